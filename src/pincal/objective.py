@@ -1,0 +1,98 @@
+"""Base of the residual vectors that calibration minimises.
+
+An :class:`Objective` is a residual vector r(x) over a *free* subset x of a
+parameter set's flat vector (the other parameters stay at their values in
+``base``), with its analytic Jacobian. A :class:`KinematicsCache` computes
+forward kinematics and parameter sensitivities once per x; the residual, the
+Jacobian (which scipy.optimize.least_squares asks for at the same point) and
+the parts of a combined objective all share it.
+
+The paper's objectives compare configurations in pairs (k, k + K/2) so that
+they do not depend on the sensor registration (eq 10–11, 14).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+import numpy.typing as npt
+
+from .chain import ChainPoses
+from .dh_parameters import DHParameterSet
+from .errors import CalibrationError
+from .sensitivity import Sensitivity, sensitivity
+
+
+def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (k, k + K/2) for k = 0 .. K/2 - 1 (eq 10); an odd last row is unused."""
+    half = n_rows // 2
+    if half < 1:
+        raise CalibrationError(f"need at least 2 calibration rows to form pairs, got {n_rows}")
+    first = np.arange(half)
+    return first, first + half
+
+
+class KinematicsCache:
+    """Forward kinematics and sensitivities at the last free-parameter vector.
+
+    Args:
+        params: the parameter set (maps a flat vector to the chain's placements).
+        free: flat indices of the parameters being fitted.
+        base: the flat vector holding the values of the fixed parameters.
+        q: joint readings of the configurations used (K, N).
+    """
+
+    def __init__(
+        self,
+        params: DHParameterSet,
+        free: npt.ArrayLike,
+        base: npt.ArrayLike,
+        q: npt.ArrayLike,
+    ) -> None:
+        self.params = params
+        self.free = np.asarray(free, dtype=int)
+        self.base = np.array(base, dtype=float)
+        self.q = np.asarray(q, dtype=float)
+        self._x: np.ndarray | None = None
+        self._result: tuple[ChainPoses, Sensitivity] | None = None
+
+    def full_vector(self, x: npt.ArrayLike) -> np.ndarray:
+        """The flat parameter vector with ``x`` in the free slots."""
+        vector = self.base.copy()
+        vector[self.free] = x
+        return vector
+
+    def evaluate(self, x: npt.ArrayLike) -> tuple[ChainPoses, Sensitivity]:
+        """Poses of the K configurations and the free parameters' sensitivities at ``x``."""
+        x = np.asarray(x, dtype=float)
+        if self._result is None or not np.array_equal(x, self._x):
+            vector = self.full_vector(x)
+            self.params.apply(vector)
+            poses = self.params.chain.poses(self.q)
+            sens = sensitivity(
+                poses,
+                self.params.frame_index[self.free],
+                self.params.local_twists(vector)[self.free],
+            )
+            self._x, self._result = x.copy(), (poses, sens)
+        return self._result
+
+
+class Objective(ABC):
+    """Residual vector over the free parameters held by a :class:`KinematicsCache`."""
+
+    def __init__(self, cache: KinematicsCache) -> None:
+        self.cache = cache
+
+    @property
+    def n_free(self) -> int:
+        return len(self.cache.free)
+
+    @abstractmethod
+    def residual(self, x: npt.ArrayLike) -> np.ndarray:
+        """Residual vector r(x), shape (m,)."""
+
+    @abstractmethod
+    def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        """dr/dx, shape (m, n_free)."""

@@ -1,0 +1,163 @@
+"""Simulated measurements of the paper's experiment (Section 7).
+
+Ground truth = default DH table + deviations (Table 2). The simulated sensor
+sees the TCP through an arbitrary registration (Omega, tau) with noise:
+
+    G_k = N_k Omega R_k,   N_k = R_ZYX(xi_k),  xi_k ~ N(0, sigma_a² I)   (eq 20, 22)
+    g_k = Omega t_k + tau + zeta_k,            zeta_k ~ N(0, sigma_p² I)  (eq 21)
+
+CPA rows move one joint at a time through K_alpha angles spread over its range
+(eq 23), the other joints at zero; calibration and validation rows are drawn
+uniformly within the joint limits. Everything is drawn from one seeded
+numpy Generator, so a seed reproduces the data exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .chain import KinematicChain, pose_from_xyz_rpy
+from .dh import DHDeviations, DHTable
+from .measurements import MeasurementSet
+from .registration import Registration
+
+#: The arbitrary sensor registration of the simulations: sensor_T_base.
+DEFAULT_REGISTRATION = Registration(
+    rotation=Rotation.from_euler("ZYX", [35.0, -12.0, 8.0], degrees=True).as_matrix(),
+    translation=np.array([1.85, -0.62, 0.43]),
+)
+
+#: The arbitrary tool F_T (flange_T_tool): TCP 62 mm off the last axis.
+DEFAULT_TOOL_XYZ = (0.045, -0.043, 0.118)
+DEFAULT_TOOL_RPY = (0.12, -0.25, 0.4)
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Settings of one simulated experiment (defaults: the paper's Section 7).
+
+    Attributes:
+        sigma_pos_mm: position noise sigma_p per axis [mm].
+        sigma_rot_deg: orientation noise sigma_a per ZYX angle [deg].
+        n_cpa: K_alpha, CPA configurations per joint.
+        n_calibration: K, random calibration configurations.
+        n_validation: J, random validation configurations.
+        seed: seed of the random generator.
+        validation_noise: add sensor noise to the validation rows too.
+    """
+
+    sigma_pos_mm: float = 0.0
+    sigma_rot_deg: float = 0.0
+    n_cpa: int = 40
+    n_calibration: int = 100
+    n_validation: int = 50
+    seed: int = 0
+    validation_noise: bool = True
+
+
+@dataclass(frozen=True)
+class SimulatedExperiment:
+    """Simulated data and the truth behind it.
+
+    Attributes:
+        calibration: ``cpa`` rows followed by ``calibration`` rows.
+        validation: ``validation`` rows.
+        truth: ground-truth DH table.
+        registration: the true sensor_T_base.
+        tool: the true flange_T_tool (4, 4).
+    """
+
+    calibration: MeasurementSet
+    validation: MeasurementSet
+    truth: DHTable
+    registration: Registration
+    tool: np.ndarray
+
+
+def cpa_configurations(lower: np.ndarray, upper: np.ndarray, per_joint: int) -> np.ndarray:
+    """Eq 23: joint n at lower_n + k·delta_n (k = 1..K_alpha), others at zero; (N·K_alpha, N)."""
+    n = len(lower)
+    rows = []
+    for joint in range(n):
+        step = (upper[joint] - lower[joint]) / (per_joint + 1)
+        block = np.zeros((per_joint, n))
+        block[:, joint] = lower[joint] + step * np.arange(1, per_joint + 1)
+        rows.append(block)
+    return np.vstack(rows)
+
+
+def _measure(
+    chain: KinematicChain,
+    q: np.ndarray,
+    registration: Registration,
+    rng: np.random.Generator,
+    sigma_pos_m: float,
+    sigma_rot_rad: float,
+    role: str,
+) -> MeasurementSet:
+    poses = chain.poses(q)
+    points = registration.apply_points(poses.tool_positions)
+    points = points + rng.normal(0.0, 1.0, points.shape) * sigma_pos_m
+    noise = Rotation.from_euler("ZYX", rng.normal(0.0, 1.0, (len(q), 3)) * sigma_rot_rad)
+    rotations = noise.as_matrix() @ registration.apply_rotations(poses.tool_rotations)
+    return MeasurementSet(
+        joint_names=chain.joint_names,
+        q=q,
+        points=points[:, None, :],
+        rotations=rotations,
+        roles=np.array([role] * len(q), dtype=object),
+        lines=np.arange(2, len(q) + 2),
+        extra={},
+        source="<simulation>",
+    )
+
+
+def simulate_experiment(
+    chain: KinematicChain,
+    nominal: DHTable,
+    deviations: DHDeviations,
+    settings: SimulationSettings = SimulationSettings(),
+    registration: Registration = DEFAULT_REGISTRATION,
+    tool: np.ndarray | None = None,
+) -> SimulatedExperiment:
+    """Simulate CPA, calibration and validation measurements of a DH chain.
+
+    The chain's placements are set to the ground truth and restored afterwards.
+    """
+    rng = np.random.default_rng(settings.seed)
+    tool = pose_from_xyz_rpy(DEFAULT_TOOL_XYZ, DEFAULT_TOOL_RPY) if tool is None else tool
+    truth = deviations.apply(nominal)
+    saved_placements, saved_tool = chain.placements(), chain.tool
+    chain.set_placements(truth.joint_origins())
+    chain.set_tool(tool)
+    lower = np.array([j.lower for j in chain.joints])
+    upper = np.array([j.upper for j in chain.joints])
+    sigma_p = settings.sigma_pos_mm / 1000.0
+    sigma_a = np.radians(settings.sigma_rot_deg)
+    try:
+        q_cpa = cpa_configurations(lower, upper, settings.n_cpa)
+        q_cal = rng.uniform(lower, upper, (settings.n_calibration, len(lower)))
+        q_val = rng.uniform(lower, upper, (settings.n_validation, len(lower)))
+        cpa = _measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa")
+        cal = _measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration")
+        val_scale = 1.0 if settings.validation_noise else 0.0
+        val = _measure(
+            chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation"
+        )
+    finally:
+        chain.set_placements(saved_placements)
+        chain.set_tool(saved_tool)
+    calibration = MeasurementSet(
+        joint_names=cpa.joint_names,
+        q=np.vstack([cpa.q, cal.q]),
+        points=np.vstack([cpa.points, cal.points]),
+        rotations=np.vstack([cpa.rotations, cal.rotations]),
+        roles=np.concatenate([cpa.roles, cal.roles]),
+        lines=np.arange(2, cpa.n_rows + cal.n_rows + 2),
+        extra={},
+        source="<simulation>",
+    )
+    return SimulatedExperiment(calibration, val, truth, registration, tool)

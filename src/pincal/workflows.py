@@ -1,0 +1,279 @@
+"""End-to-end jobs behind the command line: simulate, calibrate, evaluate, demo.
+
+Each function takes paths and options, does the whole job, and returns what
+happened; the CLI (:mod:`pincal.cli`) only parses arguments and prints.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .chain import KinematicChain, pose_from_xyz_rpy, xyz_rpy_from_pose
+from .corrected_urdf import write_corrected_urdf
+from .dh import DEVIATION_SETS, KUKA_LWR4_DH
+from .dh_parameters import DHParameterSet
+from .errors import CalibrationError, PincalError
+from .measurements import MeasurementSet, read_measurements, write_measurements
+from .metrics import PoseErrors, pose_errors
+from .paper_methods import PaperCalibration, calibrate_paper
+from .registration import register_orientations, register_points
+from .report import paper_report, read_report, write_report
+from .robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from .simulation import SimulatedExperiment, SimulationSettings, simulate_experiment
+
+#: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
+RELOAD_TOLERANCE = 1e-9
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    return a.resolve() == b.resolve()
+
+
+def refuse_overwrite(output: Path, *inputs: Path) -> None:
+    """Raise if ``output`` is one of the input files."""
+    for path in inputs:
+        if _same_file(output, path):
+            raise PincalError(f"{output}: refusing to overwrite an input file; choose another output path")
+
+
+# --- simulate ----------------------------------------------------------------
+
+
+def simulate_to_directory(
+    out_dir: str | Path, deviations: str, settings: SimulationSettings
+) -> tuple[SimulatedExperiment, dict[str, Any]]:
+    """Simulate the paper's experiment on the packaged KUKA LWR 4+ and write
+    ``calibration.csv``, ``validation.csv`` and ``truth.json`` into ``out_dir``."""
+    if deviations not in DEVIATION_SETS:
+        raise PincalError(f"unknown deviation set '{deviations}'; use one of {sorted(DEVIATION_SETS)}")
+    urdf = kuka_lwr4plus_urdf()
+    chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK)
+    experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_measurements(out / "calibration.csv", experiment.calibration)
+    write_measurements(out / "validation.csv", experiment.validation)
+    xyz, rpy = xyz_rpy_from_pose(experiment.tool)
+    tool_arg = ",".join(repr(float(v)) for v in (*xyz, *rpy))
+    truth = {
+        "pincal_version": __version__,
+        "robot": "KUKA LWR 4+ (Franaszek & Marvel 2022, Table 1)",
+        "deviations": deviations,
+        "settings": {
+            "sigma_pos_mm": settings.sigma_pos_mm,
+            "sigma_rot_deg": settings.sigma_rot_deg,
+            "seed": settings.seed,
+            "cpa_rows_per_joint": settings.n_cpa,
+            "calibration_rows": settings.n_calibration,
+            "validation_rows": settings.n_validation,
+        },
+        "dh": {
+            "alpha_rad": experiment.truth.alpha.tolist(),
+            "epsilon_rad": experiment.truth.epsilon.tolist(),
+            "r_m": experiment.truth.r.tolist(),
+            "d_m": experiment.truth.d.tolist(),
+        },
+        "registration": experiment.registration.as_dict(),
+        "tool": {"parent_link": KUKA_FLANGE_LINK, "xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()},
+        "calibrate_command": (
+            f"pincal calibrate {urdf} {out / 'calibration.csv'} --method 2 "
+            f"--tool {tool_arg} --tool-parent {KUKA_FLANGE_LINK} "
+            f"--out corrected.urdf --report REPORT.json"
+        ),
+    }
+    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
+    return experiment, truth
+
+
+# --- calibrate -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Outcome of :func:`calibrate_files`.
+
+    Attributes:
+        result: the paper method's result.
+        report: the REPORT.json document written.
+        errors: eq 24 errors on the calibration rows.
+        notes: reader and method notes for the user.
+        seconds: wall time of the calibration itself [s].
+        reload_error: largest TCP difference after reloading the written URDF [m].
+    """
+
+    result: PaperCalibration
+    report: dict[str, Any]
+    errors: PoseErrors
+    notes: list[str]
+    seconds: float
+    reload_error: float
+
+
+def calibrate_chain(
+    chain: KinematicChain, data: MeasurementSet, method: int, weight: float
+) -> tuple[PaperCalibration, DHParameterSet, float]:
+    """Run a paper method on a loaded chain; returns the result, the parameter set and the time [s]."""
+    params = DHParameterSet(chain)
+    start = time.perf_counter()
+    result = calibrate_paper(chain, data, method, weight=weight, nominal=params.nominal)
+    return result, params, time.perf_counter() - start
+
+
+def calibrate_files(
+    urdf: str | Path,
+    data_path: str | Path,
+    method: int,
+    weight: float,
+    tool_pose: np.ndarray,
+    tool_parent: str,
+    out_urdf: str | Path,
+    report_path: str | Path,
+) -> CalibrationRun:
+    """Calibrate ``urdf`` on ``data_path`` and write the corrected URDF and the report."""
+    urdf, data_path = Path(urdf), Path(data_path)
+    out_urdf, report_path = Path(out_urdf), Path(report_path)
+    refuse_overwrite(out_urdf, urdf, data_path)
+    refuse_overwrite(report_path, urdf, data_path, out_urdf)
+    chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose)
+    data, notes = read_measurements(data_path, chain.joint_specs)
+    nominal_placements = chain.placements()
+    result, params, seconds = calibrate_chain(chain, data, method, weight)
+    calibration = data.with_role("calibration")
+    errors = pose_errors(
+        chain, calibration, result.registration_position, result.registration_orientation
+    )
+    write_corrected_urdf(
+        urdf,
+        out_urdf,
+        chain,
+        nominal_placements,
+        comment=(
+            f"Calibrated by pincal {__version__} (Method {method} of Franaszek & Marvel 2022) "
+            f"from {urdf.name} and {data_path.name}. Registration and tool: see the report."
+        ),
+    )
+    reload_error = _reload_error(out_urdf, chain, data.q)
+    if reload_error > RELOAD_TOLERANCE:
+        raise CalibrationError(
+            f"{out_urdf}: reloading the written URDF moves the TCP by {reload_error:.3g} m "
+            f"(> {RELOAD_TOLERANCE:g}); please report this as a bug"
+        )
+    report = paper_report(
+        result,
+        params,
+        tool_parent,
+        tool_pose,
+        errors,
+        n_rows={role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")},
+        sources={"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf)},
+        notes=notes,
+    )
+    write_report(report_path, report)
+    return CalibrationRun(result, report, errors, notes, seconds, reload_error)
+
+
+def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
+    reloaded = KinematicChain.from_urdf(urdf, chain.tip_link, tool=chain.tool)
+    a, b = chain.poses(q), reloaded.poses(q)
+    return float(
+        max(
+            np.abs(a.tool_positions - b.tool_positions).max(),
+            np.abs(a.tool_rotations - b.tool_rotations).max(),
+        )
+    )
+
+
+# --- evaluate --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Outcome of :func:`evaluate_files`: eq 24 errors on the evaluated rows."""
+
+    errors: PoseErrors
+    n_skipped_cpa: int
+    notes: list[str]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**self.errors.as_dict(), "skipped_cpa_rows": self.n_skipped_cpa}
+
+
+def evaluate_files(urdf: str | Path, report_path: str | Path, data_path: str | Path) -> Evaluation:
+    """Eq 24 on every non-CPA row of ``data_path`` with the model and registrations of a report."""
+    report = read_report(report_path)
+    chain = KinematicChain.from_urdf(urdf, report.tool_parent, tool=report.tool_pose)
+    data, notes = read_measurements(data_path, chain.joint_specs)
+    rows = data.roles != "cpa"
+    if not np.any(rows):
+        raise PincalError(f"{data_path}: no rows to evaluate (all rows have role 'cpa')")
+    errors = pose_errors(
+        chain, data.select(rows), report.registration_position, report.registration_orientation
+    )
+    return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes)
+
+
+# --- demo ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DemoRow:
+    """One line of the demo's comparison table."""
+
+    label: str
+    calibration: PoseErrors
+    validation: PoseErrors
+    seconds: float
+
+
+def run_demo(out_dir: str | Path, settings: SimulationSettings, deviations: str = "large") -> list[DemoRow]:
+    """Simulate → calibrate with Methods 1–3 → evaluate on held-out poses.
+
+    Writes the simulated data, one corrected URDF and report per method into
+    ``out_dir``; returns the comparison rows (nominal model first).
+    """
+    out = Path(out_dir)
+    experiment, truth = simulate_to_directory(out, deviations, settings)
+    urdf = kuka_lwr4plus_urdf()
+    tool = pose_from_xyz_rpy(truth["tool"]["xyz_m"], truth["tool"]["rpy_rad"])
+    rows = [_nominal_row(urdf, experiment, tool)]
+    for method in (1, 2, 3):
+        run = calibrate_files(
+            urdf,
+            out / "calibration.csv",
+            method,
+            1.0,
+            tool,
+            KUKA_FLANGE_LINK,
+            out / f"kuka_lwr4plus_method{method}.urdf",
+            out / f"REPORT_method{method}.json",
+        )
+        evaluation = evaluate_files(
+            out / f"kuka_lwr4plus_method{method}.urdf",
+            out / f"REPORT_method{method}.json",
+            out / "validation.csv",
+        )
+        rows.append(DemoRow(f"Method {method}", run.errors, evaluation.errors, run.seconds))
+    return rows
+
+
+def _nominal_row(urdf: Path, experiment: SimulatedExperiment, tool: np.ndarray) -> DemoRow:
+    """The uncalibrated model, registered to the data like Method 2 would."""
+    chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK, tool=tool)
+    cal = experiment.calibration.with_role("calibration")
+    poses = chain.poses(cal.q)
+    points = cal.points[:, 0, :]
+    reg1 = register_points(poses.tool_positions, points)
+    reg2 = register_orientations(poses.tool_rotations, cal.rotations, poses.tool_positions, points)
+    return DemoRow(
+        "nominal (Table 1)",
+        pose_errors(chain, cal, reg1, reg2),
+        pose_errors(chain, experiment.validation, reg1, reg2),
+        0.0,
+    )

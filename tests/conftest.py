@@ -1,0 +1,38 @@
+"""Shared fixtures: the packaged KUKA LWR 4+ and simulated experiments (seeded)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pincal.chain import KinematicChain
+from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from pincal.simulation import SimulationSettings, simulate_experiment
+
+
+@pytest.fixture(scope="session")
+def kuka_urdf():
+    return kuka_lwr4plus_urdf()
+
+
+@pytest.fixture
+def kuka_chain(kuka_urdf):
+    return KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
+
+
+@pytest.fixture(scope="session")
+def noisy_large_experiment(kuka_urdf):
+    chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
+    settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=3)
+    return simulate_experiment(chain, KUKA_LWR4_DH, TABLE2_LARGE, settings)
+
+
+def assert_close(actual, expected, atol, what=""):
+    """Assert arrays are close and free of NaN (NaN never passes)."""
+    actual = np.asarray(actual, dtype=float)
+    expected = np.asarray(expected, dtype=float)
+    assert actual.shape == expected.shape, f"{what}: shape {actual.shape} != {expected.shape}"
+    assert np.all(np.isfinite(actual)), f"{what}: non-finite values"
+    err = np.abs(actual - expected).max() if actual.size else 0.0
+    assert err <= atol, f"{what}: max abs error {err:.3g} > {atol:.3g}"

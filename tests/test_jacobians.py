@@ -1,0 +1,116 @@
+"""Every analytic Jacobian against central finite differences of Pinocchio FK.
+
+Step 1e-6 (rad or m), tolerance 1e-7 relative to the column scale: central
+differences have O(h²) ≈ 1e-12 truncation error, so a wrong sign, frame or
+factor shows up many orders above the tolerance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.dh_parameters import DHParameterSet
+from pincal.distance_residual import DistanceResidual
+from pincal.full_pose_residual import FullPoseResidual
+from pincal.objective import KinematicsCache
+from pincal.rotation_residual import RotationResidual
+from pincal.sensitivity import sensitivity
+
+from conftest import assert_close
+
+STEP = 1e-6
+TOL = 1e-7
+
+
+def _random_q(chain, rng, k):
+    lower = np.array([j.lower for j in chain.joints])
+    upper = np.array([j.upper for j in chain.joints])
+    return rng.uniform(lower, upper, (k, chain.n_joints))
+
+
+def _numeric_jacobian(fun, x):
+    columns = []
+    for i in range(x.size):
+        dx = np.zeros_like(x)
+        dx[i] = STEP
+        columns.append((fun(x + dx) - fun(x - dx)) / (2 * STEP))
+    return np.stack(columns, axis=-1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sensitivity_matches_finite_differences_for_every_dh_parameter(kuka_chain, seed):
+    rng = np.random.default_rng(seed)
+    kuka_chain.set_tool(pin.SE3.Random().homogeneous)
+    params = DHParameterSet(kuka_chain)
+    vector = TABLE2_LARGE.apply(KUKA_LWR4_DH).to_vector()
+    q = _random_q(kuka_chain, rng, 5)
+
+    def tcp(v):
+        params.apply(v)
+        return kuka_chain.poses(q).tool_positions
+
+    def orientation(v):
+        params.apply(v)
+        return kuka_chain.poses(q).tool_rotations
+
+    params.apply(vector)
+    poses = kuka_chain.poses(q)
+    sens = sensitivity(poses, params.frame_index, params.local_twists(vector))
+    numeric_position = _numeric_jacobian(tcp, vector)  # (K, 3, n)
+    assert_close(sens.point_velocity(poses.tool_positions).transpose(0, 2, 1), numeric_position, TOL, "dTCP")
+    # angular: R(v + h e_i) R(v)^T ≈ exp(h w_i) in the world frame
+    numeric_angular = np.empty((len(q), 3, vector.size))
+    base = orientation(vector)
+    for i in range(vector.size):
+        dv = np.zeros_like(vector)
+        dv[i] = STEP
+        plus, minus = orientation(vector + dv), orientation(vector - dv)
+        for k in range(len(q)):
+            numeric_angular[k, :, i] = (pin.log3(plus[k] @ base[k].T) - pin.log3(minus[k] @ base[k].T)) / (2 * STEP)
+    assert_close(sens.angular.transpose(0, 2, 1), numeric_angular, TOL, "dR")
+
+
+def test_epsilon_columns_equal_pinocchio_joint_jacobian(kuka_chain):
+    """Zero-offset columns are Pinocchio's joint Jacobian columns of the TCP."""
+    rng = np.random.default_rng(7)
+    params = DHParameterSet(kuka_chain)
+    vector = params.nominal.to_vector()
+    q = _random_q(kuka_chain, rng, 3)
+    poses = kuka_chain.poses(q)
+    eps = params.indices("epsilon")
+    sens = sensitivity(poses, params.frame_index[eps], params.local_twists(vector)[eps])
+    model, data = kuka_chain.model, kuka_chain.data
+    for k in range(len(q)):
+        jac = pin.computeFrameJacobian(model, data, q[k], kuka_chain.tip_frame_id, pin.LOCAL_WORLD_ALIGNED)
+        assert_close(sens.point_velocity(poses.tool_positions)[k].T, jac[:3], 1e-12, "linear")
+        assert_close(sens.angular[k].T, jac[3:], 1e-12, "angular")
+
+
+def _objectives(chain, rng):
+    params = DHParameterSet(chain)
+    chain.set_tool(pin.SE3.Random().homogeneous)
+    truth = TABLE2_LARGE.apply(KUKA_LWR4_DH)
+    q = _random_q(chain, rng, 12)
+    params.apply(truth.to_vector())
+    poses = chain.poses(q)
+    points = poses.tool_positions + rng.normal(0, 1e-3, (12, 3))
+    rotations = np.stack([pin.exp3(rng.normal(0, 0.01, 3)) @ r for r in poses.tool_rotations])
+    free = rng.permutation(params.size)[:15]
+    cache = KinematicsCache(params, free, KUKA_LWR4_DH.to_vector(), q)
+    yield "distance", DistanceResidual(cache, points), cache
+    yield "rotation", RotationResidual(cache, rotations), cache
+    yield "full", FullPoseResidual(cache, points, rotations, weight=3.0), cache
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_objective_jacobians_match_finite_differences(kuka_chain, seed):
+    rng = np.random.default_rng(seed)
+    for name, objective, cache in _objectives(kuka_chain, rng):
+        x = cache.base[cache.free] + rng.normal(0, 0.01, cache.free.size)
+        analytic = objective.jacobian(x)
+        numeric = _numeric_jacobian(objective.residual, x)
+        scale = max(1.0, np.abs(numeric).max())
+        assert_close(analytic / scale, numeric / scale, TOL, name)
