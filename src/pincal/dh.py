@@ -150,35 +150,45 @@ class DHTable:
 
     @classmethod
     def from_joint_origins(
-        cls, origins: Sequence[npt.ArrayLike], tol: float = 1e-9
+        cls,
+        origins: Sequence[npt.ArrayLike],
+        tol: float = 1e-9,
+        names: Sequence[str] | None = None,
     ) -> "DHTable":
         """Inverse of :meth:`joint_origins`: read a table back from N + 1 origins.
 
+        Args:
+            origins: origin of joint 1 .. N and of the flange joint (4x4 each).
+            tol: largest deviation from the DH shape accepted.
+            names: joint names, for messages (default: "origin <index>").
+
         Raises:
-            PincalError: an origin is not of the DH shape (to ``tol``); the
-                message names its index (0 = first joint, N = flange).
+            PincalError: an origin is not of the DH shape; the message names it.
         """
         mats = [np.asarray(o, dtype=float) for o in origins]
         n_joints = len(mats) - 1
         if n_joints < 1:
             raise PincalError("need at least two origins (one joint and the flange)")
+        labels = list(names) if names is not None else [f"origin {i}" for i in range(len(mats))]
         alpha, eps, r, d = (np.zeros(n_joints) for _ in range(4))
-        first = mats[0]
-        eps[0] = np.arctan2(first[1, 0], first[0, 0])
-        if np.abs(first - rot_z(eps[0])).max() > tol:
-            raise PincalError("origin 0 (first joint) is not a pure rotation about z: not DH-shaped")
+        eps[0] = np.arctan2(mats[0][1, 0], mats[0][0, 0])
+        if np.abs(mats[0] - rot_z(eps[0])).max() > tol:
+            raise PincalError(f"{labels[0]}: not a pure rotation about z (DH Rz(eps_1))")
         for n in range(n_joints):
             m = mats[n + 1]
+            last = n + 1 == n_joints
             r[n], d[n] = m[0, 3], m[2, 3]
             alpha[n] = np.arctan2(-m[1, 2], m[2, 2])
-            next_eps = np.arctan2(-m[0, 1], m[0, 0])
-            if n + 1 < n_joints:
-                eps[n + 1] = next_eps
-                expected = trans(z=d[n]) @ trans(x=r[n]) @ rot_x(alpha[n]) @ rot_z(next_eps)
-            else:
-                expected = trans(z=d[n]) @ trans(x=r[n]) @ rot_x(alpha[n])
-            if np.abs(m - expected).max() > tol:
-                raise PincalError(f"origin {n + 1} is not of the form Tz(d) Tx(r) Rx(alpha) Rz(eps): not DH-shaped")
+            expected = trans(z=d[n]) @ trans(x=r[n]) @ rot_x(alpha[n])
+            if not last:
+                eps[n + 1] = np.arctan2(-m[0, 1], m[0, 0])
+                expected = expected @ rot_z(eps[n + 1])
+            deviation = np.abs(m - expected).max()
+            if deviation > tol:
+                shape = "Tz(d) Tx(r) Rx(alpha)" + ("" if last else " Rz(eps)")
+                raise PincalError(
+                    f"{labels[n + 1]}: not of the DH shape {shape} (deviation {deviation:.3g})"
+                )
         return cls(alpha=alpha, epsilon=eps, r=r, d=d)
 
     def joint_origins(self) -> list[np.ndarray]:

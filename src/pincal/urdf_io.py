@@ -50,7 +50,7 @@ import yourdfpy
 from lxml import etree
 
 from .dh import DHTable
-from .errors import ModelError
+from .errors import ModelError, PincalError
 
 #: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
 #: proper rigid transform.
@@ -430,10 +430,9 @@ def apply_dh_table(
     write_urdf_with_origins(source, destination, origins, comment=comment)
 
 
-def _nearest_branch(angle: float, reference: float | None) -> float:
-    if reference is None:
-        return angle
-    return angle + 2.0 * np.pi * round((reference - angle) / (2.0 * np.pi))
+def _nearest_branch(angle: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``angle`` shifted by multiples of 2*pi to lie nearest ``reference`` [rad]."""
+    return angle + 2.0 * np.pi * np.round((reference - angle) / (2.0 * np.pi))
 
 
 def dh_table_from_urdf(
@@ -501,47 +500,17 @@ def dh_table_from_urdf(
         for n in chain
     }
 
-    def angle_of(value: float, field: str, index: int) -> float:
-        ref = None if reference is None else float(getattr(reference, field)[index])
-        return _nearest_branch(value, ref)
-
-    first = origins[chain[0]]
-    eps = [float(np.arctan2(first[1, 0], first[0, 0]))]
-    if np.max(np.abs(first - _rz(eps[0]))) > DH_SHAPE_TOLERANCE:
-        raise ModelError(
-            f"origin of joint '{chain[0]}' is not a pure rotation about z (DH Rz(eps_1)); "
-            "was this URDF written by apply_dh_table?"
+    try:
+        table = DHTable.from_joint_origins(
+            [origins[n] for n in chain],
+            tol=DH_SHAPE_TOLERANCE,
+            names=[f"origin of joint '{n}'" for n in chain],
         )
-    alpha, r, d = [], [], []
-    for n, name in enumerate(chain[1:]):
-        T = origins[name]
-        R = T[:3, :3]
-        last = name == chain[-1]
-        a_n = float(np.arctan2(-R[1, 2], R[2, 2]))
-        e_next = 0.0 if last else float(np.arctan2(-R[0, 1], R[0, 0]))
-        r_n, d_n = float(T[0, 3]), float(T[2, 3])
-        rebuilt = _dh_row(d_n, r_n, a_n, e_next)
-        if np.max(np.abs(T - rebuilt)) > DH_SHAPE_TOLERANCE:
-            shape = "Tz(d) Tx(r) Rx(alpha)" + ("" if last else " Rz(eps)")
-            raise ModelError(
-                f"origin of joint '{name}' is not of the DH shape {shape} "
-                f"(deviation {np.max(np.abs(T - rebuilt)):.3g}); was this URDF written by apply_dh_table?"
-            )
-        alpha.append(angle_of(a_n, "alpha", n))
-        r.append(r_n)
-        d.append(d_n)
-        if not last:
-            eps.append(e_next)
-    eps = [angle_of(e, "epsilon", i) for i, e in enumerate(eps)]
-    return DHTable(alpha=np.array(alpha), epsilon=np.array(eps), r=np.array(r), d=np.array(d))
-
-
-def _rz(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-
-
-def _dh_row(d: float, r: float, alpha: float, eps_next: float) -> np.ndarray:
-    ca, sa = np.cos(alpha), np.sin(alpha)
-    row = np.array([[1, 0, 0, r], [0, ca, -sa, 0], [0, sa, ca, d], [0, 0, 0, 1.0]])
-    return row @ _rz(eps_next)
+    except PincalError as exc:
+        raise ModelError(f"{exc}; was this URDF written by apply_dh_table?") from None
+    if reference is None:
+        return table
+    vector = table.to_vector()
+    angles = slice(0, 2 * table.n_joints)  # alpha and epsilon
+    vector[angles] = _nearest_branch(vector[angles], reference.to_vector()[angles])
+    return DHTable.from_vector(vector)
