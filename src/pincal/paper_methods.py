@@ -174,11 +174,20 @@ def calibrate_paper(
     method: int,
     weight: float = 1.0,
     nominal: DHTable | None = None,
+    start: DHTable | None = None,
 ) -> PaperCalibration:
     """Run Method 1, 2 or 3 on the ``cpa`` and ``calibration`` rows of ``data``.
 
-    The chain's tool must be the measured target (the TCP). On return the
-    chain's placements hold the calibrated table.
+    Args:
+        chain: the chain; its tool must be the measured target (the TCP). On
+            return its placements hold the calibrated table.
+        data: measurements (``cpa`` rows optional, ``calibration`` rows used).
+        method: 1, 2 or 3.
+        weight: w of Method 3 [mm²/deg²].
+        nominal: the default table (read from the chain's placements if None);
+            parameters the data cannot determine keep its values.
+        start: starting values of the fitted eps, r, d (default: ``nominal``,
+            as in the paper); alpha always starts from CPA.
     """
     if method not in METHODS:
         raise CalibrationError(f"method must be one of {METHODS}, got {method}")
@@ -199,8 +208,13 @@ def calibrate_paper(
             "use --method 1 for positions only"
         )
     alpha, alpha_estimated, notes = estimate_twists(chain, nominal, data.with_role("cpa"))
-    start = nominal.to_vector()
-    start[params.indices("alpha")] = alpha
+    start_vector = nominal.to_vector()
+    offsets = params.indices("epsilon", range(1, n))
+    lengths = np.concatenate([params.indices("r"), params.indices("d", range(1, n))])
+    if start is not None:
+        fitted = np.concatenate([offsets, lengths])
+        start_vector[fitted] = start.to_vector()[fitted]
+    start_vector[params.indices("alpha")] = alpha
     std = np.full(params.size, np.nan)
     status = np.array([NO_CPA_DATA] * n + [CALIBRATED] * (3 * n), dtype=object)
     status[params.indices("alpha")[alpha_estimated]] = FROM_CPA
@@ -209,8 +223,6 @@ def calibrate_paper(
     status[params.indices("epsilon", [0])] = ABSORBED
     status[params.indices("d", [0])] = ABSORBED
 
-    offsets = params.indices("epsilon", range(1, n))
-    lengths = np.concatenate([params.indices("r"), params.indices("d", range(1, n))])
     q = calibration.q
     points = calibration.points[:, 0, :]
     rotations = calibration.rotations
@@ -229,7 +241,7 @@ def calibrate_paper(
         )
 
     stages = []
-    vector = start
+    vector = start_vector
     if method == 1:
         cache = KinematicsCache(params, np.concatenate([offsets, lengths]), vector, q)
         stages.append(fit(DistanceResidual(cache, points), cache, "Err_pos", "m"))
