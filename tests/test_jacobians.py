@@ -17,7 +17,6 @@ from pincal.distance_residual import DistanceResidual
 from pincal.full_pose_residual import FullPoseResidual
 from pincal.objective import KinematicsCache
 from pincal.rotation_residual import RotationResidual
-from pincal.sensitivity import sensitivity
 
 from conftest import assert_close
 
@@ -47,45 +46,57 @@ def test_sensitivity_matches_finite_differences_for_every_dh_parameter(kuka_chai
     params = DHParameterSet(kuka_chain)
     vector = TABLE2_LARGE.apply(KUKA_LWR4_DH).to_vector()
     q = _random_q(kuka_chain, rng, 5)
+    cache = KinematicsCache(params, np.arange(params.size), vector, q)
+    poses, sens = cache.evaluate(vector)
 
-    def tcp(v):
+    def tool(v):
         params.apply(v)
-        return kuka_chain.poses(q).tool_positions
+        return kuka_chain.poses(q)
 
-    def orientation(v):
-        params.apply(v)
-        return kuka_chain.poses(q).tool_rotations
-
-    params.apply(vector)
-    poses = kuka_chain.poses(q)
-    sens = sensitivity(poses, params.frame_index, params.local_twists(vector))
-    numeric_position = _numeric_jacobian(tcp, vector)  # (K, 3, n)
+    reference = tool(vector)
+    assert_close(poses.tool_positions, reference.tool_positions, 1e-14, "TCP")
+    assert_close(poses.tool_rotations, reference.tool_rotations, 1e-14, "R")
+    numeric_position = _numeric_jacobian(lambda v: tool(v).tool_positions, vector)  # (K, 3, n)
     assert_close(sens.point_velocity(poses.tool_positions).transpose(0, 2, 1), numeric_position, TOL, "dTCP")
+    # a point off the TCP, rigidly attached to the tool
+    offset = np.array([0.1, -0.05, 0.2])
+
+    def marker(v):
+        t = tool(v)
+        return t.tool_positions + t.tool_rotations @ offset
+
+    numeric_marker = _numeric_jacobian(marker, vector)
+    assert_close(sens.point_velocity(marker(vector)).transpose(0, 2, 1), numeric_marker, TOL, "dmarker")
     # angular: R(v + h e_i) R(v)^T ≈ exp(h w_i) in the world frame
     numeric_angular = np.empty((len(q), 3, vector.size))
-    base = orientation(vector)
     for i in range(vector.size):
         dv = np.zeros_like(vector)
         dv[i] = STEP
-        plus, minus = orientation(vector + dv), orientation(vector - dv)
+        plus, minus = tool(vector + dv).tool_rotations, tool(vector - dv).tool_rotations
         for k in range(len(q)):
-            numeric_angular[k, :, i] = (pin.log3(plus[k] @ base[k].T) - pin.log3(minus[k] @ base[k].T)) / (2 * STEP)
+            base = reference.tool_rotations[k].T
+            numeric_angular[k, :, i] = (pin.log3(plus[k] @ base) - pin.log3(minus[k] @ base)) / (2 * STEP)
     assert_close(sens.angular.transpose(0, 2, 1), numeric_angular, TOL, "dR")
 
 
 def test_epsilon_columns_equal_pinocchio_joint_jacobian(kuka_chain):
     """Zero-offset columns are Pinocchio's joint Jacobian columns of the TCP."""
     rng = np.random.default_rng(7)
+    kuka_chain.set_tool(pin.SE3.Random().homogeneous)
     params = DHParameterSet(kuka_chain)
     vector = params.nominal.to_vector()
     q = _random_q(kuka_chain, rng, 3)
-    poses = kuka_chain.poses(q)
-    eps = params.indices("epsilon")
-    sens = sensitivity(poses, params.frame_index[eps], params.local_twists(vector)[eps])
+    cache = KinematicsCache(params, params.indices("epsilon"), vector, q)
+    poses, sens = cache.evaluate(vector[cache.free])
     model, data = kuka_chain.model, kuka_chain.data
+    tool_frame = model.addFrame(
+        pin.Frame("tcp", kuka_chain.joint_ids[-1], 0,
+                  model.frames[kuka_chain.tip_frame_id].placement * pin.SE3(kuka_chain.tool), pin.FrameType.OP_FRAME)
+    )
+    data = model.createData()
     for k in range(len(q)):
-        jac = pin.computeFrameJacobian(model, data, q[k], kuka_chain.tip_frame_id, pin.LOCAL_WORLD_ALIGNED)
-        assert_close(sens.point_velocity(poses.tool_positions)[k].T, jac[:3], 1e-12, "linear")
+        jac = pin.computeFrameJacobian(model, data, q[k], tool_frame, pin.LOCAL_WORLD_ALIGNED)
+        assert_close(sens.linear[k].T, jac[:3], 1e-12, "linear")
         assert_close(sens.angular[k].T, jac[3:], 1e-12, "angular")
 
 

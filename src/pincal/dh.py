@@ -200,13 +200,17 @@ class DHTable:
         fixed flange joint: ``Tz(d_N) Tx(r_N) Rx(alpha_N)``. Chaining
         ``origin_n · Rz(theta_n)`` reproduces ``F_1 ··· F_N`` exactly.
         """
-        origins = [rot_z(self.epsilon[0])]
-        for n in range(self.n_joints):
-            row = trans(z=self.d[n]) @ trans(x=self.r[n]) @ rot_x(self.alpha[n])
-            if n + 1 < self.n_joints:
-                row = row @ rot_z(self.epsilon[n + 1])
-            origins.append(row)
-        return origins
+        n = self.n_joints
+        eps_next = np.append(self.epsilon[1:], 0.0)  # the flange row has no Rz
+        ca, sa = np.cos(self.alpha), np.sin(self.alpha)
+        ce, se = np.cos(eps_next), np.sin(eps_next)
+        rows = np.zeros((n, 4, 4))
+        # Tz(d) Tx(r) Rx(alpha) Rz(eps) in closed form
+        rows[:, 0, 0], rows[:, 0, 1], rows[:, 0, 3] = ce, -se, self.r
+        rows[:, 1, 0], rows[:, 1, 1], rows[:, 1, 2] = ca * se, ca * ce, -sa
+        rows[:, 2, 0], rows[:, 2, 1], rows[:, 2, 2], rows[:, 2, 3] = sa * se, sa * ce, ca, self.d
+        rows[:, 3, 3] = 1.0
+        return [rot_z(self.epsilon[0])] + list(rows)
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@
 :class:`DHParameterSet` ties a :class:`pincal.dh.DHTable` to a
 :class:`pincal.chain.KinematicChain` whose joint placements realise it (see
 :meth:`pincal.dh.DHTable.joint_origins`). It gives the names of the 4N
-parameters, writes a table into the chain's placements, and gives each
-parameter's local twist for :func:`pincal.sensitivity.sensitivity`.
+parameters, writes a table into the chain's placements, and says where each
+parameter acts (:class:`pincal.sensitivity.ParameterSlot`) so that
+:class:`pincal.sensitivity.SensitivityModel` can differentiate with Pinocchio.
 
 The flat order is that of :meth:`DHTable.to_vector`: ``alpha_1..N, epsilon_1..N,
 r_1..N, d_1..N`` (rad, rad, m, m).
@@ -19,6 +20,7 @@ import numpy as np
 from .chain import KinematicChain
 from .dh import DH_FIELDS, DHTable
 from .errors import ModelError, PincalError
+from .sensitivity import ParameterSlot
 
 _UNITS = {"alpha": "rad", "epsilon": "rad", "r": "m", "d": "m"}
 
@@ -64,7 +66,6 @@ class DHParameterSet:
             for field in DH_FIELDS
             for i in range(n)
         )
-        self.frame_index = np.tile(np.arange(n), 4)
 
     @property
     def size(self) -> int:
@@ -77,23 +78,36 @@ class DHParameterSet:
         joints = range(n) if joints is None else joints
         return np.array([start + j for j in joints], dtype=int)
 
+    def placements(self, vector: np.ndarray) -> list[np.ndarray]:
+        """Chain placements (N joints + tip) realising the table ``vector`` (4N,)."""
+        return DHTable.from_vector(vector).joint_origins()
+
     def apply(self, vector: np.ndarray) -> None:
         """Write the table ``vector`` (4N,) into the chain's joint placements."""
-        self.chain.set_placements(DHTable.from_vector(vector).joint_origins())
+        self.chain.set_placements(self.placements(vector))
 
-    def local_twists(self, vector: np.ndarray) -> np.ndarray:
-        """Twist ``(v, w)`` of each parameter in its joint frame (4N, 6).
+    @property
+    def slots(self) -> tuple[ParameterSlot, ...]:
+        """Where each parameter acts, all in the child frame of its joint n:
+        alpha_n turns about x through (r_n, 0, d_n), eps_n turns about z like
+        the joint itself, r_n translates along x and d_n along z."""
+        n = self.nominal.n_joints
+        kinds = {
+            "alpha": ("revolute", (1.0, 0.0, 0.0)),
+            "epsilon": ("revolute", (0.0, 0.0, 1.0)),
+            "r": ("prismatic", (1.0, 0.0, 0.0)),
+            "d": ("prismatic", (0.0, 0.0, 1.0)),
+        }
+        return tuple(
+            ParameterSlot(joint=i, after_motion=True, kind=kinds[field][0], axis=kinds[field][1])
+            for field in DH_FIELDS
+            for i in range(n)
+        )
 
-        In the child frame of joint n (after its motion), row n's d_n translates
-        along z, r_n along x, alpha_n rotates about the x axis through (r_n, 0,
-        d_n), and eps_n rotates about z like the joint itself.
-        """
+    def slot_points(self, vector: np.ndarray) -> np.ndarray:
+        """Point each slot turns about, in its frame [m], (4N, 3): (r_n, 0, d_n) for alpha_n."""
         table = DHTable.from_vector(vector)
-        n = table.n_joints
-        twists = np.zeros((4, n, 6))
-        twists[0, :, 3] = 1.0  # alpha: w = x
-        twists[0, :, 1] = table.d  # v = p x w with p = (r, 0, d)
-        twists[1, :, 5] = 1.0  # epsilon: w = z
-        twists[2, :, 0] = 1.0  # r: v = x
-        twists[3, :, 2] = 1.0  # d: v = z
-        return twists.reshape(4 * n, 6)
+        points = np.zeros((4, table.n_joints, 3))
+        points[0, :, 0] = table.r
+        points[0, :, 2] = table.d
+        return points.reshape(-1, 3)

@@ -18,10 +18,9 @@ from abc import ABC, abstractmethod
 import numpy as np
 import numpy.typing as npt
 
-from .chain import ChainPoses
 from .dh_parameters import DHParameterSet
 from .errors import CalibrationError
-from .sensitivity import Sensitivity, sensitivity
+from .sensitivity import Sensitivity, SensitivityModel, ToolPoses
 
 
 def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
@@ -34,7 +33,10 @@ def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 class KinematicsCache:
-    """Forward kinematics and sensitivities at the last free-parameter vector.
+    """Tool poses and parameter sensitivities at the last free-parameter vector.
+
+    Builds one :class:`pincal.sensitivity.SensitivityModel` for the free
+    parameters; each evaluation only updates its placements.
 
     Args:
         params: the parameter set (maps a flat vector to the chain's placements).
@@ -54,8 +56,10 @@ class KinematicsCache:
         self.free = np.asarray(free, dtype=int)
         self.base = np.array(base, dtype=float)
         self.q = np.asarray(q, dtype=float)
+        slots = params.slots
+        self.model = SensitivityModel(params.chain, [slots[i] for i in self.free])
         self._x: np.ndarray | None = None
-        self._result: tuple[ChainPoses, Sensitivity] | None = None
+        self._result: tuple[ToolPoses, Sensitivity] | None = None
 
     def full_vector(self, x: npt.ArrayLike) -> np.ndarray:
         """The flat parameter vector with ``x`` in the free slots."""
@@ -63,19 +67,17 @@ class KinematicsCache:
         vector[self.free] = x
         return vector
 
-    def evaluate(self, x: npt.ArrayLike) -> tuple[ChainPoses, Sensitivity]:
-        """Poses of the K configurations and the free parameters' sensitivities at ``x``."""
+    def evaluate(self, x: npt.ArrayLike) -> tuple[ToolPoses, Sensitivity]:
+        """Tool poses of the K configurations and the free parameters' sensitivities at ``x``."""
         x = np.asarray(x, dtype=float)
         if self._result is None or not np.array_equal(x, self._x):
             vector = self.full_vector(x)
-            self.params.apply(vector)
-            poses = self.params.chain.poses(self.q)
-            sens = sensitivity(
-                poses,
-                self.params.frame_index[self.free],
-                self.params.local_twists(vector)[self.free],
+            self.model.set_state(
+                self.params.placements(vector),
+                self.params.slot_points(vector)[self.free],
+                self.params.chain.tool,
             )
-            self._x, self._result = x.copy(), (poses, sens)
+            self._x, self._result = x.copy(), self.model.evaluate(self.q)
         return self._result
 
 

@@ -95,46 +95,43 @@ class PaperCalibration:
     notes: tuple[str, ...] = field(default=())
 
 
-def cpa_groups(q: np.ndarray) -> dict[int, np.ndarray]:
+def cpa_groups(q: np.ndarray, lines: np.ndarray | None = None) -> dict[int, np.ndarray]:
     """Split CPA rows into runs in which exactly one joint moves.
 
-    Consecutive rows belong to the same run while they differ only in the same
-    single joint. Returns {joint index: row indices}.
+    Consecutive rows belong to the same run while each step between them moves
+    the same single joint. Returns {joint index: row indices}.
+
+    Args:
+        q: joint readings of the CPA rows (R, N).
+        lines: file line numbers of those rows, for messages (default 1..R).
 
     Raises:
-        CalibrationError: a run moves several joints or has fewer than 3 rows,
-            or two runs move the same joint.
+        CalibrationError: a row belongs to no run of at least 3 rows, or two
+            runs move the same joint.
     """
-    groups: dict[int, list[int]] = {}
-    current: list[int] = []
-    moving: int | None = None
-
-    def close() -> None:
-        if not current:
-            return
-        if moving is None or len(current) < 3:
+    q = np.asarray(q, dtype=float)
+    lines = np.arange(1, len(q) + 1) if lines is None else np.asarray(lines)
+    changed = np.abs(np.diff(q, axis=0)) > 1e-12  # (R-1, N)
+    mover = np.where(changed.sum(axis=1) == 1, changed.argmax(axis=1), -1).tolist()
+    groups: dict[int, np.ndarray] = {}
+    row = 0
+    while row < len(q):
+        end = row  # last row of the run starting at `row`
+        while end < len(mover) and mover[end] >= 0 and mover[end] == mover[row]:
+            end += 1
+        if end - row < 2:
             raise CalibrationError(
-                f"CPA rows {current[0] + 1}..{current[-1] + 1}: each joint needs a run of at "
-                "least 3 rows in which only that joint moves"
+                f"CPA row at line {lines[row]}: each joint needs a run of at least 3 rows "
+                "in which only that joint moves"
             )
-        if moving in groups:
-            raise CalibrationError(f"CPA rows: joint {moving + 1} has two separate runs")
-        groups[moving] = list(current)
-
-    for row in range(len(q)):
-        if not current:
-            current = [row]
-            continue
-        changed = np.flatnonzero(np.abs(q[row] - q[row - 1]) > 1e-12)
-        if len(changed) == 1 and (moving is None or changed[0] == moving) and len(current) >= 1:
-            if moving is None:
-                moving = int(changed[0])
-            current.append(row)
-        else:
-            close()
-            current, moving = [row], None
-    close()
-    return {joint: np.array(rows) for joint, rows in groups.items()}
+        joint = mover[row]
+        if joint in groups:
+            raise CalibrationError(
+                f"CPA rows at lines {lines[row]}..{lines[end]}: joint {joint + 1} already had a run"
+            )
+        groups[joint] = np.arange(row, end + 1)
+        row = end + 1
+    return groups
 
 
 def estimate_twists(
@@ -153,7 +150,7 @@ def estimate_twists(
     if cpa.n_rows == 0:
         notes.append("no CPA rows: link twists keep their nominal values")
         return alpha, estimated, notes
-    groups = cpa_groups(cpa.q)
+    groups = cpa_groups(cpa.q, cpa.lines)
     axes: dict[int, np.ndarray] = {}
     for joint, rows in groups.items():
         axes[joint] = circle_axis(cpa.points[rows, 0, :], cpa.q[rows, joint])
@@ -259,7 +256,7 @@ def calibrate_paper(
         vector = cache.base
 
     params.apply(vector)
-    poses = chain.poses(q)
+    poses, _ = cache.evaluate(vector[cache.free])  # tool poses at the solution
     registration_position = register_points(poses.tool_positions, points)
     if method in (2, 3):
         registration_orientation = register_orientations(

@@ -18,6 +18,14 @@ from .errors import CalibrationError
 from .objective import Objective
 
 
+#: Termination tolerances of least_squares: relative step, relative cost
+#: change, and scaled gradient. Tight enough that noise-free data is fitted to
+#: ~1e-13 relative, loose enough not to spend evaluations on rounding noise.
+XTOL = 1e-12
+FTOL = 1e-12
+GTOL = 1e-12
+
+
 @dataclass(frozen=True)
 class Solution:
     """Result of one least-squares fit.
@@ -62,9 +70,9 @@ def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit") -> Solutio
         jac=objective.jacobian,
         method="lm",
         x_scale="jac",
-        xtol=1e-15,
-        ftol=1e-15,
-        gtol=1e-15,
+        xtol=XTOL,
+        ftol=FTOL,
+        gtol=GTOL,
     )
     jac = objective.jacobian(result.x)
     singular = np.linalg.svd(jac, compute_uv=False)
