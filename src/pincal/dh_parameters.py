@@ -104,6 +104,13 @@ class DHParameterSet:
             for i in range(n)
         )
 
+    def slot_jacobian(self, vector: np.ndarray) -> None:
+        """DH parameters are the slot coordinates themselves (identity map)."""
+        return None
+
+    def coupled(self, free: np.ndarray) -> np.ndarray:
+        return np.asarray(free, dtype=int)
+
     def slot_points(self, vector: np.ndarray) -> np.ndarray:
         """Point each slot turns about, in its frame [m], (4N, 3): (r_n, 0, d_n) for alpha_n."""
         table = DHTable.from_vector(vector)

@@ -14,11 +14,11 @@ they do not depend on the sensor registration (eq 10–11, 14).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from .dh_parameters import DHParameterSet
 from .errors import CalibrationError
 from .sensitivity import Sensitivity, SensitivityModel, ToolPoses
 
@@ -30,6 +30,9 @@ def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
         raise CalibrationError(f"need at least 2 calibration rows to form pairs, got {n_rows}")
     first = np.arange(half)
     return first, first + half
+
+
+ParameterSet = Any  # DHParameterSet, JointOffsets or PlacementErrors (same interface)
 
 
 class KinematicsCache:
@@ -47,7 +50,7 @@ class KinematicsCache:
 
     def __init__(
         self,
-        params: DHParameterSet,
+        params: "ParameterSet",
         free: npt.ArrayLike,
         base: npt.ArrayLike,
         q: npt.ArrayLike,
@@ -57,7 +60,8 @@ class KinematicsCache:
         self.base = np.array(base, dtype=float)
         self.q = np.asarray(q, dtype=float)
         slots = params.slots
-        self.model = SensitivityModel(params.chain, [slots[i] for i in self.free])
+        self._slots = params.coupled(self.free)  # slots moved by the free parameters
+        self.model = SensitivityModel(params.chain, [slots[i] for i in self._slots])
         self._x: np.ndarray | None = None
         self._result: tuple[ToolPoses, Sensitivity] | None = None
 
@@ -74,10 +78,19 @@ class KinematicsCache:
             vector = self.full_vector(x)
             self.model.set_state(
                 self.params.placements(vector),
-                self.params.slot_points(vector)[self.free],
+                self.params.slot_points(vector)[self._slots],
                 self.params.chain.tool,
             )
-            self._x, self._result = x.copy(), self.model.evaluate(self.q)
+            poses, sens = self.model.evaluate(self.q)
+            to_slots = self.params.slot_jacobian(vector)
+            if to_slots is not None:  # d(slot twist)/d(parameter) is not the identity
+                block = to_slots[np.ix_(self._slots, self.free)]
+                sens = Sensitivity(
+                    angular=np.einsum("ksi,sf->kfi", sens.angular, block),
+                    linear=np.einsum("ksi,sf->kfi", sens.linear, block),
+                    origin=sens.origin,
+                )
+            self._x, self._result = x.copy(), (poses, sens)
         return self._result
 
 

@@ -1,0 +1,202 @@
+"""Absolute residuals of measured target points (and orientations) in the sensor frame.
+
+For row k and target point p, with the tool pose (t_k, R_k) from the chain, the
+target's points m_p in the tool frame and the registration sensor_T_base
+(Omega, tau):
+
+    e_kp = w_k (Omega (t_k + R_k m_p) + tau − g_kp)            [dimensionless]
+    o_k  = v_k log(G_kᵀ Omega R_k R_T)                          (with orientations)
+
+w_k = 1/sigma_pos,k [1/m] and v_k = 1/sigma_rot,k [1/rad] weight each row by its
+measurement noise, so position and orientation need no ad-hoc scale. Unknowns,
+in this order: the free kinematic parameters (through the cache), the
+registration (Omega = Omega_0 exp(phi), tau), the points m_p, and the target
+rotation R_T = R_T0 exp(psi). Each block can be held fixed.
+
+Jacobians (right perturbations, Pinocchio's Jexp3 and Jlog3):
+d e/d theta = w Omega · point velocity; d e/d phi = −w Omega [y]× Jexp3(phi) with
+y = t + R m; d e/d tau = w I; d e/d m_p = w Omega R. With E = G_kᵀ Omega R_k R_T:
+d o/d theta = v Jlog3(E) Eᵀ G_kᵀ Omega · angular velocity;
+d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from .objective import KinematicsCache, Objective
+from .registration import Registration
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """[v]× for vectors (..., 3) → (..., 3, 3)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+@dataclass(frozen=True)
+class TargetEstimate:
+    """Registration and target geometry at a parameter vector.
+
+    Attributes:
+        registration: sensor_T_base.
+        points: target points in the tool frame [m], (P, 3).
+        rotation: target rotation R_T in the tool frame, (3, 3).
+    """
+
+    registration: Registration
+    points: np.ndarray
+    rotation: np.ndarray
+
+
+class SensorResidual(Objective):
+    """Eq of the module docstring over the rows the cache holds.
+
+    Args:
+        cache: kinematics of the K rows.
+        sensor_points: measured points g_kp [m], (K, P, 3).
+        sensor_rotations: measured target orientations G_k, (K, 3, 3), or None.
+        start: registration, points and target rotation to start from.
+        position_weight: w_k [1/m], scalar or (K,).
+        rotation_weight: v_k [1/rad], scalar or (K,).
+        fit_registration / fit_points / fit_rotation: which blocks are unknown.
+    """
+
+    def __init__(
+        self,
+        cache: KinematicsCache,
+        sensor_points: npt.ArrayLike,
+        sensor_rotations: npt.ArrayLike | None,
+        start: TargetEstimate,
+        position_weight: npt.ArrayLike = 1.0,
+        rotation_weight: npt.ArrayLike = 1.0,
+        fit_registration: bool = True,
+        fit_points: bool = True,
+        fit_rotation: bool = True,
+    ) -> None:
+        super().__init__(cache)
+        self.g = np.asarray(sensor_points, dtype=float)
+        self.G = None if sensor_rotations is None else np.asarray(sensor_rotations, dtype=float)
+        k, n_points = self.g.shape[:2]
+        self.start = start
+        self.w = np.broadcast_to(np.asarray(position_weight, dtype=float), (k,)).copy()
+        self.v = np.broadcast_to(np.asarray(rotation_weight, dtype=float), (k,)).copy()
+        n_kin = len(cache.free)
+        sizes = {
+            "kinematic": n_kin,
+            "registration": 6 if fit_registration else 0,
+            "points": 3 * n_points if fit_points else 0,
+            "rotation": 3 if (fit_rotation and self.G is not None) else 0,
+        }
+        self.blocks: dict[str, slice] = {}
+        offset = 0
+        for name, size in sizes.items():
+            self.blocks[name] = slice(offset, offset + size)
+            offset += size
+        self.n_params = offset
+
+    @property
+    def n_free(self) -> int:
+        return self.n_params
+
+    def start_vector(self) -> np.ndarray:
+        """Kinematic values from the cache's base, zero registration/rotation steps, start points."""
+        x = np.zeros(self.n_params)
+        x[self.blocks["kinematic"]] = self.cache.base[self.cache.free]
+        reg, pts = self.blocks["registration"], self.blocks["points"]
+        if reg.stop > reg.start:
+            x[reg.start + 3 : reg.stop] = self.start.registration.translation
+        if pts.stop > pts.start:
+            x[pts] = self.start.points.ravel()
+        return x
+
+    def estimate(self, x: npt.ArrayLike) -> TargetEstimate:
+        """Registration, points and target rotation at ``x``."""
+        x = np.asarray(x, dtype=float)
+        reg = x[self.blocks["registration"]]
+        registration = self.start.registration
+        if reg.size:
+            registration = Registration(
+                rotation=registration.rotation @ pin.exp3(reg[:3]), translation=reg[3:].copy()
+            )
+        pts = x[self.blocks["points"]]
+        points = pts.reshape(-1, 3) if pts.size else self.start.points
+        rot = x[self.blocks["rotation"]]
+        rotation = self.start.rotation @ pin.exp3(rot) if rot.size else self.start.rotation
+        return TargetEstimate(registration, points, rotation)
+
+    def _state(self, x: npt.ArrayLike):
+        x = np.asarray(x, dtype=float)
+        poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]])
+        target = self.estimate(x)
+        world = poses.tool_positions[:, None, :] + np.einsum(
+            "kij,pj->kpi", poses.tool_rotations, target.points
+        )  # (K, P, 3) in the base frame
+        return poses, sens, target, world
+
+    def residual(self, x: npt.ArrayLike) -> np.ndarray:
+        poses, _, target, world = self._state(x)
+        reg = target.registration
+        position = (reg.apply_points(world) - self.g) * self.w[:, None, None]
+        parts = [position.reshape(-1)]
+        if self.G is not None:
+            relative = self._orientation_error(poses, target)
+            logs = np.stack([pin.log3(e) for e in relative]) * self.v[:, None]
+            parts.append(logs.reshape(-1))
+        return np.concatenate(parts)
+
+    def _orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
+        """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
+        omega = target.registration.rotation
+        return self.G.transpose(0, 2, 1) @ omega @ poses.tool_rotations @ target.rotation
+
+    def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        poses, sens, target, world = self._state(x)
+        k, n_points = world.shape[:2]
+        omega = target.registration.rotation
+        rows_pos = np.zeros((k, n_points, 3, self.n_params))
+        kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
+        for p in range(n_points):
+            velocity = sens.point_velocity(world[:, p, :])  # (K, n_kin, 3)
+            rows_pos[:, p, :, kin] = np.einsum("ij,knj->kin", omega, velocity)
+        if reg.stop > reg.start:
+            jexp = pin.Jexp3(x[reg][:3])
+            rows_pos[..., reg.start : reg.start + 3] = -np.einsum(
+                "ij,kpjl,lm->kpim", omega, skew(world), jexp
+            )
+            rows_pos[..., reg.start + 3 : reg.stop] = np.eye(3)
+        if pts.stop > pts.start:
+            rotated = np.einsum("ij,kjl->kil", omega, poses.tool_rotations)  # Omega R_k
+            for p in range(n_points):
+                rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
+        rows_pos *= self.w[:, None, None, None]
+        blocks = [rows_pos.reshape(-1, self.n_params)]
+        if self.G is not None:
+            blocks.append(self._orientation_jacobian(x, poses, sens, target))
+        return np.vstack(blocks)
+
+    def _orientation_jacobian(self, x, poses, sens, target: TargetEstimate) -> np.ndarray:
+        relative = self._orientation_error(poses, target)
+        omega = target.registration.rotation
+        k = len(relative)
+        rows = np.zeros((k, 3, self.n_params))
+        jlog = np.stack([pin.Jlog3(e) for e in relative])  # (K, 3, 3)
+        kin, reg, rot = self.blocks["kinematic"], self.blocks["registration"], self.blocks["rotation"]
+        # world angular velocity w of R_k: d log E = Jlog3(E) Eᵀ G_kᵀ Omega w
+        left = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
+        rows[:, :, kin] = np.einsum("kij,knj->kin", left, sens.angular)
+        tool = poses.tool_rotations @ target.rotation  # R_k R_T
+        if reg.stop > reg.start:
+            rows[:, :, reg.start : reg.start + 3] = jlog @ tool.transpose(0, 2, 1) @ pin.Jexp3(x[reg][:3])
+        if rot.stop > rot.start:
+            rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
+        rows *= self.v[:, None, None]
+        return rows.reshape(-1, self.n_params)
