@@ -10,8 +10,9 @@ The registration and the target (its points in the tip frame, and its
 rotation when orientations are measured) are always estimated with the
 kinematics, unless a known tool is given. Parameters the data cannot determine
 are never returned: :mod:`pincal.identifiability` drops them by name, and the
-number of weakly determined combinations kept is chosen by linearised
-leave-one-row-out cross-validation (PRESS) on the calibration rows only.
+number of weakly determined combinations kept is chosen by an information
+criterion (AIC by default; BIC or leave-one-row-out cross-validation on
+request) computed on the calibration rows only — never on validation data.
 Rows whose residual is far outside the others (robust scale) are reported and,
 only when asked, removed before a refit.
 """
@@ -43,6 +44,14 @@ from .solver import Solution, solve
 
 CHAIN_LEVELS = ("registration", "offsets", "full")
 
+#: How the number of identifiable kinematic parameters kept is chosen.
+SELECTION_CRITERIA = {
+    "aic": "Akaike information criterion m ln(RSS/m) + 2n on the calibration rows",
+    "bic": "Bayesian information criterion m ln(RSS/m) + n ln(m) on the calibration rows",
+    "press": "linearised leave-one-row-out cross-validation (PRESS) on the calibration rows",
+    "all": "every identifiable parameter (AIC reported)",
+}
+
 #: Starting noise scales for weighting positions against orientations; both
 #: are re-estimated from the residuals (maximum likelihood with unknown variances).
 START_SIGMA_POS_M = 1e-3
@@ -50,7 +59,7 @@ START_SIGMA_ROT_RAD = 1e-3
 
 KEPT = "calibrated"
 NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
-NOT_SELECTED = "not determined: weakly identified, left out by cross-validation (PRESS)"
+NOT_SELECTED = "not determined: weakly identified, left out by the selection criterion"
 
 
 @dataclass(frozen=True)
@@ -226,6 +235,7 @@ def calibrate_chain(
     sigma_column: str | None = None,
     reject_outliers: bool = False,
     sigma_iterations: int = 2,
+    selection: str = "aic",
 ) -> ChainCalibration:
     """Calibrate ``chain`` at ``level`` on the non-validation rows of ``data``.
 
@@ -237,12 +247,16 @@ def calibrate_chain(
         level: one of :data:`CHAIN_LEVELS`.
         sigma_column: extra column holding a per-row noise scale [mm] (weights).
         reject_outliers: refit without the rows flagged as outliers.
+        selection: criterion choosing how many identifiable parameters to keep
+            (:data:`SELECTION_CRITERIA`).
         sigma_iterations: refits re-estimating the position/orientation noise scales.
 
     On return the chain holds the calibrated placements.
     """
     if level not in CHAIN_LEVELS:
         raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
+    if selection not in SELECTION_CRITERIA:
+        raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{selection}'")
     started = time.perf_counter()
     rows = data.select(data.roles != "validation")
     if tool_known and rows.n_points != 1:
@@ -255,7 +269,9 @@ def calibrate_chain(
     outliers: list[tuple[int, float]] = []
     removed: list[int] = []
     for attempt in range(2):
-        result = _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations)
+        result = _calibrate_rows(
+            chain, params, rows, level, tool_known, sigma_column, sigma_iterations, selection
+        )
         outliers = find_outliers(result["point_errors"], rows.lines)
         if not (reject_outliers and outliers and attempt == 0):
             break
@@ -293,7 +309,7 @@ def calibrate_chain(
     )
 
 
-def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations) -> dict:
+def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion) -> dict:
     nominal = chain.placements()
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
@@ -319,7 +335,7 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
         other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
         ordering = order_parameters(jac, kinematic_cols, other_cols)
         rank = ordering.rank
-        selection, kept = _select(problem, ordering, base, rows)
+        selection, kept = _select(problem, ordering, base, rows, criterion)
         dropped = _dropped(jac, ordering, kept, other_cols, full, params)
     fit_started = time.perf_counter()
     objective, solution = problem.fit(kept, base, what=f"{level} fit")
@@ -366,33 +382,44 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
     }
 
 
-def _select(problem: _Problem, ordering, base: np.ndarray, rows: MeasurementSet):
-    """PRESS over nested subsets of the ordered identifiable parameters."""
+def _select(problem: _Problem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str):
+    """Score nested subsets of the ordered identifiable parameters; keep the best.
+
+    ``aic``: Akaike's information criterion m ln(RSS/m) + 2n (Akaike 1974), which
+    estimates the expected prediction error on new measurements; ``bic``: the
+    same with ln(m) per parameter (Schwarz 1978); ``press``: linearised
+    leave-one-row-out cross-validation (Allen 1974); ``all``: every
+    identifiable parameter.
+    """
     sizes, scores = [], []
-    x_prev = None
+    previous = None
     block = 3 * rows.n_points + (3 if rows.rotations is not None else 0)
-    best = (np.inf, 0)
-    for n_kept in range(0, ordering.rank + 1):
+    candidates = [ordering.rank] if criterion == "all" else range(0, ordering.rank + 1)
+    for n_kept in candidates:
         kept = np.sort(ordering.order[:n_kept])
         objective = problem.objective(kept, base)
-        x0 = objective.start_vector()
-        if x_prev is not None:
-            x0 = _warm_start(objective, x_prev, kept)
+        x0 = objective.start_vector() if previous is None else _warm_start(objective, previous, kept)
         try:
             solution = solve(objective, x0, what="selection")
         except CalibrationError:
             continue
-        jac = objective.jacobian(solution.x)
-        residual = _row_blocks(solution.residual, rows, block)
-        score = press(_row_blocks(jac, rows, block), residual, block)
+        previous = (kept, solution.x, objective)
+        m, rss = solution.residual.size, float(solution.residual @ solution.residual)
+        if criterion == "press":
+            jac = objective.jacobian(solution.x)
+            residual = _row_blocks(solution.residual, rows, block)
+            score = press(_row_blocks(jac, rows, block), residual, block)
+        elif criterion == "bic":
+            score = m * np.log(rss / m) + np.log(m) * solution.x.size
+        else:  # aic, all
+            score = m * np.log(rss / m) + 2.0 * solution.x.size
         sizes.append(n_kept)
-        scores.append(score)
-        x_prev = (kept, solution.x, objective)
-        if score < best[0]:
-            best = (score, n_kept)
-    chosen = best[1]
+        scores.append(float(score))
+    if not sizes:
+        raise CalibrationError("no subset of the parameters could be fitted")
+    chosen = sizes[int(np.argmin(scores))]
     selection = Selection(
-        criterion="linearised leave-one-row-out cross-validation (PRESS) on the calibration rows",
+        criterion=SELECTION_CRITERIA[criterion],
         sizes=tuple(sizes),
         scores=tuple(scores),
         chosen=chosen,

@@ -74,15 +74,28 @@ def build_parser() -> argparse.ArgumentParser:
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
     cal.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
     cal.add_argument("data", type=Path, help="measurement CSV (format v1)")
-    cal.add_argument("--method", type=int, choices=(1, 2, 3), default=2,
+    cal.add_argument("--method", type=int, choices=(1, 2, 3),
                      help="1: positions only; 2: offsets from orientations, lengths from "
                           "positions (default); 3: full pose in one cost")
     cal.add_argument("--weight", type=_positive, default=1.0, metavar="W",
                      help="Method 3 weight w of Err_rot [mm^2/deg^2] (default 1)")
-    cal.add_argument("--tool", type=_tool, required=True, metavar="X,Y,Z,ROLL,PITCH,YAW",
-                     help="pose of the measured target in --tool-parent [m, rad]")
-    cal.add_argument("--tool-parent", required=True, metavar="LINK",
-                     help="link carrying the target (end of the calibrated chain)")
+    cal.add_argument("--level", choices=("dh", "registration", "offsets", "full"),
+                     help="what to calibrate: dh = the paper's DH parameters (needs --tool); "
+                          "registration, offsets (joint zeros) or full (SE(3) error of every joint "
+                          "placement) on any chain, estimating the target. Default: dh when "
+                          "--method is given, else full")
+    cal.add_argument("--tool", type=_tool, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                     help="known pose of the measured target in the tip link [m, rad]; "
+                          "without it (levels other than dh) the target is estimated")
+    cal.add_argument("--tool-parent", "--tip-link", dest="tip_link", metavar="LINK",
+                     help="link at the end of the calibrated chain, carrying the target")
+    cal.add_argument("--sigma-column", metavar="COLUMN",
+                     help="extra data column with a per-row noise scale [mm]: rows are weighted by it")
+    cal.add_argument("--reject-outliers", action="store_true",
+                     help="refit without the rows reported as outliers (> 5 robust sigma)")
+    cal.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
+                     help="criterion choosing how many weakly identified parameters to keep "
+                          "(default aic; computed on the calibration rows only)")
     cal.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf",
                      help="corrected URDF to write")
     cal.add_argument("--report", required=True, type=Path, metavar="REPORT.json",
@@ -102,7 +115,39 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
                       help="output directory (default: ./pincal-demo)")
     demo.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+    study = sub.add_parser("study", help="the paper's simulation study (Section 7): all methods, "
+                                         "noise limit, findings, figures")
+    study.add_argument("--out", type=Path, default=Path("pincal-study"),
+                       help="output directory (default: ./pincal-study)")
+    study.add_argument("--reps", type=_count, default=25, metavar="N",
+                       help="noise realisations per level, N_rep (default 25)")
+    study.add_argument("--levels", type=_count, default=16, metavar="M",
+                       help="noise levels from 0 to 0.15, M_n (default 16)")
+    study.add_argument("--restarts", type=_count_or_zero, default=300, metavar="N",
+                       help="random starting points per restart case (default 300, the paper's; 0 skips)")
+    study.add_argument("--workers", type=_count, default=None, metavar="N",
+                       help="local worker processes (default: all cores; 1 runs in this process)")
+    study.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on a Dask cluster at ADDRESS, or 'local' to start a Dask LocalCluster")
     return parser
+
+
+def _count_or_zero(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be >= 0")
+    return value
+
+
+def _count(text: str) -> int:
+    value = _count_or_zero(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be >= 1")
+    return value
 
 
 def _error_columns(errors: PoseErrors) -> str:
@@ -141,18 +186,47 @@ def _run_simulate(args: argparse.Namespace) -> int:
 def _run_calibrate(args: argparse.Namespace) -> int:
     from .workflows import calibrate_files
 
-    run = calibrate_files(args.urdf, args.data, args.method, args.weight, args.tool,
-                          args.tool_parent, args.out, args.report)
+    level = args.level or ("dh" if args.method is not None else "full")
+    if args.tip_link is None:
+        raise PincalError("give the end of the chain: --tip-link LINK (or --tool-parent LINK)")
+    if level != "dh" and args.method is not None:
+        raise PincalError(f"--method applies to --level dh only (got --level {level})")
+    method = args.method or 2
+    run = calibrate_files(args.urdf, args.data, method, args.weight, args.tool, args.tip_link,
+                          args.out, args.report, level=level, sigma_column=args.sigma_column,
+                          reject_outliers=args.reject_outliers, selection=args.select)
     _print_notes(run.notes + list(run.result.notes))
-    for stage in run.result.stages:
-        print(f"{stage.name}: {len(stage.parameters)} parameters, RMS residual {stage.rms:.4g} "
-              f"{stage.unit}, {stage.n_evaluations} evaluations")
-    print(f"Method {args.method} calibrated in {run.seconds * 1000:.1f} ms")
+    if level == "dh":
+        for stage in run.result.stages:
+            print(f"{stage.name}: {len(stage.parameters)} parameters, RMS residual {stage.rms:.4g} "
+                  f"{stage.unit}, {stage.n_evaluations} evaluations")
+        print(f"Method {method} calibrated in {run.seconds * 1000:.1f} ms")
+    else:
+        _print_chain_summary(run)
     print(_HEADER)
     print(f"{'calibration rows':24s} {_error_columns(run.errors)}")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
     return 0
+
+
+def _print_chain_summary(run) -> None:
+    result = run.result
+    ident = run.report["identifiability"]
+    kept = sum(1 for p in run.report["parameters"] if p["calibrated"] is not None)
+    print(f"level {result.level}: {kept} kinematic parameters kept of {len(run.report['parameters'])} "
+          f"({ident['rank']} identifiable), plus registration and target")
+    if ident["selection"]:
+        sel = ident["selection"]
+        print(f"selection: {sel['criterion']} = {sel['value']:.4g} with {sel['kept']} kept")
+    print(f"Jacobian condition number (scaled): {ident['jacobian_condition']:.3g}")
+    for pair in ident["correlated_pairs"][:10]:
+        print(f"correlated: {pair['a']} ~ {pair['b']} ({pair['correlation']:+.3f})")
+    for line, score in result.outliers:
+        print(f"outlier: line {line} (robust score {score:.1f})")
+    print(f"estimated noise: {result.sigma_pos_m * 1000:.3f} mm"
+          + ("" if result.sigma_rot_rad is None else f", {np.degrees(result.sigma_rot_rad):.4f} deg"))
+    print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
@@ -162,7 +236,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     _print_notes(evaluation.notes)
     errors = evaluation.errors
     print(_HEADER)
-    print(f"{f'{errors.position_m.size} rows':24s} {_error_columns(errors)}")
+    print(f"{f'{errors.n_rows} rows':24s} {_error_columns(errors)}")
     if args.json:
         args.json.write_text(json.dumps(evaluation.as_dict(), indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
@@ -200,11 +274,32 @@ def _run_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_study(args: argparse.Namespace) -> int:
+    from .study import ProgressBar, StudyConfig, run_study, write_study
+
+    config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts)
+    progress = ProgressBar(sys.stderr) if sys.stderr.isatty() else None
+    result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress)
+    paths = write_study(result, args.out)
+    print(f"{len(result.rows)} rows from {config.levels} noise levels x {config.repeats} repeats x "
+          f"{len(config.deviations)} deviation sets, {sum(r['starts'] for r in result.restart_summary)} restarts; "
+          f"{result.wall_s:.1f} s on {result.executor}")
+    print()
+    for finding in result.findings:
+        print(f"{'holds' if finding['holds'] else 'FAILS':5s}  {finding['finding']}: {finding['evidence']}")
+    print()
+    for name in ("study", "summary", "restarts", "findings", "json"):
+        print(f"wrote {paths[name]}")
+    print(f"wrote {len(paths['figures'])} figures in {args.out}/")
+    return 0
+
+
 _COMMANDS = {
     "simulate": _run_simulate,
     "calibrate": _run_calibrate,
     "evaluate": _run_evaluate,
     "demo": _run_demo,
+    "study": _run_study,
 }
 
 

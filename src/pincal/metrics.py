@@ -1,8 +1,10 @@
 """Accuracy of a calibrated model on measured rows (eq 24).
 
-For each row j: the position error q_j = ‖Omega_1 t_j + tau_1 − g_j‖ through
-Registration 1 and the orientation error eta_j, the angle of
-G_j⁻¹ Omega_2 R_j, through Registration 2 (Franaszek & Marvel 2022, eq 24).
+For each row j and target point p: the position error q_jp = ‖Omega_1 x_jp +
+tau_1 − g_jp‖ through Registration 1, with x_jp the point in the robot base
+frame; and the orientation error eta_j, the angle of G_j⁻¹ Omega_2 R_j R_T,
+through Registration 2 (Franaszek & Marvel 2022, eq 24; R_T is the target's
+rotation in the tool frame, identity for a known tool).
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from .chain import KinematicChain
@@ -19,7 +22,7 @@ from .registration import Registration
 
 @dataclass(frozen=True)
 class ErrorSummary:
-    """Mean, RMS and maximum of per-row errors, in reporting units (mm or deg)."""
+    """Mean, RMS and maximum of errors, in reporting units (mm or deg)."""
 
     mean: float
     rms: float
@@ -28,7 +31,7 @@ class ErrorSummary:
 
     @classmethod
     def of(cls, values: np.ndarray, unit: str) -> "ErrorSummary":
-        values = np.asarray(values, dtype=float)
+        values = np.asarray(values, dtype=float).ravel()
         return cls(
             mean=float(values.mean()),
             rms=float(np.sqrt(np.mean(values**2))),
@@ -45,7 +48,7 @@ class PoseErrors:
     """Per-row errors of eq 24.
 
     Attributes:
-        position_m: q_j [m], (J,).
+        position_m: q_jp [m], (J, P): one column per target point.
         rotation_rad: eta_j [rad], (J,), or None without orientation data.
     """
 
@@ -53,8 +56,17 @@ class PoseErrors:
     rotation_rad: np.ndarray | None
 
     @property
+    def n_rows(self) -> int:
+        return int(self.position_m.shape[0])
+
+    @property
     def position(self) -> ErrorSummary:
+        """Over all rows and points [mm]."""
         return ErrorSummary.of(self.position_m * 1000.0, "mm")
+
+    def point(self, index: int) -> ErrorSummary:
+        """Over all rows, for target point ``index`` (0-based) [mm]."""
+        return ErrorSummary.of(self.position_m[:, index] * 1000.0, "mm")
 
     @property
     def rotation(self) -> ErrorSummary | None:
@@ -63,7 +75,9 @@ class PoseErrors:
         return ErrorSummary.of(np.degrees(self.rotation_rad), "deg")
 
     def as_dict(self) -> dict:
-        out = {"rows": int(self.position_m.size), "position": self.position.as_dict()}
+        out = {"rows": self.n_rows, "position": self.position.as_dict()}
+        if self.position_m.shape[1] > 1:
+            out["position_per_point"] = [self.point(p).as_dict() for p in range(self.position_m.shape[1])]
         if self.rotation is not None:
             out["orientation"] = self.rotation.as_dict()
         return out
@@ -74,14 +88,27 @@ def pose_errors(
     data: MeasurementSet,
     registration_position: Registration,
     registration_orientation: Registration,
+    points: npt.ArrayLike | None = None,
+    target_rotation: npt.ArrayLike | None = None,
 ) -> PoseErrors:
-    """Eq 24 on every row of ``data`` (first target point; the chain's tool is the TCP)."""
+    """Eq 24 on every row of ``data``.
+
+    Args:
+        chain: the calibrated chain; its tool frame carries the target.
+        data: measured rows.
+        registration_position / registration_orientation: Registrations 1 and 2.
+        points: target points in the tool frame [m], (P, 3); default: the tool origin.
+        target_rotation: R_T, the target's rotation in the tool frame (default identity).
+    """
     poses = chain.poses(data.q)
-    predicted = registration_position.apply_points(poses.tool_positions)
-    position = np.linalg.norm(predicted - data.points[:, 0, :], axis=1)
+    points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
+    world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, points)
+    predicted = registration_position.apply_points(world)
+    position = np.linalg.norm(predicted - data.points, axis=2)
     rotation = None
     if data.rotations is not None:
-        model = registration_orientation.apply_rotations(poses.tool_rotations)
-        relative = data.rotations.transpose(0, 2, 1) @ model  # G_j^-1 Omega R_j
+        target = np.eye(3) if target_rotation is None else np.asarray(target_rotation, dtype=float)
+        model = registration_orientation.apply_rotations(poses.tool_rotations @ target)
+        relative = data.rotations.transpose(0, 2, 1) @ model  # G_j^-1 Omega R_j R_T
         rotation = np.array([np.linalg.norm(pin.log3(r)) for r in relative])
     return PoseErrors(position_m=position, rotation_rad=rotation)

@@ -9,7 +9,11 @@ Keys promised to users (never renamed, only extended):
   ``translation_m``, mapping URDF-root coordinates to sensor coordinates
   (g ≈ Omega t + tau); ``registration.orientation``: Registration 2 likewise;
 * ``tool``: ``parent_link``, ``xyz_m``, ``rpy_rad`` (pose of the target in the
-  parent link);
+  parent link) and, for estimated targets, ``points_m`` (the target's points in
+  the parent link frame, in marker-column order);
+* levels registration/offsets/full add ``level``, ``identifiability`` (rank,
+  condition number, the selection criterion and its value, what was dropped and
+  what absorbs it, correlated pairs), ``noise``, ``outliers``;
 * ``fit``: stages, row counts and the errors (eq 24) on the calibration rows.
 """
 
@@ -19,7 +23,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +34,10 @@ from .errors import PincalError
 from .metrics import PoseErrors
 from .paper_methods import CALIBRATED, FROM_CPA, PaperCalibration
 from .registration import Registration
+
+if TYPE_CHECKING:
+    from .chain import KinematicChain
+    from .chain_calibration import ChainCalibration
 
 REPORT_VERSION = 1
 
@@ -113,20 +121,23 @@ class ReportModel:
     """What ``pincal evaluate`` needs from a REPORT.json.
 
     Attributes:
-        tool_parent: link carrying the tool.
-        tool_pose: ``parent_T_tool`` (4, 4) [m].
+        tool_parent: link carrying the target.
+        points: target points in ``tool_parent``'s frame [m], (P, 3): ``tool.points_m``,
+            or the origin ``tool.xyz_m`` of a single-point tool.
+        rotation: the measured target frame's rotation in ``tool_parent`` (``tool.rpy_rad``).
         registration_position: Registration 1.
         registration_orientation: Registration 2.
     """
 
     tool_parent: str
-    tool_pose: np.ndarray
+    points: np.ndarray
+    rotation: np.ndarray
     registration_position: Registration
     registration_orientation: Registration
 
 
 def read_report(path: str | Path) -> ReportModel:
-    """Read the tool and registrations of a REPORT.json (one clear error if malformed)."""
+    """Read the target and registrations of a REPORT.json (one clear error if malformed)."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -137,9 +148,14 @@ def read_report(path: str | Path) -> ReportModel:
     try:
         tool = doc["tool"]
         registration = doc["registration"]
+        pose = pose_from_xyz_rpy(tool.get("xyz_m", [0.0, 0.0, 0.0]), tool.get("rpy_rad", [0.0, 0.0, 0.0]))
+        points = np.asarray(tool["points_m"], dtype=float) if "points_m" in tool else pose[None, :3, 3]
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError("tool.points_m must be a list of [x, y, z]")
         return ReportModel(
             tool_parent=str(tool["parent_link"]),
-            tool_pose=pose_from_xyz_rpy(tool["xyz_m"], tool["rpy_rad"]),
+            points=points,
+            rotation=pose[:3, :3],
             registration_position=Registration.from_dict(registration["position"]),
             registration_orientation=Registration.from_dict(
                 registration.get("orientation", registration["position"])
@@ -150,3 +166,95 @@ def read_report(path: str | Path) -> ReportModel:
             f"{path}: not a pincal report (missing or bad key {exc}); "
             "pass the REPORT.json written by 'pincal calibrate'"
         ) from None
+
+
+def chain_report(
+    result: "ChainCalibration",
+    chain: "KinematicChain",
+    tool_parent: str,
+    calibration_errors: PoseErrors,
+    n_rows: dict[str, int],
+    sources: dict[str, str],
+    notes: list[str],
+) -> dict[str, Any]:
+    """Build the REPORT.json document of a calibration at level registration/offsets/full."""
+    params = result.params
+    parameters = []
+    for i in range(params.size if params is not None else 0):
+        info = params.info[i]
+        determined = result.status[i] == "calibrated"
+        parameters.append(
+            {
+                "name": info.name,
+                "joint": info.joint,
+                "unit": info.unit,
+                "nominal": 0.0,
+                "calibrated": float(result.vector[i]) if determined else None,
+                "std": _number(result.std[i]) if determined else None,
+                "status": result.status[i],
+            }
+        )
+    tool = chain.tool
+    points = result.target.points @ tool[:3, :3].T + tool[:3, 3]  # in the parent link frame
+    rotation = tool[:3, :3] @ result.target.rotation
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, points[0]
+    xyz, rpy = xyz_rpy_from_pose(pose)
+    names = {i: params.info[i].name for i in range(params.size)} if params is not None else {}
+    selection = result.selection
+    return {
+        "pincal_version": __version__,
+        "report_version": REPORT_VERSION,
+        "method": None,
+        "level": result.level,
+        "model": "joint placements",
+        "sources": sources,
+        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names)},
+        "parameters": parameters,
+        "identifiability": {
+            "rank": result.rank,
+            "jacobian_condition": result.condition,
+            "selection": None
+            if selection is None
+            else {
+                "criterion": selection.criterion,
+                "kept": selection.chosen,
+                "value": float(selection.scores[selection.sizes.index(selection.chosen)]),
+                "candidates": [{"kept": n, "value": v} for n, v in zip(selection.sizes, selection.scores)],
+            },
+            "dropped": [
+                {
+                    "name": names[d.index],
+                    "reason": d.reason,
+                    "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into],
+                }
+                for d in result.dropped
+            ],
+            "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
+        },
+        "registration": {
+            "position": result.target.registration.as_dict(),
+            "orientation": result.target.registration.as_dict(),
+        },
+        "tool": {
+            "parent_link": tool_parent,
+            "points_m": points.tolist(),
+            "xyz_m": xyz.tolist(),
+            "rpy_rad": rpy.tolist(),
+        },
+        "noise": {
+            "sigma_pos_mm": result.sigma_pos_m * 1000.0,
+            "sigma_rot_deg": None if result.sigma_rot_rad is None else float(np.degrees(result.sigma_rot_rad)),
+        },
+        "outliers": [{"line": line, "robust_score": score} for line, score in result.outliers],
+        "removed_lines": list(result.removed_lines),
+        "fit": {
+            "rows": n_rows,
+            "rows_used": len(result.rows_used),
+            "rms_point_error_mm": result.rms_m * 1000.0,
+            "fit_seconds": result.fit_seconds,
+            "total_seconds": result.total_seconds,
+            "calibration_errors": calibration_errors.as_dict(),
+        },
+        "notes": list(result.notes) + list(notes),
+    }

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import __version__
 from .chain import KinematicChain, pose_from_xyz_rpy, xyz_rpy_from_pose
+from .chain_calibration import ChainCalibration, calibrate_chain
 from .corrected_urdf import write_corrected_urdf
 from .dh import DEVIATION_SETS, KUKA_LWR4_DH
 from .dh_parameters import DHParameterSet
@@ -24,7 +25,7 @@ from .measurements import MeasurementSet, read_measurements, write_measurements
 from .metrics import PoseErrors, pose_errors
 from .paper_methods import PaperCalibration, calibrate_paper
 from .registration import register_orientations, register_points
-from .report import paper_report, read_report, write_report
+from .report import chain_report, paper_report, read_report, write_report
 from .robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from .simulation import SimulatedExperiment, SimulationSettings, simulate_experiment
 
@@ -100,7 +101,7 @@ class CalibrationRun:
     """Outcome of :func:`calibrate_files`.
 
     Attributes:
-        result: the paper method's result.
+        result: the paper method's or the chain calibration's result.
         report: the REPORT.json document written.
         errors: eq 24 errors on the calibration rows.
         notes: reader and method notes for the user.
@@ -108,7 +109,7 @@ class CalibrationRun:
         reload_error: largest TCP difference after reloading the written URDF [m].
     """
 
-    result: PaperCalibration
+    result: PaperCalibration | ChainCalibration
     report: dict[str, Any]
     errors: PoseErrors
     notes: list[str]
@@ -116,7 +117,7 @@ class CalibrationRun:
     reload_error: float
 
 
-def calibrate_chain(
+def calibrate_chain_dh(
     chain: KinematicChain, data: MeasurementSet, method: int, weight: float
 ) -> tuple[PaperCalibration, DHParameterSet, float]:
     """Run a paper method on a loaded chain; returns the result, the parameter set and the time [s]."""
@@ -131,32 +132,66 @@ def calibrate_files(
     data_path: str | Path,
     method: int,
     weight: float,
-    tool_pose: np.ndarray,
+    tool_pose: np.ndarray | None,
     tool_parent: str,
     out_urdf: str | Path,
     report_path: str | Path,
+    level: str = "dh",
+    sigma_column: str | None = None,
+    reject_outliers: bool = False,
+    selection: str = "aic",
 ) -> CalibrationRun:
-    """Calibrate ``urdf`` on ``data_path`` and write the corrected URDF and the report."""
+    """Calibrate ``urdf`` on ``data_path`` and write the corrected URDF and the report.
+
+    ``level`` ``dh`` runs the paper's Method ``method`` (needs ``tool_pose``);
+    ``registration``, ``offsets`` and ``full`` calibrate any chain
+    (:func:`pincal.chain_calibration.calibrate_chain`), estimating the target
+    unless ``tool_pose`` is given.
+    """
     urdf, data_path = Path(urdf), Path(data_path)
     out_urdf, report_path = Path(out_urdf), Path(report_path)
     refuse_overwrite(out_urdf, urdf, data_path)
     refuse_overwrite(report_path, urdf, data_path, out_urdf)
+    if level == "dh" and tool_pose is None:
+        raise PincalError(
+            "the paper's methods (--level dh) need the tool: --tool X,Y,Z,ROLL,PITCH,YAW; "
+            "or use --level registration|offsets|full to estimate the target"
+        )
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose)
     data, notes = read_measurements(data_path, chain.joint_specs)
     nominal_placements = chain.placements()
-    result, params, seconds = calibrate_chain(chain, data, method, weight)
-    calibration = data.with_role("calibration")
-    errors = pose_errors(
-        chain, calibration, result.registration_position, result.registration_orientation
-    )
+    n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
+    sources = {"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf)}
+    if level == "dh":
+        result, params, seconds = calibrate_chain_dh(chain, data, method, weight)
+        errors = pose_errors(
+            chain, data.with_role("calibration"), result.registration_position, result.registration_orientation
+        )
+        report = paper_report(result, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
+        what = f"Method {method} of Franaszek & Marvel 2022"
+    else:
+        start = time.perf_counter()
+        result = calibrate_chain(
+            chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
+            reject_outliers=reject_outliers, selection=selection,
+        )
+        seconds = time.perf_counter() - start
+        registration = result.target.registration
+        used = data.select(np.isin(data.lines, result.rows_used))
+        errors = pose_errors(
+            chain, used, registration, registration, points=result.target.points,
+            target_rotation=result.target.rotation,
+        )
+        report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
+        what = f"level {level}"
     write_corrected_urdf(
         urdf,
         out_urdf,
         chain,
         nominal_placements,
         comment=(
-            f"Calibrated by pincal {__version__} (Method {method} of Franaszek & Marvel 2022) "
-            f"from {urdf.name} and {data_path.name}. Registration and tool: see the report."
+            f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {data_path.name}. "
+            "Registration and tool: see the report."
         ),
     )
     reload_error = _reload_error(out_urdf, chain, data.q)
@@ -165,16 +200,6 @@ def calibrate_files(
             f"{out_urdf}: reloading the written URDF moves the TCP by {reload_error:.3g} m "
             f"(> {RELOAD_TOLERANCE:g}); please report this as a bug"
         )
-    report = paper_report(
-        result,
-        params,
-        tool_parent,
-        tool_pose,
-        errors,
-        n_rows={role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")},
-        sources={"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf)},
-        notes=notes,
-    )
     write_report(report_path, report)
     return CalibrationRun(result, report, errors, notes, seconds, reload_error)
 
@@ -208,13 +233,23 @@ class Evaluation:
 def evaluate_files(urdf: str | Path, report_path: str | Path, data_path: str | Path) -> Evaluation:
     """Eq 24 on every non-CPA row of ``data_path`` with the model and registrations of a report."""
     report = read_report(report_path)
-    chain = KinematicChain.from_urdf(urdf, report.tool_parent, tool=report.tool_pose)
+    chain = KinematicChain.from_urdf(urdf, report.tool_parent)
     data, notes = read_measurements(data_path, chain.joint_specs)
+    if data.n_points != len(report.points):
+        raise PincalError(
+            f"{data_path}: {data.n_points} target point(s) per row, but the report's tool has "
+            f"{len(report.points)}; evaluate with data of the same target"
+        )
     rows = data.roles != "cpa"
     if not np.any(rows):
         raise PincalError(f"{data_path}: no rows to evaluate (all rows have role 'cpa')")
     errors = pose_errors(
-        chain, data.select(rows), report.registration_position, report.registration_orientation
+        chain,
+        data.select(rows),
+        report.registration_position,
+        report.registration_orientation,
+        points=report.points,
+        target_rotation=report.rotation,
     )
     return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes)
 
