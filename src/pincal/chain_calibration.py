@@ -114,7 +114,31 @@ class ChainCalibration:
     fit_seconds: float
     total_seconds: float
     rms_m: float
+    kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
+    solution: np.ndarray = field(default_factory=lambda: np.array([]))
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    start: TargetEstimate | None = None
+    fit_target: bool = True
     notes: tuple[str, ...] = field(default=())
+
+    def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
+        """Linearised prediction of the RMS error of the target points at
+        configurations ``q`` due to the parameters' estimation noise [m]
+        (covariance of the fit propagated through the measurement Jacobian)."""
+        params = self.params if self.params is not None else _NoParameters(chain)
+        k, n_points = len(q), len(self.target.points)
+        cache = KinematicsCache(params, self.kept, self.vector, q)
+        objective = SensorResidual(
+            cache,
+            np.zeros((k, n_points, 3)),
+            np.tile(np.eye(3), (k, 1, 1)) if self.sigma_rot_rad is not None else None,
+            self.start,
+            fit_points=self.fit_target,
+            fit_rotation=self.fit_target,
+        )
+        jac = objective.jacobian(self.solution)[: 3 * k * n_points]
+        variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
+        return float(np.sqrt(variance.sum() / (k * n_points)))
 
 
 def initial_target(
@@ -305,6 +329,11 @@ def calibrate_chain(
         fit_seconds=result["fit_seconds"],
         total_seconds=time.perf_counter() - started,
         rms_m=result["rms"],
+        kept=result["kept"],
+        solution=result["x"],
+        covariance=result["covariance"],
+        start=result["start"],
+        fit_target=not tool_known,
         notes=tuple(notes),
     )
 
@@ -378,6 +407,10 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
         "fit_seconds": fit_seconds,
         "rms": float(np.sqrt(np.mean(np.sum(point_residual**2, axis=2)))),
         "point_errors": np.linalg.norm(point_residual, axis=2),
+        "kept": kept,
+        "x": x,
+        "covariance": covariance,
+        "start": problem.start,
         "notes": notes,
     }
 

@@ -89,7 +89,7 @@ def cpa_configurations(lower: np.ndarray, upper: np.ndarray, per_joint: int) -> 
     return np.vstack(rows)
 
 
-def _measure(
+def measure(
     chain: KinematicChain,
     q: np.ndarray,
     registration: Registration,
@@ -97,22 +97,44 @@ def _measure(
     sigma_pos_m: float,
     sigma_rot_rad: float,
     role: str,
+    points: np.ndarray | None = None,
+    target_rotation: np.ndarray | None = None,
+    with_rotation: bool = True,
 ) -> MeasurementSet:
+    """What the simulated sensor reports at configurations ``q`` (eq 20–22).
+
+    Args:
+        points: target points in the tool frame (P, 3) [m]; default: the tool origin.
+        target_rotation: the measured frame's rotation in the tool frame (default identity).
+        with_rotation: also report orientations.
+    """
     poses = chain.poses(q)
-    points = registration.apply_points(poses.tool_positions)
-    points = points + rng.normal(0.0, 1.0, points.shape) * sigma_pos_m
-    noise = Rotation.from_euler("ZYX", rng.normal(0.0, 1.0, (len(q), 3)) * sigma_rot_rad)
-    rotations = noise.as_matrix() @ registration.apply_rotations(poses.tool_rotations)
+    points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
+    world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, points)
+    sensed = registration.apply_points(world)
+    sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
+    rotations = None
+    if with_rotation:
+        target = np.eye(3) if target_rotation is None else target_rotation
+        noise = Rotation.from_euler("ZYX", rng.normal(0.0, 1.0, (len(q), 3)) * sigma_rot_rad)
+        rotations = noise.as_matrix() @ registration.apply_rotations(poses.tool_rotations @ target)
     return MeasurementSet(
         joint_names=chain.joint_names,
         q=q,
-        points=points[:, None, :],
+        points=sensed,
         rotations=rotations,
         roles=np.array([role] * len(q), dtype=object),
         lines=np.arange(2, len(q) + 2),
         extra={},
         source="<simulation>",
     )
+
+
+def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
+    """Joint readings drawn uniformly within the limits (±pi for continuous joints), (count, N)."""
+    lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
+    upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    return rng.uniform(lower, upper, (count, len(lower)))
 
 
 def simulate_experiment(
@@ -141,10 +163,10 @@ def simulate_experiment(
         q_cpa = cpa_configurations(lower, upper, settings.n_cpa)
         q_cal = rng.uniform(lower, upper, (settings.n_calibration, len(lower)))
         q_val = rng.uniform(lower, upper, (settings.n_validation, len(lower)))
-        cpa = _measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa")
-        cal = _measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration")
+        cpa = measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa")
+        cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration")
         val_scale = 1.0 if settings.validation_noise else 0.0
-        val = _measure(
+        val = measure(
             chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation"
         )
     finally:
@@ -161,3 +183,54 @@ def simulate_experiment(
         source="<simulation>",
     )
     return SimulatedExperiment(calibration, val, truth, registration, tool)
+
+
+@dataclass(frozen=True)
+class ChainExperiment:
+    """Simulated measurements of any chain and the truth behind them.
+
+    Attributes:
+        calibration / validation: the simulated rows.
+        truth: the true parameter vector of the parameter set used.
+        registration: the true sensor_T_base.
+        points: the true target points in the tool frame [m], (P, 3).
+        target_rotation: the measured frame's rotation in the tool frame.
+    """
+
+    calibration: MeasurementSet
+    validation: MeasurementSet
+    truth: np.ndarray
+    registration: Registration
+    points: np.ndarray
+    target_rotation: np.ndarray
+
+
+def simulate_chain(
+    params,
+    truth: np.ndarray,
+    points: np.ndarray,
+    settings: SimulationSettings = SimulationSettings(),
+    with_rotation: bool = False,
+    target_rotation: np.ndarray | None = None,
+    registration: Registration = DEFAULT_REGISTRATION,
+) -> ChainExperiment:
+    """Simulate random-configuration measurements of ``params.chain`` with the
+    true parameters ``truth`` (a vector of the parameter set ``params``); the
+    chain's placements are restored afterwards."""
+    chain = params.chain
+    rng = np.random.default_rng(settings.seed)
+    target_rotation = np.eye(3) if target_rotation is None else target_rotation
+    saved = chain.placements()
+    sigma_p = settings.sigma_pos_mm / 1000.0
+    sigma_a = np.radians(settings.sigma_rot_deg)
+    try:
+        params.apply(truth)
+        q_cal = random_configurations(chain, rng, settings.n_calibration)
+        q_val = random_configurations(chain, rng, settings.n_validation)
+        common = dict(points=points, target_rotation=target_rotation, with_rotation=with_rotation)
+        cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration", **common)
+        scale = 1.0 if settings.validation_noise else 0.0
+        val = measure(chain, q_val, registration, rng, sigma_p * scale, sigma_a * scale, "validation", **common)
+    finally:
+        chain.set_placements(saved)
+    return ChainExperiment(cal, val, np.asarray(truth, dtype=float), registration, np.asarray(points), target_rotation)
