@@ -71,7 +71,7 @@ class PaperCalibration:
     """Outcome of one paper method.
 
     Attributes:
-        method: 1, 2 or 3.
+        method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.ml_estimator`).
         weight: w of Method 3 [mm²/deg²], None otherwise.
         nominal: the starting DH table.
         table: the calibrated DH table.
@@ -83,7 +83,7 @@ class PaperCalibration:
         notes: things the user should know.
     """
 
-    method: int
+    method: int | str
     weight: float | None
     nominal: DHTable
     table: DHTable
@@ -179,7 +179,7 @@ def calibrate_paper(
         chain: the chain; its tool must be the measured target (the TCP). On
             return its placements hold the calibrated table.
         data: measurements (``cpa`` rows optional, ``calibration`` rows used).
-        method: 1, 2 or 3.
+        method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.ml_estimator`).
         weight: w of Method 3 [mm²/deg²].
         nominal: the default table (read from the chain's placements if None);
             parameters the data cannot determine keep its values.
