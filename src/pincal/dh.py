@@ -192,25 +192,31 @@ class DHTable:
         return cls(alpha=alpha, epsilon=eps, r=r, d=d)
 
     def joint_origins(self) -> list[np.ndarray]:
-        """URDF joint origins realising this table, N + 1 homogeneous matrices.
+        """URDF joint origins realising this table; see :func:`dh_joint_origins`."""
+        return dh_joint_origins(self.to_vector())
 
-        Entry 0 is the origin of joint 1 in DH frame 0: ``Rz(eps_1)``. Entry n
-        (1 <= n < N) is the origin of joint n+1 in the child link of joint n:
-        ``Tz(d_n) Tx(r_n) Rx(alpha_n) Rz(eps_{n+1})``. Entry N is the origin of the
-        fixed flange joint: ``Tz(d_N) Tx(r_N) Rx(alpha_N)``. Chaining
-        ``origin_n · Rz(theta_n)`` reproduces ``F_1 ··· F_N`` exactly.
-        """
-        n = self.n_joints
-        eps_next = np.append(self.epsilon[1:], 0.0)  # the flange row has no Rz
-        ca, sa = np.cos(self.alpha), np.sin(self.alpha)
-        ce, se = np.cos(eps_next), np.sin(eps_next)
-        rows = np.zeros((n, 4, 4))
-        # Tz(d) Tx(r) Rx(alpha) Rz(eps) in closed form
-        rows[:, 0, 0], rows[:, 0, 1], rows[:, 0, 3] = ce, -se, self.r
-        rows[:, 1, 0], rows[:, 1, 1], rows[:, 1, 2] = ca * se, ca * ce, -sa
-        rows[:, 2, 0], rows[:, 2, 1], rows[:, 2, 2], rows[:, 2, 3] = sa * se, sa * ce, ca, self.d
-        rows[:, 3, 3] = 1.0
-        return [rot_z(self.epsilon[0])] + list(rows)
+
+def dh_joint_origins(vector: npt.ArrayLike) -> list[np.ndarray]:
+    """URDF joint origins realising the table ``[alpha, epsilon, r, d]`` (4N,), N + 1 matrices.
+
+    Entry 0 is the origin of joint 1 in DH frame 0: ``Rz(eps_1)``. Entry n
+    (1 <= n < N) is the origin of joint n+1 in the child link of joint n:
+    ``Tz(d_n) Tx(r_n) Rx(alpha_n) Rz(eps_{n+1})``. Entry N is the origin of the
+    fixed flange joint: ``Tz(d_N) Tx(r_N) Rx(alpha_N)``. Chaining
+    ``origin_n · Rz(theta_n)`` reproduces ``F_1 ··· F_N`` exactly.
+    """
+    alpha, epsilon, r, d = np.asarray(vector, dtype=float).reshape(4, -1)
+    n = alpha.size
+    eps_next = np.append(epsilon[1:], 0.0)  # the flange row has no Rz
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    ce, se = np.cos(eps_next), np.sin(eps_next)
+    rows = np.zeros((n, 4, 4))
+    # Tz(d) Tx(r) Rx(alpha) Rz(eps) in closed form
+    rows[:, 0, 0], rows[:, 0, 1], rows[:, 0, 3] = ce, -se, r
+    rows[:, 1, 0], rows[:, 1, 1], rows[:, 1, 2] = ca * se, ca * ce, -sa
+    rows[:, 2, 0], rows[:, 2, 1], rows[:, 2, 2], rows[:, 2, 3] = sa * se, sa * ce, ca, d
+    rows[:, 3, 3] = 1.0
+    return [rot_z(epsilon[0])] + list(rows)
 
 
 @dataclass(frozen=True)

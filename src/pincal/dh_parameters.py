@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .chain import KinematicChain
-from .dh import DH_FIELDS, DHTable
+from .dh import DH_FIELDS, DHTable, dh_joint_origins
 from .errors import ModelError, PincalError
 from .sensitivity import ParameterSlot
 
@@ -80,7 +80,7 @@ class DHParameterSet:
 
     def placements(self, vector: np.ndarray) -> list[np.ndarray]:
         """Chain placements (N joints + tip) realising the table ``vector`` (4N,)."""
-        return DHTable.from_vector(vector).joint_origins()
+        return dh_joint_origins(vector)
 
     def apply(self, vector: np.ndarray) -> None:
         """Write the table ``vector`` (4N,) into the chain's joint placements."""
@@ -113,8 +113,8 @@ class DHParameterSet:
 
     def slot_points(self, vector: np.ndarray) -> np.ndarray:
         """Point each slot turns about, in its frame [m], (4N, 3): (r_n, 0, d_n) for alpha_n."""
-        table = DHTable.from_vector(vector)
-        points = np.zeros((4, table.n_joints, 3))
-        points[0, :, 0] = table.r
-        points[0, :, 2] = table.d
+        _, _, r, d = np.asarray(vector, dtype=float).reshape(4, -1)
+        points = np.zeros((4, r.size, 3))
+        points[0, :, 0] = r
+        points[0, :, 2] = d
         return points.reshape(-1, 3)

@@ -13,8 +13,9 @@ extra joints do not change the kinematics, and the columns of the tool frame's
 Jacobian (``pin.computeFrameJacobian``, LOCAL_WORLD_ALIGNED) for those joints
 are exactly the derivatives of the tool pose with respect to the parameters
 (Murray, Li & Sastry 1994, eq 3.55: the Jacobian column of a joint is its twist
-transported by the adjoint). One Pinocchio call per configuration then gives the
-tool pose and every parameter derivative; the model is never rebuilt inside a
+transported by the adjoint). A few Pinocchio calls per configuration
+(``computeJointJacobians``, ``getFrameJacobian``) then give the tool pose and
+every parameter derivative; the model is never rebuilt inside a
 cost function, only its placements are updated.
 """
 
@@ -134,6 +135,8 @@ class SensitivityModel:
             [np.arange(model.joints[j].idx_q, model.joints[j].idx_q + model.joints[j].nq) for j in self._real_ids]
         )
         self._q_template = pin.neutral(model)
+        self._identity = np.eye(4)
+        self._identity.setflags(write=False)
 
     def set_state(
         self,
@@ -161,17 +164,17 @@ class SensitivityModel:
                 group = joint
             if what == "joint":
                 model.jointPlacements[self._real_ids[index]] = pin.SE3(pending)
-                pending = np.eye(4)
+                pending = self._identity
             elif self.slots[index].kind == "revolute":  # turn about an axis through the point
                 point = points[index]
                 model.jointPlacements[self._slot_ids[index]] = pin.SE3(
                     pending[:3, :3], pending[:3, :3] @ point + pending[:3, 3]
                 )
-                pending = np.eye(4)
+                pending = self._identity.copy()
                 pending[:3, 3] = -point
             else:
                 model.jointPlacements[self._slot_ids[index]] = pin.SE3(pending)
-                pending = np.eye(4)
+                pending = self._identity
         tool = pending @ placements[-1] @ tip_T_tool
         model.frames[self._tool_frame].placement = pin.SE3(tool)
 
@@ -182,13 +185,16 @@ class SensitivityModel:
         augmented = np.tile(self._q_template, (k, 1))
         augmented[:, self._real_q] = configurations
         poses = np.empty((k, 4, 4))
-        jacobians = np.empty((k, 6, len(self.slots)))
+        jacobians = np.empty((k, 6, self.model.nv))
         model, data, fid = self.model, self.data, self._tool_frame
-        columns = self._slot_columns
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        joint_jacobians, frame_jacobian = pin.computeJointJacobians, pin.getFrameJacobian
+        frame_placement = pin.updateFramePlacement
         for row in range(k):
-            jacobians[row] = pin.computeFrameJacobian(model, data, augmented[row], fid, world)[:, columns]
-            poses[row] = data.oMf[fid].homogeneous
+            joint_jacobians(model, data, augmented[row])  # forward kinematics + joint Jacobians
+            jacobians[row] = frame_jacobian(model, data, fid, world)
+            poses[row] = frame_placement(model, data, fid).homogeneous
+        jacobians = jacobians[:, :, self._slot_columns]
         positions = poses[:, :3, 3]
         linear = jacobians[:, :3].transpose(0, 2, 1)
         angular = jacobians[:, 3:].transpose(0, 2, 1)
