@@ -126,6 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="noise levels from 0 to 0.15, M_n (default 16)")
     study.add_argument("--restarts", type=_count_or_zero, default=300, metavar="N",
                        help="random starting points per restart case (default 300, the paper's; 0 skips)")
+    study.add_argument("--limit-pose-sets", type=_count_or_zero, default=2, metavar="L",
+                       help="pose sets the noise limit is averaged over (default 2; 0 skips it)")
     study.add_argument("--workers", type=_count, default=None, metavar="N",
                        help="local worker processes (default: all cores; 1 runs in this process)")
     study.add_argument("--scheduler", metavar="ADDRESS",
@@ -277,7 +279,8 @@ def _run_demo(args: argparse.Namespace) -> int:
 def _run_study(args: argparse.Namespace) -> int:
     from .study import ProgressBar, StudyConfig, run_study, write_study
 
-    config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts)
+    config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts,
+                         limit_pose_sets=args.limit_pose_sets)
     progress = ProgressBar(sys.stderr) if sys.stderr.isatty() else None
     result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress)
     paths = write_study(result, args.out)
