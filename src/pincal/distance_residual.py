@@ -46,8 +46,8 @@ class DistanceResidual(Objective):
 
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         diff, length = self._differences(x)
-        poses, sens = self.cache.evaluate(x)
-        velocity = sens.point_velocity(poses.tool_positions)  # (K, n_free, 3)
+        _, sens = self.cache.evaluate(x)
+        velocity = sens.linear  # (K, n_free, 3): the TCP is the tool frame origin
         unit = diff / length[:, None]
         return np.einsum(
             "ki,kni->kn", unit, velocity[self.first] - velocity[self.second]
