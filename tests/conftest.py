@@ -36,3 +36,13 @@ def assert_close(actual, expected, atol, what=""):
     assert np.all(np.isfinite(actual)), f"{what}: non-finite values"
     err = np.abs(actual - expected).max() if actual.size else 0.0
     assert err <= atol, f"{what}: max abs error {err:.3g} > {atol:.3g}"
+
+
+def numeric_jacobian(fun, x, step=1e-6):
+    """Central finite differences of ``fun`` at ``x``: columns stacked on the last axis."""
+    columns = []
+    for i in range(x.size):
+        dx = np.zeros_like(x)
+        dx[i] = step
+        columns.append((fun(x + dx) - fun(x - dx)) / (2 * step))
+    return np.stack(columns, axis=-1)

@@ -20,7 +20,7 @@ from pincal.robots import example_robot_data_urdf
 from pincal.sensor_residual import SensorResidual, TargetEstimate
 from pincal.simulation import SimulationSettings, simulate_chain
 
-from conftest import assert_close
+from conftest import assert_close, numeric_jacobian
 
 ROBOTS = {
     "tiago": ("tiago_description/robots/tiago.urdf", "wrist_ft_tool_link"),
@@ -104,13 +104,7 @@ def test_sensor_residual_jacobian_matches_finite_differences():
     objective = SensorResidual(cache, rng.normal(size=(6, 4, 3)), rotations, start,
                                position_weight=rng.uniform(0.5, 2, 6), rotation_weight=3.0)
     x = objective.start_vector() + rng.normal(0, 0.05, objective.n_free)
-    analytic = objective.jacobian(x)
-    numeric = np.empty_like(analytic)
-    for i in range(x.size):
-        dx = np.zeros_like(x)
-        dx[i] = 1e-6
-        numeric[:, i] = (objective.residual(x + dx) - objective.residual(x - dx)) / 2e-6
-    assert_close(analytic, numeric, 1e-6, "SensorResidual")
+    assert_close(objective.jacobian(x), numeric_jacobian(objective.residual, x), 1e-6, "SensorResidual")
 
 
 def test_identifiability_names_what_registration_and_target_absorb():

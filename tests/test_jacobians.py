@@ -18,7 +18,7 @@ from pincal.full_pose_residual import FullPoseResidual
 from pincal.objective import KinematicsCache
 from pincal.rotation_residual import RotationResidual
 
-from conftest import assert_close
+from conftest import assert_close, numeric_jacobian
 
 STEP = 1e-6
 TOL = 1e-7
@@ -28,15 +28,6 @@ def _random_q(chain, rng, k):
     lower = np.array([j.lower for j in chain.joints])
     upper = np.array([j.upper for j in chain.joints])
     return rng.uniform(lower, upper, (k, chain.n_joints))
-
-
-def _numeric_jacobian(fun, x):
-    columns = []
-    for i in range(x.size):
-        dx = np.zeros_like(x)
-        dx[i] = STEP
-        columns.append((fun(x + dx) - fun(x - dx)) / (2 * STEP))
-    return np.stack(columns, axis=-1)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -56,7 +47,7 @@ def test_sensitivity_matches_finite_differences_for_every_dh_parameter(kuka_chai
     reference = tool(vector)
     assert_close(poses.tool_positions, reference.tool_positions, 1e-14, "TCP")
     assert_close(poses.tool_rotations, reference.tool_rotations, 1e-14, "R")
-    numeric_position = _numeric_jacobian(lambda v: tool(v).tool_positions, vector)  # (K, 3, n)
+    numeric_position = numeric_jacobian(lambda v: tool(v).tool_positions, vector)  # (K, 3, n)
     assert_close(sens.point_velocity(poses.tool_positions).transpose(0, 2, 1), numeric_position, TOL, "dTCP")
     # a point off the TCP, rigidly attached to the tool
     offset = np.array([0.1, -0.05, 0.2])
@@ -65,7 +56,7 @@ def test_sensitivity_matches_finite_differences_for_every_dh_parameter(kuka_chai
         t = tool(v)
         return t.tool_positions + t.tool_rotations @ offset
 
-    numeric_marker = _numeric_jacobian(marker, vector)
+    numeric_marker = numeric_jacobian(marker, vector)
     assert_close(sens.point_velocity(marker(vector)).transpose(0, 2, 1), numeric_marker, TOL, "dmarker")
     # angular: R(v + h e_i) R(v)^T ≈ exp(h w_i) in the world frame
     numeric_angular = np.empty((len(q), 3, vector.size))
@@ -122,6 +113,6 @@ def test_objective_jacobians_match_finite_differences(kuka_chain, seed):
     for name, objective, cache in _objectives(kuka_chain, rng):
         x = cache.base[cache.free] + rng.normal(0, 0.01, cache.free.size)
         analytic = objective.jacobian(x)
-        numeric = _numeric_jacobian(objective.residual, x)
+        numeric = numeric_jacobian(objective.residual, x)
         scale = max(1.0, np.abs(numeric).max())
         assert_close(analytic / scale, numeric / scale, TOL, name)

@@ -27,19 +27,10 @@ from pincal.registration import Registration
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation import DEFAULT_REGISTRATION, SimulationSettings, simulate_experiment
 
-from conftest import assert_close
+from conftest import assert_close, numeric_jacobian
 
 STEP = 1e-6
 TOL = 1e-7
-
-
-def _numeric(fun, x):
-    columns = []
-    for i in range(x.size):
-        dx = np.zeros_like(x)
-        dx[i] = STEP
-        columns.append((fun(x + dx) - fun(x - dx)) / (2 * STEP))
-    return np.stack(columns, axis=-1)
 
 
 def _pose_residual(chain, rng, k=10):
@@ -69,7 +60,7 @@ def _pose_residual(chain, rng, k=10):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_pose_residual_jacobian_matches_finite_differences(kuka_chain, seed):
     objective, x, _, _ = _pose_residual(kuka_chain, np.random.default_rng(seed))
-    analytic, numeric = objective.jacobian(x), _numeric(objective.residual, x)
+    analytic, numeric = objective.jacobian(x), numeric_jacobian(objective.residual, x)
     n = objective.n_model
     for name, block in (("DH", slice(0, n)), ("phi", slice(n, n + 3)), ("tau", slice(n + 3, n + 6))):
         scale = max(1.0, np.abs(numeric[:, block]).max())

@@ -34,18 +34,10 @@ import pinocchio as pin
 from .errors import CalibrationError
 from .objective import KinematicsCache, Objective
 from .registration import Registration
+from .sensor_residual import skew
 
 #: Names of the six registration unknowns appended to the model parameters.
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """[v]× for vectors (..., 3) → (..., 3, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
 
 
 class PoseResidual(Objective):
@@ -141,7 +133,7 @@ class PoseResidual(Objective):
         jac = np.zeros((k, 6, n + 6))
         velocity = sens.point_velocity(poses.tool_positions)  # (K, n, 3)
         jac[:, :3, :n] = np.einsum("ij,knj->kin", omega, velocity) / self.sigma_position
-        jac[:, :3, n : n + 3] = -_skew(poses.tool_positions @ omega.T) @ world / self.sigma_position
+        jac[:, :3, n : n + 3] = -skew(poses.tool_positions @ omega.T) @ world / self.sigma_position
         jac[:, :3, n + 3 :] = np.eye(3) / self.sigma_position
         left = self._left(poses, relative)
         jac[:, 3:, :n] = np.einsum("kij,knj->kin", left, sens.angular) / self.sigma_rotation
