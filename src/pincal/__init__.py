@@ -7,12 +7,16 @@ robot and write a corrected URDF. The first method is Franaszek & Marvel
 
 __version__ = "0.1.0"
 
+from .chain_calibration import ChainCalibration, calibrate_chain
 from .chain import ChainPoses, KinematicChain, pose_from_xyz_rpy, xyz_rpy_from_pose
 from .dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL, DHDeviations, DHTable
 from .dh_parameters import DHParameterSet
 from .errors import CalibrationError, MeasurementError, ModelError, PincalError
 from .measurements import JointSpec, MeasurementSet, read_measurements, write_measurements
 from .metrics import ErrorSummary, PoseErrors, pose_errors
+from .ml_estimator import MLCalibration, calibrate_ml
+from .noise_limit import PredictedErrors, predicted_errors
+from .parameter_sets import JointOffsets, PlacementErrors
 from .paper_methods import PaperCalibration, calibrate_paper
 from .registration import Registration, register_orientations, register_points
 from .simulation import SimulatedExperiment, SimulationSettings, simulate_experiment
@@ -20,6 +24,14 @@ from .simulation import SimulatedExperiment, SimulationSettings, simulate_experi
 __all__ = [
     "__version__",
     "CalibrationError",
+    "ChainCalibration",
+    "JointOffsets",
+    "MLCalibration",
+    "PlacementErrors",
+    "PredictedErrors",
+    "calibrate_chain",
+    "calibrate_ml",
+    "predicted_errors",
     "ChainPoses",
     "DHDeviations",
     "DHParameterSet",
