@@ -71,9 +71,13 @@ class KinematicsCache:
         vector[self.free] = x
         return vector
 
-    def evaluate(self, x: npt.ArrayLike) -> tuple[ToolPoses, Sensitivity]:
-        """Tool poses of the K configurations and the free parameters' sensitivities at ``x``."""
+    def evaluate(self, x: npt.ArrayLike, q: npt.ArrayLike | None = None) -> tuple[ToolPoses, Sensitivity]:
+        """Tool poses and the free parameters' sensitivities at ``x``, at the
+        cache's configurations or at ``q`` (K, N) when given (effects shift them)."""
         x = np.asarray(x, dtype=float)
+        if q is not None and not np.array_equal(q, self.q):
+            self.q = np.array(q, dtype=float)
+            self._result = None
         if self._result is None or not np.array_equal(x, self._x):
             vector = self.full_vector(x)
             self.model.set_state(
@@ -89,6 +93,8 @@ class KinematicsCache:
                     angular=np.einsum("ksi,sf->kfi", sens.angular, block),
                     linear=np.einsum("ksi,sf->kfi", sens.linear, block),
                     origin=sens.origin,
+                    joint_angular=sens.joint_angular,
+                    joint_linear=sens.joint_linear,
                 )
             self._x, self._result = x.copy(), (poses, sens)
         return self._result

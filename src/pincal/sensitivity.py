@@ -74,16 +74,25 @@ class Sensitivity:
         angular: world angular velocity of the tool [rad/unit], (K, n_par, 3).
         linear: world velocity of the tool frame origin [m/unit], (K, n_par, 3).
         origin: the tool frame origins the linear part refers to [m], (K, 3).
+        joint_angular / joint_linear: the same for the chain's own joints
+            (Pinocchio's joint Jacobian columns), (K, N, 3).
     """
 
     angular: np.ndarray
     linear: np.ndarray
     origin: np.ndarray
+    joint_angular: np.ndarray | None = None
+    joint_linear: np.ndarray | None = None
 
     def point_velocity(self, points: npt.ArrayLike) -> np.ndarray:
         """d(point)/d(parameter) for points rigidly attached to the tool, (K, 3) → (K, n_par, 3)."""
         offset = np.asarray(points, dtype=float) - self.origin
         return self.linear + np.cross(self.angular, offset[:, None, :])
+
+    def joint_point_velocity(self, points: npt.ArrayLike) -> np.ndarray:
+        """d(point)/d(joint value) of the chain's joints, (K, 3) → (K, N, 3)."""
+        offset = np.asarray(points, dtype=float) - self.origin
+        return self.joint_linear + np.cross(self.joint_angular, offset[:, None, :])
 
 
 def _sensitivity_joint(slot: ParameterSlot) -> pin.JointModel:
@@ -131,6 +140,7 @@ class SensitivityModel:
         self.model = model
         self.data = model.createData()
         self._slot_columns = np.array([model.joints[j].idx_v for j in self._slot_ids], dtype=int)
+        self._real_columns = np.array([model.joints[j].idx_v for j in self._real_ids], dtype=int)
         self._real_q = np.concatenate(
             [np.arange(model.joints[j].idx_q, model.joints[j].idx_q + model.joints[j].nq) for j in self._real_ids]
         )
@@ -194,8 +204,14 @@ class SensitivityModel:
             joint_jacobians(model, data, augmented[row])  # forward kinematics + joint Jacobians
             jacobians[row] = frame_jacobian(model, data, fid, world)
             poses[row] = frame_placement(model, data, fid).homogeneous
-        jacobians = jacobians[:, :, self._slot_columns]
+        joints = jacobians[:, :, self._real_columns].transpose(0, 2, 1)
+        jacobians = jacobians[:, :, self._slot_columns].transpose(0, 2, 1)
         positions = poses[:, :3, 3]
-        linear = jacobians[:, :3].transpose(0, 2, 1)
-        angular = jacobians[:, 3:].transpose(0, 2, 1)
-        return ToolPoses(positions, poses[:, :3, :3]), Sensitivity(angular, linear, positions)
+        sensitivity = Sensitivity(
+            angular=jacobians[:, :, 3:],
+            linear=jacobians[:, :, :3],
+            origin=positions,
+            joint_angular=joints[:, :, 3:],
+            joint_linear=joints[:, :, :3],
+        )
+        return ToolPoses(positions, poses[:, :3, :3]), sensitivity

@@ -11,7 +11,11 @@ w_k = 1/sigma_pos,k [1/m] and v_k = 1/sigma_rot,k [1/rad] weight each row by its
 measurement noise, so position and orientation need no ad-hoc scale. Unknowns,
 in this order: the free kinematic parameters (through the cache), the
 registration (Omega = Omega_0 exp(phi), tau), the points m_p, and the target
-rotation R_T = R_T0 exp(psi). Each block can be held fixed.
+rotation R_T = R_T0 exp(psi), and the values of unmodelled effects
+(:mod:`pincal.effects`): joint effects shift the joint readings before the
+forward kinematics, ``drift`` adds t_k u to the registration's translation and
+``sensor_scale`` multiplies the sensed coordinates by (1 + s). Each block can
+be held fixed.
 
 Jacobians (right perturbations, Pinocchio's Jexp3 and Jlog3):
 d e/d theta = w Omega · point velocity; d e/d phi = −w Omega [y]× Jexp3(phi) with
@@ -23,11 +27,13 @@ d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+from .effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 from .objective import KinematicsCache, Objective
 from .registration import Registration
 
@@ -80,8 +86,22 @@ class SensorResidual(Objective):
         fit_registration: bool = True,
         fit_points: bool = True,
         fit_rotation: bool = True,
+        effects: Sequence[Effect] = (),
+        inputs: EffectInputs | None = None,
     ) -> None:
         super().__init__(cache)
+        self.effects = tuple(effects)
+        self.inputs = inputs
+        if self.effects and inputs is None:
+            raise ValueError("effects need their inputs (gravity torques, time)")
+        joint_names = list(cache.params.chain.joint_names)
+        self._effect_joint = [joint_names.index(e.joint) if e.joint else -1 for e in self.effects]
+        self._effect_basis = [
+            joint_basis(e, inputs, j) if e.type in JOINT_EFFECTS else None
+            for e, j in zip(self.effects, self._effect_joint)
+        ]
+        if any(e.type == "drift" for e in self.effects) and (inputs is None or inputs.time is None):
+            raise ValueError("a drift effect needs a time column")
         self.g = np.asarray(sensor_points, dtype=float)
         self.G = None if sensor_rotations is None else np.asarray(sensor_rotations, dtype=float)
         k, n_points = self.g.shape[:2]
@@ -89,11 +109,13 @@ class SensorResidual(Objective):
         self.w = np.broadcast_to(np.asarray(position_weight, dtype=float), (k,)).copy()
         self.v = np.broadcast_to(np.asarray(rotation_weight, dtype=float), (k,)).copy()
         n_kin = len(cache.free)
+        self._effect_slices = []
         sizes = {
             "kinematic": n_kin,
             "registration": 6 if fit_registration else 0,
             "points": 3 * n_points if fit_points else 0,
             "rotation": 3 if (fit_rotation and self.G is not None) else 0,
+            "effects": sum(e.n_values for e in self.effects),
         }
         self.blocks: dict[str, slice] = {}
         offset = 0
@@ -101,6 +123,10 @@ class SensorResidual(Objective):
             self.blocks[name] = slice(offset, offset + size)
             offset += size
         self.n_params = offset
+        start = self.blocks["effects"].start
+        for effect in self.effects:
+            self._effect_slices.append(slice(start, start + effect.n_values))
+            start += effect.n_values
 
     @property
     def n_free(self) -> int:
@@ -132,19 +158,47 @@ class SensorResidual(Objective):
         rotation = self.start.rotation @ pin.exp3(rot) if rot.size else self.start.rotation
         return TargetEstimate(registration, points, rotation)
 
+    def effect_values(self, x: npt.ArrayLike) -> list[np.ndarray]:
+        """Values of each effect at ``x``."""
+        x = np.asarray(x, dtype=float)
+        return [x[sl] for sl in self._effect_slices]
+
+    def _sensor_terms(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """Sensor scale s and drift offset t_k u (K, 3) at ``x``."""
+        scale, drift = 0.0, np.zeros((self.g.shape[0], 3))
+        for effect, sl in zip(self.effects, self._effect_slices):
+            if effect.type == "sensor_scale":
+                scale = float(x[sl][0])
+            elif effect.type == "drift":
+                drift = self.inputs.time[:, None] * x[sl]
+        return scale, drift
+
     def _state(self, x: npt.ArrayLike):
         x = np.asarray(x, dtype=float)
-        poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]])
+        q = None
+        if self.effects:
+            shifts = np.zeros_like(self.inputs.q)
+            for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
+                if basis is not None:
+                    shifts[:, j] += basis @ x[sl]
+            q = self.inputs.q + shifts
+        poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]], q)
         target = self.estimate(x)
         world = poses.tool_positions[:, None, :] + np.einsum(
             "kij,pj->kpi", poses.tool_rotations, target.points
         )  # (K, P, 3) in the base frame
         return poses, sens, target, world
 
+    def predicted_points(self, x: npt.ArrayLike) -> np.ndarray:
+        """Model points in the sensor frame (K, P, 3) [m]: (1 + s)(Omega y + tau + t u)."""
+        x = np.asarray(x, dtype=float)
+        _, _, target, world = self._state(x)
+        scale, drift = self._sensor_terms(x)
+        return (1.0 + scale) * (target.registration.apply_points(world) + drift[:, None, :])
+
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
         poses, _, target, world = self._state(x)
-        reg = target.registration
-        position = (reg.apply_points(world) - self.g) * self.w[:, None, None]
+        position = (self.predicted_points(x) - self.g) * self.w[:, None, None]
         parts = [position.reshape(-1)]
         if self.G is not None:
             relative = self._orientation_error(poses, target)
@@ -177,6 +231,19 @@ class SensorResidual(Objective):
             rotated = np.einsum("ij,kjl->kil", omega, poses.tool_rotations)  # Omega R_k
             for p in range(n_points):
                 rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
+        scale, drift = self._sensor_terms(x)
+        for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self._effect_slices):
+            if basis is not None:  # joint shift: the joint's Jacobian column times the basis
+                for p in range(n_points):
+                    velocity = sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T  # (K, 3)
+                    rows_pos[:, p, :, sl] = velocity[:, :, None] * basis[:, None, :]
+            elif effect.type == "drift":
+                rows_pos[..., sl] = self.inputs.time[:, None, None, None] * np.eye(3)
+        rows_pos *= 1.0 + scale  # every term is scaled by the sensor's (1 + s)
+        for effect, sl in zip(self.effects, self._effect_slices):
+            if effect.type == "sensor_scale":
+                sensed = target.registration.apply_points(world) + drift[:, None, :]
+                rows_pos[..., sl] = sensed[..., None]
         rows_pos *= self.w[:, None, None, None]
         blocks = [rows_pos.reshape(-1, self.n_params)]
         if self.G is not None:
@@ -198,5 +265,9 @@ class SensorResidual(Objective):
             rows[:, :, reg.start : reg.start + 3] = jlog @ tool.transpose(0, 2, 1) @ pin.Jexp3(x[reg][:3])
         if rot.stop > rot.start:
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
+        for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
+            if basis is not None:
+                turn = np.einsum("kij,kj->ki", left, sens.joint_angular[:, j, :])  # (K, 3)
+                rows[:, :, sl] = turn[:, :, None] * basis[:, None, :]
         rows *= self.v[:, None, None]
         return rows.reshape(-1, self.n_params)

@@ -1,0 +1,214 @@
+"""Effects a kinematic model lacks, as corrections of the measured joint values.
+
+Each joint effect shifts the reading of one joint: actual = q_j + shift, with
+
+* ``compliance``     shift = c · tau_j(q)        c [rad/(N·m)] (m/N for a prismatic joint),
+  tau the gravity torque from Pinocchio's ``computeGeneralizedGravity`` on the
+  URDF's inertias, plus an optional payload mass at the target;
+* ``encoder_scale``  shift = s · q_j             s relative (gear-ratio error);
+* ``cyclic``         shift = a · sin(h q_j) + b · cos(h q_j), harmonic h = 1, 2 [rad];
+* ``backlash``       lost motion between gear flanks [rad or m], two forms:
+  ``gravity``: shift = value · sign(tau_j(q)) (a static pose rests on the flank
+  gravity pushes it to); ``approach``: shift = value · sign(q_j[k] − q_j[k−1])
+  over the rows in time order — a joint that moved less than
+  :data:`APPROACH_MIN_STEP` keeps the flank it was on; 0 for the first row.
+
+Two effects act on the sensor side: ``drift`` moves the registration's
+translation linearly with time (u [m/s], 3 values; thermal drift) and
+``sensor_scale`` scales the sensor's lengths (relative).
+
+Each shift is linear in its values: shift = basis(k) · values, so the
+calibration's Jacobian for an effect is the joint's Jacobian column times its
+basis (see :mod:`pincal.sensor_residual`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from .chain import KinematicChain
+from .errors import PincalError
+from .measurements import MeasurementSet
+
+JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash")
+SENSOR_EFFECTS = ("drift", "sensor_scale")
+EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS
+BACKLASH_SOURCES = ("gravity", "approach")
+HARMONICS = (1, 2)
+
+#: A joint that moved less than this between rows stays on its flank [rad or m].
+APPROACH_MIN_STEP = 1e-3
+#: Extra columns taken as the row time [s], first found wins.
+TIME_COLUMNS = ("time", "t", "timestamp", "t_start_robot")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate or adopted effect.
+
+    Attributes:
+        type: one of :data:`EFFECT_TYPES`.
+        joint: URDF joint name for joint effects, None for sensor effects.
+        harmonic: h of a ``cyclic`` effect.
+        source: ``gravity`` or ``approach`` for ``backlash``.
+    """
+
+    type: str
+    joint: str | None = None
+    harmonic: int | None = None
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.type not in EFFECT_TYPES:
+            raise PincalError(f"unknown effect '{self.type}'; effects are: {', '.join(EFFECT_TYPES)}")
+        if self.type in JOINT_EFFECTS and not self.joint:
+            raise PincalError(f"effect '{self.type}' needs a joint")
+        if self.type == "cyclic" and self.harmonic not in HARMONICS:
+            raise PincalError(f"cyclic effect harmonic must be one of {HARMONICS}, got {self.harmonic}")
+        if self.type == "backlash" and self.source not in BACKLASH_SOURCES:
+            raise PincalError(f"backlash source must be one of {BACKLASH_SOURCES}, got {self.source}")
+
+    @property
+    def n_values(self) -> int:
+        return {"cyclic": 2, "drift": 3}.get(self.type, 1)
+
+    @property
+    def label(self) -> str:
+        parts = [self.type]
+        if self.joint:
+            parts.append(self.joint)
+        if self.harmonic:
+            parts.append(f"h{self.harmonic}")
+        if self.source:
+            parts.append(self.source)
+        return ":".join(parts)
+
+
+@dataclass(frozen=True)
+class EffectInputs:
+    """Per-row quantities effects depend on.
+
+    Attributes:
+        q: measured joint values (K, N) [rad or m].
+        gravity: gravity torque of each joint at q (K, N) [N·m or N].
+        time: row time relative to its mean (K,) [s], or None.
+        order: row indices in time order (file order without a time column), (K,).
+    """
+
+    q: np.ndarray
+    gravity: np.ndarray
+    time: np.ndarray | None
+    order: np.ndarray
+
+
+def gravity_torques(
+    chain: KinematicChain, q: np.ndarray, payload_kg: float = 0.0, payload_point: np.ndarray | None = None
+) -> np.ndarray:
+    """Gravity torques (K, N) of the chain's URDF inertias, plus a point mass
+    ``payload_kg`` at ``payload_point`` (in the tool frame) [N·m or N]."""
+    model = chain.model.copy()
+    if payload_kg > 0:
+        point = np.zeros(3) if payload_point is None else np.asarray(payload_point, dtype=float)
+        tip = model.frames[chain.tip_frame_id]
+        at_tool = tip.placement * pin.SE3(chain.tool) * pin.SE3(np.eye(3), point)
+        model.appendBodyToJoint(tip.parentJoint, pin.Inertia(payload_kg, np.zeros(3), np.zeros((3, 3))), at_tool)
+    data = model.createData()
+    configurations = chain.configurations(q)
+    return np.stack([pin.computeGeneralizedGravity(model, data, c) for c in configurations])
+
+
+def time_column(data: MeasurementSet, name: str | None = None) -> np.ndarray | None:
+    """The rows' time [s] from ``name`` or the first of :data:`TIME_COLUMNS` present."""
+    names = [name] if name else [n for n in TIME_COLUMNS if n in data.extra]
+    if name and name not in data.extra:
+        raise PincalError(
+            f"{data.source}: no time column '{name}'; numeric extra columns are: "
+            f"{', '.join(data.extra) or 'none'}"
+        )
+    if not names:
+        return None
+    return np.asarray(data.extra[names[0]], dtype=float)
+
+
+def effect_inputs(
+    chain: KinematicChain,
+    data: MeasurementSet,
+    payload_kg: float = 0.0,
+    payload_point: np.ndarray | None = None,
+    time: np.ndarray | None = None,
+) -> EffectInputs:
+    """Gravity torques, time and time order of the rows of ``data``."""
+    order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
+    centred = None if time is None else time - time.mean()
+    return EffectInputs(
+        q=np.asarray(data.q, dtype=float),
+        gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
+        time=centred,
+        order=order,
+    )
+
+
+def approach_flank(q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_MIN_STEP) -> np.ndarray:
+    """sign(q[k] − q[k−1]) over rows in time order; small moves keep the previous flank (K,)."""
+    flank = np.zeros(len(q))
+    current = 0.0
+    for previous, row in zip(order[:-1], order[1:]):
+        step = q[row] - q[previous]
+        if abs(step) >= min_step:
+            current = float(np.sign(step))
+        flank[row] = current
+    return flank
+
+
+def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
+    """Basis of a joint effect at every row, (K, n_values): shift = basis @ values."""
+    q = inputs.q[:, joint]
+    if effect.type == "compliance":
+        return inputs.gravity[:, joint : joint + 1]
+    if effect.type == "encoder_scale":
+        return q[:, None]
+    if effect.type == "cyclic":
+        h = effect.harmonic
+        return np.column_stack([np.sin(h * q), np.cos(h * q)])
+    if effect.source == "gravity":
+        return np.sign(inputs.gravity[:, joint : joint + 1])
+    return approach_flank(q, inputs.order)[:, None]
+
+
+def joint_shifts(
+    effects: Sequence[Effect], values: Sequence[np.ndarray], inputs: EffectInputs, joint_names: Sequence[str]
+) -> np.ndarray:
+    """Total shift of every joint at every row (K, N) [rad or m]."""
+    shifts = np.zeros_like(inputs.q)
+    for effect, value in zip(effects, values):
+        if effect.type in JOINT_EFFECTS:
+            j = list(joint_names).index(effect.joint)
+            shifts[:, j] += joint_basis(effect, inputs, j) @ np.atleast_1d(value)
+    return shifts
+
+
+def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
+    """``TYPE:JOINT:VALUE`` (``cyclic:JOINT:H:SIN:COS``, ``backlash:JOINT:VALUE[:SOURCE]``,
+    ``drift:VX:VY:VZ`` [m/s], ``sensor_scale:VALUE``) → effect and values."""
+    parts = text.split(":")
+    try:
+        kind = parts[0]
+        if kind == "cyclic":
+            return Effect(kind, parts[1], harmonic=int(parts[2])), np.array([float(parts[3]), float(parts[4])])
+        if kind == "backlash":
+            source = parts[3] if len(parts) > 3 else "gravity"
+            return Effect(kind, parts[1], source=source), np.array([float(parts[2])])
+        if kind == "drift":
+            return Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
+        if kind == "sensor_scale":
+            return Effect(kind), np.array([float(parts[1])])
+        return Effect(kind, parts[1]), np.array([float(parts[2])])
+    except (IndexError, ValueError):
+        raise PincalError(
+            f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "
+            "backlash:JOINT:VALUE[:gravity|approach], drift:VX:VY:VZ or sensor_scale:VALUE"
+        ) from None

@@ -1,0 +1,76 @@
+"""Unmodelled effects: bases, gravity torques and their Jacobians."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pincal.chain import KinematicChain
+from pincal.effects import Effect, EffectInputs, approach_flank, effect_inputs, gravity_torques, parse_effect
+from pincal.errors import PincalError
+from pincal.objective import KinematicsCache
+from pincal.parameter_sets import PlacementErrors
+from pincal.registration import Registration
+from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf
+from pincal.sensor_residual import SensorResidual, TargetEstimate
+
+from conftest import assert_close, numeric_jacobian
+
+ALL_EFFECTS = [
+    Effect("compliance", "lwr_joint_2"),
+    Effect("encoder_scale", "lwr_joint_3"),
+    Effect("cyclic", "lwr_joint_4", harmonic=2),
+    Effect("backlash", "lwr_joint_5", source="gravity"),
+    Effect("backlash", "lwr_joint_6", source="approach"),
+    Effect("drift"),
+    Effect("sensor_scale"),
+]
+
+
+def test_sensor_residual_jacobian_with_every_effect(kuka_chain):
+    rng = np.random.default_rng(8)
+    params = PlacementErrors(kuka_chain)
+    q = rng.uniform(-1.5, 1.5, (9, 7))
+    gravity = gravity_torques(kuka_chain, q)
+    inputs = EffectInputs(q=q, gravity=gravity, time=np.linspace(-600, 600, 9), order=np.arange(9))
+    free = rng.permutation(params.size)[:12]
+    cache = KinematicsCache(params, free, rng.normal(0, 1e-2, params.size), q)
+    start = TargetEstimate(Registration(pin.exp3(rng.normal(size=3)), rng.normal(size=3)),
+                           rng.normal(0, 0.1, (2, 3)), pin.exp3(rng.normal(size=3)))
+    rotations = np.stack([pin.exp3(rng.normal(size=3)) for _ in q])
+    objective = SensorResidual(cache, rng.normal(size=(9, 2, 3)), rotations, start, effects=ALL_EFFECTS,
+                               inputs=inputs, rotation_weight=2.0)
+    x = objective.start_vector() + rng.normal(0, 0.01, objective.n_free)
+    x[objective.blocks["effects"]] = rng.normal(0, 1e-3, objective.blocks["effects"].stop - objective.blocks["effects"].start)
+    assert_close(objective.jacobian(x), numeric_jacobian(objective.residual, x), 1e-6, "effects")
+
+
+def test_gravity_torques_match_pinocchio_and_payload_adds_torque(kuka_chain):
+    q = np.array([[0.0, 0.3, 0.0, -0.5, 0.0, 0.4, 0.0]])
+    base = gravity_torques(kuka_chain, q)
+    direct = pin.computeGeneralizedGravity(kuka_chain.model, kuka_chain.model.createData(), q[0])
+    assert_close(base[0], direct, 1e-12, "gravity")
+    loaded = gravity_torques(kuka_chain, q, payload_kg=2.0, payload_point=np.array([0.0, 0.0, 0.1]))
+    assert np.abs(loaded - base).max() > 0.1
+    assert loaded[0, 0] == pytest.approx(base[0, 0], abs=1e-9)  # joint 1 turns about gravity's axis
+
+
+def test_approach_flank_keeps_the_flank_on_small_moves():
+    q = np.array([0.0, 0.1, 0.1005, 0.05, 0.05, 0.2])
+    assert approach_flank(q, np.arange(6)).tolist() == [0, 1, 1, -1, -1, 1]
+    # time order, not file order
+    assert approach_flank(q[::-1], np.arange(6)[::-1]).tolist() == [1, -1, -1, 1, 1, 0]
+
+
+def test_parse_effect_forms():
+    effect, value = parse_effect("compliance:lwr_joint_2:2e-4")
+    assert effect == Effect("compliance", "lwr_joint_2") and value.tolist() == [2e-4]
+    effect, value = parse_effect("cyclic:lwr_joint_4:2:1e-3:-5e-4")
+    assert effect.harmonic == 2 and value.tolist() == [1e-3, -5e-4]
+    effect, _ = parse_effect("backlash:arm_6_joint:0.04:approach")
+    assert effect.source == "approach"
+    with pytest.raises(PincalError, match="TYPE:JOINT:VALUE"):
+        parse_effect("compliance:lwr_joint_2")
+    with pytest.raises(PincalError, match="unknown effect"):
+        parse_effect("wobble:lwr_joint_2:1")
