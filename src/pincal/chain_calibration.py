@@ -186,11 +186,14 @@ def _weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
 class _Problem:
     """One weighted fit of registration, target and a subset of kinematic parameters."""
 
-    def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight):
+    def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight,
+                 effects=(), inputs=None):
         self.chain, self.params, self.data = chain, params, data
         self.start = start
         self.fit_target = fit_target
         self.row_weight = row_weight
+        self.effects = tuple(effects)
+        self.inputs = inputs
         self.sigma_pos = START_SIGMA_POS_M
         self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
 
@@ -206,6 +209,8 @@ class _Problem:
             rotation_weight=self.row_weight / (self.sigma_rot or 1.0),
             fit_points=self.fit_target,
             fit_rotation=self.fit_target,
+            effects=self.effects,
+            inputs=self.inputs,
         )
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):

@@ -140,10 +140,14 @@ def effect_inputs(
     payload_kg: float = 0.0,
     payload_point: np.ndarray | None = None,
     time: np.ndarray | None = None,
+    time_reference: float | None = None,
 ) -> EffectInputs:
-    """Gravity torques, time and time order of the rows of ``data``."""
+    """Gravity torques, time (minus ``time_reference``, default its mean) and
+    time order of the rows of ``data``."""
     order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
-    centred = None if time is None else time - time.mean()
+    if time is not None and time_reference is None:
+        time_reference = float(np.mean(time))
+    centred = None if time is None else time - time_reference
     return EffectInputs(
         q=np.asarray(data.q, dtype=float),
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),

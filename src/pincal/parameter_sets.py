@@ -103,21 +103,26 @@ class JointOffsets(_ChainParameters):
 
 
 class PlacementErrors(_ChainParameters):
-    """SE(3) perturbation ``exp(xi_j)`` of every joint placement (6N parameters).
+    """SE(3) perturbation of every joint placement and of the tip (6N + 6 parameters).
 
-    Parameter names are ``<joint>.tx, .ty, .tz`` (m) and ``.rx, .ry, .rz`` (rad),
-    the coordinates of xi_j in the joint's placement frame.
+    Joint j: ``M_j · exp(xi_j)``, xi_j in the joint's placement frame; names
+    ``<joint>.tx, .ty, .tz`` (m) and ``.rx, .ry, .rz`` (rad). The tip link's
+    placement on the last joint: ``exp(xi_tip) · M_tip``, xi_tip in the last
+    joint's frame, names ``<tip link>.tx`` ... — absorbed by an estimated
+    target, identifiable with a known tool.
     """
 
     def __init__(self, chain: KinematicChain) -> None:
         super().__init__(chain)
         info, slots = [], []
-        for i, joint in enumerate(chain.joints):
+        owners = [(i, j.name, False) for i, j in enumerate(chain.joints)]
+        owners.append((chain.n_joints - 1, chain.tip_link, True))
+        for i, owner, after in owners:
             for kind, prefix, unit in (("prismatic", "t", "m"), ("revolute", "r", "rad")):
                 for a, name in enumerate(_AXES):
                     axis = tuple(float(v) for v in np.eye(3)[a])
-                    info.append(ParameterInfo(f"{joint.name}.{prefix}{name}", joint.name, unit))
-                    slots.append(ParameterSlot(joint=i, after_motion=False, kind=kind, axis=axis))
+                    info.append(ParameterInfo(f"{owner}.{prefix}{name}", owner, unit))
+                    slots.append(ParameterSlot(joint=i, after_motion=after, kind=kind, axis=axis))
         self.info, self.slots = tuple(info), tuple(slots)
 
     def placements(self, vector: np.ndarray) -> list[np.ndarray]:
@@ -125,19 +130,23 @@ class PlacementErrors(_ChainParameters):
         out = [p.copy() for p in self.nominal_placements]
         for i in range(self.chain.n_joints):
             out[i] = out[i] @ pin.exp6(xi[i]).homogeneous
+        out[-1] = pin.exp6(xi[-1]).homogeneous @ out[-1]
         return out
 
     def coupled(self, free: np.ndarray) -> np.ndarray:
-        """Every parameter of a joint whose placement has a free parameter."""
-        joints = np.unique(np.asarray(free, dtype=int) // 6)
-        return (6 * joints[:, None] + np.arange(6)).ravel()
+        """Every parameter of a placement that has a free parameter."""
+        blocks = np.unique(np.asarray(free, dtype=int) // 6)
+        return (6 * blocks[:, None] + np.arange(6)).ravel()
 
     def slot_jacobian(self, vector: np.ndarray) -> np.ndarray:
-        """Block diagonal of Pinocchio's ``Jexp6(xi_j)``: exp(xi + d) ≈ exp(xi) exp(Jexp6(xi) d)."""
+        """Block diagonal of Pinocchio's right Jacobian ``Jexp6(xi_j)`` for the
+        joints (exp(xi + d) ≈ exp(xi) exp(Jexp6(xi) d)) and of the left one,
+        ``Jexp6(-xi_tip)``, for the tip."""
         xi = np.asarray(vector, dtype=float).reshape(-1, 6)
         out = np.zeros((self.size, self.size))
         for i, block in enumerate(xi):
-            out[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = pin.Jexp6(block)
+            sign = -1.0 if i == len(xi) - 1 else 1.0
+            out[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = pin.Jexp6(sign * block)
         return out
 
 

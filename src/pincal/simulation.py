@@ -19,8 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from typing import Sequence
+
 from .chain import KinematicChain, pose_from_xyz_rpy
 from .dh import DHDeviations, DHTable
+from .effects import Effect, EffectInputs, gravity_torques, joint_shifts
+from .errors import PincalError
 from .measurements import MeasurementSet
 from .registration import Registration
 
@@ -100,6 +104,8 @@ def measure(
     points: np.ndarray | None = None,
     target_rotation: np.ndarray | None = None,
     with_rotation: bool = True,
+    effects: Sequence[tuple[Effect, np.ndarray]] = (),
+    time: np.ndarray | None = None,
 ) -> MeasurementSet:
     """What the simulated sensor reports at configurations ``q`` (eq 20–22).
 
@@ -107,11 +113,33 @@ def measure(
         points: target points in the tool frame (P, 3) [m]; default: the tool origin.
         target_rotation: the measured frame's rotation in the tool frame (default identity).
         with_rotation: also report orientations.
+        effects: unmodelled effects acting on the robot and sensor, with their
+            values (see :mod:`pincal.effects`); the readings ``q`` are written
+            unchanged, the sensor sees the shifted joints.
+        time: row times [s], written as the extra column ``time``; drift grows
+            with it from t = 0.
     """
-    poses = chain.poses(q)
+    actual = np.asarray(q, dtype=float)
+    scale, drift = 0.0, np.zeros((len(q), 3))
+    if effects:
+        inputs = EffectInputs(
+            q=actual,
+            gravity=gravity_torques(chain, actual),
+            time=time,
+            order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
+        )
+        actual = actual + joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
+        for effect, value in effects:
+            if effect.type == "sensor_scale":
+                scale = float(value[0])
+            elif effect.type == "drift":
+                if time is None:
+                    raise PincalError("a simulated drift needs row times")
+                drift = time[:, None] * np.asarray(value, dtype=float)
+    poses = chain.poses(actual)
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
     world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, points)
-    sensed = registration.apply_points(world)
+    sensed = (1.0 + scale) * (registration.apply_points(world) + drift[:, None, :])
     sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
     rotations = None
     if with_rotation:
@@ -125,7 +153,7 @@ def measure(
         rotations=rotations,
         roles=np.array([role] * len(q), dtype=object),
         lines=np.arange(2, len(q) + 2),
-        extra={},
+        extra={} if time is None else {"time": np.asarray(time, dtype=float)},
         source="<simulation>",
     )
 
@@ -144,10 +172,14 @@ def simulate_experiment(
     settings: SimulationSettings = SimulationSettings(),
     registration: Registration = DEFAULT_REGISTRATION,
     tool: np.ndarray | None = None,
+    effects: Sequence[tuple[Effect, np.ndarray]] = (),
 ) -> SimulatedExperiment:
     """Simulate CPA, calibration and validation measurements of a DH chain.
 
     The chain's placements are set to the ground truth and restored afterwards.
+    ``effects`` are injected into the measurements without being declared; the
+    rows get a ``time`` column (:data:`SECONDS_PER_ROW` apart, validation after
+    calibration) when there are effects.
     """
     rng = np.random.default_rng(settings.seed)
     tool = pose_from_xyz_rpy(DEFAULT_TOOL_XYZ, DEFAULT_TOOL_RPY) if tool is None else tool
@@ -163,11 +195,15 @@ def simulate_experiment(
         q_cpa = cpa_configurations(lower, upper, settings.n_cpa)
         q_cal = rng.uniform(lower, upper, (settings.n_calibration, len(lower)))
         q_val = rng.uniform(lower, upper, (settings.n_validation, len(lower)))
-        cpa = measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa")
-        cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration")
+        times = _row_times(effects, len(q_cpa) + len(q_cal) + len(q_val))
+        cpa = measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa",
+                      effects=effects, time=_part(times, 0, len(q_cpa)))
+        cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration",
+                      effects=effects, time=_part(times, len(q_cpa), len(q_cal)))
         val_scale = 1.0 if settings.validation_noise else 0.0
         val = measure(
-            chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation"
+            chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation",
+            effects=effects, time=_part(times, len(q_cpa) + len(q_cal), len(q_val)),
         )
     finally:
         chain.set_placements(saved_placements)
@@ -179,10 +215,22 @@ def simulate_experiment(
         rotations=np.vstack([cpa.rotations, cal.rotations]),
         roles=np.concatenate([cpa.roles, cal.roles]),
         lines=np.arange(2, cpa.n_rows + cal.n_rows + 2),
-        extra={},
+        extra={} if times is None else {"time": times[: cpa.n_rows + cal.n_rows]},
         source="<simulation>",
     )
     return SimulatedExperiment(calibration, val, truth, registration, tool)
+
+
+#: Time between simulated rows when effects are injected [s].
+SECONDS_PER_ROW = 10.0
+
+
+def _row_times(effects, count: int) -> np.ndarray | None:
+    return SECONDS_PER_ROW * np.arange(count, dtype=float) if effects else None
+
+
+def _part(times: np.ndarray | None, start: int, count: int) -> np.ndarray | None:
+    return None if times is None else times[start : start + count]
 
 
 @dataclass(frozen=True)
