@@ -152,6 +152,8 @@ class _Model:
     def __init__(self, chain, calibration: ChainCalibration, rows: MeasurementSet, row_weight, inputs):
         self.chain, self.calibration, self.rows, self.inputs = chain, calibration, rows, inputs
         self.row_weight = row_weight
+        self.sigma_pos = calibration.sigma_pos_m
+        self.sigma_rot = calibration.sigma_rot_rad
 
     def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> _Problem:
         data = self.rows if data is None else data
@@ -161,9 +163,15 @@ class _Model:
             fit_target=self.calibration.fit_target, row_weight=weight,
             effects=effects, inputs=self.inputs if inputs is None else inputs,
         )
-        problem.sigma_pos = self.calibration.sigma_pos_m
-        problem.sigma_rot = self.calibration.sigma_rot_rad
+        problem.sigma_pos = self.sigma_pos
+        problem.sigma_rot = self.sigma_rot
         return problem
+
+    def reestimate(self, objective: SensorResidual, solution) -> None:
+        """Noise scales from the residuals of a fit (maximum likelihood)."""
+        problem = self.problem(objective.effects)
+        problem.reestimate_sigmas(objective, solution)
+        self.sigma_pos, self.sigma_rot = problem.sigma_pos, problem.sigma_rot
 
     def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray]):
         """Fit geometry, registration, target and ``effects`` from a start."""
@@ -245,8 +253,12 @@ def diagnose(
     model = _Model(chain, calibration, rows, _weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:
+        previous = None  # a held-out session recorded right after the calibration rows continues their flanks
+        if row_time is not None and heldout_time is not None and heldout_time.min() > row_time.max():
+            previous = rows.q[int(np.argmax(row_time))]
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time,
-                                    time_reference=reference if heldout_time is not None else None)
+                                    time_reference=reference if heldout_time is not None else None,
+                                    previous=previous)
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
@@ -258,6 +270,7 @@ def diagnose(
     steps: list[Step] = []
     notes: list[str] = []
     ranking: list[Candidate] = []
+    inseparable: list[str] = []
     current_objective = objective
     while len(adopted) < MAX_EFFECTS:
         tried = []
@@ -268,6 +281,8 @@ def diagnose(
                 obj, sol = model.fit(adopted + [effect], current_x[: current_objective.blocks["effects"].start],
                                      values + [np.zeros(effect.n_values)])
             except CalibrationError:
+                if not steps and effect.label not in inseparable:
+                    inseparable.append(effect.label)
                 continue
             delta = _bic(sol.residual, sol.x.size) - current_bic
             tried.append((delta, effect, obj, sol))
@@ -295,6 +310,9 @@ def diagnose(
         before_cal = _errors(current_objective, current_x)
         before_held = _heldout_errors(model, current_objective, current_x, heldout, held_inputs)
         adopted.append(effect)
+        # noise scales re-estimated with the effect in the model (maximum likelihood)
+        model.reestimate(obj, sol)
+        obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj._effect_slices])
         values = [sol.x[sl] for sl in obj._effect_slices]
         current_objective, current_x = obj, sol.x
         current_bic = _bic(sol.residual, sol.x.size)
@@ -305,6 +323,10 @@ def diagnose(
             heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
             candidates=tuple(ranking[:8]),
         ))
+    if inseparable:
+        notes.append(
+            f"not separable from the calibrated geometry at this level (absorbed by it): {', '.join(inseparable)}"
+        )
     final_solution = solve(current_objective, current_x, what="final fit")
     effects = tuple(
         (e, final_solution.x[sl], final_solution.std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)

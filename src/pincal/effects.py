@@ -97,12 +97,15 @@ class EffectInputs:
         gravity: gravity torque of each joint at q (K, N) [N·m or N].
         time: row time relative to its mean (K,) [s], or None.
         order: row indices in time order (file order without a time column), (K,).
+        previous: the joint readings just before the first row (N,), when known
+            (e.g. the last row of an earlier session part), else None.
     """
 
     q: np.ndarray
     gravity: np.ndarray
     time: np.ndarray | None
     order: np.ndarray
+    previous: np.ndarray | None = None
 
 
 def gravity_torques(
@@ -141,9 +144,11 @@ def effect_inputs(
     payload_point: np.ndarray | None = None,
     time: np.ndarray | None = None,
     time_reference: float | None = None,
+    previous: np.ndarray | None = None,
 ) -> EffectInputs:
     """Gravity torques, time (minus ``time_reference``, default its mean) and
-    time order of the rows of ``data``."""
+    time order of the rows of ``data``; ``previous`` are the readings just
+    before its first row, if known."""
     order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
     if time is not None and time_reference is None:
         time_reference = float(np.mean(time))
@@ -153,18 +158,23 @@ def effect_inputs(
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
         time=centred,
         order=order,
+        previous=None if previous is None else np.asarray(previous, dtype=float),
     )
 
 
-def approach_flank(q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_MIN_STEP) -> np.ndarray:
-    """sign(q[k] − q[k−1]) over rows in time order; small moves keep the previous flank (K,)."""
+def approach_flank(
+    q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_MIN_STEP, before: float | None = None
+) -> np.ndarray:
+    """sign(q[k] − q[k−1]) over rows in time order; small moves keep the previous
+    flank; the first row's flank is 0 unless the reading ``before`` it is known (K,)."""
     flank = np.zeros(len(q))
     current = 0.0
-    for previous, row in zip(order[:-1], order[1:]):
-        step = q[row] - q[previous]
-        if abs(step) >= min_step:
-            current = float(np.sign(step))
+    last = before
+    for row in order:
+        if last is not None and abs(q[row] - last) >= min_step:
+            current = float(np.sign(q[row] - last))
         flank[row] = current
+        last = q[row]
     return flank
 
 
@@ -180,7 +190,8 @@ def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
         return np.column_stack([np.sin(h * q), np.cos(h * q)])
     if effect.source == "gravity":
         return np.sign(inputs.gravity[:, joint : joint + 1])
-    return approach_flank(q, inputs.order)[:, None]
+    before = None if inputs.previous is None else float(inputs.previous[joint])
+    return approach_flank(q, inputs.order, before=before)[:, None]
 
 
 def joint_shifts(

@@ -106,6 +106,7 @@ def measure(
     with_rotation: bool = True,
     effects: Sequence[tuple[Effect, np.ndarray]] = (),
     time: np.ndarray | None = None,
+    shifts: np.ndarray | None = None,
 ) -> MeasurementSet:
     """What the simulated sensor reports at configurations ``q`` (eq 20–22).
 
@@ -118,17 +119,16 @@ def measure(
             unchanged, the sensor sees the shifted joints.
         time: row times [s], written as the extra column ``time``; drift grows
             with it from t = 0.
+        shifts: joint shifts of these rows (K, N) when computed over a longer
+            sequence (approach flanks depend on the previous row); default:
+            computed from these rows alone (:func:`simulated_shifts`).
     """
     actual = np.asarray(q, dtype=float)
     scale, drift = 0.0, np.zeros((len(q), 3))
     if effects:
-        inputs = EffectInputs(
-            q=actual,
-            gravity=gravity_torques(chain, actual),
-            time=time,
-            order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
-        )
-        actual = actual + joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
+        if shifts is None:
+            shifts = simulated_shifts(chain, actual, effects, time)
+        actual = actual + shifts
         for effect, value in effects:
             if effect.type == "sensor_scale":
                 scale = float(value[0])
@@ -156,6 +156,19 @@ def measure(
         extra={} if time is None else {"time": np.asarray(time, dtype=float)},
         source="<simulation>",
     )
+
+
+def simulated_shifts(
+    chain: KinematicChain, q: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]], time: np.ndarray | None
+) -> np.ndarray:
+    """Joint shifts (K, N) the effects cause at readings ``q`` taken at ``time`` (row order if None)."""
+    inputs = EffectInputs(
+        q=q,
+        gravity=gravity_torques(chain, q),
+        time=time,
+        order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
+    )
+    return joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
 
 
 def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
@@ -196,14 +209,18 @@ def simulate_experiment(
         q_cal = rng.uniform(lower, upper, (settings.n_calibration, len(lower)))
         q_val = rng.uniform(lower, upper, (settings.n_validation, len(lower)))
         times = _row_times(effects, len(q_cpa) + len(q_cal) + len(q_val))
+        shifts = None  # over the whole session: approach flanks carry from one part to the next
+        if effects:
+            shifts = simulated_shifts(chain, np.vstack([q_cpa, q_cal, q_val]), effects, times)
+        cut = np.cumsum([len(q_cpa), len(q_cal)])
         cpa = measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa",
-                      effects=effects, time=_part(times, 0, len(q_cpa)))
+                      effects=effects, time=_part(times, 0, cut[0]), shifts=_part(shifts, 0, cut[0]))
         cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration",
-                      effects=effects, time=_part(times, len(q_cpa), len(q_cal)))
+                      effects=effects, time=_part(times, cut[0], cut[1]), shifts=_part(shifts, cut[0], cut[1]))
         val_scale = 1.0 if settings.validation_noise else 0.0
         val = measure(
             chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation",
-            effects=effects, time=_part(times, len(q_cpa) + len(q_cal), len(q_val)),
+            effects=effects, time=_part(times, cut[1], None), shifts=_part(shifts, cut[1], None),
         )
     finally:
         chain.set_placements(saved_placements)
@@ -229,8 +246,8 @@ def _row_times(effects, count: int) -> np.ndarray | None:
     return SECONDS_PER_ROW * np.arange(count, dtype=float) if effects else None
 
 
-def _part(times: np.ndarray | None, start: int, count: int) -> np.ndarray | None:
-    return None if times is None else times[start : start + count]
+def _part(values: np.ndarray | None, start: int, stop: int | None) -> np.ndarray | None:
+    return None if values is None else values[start:stop]
 
 
 @dataclass(frozen=True)
