@@ -70,6 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--sigma-rot", type=_non_negative, default=0.055, metavar="DEG",
                      help="orientation noise per angle [deg] (default 0.055)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
+                     help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
+                          "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
+                          "drift:VX:VY:VZ (m/s), sensor_scale:REL")
 
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
     cal.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
@@ -110,6 +114,28 @@ def build_parser() -> argparse.ArgumentParser:
                     help="fail (exit 1) if the largest position error exceeds X mm")
     ev.add_argument("--max-rot-deg", type=_non_negative, metavar="Y",
                     help="fail (exit 1) if the largest orientation error exceeds Y deg")
+
+    dia = sub.add_parser("diagnose", help="calibrate, then find and add the effects the model lacks")
+    dia.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
+    dia.add_argument("data", type=Path, help="measurement CSV (format v1)")
+    dia.add_argument("--validation", type=Path, metavar="DATA2",
+                     help="held-out measurements: errors reported before/after, effects that make them worse are refused")
+    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
+                     help="link at the end of the calibrated chain, carrying the target")
+    dia.add_argument("--level", choices=("registration", "offsets", "full"), default="full",
+                     help="geometric model under the effects (default full)")
+    dia.add_argument("--tool", type=_tool, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                     help="known pose of the measured target in the tip link [m, rad] (default: estimated)")
+    dia.add_argument("--sigma-column", metavar="COLUMN", help="per-row noise scale column [mm]")
+    dia.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
+                     help="criterion for the geometric parameters (default aic)")
+    dia.add_argument("--payload-kg", type=_non_negative, default=0.0, metavar="KG",
+                     help="point mass at the target for gravity torques (default 0)")
+    dia.add_argument("--time-column", metavar="COLUMN",
+                     help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
+    dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
+    dia.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf", help="corrected URDF to write")
+    dia.add_argument("--report", required=True, type=Path, metavar="REPORT.json", help="report to write")
 
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
@@ -175,7 +201,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     from .workflows import simulate_to_directory
 
     settings = SimulationSettings(sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, seed=args.seed)
-    experiment, truth = simulate_to_directory(args.out, args.deviations, settings)
+    experiment, truth = simulate_to_directory(args.out, args.deviations, settings, effects=args.effect)
     print(f"wrote {args.out / 'calibration.csv'} ({experiment.calibration.n_rows} rows: "
           f"{int(np.sum(experiment.calibration.roles == 'cpa'))} cpa, "
           f"{int(np.sum(experiment.calibration.roles == 'calibration'))} calibration)")
@@ -255,6 +281,42 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     return EXIT_THRESHOLD if failed else 0
 
 
+def _run_diagnose(args: argparse.Namespace) -> int:
+    from .workflows import diagnose_files
+
+    plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
+    run = diagnose_files(args.urdf, args.data, args.out, args.report, args.tip_link, level=args.level,
+                         tool_pose=args.tool, validation_path=args.validation, sigma_column=args.sigma_column,
+                         selection=args.select, payload_kg=args.payload_kg, time_column_name=args.time_column,
+                         plots_dir=plots)
+    _print_notes(run.notes + list(run.calibration.notes))
+    diagnosis = run.diagnosis
+    held = diagnosis.heldout_errors is not None
+    print(f"geometric calibration ({run.calibration.level}), then {len(diagnosis.steps)} effect(s) adopted:")
+    header = f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
+    print(header + (f" {'held-out RMS [mm]':>19s}" if held else ""))
+    for step in diagnosis.steps:
+        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std))
+        line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
+                f"{step.calibration_before.position.rms:7.3f} -> {step.calibration_after.position.rms:6.3f}")
+        if held:
+            line += f" {step.heldout_before.position.rms:8.3f} -> {step.heldout_after.position.rms:6.3f}"
+        print(line)
+    if not diagnosis.steps:
+        print("  nothing significant: no effect is claimed")
+    for note in diagnosis.notes:
+        print(f"reported, not adopted: {note}")
+    print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")
+    print(_HEADER)
+    print(f"{'calibration rows':24s} {_error_columns(diagnosis.calibration_errors)}")
+    if held:
+        print(f"{'held-out rows':24s} {_error_columns(diagnosis.heldout_errors)}")
+    for path in run.plots:
+        print(f"wrote {path}")
+    print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
+    return 0
+
+
 def _run_demo(args: argparse.Namespace) -> int:
     from .workflows import run_demo
 
@@ -301,6 +363,7 @@ _COMMANDS = {
     "simulate": _run_simulate,
     "calibrate": _run_calibrate,
     "evaluate": _run_evaluate,
+    "diagnose": _run_diagnose,
     "demo": _run_demo,
     "study": _run_study,
 }

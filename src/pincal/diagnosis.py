@@ -103,6 +103,10 @@ class Step:
     heldout_before: PoseErrors | None
     heldout_after: PoseErrors | None
     candidates: tuple[Candidate, ...]
+    driver: np.ndarray | None = None
+    driver_label: str = ""
+    joint_residual: np.ndarray | None = None
+    fitted_shift: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -271,6 +275,7 @@ def diagnose(
     notes: list[str] = []
     ranking: list[Candidate] = []
     inseparable: list[str] = []
+    rejected: dict[str, str] = {}
     current_objective = objective
     while len(adopted) < MAX_EFFECTS:
         tried = []
@@ -302,13 +307,16 @@ def diagnose(
                     if verdict == "adopted":
                         chosen = (delta, effect, obj, sol)
                     else:
-                        notes.append(f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted")
+                        rejected[effect.label] = f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted"
             ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
         if chosen is None:
             break
         delta, effect, obj, sol = chosen
         before_cal = _errors(current_objective, current_x)
         before_held = _heldout_errors(model, current_objective, current_x, heldout, held_inputs)
+        driver, driver_label, joint_residual, fitted = _partial_residual(
+            effect, obj, sol, current_objective, current_x, inputs, chain
+        )
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
         model.reestimate(obj, sol)
@@ -322,7 +330,9 @@ def diagnose(
             heldout_before=before_held,
             heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
             candidates=tuple(ranking[:8]),
+            driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
         ))
+    notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
     if inseparable:
         notes.append(
             f"not separable from the calibrated geometry at this level (absorbed by it): {', '.join(inseparable)}"
@@ -412,3 +422,36 @@ def _remaining_structure(model, adopted, objective, solution, chain, inputs) -> 
         return None
     return ("structure remains that no candidate explains: a generic correction of the joint angle "
             f"(linear + harmonics 1, 2) still fits much better on {', '.join(found)}")
+
+
+_DRIVERS = {
+    "compliance": "gravity torque tau_j [N·m]",
+    "encoder_scale": "joint reading q_j",
+    "cyclic": "joint reading q_j",
+}
+
+
+def _partial_residual(effect, objective, solution, before_objective, before_x, inputs, chain):
+    """For a joint effect: per row, the joint shift that best explains the residual
+    left before the effect was added, against the effect's driver, and the fitted shift."""
+    if effect.type not in JOINT_EFFECTS:
+        return None, "", None, None
+    j = chain.joint_names.index(effect.joint)
+    basis = joint_basis(effect, inputs, j)
+    fitted = basis @ solution.x[objective._effect_slices[-1]]
+    poses, sens, target, world = before_objective._state(before_x)
+    residual = before_objective.predicted_points(before_x) - before_objective.g  # (K, P, 3)
+    omega = target.registration.rotation
+    column = np.stack([sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T
+                       for p in range(world.shape[1])], axis=1)  # (K, P, 3)
+    a = column.reshape(len(column), -1)
+    r = residual.reshape(len(residual), -1)
+    shift = -np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
+    if effect.type == "backlash":
+        driver = basis[:, 0]
+        label = "sign of gravity torque" if effect.source == "gravity" else "approach direction (flank)"
+    elif effect.type == "compliance":
+        driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
+    else:
+        driver, label = inputs.q[:, j], _DRIVERS[effect.type]
+    return driver, label, shift, fitted

@@ -227,3 +227,36 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
             f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "
             "backlash:JOINT:VALUE[:gravity|approach], drift:VX:VY:VZ or sensor_scale:VALUE"
         ) from None
+
+
+def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict:
+    """REPORT.json form: {"type", "joint", "value"}; cyclic gives harmonic, sin, cos;
+    backlash adds source; drift's value is [vx, vy, vz] in m/s."""
+    values = np.atleast_1d(np.asarray(values, dtype=float))
+    std = None if std is None else np.atleast_1d(np.asarray(std, dtype=float))
+    out: dict = {"type": effect.type, "joint": effect.joint}
+    if effect.type == "cyclic":
+        out.update(harmonic=effect.harmonic, sin=float(values[0]), cos=float(values[1]))
+        if std is not None:
+            out.update(sin_std=float(std[0]), cos_std=float(std[1]))
+        return out
+    out["value"] = values.tolist() if effect.type == "drift" else float(values[0])
+    if std is not None:
+        out["std"] = std.tolist() if effect.type == "drift" else float(std[0])
+    if effect.type == "backlash":
+        out["source"] = effect.source
+    return out
+
+
+def effect_from_dict(entry: dict) -> tuple[Effect, np.ndarray]:
+    """Inverse of :func:`effect_to_dict`."""
+    try:
+        kind = entry["type"]
+        if kind == "cyclic":
+            return Effect(kind, entry["joint"], harmonic=int(entry["harmonic"])), np.array(
+                [float(entry["sin"]), float(entry["cos"])]
+            )
+        effect = Effect(kind, entry.get("joint"), source=entry.get("source"))
+        return effect, np.atleast_1d(np.asarray(entry["value"], dtype=float))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise PincalError(f"bad effect entry {entry} in the report ({exc})") from None

@@ -90,6 +90,9 @@ def pose_errors(
     registration_orientation: Registration,
     points: npt.ArrayLike | None = None,
     target_rotation: npt.ArrayLike | None = None,
+    q: npt.ArrayLike | None = None,
+    sensor_scale: float = 0.0,
+    drift: npt.ArrayLike | None = None,
 ) -> PoseErrors:
     """Eq 24 on every row of ``data``.
 
@@ -99,11 +102,17 @@ def pose_errors(
         registration_position / registration_orientation: Registrations 1 and 2.
         points: target points in the tool frame [m], (P, 3); default: the tool origin.
         target_rotation: R_T, the target's rotation in the tool frame (default identity).
+        q: joint values to use instead of the readings (readings corrected by effects).
+        sensor_scale / drift: sensor effects: the model point is
+            (1 + s)(Omega x + tau + drift_j) (see :mod:`pincal.effects`).
     """
-    poses = chain.poses(data.q)
+    poses = chain.poses(data.q if q is None else q)
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
     world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, points)
     predicted = registration_position.apply_points(world)
+    if drift is not None:
+        predicted = predicted + np.asarray(drift, dtype=float)[:, None, :]
+    predicted = (1.0 + sensor_scale) * predicted
     position = np.linalg.norm(predicted - data.points, axis=2)
     rotation = None
     if data.rotations is not None:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +38,7 @@ from .registration import Registration
 if TYPE_CHECKING:
     from .chain import KinematicChain
     from .chain_calibration import ChainCalibration
+    from .diagnosis import Diagnosis
 
 REPORT_VERSION = 1
 
@@ -127,6 +128,8 @@ class ReportModel:
         rotation: the measured target frame's rotation in ``tool_parent`` (``tool.rpy_rad``).
         registration_position: Registration 1.
         registration_orientation: Registration 2.
+        effects: ``effects`` and what applying them needs (``payload_kg``,
+            ``time_column``, ``time_reference_s``); empty without effects.
     """
 
     tool_parent: str
@@ -134,6 +137,7 @@ class ReportModel:
     rotation: np.ndarray
     registration_position: Registration
     registration_orientation: Registration
+    effects: dict = field(default_factory=dict)
 
 
 def read_report(path: str | Path) -> ReportModel:
@@ -160,6 +164,7 @@ def read_report(path: str | Path) -> ReportModel:
             registration_orientation=Registration.from_dict(
                 registration.get("orientation", registration["position"])
             ),
+            effects={k: doc[k] for k in ("effects", "payload_kg", "time_column", "time_reference_s") if k in doc},
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(
@@ -257,4 +262,49 @@ def chain_report(
             "calibration_errors": calibration_errors.as_dict(),
         },
         "notes": list(result.notes) + list(notes),
+    }
+
+
+def diagnosis_report(diagnosis: "Diagnosis", payload_kg: float, time_column: str | None) -> dict[str, Any]:
+    """The ``effects`` list and the ``diagnosis`` section of a REPORT.json."""
+    from .effects import effect_to_dict
+
+    def errors(e):
+        return None if e is None else e.as_dict()
+
+    return {
+        "effects": [effect_to_dict(e, v, s) for e, v, s in diagnosis.effects],
+        "payload_kg": payload_kg,
+        "time_column": time_column,
+        "time_reference_s": diagnosis.time_reference,
+        "diagnosis": {
+            "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
+                         "not offset-like, not ambiguous, not worse on held-out rows",
+            "steps": [
+                {
+                    "effect": effect_to_dict(step.effect, step.values, step.std),
+                    "delta_bic": step.delta_bic,
+                    "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
+                    "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
+                    "candidates": [_candidate(c) for c in step.candidates],
+                }
+                for step in diagnosis.steps
+            ],
+            "last_candidates": [_candidate(c) for c in diagnosis.last_candidates],
+            "unexplained": diagnosis.unexplained,
+            "calibration_errors": errors(diagnosis.calibration_errors),
+            "heldout_errors": errors(diagnosis.heldout_errors),
+            "notes": list(diagnosis.notes),
+        },
+    }
+
+
+def _candidate(candidate) -> dict[str, Any]:
+    from .effects import effect_to_dict
+
+    return {
+        **effect_to_dict(candidate.effect, candidate.values, candidate.std),
+        "delta_bic": candidate.delta_bic,
+        "heldout_rms_mm": candidate.heldout_rms_mm,
+        "verdict": candidate.verdict,
     }

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -18,6 +18,17 @@ from . import __version__
 from .chain import KinematicChain, pose_from_xyz_rpy, xyz_rpy_from_pose
 from .chain_calibration import ChainCalibration, calibrate_chain
 from .corrected_urdf import write_corrected_urdf
+from .diagnosis import Diagnosis, diagnose
+from .diagnosis_plots import plot_diagnosis
+from .effects import (
+    TIME_COLUMNS,
+    effect_from_dict,
+    effect_inputs,
+    effect_to_dict,
+    joint_shifts,
+    parse_effect,
+    time_column,
+)
 from .dh import DEVIATION_SETS, KUKA_LWR4_DH
 from .dh_parameters import DHParameterSet
 from .errors import CalibrationError, PincalError
@@ -25,7 +36,7 @@ from .measurements import MeasurementSet, read_measurements, write_measurements
 from .metrics import PoseErrors, pose_errors
 from .paper_methods import PaperCalibration, calibrate_paper
 from .registration import register_orientations, register_points
-from .report import chain_report, paper_report, read_report, write_report
+from .report import chain_report, diagnosis_report, paper_report, read_report, write_report
 from .robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from .simulation import SimulatedExperiment, SimulationSettings, simulate_experiment
 
@@ -48,15 +59,24 @@ def refuse_overwrite(output: Path, *inputs: Path) -> None:
 
 
 def simulate_to_directory(
-    out_dir: str | Path, deviations: str, settings: SimulationSettings
+    out_dir: str | Path, deviations: str, settings: SimulationSettings, effects: Sequence[str] = ()
 ) -> tuple[SimulatedExperiment, dict[str, Any]]:
     """Simulate the paper's experiment on the packaged KUKA LWR 4+ and write
-    ``calibration.csv``, ``validation.csv`` and ``truth.json`` into ``out_dir``."""
+    ``calibration.csv``, ``validation.csv`` and ``truth.json`` into ``out_dir``.
+
+    ``effects`` (``TYPE:JOINT:VALUE`` strings, see :func:`pincal.effects.parse_effect`)
+    are injected into the data without being declared in it; truth.json records them.
+    """
     if deviations not in DEVIATION_SETS:
         raise PincalError(f"unknown deviation set '{deviations}'; use one of {sorted(DEVIATION_SETS)}")
     urdf = kuka_lwr4plus_urdf()
     chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK)
-    experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings)
+    injected = [parse_effect(text) for text in effects]
+    for effect, _ in injected:
+        if effect.joint is not None and effect.joint not in chain.joint_names:
+            raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}'; joints are: "
+                              f"{', '.join(chain.joint_names)}")
+    experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings, effects=injected)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_measurements(out / "calibration.csv", experiment.calibration)
@@ -83,6 +103,7 @@ def simulate_to_directory(
         },
         "registration": experiment.registration.as_dict(),
         "tool": {"parent_link": KUKA_FLANGE_LINK, "xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()},
+        "effects": [effect_to_dict(e, v) for e, v in injected],
         "calibrate_command": (
             f"pincal calibrate {urdf} {out / 'calibration.csv'} --method 2 "
             f"--tool {tool_arg} --tool-parent {KUKA_FLANGE_LINK} "
@@ -243,15 +264,41 @@ def evaluate_files(urdf: str | Path, report_path: str | Path, data_path: str | P
     rows = data.roles != "cpa"
     if not np.any(rows):
         raise PincalError(f"{data_path}: no rows to evaluate (all rows have role 'cpa')")
+    data = data.select(rows)
+    corrections = _effect_corrections(chain, data, report.effects, report.points)
     errors = pose_errors(
         chain,
-        data.select(rows),
+        data,
         report.registration_position,
         report.registration_orientation,
         points=report.points,
         target_rotation=report.rotation,
+        **corrections,
     )
     return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes)
+
+
+def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray) -> dict:
+    """Joint readings corrected by the report's effects, and its sensor terms."""
+    entries = effects.get("effects", [])
+    if not entries:
+        return {}
+    parsed = [effect_from_dict(e) for e in entries]
+    needs_time = any(e.type == "drift" for e, _ in parsed)
+    row_time = time_column(data, effects.get("time_column")) if needs_time else time_column(data)
+    if needs_time and row_time is None:
+        raise PincalError(f"{data.source}: the report has a drift effect; the data need its time column")
+    reference = effects.get("time_reference_s")
+    inputs = effect_inputs(chain, data, effects.get("payload_kg", 0.0), points.mean(axis=0), row_time,
+                           time_reference=reference if row_time is not None else None)
+    q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
+    out: dict = {"q": q}
+    for effect, value in parsed:
+        if effect.type == "sensor_scale":
+            out["sensor_scale"] = float(value[0])
+        elif effect.type == "drift":
+            out["drift"] = inputs.time[:, None] * value
+    return out
 
 
 # --- demo ----------------------------------------------------------------------------
@@ -312,3 +359,82 @@ def _nominal_row(urdf: Path, experiment: SimulatedExperiment, tool: np.ndarray) 
         pose_errors(chain, experiment.validation, reg1, reg2),
         0.0,
     )
+
+
+# --- diagnose --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DiagnoseRun:
+    """Outcome of :func:`diagnose_files`."""
+
+    calibration: ChainCalibration
+    diagnosis: Diagnosis
+    report: dict[str, Any]
+    notes: list[str]
+    plots: list[Path]
+    seconds: float
+
+
+def diagnose_files(
+    urdf: str | Path,
+    data_path: str | Path,
+    out_urdf: str | Path,
+    report_path: str | Path,
+    tip_link: str,
+    level: str = "full",
+    tool_pose: np.ndarray | None = None,
+    validation_path: str | Path | None = None,
+    sigma_column: str | None = None,
+    selection: str = "aic",
+    payload_kg: float = 0.0,
+    time_column_name: str | None = None,
+    plots_dir: str | Path | None = None,
+) -> DiagnoseRun:
+    """Calibrate, search the residuals for missing effects, write the corrected
+    URDF, the report (with ``effects``) and the plots."""
+    urdf, data_path, out_urdf, report_path = Path(urdf), Path(data_path), Path(out_urdf), Path(report_path)
+    inputs = [urdf, data_path] + ([Path(validation_path)] if validation_path else [])
+    refuse_overwrite(out_urdf, *inputs)
+    refuse_overwrite(report_path, *inputs, out_urdf)
+    if level == "dh":
+        raise PincalError("diagnose works on --level registration, offsets or full")
+    started = time.perf_counter()
+    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose)
+    data, notes = read_measurements(data_path, chain.joint_specs)
+    heldout = held_time = None
+    if validation_path:
+        heldout, held_notes = read_measurements(validation_path, chain.joint_specs)
+        notes += held_notes
+        held_time = time_column(heldout, time_column_name)
+    nominal_placements = chain.placements()
+    calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None,
+                                  sigma_column=sigma_column, selection=selection)
+    row_time = time_column(data, time_column_name)
+    diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
+                         payload_kg=payload_kg, time=row_time, heldout_time=held_time)
+    objective, x = diagnosis.objective, diagnosis.solution_x
+    vector = calibration.vector.copy()
+    vector[calibration.kept] = x[objective.blocks["kinematic"]]
+    if calibration.params is not None:
+        calibration.params.apply(vector)
+    final = replace(calibration, vector=vector, target=objective.estimate(x))
+    write_corrected_urdf(urdf, out_urdf, chain, nominal_placements, comment=(
+        f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and {data_path.name}. "
+        "Registration, tool and effects (which a URDF cannot carry): see the report."))
+    reload_error = _reload_error(out_urdf, chain, data.q)
+    if reload_error > RELOAD_TOLERANCE:
+        raise CalibrationError(f"{out_urdf}: reloading the written URDF moves the tool by {reload_error:.3g} m")
+    n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
+    sources = {"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf),
+               "validation": None if validation_path is None else str(validation_path)}
+    report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
+    report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
+    plots = plot_diagnosis(diagnosis, plots_dir) if plots_dir is not None else []
+    report["diagnosis"]["plots"] = [str(p) for p in plots]
+    write_report(report_path, report)
+    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started)
+
+
+def _time_name(data: MeasurementSet) -> str | None:
+    return next((n for n in TIME_COLUMNS if n in data.extra), None)
