@@ -63,6 +63,24 @@ def test_approach_flank_keeps_the_flank_on_small_moves():
     assert approach_flank(q[::-1], np.arange(6)[::-1]).tolist() == [1, -1, -1, 1, 1, 0]
 
 
+def test_approach_flank_follows_interleaved_rows_of_another_set(kuka_chain):
+    """A held-out row between calibration rows takes its flank from the row before it in time."""
+    q = np.zeros((3, 7))
+    q[:, 5] = [0.0, 0.2, 0.3]           # calibration rows at t = 0, 20, 40
+    other = np.zeros((2, 7))
+    other[:, 5] = [0.5, 0.1]            # held-out rows at t = 10, 30
+    from pincal.measurements import MeasurementSet
+    held = MeasurementSet(joint_names=kuka_chain.joint_names, q=other, points=np.zeros((2, 1, 3)), rotations=None,
+                          roles=np.array(["validation"] * 2, dtype=object), lines=np.arange(2, 4))
+    cal = MeasurementSet(joint_names=kuka_chain.joint_names, q=q, points=np.zeros((3, 1, 3)), rotations=None,
+                         roles=np.array(["calibration"] * 3, dtype=object), lines=np.arange(2, 5))
+    inputs = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context=held,
+                           context_time=np.array([10.0, 30.0]))
+    from pincal.effects import joint_basis
+    flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), inputs, 5)[:, 0]
+    assert flank.tolist() == [0.0, -1.0, 1.0]  # 0.5 -> 0.2 goes down, 0.1 -> 0.3 goes up
+
+
 def test_parse_effect_forms():
     effect, value = parse_effect("compliance:lwr_joint_2:2e-4")
     assert effect == Effect("compliance", "lwr_joint_2") and value.tolist() == [2e-4]

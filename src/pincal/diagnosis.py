@@ -28,7 +28,7 @@ candidate explains.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -67,6 +67,8 @@ OFFSET_LIKE = 0.95
 AMBIGUOUS = 0.8
 #: Most effects adopted.
 MAX_EFFECTS = 4
+#: Refits with gravity torques recomputed on the refitted geometry.
+GRAVITY_REFRESHES = 2
 
 
 @dataclass(frozen=True)
@@ -252,17 +254,14 @@ def diagnose(
     row_time = None if time is None else time[np.isin(data.lines, calibration.rows_used)]
     points = calibration.target.points
     point = points.mean(axis=0)
-    inputs = effect_inputs(chain, rows, payload_kg, point, row_time)
     reference = None if row_time is None else float(np.mean(row_time))
+    inputs = effect_inputs(chain, rows, payload_kg, point, row_time, context=heldout, context_time=heldout_time)
     model = _Model(chain, calibration, rows, _weights(rows, sigma_column), inputs)
     held_inputs = None
-    if heldout is not None:
-        previous = None  # a held-out session recorded right after the calibration rows continues their flanks
-        if row_time is not None and heldout_time is not None and heldout_time.min() > row_time.max():
-            previous = rows.q[int(np.argmax(row_time))]
+    if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time,
                                     time_reference=reference if heldout_time is not None else None,
-                                    previous=previous)
+                                    context=rows, context_time=row_time)
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
@@ -321,6 +320,19 @@ def diagnose(
         # noise scales re-estimated with the effect in the model (maximum likelihood)
         model.reestimate(obj, sol)
         obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj._effect_slices])
+        if any(e.type == "compliance" or e.source == "gravity" for e in adopted):
+            # gravity torques on the refitted geometry, not the one fitted without the effects
+            for _ in range(GRAVITY_REFRESHES):
+                if calibration.params is not None:
+                    vector = calibration.vector.copy()
+                    vector[calibration.kept] = sol.x[obj.blocks["kinematic"]]
+                    calibration.params.apply(vector)
+                inputs = replace(inputs, gravity=effect_inputs(chain, rows, payload_kg, point).gravity)
+                model.inputs = inputs
+                if heldout is not None:
+                    held_inputs = replace(held_inputs, gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
+                obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
+                                     [sol.x[sl] for sl in obj._effect_slices])
         values = [sol.x[sl] for sl in obj._effect_slices]
         current_objective, current_x = obj, sol.x
         current_bic = _bic(sol.residual, sol.x.size)

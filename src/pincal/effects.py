@@ -97,15 +97,18 @@ class EffectInputs:
         gravity: gravity torque of each joint at q (K, N) [N·m or N].
         time: row time relative to its mean (K,) [s], or None.
         order: row indices in time order (file order without a time column), (K,).
-        previous: the joint readings just before the first row (N,), when known
-            (e.g. the last row of an earlier session part), else None.
+        context_q / context_time: readings (M, N) and times (M,) [s] of other
+            rows of the same session (e.g. held-out rows between calibration
+            rows): the approach flank of a row follows the row before it in
+            time, whichever set it belongs to. None without them.
     """
 
     q: np.ndarray
     gravity: np.ndarray
     time: np.ndarray | None
     order: np.ndarray
-    previous: np.ndarray | None = None
+    context_q: np.ndarray | None = None
+    context_time: np.ndarray | None = None
 
 
 def gravity_torques(
@@ -144,11 +147,12 @@ def effect_inputs(
     payload_point: np.ndarray | None = None,
     time: np.ndarray | None = None,
     time_reference: float | None = None,
-    previous: np.ndarray | None = None,
+    context: MeasurementSet | None = None,
+    context_time: np.ndarray | None = None,
 ) -> EffectInputs:
     """Gravity torques, time (minus ``time_reference``, default its mean) and
-    time order of the rows of ``data``; ``previous`` are the readings just
-    before its first row, if known."""
+    time order of the rows of ``data``. ``context`` (with ``context_time``) are
+    other rows of the same session, interleaved in time, for approach flanks."""
     order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
     if time is not None and time_reference is None:
         time_reference = float(np.mean(time))
@@ -158,18 +162,18 @@ def effect_inputs(
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
         time=centred,
         order=order,
-        previous=None if previous is None else np.asarray(previous, dtype=float),
+        context_q=None if context is None or context_time is None else np.asarray(context.q, dtype=float),
+        context_time=None if context is None or time is None else np.asarray(context_time, dtype=float)
+        - (time_reference if time_reference is not None else 0.0),
     )
 
 
-def approach_flank(
-    q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_MIN_STEP, before: float | None = None
-) -> np.ndarray:
+def approach_flank(q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_MIN_STEP) -> np.ndarray:
     """sign(q[k] − q[k−1]) over rows in time order; small moves keep the previous
-    flank; the first row's flank is 0 unless the reading ``before`` it is known (K,)."""
+    flank; 0 for the first row (K,)."""
     flank = np.zeros(len(q))
     current = 0.0
-    last = before
+    last = None
     for row in order:
         if last is not None and abs(q[row] - last) >= min_step:
             current = float(np.sign(q[row] - last))
@@ -190,8 +194,11 @@ def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
         return np.column_stack([np.sin(h * q), np.cos(h * q)])
     if effect.source == "gravity":
         return np.sign(inputs.gravity[:, joint : joint + 1])
-    before = None if inputs.previous is None else float(inputs.previous[joint])
-    return approach_flank(q, inputs.order, before=before)[:, None]
+    if inputs.context_q is None:
+        return approach_flank(q, inputs.order)[:, None]
+    merged = np.concatenate([q, inputs.context_q[:, joint]])
+    order = np.argsort(np.concatenate([inputs.time, inputs.context_time]), kind="stable")
+    return approach_flank(merged, order)[: len(q), None]
 
 
 def joint_shifts(

@@ -191,8 +191,8 @@ def simulate_experiment(
 
     The chain's placements are set to the ground truth and restored afterwards.
     ``effects`` are injected into the measurements without being declared; the
-    rows get a ``time`` column (:data:`SECONDS_PER_ROW` apart, validation after
-    calibration) when there are effects.
+    rows get a ``time`` column (:data:`SECONDS_PER_ROW` apart, validation rows
+    interleaved with the calibration rows) when there are effects.
     """
     rng = np.random.default_rng(settings.seed)
     tool = pose_from_xyz_rpy(DEFAULT_TOOL_XYZ, DEFAULT_TOOL_RPY) if tool is None else tool
@@ -208,7 +208,7 @@ def simulate_experiment(
         q_cpa = cpa_configurations(lower, upper, settings.n_cpa)
         q_cal = rng.uniform(lower, upper, (settings.n_calibration, len(lower)))
         q_val = rng.uniform(lower, upper, (settings.n_validation, len(lower)))
-        times = _row_times(effects, len(q_cpa) + len(q_cal) + len(q_val))
+        times = _row_times(effects, len(q_cpa), len(q_cal), len(q_val))
         shifts = None  # over the whole session: approach flanks carry from one part to the next
         if effects:
             shifts = simulated_shifts(chain, np.vstack([q_cpa, q_cal, q_val]), effects, times)
@@ -242,8 +242,16 @@ def simulate_experiment(
 SECONDS_PER_ROW = 10.0
 
 
-def _row_times(effects, count: int) -> np.ndarray | None:
-    return SECONDS_PER_ROW * np.arange(count, dtype=float) if effects else None
+def _row_times(effects, n_cpa: int, n_calibration: int, n_validation: int) -> np.ndarray | None:
+    """Times of the CPA, calibration and validation rows (in that order): the
+    CPA runs first, then calibration and validation rows evenly interleaved."""
+    if not effects:
+        return None
+    slots = np.arange(n_calibration + n_validation)
+    validation = np.round(np.linspace(0, len(slots) - 1, n_validation + 2)[1:-1]).astype(int) if n_validation else []
+    is_validation = np.isin(slots, validation)
+    late = n_cpa + slots
+    return SECONDS_PER_ROW * np.concatenate([np.arange(n_cpa), late[~is_validation], late[is_validation]]).astype(float)
 
 
 def _part(values: np.ndarray | None, start: int, stop: int | None) -> np.ndarray | None:
