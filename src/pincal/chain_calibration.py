@@ -164,7 +164,8 @@ def initial_target(
     return TargetEstimate(registration, points, rotation)
 
 
-def _weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
+def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
+    """Relative row weights from a per-row noise column (median 1), or ones."""
     if sigma_column is None:
         return np.ones(data.n_rows)
     if sigma_column not in data.extra:
@@ -183,7 +184,7 @@ def _weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
     return 1.0 / relative
 
 
-class _Problem:
+class FitProblem:
     """One weighted fit of registration, target and a subset of kinematic parameters."""
 
     def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight,
@@ -348,7 +349,7 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
         start = TargetEstimate(start.registration, np.zeros((1, 3)), np.eye(3))
-    problem = _Problem(chain, params, rows, start, fit_target=not tool_known, row_weight=_weights(rows, sigma_column))
+    problem = FitProblem(chain, params, rows, start, fit_target=not tool_known, row_weight=row_weights(rows, sigma_column))
     size = params.size if params is not None else 0
     base = np.zeros(size)
     empty = np.array([], dtype=int)
@@ -420,7 +421,7 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
     }
 
 
-def _select(problem: _Problem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str):
+def _select(problem: FitProblem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str):
     """Score nested subsets of the ordered identifiable parameters; keep the best.
 
     ``aic``: Akaike's information criterion m ln(RSS/m) + 2n (Akaike 1974), which

@@ -34,7 +34,7 @@ from typing import Sequence
 import numpy as np
 
 from .chain import KinematicChain
-from .chain_calibration import ChainCalibration, _Problem, _weights
+from .chain_calibration import ChainCalibration, FitProblem, row_weights
 from .effects import (
     BACKLASH_SOURCES,
     HARMONICS,
@@ -161,10 +161,10 @@ class _Model:
         self.sigma_pos = calibration.sigma_pos_m
         self.sigma_rot = calibration.sigma_rot_rad
 
-    def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> _Problem:
+    def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
         data = self.rows if data is None else data
         weight = self.row_weight if data is self.rows else np.ones(data.n_rows)
-        problem = _Problem(
+        problem = FitProblem(
             self.chain, self.calibration.params, data, self.calibration.start,
             fit_target=self.calibration.fit_target, row_weight=weight,
             effects=effects, inputs=self.inputs if inputs is None else inputs,
@@ -256,7 +256,7 @@ def diagnose(
     point = points.mean(axis=0)
     reference = None if row_time is None else float(np.mean(row_time))
     inputs = effect_inputs(chain, rows, payload_kg, point, row_time, context=heldout, context_time=heldout_time)
-    model = _Model(chain, calibration, rows, _weights(rows, sigma_column), inputs)
+    model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time,
