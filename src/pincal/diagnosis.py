@@ -313,9 +313,7 @@ def diagnose(
         delta, effect, obj, sol = chosen
         before_cal = _errors(current_objective, current_x)
         before_held = _heldout_errors(model, current_objective, current_x, heldout, held_inputs)
-        driver, driver_label, joint_residual, fitted = _partial_residual(
-            effect, obj, sol, current_objective, current_x, inputs, chain
-        )
+        driver, driver_label, joint_residual, fitted = _partial_residual(effect, obj, sol, inputs, chain)
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
         model.reestimate(obj, sol)
@@ -443,22 +441,23 @@ _DRIVERS = {
 }
 
 
-def _partial_residual(effect, objective, solution, before_objective, before_x, inputs, chain):
-    """For a joint effect: per row, the joint shift that best explains the residual
-    left before the effect was added, against the effect's driver, and the fitted shift."""
+def _partial_residual(effect, objective, solution, inputs, chain):
+    """Component-plus-residual of a joint effect: per row, the fitted shift plus the
+    remaining residual of the fit expressed as a shift of that joint (least
+    squares on the joint's Jacobian column), against the effect's driver."""
     if effect.type not in JOINT_EFFECTS:
         return None, "", None, None
     j = chain.joint_names.index(effect.joint)
     basis = joint_basis(effect, inputs, j)
     fitted = basis @ solution.x[objective._effect_slices[-1]]
-    poses, sens, target, world = before_objective._state(before_x)
-    residual = before_objective.predicted_points(before_x) - before_objective.g  # (K, P, 3)
+    _, sens, target, world = objective._state(solution.x)
+    residual = objective.predicted_points(solution.x) - objective.g  # (K, P, 3)
     omega = target.registration.rotation
     column = np.stack([sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T
                        for p in range(world.shape[1])], axis=1)  # (K, P, 3)
     a = column.reshape(len(column), -1)
     r = residual.reshape(len(residual), -1)
-    shift = -np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
+    shift = fitted - np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
     if effect.type == "backlash":
         driver = basis[:, 0]
         label = "sign of gravity torque" if effect.source == "gravity" else "approach direction (flank)"

@@ -30,7 +30,7 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
         order = np.argsort(step.driver, kind="stable")
         unit = _joint_unit(step.effect.joint or "")
         ax.plot(step.driver, step.joint_residual * 1000.0, "o", ms=4, alpha=0.7,
-                label="residual as a joint shift, before this effect")
+                label="fitted shift + remaining residual, per row")
         ax.plot(step.driver[order], step.fitted_shift[order] * 1000.0, "-", lw=2, label=f"fitted {step.effect.type}")
         ax.set_xlabel(step.driver_label)
         ax.set_ylabel(f"joint shift of {step.effect.joint} [m{unit}]")
