@@ -19,7 +19,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
 import numpy as np  # noqa: E402
 
-from .study import Estimator, StudyResult  # noqa: E402
+from .study import StudyResult  # noqa: E402
+from .study_estimators import Estimator  # noqa: E402
 
 _POS_X = "sensor position noise σ_p [mm]"
 _ROT_X = "sensor orientation noise σ_a [deg]"
