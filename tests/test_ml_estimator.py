@@ -1,4 +1,4 @@
-"""The ML estimator (pincal.ml_estimator) and its residual (pincal.pose_residual).
+"""The ML estimator (pincal.ml_estimator) and its residual (pincal.sensor_residual.tool_pose_residual).
 
 Jacobians against central finite differences (step 1e-6, tolerance 1e-7
 relative to the column scale, as in test_jacobians.py); noise-free data must
@@ -17,14 +17,15 @@ import pytest
 from pincal.chain import KinematicChain
 from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL, DHDeviations, DHTable
 from pincal.dh_parameters import DHParameterSet
+from pincal.effects import Effect, EffectInputs
 from pincal.errors import CalibrationError
 from pincal.metrics import pose_errors
 from pincal.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
 from pincal.objective import KinematicsCache
 from pincal.paper_methods import ABSORBED, CALIBRATED, calibrate_paper
-from pincal.pose_residual import PoseResidual
 from pincal.registration import Registration
 from pincal.robots import KUKA_FLANGE_LINK
+from pincal.sensor_residual import SensorResidual, TargetEstimate, tool_pose_residual
 from pincal.simulation import DEFAULT_REGISTRATION, SimulationSettings, simulate_experiment
 
 from conftest import assert_close, numeric_jacobian
@@ -34,7 +35,7 @@ TOL = 1e-7
 
 
 def _pose_residual(chain, rng, k=10):
-    """A PoseResidual over all 28 DH parameters away from the truth and the reference."""
+    """A tool pose residual over all 28 DH parameters away from the truth and the reference."""
     chain.set_tool(pin.SE3.Random().homogeneous)
     params = DHParameterSet(chain)
     truth = TABLE2_LARGE.apply(KUKA_LWR4_DH)
@@ -51,43 +52,85 @@ def _pose_residual(chain, rng, k=10):
         pin.exp3(rng.normal(0, 0.05, 3)) @ DEFAULT_REGISTRATION.rotation, DEFAULT_REGISTRATION.translation + 0.01
     )
     cache = KinematicsCache(params, np.arange(params.size), KUKA_LWR4_DH.to_vector(), q)
-    objective = PoseResidual(cache, points, rotations, reference, 2e-3, 0.03)
-    x = objective.initial_vector(cache.base + rng.normal(0, 0.01, params.size))
-    x[params.size : params.size + 3] = rng.normal(0, 0.05, 3)  # away from phi = 0
-    return objective, x, points, rotations
+    objective = tool_pose_residual(cache, points, rotations, reference, 2e-3, 0.03)
+    x = objective.start_vector()
+    x[objective.blocks["kinematic"]] += rng.normal(0, 0.01, params.size)
+    x[objective.blocks["registration"].start + np.arange(3)] = rng.normal(0, 0.05, 3)  # away from phi = 0
+
+    def moved(g, rot):
+        return tool_pose_residual(cache, g, rot, reference, 2e-3, 0.03)
+
+    return objective, x, moved
+
+
+def _target_residual(chain, rng, k=5):
+    """A SensorResidual with two fitted target points, a fitted target rotation, per-row
+    weights and the sensor effects (scale, drift), away from its start."""
+    params = DHParameterSet(chain)
+    q = rng.uniform(-1.5, 1.5, (k, chain.n_joints))
+    inputs = EffectInputs(q=q, gravity=np.zeros_like(q), time=np.linspace(-600, 600, k), order=np.arange(k))
+    cache = KinematicsCache(params, np.arange(params.size), KUKA_LWR4_DH.to_vector(), q)
+    start = TargetEstimate(Registration(pin.exp3(rng.normal(size=3)), rng.normal(size=3)),
+                           rng.normal(0, 0.1, (2, 3)), pin.exp3(rng.normal(size=3)))
+    weights = rng.uniform(0.5, 2.0, k), rng.uniform(0.5, 2.0, k)
+
+    def moved(g, rot):
+        return SensorResidual(cache, g, rot, start, *weights, effects=[Effect("drift"), Effect("sensor_scale")],
+                              inputs=inputs)
+
+    objective = moved(rng.normal(size=(k, 2, 3)), np.stack([pin.exp3(rng.normal(size=3)) for _ in q]))
+    x = objective.start_vector() + rng.normal(0, 0.01, objective.n_free)
+    return objective, x, moved
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_pose_residual_jacobian_matches_finite_differences(kuka_chain, seed):
-    objective, x, _, _ = _pose_residual(kuka_chain, np.random.default_rng(seed))
+    objective, x, _ = _pose_residual(kuka_chain, np.random.default_rng(seed))
     analytic, numeric = objective.jacobian(x), numeric_jacobian(objective.residual, x)
-    n = objective.n_model
+    n = objective.blocks["kinematic"].stop
     for name, block in (("DH", slice(0, n)), ("phi", slice(n, n + 3)), ("tau", slice(n + 3, n + 6))):
         scale = max(1.0, np.abs(numeric[:, block]).max())
         assert_close(analytic[:, block] / scale, numeric[:, block] / scale, TOL, name)
 
 
-def test_pose_residual_noise_jacobian_matches_finite_differences(kuka_chain):
-    """g_k → g_k + zeta, G_k → exp(xi) G_k moves only row k's residual, by the returned block."""
-    objective, x, points, rotations = _pose_residual(kuka_chain, np.random.default_rng(5), k=4)
-    blocks = objective.noise_jacobian(x)
+@pytest.mark.parametrize("case", [_pose_residual, _target_residual], ids=["tool", "target"])
+def test_noise_jacobian_matches_finite_differences(kuka_chain, case):
+    """g_kp → g_kp + zeta, G_k → exp(xi) G_k moves only row k's residuals, by the returned block."""
+    objective, x, moved = case(kuka_chain, np.random.default_rng(5), k=4)
+    blocks, rows = objective.noise_jacobian(x), objective.row_indices()
+    points, rotations = objective.g, objective.G
+    n_position = 3 * points.shape[1]
+    assert blocks.shape == (len(points), n_position + 3, n_position + 3) == rows.shape + (n_position + 3,)
     for k in range(len(points)):
-        for c in range(6):
+        for c in range(blocks.shape[2]):
 
             def residual(h):
                 g, rot = points.copy(), rotations.copy()
-                if c < 3:
-                    g[k, c] += h
+                if c < n_position:
+                    g[k, c // 3, c % 3] += h
                 else:
-                    rot[k] = pin.exp3(h * np.eye(3)[c - 3]) @ rot[k]
-                moved = PoseResidual(objective.cache, g, rot, objective.reference, 2e-3, 0.03)
-                return moved.residual(x).reshape(-1, 6)
+                    rot[k] = pin.exp3(h * np.eye(3)[c - n_position]) @ rot[k]
+                return moved(g, rot).residual(x)
 
             numeric = (residual(STEP) - residual(-STEP)) / (2 * STEP)
             expected = np.zeros_like(numeric)
-            expected[k] = blocks[k][:, c]
+            expected[rows[k]] = blocks[k][:, c]
             scale = max(1.0, np.abs(numeric).max())
             assert_close(numeric / scale, expected / scale, TOL, f"row {k} noise {c}")
+
+
+def test_tool_pose_residual_is_row_by_row_pose_error(kuka_chain):
+    """Row k's residuals are [(Omega t_k + tau − g_k) / sigma_p, log(G_kᵀ Omega R_k) / sigma_a]."""
+    objective, x, _ = _pose_residual(kuka_chain, np.random.default_rng(2), k=3)
+    registration = objective.estimate(x).registration
+    poses, _ = objective.cache.evaluate(x[objective.blocks["kinematic"]])
+    position = (registration.apply_points(poses.tool_positions) - objective.g[:, 0]) / 2e-3
+    rotation = np.stack(
+        [pin.log3(g.T @ registration.rotation @ r) for g, r in zip(objective.G, poses.tool_rotations)]
+    ) / 0.03
+    assert_close(objective.residual(x)[objective.row_indices()], np.hstack([position, rotation]), 1e-12, "residual")
+    with pytest.raises(CalibrationError, match="must be positive"):
+        tool_pose_residual(objective.cache, objective.g, objective.G, registration, 0.0, 0.03)
 
 
 def _run(urdf, experiment, **kwargs):

@@ -25,8 +25,8 @@ from pincal.ml_estimator import calibrate_ml, ml_parameter_indices
 from pincal.noise_limit import mean_norm, predicted_errors
 from pincal.objective import KinematicsCache
 from pincal.paper_methods import calibrate_paper
-from pincal.pose_residual import PoseResidual
 from pincal.robots import KUKA_FLANGE_LINK
+from pincal.sensor_residual import tool_pose_residual
 from pincal.simulation import SimulationSettings, simulate_experiment
 
 SMALL = SimulationSettings(seed=4, n_cpa=10, n_calibration=60, n_validation=10)
@@ -97,7 +97,11 @@ def test_prediction_scales_linearly_with_noise(kuka_chain, method):
 
 
 def test_ml_prediction_is_the_cramer_rao_bound(kuka_chain):
-    """(JᵀΣ⁻¹J)⁻¹ of the ML problem at the truth, over its DH unknowns and the registration."""
+    """(JᵀΣ⁻¹J)⁻¹ of the ML problem at the truth, over its DH unknowns and the registration.
+
+    The residual's registration rotation is Ω₀ exp(φ_r); the prediction's φ is a
+    left rotation, φ = Ω₀ φ_r, so its block is Ω₀ (bound) Ω₀ᵀ.
+    """
     experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
     prediction = predicted_errors(kuka_chain, experiment, "ml", 0.05, 0.1)
     kuka_chain.set_tool(experiment.tool)
@@ -106,7 +110,7 @@ def test_ml_prediction_is_the_cramer_rao_bound(kuka_chain):
     cache = KinematicsCache(params, free, experiment.truth.to_vector(), experiment.calibration.q)
     params.apply(experiment.truth.to_vector())
     poses = kuka_chain.poses(experiment.calibration.q)
-    objective = PoseResidual(
+    objective = tool_pose_residual(
         cache,
         experiment.registration.apply_points(poses.tool_positions),
         experiment.registration.apply_rotations(poses.tool_rotations),
@@ -114,8 +118,11 @@ def test_ml_prediction_is_the_cramer_rao_bound(kuka_chain):
         0.05e-3,
         np.radians(0.1),
     )
-    jac = objective.jacobian(objective.initial_vector(cache.base[free]))
+    jac = objective.jacobian(objective.start_vector())
     bound = np.linalg.inv(jac.T @ jac)
+    to_left = np.eye(len(bound))
+    to_left[len(free) : len(free) + 3, len(free) : len(free) + 3] = experiment.registration.rotation
+    bound = to_left @ bound @ to_left.T
     index = np.concatenate([free, params.size + np.arange(6)])  # DH unknowns, Registration 1
     predicted = prediction.covariance[np.ix_(index, index)]
     assert np.abs(predicted - bound).max() < 1e-8 * np.abs(bound).max()

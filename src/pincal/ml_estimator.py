@@ -5,7 +5,8 @@ weight w; Method 2 avoids the weight by splitting the data (orientations for
 eps, positions for r and d) and never uses the absolute poses. Here every
 measured row — the ``cpa`` rows as well as the ``calibration`` rows — enters
 one least-squares problem in which each residual is divided by the sensor's
-noise (:class:`pincal.pose_residual.PoseResidual`):
+noise (:func:`pincal.sensor_residual.tool_pose_residual`, a
+:class:`pincal.sensor_residual.SensorResidual` of the known tool):
 
     r_k = [ (Ω t_k + τ − g_k) / σ_p ,  log(G_kᵀ Ω R_k) / σ_a ]
 
@@ -21,7 +22,8 @@ converges: the maximum-likelihood solution with unknown variances (REML-style
 degrees of freedom).
 
 Unknowns: alpha_1..N (alpha_N too: with the tool known and full poses measured
-it is identifiable, unlike in CPA), eps_2..N, r_1..N, d_2..N, φ (3), τ (3).
+it is identifiable, unlike in CPA), eps_2..N, r_1..N, d_2..N, φ (3), τ (3),
+with Ω = Ω_0 exp(φ) about Method 2's Registration 1 Ω_0.
 eps_1 and d_1 are a gauge of the registration (rotation about and translation
 along the first joint axis) and keep their nominal values. The fit starts from
 Method 2's solution and its Registration 1.
@@ -41,7 +43,7 @@ from .errors import CalibrationError
 from .measurements import MeasurementSet
 from .objective import KinematicsCache
 from .paper_methods import ABSORBED, CALIBRATED, PaperCalibration, Stage, calibrate_paper
-from .pose_residual import REGISTRATION_NAMES, PoseResidual
+from .sensor_residual import REGISTRATION_NAMES, SensorResidual, tool_pose_residual
 from .solver import Solution, solve
 
 #: Value of :attr:`PaperCalibration.method` for this estimator.
@@ -91,20 +93,21 @@ def ml_parameter_indices(params: DHParameterSet, fit_alpha_n: bool = True) -> np
     )
 
 
-def variance_components(objective: PoseResidual, x: npt.ArrayLike) -> tuple[float, float]:
+def variance_components(objective: SensorResidual, x: npt.ArrayLike) -> tuple[float, float]:
     """Estimates of σ_p² [m²] and σ_a² [rad²] from the residuals of ``objective`` at ``x``.
 
     σ² = ‖e‖² / (3K − tr H_type), with e the unscaled residuals of one type and
     H the hat matrix J (JᵀJ)⁻¹ Jᵀ of the scaled problem, whose diagonal over a
     type's rows is the number of unknowns that type absorbs (Förstner 1979).
+    ``objective`` is a :func:`tool_pose_residual` (weights 1/σ_p and 1/σ_a).
     """
-    jac = objective.jacobian(x)
-    basis, _ = np.linalg.qr(jac)
-    leverage = (basis**2).sum(axis=1).reshape(-1, 6)
-    residual = objective.residual(x).reshape(-1, 6)
+    rows = objective.row_indices()  # (K, 6): position, orientation
+    basis, _ = np.linalg.qr(objective.jacobian(x))
+    leverage = (basis**2).sum(axis=1)[rows]
+    residual = objective.residual(x)[rows]
     k = len(residual)
-    ss_p = float((residual[:, :3] ** 2).sum()) * objective.sigma_position**2
-    ss_a = float((residual[:, 3:] ** 2).sum()) * objective.sigma_rotation**2
+    ss_p = float(((residual[:, :3] / objective.w[:, None]) ** 2).sum())
+    ss_a = float(((residual[:, 3:] / objective.v[:, None]) ** 2).sum())
     return ss_p / (3 * k - leverage[:, :3].sum()), ss_a / (3 * k - leverage[:, 3:].sum())
 
 
@@ -146,7 +149,7 @@ def calibrate_ml(
     rows = data.with_role("cpa", "calibration")
     free = ml_parameter_indices(params, fit_alpha_n)
     cache = KinematicsCache(params, free, start.table.to_vector(), rows.q)
-    points, rotations = rows.points[:, 0, :], rows.rotations
+    points, rotations = rows.points[:, :1, :], rows.rotations
     reference = start.registration_position
 
     estimated = (sigma_pos_mm is None, sigma_rot_deg is None)
@@ -154,15 +157,15 @@ def calibrate_ml(
         [1.0 if sigma_pos_mm is None else sigma_pos_mm / 1000.0,
          1.0 if sigma_rot_deg is None else np.radians(sigma_rot_deg)]
     )
-    unscaled = PoseResidual(cache, points, rotations, reference)  # σ = 1: residuals in m and rad
-    x = unscaled.initial_vector(cache.base[free])
+    unscaled = tool_pose_residual(cache, points, rotations, reference)  # σ = 1: residuals in m and rad
+    x = unscaled.start_vector()  # Method 2's table and Registration 1
     if any(estimated):  # start from the spread of the residuals of Method 2's solution
-        residual = unscaled.residual(x).reshape(-1, 6)
+        residual = unscaled.residual(x)[unscaled.row_indices()]
         first = np.sqrt([np.mean(residual[:, :3] ** 2), np.mean(residual[:, 3:] ** 2)])
         sigma = np.where(estimated, np.maximum(first, SIGMA_FLOOR), sigma)
 
-    def fit(sigma: np.ndarray, x: np.ndarray) -> tuple[PoseResidual, Solution]:
-        objective = PoseResidual(cache, points, rotations, reference, *sigma)
+    def fit(sigma: np.ndarray, x: np.ndarray) -> tuple[SensorResidual, Solution]:
+        objective = tool_pose_residual(cache, points, rotations, reference, *sigma)
         return objective, solve(objective, x, what="ML estimator")
 
     objective, solution = fit(sigma, x)
@@ -175,13 +178,13 @@ def calibrate_ml(
         if not converged:  # else the last fit's weights are within tolerance of these
             objective, solution = fit(sigma, solution.x)
             fits.append(solution)
-    x = solution.x
+    x, model = solution.x, objective.blocks["kinematic"]
 
-    vector = cache.full_vector(x[: objective.n_model])
+    vector = cache.full_vector(x[model])
     params.apply(vector)
-    registration = objective.registration(x)
+    registration = objective.estimate(x).registration
     std = np.full(params.size, np.nan)
-    std[free] = solution.std[: objective.n_model]
+    std[free] = solution.std[model]
     status = np.array([CALIBRATED] * params.size, dtype=object)
     status[params.indices("epsilon", [0])] = ABSORBED
     status[params.indices("d", [0])] = ABSORBED

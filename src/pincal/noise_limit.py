@@ -45,9 +45,9 @@ from .measurements import MeasurementSet
 from .ml_estimator import METHOD as ML, calibrate_ml
 from .objective import KinematicsCache, Objective
 from .paper_methods import FROM_CPA, PaperCalibration, calibrate_paper, cpa_groups
-from .pose_residual import REGISTRATION_NAMES, PoseResidual
 from .registration import Registration
 from .rotation_residual import RotationResidual
+from .sensor_residual import REGISTRATION_NAMES, tool_pose_residual
 from .simulation import SimulatedExperiment
 
 METHODS = (1, 2, 3, ML)
@@ -182,19 +182,29 @@ class _Propagation:
         previous = jac[:, ~is_free] @ self.d[columns[~is_free]]
         self.d[columns[is_free]] = solve @ previous + (noise.T @ solve.T).T
 
-    def pose_residual(
-        self, rows: np.ndarray, which: str, sigma: tuple[float, float] = (1.0, 1.0)
-    ) -> tuple[PoseResidual, np.ndarray]:
-        """PoseResidual of ``rows`` about the noise-free registration ``which`` and its x.
+    def pose_jacobians(
+        self, data: MeasurementSet, which: str, sigma: tuple[float, float] = (1.0, 1.0)
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """dr/dp and per-row dr/dz of the tool pose residual of ``data`` at the noise-free solution.
 
-        ``sigma`` = (σ_p [m], σ_a [rad]) scales the residuals (the ML weights);
-        single-type stages use 1.
+        The residual is :func:`pincal.sensor_residual.tool_pose_residual` about
+        the registration ``which`` with every DH parameter free; ``sigma`` =
+        (σ_p [m], σ_a [rad]) scales it (the ML weights), single-type stages use 1.
+
+        Returns:
+            dr/dp over [DH vector, φ, τ], (6 R, 4N + 6), row by row (three
+            position then three orientation residuals), with φ converted to p's
+            left rotation: the residual's Ω₀ exp(φ_r) is exp(φ) Ω₀ for φ = Ω₀ φ_r,
+            so dr/dφ = dr/dφ_r Ω₀ᵀ at φ = 0. And dr/dz per row, (R, 6, 6).
         """
         registration = getattr(self.result, f"registration_{which}")
-        objective = PoseResidual(
-            self.cache(rows), self.data.points[rows, 0], self.data.rotations[rows], registration, *sigma
-        )
-        return objective, objective.initial_vector(self.vector)
+        cache = KinematicsCache(self.params, np.arange(self.n_dh), self.vector, data.q)
+        objective = tool_pose_residual(cache, data.points[:, :1], data.rotations, registration, *sigma)
+        x = objective.start_vector()
+        jac = objective.jacobian(x)[objective.row_indices().ravel()]
+        phi = objective.blocks["registration"].start + np.arange(3)
+        jac[:, phi] = jac[:, phi] @ registration.rotation.T
+        return jac, objective.noise_jacobian(x)
 
     # --- stages --------------------------------------------------------
 
@@ -279,17 +289,15 @@ class _Propagation:
     def registration_position(self) -> None:
         """Registration 1 (Arun et al. 1987 + eq 19): min Σ ‖Ω t_k + τ − g_k‖² on the calibration rows."""
         rows = self.rows["calibration"]
-        objective, x = self.pose_residual(rows, "position")
+        jac, noise = self.pose_jacobians(self.data.select(rows), "position")
         position = (np.arange(6 * len(rows)) % 6) < 3
         columns = np.concatenate([np.arange(self.n_dh), self.registration_columns["position"]])
-        noise = self.embed(objective.noise_jacobian(x)[:, :3, :], rows)
-        self.stage(objective.jacobian(x)[position], columns, self.registration_columns["position"], noise)
+        self.stage(jac[position], columns, self.registration_columns["position"], self.embed(noise[:, :3, :], rows))
 
     def registration_orientation(self) -> None:
         """Registration 2: Ω = mean rotation of G_k R_kᵀ (Moakher 2002), then τ by eq 19."""
         rows = self.rows["calibration"]
-        objective, x = self.pose_residual(rows, "orientation")
-        jac, noise = objective.jacobian(x), objective.noise_jacobian(x)
+        jac, noise = self.pose_jacobians(self.data.select(rows), "orientation")
         position = (np.arange(6 * len(rows)) % 6) < 3
         columns = np.concatenate([np.arange(self.n_dh), self.registration_columns["orientation"]])
         phi, tau = columns[self.n_dh : self.n_dh + 3], columns[self.n_dh + 3 :]
@@ -299,11 +307,11 @@ class _Propagation:
     def maximum_likelihood(self, free_names: tuple[str, ...], sigma: np.ndarray) -> None:
         """The ML estimator's single stage; equals the Cramér–Rao bound at the truth."""
         rows = np.concatenate([self.rows["cpa"], self.rows["calibration"]])
-        objective, x = self.pose_residual(rows, "position", sigma)
+        jac, noise = self.pose_jacobians(self.data.select(rows), "position", sigma)
         registration = self.registration_columns["position"]
         free = np.concatenate([self.dh_indices(free_names), registration])
         columns = np.concatenate([np.arange(self.n_dh), registration])
-        self.stage(objective.jacobian(x), columns, free, self.embed(objective.noise_jacobian(x), rows))
+        self.stage(jac, columns, free, self.embed(noise, rows))
         self.d[self.registration_columns["orientation"]] = self.d[registration]
 
     # --- validation ----------------------------------------------------
@@ -312,17 +320,14 @@ class _Propagation:
         """de/dz of the truth-referenced errors at the validation poses (eq 24 against the truth).
 
         Position e = Ω̂₁ t̂_j + τ̂₁ − g_j [m] and orientation log(G_jᵀ Ω̂₂ R̂_j) [rad]
-        are the residuals of a :class:`PoseResidual` on noise-free ``validation``.
+        are the residuals of the tool pose residual on noise-free ``validation``.
 
         Returns:
             Position and orientation derivatives, (J, 3, 6 K) each.
         """
-        cache = KinematicsCache(self.params, np.arange(self.n_dh), self.vector, validation.q)
         out = []
         for which, part in (("position", slice(0, 3)), ("orientation", slice(3, 6))):
-            registration = getattr(self.result, f"registration_{which}")
-            objective = PoseResidual(cache, validation.points[:, 0], validation.rotations, registration)
-            jac = objective.jacobian(objective.initial_vector(self.vector)).reshape(validation.n_rows, 6, -1)
+            jac = self.pose_jacobians(validation, which)[0].reshape(validation.n_rows, 6, -1)
             columns = np.concatenate([np.arange(self.n_dh), self.registration_columns[which]])
             out.append(jac[:, part, :] @ self.d[columns])
         return out[0], out[1]

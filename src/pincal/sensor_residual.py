@@ -22,6 +22,13 @@ d e/d theta = w Omega · point velocity; d e/d phi = −w Omega [y]× Jexp3(phi)
 y = t + R m; d e/d tau = w I; d e/d m_p = w Omega R. With E = G_kᵀ Omega R_k R_T:
 d o/d theta = v Jlog3(E) Eᵀ G_kᵀ Omega · angular velocity;
 d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi).
+
+With the chain's tool as the measured frame (one zero target point, R_T = I,
+neither fitted: :func:`tool_pose_residual`) and w = 1/sigma_p, v = 1/sigma_a
+the sensor's noise (eq 20–22), the least-squares solution is the
+maximum-likelihood estimate of :mod:`pincal.ml_estimator`;
+:meth:`SensorResidual.noise_jacobian` gives the derivative with respect to the
+sensor noise that :mod:`pincal.noise_limit` propagates.
 """
 
 from __future__ import annotations
@@ -34,8 +41,12 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from .effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
+from .errors import CalibrationError
 from .objective import KinematicsCache, Objective
 from .registration import Registration
+
+#: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
+REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -206,6 +217,46 @@ class SensorResidual(Objective):
             parts.append(logs.reshape(-1))
         return np.concatenate(parts)
 
+    def row_indices(self) -> np.ndarray:
+        """Where each row's residuals sit in :meth:`residual`, (K, 3P) or (K, 3P + 3).
+
+        Row k's entries are e_k1, ..., e_kP (three components each), then o_k
+        (with orientations): ``residual(x)[row_indices()]`` is the residual
+        row by row, in the order of :meth:`noise_jacobian`'s blocks.
+        """
+        k, n_points = self.g.shape[:2]
+        indices = np.arange(3 * k * n_points).reshape(k, 3 * n_points)
+        if self.G is None:
+            return indices
+        return np.hstack([indices, 3 * k * n_points + np.arange(3 * k).reshape(k, 3)])
+
+    def noise_jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        """Derivative of each row's residual with respect to that row's sensor noise.
+
+        The noise of row k is (zeta_k1, ..., zeta_kP [m], xi_k [rad]):
+        g_kp → g_kp + zeta_kp and G_k → exp(xi_k) G_k, the linearised sensor
+        model of eq 20–22 (R_ZYX(xi) and exp(xi) agree to first order). The
+        residual is block-diagonal in the rows: d e_kp/d zeta_kp = −w_k I and,
+        as G_kᵀ exp(−xi) = exp(−G_kᵀ xi) G_kᵀ, d o_k/d xi_k = −v_k Jlog3(E_k) E_kᵀ G_kᵀ.
+
+        Returns:
+            (K, m, m) with m = 3P (+ 3 with orientations): block k is the
+            derivative of row k's residuals (in the order of :meth:`row_indices`)
+            by row k's noise (zeta_k1, ..., zeta_kP, xi_k).
+        """
+        k, n_points = self.g.shape[:2]
+        n_pos = 3 * n_points
+        size = n_pos + (0 if self.G is None else 3)
+        blocks = np.zeros((k, size, size))
+        blocks[:, :n_pos, :n_pos] = -self.w[:, None, None] * np.eye(n_pos)
+        if self.G is not None:
+            poses, _, target, _ = self._state(x)
+            relative = self._orientation_error(poses, target)
+            jlog = np.stack([pin.Jlog3(e) for e in relative])
+            turn = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1)
+            blocks[:, n_pos:, n_pos:] = -self.v[:, None, None] * turn
+        return blocks
+
     def _orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
         """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
         omega = target.registration.rotation
@@ -271,3 +322,60 @@ class SensorResidual(Objective):
                 rows[:, :, sl] = turn[:, :, None] * basis[:, None, :]
         rows *= self.v[:, None, None]
         return rows.reshape(-1, self.n_params)
+
+
+def tool_pose_residual(
+    cache: KinematicsCache,
+    sensor_points: npt.ArrayLike,
+    sensor_rotations: npt.ArrayLike,
+    registration: Registration,
+    sigma_position_m: float = 1.0,
+    sigma_rotation_rad: float = 1.0,
+) -> SensorResidual:
+    """Noise-scaled pose residual of the chain's tool with the registration unknown.
+
+    The measured frame is the chain's tool (the TCP: one zero target point,
+    R_T = I, neither fitted), so row k's residual is
+
+        [ (Omega t_k + tau − g_k) / sigma_p ,  log(G_kᵀ Omega R_k) / sigma_a ]
+
+    with unknowns x = [the cache's free parameters, phi (3), tau (3)] and
+    Omega = Omega_0 exp(phi). With the sensor's noise as sigma_p, sigma_a the
+    least-squares solution is the maximum-likelihood estimate (eq 20–22);
+    ``start_vector()`` is the cache's base with Omega_0 and tau of ``registration``.
+
+    Args:
+        cache: kinematics of the K measured rows.
+        sensor_points: measured tool positions g_k [m], (K, 3) or (K, 1, 3).
+        sensor_rotations: measured tool orientations G_k, (K, 3, 3).
+        registration: sensor_T_base to start from (phi = 0).
+        sigma_position_m: sigma_p, the position noise per axis [m].
+        sigma_rotation_rad: sigma_a, the orientation noise per component [rad].
+
+    Raises:
+        CalibrationError: mismatched shapes or a non-positive sigma.
+    """
+    k = len(cache.q)
+    points = np.asarray(sensor_points, dtype=float)
+    rotations = np.asarray(sensor_rotations, dtype=float)
+    if points.shape not in ((k, 3), (k, 1, 3)) or rotations.shape != (k, 3, 3):
+        raise CalibrationError(
+            f"tool pose residual: expected points ({k}, 3) and rotations ({k}, 3, 3), "
+            f"got {points.shape} and {rotations.shape}"
+        )
+    if not (sigma_position_m > 0 and sigma_rotation_rad > 0):
+        raise CalibrationError(
+            f"noise scales must be positive, got sigma_p={sigma_position_m} m, "
+            f"sigma_a={sigma_rotation_rad} rad"
+        )
+    start = TargetEstimate(registration, np.zeros((1, 3)), np.eye(3))
+    return SensorResidual(
+        cache,
+        points.reshape(k, 1, 3),
+        rotations,
+        start,
+        position_weight=1.0 / sigma_position_m,
+        rotation_weight=1.0 / sigma_rotation_rad,
+        fit_points=False,
+        fit_rotation=False,
+    )
