@@ -36,14 +36,24 @@ def _tool(text: str) -> np.ndarray:
     return pose_from_xyz_rpy(values[:3], values[3:])
 
 
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not (value >= 0 and np.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number >= 0")
-    return value
+def _number(kind: type, minimum: float, what: str):
+    """argparse type: a finite ``kind`` (float or int) >= ``minimum``; ``what`` names it in errors."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not {what}") from None
+        if not (np.isfinite(value) and value >= minimum):
+            raise argparse.ArgumentTypeError(f"'{text}' must be >= {minimum:g} (a finite {what})")
+        return value
+
+    return parse
+
+
+_non_negative = _number(float, 0.0, "number")
+_count_or_zero = _number(int, 0, "integer")
+_count = _number(int, 1, "integer")
 
 
 def _positive(text: str) -> float:
@@ -159,23 +169,6 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on a Dask cluster at ADDRESS, or 'local' to start a Dask LocalCluster")
     return parser
-
-
-def _count_or_zero(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be >= 0")
-    return value
-
-
-def _count(text: str) -> int:
-    value = _count_or_zero(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be >= 1")
-    return value
 
 
 def _error_columns(errors: PoseErrors) -> str:
