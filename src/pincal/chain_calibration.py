@@ -20,7 +20,7 @@ only when asked, removed before a refit.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -299,52 +299,35 @@ def calibrate_chain(
     outliers: list[tuple[int, float]] = []
     removed: list[int] = []
     for attempt in range(2):
-        result = _calibrate_rows(
+        result, point_errors = _calibrate_rows(
             chain, params, rows, level, tool_known, sigma_column, sigma_iterations, selection
         )
-        outliers = find_outliers(result["point_errors"], rows.lines)
+        outliers = find_outliers(point_errors, rows.lines)
         if not (reject_outliers and outliers and attempt == 0):
             break
         removed = [line for line, _ in outliers]
         rows = rows.select(~np.isin(rows.lines, removed))
         notes.append(f"removed {len(removed)} outlier row(s) at lines {removed} and refitted")
-    notes += result["notes"]
     if outliers and not removed:
         notes.append(
             f"{len(outliers)} row(s) look like outliers (lines {[l for l, _ in outliers]}); "
             "rerun with --reject-outliers to refit without them"
         )
-    return ChainCalibration(
-        level=level,
-        params=params,
-        vector=result["vector"],
-        std=result["std"],
-        status=result["status"],
-        target=result["target"],
-        target_std=result["target_std"],
-        sigma_pos_m=result["sigma_pos"],
-        sigma_rot_rad=result["sigma_rot"],
-        rank=result["rank"],
-        condition=result["condition"],
-        selection=result["selection"],
-        dropped=result["dropped"],
-        correlated=result["correlated"],
+    return replace(
+        result,
         outliers=tuple(outliers),
         removed_lines=tuple(removed),
         rows_used=tuple(int(l) for l in rows.lines),
-        fit_seconds=result["fit_seconds"],
         total_seconds=time.perf_counter() - started,
-        rms_m=result["rms"],
-        kept=result["kept"],
-        solution=result["x"],
-        covariance=result["covariance"],
-        start=result["start"],
-        fit_target=not tool_known,
         notes=tuple(notes),
     )
 
 
-def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion) -> dict:
+def _calibrate_rows(
+    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion
+) -> tuple[ChainCalibration, np.ndarray]:
+    """One calibration of ``rows``; returns the result (without the outlier
+    bookkeeping) and each target point's distance from the model (K, P) [m]."""
     nominal = chain.placements()
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
@@ -359,7 +342,6 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
         problem.reestimate_sigmas(objective, solution)
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
     problem.start = objective.estimate(solution.x)
-    notes: list[str] = []
     selection, dropped, rank, kept = None, (), 0, empty
     if size:
         everything = np.arange(size)
@@ -388,7 +370,7 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
     if size:
         status[ordering.order[:rank]] = NOT_SELECTED
         status[kept] = KEPT
-        (params or _NoParameters(chain)).apply(vector)
+        params.apply(vector)
     else:
         chain.set_placements(nominal)
     jac = objective.jacobian(x)
@@ -397,28 +379,35 @@ def _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_
     correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
     k, p = rows.n_rows, rows.n_points
     point_residual = solution.residual[: 3 * k * p].reshape(k, p, 3) * problem.sigma_pos / problem.row_weight[:, None, None]
-    return {
-        "vector": vector,
-        "std": std,
-        "status": tuple(status),
-        "target": objective.estimate(x),
-        "target_std": std_all[len(kept):],
-        "sigma_pos": problem.sigma_pos,
-        "sigma_rot": problem.sigma_rot,
-        "rank": rank,
-        "condition": condition_number(jac),
-        "selection": selection,
-        "dropped": dropped,
-        "correlated": correlated,
-        "fit_seconds": fit_seconds,
-        "rms": float(np.sqrt(np.mean(np.sum(point_residual**2, axis=2)))),
-        "point_errors": np.linalg.norm(point_residual, axis=2),
-        "kept": kept,
-        "x": x,
-        "covariance": covariance,
-        "start": problem.start,
-        "notes": notes,
-    }
+    point_errors = np.linalg.norm(point_residual, axis=2)
+    result = ChainCalibration(
+        level=level,
+        params=params,
+        vector=vector,
+        std=std,
+        status=tuple(status),
+        target=objective.estimate(x),
+        target_std=std_all[len(kept):],
+        sigma_pos_m=problem.sigma_pos,
+        sigma_rot_rad=problem.sigma_rot,
+        rank=rank,
+        condition=condition_number(jac),
+        selection=selection,
+        dropped=dropped,
+        correlated=correlated,
+        outliers=(),
+        removed_lines=(),
+        rows_used=tuple(int(l) for l in rows.lines),
+        fit_seconds=fit_seconds,
+        total_seconds=0.0,
+        rms_m=float(np.sqrt(np.mean(np.sum(point_residual**2, axis=2)))),
+        kept=kept,
+        solution=x,
+        covariance=covariance,
+        start=problem.start,
+        fit_target=not tool_known,
+    )
+    return result, point_errors
 
 
 def _select(problem: FitProblem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str):
