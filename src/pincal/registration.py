@@ -154,7 +154,7 @@ def mean_rotation(rotations, weights=None, tol=1e-14, max_iter=100) -> np.ndarra
     omega = _project_to_so3(np.einsum("k,kij->ij", w, m))
     step = np.inf
     for _ in range(max_iter):
-        delta = sum(wk * pin.log3(omega.T @ mk) for wk, mk in zip(w, m))
+        delta = w @ Rotation.from_matrix(omega.T @ m).as_rotvec()  # Σ w_k log(Ωᵀ M_k), batched
         omega = _project_to_so3(omega @ pin.exp3(delta))
         previous, step = step, float(np.linalg.norm(delta))
         if step <= tol or (step < 1e-12 and step >= previous):  # converged to rounding level
