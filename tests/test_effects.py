@@ -74,7 +74,7 @@ def test_approach_flank_follows_interleaved_rows_of_another_set(kuka_chain):
                           roles=np.array(["validation"] * 2, dtype=object), lines=np.arange(2, 4))
     cal = MeasurementSet(joint_names=kuka_chain.joint_names, q=q, points=np.zeros((3, 1, 3)), rotations=None,
                          roles=np.array(["calibration"] * 3, dtype=object), lines=np.arange(2, 5))
-    inputs = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context=held,
+    inputs = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
                            context_time=np.array([10.0, 30.0]))
     from pincal.effects import joint_basis
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), inputs, 5)[:, 0]

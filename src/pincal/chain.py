@@ -107,13 +107,18 @@ class KinematicChain:
         tool: npt.ArrayLike | None = None,
         source: str = "<model>",
     ) -> None:
-        if not model.existFrame(tip_link):
-            links = sorted(f.name for f in model.frames if f.type == pin.FrameType.BODY)
+        body = pin.FrameType.BODY
+        if not model.existFrame(tip_link, body):
+            links = sorted(f.name for f in model.frames if f.type == body)
             raise ModelError(
                 f"{source}: no link named '{tip_link}'; links are: {', '.join(links)}"
             )
-        full_tip = model.frames[model.getFrameId(tip_link)]
+        full_tip = model.frames[model.getFrameId(tip_link, body)]
         support = [j for j in model.supports[full_tip.parentJoint] if j != 0]
+        if not support:
+            raise ModelError(
+                f"{source}: no joint between the root and '{tip_link}'; give a --tip-link further down the chain"
+            )
         for jid in support:
             if model.joints[jid].shortname() not in _KINDS:
                 raise ModelError(
@@ -130,7 +135,7 @@ class KinematicChain:
         self.source = source
         self.tip_link = tip_link
         self.joint_ids = tuple(model.getJointId(n) for n in chain_names)
-        self.tip_frame_id = model.getFrameId(tip_link)
+        self.tip_frame_id = model.getFrameId(tip_link, body)
         if model.nq != len(chain_names) or model.nv != len(chain_names):
             raise ModelError(f"{source}: the chain to '{tip_link}' is not a simple serial chain")
         joints = []

@@ -79,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="position noise per axis [mm] (default 0.055)")
     sim.add_argument("--sigma-rot", type=_non_negative, default=0.055, metavar="DEG",
                      help="orientation noise per angle [deg] (default 0.055)")
-    sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sim.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
     sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
                      help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
@@ -150,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
                       help="output directory (default: ./pincal-demo)")
-    demo.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    demo.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
 
     study = sub.add_parser("study", help="the paper's simulation study (Section 7): all methods, "
                                          "noise limit, findings, figures")
@@ -259,6 +259,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     print(_HEADER)
     print(f"{f'{errors.n_rows} rows':24s} {_error_columns(errors)}")
     if args.json:
+        from .workflows import refuse_overwrite
+
+        refuse_overwrite(args.json, args.urdf, args.report, args.data)
         args.json.write_text(json.dumps(evaluation.as_dict(), indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
     failed = []
@@ -297,6 +300,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(line)
     if not diagnosis.steps:
         print("  nothing significant: no effect is claimed")
+    for effect, values, std in diagnosis.effects:  # refitted together: what evaluate applies
+        value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))
+        print(f"final model: {effect.label} = {value}")
     for note in diagnosis.notes:
         print(f"reported, not adopted: {note}")
     print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")
@@ -333,7 +339,9 @@ def _run_demo(args: argparse.Namespace) -> int:
 
 def _run_study(args: argparse.Namespace) -> int:
     from .study import ProgressBar, StudyConfig, run_study, write_study
+    from .workflows import ensure_directory
 
+    ensure_directory(args.out)  # before the run, not after it
     config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts,
                          limit_pose_sets=args.limit_pose_sets)
     progress = ProgressBar(sys.stderr) if sys.stderr.isatty() else None
@@ -369,6 +377,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _COMMANDS[args.command](args)
     except PincalError as exc:
         print(f"pincal: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:  # file system trouble not caught closer to its cause
+        print(f"pincal: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_USAGE
 
 

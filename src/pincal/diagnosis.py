@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .chain import KinematicChain
 from .chain_calibration import ChainCalibration, FitProblem, row_weights
@@ -135,6 +136,9 @@ class Diagnosis:
     time_reference: float | None
     calibration_errors: PoseErrors
     heldout_errors: PoseErrors | None
+    solution_std: np.ndarray = field(default_factory=lambda: np.array([]))
+    sigma_pos_m: float = float("nan")
+    sigma_rot_rad: float | None = None
     notes: tuple[str, ...] = field(default=())
 
 
@@ -255,13 +259,20 @@ def diagnose(
     points = calibration.target.points
     point = points.mean(axis=0)
     reference = None if row_time is None else float(np.mean(row_time))
-    inputs = effect_inputs(chain, rows, payload_kg, point, row_time, context=heldout, context_time=heldout_time)
+    if heldout is not None and (heldout.n_points != rows.n_points or heldout.has_orientation != rows.has_orientation):
+        raise CalibrationError(
+            f"{heldout.source}: the held-out rows must measure the same target as the calibration rows "
+            f"({rows.n_points} point(s){' and orientations' if rows.has_orientation else ''}); "
+            f"they have {heldout.n_points} point(s){' and orientations' if heldout.has_orientation else ''}"
+        )
+    inputs = effect_inputs(chain, rows, payload_kg, point, row_time,
+                           context_q=None if heldout is None else heldout.q, context_time=heldout_time)
     model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time,
                                     time_reference=reference if heldout_time is not None else None,
-                                    context=rows, context_time=row_time)
+                                    context_q=rows.q, context_time=row_time)
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
@@ -363,6 +374,9 @@ def diagnose(
         time_reference=reference,
         calibration_errors=_errors(current_objective, final_solution.x),
         heldout_errors=_heldout_errors(model, current_objective, final_solution.x, heldout, held_inputs),
+        solution_std=final_solution.std,
+        sigma_pos_m=model.sigma_pos,
+        sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),
     )
 
@@ -389,9 +403,14 @@ def _rejection(effect, value, delta, tried, inputs, chain, held, model, current_
 
 
 def _errors(objective: SensorResidual, x: np.ndarray) -> PoseErrors:
-    """Point errors of the fit on its own rows."""
-    error = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
-    return PoseErrors(position_m=error, rotation_rad=None)
+    """Point errors (and orientation errors with 6D data) of a fit on its own rows (eq 24)."""
+    position = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
+    rotation = None
+    if objective.G is not None:
+        poses, _, target, _ = objective._state(x)
+        relative = objective._orientation_error(poses, target)
+        rotation = np.linalg.norm(Rotation.from_matrix(relative).as_rotvec(), axis=1)
+    return PoseErrors(position_m=position, rotation_rad=rotation)
 
 
 def _heldout_objective(model: _Model, objective: SensorResidual, heldout, held_inputs) -> SensorResidual:
@@ -402,9 +421,7 @@ def _heldout_objective(model: _Model, objective: SensorResidual, heldout, held_i
 def _heldout_errors(model, objective, x, heldout, held_inputs) -> PoseErrors | None:
     if heldout is None:
         return None
-    held = _heldout_objective(model, objective, heldout, held_inputs)
-    error = np.linalg.norm(held.predicted_points(x) - held.g, axis=2)
-    return PoseErrors(position_m=error, rotation_rad=None)
+    return _errors(_heldout_objective(model, objective, heldout, held_inputs), x)
 
 
 def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:

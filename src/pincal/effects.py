@@ -137,7 +137,14 @@ def time_column(data: MeasurementSet, name: str | None = None) -> np.ndarray | N
         )
     if not names:
         return None
-    return np.asarray(data.extra[names[0]], dtype=float)
+    time = np.asarray(data.extra[names[0]], dtype=float)
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        raise PincalError(
+            f"{data.source}, line {int(data.lines[bad[0]])}, column '{names[0]}': empty or non-finite time; "
+            "fill it in or choose another column with --time-column"
+        )
+    return time
 
 
 def effect_inputs(
@@ -147,24 +154,25 @@ def effect_inputs(
     payload_point: np.ndarray | None = None,
     time: np.ndarray | None = None,
     time_reference: float | None = None,
-    context: MeasurementSet | None = None,
+    context_q: np.ndarray | None = None,
     context_time: np.ndarray | None = None,
 ) -> EffectInputs:
     """Gravity torques, time (minus ``time_reference``, default its mean) and
-    time order of the rows of ``data``. ``context`` (with ``context_time``) are
-    other rows of the same session, interleaved in time, for approach flanks."""
+    time order of the rows of ``data``. ``context_q`` (M, N) with
+    ``context_time`` (M,) [s] are the joint readings of other rows of the same
+    session, interleaved in time, for approach flanks (readings only)."""
     order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
     if time is not None and time_reference is None:
         time_reference = float(np.mean(time))
     centred = None if time is None else time - time_reference
+    with_context = context_q is not None and context_time is not None and time is not None
     return EffectInputs(
         q=np.asarray(data.q, dtype=float),
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
         time=centred,
         order=order,
-        context_q=None if context is None or context_time is None else np.asarray(context.q, dtype=float),
-        context_time=None if context is None or time is None else np.asarray(context_time, dtype=float)
-        - (time_reference if time_reference is not None else 0.0),
+        context_q=np.asarray(context_q, dtype=float) if with_context else None,
+        context_time=np.asarray(context_time, dtype=float) - time_reference if with_context else None,
     )
 
 
@@ -208,6 +216,10 @@ def joint_shifts(
     shifts = np.zeros_like(inputs.q)
     for effect, value in zip(effects, values):
         if effect.type in JOINT_EFFECTS:
+            if effect.joint not in joint_names:
+                raise PincalError(
+                    f"effect '{effect.label}': no joint '{effect.joint}' on the chain; joints are: {', '.join(joint_names)}"
+                )
             j = list(joint_names).index(effect.joint)
             shifts[:, j] += joint_basis(effect, inputs, j) @ np.atleast_1d(value)
     return shifts
@@ -220,15 +232,19 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     try:
         kind = parts[0]
         if kind == "cyclic":
-            return Effect(kind, parts[1], harmonic=int(parts[2])), np.array([float(parts[3]), float(parts[4])])
-        if kind == "backlash":
+            effect, values = Effect(kind, parts[1], harmonic=int(parts[2])), np.array([float(parts[3]), float(parts[4])])
+        elif kind == "backlash":
             source = parts[3] if len(parts) > 3 else "gravity"
-            return Effect(kind, parts[1], source=source), np.array([float(parts[2])])
-        if kind == "drift":
-            return Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
-        if kind == "sensor_scale":
-            return Effect(kind), np.array([float(parts[1])])
-        return Effect(kind, parts[1]), np.array([float(parts[2])])
+            effect, values = Effect(kind, parts[1], source=source), np.array([float(parts[2])])
+        elif kind == "drift":
+            effect, values = Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
+        elif kind == "sensor_scale":
+            effect, values = Effect(kind), np.array([float(parts[1])])
+        else:
+            effect, values = Effect(kind, parts[1]), np.array([float(parts[2])])
+        if not np.all(np.isfinite(values)):
+            raise ValueError("non-finite value")
+        return effect, values
     except (IndexError, ValueError):
         raise PincalError(
             f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "

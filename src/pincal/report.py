@@ -164,7 +164,11 @@ def read_report(path: str | Path) -> ReportModel:
             registration_orientation=Registration.from_dict(
                 registration.get("orientation", registration["position"])
             ),
-            effects={k: doc[k] for k in ("effects", "payload_kg", "time_column", "time_reference_s") if k in doc},
+            effects={
+                k: doc[k]
+                for k in ("effects", "payload_kg", "time_column", "time_reference_s", "approach_context")
+                if k in doc
+            },
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(
@@ -272,11 +276,19 @@ def diagnosis_report(diagnosis: "Diagnosis", payload_kg: float, time_column: str
     def errors(e):
         return None if e is None else e.as_dict()
 
+    approach = any(e.source == "approach" for e, _, _ in diagnosis.effects)
+    context = None
+    if approach and diagnosis.inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+        context = {
+            "time_s": (diagnosis.inputs.time + diagnosis.time_reference).tolist(),
+            "q": diagnosis.inputs.q.tolist(),
+        }
     return {
         "effects": [effect_to_dict(e, v, s) for e, v, s in diagnosis.effects],
         "payload_kg": payload_kg,
         "time_column": time_column,
         "time_reference_s": diagnosis.time_reference,
+        "approach_context": context,
         "diagnosis": {
             "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
                          "not offset-like, not ambiguous, not worse on held-out rows",

@@ -32,7 +32,7 @@ class Solution:
 
     Attributes:
         x: fitted free parameters (n,).
-        std: their standard deviations (n,), NaN where the data cannot determine them.
+        std: their standard deviations (n,) (:func:`solve` refuses undetermined parameters).
         residual: residual vector at ``x`` (m,).
         rms: root-mean-square residual (units of the objective).
         n_evaluations: number of residual evaluations.
@@ -64,16 +64,19 @@ def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit") -> Solutio
         raise CalibrationError(
             f"{what}: {m} residuals cannot determine {n} parameters; add calibration rows"
         )
-    result = least_squares(
-        objective.residual,
-        x0,
-        jac=objective.jacobian,
-        method="lm",
-        x_scale="jac",
-        xtol=XTOL,
-        ftol=FTOL,
-        gtol=GTOL,
-    )
+    try:
+        result = least_squares(
+            objective.residual,
+            x0,
+            jac=objective.jacobian,
+            method="lm",
+            x_scale="jac",
+            xtol=XTOL,
+            ftol=FTOL,
+            gtol=GTOL,
+        )
+    except ValueError as exc:  # non-finite residuals or Jacobian
+        raise CalibrationError(f"{what}: the fit failed ({exc}); check the data and the tool for extreme values") from None
     jac = objective.jacobian(result.x)
     singular = np.linalg.svd(jac, compute_uv=False)
     condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else np.inf

@@ -49,10 +49,25 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def refuse_overwrite(output: Path, *inputs: Path) -> None:
-    """Raise if ``output`` is one of the input files."""
+    """Raise if ``output`` is one of the input files; create its folder if needed."""
     for path in inputs:
         if _same_file(output, path):
             raise PincalError(f"{output}: refusing to overwrite an input file; choose another output path")
+    if output.is_dir():
+        raise PincalError(f"{output}: is a directory; give a file name")
+    ensure_directory(output.parent)
+
+
+def ensure_directory(path: str | Path) -> Path:
+    """Create the output folder ``path`` (and its parents); one clear error if impossible."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise PincalError(f"{path}: exists and is not a directory; choose another output folder") from None
+    except OSError as exc:
+        raise PincalError(f"{path}: cannot create the output folder ({exc.strerror})") from None
+    return path
 
 
 # --- simulate ----------------------------------------------------------------
@@ -77,8 +92,7 @@ def simulate_to_directory(
             raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}'; joints are: "
                               f"{', '.join(chain.joint_names)}")
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings, effects=injected)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_directory(out_dir)
     write_measurements(out / "calibration.csv", experiment.calibration)
     write_measurements(out / "validation.csv", experiment.validation)
     xyz, rpy = xyz_rpy_from_pose(experiment.tool)
@@ -289,8 +303,16 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
     if needs_time and row_time is None:
         raise PincalError(f"{data.source}: the report has a drift effect; the data need its time column")
     reference = effects.get("time_reference_s")
-    inputs = effect_inputs(chain, data, effects.get("payload_kg", 0.0), points.mean(axis=0), row_time,
-                           time_reference=reference if row_time is not None else None)
+    context = effects.get("approach_context") or {}
+    try:
+        payload = float(effects.get("payload_kg", 0.0))
+        context_q = np.asarray(context["q"], dtype=float) if context else None
+        context_time = np.asarray(context["time_s"], dtype=float) if context else None
+    except (KeyError, TypeError, ValueError):
+        raise PincalError(f"{data.source}: the report's payload_kg or approach_context is malformed") from None
+    inputs = effect_inputs(chain, data, payload, points.mean(axis=0), row_time,
+                           time_reference=reference if row_time is not None else None,
+                           context_q=context_q, context_time=context_time)
     q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
     out: dict = {"q": q}
     for effect, value in parsed:
@@ -414,11 +436,19 @@ def diagnose_files(
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
                          payload_kg=payload_kg, time=row_time, heldout_time=held_time)
     objective, x = diagnosis.objective, diagnosis.solution_x
+    kinematic = objective.blocks["kinematic"]
     vector = calibration.vector.copy()
-    vector[calibration.kept] = x[objective.blocks["kinematic"]]
+    vector[calibration.kept] = x[kinematic]
+    std = np.full(vector.size, np.nan)
+    std[calibration.kept] = diagnosis.solution_std[kinematic]
     if calibration.params is not None:
         calibration.params.apply(vector)
-    final = replace(calibration, vector=vector, target=objective.estimate(x))
+    final = replace(  # the model with its effects: values, spreads, noise and fit of the final fit
+        calibration, vector=vector, std=std, target=objective.estimate(x),
+        target_std=diagnosis.solution_std[kinematic.stop : objective.blocks["effects"].start],
+        sigma_pos_m=diagnosis.sigma_pos_m, sigma_rot_rad=diagnosis.sigma_rot_rad,
+        rms_m=float(np.sqrt(np.mean(diagnosis.calibration_errors.position_m**2))),
+    )
     write_corrected_urdf(urdf, out_urdf, chain, nominal_placements, comment=(
         f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and {data_path.name}. "
         "Registration, tool and effects (which a URDF cannot carry): see the report."))
@@ -430,7 +460,7 @@ def diagnose_files(
                "validation": None if validation_path is None else str(validation_path)}
     report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
     report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
-    plots = plot_diagnosis(diagnosis, plots_dir) if plots_dir is not None else []
+    plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir)) if plots_dir is not None else []
     report["diagnosis"]["plots"] = [str(p) for p in plots]
     write_report(report_path, report)
     return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started)
