@@ -15,8 +15,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from pincal.chain import KinematicChain
 from pincal.chain_calibration import calibrate_chain
 from pincal.measurements import read_measurements

@@ -17,7 +17,7 @@ from pincal.chain_calibration import calibrate_chain
 from pincal.cli import main
 from pincal.diagnosis import diagnose
 from pincal.dh import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
-from pincal.effects import Effect, parse_effect, time_column
+from pincal.effects import parse_effect, time_column
 from pincal.robots import KUKA_FLANGE_LINK
 
 OFFSETS_ONLY = DHDeviations(

@@ -6,13 +6,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pincal.chain import KinematicChain
 from pincal.effects import Effect, EffectInputs, approach_flank, effect_inputs, gravity_torques, parse_effect
 from pincal.errors import PincalError
 from pincal.objective import KinematicsCache
 from pincal.parameter_sets import PlacementErrors
 from pincal.registration import Registration
-from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf
 from pincal.sensor_residual import SensorResidual, TargetEstimate
 
 from conftest import assert_close, numeric_jacobian

@@ -91,7 +91,7 @@ def test_tiago_header(tmp_path):
 
 def test_roles_and_quaternion_normalised(tmp_path):
     s = 0.5 * (1 + 5e-4)  # norm 1.0005: within tolerance, normalised
-    rows = [f"0,0.1,0,1,2,3,{s},{s},{s},{s},cpa", f"0,0.1,0,1,2,3,0,0,0,1,", f"0,0.1,0,1,2,3,0,0,0,1, Validation"]
+    rows = [f"0,0.1,0,1,2,3,{s},{s},{s},{s},cpa", "0,0.1,0,1,2,3,0,0,0,1,", "0,0.1,0,1,2,3,0,0,0,1, Validation"]
     data, _ = read_measurements(write(tmp_path, csv_text(HEADER + ",qx,qy,qz,qw,role", *rows)), JOINTS)
     assert list(data.roles) == ["cpa", "calibration", "validation"]
     r = data.rotations

@@ -254,13 +254,21 @@ class KinematicChain:
             tool_pos[row] = tool.translation
         return ChainPoses(joint_rot, joint_pos, tool_rot, tool_pos)
 
-    def tool_points(self, q: npt.ArrayLike, points_in_tool: npt.ArrayLike) -> np.ndarray:
-        """World positions (K, P, 3) of points given in the tool frame (P, 3) [m]."""
-        poses = self.poses(q)
-        points = np.atleast_2d(np.asarray(points_in_tool, dtype=float))
-        return poses.tool_positions[:, None, :] + np.einsum(
-            "kij,pj->kpi", poses.tool_rotations, points
-        )
+
+def points_in_base(
+    tool_positions: np.ndarray, tool_rotations: np.ndarray, points_in_tool: npt.ArrayLike
+) -> np.ndarray:
+    """World (URDF-root) positions of points fixed in the tool frame: t_k + R_k m_p.
+
+    Args:
+        tool_positions: (K, 3) [m]; tool_rotations: (K, 3, 3).
+        points_in_tool: (P, 3) [m].
+
+    Returns:
+        (K, P, 3) [m].
+    """
+    points = np.atleast_2d(np.asarray(points_in_tool, dtype=float))
+    return tool_positions[:, None, :] + np.einsum("kij,pj->kpi", tool_rotations, points)
 
 
 def _checked_transform(matrix: npt.ArrayLike, what: str) -> np.ndarray:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .chain import KinematicChain
+from .chain import KinematicChain, points_in_base
 from .errors import CalibrationError
 from .identifiability import (
     Selection,
@@ -38,7 +38,7 @@ from .measurements import MeasurementSet
 from .objective import KinematicsCache
 from .outliers import find_outliers
 from .parameter_sets import LEVELS
-from .registration import Registration, mean_rotation, register_points
+from .registration import mean_rotation, register_points
 from .sensor_residual import SensorResidual, TargetEstimate
 from .solver import Solution, solve
 
@@ -151,7 +151,7 @@ def initial_target(
     n_points = data.n_points
     points = np.zeros((n_points, 3))
     for _ in range(iterations if fit_points else 1):
-        world = t[:, None, :] + np.einsum("kij,pj->kpi", rot, points)
+        world = points_in_base(t, rot, points)
         registration = register_points(world.reshape(-1, 3), data.points.reshape(-1, 3))
         if not fit_points:
             break

@@ -77,7 +77,7 @@ class DHTable:
         sizes = {a.size for a in arrays.values()}
         if len(sizes) != 1 or 0 in sizes:
             raise PincalError(
-                f"DH table rows must have the same non-zero length, got "
+                "DH table rows must have the same non-zero length, got "
                 + ", ".join(f"{k}={v.size}" for k, v in arrays.items())
             )
         for name, value in arrays.items():

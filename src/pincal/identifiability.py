@@ -10,10 +10,11 @@ projected out:
   determine at all. The others are not identifiable: each is reported with the
   kept parameters it is absorbed into (least-squares coefficients of its column).
 * Among the identifiable ones, weakly determined combinations can still hurt
-  prediction. The number kept is chosen by leave-one-row-out cross-validation
-  on the calibration rows, linearised (the PRESS statistic, Allen 1974): for a
-  row block r_k with hat block H_kk, its left-out residual is (I − H_kk)⁻¹ r_k.
-  The validation data are never looked at.
+  prediction. :mod:`pincal.chain_calibration` chooses how many to keep by an
+  information criterion (AIC by default, BIC) or by linearised leave-one-row-out
+  cross-validation (:func:`press`, Allen 1974: for a row block r_k with hat
+  block H_kk, its left-out residual is (I − H_kk)⁻¹ r_k), always on the
+  calibration rows; the validation data are never looked at.
 """
 
 from __future__ import annotations

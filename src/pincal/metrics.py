@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from .chain import KinematicChain
+from .chain import KinematicChain, points_in_base
 from .measurements import MeasurementSet
 from .registration import Registration
 
@@ -108,7 +108,7 @@ def pose_errors(
     """
     poses = chain.poses(data.q if q is None else q)
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
-    world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, points)
+    world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
     predicted = registration_position.apply_points(world)
     if drift is not None:
         predicted = predicted + np.asarray(drift, dtype=float)[:, None, :]

@@ -63,6 +63,8 @@ class KinematicsCache:
         self._slots = params.coupled(self.free)  # slots moved by the free parameters
         self.model = SensitivityModel(params.chain, [slots[i] for i in self._slots])
         self._x: np.ndarray | None = None
+        self._q: np.ndarray | None = None
+        self._tool: np.ndarray | None = None
         self._result: tuple[ToolPoses, Sensitivity] | None = None
 
     def full_vector(self, x: npt.ArrayLike) -> np.ndarray:
@@ -75,17 +77,20 @@ class KinematicsCache:
         """Tool poses and the free parameters' sensitivities at ``x``, at the
         cache's configurations or at ``q`` (K, N) when given (effects shift them)."""
         x = np.asarray(x, dtype=float)
-        if q is not None and not np.array_equal(q, self.q):
-            self.q = np.array(q, dtype=float)
-            self._result = None
-        if self._result is None or not np.array_equal(x, self._x):
+        q = self.q if q is None else np.asarray(q, dtype=float)
+        if (
+            self._result is None
+            or not np.array_equal(x, self._x)
+            or not np.array_equal(q, self._q)
+            or not np.array_equal(self.params.chain.tool, self._tool)
+        ):
             vector = self.full_vector(x)
             self.model.set_state(
                 self.params.placements(vector),
                 self.params.slot_points(vector)[self._slots],
                 self.params.chain.tool,
             )
-            poses, sens = self.model.evaluate(self.q)
+            poses, sens = self.model.evaluate(q)
             to_slots = self.params.slot_jacobian(vector)
             if to_slots is not None:  # d(slot twist)/d(parameter) is not the identity
                 block = to_slots[np.ix_(self._slots, self.free)]
@@ -96,7 +101,8 @@ class KinematicsCache:
                     joint_angular=sens.joint_angular,
                     joint_linear=sens.joint_linear,
                 )
-            self._x, self._result = x.copy(), (poses, sens)
+            self._x, self._q, self._tool = x.copy(), q.copy(), self.params.chain.tool
+            self._result = (poses, sens)
         return self._result
 
 

@@ -42,6 +42,7 @@ import pinocchio as pin
 
 from .effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 from .errors import CalibrationError
+from .chain import points_in_base
 from .objective import KinematicsCache, Objective
 from .registration import Registration
 
@@ -195,21 +196,23 @@ class SensorResidual(Objective):
             q = self.inputs.q + shifts
         poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]], q)
         target = self.estimate(x)
-        world = poses.tool_positions[:, None, :] + np.einsum(
-            "kij,pj->kpi", poses.tool_rotations, target.points
-        )  # (K, P, 3) in the base frame
+        world = points_in_base(poses.tool_positions, poses.tool_rotations, target.points)  # (K, P, 3)
         return poses, sens, target, world
 
     def predicted_points(self, x: npt.ArrayLike) -> np.ndarray:
         """Model points in the sensor frame (K, P, 3) [m]: (1 + s)(Omega y + tau + t u)."""
         x = np.asarray(x, dtype=float)
         _, _, target, world = self._state(x)
+        return self._sensed(x, target, world)
+
+    def _sensed(self, x: np.ndarray, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
         scale, drift = self._sensor_terms(x)
         return (1.0 + scale) * (target.registration.apply_points(world) + drift[:, None, :])
 
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
         poses, _, target, world = self._state(x)
-        position = (self.predicted_points(x) - self.g) * self.w[:, None, None]
+        position = (self._sensed(x, target, world) - self.g) * self.w[:, None, None]
         parts = [position.reshape(-1)]
         if self.G is not None:
             relative = self._orientation_error(poses, target)

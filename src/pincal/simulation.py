@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from typing import Sequence
 
-from .chain import KinematicChain, pose_from_xyz_rpy
+from .chain import KinematicChain, points_in_base, pose_from_xyz_rpy
 from .dh import DHDeviations, DHTable
 from .effects import Effect, EffectInputs, gravity_torques, joint_shifts
 from .errors import PincalError
@@ -138,7 +138,7 @@ def measure(
                 drift = time[:, None] * np.asarray(value, dtype=float)
     poses = chain.poses(actual)
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
-    world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, points)
+    world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
     sensed = (1.0 + scale) * (registration.apply_points(world) + drift[:, None, :])
     sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
     rotations = None

@@ -158,7 +158,7 @@ def figure5(result: StudyResult, path: Path) -> Path | None:
     _compare(axes[0, 0], result, d, [(m1, 1, "black", "s"), (m2, 1, "tab:blue", "o")], "pos_mean_mm", True,
              f"(a) Methods 1 and 2, {d} deviations")
     _compare(axes[0, 1], result, d, [(m1, 1, "black", "s"), (m2, 2, "tab:red", "o")], "rot_mean_deg", False,
-             f"(b) Methods 1 and 2 (σ = σ_p for Method 1)")
+             "(b) Methods 1 and 2 (σ = σ_p for Method 1)")
     _compare(axes[1, 0], result, d, [(m2, 1, "tab:blue", "o"), (m3, 1, "tab:blue", "^")], "pos_mean_mm", True,
              "(c) Methods 2 and 3, Registration 1")
     _compare(axes[1, 1], result, d, [(m2, 2, "tab:red", "o"), (m3, 2, "tab:red", "^")], "rot_mean_deg", False,
