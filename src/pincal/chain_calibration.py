@@ -37,7 +37,7 @@ from .identifiability import (
 from .measurements import MeasurementSet
 from .objective import KinematicsCache
 from .outliers import find_outliers
-from .parameter_sets import LEVELS
+from .parameter_sets import LEVELS, NoParameters
 from .registration import mean_rotation, register_points
 from .sensor_residual import SensorResidual, TargetEstimate
 from .solver import Solution, solve
@@ -125,7 +125,7 @@ class ChainCalibration:
         """Linearised prediction of the RMS error of the target points at
         configurations ``q`` due to the parameters' estimation noise [m]
         (covariance of the fit propagated through the measurement Jacobian)."""
-        params = self.params if self.params is not None else _NoParameters(chain)
+        params = self.params if self.params is not None else NoParameters(chain)
         k, n_points = len(q), len(self.target.points)
         cache = KinematicsCache(params, self.kept, self.vector, q)
         objective = SensorResidual(
@@ -199,7 +199,7 @@ class FitProblem:
         self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual:
-        params = self.params if self.params is not None else _NoParameters(self.chain)
+        params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.data.q)
         return SensorResidual(
             cache,
@@ -229,32 +229,6 @@ class FitProblem:
         if self.sigma_rot is not None:
             rot = solution.residual[n_pos:] * self.sigma_rot
             self.sigma_rot = float(np.sqrt(np.mean(rot**2))) or self.sigma_rot
-
-
-class _NoParameters:
-    """The empty kinematic parameter set of level ``registration``."""
-
-    def __init__(self, chain: KinematicChain) -> None:
-        self.chain = chain
-        self.nominal_placements = chain.placements()
-        self.slots: tuple = ()
-        self.info: tuple = ()
-        self.size = 0
-
-    def placements(self, vector):
-        return self.nominal_placements
-
-    def slot_points(self, vector):
-        return np.zeros((0, 3))
-
-    def slot_jacobian(self, vector):
-        return None
-
-    def coupled(self, free):
-        return np.asarray(free, dtype=int)
-
-    def apply(self, vector):
-        self.chain.set_placements(self.nominal_placements)
 
 
 def calibrate_chain(

@@ -15,18 +15,15 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-import yourdfpy
 
 from .chain import KinematicChain
 from .errors import ModelError
-from .urdf_io import read_joint_origins, write_urdf_with_origins
+from .urdf_io import load_urdf, read_joint_origins, write_urdf_with_origins
 
 
 def _tip_joint(urdf_path: Path, tip_link: str) -> tuple[str | None, bool]:
     """Name of the joint whose child is ``tip_link`` and whether it is fixed."""
-    robot = yourdfpy.URDF.load(
-        str(urdf_path), build_scene_graph=False, load_meshes=False, load_collision_meshes=False
-    ).robot
+    robot = load_urdf(urdf_path).robot
     for joint in robot.joints:
         if joint.child == tip_link:
             return joint.name, joint.type == "fixed"

@@ -150,4 +150,11 @@ class PlacementErrors(_ChainParameters):
         return out
 
 
+class NoParameters(_ChainParameters):
+    """The empty kinematic parameter set (level ``registration``): the URDF as loaded."""
+
+    def placements(self, vector: np.ndarray) -> list[np.ndarray]:
+        return [p.copy() for p in self.nominal_placements]
+
+
 LEVELS = {"offsets": JointOffsets, "full": PlacementErrors}

@@ -206,8 +206,8 @@ def simulate_experiment(
     sigma_a = np.radians(settings.sigma_rot_deg)
     try:
         q_cpa = cpa_configurations(lower, upper, settings.n_cpa)
-        q_cal = rng.uniform(lower, upper, (settings.n_calibration, len(lower)))
-        q_val = rng.uniform(lower, upper, (settings.n_validation, len(lower)))
+        q_cal = random_configurations(chain, rng, settings.n_calibration)
+        q_val = random_configurations(chain, rng, settings.n_validation)
         times = _row_times(effects, len(q_cpa), len(q_cal), len(q_val))
         shifts = None  # over the whole session: approach flanks carry from one part to the next
         if effects:

@@ -247,7 +247,8 @@ def read_joint_origins(urdf_path: str | os.PathLike[str]) -> dict[str, np.ndarra
 # --------------------------------------------------------------------------- writing
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name the same file (symlinks and ``..`` resolved)."""
     if b.exists():
         try:
             return os.path.samefile(a, b)
@@ -368,7 +369,7 @@ def write_urdf_with_origins(
     """
     src_path = _as_path(source, "input")
     dst_path = Path(destination)
-    if _same_file(src_path, dst_path):
+    if same_file(src_path, dst_path):
         raise ModelError(f"refusing to write {dst_path}: it is the input URDF; never overwrite the input")
     checked = {
         str(name): check_rigid_transform(matrix, f"origin of joint '{name}'")

@@ -38,20 +38,17 @@ from .paper_methods import PaperCalibration, calibrate_paper
 from .registration import register_orientations, register_points
 from .report import chain_report, diagnosis_report, paper_report, read_report, write_report
 from .robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from .urdf_io import same_file
 from .simulation import SimulatedExperiment, SimulationSettings, simulate_experiment
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    return a.resolve() == b.resolve()
-
-
 def refuse_overwrite(output: Path, *inputs: Path) -> None:
     """Raise if ``output`` is one of the input files; create its folder if needed."""
     for path in inputs:
-        if _same_file(output, path):
+        if same_file(output, path):
             raise PincalError(f"{output}: refusing to overwrite an input file; choose another output path")
     if output.is_dir():
         raise PincalError(f"{output}: is a directory; give a file name")
@@ -219,24 +216,28 @@ def calibrate_files(
         )
         report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
         what = f"level {level}"
-    write_corrected_urdf(
-        urdf,
-        out_urdf,
-        chain,
-        nominal_placements,
-        comment=(
-            f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {data_path.name}. "
-            "Registration and tool: see the report."
-        ),
+    reload_error = write_checked_urdf(
+        urdf, out_urdf, chain, nominal_placements, data.q,
+        f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {data_path.name}. "
+        "Registration and tool: see the report.",
     )
-    reload_error = _reload_error(out_urdf, chain, data.q)
-    if reload_error > RELOAD_TOLERANCE:
-        raise CalibrationError(
-            f"{out_urdf}: reloading the written URDF moves the TCP by {reload_error:.3g} m "
-            f"(> {RELOAD_TOLERANCE:g}); please report this as a bug"
-        )
     write_report(report_path, report)
     return CalibrationRun(result, report, errors, notes, seconds, reload_error)
+
+
+def write_checked_urdf(
+    source: Path, destination: Path, chain: KinematicChain, nominal_placements, q: np.ndarray, comment: str
+) -> float:
+    """Write the corrected URDF, reload it and check it reproduces the chain's
+    tool poses at ``q`` to :data:`RELOAD_TOLERANCE`; returns the largest difference."""
+    write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment)
+    reload_error = _reload_error(destination, chain, q)
+    if reload_error > RELOAD_TOLERANCE:
+        raise CalibrationError(
+            f"{destination}: reloading the written URDF moves the tool by {reload_error:.3g} "
+            f"(> {RELOAD_TOLERANCE:g}); please report this as a bug"
+        )
+    return reload_error
 
 
 def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
@@ -449,12 +450,11 @@ def diagnose_files(
         sigma_pos_m=diagnosis.sigma_pos_m, sigma_rot_rad=diagnosis.sigma_rot_rad,
         rms_m=float(np.sqrt(np.mean(diagnosis.calibration_errors.position_m**2))),
     )
-    write_corrected_urdf(urdf, out_urdf, chain, nominal_placements, comment=(
+    write_checked_urdf(
+        urdf, out_urdf, chain, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and {data_path.name}. "
-        "Registration, tool and effects (which a URDF cannot carry): see the report."))
-    reload_error = _reload_error(out_urdf, chain, data.q)
-    if reload_error > RELOAD_TOLERANCE:
-        raise CalibrationError(f"{out_urdf}: reloading the written URDF moves the tool by {reload_error:.3g} m")
+        "Registration, tool and effects (which a URDF cannot carry): see the report.",
+    )
     n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
     sources = {"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf),
                "validation": None if validation_path is None else str(validation_path)}
