@@ -263,6 +263,11 @@ def calibrate_chain(
         raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{selection}'")
     started = time.perf_counter()
     rows = data.select(data.roles != "validation")
+    if rows.n_rows < 3:
+        raise CalibrationError(
+            f"{data.source}: {rows.n_rows} calibration row(s) (rows with role 'validation' are not used); "
+            "a calibration needs at least 3"
+        )
     if tool_known and rows.n_points != 1:
         raise CalibrationError(
             f"{data.source}: a known --tool is one point; this file has {rows.n_points} points "

@@ -242,8 +242,8 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
             effect, values = Effect(kind), np.array([float(parts[1])])
         else:
             effect, values = Effect(kind, parts[1]), np.array([float(parts[2])])
-        if not np.all(np.isfinite(values)):
-            raise ValueError("non-finite value")
+        if not np.all(np.isfinite(values)) or (kind == "sensor_scale" and values[0] <= -1.0):
+            raise ValueError("non-finite value or a scale of -1 or less")
         return effect, values
     except (IndexError, ValueError):
         raise PincalError(
