@@ -33,6 +33,7 @@ import pinocchio as pin
 from .chain import KinematicChain
 from .errors import PincalError
 from .measurements import MeasurementSet
+from .registration import Registration
 
 JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash")
 SENSOR_EFFECTS = ("drift", "sensor_scale")
@@ -188,6 +189,23 @@ def approach_flank(q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_
         flank[row] = current
         last = q[row]
     return flank
+
+
+def sensed_points(
+    registration: Registration, world: np.ndarray, scale: float = 0.0, drift: np.ndarray | None = None
+) -> np.ndarray:
+    """Where the sensor sees points given in the base frame: (1 + s)(Omega y + tau + drift_k).
+
+    Args:
+        registration: sensor_T_base (Omega, tau).
+        world: points in the base frame [m], (K, P, 3).
+        scale: ``sensor_scale`` s (relative).
+        drift: ``drift`` offset t_k u of each row [m], (K, 3), or None.
+    """
+    sensed = registration.apply_points(world)
+    if drift is not None:
+        sensed = sensed + np.asarray(drift, dtype=float)[:, None, :]
+    return (1.0 + scale) * sensed
 
 
 def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from .chain import KinematicChain, points_in_base
+from .effects import sensed_points
 from .measurements import MeasurementSet
 from .registration import Registration
 
@@ -109,10 +110,7 @@ def pose_errors(
     poses = chain.poses(data.q if q is None else q)
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
     world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
-    predicted = registration_position.apply_points(world)
-    if drift is not None:
-        predicted = predicted + np.asarray(drift, dtype=float)[:, None, :]
-    predicted = (1.0 + sensor_scale) * predicted
+    predicted = sensed_points(registration_position, world, sensor_scale, drift)
     position = np.linalg.norm(predicted - data.points, axis=2)
     rotation = None
     if data.rotations is not None:

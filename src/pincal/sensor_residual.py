@@ -40,7 +40,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from .effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
+from .effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis, sensed_points
 from .errors import CalibrationError
 from .chain import points_in_base
 from .objective import KinematicsCache, Objective
@@ -207,7 +207,7 @@ class SensorResidual(Objective):
 
     def _sensed(self, x: np.ndarray, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
         scale, drift = self._sensor_terms(x)
-        return (1.0 + scale) * (target.registration.apply_points(world) + drift[:, None, :])
+        return sensed_points(target.registration, world, scale, drift)
 
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)

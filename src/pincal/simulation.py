@@ -23,7 +23,7 @@ from typing import Sequence
 
 from .chain import KinematicChain, points_in_base, pose_from_xyz_rpy
 from .dh import DHDeviations, DHTable
-from .effects import Effect, EffectInputs, gravity_torques, joint_shifts
+from .effects import Effect, EffectInputs, gravity_torques, joint_shifts, sensed_points
 from .errors import PincalError
 from .measurements import MeasurementSet
 from .registration import Registration
@@ -139,7 +139,7 @@ def measure(
     poses = chain.poses(actual)
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
     world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
-    sensed = (1.0 + scale) * (registration.apply_points(world) + drift[:, None, :])
+    sensed = sensed_points(registration, world, scale, drift)
     sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
     rotations = None
     if with_rotation:
