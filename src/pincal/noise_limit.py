@@ -28,7 +28,7 @@ mean is a fixed Gauss–Legendre × trapezoid quadrature (spectrally accurate).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -48,7 +48,7 @@ from .paper_methods import FROM_CPA, PaperCalibration, calibrate_paper, cpa_grou
 from .registration import Registration
 from .rotation_residual import RotationResidual
 from .sensor_residual import REGISTRATION_NAMES, tool_pose_residual
-from .simulation import SimulatedExperiment
+from .simulation import SimulatedExperiment, perfect_measurements
 
 METHODS = (1, 2, 3, ML)
 
@@ -119,12 +119,7 @@ def _noise_free(
 ) -> MeasurementSet:
     """``data`` with the sensor readings the truth would give (eq 20–21 without noise)."""
     DHParameterSet(chain, truth).apply(truth.to_vector())
-    poses = chain.poses(data.q)
-    return replace(
-        data,
-        points=registration.apply_points(poses.tool_positions)[:, None, :],
-        rotations=registration.apply_rotations(poses.tool_rotations),
-    )
+    return perfect_measurements(chain, data, registration)
 
 
 class _Propagation:

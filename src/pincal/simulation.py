@@ -14,7 +14,7 @@ numpy Generator, so a seed reproduces the data exactly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -169,6 +169,17 @@ def simulated_shifts(
         order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
     )
     return joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
+
+
+def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registration: Registration) -> MeasurementSet:
+    """``data`` as a noise-free sensor sees the chain in its current placements
+    (eq 20–21 without N_k and zeta_k): its tool origin and orientation."""
+    poses = chain.poses(data.q)
+    return replace(
+        data,
+        points=registration.apply_points(poses.tool_positions)[:, None, :],
+        rotations=registration.apply_rotations(poses.tool_rotations),
+    )
 
 
 def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -28,7 +28,7 @@ from .errors import CalibrationError
 from .measurements import MeasurementSet
 from .metrics import pose_errors
 from .robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-from .simulation import SimulatedExperiment, simulate_experiment
+from .simulation import SimulatedExperiment, perfect_measurements, simulate_experiment
 from .study_estimators import METHOD_1, METHOD_2, RESTART_ESTIMATORS
 from .study_protocol import (
     FIGURE2_REPEAT,
@@ -69,25 +69,15 @@ def noise_free_test_set(chain: KinematicChain, experiment: SimulatedExperiment) 
 
     The chain's placements and tool are restored afterwards.
     """
-    validation = experiment.validation
     saved_placements, saved_tool = chain.placements(), chain.tool
     chain.set_placements(experiment.truth.joint_origins())
     chain.set_tool(experiment.tool)
     try:
-        poses = chain.poses(validation.q)
+        test_set = perfect_measurements(chain, experiment.validation, experiment.registration)
     finally:
         chain.set_placements(saved_placements)
         chain.set_tool(saved_tool)
-    sensor_T_base = experiment.registration
-    return MeasurementSet(
-        joint_names=validation.joint_names,
-        q=validation.q,
-        points=sensor_T_base.apply_points(poses.tool_positions)[:, None, :],
-        rotations=sensor_T_base.apply_rotations(poses.tool_rotations),
-        roles=validation.roles,
-        lines=validation.lines,
-        source="<noise-free truth>",
-    )
+    return replace(test_set, extra={}, source="<noise-free truth>")
 
 
 def parameter_deviations(table: DHTable, truth: DHTable) -> dict[str, float]:
