@@ -15,10 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from pincal.chain import KinematicChain
-from pincal.chain_calibration import calibrate_chain
-from pincal.measurements import read_measurements
-from pincal.metrics import pose_errors
+from pincal import KinematicChain, calibrate_chain, pose_errors, read_measurements
 from pincal.robots import example_robot_data_urdf
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "tiago_mocap"

@@ -37,11 +37,11 @@ GOALS = {"method2_median_ms": 10.0, "study_wall_s": 60.0, "k_ratio_10000_over_10
 _SCALING_PROGRAM = """
 import json, sys, time
 started = time.perf_counter()
-from pincal.chain import KinematicChain
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
-from pincal.paper_methods import calibrate_paper
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.fit.paper_methods import calibrate_paper
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-from pincal.simulation import SimulationSettings, simulate_experiment
+from pincal.simulation.paper import SimulationSettings, simulate_experiment
 imported = time.perf_counter()
 chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
 settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, n_calibration=int(sys.argv[1]), seed=1)
@@ -57,11 +57,11 @@ print(json.dumps({"import_s": imported - started, "simulate_s": simulated - impo
 
 def method2_calibration(runs: int) -> dict:
     """(a): median wall time of one Method-2 calibration [ms], from the nominal every time."""
-    from pincal.chain import KinematicChain
-    from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
-    from pincal.paper_methods import calibrate_paper
+    from pincal.fit.paper_methods import calibrate_paper
+    from pincal.model.chain import KinematicChain
+    from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
     from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-    from pincal.simulation import SimulationSettings, simulate_experiment
+    from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
     chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
     settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=1)

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pincal.chain import KinematicChain
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-from pincal.simulation import SimulationSettings, simulate_experiment
+from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 
 @pytest.fixture(scope="session")

@@ -10,17 +10,17 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-
-from pincal.chain import KinematicChain
-from pincal.chain_calibration import NOT_IDENTIFIABLE, calibrate_chain
-from pincal.objective import KinematicsCache
-from pincal.parameter_sets import JointOffsets, PlacementErrors
-from pincal.registration import Registration
-from pincal.robots import example_robot_data_urdf
-from pincal.sensor_residual import SensorResidual, TargetEstimate
-from pincal.simulation import SimulationSettings, simulate_chain
-
 from conftest import assert_close, numeric_jacobian
+
+from pincal.fit.chain_calibration import NOT_IDENTIFIABLE, calibrate_chain
+from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import JointOffsets, PlacementErrors
+from pincal.model.sensor import Registration
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.robots import example_robot_data_urdf
+from pincal.simulation.chain import simulate_chain
+from pincal.simulation.paper import SimulationSettings
 
 ROBOTS = {
     "tiago": ("tiago_description/robots/tiago.urdf", "wrist_ft_tool_link"),

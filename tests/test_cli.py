@@ -8,11 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from pincal.chain import KinematicChain, pose_from_xyz_rpy
-from pincal.cli import main
-from pincal.dh import DHTable
+from pincal.cli.commands import main
+from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
+from pincal.model.dh import DHTable
+from pincal.model.urdf import read_joint_origins
 from pincal.robots import KUKA_FLANGE_LINK
-from pincal.urdf_io import read_joint_origins
 
 
 def _sha(path):
@@ -105,8 +105,8 @@ def test_nominal_model_evaluates_worse_than_calibrated(tmp_path, simulated, kuka
 
 
 def test_reloaded_corrected_urdf_reproduces_calibrated_fk(tmp_path, simulated, kuka_urdf):
-    from pincal.measurements import read_measurements
-    from pincal.workflows import calibrate_files
+    from pincal.cli.workflows import calibrate_files
+    from pincal.measurements.csv_v1 import read_measurements
 
     tool = json.loads((simulated / "truth.json").read_text())["tool"]
     pose = pose_from_xyz_rpy(tool["xyz_m"], tool["rpy_rad"])

@@ -12,12 +12,12 @@ import json
 import numpy as np
 import pytest
 
-from pincal.chain import KinematicChain
-from pincal.chain_calibration import calibrate_chain
-from pincal.cli import main
-from pincal.diagnosis import diagnose
-from pincal.dh import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
-from pincal.effects import parse_effect, time_column
+from pincal.cli.commands import main
+from pincal.diagnosis.diagnose import diagnose
+from pincal.fit.chain_calibration import calibrate_chain
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
+from pincal.model.effects import parse_effect, time_column
 from pincal.robots import KUKA_FLANGE_LINK
 
 OFFSETS_ONLY = DHDeviations(
@@ -29,7 +29,7 @@ SETTINGS = dict(sigma_pos_mm=0.02, sigma_rot_deg=0.02, n_cpa=8, n_calibration=80
 
 
 def _run(kuka_urdf, effect_text, seed=3):
-    from pincal.simulation import SimulationSettings, simulate_experiment
+    from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
     effects = [parse_effect(effect_text)] if effect_text else []

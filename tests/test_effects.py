@@ -5,15 +5,21 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-
-from pincal.effects import Effect, EffectInputs, approach_flank, effect_inputs, gravity_torques, parse_effect
-from pincal.errors import PincalError
-from pincal.objective import KinematicsCache
-from pincal.parameter_sets import PlacementErrors
-from pincal.registration import Registration
-from pincal.sensor_residual import SensorResidual, TargetEstimate
-
 from conftest import assert_close, numeric_jacobian
+
+from pincal.errors import PincalError
+from pincal.model.effects import (
+    Effect,
+    EffectInputs,
+    approach_flank,
+    effect_inputs,
+    gravity_torques,
+    parse_effect,
+)
+from pincal.model.parameter_sets import PlacementErrors
+from pincal.model.sensor import Registration
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.sensor import SensorResidual, TargetEstimate
 
 ALL_EFFECTS = [
     Effect("compliance", "lwr_joint_2"),
@@ -67,14 +73,14 @@ def test_approach_flank_follows_interleaved_rows_of_another_set(kuka_chain):
     q[:, 5] = [0.0, 0.2, 0.3]           # calibration rows at t = 0, 20, 40
     other = np.zeros((2, 7))
     other[:, 5] = [0.5, 0.1]            # held-out rows at t = 10, 30
-    from pincal.measurements import MeasurementSet
+    from pincal.measurements.data import MeasurementSet
     held = MeasurementSet(joint_names=kuka_chain.joint_names, q=other, points=np.zeros((2, 1, 3)), rotations=None,
                           roles=np.array(["validation"] * 2, dtype=object), lines=np.arange(2, 4))
     cal = MeasurementSet(joint_names=kuka_chain.joint_names, q=q, points=np.zeros((3, 1, 3)), rotations=None,
                          roles=np.array(["calibration"] * 3, dtype=object), lines=np.arange(2, 5))
     inputs = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
                            context_time=np.array([10.0, 30.0]))
-    from pincal.effects import joint_basis
+    from pincal.model.effects import joint_basis
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), inputs, 5)[:, 0]
     assert flank.tolist() == [0.0, -1.0, 1.0]  # 0.5 -> 0.2 goes down, 0.1 -> 0.3 goes up
 

@@ -10,15 +10,14 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
-from pincal.dh_parameters import DHParameterSet
-from pincal.distance_residual import DistanceResidual
-from pincal.full_pose_residual import FullPoseResidual
-from pincal.objective import KinematicsCache
-from pincal.rotation_residual import RotationResidual
-
 from conftest import assert_close, numeric_jacobian
+
+from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.model.dh_parameters import DHParameterSet
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.distance import DistanceResidual
+from pincal.residuals.full_pose import FullPoseResidual
+from pincal.residuals.rotation import RotationResidual
 
 STEP = 1e-6
 TOL = 1e-7

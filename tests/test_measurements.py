@@ -1,4 +1,4 @@
-"""Tests of pincal.measurements: CSV format v1 reading, rejections, notes, round trip."""
+"""Tests of pincal.measurements.csv_v1: CSV format v1 reading, rejections, notes, round trip."""
 
 from __future__ import annotations
 
@@ -11,13 +11,8 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import MeasurementError
-from pincal.measurements import (
-    ROLES,
-    JointSpec,
-    MeasurementSet,
-    read_measurements,
-    write_measurements,
-)
+from pincal.measurements.csv_v1 import read_measurements, write_measurements
+from pincal.measurements.data import ROLES, JointSpec, MeasurementSet
 
 JOINTS = (
     JointSpec("j1", "revolute", -2.0, 2.0),

@@ -1,4 +1,4 @@
-"""The ML estimator (pincal.ml_estimator) and its residual (pincal.sensor_residual.tool_pose_residual).
+"""The ML estimator (pincal.fit.ml_estimator) and its residual (pincal.residuals.sensor.tool_pose_residual).
 
 Jacobians against central finite differences (step 1e-6, tolerance 1e-7
 relative to the column scale, as in test_jacobians.py); noise-free data must
@@ -13,22 +13,28 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
-
-from pincal.chain import KinematicChain
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL, DHDeviations, DHTable
-from pincal.dh_parameters import DHParameterSet
-from pincal.effects import Effect, EffectInputs
-from pincal.errors import CalibrationError
-from pincal.metrics import pose_errors
-from pincal.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
-from pincal.objective import KinematicsCache
-from pincal.paper_methods import ABSORBED, CALIBRATED, calibrate_paper
-from pincal.registration import Registration
-from pincal.robots import KUKA_FLANGE_LINK
-from pincal.sensor_residual import SensorResidual, TargetEstimate, tool_pose_residual
-from pincal.simulation import DEFAULT_REGISTRATION, SimulationSettings, simulate_experiment
-
 from conftest import assert_close, numeric_jacobian
+
+from pincal.errors import CalibrationError
+from pincal.fit.metrics import pose_errors
+from pincal.fit.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
+from pincal.fit.paper_methods import ABSORBED, CALIBRATED, calibrate_paper
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import (
+    KUKA_LWR4_DH,
+    TABLE2_LARGE,
+    TABLE2_SMALL,
+    DHDeviations,
+    DHTable,
+)
+from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.effects import Effect, EffectInputs
+from pincal.model.sensor import Registration
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.sensor import SensorResidual, TargetEstimate, tool_pose_residual
+from pincal.robots import KUKA_FLANGE_LINK
+from pincal.simulation.paper import SimulationSettings, simulate_experiment
+from pincal.simulation.sensor import DEFAULT_REGISTRATION
 
 STEP = 1e-6
 TOL = 1e-7

@@ -1,4 +1,4 @@
-"""Linearised (Cramér–Rao) predictions of pincal.noise_limit.
+"""Linearised (Cramér–Rao) predictions of pincal.fit.noise_limit.
 
 The linearisation is checked against finite differences of the whole
 estimator (every stage re-run on perturbed data), the ML covariance against
@@ -16,18 +16,18 @@ import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pincal.chain import KinematicChain
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL
-from pincal.dh_parameters import DHParameterSet
 from pincal.errors import CalibrationError
-from pincal.metrics import pose_errors
-from pincal.ml_estimator import calibrate_ml, ml_parameter_indices
-from pincal.noise_limit import mean_norm, predicted_errors
-from pincal.objective import KinematicsCache
-from pincal.paper_methods import calibrate_paper
+from pincal.fit.metrics import pose_errors
+from pincal.fit.ml_estimator import calibrate_ml, ml_parameter_indices
+from pincal.fit.noise_limit import mean_norm, predicted_errors
+from pincal.fit.paper_methods import calibrate_paper
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL
+from pincal.model.dh_parameters import DHParameterSet
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.sensor import tool_pose_residual
 from pincal.robots import KUKA_FLANGE_LINK
-from pincal.sensor_residual import tool_pose_residual
-from pincal.simulation import SimulationSettings, simulate_experiment
+from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 SMALL = SimulationSettings(seed=4, n_cpa=10, n_calibration=60, n_validation=10)
 

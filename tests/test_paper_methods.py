@@ -9,13 +9,24 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pincal.chain import KinematicChain
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL, random_deviations_like
 from pincal.errors import CalibrationError
-from pincal.metrics import pose_errors
-from pincal.paper_methods import ABSORBED, FROM_CPA, NOT_BY_CPA, calibrate_paper, cpa_groups
+from pincal.fit.metrics import pose_errors
+from pincal.fit.paper_methods import (
+    ABSORBED,
+    FROM_CPA,
+    NOT_BY_CPA,
+    calibrate_paper,
+    cpa_groups,
+)
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import (
+    KUKA_LWR4_DH,
+    TABLE2_LARGE,
+    TABLE2_SMALL,
+    random_deviations_like,
+)
 from pincal.robots import KUKA_FLANGE_LINK
-from pincal.simulation import SimulationSettings, simulate_experiment
+from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 NOISE_FREE = SimulationSettings(seed=11)
 

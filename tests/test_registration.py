@@ -1,4 +1,4 @@
-"""Tests of pincal.registration (Registration 1 / 2, eq 19, Moakher mean)."""
+"""Tests of pincal.fit.registration (Registration 1 / 2, eq 19, Moakher mean)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
-from pincal.registration import (
-    Registration,
+from pincal.fit.registration import (
     mean_rotation,
     register_orientations,
     register_points,
 )
+from pincal.model.sensor import Registration
 
 SETTINGS = settings(max_examples=40, deadline=None, derandomize=True)
 seeds = st.integers(0, 2**32 - 1)

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 from distributed import Client, LocalCluster
 
-from pincal.chain import KinematicChain
-from pincal.cli import main
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.cli.commands import main
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK
-from pincal.study import (
+from pincal.simulation.paper import SimulationSettings, simulate_experiment
+from pincal.study.figures import FIGURES
+from pincal.study.run import (
     FIGURE2_REPEAT,
     RESTART_SPREAD_DEG,
     RESTART_SPREAD_MM,
@@ -30,8 +32,6 @@ from pincal.study import (
     task_seed,
     write_study,
 )
-from pincal.simulation import SimulationSettings, simulate_experiment
-from pincal.study_figures import FIGURES
 
 TINY = StudyConfig(levels=2, repeats=2, restarts=3, restart_cases=1, limit_pose_sets=1)
 #: Executors are compared without the noise limit (its tasks take ~1 s each).

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pincal.cli import main
+from pincal.cli.commands import main
 from pincal.robots import example_robot_data_urdf
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,8 +15,21 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lxml import etree
 
-from pincal.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL, DHTable, random_deviations_like
 from pincal.errors import ModelError
+from pincal.model.dh import (
+    KUKA_LWR4_DH,
+    TABLE2_LARGE,
+    TABLE2_SMALL,
+    DHTable,
+    random_deviations_like,
+)
+from pincal.model.dh_urdf import apply_dh_table, dh_table_from_urdf
+from pincal.model.urdf import (
+    read_joint_origins,
+    rpy_from_matrix,
+    rpy_matrix,
+    write_urdf_with_origins,
+)
 from pincal.robots import (
     KUKA_BASE_LINK,
     KUKA_FLANGE_JOINT,
@@ -25,14 +38,6 @@ from pincal.robots import (
     KUKA_LINKS,
     example_robot_data_urdf,
     kuka_lwr4plus_urdf,
-)
-from pincal.urdf_io import (
-    apply_dh_table,
-    dh_table_from_urdf,
-    read_joint_origins,
-    rpy_from_matrix,
-    rpy_matrix,
-    write_urdf_with_origins,
 )
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -339,7 +344,7 @@ def test_committed_kuka_urdfs_are_generated_and_identical():
     generator = load_generator()
     content = generator.generate_urdf_bytes()
     user_facing = REPO_ROOT / "urdf" / "kuka_lwr4plus.urdf"
-    packaged = REPO_ROOT / "src" / "pincal" / "data" / "kuka_lwr4plus.urdf"
+    packaged = REPO_ROOT / "pincal" / "robots" / "kuka_lwr4plus.urdf"
     assert user_facing.read_bytes() == packaged.read_bytes()
     assert packaged.read_bytes() == content
     assert kuka_lwr4plus_urdf().read_bytes() == content

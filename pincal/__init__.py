@@ -1,0 +1,81 @@
+"""pincal: robot kinematic calibration on Pinocchio.
+
+Identify the kinematic parameters of a URDF from measurements of the real
+robot and write a corrected URDF. The first method is Franaszek & Marvel
+(2022), "Using Full Pose Measurement for Serial Robot Calibration".
+"""
+
+from pincal._version import __version__
+from pincal.errors import CalibrationError, MeasurementError, ModelError, PincalError
+from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+from pincal.fit.metrics import ErrorSummary, PoseErrors, pose_errors
+from pincal.fit.ml_estimator import MLCalibration, calibrate_ml
+from pincal.fit.noise_limit import PredictedErrors, predicted_errors
+from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
+from pincal.fit.registration import register_orientations, register_points
+from pincal.measurements.csv_v1 import read_measurements, write_measurements
+from pincal.measurements.data import JointSpec, MeasurementSet
+from pincal.model.chain import (
+    ChainPoses,
+    KinematicChain,
+    pose_from_xyz_rpy,
+    xyz_rpy_from_pose,
+)
+from pincal.model.dh import (
+    KUKA_LWR4_DH,
+    TABLE2_LARGE,
+    TABLE2_SMALL,
+    DHDeviations,
+    DHTable,
+)
+from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.parameter_sets import JointOffsets, PlacementErrors
+from pincal.model.sensor import Registration
+from pincal.simulation.paper import (
+    SimulatedExperiment,
+    SimulationSettings,
+    simulate_experiment,
+)
+
+
+
+__all__ = [
+    "__version__",
+    "CalibrationError",
+    "ChainCalibration",
+    "JointOffsets",
+    "MLCalibration",
+    "PlacementErrors",
+    "PredictedErrors",
+    "calibrate_chain",
+    "calibrate_ml",
+    "predicted_errors",
+    "ChainPoses",
+    "DHDeviations",
+    "DHParameterSet",
+    "DHTable",
+    "ErrorSummary",
+    "JointSpec",
+    "KUKA_LWR4_DH",
+    "KinematicChain",
+    "MeasurementError",
+    "MeasurementSet",
+    "ModelError",
+    "PaperCalibration",
+    "PincalError",
+    "PoseErrors",
+    "Registration",
+    "SimulatedExperiment",
+    "SimulationSettings",
+    "TABLE2_LARGE",
+    "TABLE2_SMALL",
+    "calibrate_paper",
+    "pose_errors",
+    "pose_from_xyz_rpy",
+    "read_measurements",
+    "register_orientations",
+    "register_points",
+    "simulate_experiment",
+    "write_measurements",
+    "xyz_rpy_from_pose",
+]

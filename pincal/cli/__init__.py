@@ -1,0 +1,7 @@
+"""The ``pincal`` command line and the file-level workflows behind it (read, fit,
+write, check). The top layer: nothing in pincal imports it.
+"""
+
+from pincal.cli.commands import main
+
+__all__ = ["main"]

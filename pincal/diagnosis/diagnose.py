@@ -1,0 +1,485 @@
+"""Close the loop: find in the residuals what the model lacks, add it, say what it gained.
+
+After the geometric calibration (:func:`pincal.fit.chain_calibration.calibrate_chain`)
+every candidate effect of :mod:`pincal.model.effects` — each type on each joint, both
+backlash sources, both cyclic harmonics, drift when the data has a time column,
+the sensor's scale — is fitted together with the geometry, registration and
+target it would change. Candidates are ranked by the change of the Bayesian
+information criterion on the calibration rows (Schwarz 1978),
+
+    ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m),
+
+with the noise scales held at the geometric calibration's estimates. The best
+one is adopted when the evidence is very strong (ΔBIC < :data:`EVIDENCE`, Kass &
+Raftery 1995) and it is not one of the cases that fool a selection:
+
+* a value outside physical range (:data:`PLAUSIBLE`) — a stand-in for something else;
+* a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
+  as a joint offset, which the model already has;
+* a close competitor with a strongly correlated basis (e.g. the approach flanks
+  of two joints that always move together): the data cannot tell them apart;
+* when held-out rows are given, an effect that makes them worse.
+
+Such cases are reported, not adopted. The loop repeats until nothing
+significant remains; then a generic per-joint correction (polynomial and
+harmonics of the joint angle) tests whether structure remains that no
+candidate explains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
+from pincal.fit.metrics import PoseErrors
+from pincal.fit.solver import solve
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+from pincal.model.effects import (
+    BACKLASH_SOURCES,
+    HARMONICS,
+    JOINT_EFFECTS,
+    Effect,
+    EffectInputs,
+    effect_inputs,
+    joint_basis,
+)
+from pincal.residuals.sensor import SensorResidual
+
+#: ΔBIC below which the evidence for an effect is "very strong".
+EVIDENCE = -10.0
+#: Largest plausible magnitude of each effect's value(s), by type (revolute, prismatic).
+PLAUSIBLE = {
+    "compliance": (1e-3, 1e-4),  # rad/(N·m), m/N: stiffer than 1 000 N·m/rad
+    "encoder_scale": (0.02, 0.02),  # relative
+    "cyclic": (0.02, 0.005),  # rad, m
+    "backlash": (0.1, 0.01),  # rad, m
+    "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
+    "sensor_scale": (0.01, 0.01),  # relative
+}
+#: |mean| / RMS of a basis above which it is "nearly constant" (acts as an offset).
+OFFSET_LIKE = 0.95
+#: |correlation| of two candidates' bases above which they are hard to tell apart.
+AMBIGUOUS = 0.8
+#: Most effects adopted.
+MAX_EFFECTS = 4
+#: Refits with gravity torques recomputed on the refitted geometry.
+GRAVITY_REFRESHES = 2
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect tried at one step.
+
+    Attributes:
+        effect: the effect.
+        values / std: fitted values and standard deviations.
+        delta_bic: BIC change on the calibration rows against the current model.
+        heldout_rms_mm: RMS point error on held-out rows, or None.
+        verdict: ``adopted``, ``significant`` (not the best), ``not significant``,
+            or why a significant one was not adopted.
+    """
+
+    effect: Effect
+    values: np.ndarray
+    std: np.ndarray
+    delta_bic: float
+    heldout_rms_mm: float | None
+    verdict: str
+
+
+@dataclass(frozen=True)
+class Step:
+    """One adopted effect, with the errors before and after adding it."""
+
+    effect: Effect
+    values: np.ndarray
+    std: np.ndarray
+    delta_bic: float
+    calibration_before: PoseErrors
+    calibration_after: PoseErrors
+    heldout_before: PoseErrors | None
+    heldout_after: PoseErrors | None
+    candidates: tuple[Candidate, ...]
+    driver: np.ndarray | None = None
+    driver_label: str = ""
+    joint_residual: np.ndarray | None = None
+    fitted_shift: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Outcome of :func:`diagnose`.
+
+    Attributes:
+        effects: adopted effects with their values and standard deviations.
+        steps: one per adopted effect.
+        last_candidates: the ranking of the step that adopted nothing.
+        unexplained: a plain statement of remaining structure, or None.
+        objective / solution: the final fit (for writing the URDF and report).
+        inputs: effect inputs of the calibration rows; ``time_reference`` [s].
+        notes: cases reported rather than adopted, and other remarks.
+    """
+
+    effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
+    steps: tuple[Step, ...]
+    last_candidates: tuple[Candidate, ...]
+    unexplained: str | None
+    objective: SensorResidual
+    solution_x: np.ndarray
+    inputs: EffectInputs
+    time_reference: float | None
+    calibration_errors: PoseErrors
+    heldout_errors: PoseErrors | None
+    solution_std: np.ndarray = field(default_factory=lambda: np.array([]))
+    sigma_pos_m: float = float("nan")
+    sigma_rot_rad: float | None = None
+    notes: tuple[str, ...] = field(default=())
+
+
+def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
+    """Every candidate on every joint of the chain, plus the sensor's."""
+    out: list[Effect] = []
+    for joint in chain.joint_names:
+        out.append(Effect("compliance", joint))
+        out.append(Effect("encoder_scale", joint))
+        out += [Effect("cyclic", joint, harmonic=h) for h in HARMONICS]
+        out += [Effect("backlash", joint, source=s) for s in BACKLASH_SOURCES]
+    if has_time:
+        out.append(Effect("drift"))
+    out.append(Effect("sensor_scale"))
+    return out
+
+
+class _Model:
+    """The calibrated geometry plus a list of effects, refittable on calibration rows."""
+
+    def __init__(self, chain, calibration: ChainCalibration, rows: MeasurementSet, row_weight, inputs):
+        self.chain, self.calibration, self.rows, self.inputs = chain, calibration, rows, inputs
+        self.row_weight = row_weight
+        self.sigma_pos = calibration.sigma_pos_m
+        self.sigma_rot = calibration.sigma_rot_rad
+
+    def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
+        data = self.rows if data is None else data
+        weight = self.row_weight if data is self.rows else np.ones(data.n_rows)
+        problem = FitProblem(
+            self.chain, self.calibration.params, data, self.calibration.start,
+            fit_target=self.calibration.fit_target, row_weight=weight,
+            effects=effects, inputs=self.inputs if inputs is None else inputs,
+        )
+        problem.sigma_pos = self.sigma_pos
+        problem.sigma_rot = self.sigma_rot
+        return problem
+
+    def reestimate(self, objective: SensorResidual, solution) -> None:
+        """Noise scales from the residuals of a fit (maximum likelihood)."""
+        problem = self.problem(objective.effects)
+        problem.reestimate_sigmas(objective, solution)
+        self.sigma_pos, self.sigma_rot = problem.sigma_pos, problem.sigma_rot
+
+    def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray]):
+        """Fit geometry, registration, target and ``effects`` from a start."""
+        problem = self.problem(effects)
+        base = self.calibration.vector
+        objective = problem.objective(self.calibration.kept, base)
+        x0 = np.zeros(objective.n_params)
+        n_core = x_start.size
+        x0[:n_core] = x_start
+        for sl, value in zip(objective._effect_slices, values_start):
+            x0[sl] = value
+        solution = solve(objective, x0, what="effect fit")
+        return objective, solution
+
+
+def _bic(residual: np.ndarray, n_params: int) -> float:
+    m = residual.size
+    return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
+
+
+def _basis(effect: Effect, inputs: EffectInputs, chain: KinematicChain) -> np.ndarray | None:
+    if effect.type not in JOINT_EFFECTS:
+        return inputs.time[:, None] if effect.type == "drift" else None
+    return joint_basis(effect, inputs, chain.joint_names.index(effect.joint))
+
+
+def _offset_like(basis: np.ndarray | None) -> bool:
+    if basis is None:
+        return False
+    columns = basis.reshape(len(basis), -1)
+    ratio = np.abs(columns.mean(axis=0)) / np.sqrt(np.mean(columns**2, axis=0) + 1e-300)
+    return bool(np.all(ratio > OFFSET_LIKE))
+
+
+def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> bool:
+    prismatic = effect.joint is not None and chain.joints[chain.joint_names.index(effect.joint)].kind == "prismatic"
+    limit = PLAUSIBLE[effect.type][1 if prismatic else 0]
+    magnitude = np.hypot(*values) if effect.type == "cyclic" else np.max(np.abs(values))
+    return bool(magnitude <= limit)
+
+
+def _correlation(a: np.ndarray | None, b: np.ndarray | None) -> float:
+    if a is None or b is None:
+        return 0.0
+    a, b = a[:, 0] - a[:, 0].mean(), b[:, 0] - b[:, 0].mean()
+    denominator = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / denominator) if denominator > 0 else 0.0
+
+
+def diagnose(
+    chain: KinematicChain,
+    calibration: ChainCalibration,
+    data: MeasurementSet,
+    heldout: MeasurementSet | None = None,
+    sigma_column: str | None = None,
+    payload_kg: float = 0.0,
+    time: np.ndarray | None = None,
+    heldout_time: np.ndarray | None = None,
+    candidates: Sequence[Effect] | None = None,
+) -> Diagnosis:
+    """Search the calibrated model's residuals for missing effects (module docstring).
+
+    Args:
+        chain: the chain, holding the geometric calibration.
+        calibration: its result (:func:`calibrate_chain`).
+        data: the measurement set it was calibrated on.
+        heldout: rows of another session to report (and veto) on.
+        sigma_column: the row-weight column used by the calibration.
+        payload_kg: point mass at the target for gravity torques [kg].
+        time / heldout_time: row times [s] of ``data`` / ``heldout``, or None.
+        candidates: effects to try (default: :func:`candidate_effects`).
+    """
+    rows = data.select(np.isin(data.lines, calibration.rows_used))
+    row_time = None if time is None else time[np.isin(data.lines, calibration.rows_used)]
+    points = calibration.target.points
+    point = points.mean(axis=0)
+    reference = None if row_time is None else float(np.mean(row_time))
+    if heldout is not None and (heldout.n_points != rows.n_points or heldout.has_orientation != rows.has_orientation):
+        raise CalibrationError(
+            f"{heldout.source}: the held-out rows must measure the same target as the calibration rows "
+            f"({rows.n_points} point(s){' and orientations' if rows.has_orientation else ''}); "
+            f"they have {heldout.n_points} point(s){' and orientations' if heldout.has_orientation else ''}"
+        )
+    inputs = effect_inputs(chain, rows, payload_kg, point, row_time,
+                           context_q=None if heldout is None else heldout.q, context_time=heldout_time)
+    model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
+    held_inputs = None
+    if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
+        held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time,
+                                    time_reference=reference if heldout_time is not None else None,
+                                    context_q=rows.q, context_time=row_time)
+    pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
+    if row_time is None:
+        pool = [e for e in pool if e.type != "drift"]
+
+    adopted: list[Effect] = []
+    values: list[np.ndarray] = []
+    objective, solution = model.fit([], calibration.solution, [])
+    current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size)
+    steps: list[Step] = []
+    notes: list[str] = []
+    ranking: list[Candidate] = []
+    inseparable: list[str] = []
+    rejected: dict[str, str] = {}
+    current_objective = objective
+    while len(adopted) < MAX_EFFECTS:
+        tried = []
+        for effect in pool:
+            if effect in adopted:
+                continue
+            try:
+                obj, sol = model.fit(adopted + [effect], current_x[: current_objective.blocks["effects"].start],
+                                     values + [np.zeros(effect.n_values)])
+            except CalibrationError:
+                if not steps and effect.label not in inseparable:
+                    inseparable.append(effect.label)
+                continue
+            delta = _bic(sol.residual, sol.x.size) - current_bic
+            tried.append((delta, effect, obj, sol))
+        tried.sort(key=lambda item: item[0])
+        ranking = []
+        chosen = None
+        for rank, (delta, effect, obj, sol) in enumerate(tried):
+            sl = obj._effect_slices[-1]
+            value, std = sol.x[sl], sol.std[sl]
+            held = _heldout_rms(model, obj, sol.x, heldout, held_inputs) if heldout is not None else None
+            verdict = "not significant"
+            if delta < EVIDENCE:
+                verdict = "significant"
+                if chosen is None:
+                    verdict = _rejection(effect, value, delta, tried, inputs, chain, held, model,
+                                         current_objective, current_x, heldout, held_inputs)
+                    if verdict == "adopted":
+                        chosen = (delta, effect, obj, sol)
+                    else:
+                        rejected[effect.label] = f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted"
+            ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
+        if chosen is None:
+            break
+        delta, effect, obj, sol = chosen
+        before_cal = _errors(current_objective, current_x)
+        before_held = _heldout_errors(model, current_objective, current_x, heldout, held_inputs)
+        driver, driver_label, joint_residual, fitted = _partial_residual(effect, obj, sol, inputs, chain)
+        adopted.append(effect)
+        # noise scales re-estimated with the effect in the model (maximum likelihood)
+        model.reestimate(obj, sol)
+        obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj._effect_slices])
+        if any(e.type == "compliance" or e.source == "gravity" for e in adopted):
+            # gravity torques on the refitted geometry, not the one fitted without the effects
+            for _ in range(GRAVITY_REFRESHES):
+                if calibration.params is not None:
+                    vector = calibration.vector.copy()
+                    vector[calibration.kept] = sol.x[obj.blocks["kinematic"]]
+                    calibration.params.apply(vector)
+                inputs = replace(inputs, gravity=effect_inputs(chain, rows, payload_kg, point).gravity)
+                model.inputs = inputs
+                if heldout is not None:
+                    held_inputs = replace(held_inputs, gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
+                obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
+                                     [sol.x[sl] for sl in obj._effect_slices])
+        values = [sol.x[sl] for sl in obj._effect_slices]
+        current_objective, current_x = obj, sol.x
+        current_bic = _bic(sol.residual, sol.x.size)
+        steps.append(Step(
+            effect=effect, values=sol.x[obj._effect_slices[-1]], std=sol.std[obj._effect_slices[-1]],
+            delta_bic=float(delta), calibration_before=before_cal, calibration_after=_errors(obj, sol.x),
+            heldout_before=before_held,
+            heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
+            candidates=tuple(ranking[:8]),
+            driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
+        ))
+    notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
+    if inseparable:
+        notes.append(
+            f"not separable from the calibrated geometry at this level (absorbed by it): {', '.join(inseparable)}"
+        )
+    final_solution = solve(current_objective, current_x, what="final fit")
+    effects = tuple(
+        (e, final_solution.x[sl], final_solution.std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
+    )
+    unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain, inputs)
+    return Diagnosis(
+        effects=effects,
+        steps=tuple(steps),
+        last_candidates=tuple(ranking[:8]),
+        unexplained=unexplained,
+        objective=current_objective,
+        solution_x=final_solution.x,
+        inputs=inputs,
+        time_reference=reference,
+        calibration_errors=_errors(current_objective, final_solution.x),
+        heldout_errors=_heldout_errors(model, current_objective, final_solution.x, heldout, held_inputs),
+        solution_std=final_solution.std,
+        sigma_pos_m=model.sigma_pos,
+        sigma_rot_rad=model.sigma_rot,
+        notes=tuple(notes),
+    )
+
+
+def _rejection(effect, value, delta, tried, inputs, chain, held, model, current_objective, current_x,
+               heldout, held_inputs) -> str:
+    """'adopted', or why the best significant candidate is only reported."""
+    if not _plausible(effect, value, chain):
+        return f"its value {np.round(value, 6).tolist()} is outside the physical range (a stand-in for something else)"
+    basis = _basis(effect, inputs, chain)
+    if _offset_like(basis):
+        return "its basis barely changes over the rows, so it acts as a joint offset"
+    for other_delta, other, _, _ in tried:
+        if other is effect or other_delta - delta > 6.0:
+            continue
+        if abs(_correlation(basis, _basis(other, inputs, chain))) > AMBIGUOUS:
+            return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
+                    f"{_correlation(basis, _basis(other, inputs, chain)):+.2f}: the data cannot tell them apart")
+    if heldout is not None and held is not None:
+        before = _heldout_rms(model, current_objective, current_x, heldout, held_inputs)
+        if held > before * 1.02:
+            return f"it makes the held-out rows worse ({before:.3f} → {held:.3f} mm RMS)"
+    return "adopted"
+
+
+def _errors(objective: SensorResidual, x: np.ndarray) -> PoseErrors:
+    """Point errors (and orientation errors with 6D data) of a fit on its own rows (eq 24)."""
+    position = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
+    rotation = None
+    if objective.G is not None:
+        poses, _, target, _ = objective._state(x)
+        relative = objective._orientation_error(poses, target)
+        rotation = np.linalg.norm(Rotation.from_matrix(relative).as_rotvec(), axis=1)
+    return PoseErrors(position_m=position, rotation_rad=rotation)
+
+
+def _heldout_objective(model: _Model, objective: SensorResidual, heldout, held_inputs) -> SensorResidual:
+    problem = model.problem(objective.effects, heldout, held_inputs)
+    return problem.objective(model.calibration.kept, model.calibration.vector)
+
+
+def _heldout_errors(model, objective, x, heldout, held_inputs) -> PoseErrors | None:
+    if heldout is None:
+        return None
+    return _errors(_heldout_objective(model, objective, heldout, held_inputs), x)
+
+
+def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
+    errors = _heldout_errors(model, objective, x, heldout, held_inputs)
+    return errors.position.rms
+
+
+def _remaining_structure(model, adopted, objective, solution, chain, inputs) -> str | None:
+    """Fit a generic joint-space correction per joint; report strong evidence of structure."""
+    base_bic = _bic(solution.residual, solution.x.size)
+    found = []
+    for j, name in enumerate(chain.joint_names):
+        generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
+        generic = [e for e in generic if e not in adopted]
+        try:
+            _, sol = model.fit(adopted + generic, solution.x[: objective.blocks["effects"].start],
+                               [solution.x[sl] for sl in objective._effect_slices]
+                               + [np.zeros(e.n_values) for e in generic])
+        except CalibrationError:
+            continue
+        delta = _bic(sol.residual, sol.x.size) - base_bic
+        if delta < EVIDENCE:
+            found.append(f"{name} (ΔBIC {delta:.1f})")
+    if not found:
+        return None
+    return ("structure remains that no candidate explains: a generic correction of the joint angle "
+            f"(linear + harmonics 1, 2) still fits much better on {', '.join(found)}")
+
+
+_DRIVERS = {
+    "compliance": "gravity torque tau_j [N·m]",
+    "encoder_scale": "joint reading q_j",
+    "cyclic": "joint reading q_j",
+}
+
+
+def _partial_residual(effect, objective, solution, inputs, chain):
+    """Component-plus-residual of a joint effect: per row, the fitted shift plus the
+    remaining residual of the fit expressed as a shift of that joint (least
+    squares on the joint's Jacobian column), against the effect's driver."""
+    if effect.type not in JOINT_EFFECTS:
+        return None, "", None, None
+    j = chain.joint_names.index(effect.joint)
+    basis = joint_basis(effect, inputs, j)
+    fitted = basis @ solution.x[objective._effect_slices[-1]]
+    _, sens, target, world = objective._state(solution.x)
+    residual = objective.predicted_points(solution.x) - objective.g  # (K, P, 3)
+    omega = target.registration.rotation
+    column = np.stack([sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T
+                       for p in range(world.shape[1])], axis=1)  # (K, P, 3)
+    a = column.reshape(len(column), -1)
+    r = residual.reshape(len(residual), -1)
+    shift = fitted - np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
+    if effect.type == "backlash":
+        driver = basis[:, 0]
+        label = "sign of gravity torque" if effect.source == "gravity" else "approach direction (flank)"
+    elif effect.type == "compliance":
+        driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
+    else:
+        driver, label = inputs.q[:, j], _DRIVERS[effect.type]
+    return driver, label, shift, fitted

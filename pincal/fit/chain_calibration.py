@@ -1,0 +1,484 @@
+"""Calibration of any serial chain from absolute measurements (points, rigid targets, poses).
+
+Levels:
+
+* ``registration`` — only the registration sensor_T_base and the target;
+* ``offsets`` — plus each joint's zero (:class:`pincal.model.parameter_sets.JointOffsets`);
+* ``full`` — plus each joint placement's SE(3) error (:class:`PlacementErrors`).
+
+The registration and the target (its points in the tip frame, and its
+rotation when orientations are measured) are always estimated with the
+kinematics, unless a known tool is given. Parameters the data cannot determine
+are never returned: :mod:`pincal.fit.identifiability` drops them by name, and the
+number of weakly determined combinations kept is chosen by an information
+criterion (AIC by default; BIC or leave-one-row-out cross-validation on
+request) computed on the calibration rows only — never on validation data.
+Rows whose residual is far outside the others (robust scale) are reported and,
+only when asked, removed before a refit.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from pincal.errors import CalibrationError
+from pincal.fit.identifiability import (
+    Selection,
+    absorbed_into,
+    condition_number,
+    correlated_pairs,
+    order_parameters,
+    press,
+)
+from pincal.fit.outliers import find_outliers
+from pincal.fit.registration import mean_rotation, register_points
+from pincal.fit.solver import Solution, solve
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain, points_in_base
+from pincal.model.parameter_sets import LEVELS, NoParameters
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.sensor import SensorResidual, TargetEstimate
+
+CHAIN_LEVELS = ("registration", "offsets", "full")
+
+#: How the number of identifiable kinematic parameters kept is chosen.
+SELECTION_CRITERIA = {
+    "aic": "Akaike information criterion m ln(RSS/m) + 2n on the calibration rows",
+    "bic": "Bayesian information criterion m ln(RSS/m) + n ln(m) on the calibration rows",
+    "press": "linearised leave-one-row-out cross-validation (PRESS) on the calibration rows",
+    "all": "every identifiable parameter (AIC reported)",
+}
+
+#: Starting noise scales for weighting positions against orientations; both
+#: are re-estimated from the residuals (maximum likelihood with unknown variances).
+START_SIGMA_POS_M = 1e-3
+START_SIGMA_ROT_RAD = 1e-3
+
+KEPT = "calibrated"
+NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
+NOT_SELECTED = "not determined: weakly identified, left out by the selection criterion"
+
+
+@dataclass(frozen=True)
+class Dropped:
+    """A parameter not estimated, and what absorbs it."""
+
+    index: int
+    reason: str
+    absorbed_into: tuple[tuple[str, float], ...]
+
+
+@dataclass(frozen=True)
+class ChainCalibration:
+    """Outcome of :func:`calibrate_chain`.
+
+    Attributes:
+        level: ``registration``, ``offsets`` or ``full``.
+        params: the kinematic parameter set (None at level ``registration``).
+        vector: calibrated kinematic parameters (zero = nominal), (n,).
+        std: their standard deviations, NaN where not estimated, (n,).
+        status: per kinematic parameter, :data:`KEPT` or a reason it is not.
+        target: registration, target points and rotation.
+        target_std: standard deviations of registration (6) and target parameters.
+        sigma_pos_m / sigma_rot_rad: noise scales estimated from the residuals.
+        rank, condition, selection, dropped, correlated: identifiability report.
+        outliers: (file line, robust score) of rows flagged as outliers.
+        removed_lines: lines removed before the final fit (``reject_outliers``).
+        rows_used: file lines of the rows in the final fit.
+        fit_seconds: time of the final least-squares fit [s].
+        total_seconds: time including selection [s].
+        rms_m: RMS point residual of the final fit [m].
+        notes: things the user should know.
+    """
+
+    level: str
+    params: object | None
+    vector: np.ndarray
+    std: np.ndarray
+    status: tuple[str, ...]
+    target: TargetEstimate
+    target_std: np.ndarray
+    sigma_pos_m: float
+    sigma_rot_rad: float | None
+    rank: int
+    condition: float
+    selection: Selection | None
+    dropped: tuple[Dropped, ...]
+    correlated: tuple[tuple[str, str, float], ...]
+    outliers: tuple[tuple[int, float], ...]
+    removed_lines: tuple[int, ...]
+    rows_used: tuple[int, ...]
+    fit_seconds: float
+    total_seconds: float
+    rms_m: float
+    kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
+    solution: np.ndarray = field(default_factory=lambda: np.array([]))
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    start: TargetEstimate | None = None
+    fit_target: bool = True
+    notes: tuple[str, ...] = field(default=())
+
+    def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
+        """Linearised prediction of the RMS error of the target points at
+        configurations ``q`` due to the parameters' estimation noise [m]
+        (covariance of the fit propagated through the measurement Jacobian)."""
+        params = self.params if self.params is not None else NoParameters(chain)
+        k, n_points = len(q), len(self.target.points)
+        cache = KinematicsCache(params, self.kept, self.vector, q)
+        objective = SensorResidual(
+            cache,
+            np.zeros((k, n_points, 3)),
+            np.tile(np.eye(3), (k, 1, 1)) if self.sigma_rot_rad is not None else None,
+            self.start,
+            fit_points=self.fit_target,
+            fit_rotation=self.fit_target,
+        )
+        jac = objective.jacobian(self.solution)[: 3 * k * n_points]
+        variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
+        return float(np.sqrt(variance.sum() / (k * n_points)))
+
+
+def initial_target(
+    chain: KinematicChain, data: MeasurementSet, fit_points: bool, iterations: int = 10
+) -> TargetEstimate:
+    """Registration and target points from the nominal model, alternating
+    Registration 1 (Arun) with the linear solution for the points."""
+    poses = chain.poses(data.q)
+    t, rot = poses.tool_positions, poses.tool_rotations
+    n_points = data.n_points
+    points = np.zeros((n_points, 3))
+    for _ in range(iterations if fit_points else 1):
+        world = points_in_base(t, rot, points)
+        registration = register_points(world.reshape(-1, 3), data.points.reshape(-1, 3))
+        if not fit_points:
+            break
+        local = (data.points - registration.translation) @ registration.rotation  # Ωᵀ(g − τ)
+        points = np.einsum("kji,kpj->kpi", rot, local - t[:, None, :]).mean(axis=0)
+    rotation = np.eye(3)
+    if data.rotations is not None:
+        relative = rot.transpose(0, 2, 1) @ registration.rotation.T @ data.rotations  # R_kᵀ Ωᵀ G_k
+        rotation = mean_rotation(relative)
+    return TargetEstimate(registration, points, rotation)
+
+
+def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
+    """Relative row weights from a per-row noise column (median 1), or ones."""
+    if sigma_column is None:
+        return np.ones(data.n_rows)
+    if sigma_column not in data.extra:
+        raise CalibrationError(
+            f"{data.source}: no column '{sigma_column}' for --sigma-column; "
+            f"numeric extra columns are: {', '.join(data.extra) or 'none'}"
+        )
+    sigma = np.asarray(data.extra[sigma_column], dtype=float)
+    bad = ~(np.isfinite(sigma) & (sigma > 0))
+    if np.any(bad):
+        line = int(data.lines[np.flatnonzero(bad)[0]])
+        raise CalibrationError(
+            f"{data.source}, line {line}, column '{sigma_column}': sigma must be a positive number [mm]"
+        )
+    relative = sigma / np.median(sigma)
+    return 1.0 / relative
+
+
+class FitProblem:
+    """One weighted fit of registration, target and a subset of kinematic parameters."""
+
+    def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight,
+                 effects=(), inputs=None):
+        self.chain, self.params, self.data = chain, params, data
+        self.start = start
+        self.fit_target = fit_target
+        self.row_weight = row_weight
+        self.effects = tuple(effects)
+        self.inputs = inputs
+        self.sigma_pos = START_SIGMA_POS_M
+        self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
+
+    def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual:
+        params = self.params if self.params is not None else NoParameters(self.chain)
+        cache = KinematicsCache(params, free, base, self.data.q)
+        return SensorResidual(
+            cache,
+            self.data.points,
+            self.data.rotations,
+            self.start,
+            position_weight=self.row_weight / self.sigma_pos,
+            rotation_weight=self.row_weight / (self.sigma_rot or 1.0),
+            fit_points=self.fit_target,
+            fit_rotation=self.fit_target,
+            effects=self.effects,
+            inputs=self.inputs,
+        )
+
+    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
+        objective = self.objective(free, base)
+        x0 = objective.start_vector() if x0 is None else x0
+        solution = solve(objective, x0, what=what)
+        return objective, solution
+
+    def reestimate_sigmas(self, objective: SensorResidual, solution: Solution) -> None:
+        """Maximum likelihood with unknown variances: sigma² = mean squared residual per kind."""
+        k, p = self.data.n_rows, self.data.n_points
+        n_pos = 3 * k * p
+        pos = solution.residual[:n_pos] * self.sigma_pos
+        self.sigma_pos = float(np.sqrt(np.mean(pos**2))) or self.sigma_pos
+        if self.sigma_rot is not None:
+            rot = solution.residual[n_pos:] * self.sigma_rot
+            self.sigma_rot = float(np.sqrt(np.mean(rot**2))) or self.sigma_rot
+
+
+def calibrate_chain(
+    chain: KinematicChain,
+    data: MeasurementSet,
+    level: str,
+    tool_known: bool = False,
+    sigma_column: str | None = None,
+    reject_outliers: bool = False,
+    sigma_iterations: int = 2,
+    selection: str = "aic",
+) -> ChainCalibration:
+    """Calibrate ``chain`` at ``level`` on the non-validation rows of ``data``.
+
+    Args:
+        chain: the chain; its tool is the target frame. If ``tool_known``, the
+            tool is the measured point (and frame) and is not estimated;
+            otherwise the target points are estimated in the tool frame.
+        data: measurements (rows with role ``validation`` are not used).
+        level: one of :data:`CHAIN_LEVELS`.
+        sigma_column: extra column holding a per-row noise scale [mm] (weights).
+        reject_outliers: refit without the rows flagged as outliers.
+        selection: criterion choosing how many identifiable parameters to keep
+            (:data:`SELECTION_CRITERIA`).
+        sigma_iterations: refits re-estimating the position/orientation noise scales.
+
+    On return the chain holds the calibrated placements.
+    """
+    if level not in CHAIN_LEVELS:
+        raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
+    if selection not in SELECTION_CRITERIA:
+        raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{selection}'")
+    started = time.perf_counter()
+    rows = data.select(data.roles != "validation")
+    if rows.n_rows < 3:
+        raise CalibrationError(
+            f"{data.source}: {rows.n_rows} calibration row(s) (rows with role 'validation' are not used); "
+            "a calibration needs at least 3"
+        )
+    if tool_known and rows.n_points != 1:
+        raise CalibrationError(
+            f"{data.source}: a known --tool is one point; this file has {rows.n_points} points "
+            "per row — leave out --tool to estimate the target's points"
+        )
+    params = LEVELS[level](chain) if level in LEVELS else None
+    notes: list[str] = []
+    outliers: list[tuple[int, float]] = []
+    removed: list[int] = []
+    for attempt in range(2):
+        result, point_errors = _calibrate_rows(
+            chain, params, rows, level, tool_known, sigma_column, sigma_iterations, selection
+        )
+        outliers = find_outliers(point_errors, rows.lines)
+        if not (reject_outliers and outliers and attempt == 0):
+            break
+        removed = [line for line, _ in outliers]
+        rows = rows.select(~np.isin(rows.lines, removed))
+        notes.append(f"removed {len(removed)} outlier row(s) at lines {removed} and refitted")
+    if outliers and not removed:
+        notes.append(
+            f"{len(outliers)} row(s) look like outliers (lines {[l for l, _ in outliers]}); "
+            "rerun with --reject-outliers to refit without them"
+        )
+    return replace(
+        result,
+        outliers=tuple(outliers),
+        removed_lines=tuple(removed),
+        rows_used=tuple(int(l) for l in rows.lines),
+        total_seconds=time.perf_counter() - started,
+        notes=tuple(notes),
+    )
+
+
+def _calibrate_rows(
+    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion
+) -> tuple[ChainCalibration, np.ndarray]:
+    """One calibration of ``rows``; returns the result (without the outlier
+    bookkeeping) and each target point's distance from the model (K, P) [m]."""
+    nominal = chain.placements()
+    start = initial_target(chain, rows, fit_points=not tool_known)
+    if tool_known:
+        start = TargetEstimate(start.registration, np.zeros((1, 3)), np.eye(3))
+    problem = FitProblem(chain, params, rows, start, fit_target=not tool_known, row_weight=row_weights(rows, sigma_column))
+    size = params.size if params is not None else 0
+    base = np.zeros(size)
+    empty = np.array([], dtype=int)
+    # registration and target first, with the nominal kinematics
+    objective, solution = problem.fit(empty, base, what="registration")
+    for _ in range(sigma_iterations):
+        problem.reestimate_sigmas(objective, solution)
+        objective, solution = problem.fit(empty, base, solution.x, what="registration")
+    problem.start = objective.estimate(solution.x)
+    selection, dropped, rank, kept = None, (), 0, empty
+    if size:
+        everything = np.arange(size)
+        full = problem.objective(everything, base)
+        x_full = full.start_vector()
+        jac = full.jacobian(x_full)
+        kinematic_cols = np.arange(full.blocks["kinematic"].start, full.blocks["kinematic"].stop)
+        other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
+        ordering = order_parameters(jac, kinematic_cols, other_cols)
+        rank = ordering.rank
+        selection, kept = _select(problem, ordering, base, rows, criterion)
+        dropped = _dropped(jac, ordering, kept, other_cols, full, params)
+    fit_started = time.perf_counter()
+    objective, solution = problem.fit(kept, base, what=f"{level} fit")
+    fit_seconds = time.perf_counter() - fit_started
+    for _ in range(sigma_iterations if size else 0):
+        problem.reestimate_sigmas(objective, solution)
+        objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
+    x = solution.x
+    vector = base.copy()
+    vector[kept] = x[objective.blocks["kinematic"]]
+    std_all = solution.std
+    std = np.full(size, np.nan)
+    std[kept] = std_all[objective.blocks["kinematic"]]
+    status = np.array([NOT_IDENTIFIABLE] * size, dtype=object)
+    if size:
+        status[ordering.order[:rank]] = NOT_SELECTED
+        status[kept] = KEPT
+        params.apply(vector)
+    else:
+        chain.set_placements(nominal)
+    jac = objective.jacobian(x)
+    covariance = np.linalg.pinv(jac.T @ jac) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    names = _column_names(objective, params, kept)
+    correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
+    k, p = rows.n_rows, rows.n_points
+    point_residual = solution.residual[: 3 * k * p].reshape(k, p, 3) * problem.sigma_pos / problem.row_weight[:, None, None]
+    point_errors = np.linalg.norm(point_residual, axis=2)
+    result = ChainCalibration(
+        level=level,
+        params=params,
+        vector=vector,
+        std=std,
+        status=tuple(status),
+        target=objective.estimate(x),
+        target_std=std_all[len(kept):],
+        sigma_pos_m=problem.sigma_pos,
+        sigma_rot_rad=problem.sigma_rot,
+        rank=rank,
+        condition=condition_number(jac),
+        selection=selection,
+        dropped=dropped,
+        correlated=correlated,
+        outliers=(),
+        removed_lines=(),
+        rows_used=tuple(int(l) for l in rows.lines),
+        fit_seconds=fit_seconds,
+        total_seconds=0.0,
+        rms_m=float(np.sqrt(np.mean(np.sum(point_residual**2, axis=2)))),
+        kept=kept,
+        solution=x,
+        covariance=covariance,
+        start=problem.start,
+        fit_target=not tool_known,
+    )
+    return result, point_errors
+
+
+def _select(problem: FitProblem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str):
+    """Score nested subsets of the ordered identifiable parameters; keep the best.
+
+    ``aic``: Akaike's information criterion m ln(RSS/m) + 2n (Akaike 1974), which
+    estimates the expected prediction error on new measurements; ``bic``: the
+    same with ln(m) per parameter (Schwarz 1978); ``press``: linearised
+    leave-one-row-out cross-validation (Allen 1974); ``all``: every
+    identifiable parameter.
+    """
+    sizes, scores = [], []
+    previous = None
+    block = 3 * rows.n_points + (3 if rows.rotations is not None else 0)
+    candidates = [ordering.rank] if criterion == "all" else range(0, ordering.rank + 1)
+    for n_kept in candidates:
+        kept = np.sort(ordering.order[:n_kept])
+        objective = problem.objective(kept, base)
+        x0 = objective.start_vector() if previous is None else _warm_start(objective, previous, kept)
+        try:
+            solution = solve(objective, x0, what="selection")
+        except CalibrationError:
+            continue
+        previous = (kept, solution.x, objective)
+        m, rss = solution.residual.size, float(solution.residual @ solution.residual)
+        if criterion == "press":
+            jac = objective.jacobian(solution.x)
+            residual = _row_blocks(solution.residual, rows, block)
+            score = press(_row_blocks(jac, rows, block), residual, block)
+        elif criterion == "bic":
+            score = m * np.log(rss / m) + np.log(m) * solution.x.size
+        else:  # aic, all
+            score = m * np.log(rss / m) + 2.0 * solution.x.size
+        sizes.append(n_kept)
+        scores.append(float(score))
+    if not sizes:
+        raise CalibrationError("no subset of the parameters could be fitted")
+    chosen = sizes[int(np.argmin(scores))]
+    selection = Selection(
+        criterion=SELECTION_CRITERIA[criterion],
+        sizes=tuple(sizes),
+        scores=tuple(scores),
+        chosen=chosen,
+    )
+    return selection, np.sort(ordering.order[:chosen])
+
+
+def _warm_start(objective: SensorResidual, previous, kept: np.ndarray) -> np.ndarray:
+    """Start a larger subset from the previous subset's solution."""
+    prev_kept, prev_x, prev_objective = previous
+    x0 = objective.start_vector()
+    kin = objective.blocks["kinematic"]
+    values = dict(zip(prev_kept.tolist(), prev_x[prev_objective.blocks["kinematic"]]))
+    x0[kin] = [values.get(int(i), 0.0) for i in kept]
+    x0[kin.stop :] = prev_x[prev_objective.blocks["kinematic"].stop :]
+    return x0
+
+
+def _row_blocks(values: np.ndarray, rows: MeasurementSet, block: int) -> np.ndarray:
+    """Reorder residual rows (positions first, then orientations) into per-row blocks."""
+    k, p = rows.n_rows, rows.n_points
+    n_pos = 3 * k * p
+    pos = values[:n_pos].reshape((k, 3 * p) + values.shape[1:])
+    if rows.rotations is None:
+        return pos.reshape((k * block,) + values.shape[1:])
+    rot = values[n_pos:].reshape((k, 3) + values.shape[1:])
+    return np.concatenate([pos, rot], axis=1).reshape((k * block,) + values.shape[1:])
+
+
+def _column_names(objective: SensorResidual, params, kept: np.ndarray) -> list[str]:
+    names = [params.info[i].name for i in kept] if params is not None else []
+    if objective.blocks["registration"].stop > objective.blocks["registration"].start:
+        names += ["registration.rx", "registration.ry", "registration.rz",
+                  "registration.x", "registration.y", "registration.z"]
+    pts = objective.blocks["points"]
+    names += [f"target.point{i // 3 + 1}.{'xyz'[i % 3]}" for i in range(pts.stop - pts.start)]
+    rot = objective.blocks["rotation"]
+    names += [f"target.r{'xyz'[i]}" for i in range(rot.stop - rot.start)]
+    return names
+
+
+def _dropped(jac, ordering, kept, other_cols, full: SensorResidual, params) -> tuple[Dropped, ...]:
+    """Each parameter not kept, with the kept parameters that absorb it."""
+    kin_start = full.blocks["kinematic"].start
+    kept_cols = np.concatenate([kin_start + kept, other_cols]).astype(int)
+    names = _column_names(full, params, np.arange(params.size))
+    out = []
+    for rank_position, column in enumerate(ordering.order):
+        index = int(column - kin_start)
+        if index in set(kept.tolist()):
+            continue
+        reason = NOT_SELECTED if rank_position < ordering.rank else NOT_IDENTIFIABLE
+        absorbers = tuple((names[c], coef) for c, coef in absorbed_into(jac, int(column), kept_cols))
+        out.append(Dropped(index=index, reason=reason, absorbed_into=absorbers))
+    return tuple(out)

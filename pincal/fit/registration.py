@@ -1,0 +1,126 @@
+"""Registration of the sensor frame to the robot base (Franaszek & Marvel 2022, Sec. 4).
+
+Sensor coordinates ``g`` and robot-base (URDF root) coordinates ``t`` are related by
+``g ≈ Ω t + τ``. Registration 1 takes Ω from 3D points by the SVD method of Arun,
+Huang & Blostein (1987); Registration 2 takes Ω as the Riemannian (geodesic L2) mean
+(Moakher 2002) of the relative rotations ``G_k R_k^T``. Both take τ from eq 19,
+``τ = ḡ − Ω t̄``. Lengths in metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from pincal.errors import CalibrationError
+from pincal.model.sensor import Registration, checked_array, checked_rotations
+
+
+def _weights(weights, k: int) -> np.ndarray:
+    if weights is None:
+        return np.full(k, 1.0 / k)
+    w = np.asarray(weights, dtype=float)
+    if w.shape != (k,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+        raise CalibrationError(f"weights must be {k} finite non-negative numbers with a positive sum")
+    return w / w.sum()
+
+
+def _project_to_so3(m: np.ndarray) -> np.ndarray:
+    """Closest proper rotation (Frobenius) to ``m``: U diag(1, 1, det(U V^T)) V^T."""
+    u, _, vt = np.linalg.svd(m)
+    return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt)) or 1.0]) @ vt
+
+
+def _translation(rotation, robot_points, sensor_points, w) -> np.ndarray:
+    """Eq 19: τ = ḡ − Ω t̄ with (weighted) centroids ḡ, t̄ [m]."""
+    return w @ sensor_points - rotation @ (w @ robot_points)
+
+
+def register_points(robot_points, sensor_points, weights=None) -> Registration:
+    """Registration 1: Ω by the SVD method of Arun et al. (1987), τ by eq 19.
+
+    Args:
+        robot_points: (K, 3) points t_k in robot-base coordinates [m], K >= 3.
+        sensor_points: (K, 3) the same points g_k measured by the sensor [m].
+        weights: optional (K,) non-negative weights (used for centroids and Ω).
+
+    Returns:
+        The proper rotation Ω and τ minimising Σ w_k ‖g_k − Ω t_k − τ‖². If the
+        unconstrained optimum is a reflection (det = −1) the best proper rotation is
+        returned (Arun's det correction).
+
+    Raises:
+        CalibrationError: fewer than 3 points, mismatched shapes, NaN, bad weights,
+            or a collinear point set (rank < 2) that leaves Ω undetermined.
+    """
+    t = checked_array(robot_points, (3,), "robot_points", 3)
+    g = checked_array(sensor_points, (3,), "sensor_points", 3)
+    if len(t) != len(g):
+        raise CalibrationError(f"robot_points ({len(t)}) and sensor_points ({len(g)}) differ in number")
+    w = _weights(weights, len(t))
+    tc, gc = t - w @ t, g - w @ g
+    for pts, name in ((tc, "robot_points"), (gc, "sensor_points")):
+        s = np.linalg.svd(pts * np.sqrt(w)[:, None], compute_uv=False)
+        if s[1] <= 1e-9 * max(s[0], 1e-300):
+            raise CalibrationError(f"{name} are collinear or coincident (rank < 2): rotation undetermined")
+    u, _, vt = np.linalg.svd((tc * w[:, None]).T @ gc)  # H = Σ w t_k g_k^T = U S V^T
+    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return Registration(rotation, _translation(rotation, t, g, w))
+
+
+def mean_rotation(rotations, weights=None, tol=1e-14, max_iter=100) -> np.ndarray:
+    """Riemannian (geodesic L2) mean of rotations, Moakher (2002).
+
+    Minimises Σ w_k ‖log(Ω^T M_k)‖² by the fixed-point iteration
+    Ω ← Ω exp(Σ w_k log(Ω^T M_k)), started at the projected arithmetic mean.
+
+    Args:
+        rotations: (K, 3, 3) proper rotations M_k, K >= 1.
+        weights: optional (K,) non-negative weights.
+        tol: stop when the update angle [rad] is below this.
+        max_iter: iteration limit.
+
+    Returns:
+        (3, 3) proper rotation Ω.
+
+    Raises:
+        CalibrationError: bad input, or no convergence (rotations too dispersed).
+    """
+    m = checked_rotations(rotations, "rotations")
+    w = _weights(weights, len(m))
+    omega = _project_to_so3(np.einsum("k,kij->ij", w, m))
+    step = np.inf
+    for _ in range(max_iter):
+        delta = w @ Rotation.from_matrix(omega.T @ m).as_rotvec()  # Σ w_k log(Ωᵀ M_k), batched
+        omega = _project_to_so3(omega @ pin.exp3(delta))
+        previous, step = step, float(np.linalg.norm(delta))
+        if step <= tol or (step < 1e-12 and step >= previous):  # converged to rounding level
+            return omega
+    raise CalibrationError(f"mean rotation did not converge in {max_iter} iterations (last step {step:.3g} rad)")
+
+
+def register_orientations(robot_rotations, sensor_rotations, robot_points, sensor_points) -> Registration:
+    """Registration 2: Ω = Riemannian mean of G_k R_k^T (Moakher 2002), τ by eq 19.
+
+    Args:
+        robot_rotations: (K, 3, 3) model orientations R_k in the robot base.
+        sensor_rotations: (K, 3, 3) measured orientations G_k in the sensor frame.
+        robot_points: (L, 3) points t_l in robot-base coordinates [m], L >= 3.
+        sensor_points: (L, 3) the same points g_l measured by the sensor [m].
+
+    Raises:
+        CalibrationError: mismatched shapes or counts, fewer than 3 points, NaN,
+            non-rotation matrices.
+    """
+    r = checked_rotations(robot_rotations, "robot_rotations")
+    g_rot = checked_rotations(sensor_rotations, "sensor_rotations")
+    if len(r) != len(g_rot):
+        raise CalibrationError(f"robot_rotations ({len(r)}) and sensor_rotations ({len(g_rot)}) differ in number")
+    t = checked_array(robot_points, (3,), "robot_points", 3)
+    g = checked_array(sensor_points, (3,), "sensor_points", 3)
+    if len(t) != len(g):
+        raise CalibrationError(f"robot_points ({len(t)}) and sensor_points ({len(g)}) differ in number")
+    rotation = mean_rotation(g_rot @ r.transpose(0, 2, 1))
+    return Registration(rotation, _translation(rotation, t, g, np.full(len(t), 1.0 / len(t))))

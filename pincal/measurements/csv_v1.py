@@ -1,0 +1,304 @@
+"""Measurement files (CSV format v1): read, validate and write.
+
+Format v1 has one row per robot configuration and these columns:
+
+* one column per joint, named exactly as the URDF joint: radians for revolute and
+  continuous joints, metres for prismatic joints;
+* the target position in the sensor frame, ``x,y,z`` [m], or several points of
+  one rigid target, ``x1,y1,z1,x2,y2,z2,...`` [m] (numbered 1..P, full triplets);
+* optionally the target orientation in the sensor frame, ``qx,qy,qz,qw`` (unit
+  quaternion, scalar last as in :class:`scipy.spatial.transform.Rotation`);
+* optionally ``role``: ``cpa``, ``calibration`` (default, also for an empty cell)
+  or ``validation``;
+* any other column is an extra: kept when numeric, ignored otherwise.
+
+Every problem raises :class:`~pincal.errors.MeasurementError` with a one-line
+message naming the file and, where relevant, the line (the header is line 1) and
+the column. Soft problems (joint limits, ignored columns) are returned as notes:
+this module never prints.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass
+from typing import Literal, Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pincal.errors import MeasurementError
+from pincal.measurements.data import (
+    POSITION_COLUMN_RE,
+    DEFAULT_ROLE,
+    JOINT_SANITY,
+    QUAT_COLUMNS,
+    ROLE_COLUMN,
+    ROLES,
+    JointSpec,
+    MeasurementSet,
+    is_reserved,
+)
+
+JointKind = Literal["revolute", "continuous", "prismatic"]
+
+
+QUAT_NORM_TOL = 1e-3
+#: Largest plausible |target coordinate| [m]; above it the file is likely in mm.
+MAX_POSITION = 20.0
+
+
+@dataclass(frozen=True)
+class _Table:
+    """Raw CSV cells: stripped header names, data rows and their line numbers."""
+
+    source: str
+    names: tuple[str, ...]
+    rows: list[list[str]]
+    lines: list[int]
+
+    def error(self, message: str, line: int | None = None, column: str | None = None) -> MeasurementError:
+        """Build a one-line error naming the file and, if given, the line and column."""
+        where = self.source
+        if line is not None:
+            where += f": line {line}"
+        if column is not None:
+            where += f", column '{column}'" if line is not None else f": column '{column}'"
+        return MeasurementError(f"{where}: {message}")
+
+    def cells(self, name: str) -> list[str]:
+        """Stripped cells of column ``name``, one per data row."""
+        j = self.names.index(name)
+        return [row[j].strip() for row in self.rows]
+
+    def numbers(self, name: str) -> np.ndarray:
+        """Column ``name`` as finite floats; any other cell is an error."""
+        out = np.empty(len(self.rows))
+        for k, (text, line) in enumerate(zip(self.cells(name), self.lines)):
+            try:
+                out[k] = float(text)
+            except ValueError:
+                out[k] = math.nan
+            if not math.isfinite(out[k]):
+                bad = "empty cell" if not text else f"bad value {text!r}"
+                raise self.error(f"{bad}; expected a finite number", line, name)
+        return out
+
+    def matrix(self, names: Sequence[str]) -> np.ndarray:
+        """Columns ``names`` as a (K, len(names)) float array."""
+        out = np.empty((len(self.rows), len(names)))
+        for i, name in enumerate(names):
+            out[:, i] = self.numbers(name)
+        return out
+
+    def check_magnitude(self, name: str, values: np.ndarray, limit: float, found: str, expected: str) -> None:
+        """Reject column ``name`` if a value exceeds ``limit`` in magnitude (a unit mistake)."""
+        bad = np.flatnonzero(np.abs(values) > limit)
+        if bad.size:
+            raise self.error(
+                f"value {values[bad[0]]:g} looks like {found}; pincal expects {expected} "
+                f"(|value| > {limit:g} {expected}); convert the column", self.lines[bad[0]], name)
+
+
+def _read_table(path: str | os.PathLike, source: str) -> _Table:
+    """Read the CSV cells; reject unreadable, empty or ragged files."""
+    records: list[tuple[int, list[str]]] = []
+    reader = None
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as handle:
+            reader = csv.reader(handle)
+            records = [(reader.line_num, row) for row in reader if row]
+    except FileNotFoundError:
+        raise MeasurementError(f"{source}: file not found; check the path") from None
+    except OSError as exc:
+        raise MeasurementError(f"{source}: cannot read file ({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise MeasurementError(f"{source}: not a UTF-8 text file; save it as CSV text") from None
+    except csv.Error as exc:
+        line = getattr(reader, "line_num", 0)
+        raise MeasurementError(f"{source}: line {line}: malformed CSV ({exc}); fix or delete the line") from None
+    if not records:
+        raise MeasurementError(f"{source}: file is empty; expected a header line and one row per configuration")
+    (header_line, header), data = records[0], records[1:]
+    table = _Table(source, tuple(h.strip() for h in header), [r for _, r in data], [n for n, _ in data])
+    for i, name in enumerate(table.names, start=1):
+        if not name:
+            raise table.error(f"header column {i} has no name; name it or delete the column", header_line)
+    duplicates = sorted({n for n in table.names if table.names.count(n) > 1})
+    if duplicates:
+        raise table.error(f"duplicate column(s) {', '.join(duplicates)}; keep one of each", header_line)
+    if not data:
+        raise table.error("header only, no data rows; add one row per robot configuration")
+    for line, row in data:
+        if len(row) != len(header):
+            raise table.error(
+                f"{len(row)} fields but the header has {len(header)}; give one value per column", line)
+    return table
+
+
+def _point_columns(table: _Table, joint_names: Sequence[str]) -> list[tuple[str, str, str]]:
+    """Names of the x,y,z columns of each target point, point 1 first."""
+    axes: dict[int | None, set[str]] = {}
+    for name in table.names:
+        match = POSITION_COLUMN_RE.fullmatch(name)
+        if match and name not in joint_names:
+            index = None if match[2] is None else int(match[2])
+            axes.setdefault(index, set()).add(match[1])
+    if not axes:
+        raise table.error("no target position columns; expected x,y,z (one point) "
+                          "or x1,y1,z1,x2,y2,z2,... (several points), in metres")
+    if None in axes and len(axes) > 1:
+        raise table.error("both x,y,z and numbered x1,y1,z1,... columns; keep one form (ambiguous)")
+    for index, present in axes.items():
+        suffix = "" if index is None else str(index)
+        missing = [f"{a}{suffix}" for a in "xyz" if a not in present]
+        if missing:
+            raise table.error(f"incomplete point columns: missing {','.join(missing)}; "
+                              f"each point needs x{suffix},y{suffix},z{suffix}")
+    if None in axes:
+        return [("x", "y", "z")]
+    if sorted(axes) != list(range(1, len(axes) + 1)):
+        raise table.error(f"point columns numbered {sorted(axes)}; number them 1..P without gaps")
+    return [(f"x{i}", f"y{i}", f"z{i}") for i in range(1, len(axes) + 1)]
+
+
+def _read_rotations(table: _Table) -> np.ndarray | None:
+    """Target orientations from qx,qy,qz,qw, normalised, as (K, 3, 3); None if absent."""
+    present = [c for c in QUAT_COLUMNS if c in table.names]
+    if not present:
+        return None
+    if len(present) < len(QUAT_COLUMNS):
+        missing = [c for c in QUAT_COLUMNS if c not in present]
+        raise table.error(f"partial orientation columns: missing {','.join(missing)}; "
+                          "give all of qx,qy,qz,qw or none")
+    quats = table.matrix(QUAT_COLUMNS)
+    norms = np.linalg.norm(quats, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOL)
+    if bad.size:
+        raise table.error(f"quaternion qx,qy,qz,qw has norm {norms[bad[0]]:.6g}; "
+                          f"expected a unit quaternion (within {QUAT_NORM_TOL:g})", table.lines[bad[0]])
+    return Rotation.from_quat(quats / norms[:, None]).as_matrix()
+
+
+def _read_roles(table: _Table) -> np.ndarray:
+    """The role of each row; ``calibration`` when the column or the cell is empty."""
+    if ROLE_COLUMN not in table.names:
+        return np.full(len(table.rows), DEFAULT_ROLE, dtype=object)
+    roles = np.empty(len(table.rows), dtype=object)
+    for k, (text, line) in enumerate(zip(table.cells(ROLE_COLUMN), table.lines)):
+        roles[k] = text.lower() or DEFAULT_ROLE
+        if roles[k] not in ROLES:
+            raise table.error(f"unknown role {text!r}; allowed: {', '.join(ROLES)} "
+                              f"(empty means {DEFAULT_ROLE})", line, ROLE_COLUMN)
+    return roles
+
+
+def _read_extras(table: _Table, names: Sequence[str]) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Numeric extra columns (empty cells become NaN) and the names of the ignored ones."""
+    kept: dict[str, np.ndarray] = {}
+    ignored: list[str] = []
+    for name in names:
+        cells = table.cells(name)
+        try:
+            values = [float(c) if c else math.nan for c in cells]
+        except ValueError:
+            values = None
+        if values is None or not any(cells):
+            ignored.append(name)
+        else:
+            kept[name] = np.array(values)
+    return kept, ignored
+
+
+def _limit_notes(table: _Table, q: np.ndarray, joints: Sequence[JointSpec]) -> list[str]:
+    """One note per joint with readings outside its limits."""
+    notes = []
+    for n, joint in enumerate(joints):
+        outside = np.flatnonzero((q[:, n] < joint.lower) | (q[:, n] > joint.upper))
+        if outside.size:
+            k, unit = outside[0], "m" if joint.kind == "prismatic" else "rad"
+            notes.append(
+                f"{table.source}: joint '{joint.name}' is outside its limits [{joint.lower:.6g}, "
+                f"{joint.upper:.6g}] {unit} in {outside.size} of {len(q)} rows; "
+                f"first at line {table.lines[k]}: {q[k, n]:.6g} {unit}")
+    return notes
+
+
+def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> tuple[MeasurementSet, list[str]]:
+    """Read and validate a measurement file (format v1).
+
+    Args:
+        path: CSV file.
+        joints: the joints the rows must provide, in the order of the returned ``q``.
+
+    Returns:
+        The measurement set and notes (joint limits, ignored or extra columns) for
+        the caller to print.
+
+    Raises:
+        MeasurementError: naming the file, line and column of the first problem.
+    """
+    table = _read_table(path, str(path))
+    joint_names = [j.name for j in joints]
+    missing = [n for n in joint_names if n not in table.names]
+    if missing:
+        hint = "; is the file comma-separated?" if len(table.names) == 1 else ""
+        raise table.error(f"missing joint column(s) {', '.join(missing)}; the URDF expects "
+                          f"{', '.join(joint_names)}{hint}")
+    point_names = _point_columns(table, joint_names)
+    q = table.matrix(joint_names)
+    for n, joint in enumerate(joints):
+        table.check_magnitude(joint.name, q[:, n], *JOINT_SANITY[joint.kind])
+    points = table.matrix([c for triplet in point_names for c in triplet])
+    for i, name in enumerate(c for triplet in point_names for c in triplet):
+        table.check_magnitude(name, points[:, i], MAX_POSITION, "millimetres", "metres")
+    rotations = _read_rotations(table)
+    roles = _read_roles(table)
+    extra, ignored = _read_extras(table, [n for n in table.names if not is_reserved(n, joint_names)])
+    notes = _limit_notes(table, q, joints)
+    if ignored:
+        notes.append(f"{table.source}: ignored non-numeric column(s): {', '.join(ignored)}")
+    if extra:
+        notes.append(f"{table.source}: kept numeric extra column(s): {', '.join(extra)}")
+    data = MeasurementSet(tuple(joint_names), q, points.reshape(len(q), len(point_names), 3),
+                          rotations, roles, np.array(table.lines), extra, table.source)
+    return data, notes
+
+
+def write_measurements(path: str | os.PathLike, data: MeasurementSet) -> None:
+    """Write ``data`` in format v1, exactly readable back by :func:`read_measurements`.
+
+    Columns: joints, ``x,y,z`` (one point) or ``x1,y1,z1,...``, ``qx,qy,qz,qw`` if
+    orientations were measured, ``role``, then the extras. Floats are written with
+    ``repr`` (shortest exact form), so q, points and extras round-trip bit for bit
+    and rotations to ~1e-15.
+
+    Raises:
+        MeasurementError: if the file cannot be written.
+    """
+    p = data.n_points
+    point_names = ["x", "y", "z"] if p == 1 else [f"{a}{i}" for i in range(1, p + 1) for a in "xyz"]
+    numeric = [data.q, data.points.reshape(data.n_rows, 3 * p)]
+    header = [*data.joint_names, *point_names]
+    if data.rotations is not None and data.n_rows:
+        numeric.append(Rotation.from_matrix(data.rotations).as_quat())
+        header += QUAT_COLUMNS
+    header.append(ROLE_COLUMN)
+    header += list(data.extra)
+    numbers = np.hstack(numeric)
+    extras = np.column_stack([data.extra[n] for n in data.extra]) if data.extra else np.empty((data.n_rows, 0))
+    try:
+        with open(path, "w", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(header)
+            for k in range(data.n_rows):
+                writer.writerow([*map(_format, numbers[k]), data.roles[k], *map(_format, extras[k])])
+    except OSError as exc:
+        raise MeasurementError(f"{path}: cannot write file ({exc.strerror or exc})") from None
+
+
+def _format(value: float) -> str:
+    """Shortest text that reads back as exactly ``value``."""
+    return repr(float(value))

@@ -1,0 +1,161 @@
+"""Measurements in memory: the joint specification and one set of rows (CSV v1 in :mod:`pincal.measurements.csv_v1`)."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from pincal.errors import MeasurementError, ModelError
+
+ROLES = ("cpa", "calibration", "validation")
+DEFAULT_ROLE = "calibration"
+ROLE_COLUMN = "role"
+QUAT_COLUMNS = ("qx", "qy", "qz", "qw")
+
+
+#: Largest plausible |joint value| per kind [rad or m], with the unit mistake it hints at.
+JOINT_SANITY = {
+    "revolute": (2 * math.pi + 0.5, "degrees", "radians"),
+    "continuous": (100.0, "degrees", "radians"),
+    "prismatic": (5.0, "millimetres", "metres"),
+}
+POSITION_COLUMN_RE = re.compile(r"([xyz])(0|[1-9][0-9]*)?")
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One joint the data must provide.
+
+    Attributes:
+        name: URDF joint name, also the CSV column name.
+        kind: ``"revolute"``, ``"continuous"`` or ``"prismatic"``.
+        lower: lower limit [rad or m]; ``-inf`` when unlimited.
+        upper: upper limit [rad or m]; ``inf`` when unlimited.
+    """
+
+    name: str
+    kind: str
+    lower: float = -math.inf
+    upper: float = math.inf
+
+    def __post_init__(self) -> None:
+        if self.kind not in JOINT_SANITY:
+            raise ModelError(
+                f"joint '{self.name}' has kind '{self.kind}'; pincal measures only "
+                f"{', '.join(JOINT_SANITY)} joints"
+            )
+
+
+def _frozen(values, dtype) -> np.ndarray:
+    """Return a read-only copy of ``values`` as an array of ``dtype``."""
+    out = np.array(values, dtype=dtype, copy=True)
+    out.flags.writeable = False
+    return out
+
+
+def is_reserved(name: str, joint_names: Sequence[str]) -> bool:
+    """Whether ``name`` is a column the format gives a meaning to (so not an extra)."""
+    return (name in joint_names or name in QUAT_COLUMNS or name == ROLE_COLUMN
+            or POSITION_COLUMN_RE.fullmatch(name) is not None)
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementSet:
+    """K measured robot configurations; arrays are read-only copies.
+
+    Attributes:
+        joint_names: N joint names, the column order of ``q``.
+        q: (K, N) joint readings [rad for revolute/continuous, m for prismatic].
+        points: (K, P, 3) target points in the sensor frame [m].
+        rotations: (K, 3, 3) target orientations in the sensor frame, or None.
+        roles: (K,) object array of ``"cpa"``, ``"calibration"`` or ``"validation"``.
+        lines: (K,) 1-based line numbers in the source file (header is line 1).
+        extra: numeric extra columns by name, each (K,).
+        source: file path the data came from, or ``"<memory>"``.
+    """
+
+    joint_names: tuple[str, ...]
+    q: np.ndarray
+    points: np.ndarray
+    rotations: np.ndarray | None
+    roles: np.ndarray
+    lines: np.ndarray
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        names = tuple(str(n) for n in self.joint_names)
+        values = {
+            "joint_names": names,
+            "q": _frozen(self.q, float),
+            "points": _frozen(self.points, float),
+            "rotations": None if self.rotations is None else _frozen(self.rotations, float),
+            "roles": _frozen(self.roles, object),
+            "lines": _frozen(self.lines, np.int64),
+            "extra": MappingProxyType({str(k): _frozen(v, float) for k, v in self.extra.items()}),
+        }
+        for key, value in values.items():
+            object.__setattr__(self, key, value)
+        k = self.q.shape[0] if self.q.ndim == 2 else -1
+        problems = [
+            (self.q.shape != (k, len(names)), f"q has shape {self.q.shape}, expected (K, {len(names)})"),
+            (self.points.ndim != 3 or self.points.shape[0] != k or self.points.shape[2] != 3
+             or self.points.shape[1] < 1, f"points has shape {self.points.shape}, expected ({k}, P>=1, 3)"),
+            (self.rotations is not None and self.rotations.shape != (k, 3, 3),
+             f"rotations has shape {getattr(self.rotations, 'shape', None)}, expected ({k}, 3, 3)"),
+            (self.roles.shape != (k,), f"roles has shape {self.roles.shape}, expected ({k},)"),
+            (self.lines.shape != (k,), f"lines has shape {self.lines.shape}, expected ({k},)"),
+            (len(set(names)) != len(names), "joint names are not unique"),
+            (not set(self.roles.ravel().tolist()) <= set(ROLES), f"roles must be among {', '.join(ROLES)}"),
+        ]
+        for name, column in self.extra.items():
+            problems.append((column.shape != (k,), f"extra '{name}' has shape {column.shape}, expected ({k},)"))
+            problems.append((is_reserved(name, names), f"extra column name '{name}' is reserved"))
+        for failed, message in problems:
+            if failed:
+                raise MeasurementError(f"{self.source}: invalid measurement set: {message}")
+
+    @property
+    def n_rows(self) -> int:
+        """Number K of configurations."""
+        return int(self.q.shape[0])
+
+    @property
+    def n_points(self) -> int:
+        """Number P of target points per configuration."""
+        return int(self.points.shape[1])
+
+    @property
+    def has_orientation(self) -> bool:
+        """Whether target orientations were measured."""
+        return self.rotations is not None
+
+    def select(self, mask: np.ndarray) -> MeasurementSet:
+        """Return the rows picked by a boolean mask of shape (K,) or an index array."""
+        index = np.asarray(mask)
+        if index.dtype != bool:
+            index = index.astype(np.intp)
+        return MeasurementSet(
+            joint_names=self.joint_names,
+            q=self.q[index],
+            points=self.points[index],
+            rotations=None if self.rotations is None else self.rotations[index],
+            roles=self.roles[index],
+            lines=self.lines[index],
+            extra={name: column[index] for name, column in self.extra.items()},
+            source=self.source,
+        )
+
+    def with_role(self, *roles: str) -> MeasurementSet:
+        """Return the rows whose role is one of ``roles``, in file order."""
+        unknown = sorted(set(roles) - set(ROLES))
+        if unknown:
+            raise MeasurementError(
+                f"{self.source}: unknown role(s) {', '.join(unknown)}; allowed: {', '.join(ROLES)}"
+            )
+        return self.select(np.array([role in roles for role in self.roles], dtype=bool))

@@ -1,0 +1,7 @@
+"""The robot model: URDF and DH tables in and out, the Pinocchio chain, the
+parameterisations of its joint placements (DH, offsets, full), their analytic
+sensitivities, the effect catalogue (joint shifts and sensor terms), the sensor's
+registration and the corrected-URDF writer.
+
+Imports :mod:`pincal.measurements.csv_v1`, :mod:`pincal.robots` and :mod:`pincal.errors` only.
+"""

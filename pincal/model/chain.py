@@ -1,0 +1,295 @@
+"""A serial kinematic chain of a URDF, evaluated with Pinocchio.
+
+:class:`KinematicChain` holds a Pinocchio model reduced to the joints between the
+URDF root and a tip link (every other joint locked at its neutral value), the
+tool (a fixed transform from the tip link to the measured target), and nothing
+else. Calibration changes the chain's joint placements in place
+(:meth:`KinematicChain.set_placements`); the model is never rebuilt inside a
+cost function.
+
+Frames are named by what they map: ``base_T_tip`` maps tip-link coordinates to
+URDF-root coordinates. Units: metres and radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from pincal.errors import ModelError
+from pincal.measurements.data import JointSpec
+
+_KINDS = {
+    "JointModelRX": "revolute",
+    "JointModelRY": "revolute",
+    "JointModelRZ": "revolute",
+    "JointModelRevoluteUnaligned": "revolute",
+    "JointModelRUBX": "continuous",
+    "JointModelRUBY": "continuous",
+    "JointModelRUBZ": "continuous",
+    "JointModelRevoluteUnboundedUnaligned": "continuous",
+    "JointModelPX": "prismatic",
+    "JointModelPY": "prismatic",
+    "JointModelPZ": "prismatic",
+    "JointModelPrismaticUnaligned": "prismatic",
+}
+
+_AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
+
+
+@dataclass(frozen=True)
+class ChainJoint:
+    """One actuated joint of the chain.
+
+    Attributes:
+        name: URDF joint name.
+        kind: ``revolute``, ``continuous`` or ``prismatic``.
+        axis: unit joint axis in the joint frame, shape (3,).
+        lower: lower position limit [rad or m] (``-inf`` if none).
+        upper: upper position limit [rad or m] (``inf`` if none).
+    """
+
+    name: str
+    kind: str
+    axis: np.ndarray
+    lower: float
+    upper: float
+
+    @property
+    def spec(self) -> JointSpec:
+        """The measurement reader's view of this joint."""
+        return JointSpec(self.name, self.kind, self.lower, self.upper)
+
+
+@dataclass(frozen=True)
+class ChainPoses:
+    """Forward kinematics of K configurations.
+
+    Attributes:
+        joint_rotations: world rotation of each joint frame after its motion, (K, N, 3, 3).
+        joint_positions: world position of each joint frame origin [m], (K, N, 3).
+        tool_rotations: world rotation of the tool frame, (K, 3, 3).
+        tool_positions: world position of the tool frame origin (the TCP) [m], (K, 3).
+    """
+
+    joint_rotations: np.ndarray
+    joint_positions: np.ndarray
+    tool_rotations: np.ndarray
+    tool_positions: np.ndarray
+
+
+def _joint_axis(joint: pin.JointModel) -> np.ndarray:
+    short = joint.shortname()
+    if short[-1] in _AXES and not short.endswith("Unaligned"):
+        return np.array(_AXES[short[-1]])
+    return np.asarray(joint.extract().axis, dtype=float).copy()
+
+
+class KinematicChain:
+    """The joints from a URDF's root to a tip link, with a tool on the tip.
+
+    Args:
+        model: Pinocchio model of the whole URDF.
+        tip_link: name of the link (Pinocchio body frame) at the end of the chain.
+        tool: ``tip_T_tool`` as a 4x4 homogeneous matrix [m] (identity if None).
+        source: where the model came from, for messages.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        tip_link: str,
+        tool: npt.ArrayLike | None = None,
+        source: str = "<model>",
+    ) -> None:
+        body = pin.FrameType.BODY
+        if not model.existFrame(tip_link, body):
+            links = sorted(f.name for f in model.frames if f.type == body)
+            raise ModelError(
+                f"{source}: no link named '{tip_link}'; links are: {', '.join(links)}"
+            )
+        full_tip = model.frames[model.getFrameId(tip_link, body)]
+        support = [j for j in model.supports[full_tip.parentJoint] if j != 0]
+        if not support:
+            raise ModelError(
+                f"{source}: no joint between the root and '{tip_link}'; give a --tip-link further down the chain"
+            )
+        for jid in support:
+            if model.joints[jid].shortname() not in _KINDS:
+                raise ModelError(
+                    f"{source}: joint '{model.names[jid]}' on the chain to '{tip_link}' is a "
+                    f"{model.joints[jid].shortname()}; pincal calibrates revolute, continuous "
+                    "and prismatic joints only"
+                )
+        chain_names = [model.names[j] for j in support]
+        locked = [j for j in range(1, model.njoints) if j not in support]
+        if locked:
+            model = pin.buildReducedModel(model, locked, pin.neutral(model))
+        self.model: pin.Model = model
+        self.data: pin.Data = model.createData()
+        self.source = source
+        self.tip_link = tip_link
+        self.joint_ids = tuple(model.getJointId(n) for n in chain_names)
+        self.tip_frame_id = model.getFrameId(tip_link, body)
+        if model.nq != len(chain_names) or model.nv != len(chain_names):
+            raise ModelError(f"{source}: the chain to '{tip_link}' is not a simple serial chain")
+        joints = []
+        for jid, name in zip(self.joint_ids, chain_names):
+            jm = model.joints[jid]
+            kind = _KINDS[jm.shortname()]
+            lower = float(model.lowerPositionLimit[jm.idx_q]) if kind != "continuous" else -np.inf
+            upper = float(model.upperPositionLimit[jm.idx_q]) if kind != "continuous" else np.inf
+            joints.append(ChainJoint(name, kind, _joint_axis(jm), lower, upper))
+        self.joints: tuple[ChainJoint, ...] = tuple(joints)
+        self._tool = np.eye(4) if tool is None else _checked_transform(tool, "tool")
+        self._continuous = [j.kind == "continuous" for j in self.joints]
+
+    @classmethod
+    def from_urdf(
+        cls, urdf_path: str | Path, tip_link: str, tool: npt.ArrayLike | None = None
+    ) -> "KinematicChain":
+        """Load ``urdf_path`` with Pinocchio and take the chain from its root to ``tip_link``."""
+        path = Path(urdf_path)
+        if not path.is_file():
+            raise ModelError(f"{path}: no such URDF file")
+        try:
+            model = pin.buildModelFromUrdf(str(path))
+        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
+            raise ModelError(f"{path}: Pinocchio cannot read this URDF ({exc})") from None
+        return cls(model, tip_link, tool=tool, source=str(path))
+
+    # --- names and sizes -------------------------------------------------
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joints)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    @property
+    def joint_specs(self) -> list[JointSpec]:
+        return [j.spec for j in self.joints]
+
+    @property
+    def root_link(self) -> str:
+        return self.model.frames[1].name if self.model.nframes > 1 else "universe"
+
+    # --- placements -----------------------------------------------------
+
+    @property
+    def tool(self) -> np.ndarray:
+        """``tip_T_tool`` (4, 4)."""
+        return self._tool.copy()
+
+    def set_tool(self, tip_T_tool: npt.ArrayLike) -> None:
+        self._tool = _checked_transform(tip_T_tool, "tool")
+
+    def placements(self) -> list[np.ndarray]:
+        """Current placements: N joint placements (``parent_T_joint`` at zero motion)
+        followed by the tip link's placement in the last joint frame; 4x4 each."""
+        out = [self.model.jointPlacements[j].homogeneous.copy() for j in self.joint_ids]
+        out.append(self.model.frames[self.tip_frame_id].placement.homogeneous.copy())
+        return out
+
+    def set_placements(self, placements: Sequence[np.ndarray]) -> None:
+        """Set the N joint placements and the tip placement (see :meth:`placements`)."""
+        if len(placements) != self.n_joints + 1:
+            raise ModelError(
+                f"expected {self.n_joints + 1} placements, got {len(placements)}"
+            )
+        for jid, placement in zip(self.joint_ids, placements[:-1]):
+            self.model.jointPlacements[jid] = pin.SE3(np.asarray(placement, dtype=float))
+        self.model.frames[self.tip_frame_id].placement = pin.SE3(
+            np.asarray(placements[-1], dtype=float)
+        )
+
+    # --- kinematics -----------------------------------------------------
+
+    def configurations(self, q: npt.ArrayLike) -> np.ndarray:
+        """Joint readings (K, N) → Pinocchio configurations (K, nq).
+
+        Continuous joints are stored by Pinocchio as (cos, sin); others as is.
+        """
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if q.shape[1] != self.n_joints:
+            raise ModelError(f"expected {self.n_joints} joint values per row, got {q.shape[1]}")
+        if not any(self._continuous):
+            return q
+        columns = []
+        for i, continuous in enumerate(self._continuous):
+            if continuous:
+                columns += [np.cos(q[:, i]), np.sin(q[:, i])]
+            else:
+                columns.append(q[:, i])
+        return np.column_stack(columns)
+
+    def poses(self, q: npt.ArrayLike) -> ChainPoses:
+        """Forward kinematics (Pinocchio) of K joint readings (K, N)."""
+        configurations = self.configurations(q)
+        k = configurations.shape[0]
+        n = self.n_joints
+        joint_rot = np.empty((k, n, 3, 3))
+        joint_pos = np.empty((k, n, 3))
+        tip_T_tool = pin.SE3(self._tool)
+        tool_placement = self.model.frames[self.tip_frame_id].placement * tip_T_tool
+        last = self.joint_ids[-1]
+        tool_rot = np.empty((k, 3, 3))
+        tool_pos = np.empty((k, 3))
+        model, data, oMi = self.model, self.data, self.data.oMi
+        for row in range(k):
+            pin.forwardKinematics(model, data, configurations[row])
+            for col, jid in enumerate(self.joint_ids):
+                placement = oMi[jid]
+                joint_rot[row, col] = placement.rotation
+                joint_pos[row, col] = placement.translation
+            tool = oMi[last] * tool_placement
+            tool_rot[row] = tool.rotation
+            tool_pos[row] = tool.translation
+        return ChainPoses(joint_rot, joint_pos, tool_rot, tool_pos)
+
+
+def points_in_base(
+    tool_positions: np.ndarray, tool_rotations: np.ndarray, points_in_tool: npt.ArrayLike
+) -> np.ndarray:
+    """World (URDF-root) positions of points fixed in the tool frame: t_k + R_k m_p.
+
+    Args:
+        tool_positions: (K, 3) [m]; tool_rotations: (K, 3, 3).
+        points_in_tool: (P, 3) [m].
+
+    Returns:
+        (K, P, 3) [m].
+    """
+    points = np.atleast_2d(np.asarray(points_in_tool, dtype=float))
+    return tool_positions[:, None, :] + np.einsum("kij,pj->kpi", tool_rotations, points)
+
+
+def _checked_transform(matrix: npt.ArrayLike, what: str) -> np.ndarray:
+    m = np.asarray(matrix, dtype=float)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ModelError(f"{what} must be a finite 4x4 homogeneous matrix")
+    rot = m[:3, :3]
+    if np.abs(rot @ rot.T - np.eye(3)).max() > 1e-9 or np.linalg.det(rot) < 0:
+        raise ModelError(f"{what} rotation is not a proper rotation matrix")
+    return m.copy()
+
+
+def pose_from_xyz_rpy(xyz: Sequence[float], rpy: Sequence[float]) -> np.ndarray:
+    """Homogeneous matrix from a URDF-style origin: ``xyz`` [m] and fixed-axis roll-pitch-yaw [rad]."""
+    out = np.eye(4)
+    out[:3, :3] = pin.rpy.rpyToMatrix(np.asarray(rpy, dtype=float))
+    out[:3, 3] = xyz
+    return out
+
+
+def xyz_rpy_from_pose(pose: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`pose_from_xyz_rpy`."""
+    m = np.asarray(pose, dtype=float)
+    return m[:3, 3].copy(), np.asarray(pin.rpy.matrixToRpy(m[:3, :3])).copy()

@@ -1,0 +1,393 @@
+"""Reading and writing URDF joint origins, everything else preserved.
+
+yourdfpy is the XML reader and writer: a URDF is loaded with it (no meshes, no
+scene graph, ``package://`` file names left untouched), the origins of the named
+joints are replaced in its model and the model is written back. Three
+post-processing steps on yourdfpy's output tree make the result faithful:
+
+* **Origins at full precision.** yourdfpy writes an origin as ``xyz``/``rpy``
+  strings computed by ``trimesh.transformations``; the replaced origins are
+  instead written with :func:`format_floats` (shortest round-trip ``repr``, i.e.
+  all 17 significant digits when needed) from a gimbal-safe RPY extraction
+  (:func:`rpy_from_matrix`), so that reading them back reproduces the matrix to
+  about 1e-15. Every origin that was *not* replaced (other joints, inertials,
+  visuals, collisions) gets its original attribute text back verbatim, so it is
+  bit-for-bit what the source said rather than yourdfpy's matrix→RPY round trip.
+* **What yourdfpy drops is put back.** yourdfpy 0.0.60 parses only ``<link>``,
+  ``<joint>`` and ``<material>`` under ``<robot>`` (so ``<transmission>``,
+  ``<gazebo>``, ``<ros2_control>`` ... are lost), its writer omits a joint's
+  ``<mimic>``, ``<calibration>`` and ``<safety_controller>``, and it keeps only the
+  attributes it models (e.g. panda's ``<dynamics D=.. K=.. mu_coulomb=..>`` lose
+  all but ``damping``/``friction``; ``<geometry name=..>`` loses its name). The
+  output tree is therefore merged with the source: for every element yourdfpy
+  writes (links and joints matched by name, their children by tag and position),
+  attributes it omitted are copied back, and children it does not model are
+  deep-copied back; top-level extras are appended after the materials in their
+  original order. Attributes of ``<robot>`` other than ``name`` are restored too.
+* **What yourdfpy adds is removed.** yourdfpy writes ``<axis xyz="1 0 0"/>`` for a
+  joint that had no ``<axis>`` (the URDF default); it is removed again.
+
+What is *not* preserved: XML comments (yourdfpy strips them), the interleaving of
+links/joints/extras (yourdfpy writes all links, then all joints, then materials;
+URDF semantics do not depend on order), unused namespace declarations such as
+``xmlns:xacro``, and the textual form of numbers outside origins (e.g. ``1e3``
+becomes ``1000.0``; the values are identical).
+
+Units: lengths in metres, angles in radians, 4x4 homogeneous matrices
+``parent_T_child`` as in the URDF ``<origin>`` element.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import numpy.typing as npt
+import yourdfpy
+from lxml import etree
+
+from pincal.errors import ModelError
+
+#: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
+#: proper rigid transform.
+RIGID_TOLERANCE = 1e-9
+
+
+# What yourdfpy models (and writes back) under each element; any other child found
+# in the source is copied back verbatim, and so is any attribute yourdfpy omits.
+_MODELLED_CHILDREN: dict[str, frozenset[str]] = {
+    "robot": frozenset({"link", "joint", "material"}),
+    "joint": frozenset({"parent", "child", "origin", "axis", "limit", "dynamics"}),
+    "link": frozenset({"inertial", "visual", "collision"}),
+    "inertial": frozenset({"origin", "mass", "inertia"}),
+    "visual": frozenset({"origin", "geometry", "material"}),
+    "collision": frozenset({"origin", "geometry"}),
+    "geometry": frozenset({"box", "cylinder", "sphere", "mesh"}),
+    "material": frozenset({"color", "texture"}),
+}
+# Top-level elements matched by name rather than by position.
+_NAMED_TOP_LEVEL = ("link", "joint")
+
+
+# --------------------------------------------------------------------------- numbers
+
+
+def format_floats(values: npt.ArrayLike) -> str:
+    """Space-separated shortest round-trip representation of ``values``.
+
+    ``repr(float)`` gives the shortest string that parses back to the same double
+    (at most 17 significant digits), so no precision is lost. ``-0.0`` is written
+    as ``0.0``.
+    """
+    return " ".join(repr(float(v) + 0.0) for v in np.asarray(values, dtype=float).ravel())
+
+
+def rpy_matrix(rpy: npt.ArrayLike) -> np.ndarray:
+    """URDF rotation ``Rz(yaw) · Ry(pitch) · Rx(roll)`` for ``rpy = (roll, pitch, yaw)`` [rad]."""
+    r, p, y = (float(v) for v in np.asarray(rpy, dtype=float).ravel())
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _wrap(angle: float) -> float:
+    """Angle [rad] wrapped into (-pi, pi]."""
+    wrapped = float(np.arctan2(np.sin(angle), np.cos(angle)))
+    return np.pi if wrapped == -np.pi else wrapped
+
+
+def rpy_from_matrix(rotation: npt.ArrayLike) -> np.ndarray:
+    """URDF ``(roll, pitch, yaw)`` [rad] of a rotation matrix, accurate near gimbal lock.
+
+    The closed-form extraction is ill-conditioned when ``cos(pitch)`` is small
+    (only ``roll ± yaw`` is then well determined); the initial guess uses that
+    combination and two to four Gauss–Newton steps on the body-frame rotation
+    error bring ``rpy_matrix(rpy)`` to within a few ulp of ``rotation``.
+
+    Args:
+        rotation: 3x3 rotation matrix (the top-left block of a 4x4 is accepted).
+
+    Returns:
+        ``(roll, pitch, yaw)`` with pitch in [-pi/2, pi/2] and roll, yaw in (-pi, pi].
+    """
+    R = np.asarray(rotation, dtype=float)[:3, :3]
+    h = float(np.hypot(R[0, 0], R[1, 0]))
+    pitch = float(np.arctan2(-R[2, 0], h))
+    # At (numerically) exact gimbal lock only roll -/+ yaw matters: put it all in roll.
+    yaw = float(np.arctan2(R[1, 0], R[0, 0])) if h > 4e-16 else 0.0
+    if h > 1e-3:
+        roll = float(np.arctan2(R[2, 1], R[2, 2]))
+    elif R[2, 0] < 0.0:  # pitch ~ +pi/2: R01 = sin(roll - yaw), R11 = cos(roll - yaw)
+        roll = yaw + float(np.arctan2(R[0, 1], R[1, 1]))
+    else:  # pitch ~ -pi/2: R01 = -sin(roll + yaw), R11 = cos(roll + yaw)
+        roll = float(np.arctan2(-R[0, 1], R[1, 1])) - yaw
+    rpy = np.array([_wrap(roll), pitch, _wrap(yaw)])
+    for _ in range(4):
+        err = rpy_matrix(rpy).T @ R
+        omega = 0.5 * np.array(
+            [err[2, 1] - err[1, 2], err[0, 2] - err[2, 0], err[1, 0] - err[0, 1]]
+        )
+        if np.max(np.abs(omega)) < 1e-17:
+            break
+        r, p = rpy[0], rpy[1]
+        # Body-frame angular velocity per unit (roll, pitch, yaw) rate.
+        jac = np.array(
+            [
+                [1.0, 0.0, -np.sin(p)],
+                [0.0, np.cos(r), np.cos(p) * np.sin(r)],
+                [0.0, -np.sin(r), np.cos(p) * np.cos(r)],
+            ]
+        )
+        rpy = rpy + np.linalg.lstsq(jac, omega, rcond=1e-10)[0]
+    rpy = np.array([_wrap(rpy[0]), rpy[1], _wrap(rpy[2])])
+    # Angles of order 1e-17 are refinement noise: zero them when that costs nothing.
+    tidy = np.where(np.abs(rpy) < 1e-15, 0.0, rpy)
+    if np.max(np.abs(rpy_matrix(tidy) - R)) <= np.max(np.abs(rpy_matrix(rpy) - R)) + 1e-16:
+        rpy = tidy
+    return rpy + 0.0
+
+
+def origin_attributes(matrix: npt.ArrayLike) -> dict[str, str]:
+    """``{"xyz": ..., "rpy": ...}`` attribute strings of a 4x4 origin at full precision."""
+    T = np.asarray(matrix, dtype=float)
+    return {"xyz": format_floats(T[:3, 3]), "rpy": format_floats(rpy_from_matrix(T[:3, :3]))}
+
+
+def check_rigid_transform(matrix: npt.ArrayLike, what: str) -> np.ndarray:
+    """Return ``matrix`` as a float (4, 4) array or raise :class:`ModelError`.
+
+    A proper rigid transform is finite, has the homogeneous last row
+    ``[0, 0, 0, 1]`` and a rotation block with ``R^T R = I`` and ``det R = +1``
+    (both to :data:`RIGID_TOLERANCE`).
+
+    Args:
+        matrix: candidate homogeneous transform.
+        what: name used in the error message (e.g. ``"origin of joint 'j1'"``).
+    """
+    try:
+        T = np.array(matrix, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{what} is not a numeric 4x4 matrix: {exc}") from None
+    if T.shape != (4, 4):
+        raise ModelError(f"{what} must be a 4x4 homogeneous matrix, got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise ModelError(f"{what} has non-finite entries")
+    if np.max(np.abs(T[3] - (0.0, 0.0, 0.0, 1.0))) > RIGID_TOLERANCE:
+        raise ModelError(f"{what} is not a rigid transform: last row is {T[3].tolist()}, not [0, 0, 0, 1]")
+    R = T[:3, :3]
+    ortho = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if ortho > RIGID_TOLERANCE:
+        raise ModelError(f"{what} is not a rigid transform: rotation block is not orthonormal (|R^T R - I| = {ortho:.3g})")
+    if np.linalg.det(R) < 0.0:
+        raise ModelError(f"{what} is not a proper rigid transform: rotation block is a reflection (det = -1)")
+    return T
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _as_path(path: str | os.PathLike[str], role: str) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise ModelError(f"{role} URDF {p} does not exist or is not a file")
+    return p
+
+
+def load_urdf(urdf_path: str | os.PathLike[str]) -> yourdfpy.URDF:
+    """Load a URDF with yourdfpy without touching meshes.
+
+    No scene graph is built and no mesh is loaded; mesh file names (including
+    unresolvable ``package://`` ones) are kept exactly as written.
+
+    Raises:
+        ModelError: if the file does not exist or cannot be parsed.
+    """
+    path = _as_path(urdf_path, "input")
+    try:
+        return yourdfpy.URDF.load(
+            str(path),
+            build_scene_graph=False,
+            build_collision_scene_graph=False,
+            load_meshes=False,
+            load_collision_meshes=False,
+            filename_handler=yourdfpy.filename_handler_null,
+        )
+    except Exception as exc:  # yourdfpy raises assorted exceptions on bad XML
+        raise ModelError(f"cannot read URDF {path}: {exc}") from None
+
+
+def read_joint_origins(urdf_path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """Origins of all joints of a URDF.
+
+    Args:
+        urdf_path: URDF file.
+
+    Returns:
+        ``{joint name: 4x4 parent_T_child origin}`` [m, rad]; a joint without an
+        ``<origin>`` element has the identity.
+    """
+    urdf = load_urdf(urdf_path)
+    return {
+        joint.name: (np.eye(4) if joint.origin is None else np.array(joint.origin, dtype=float))
+        for joint in urdf.robot.joints
+    }
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name the same file (symlinks and ``..`` resolved)."""
+    if b.exists():
+        try:
+            return os.path.samefile(a, b)
+        except OSError:
+            pass
+    return a.resolve() == b.resolve()
+
+
+def _parse_source_tree(path: Path) -> etree._Element:
+    parser = etree.XMLParser(remove_blank_text=True, remove_comments=True)
+    try:
+        return etree.parse(str(path), parser).getroot()
+    except etree.XMLSyntaxError as exc:
+        raise ModelError(f"cannot parse URDF {path}: {exc}") from None
+
+
+def _is_element(node: object) -> bool:
+    return isinstance(node, etree._Element) and isinstance(node.tag, str)
+
+
+def _elements(parent: etree._Element, tag: str) -> list[etree._Element]:
+    return [child for child in parent if _is_element(child) and child.tag == tag]
+
+
+def _merge(src: etree._Element, out: etree._Element) -> None:
+    """Make ``out`` (yourdfpy's rendering of ``src``) carry everything ``src`` has.
+
+    Attributes missing from ``out`` are copied; children yourdfpy models are
+    matched by tag and position and merged recursively (``<origin>`` gets the
+    source's attribute text verbatim); other children are deep-copied.
+    """
+    for key, value in src.attrib.items():
+        if key not in out.attrib:
+            out.set(key, value)
+    if src.tag == "origin":
+        out.attrib.clear()
+        out.attrib.update(dict(src.attrib))
+        return
+    modelled = _MODELLED_CHILDREN.get(src.tag, frozenset())
+    seen: dict[str, int] = {}
+    for child in src:
+        if not _is_element(child):
+            continue
+        if child.tag not in modelled:
+            out.append(copy.deepcopy(child))
+            continue
+        index = seen.get(child.tag, 0)
+        seen[child.tag] = index + 1
+        candidates = _elements(out, child.tag)
+        if index < len(candidates):
+            _merge(child, candidates[index])
+
+
+def _postprocess(
+    src_root: etree._Element, out_root: etree._Element, replaced: Mapping[str, np.ndarray]
+) -> None:
+    """Fix yourdfpy's output tree in place, see the module docstring."""
+    for key, value in src_root.attrib.items():
+        if key not in out_root.attrib:
+            out_root.set(key, value)
+    for tag in _NAMED_TOP_LEVEL:
+        out_by_name = {e.get("name"): e for e in _elements(out_root, tag)}
+        for src_el in _elements(src_root, tag):
+            out_el = out_by_name.get(src_el.get("name"))
+            if out_el is not None:
+                _merge(src_el, out_el)
+    for src_el, out_el in zip(_elements(src_root, "material"), _elements(out_root, "material")):
+        _merge(src_el, out_el)
+    for child in src_root:
+        if _is_element(child) and child.tag not in _MODELLED_CHILDREN["robot"]:
+            out_root.append(copy.deepcopy(child))
+
+    out_joints = {e.get("name"): e for e in _elements(out_root, "joint")}
+    src_joints = {e.get("name"): e for e in _elements(src_root, "joint")}
+    for name, out_joint in out_joints.items():
+        src_joint = src_joints.get(name)
+        if src_joint is not None and src_joint.find("axis") is None:
+            for axis in _elements(out_joint, "axis"):
+                out_joint.remove(axis)
+        if name in replaced:
+            origins = _elements(out_joint, "origin")
+            origin = origins[0] if origins else etree.SubElement(out_joint, "origin")
+            origin.attrib.clear()
+            origin.attrib.update(origin_attributes(replaced[name]))
+
+
+def _xml_comment(text: str) -> etree._Comment:
+    """An XML comment holding ``text``; ``--`` (illegal in comments) becomes ``- -``."""
+    body = text.rstrip()
+    while "--" in body:
+        body = body.replace("--", "- -")
+    return etree.Comment(f" {body} ")
+
+
+def write_urdf_with_origins(
+    source: str | os.PathLike[str],
+    destination: str | os.PathLike[str],
+    origins: Mapping[str, npt.ArrayLike],
+    comment: str | None = None,
+) -> None:
+    """Copy a URDF, replacing the origins of the named joints.
+
+    Everything else is preserved (see the module docstring for the exact
+    guarantees and for what yourdfpy cannot keep: comments and element order).
+
+    Args:
+        source: input URDF; never modified.
+        destination: output URDF; must not be the same file as ``source``.
+        origins: ``{joint name: 4x4 parent_T_child}`` [m]; each must be a proper
+            rigid transform.
+        comment: optional text written as an XML comment just before ``<robot>``
+            (e.g. provenance); multi-line text is kept.
+
+    Raises:
+        ModelError: the destination is the source file, a named joint does not
+            exist (the message lists the joints that do), an origin is not a
+            proper rigid transform, or the source cannot be read.
+    """
+    src_path = _as_path(source, "input")
+    dst_path = Path(destination)
+    if same_file(src_path, dst_path):
+        raise ModelError(f"refusing to write {dst_path}: it is the input URDF; never overwrite the input")
+    checked = {
+        str(name): check_rigid_transform(matrix, f"origin of joint '{name}'")
+        for name, matrix in origins.items()
+    }
+    urdf = load_urdf(src_path)
+    joint_map = {joint.name: joint for joint in urdf.robot.joints}
+    unknown = [name for name in checked if name not in joint_map]
+    if unknown:
+        raise ModelError(
+            f"joint(s) {', '.join(repr(n) for n in unknown)} not found in {src_path}; "
+            f"its joints are: {', '.join(joint_map)}"
+        )
+    for name, matrix in checked.items():
+        joint_map[name].origin = matrix.copy()
+
+    out_root = urdf.write_xml().getroot()
+    _postprocess(_parse_source_tree(src_path), out_root, checked)
+    if comment:
+        out_root.addprevious(_xml_comment(comment))
+    tree = out_root.getroottree()
+    if not dst_path.parent.exists():
+        raise ModelError(f"cannot write {dst_path}: directory {dst_path.parent} does not exist")
+    tree.write(str(dst_path), xml_declaration=True, encoding="utf-8", pretty_print=True)

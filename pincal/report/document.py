@@ -1,0 +1,323 @@
+"""REPORT.json: what a calibration found, in a form scripts can rely on.
+
+Keys promised to users (never renamed, only extended):
+
+* ``method``; ``parameters``: list of {name, joint, unit, nominal, calibrated,
+  std, status} — ``calibrated`` and ``std`` are null for parameters the data
+  cannot determine, and ``status`` says why;
+* ``registration.position``: Registration 1 as ``rotation_xyzw`` and
+  ``translation_m``, mapping URDF-root coordinates to sensor coordinates
+  (g ≈ Omega t + tau); ``registration.orientation``: Registration 2 likewise;
+* ``tool``: ``parent_link``, ``xyz_m``, ``rpy_rad`` (pose of the target in the
+  parent link) and, for estimated targets, ``points_m`` (the target's points in
+  the parent link frame, in marker-column order);
+* levels registration/offsets/full add ``level``, ``identifiability`` (rank,
+  condition number, the selection criterion and its value, what was dropped and
+  what absorbs it, correlated pairs), ``noise``, ``outliers``;
+* ``fit``: stages, row counts and the errors (eq 24) on the calibration rows.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pincal._version import __version__
+from pincal.errors import PincalError
+from pincal.fit.metrics import PoseErrors
+from pincal.fit.paper_methods import CALIBRATED, FROM_CPA, PaperCalibration
+from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
+from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.sensor import Registration
+
+if TYPE_CHECKING:
+    from pincal.diagnosis.diagnose import Diagnosis
+    from pincal.fit.chain_calibration import ChainCalibration
+    from pincal.model.chain import KinematicChain
+
+
+REPORT_VERSION = 1
+
+
+def _number(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def paper_report(
+    result: PaperCalibration,
+    params: DHParameterSet,
+    tool_parent: str,
+    tool_pose: np.ndarray,
+    calibration_errors: PoseErrors,
+    n_rows: dict[str, int],
+    sources: dict[str, str],
+    notes: list[str],
+) -> dict[str, Any]:
+    """Build the REPORT.json document of a paper-method calibration."""
+    nominal = result.nominal.to_vector()
+    calibrated = result.table.to_vector()
+    parameters = []
+    for i, info in enumerate(params.info):
+        determined = result.status[i] in (CALIBRATED, FROM_CPA)
+        parameters.append(
+            {
+                "name": info.name,
+                "joint": info.joint,
+                "unit": info.unit,
+                "nominal": float(nominal[i]),
+                "calibrated": float(calibrated[i]) if determined else None,
+                "std": _number(result.std[i]) if determined else None,
+                "status": result.status[i],
+            }
+        )
+    xyz, rpy = xyz_rpy_from_pose(tool_pose)
+    return {
+        "pincal_version": __version__,
+        "report_version": REPORT_VERSION,
+        "method": result.method,
+        "weight_mm2_per_deg2": result.weight,
+        "model": "dh",
+        "sources": sources,
+        "chain": {
+            "root_link": params.chain.root_link,
+            "tip_link": params.chain.tip_link,
+            "joints": list(params.chain.joint_names),
+        },
+        "parameters": parameters,
+        "registration": {
+            "position": result.registration_position.as_dict(),
+            "orientation": result.registration_orientation.as_dict(),
+        },
+        "tool": {"parent_link": tool_parent, "xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()},
+        "fit": {
+            "rows": n_rows,
+            "stages": [
+                {
+                    "error_function": stage.name,
+                    "parameters": list(stage.parameters),
+                    "rms": stage.rms,
+                    "unit": stage.unit,
+                    "evaluations": stage.n_evaluations,
+                    "jacobian_condition": stage.condition,
+                }
+                for stage in result.stages
+            ],
+            "calibration_errors": calibration_errors.as_dict(),
+        },
+        "notes": list(result.notes) + list(notes),
+    }
+
+
+def write_report(path: str | Path, report: dict[str, Any]) -> None:
+    """Write ``report`` as indented JSON."""
+    Path(path).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+
+
+@dataclass(frozen=True)
+class ReportModel:
+    """What ``pincal evaluate`` needs from a REPORT.json.
+
+    Attributes:
+        tool_parent: link carrying the target.
+        points: target points in ``tool_parent``'s frame [m], (P, 3): ``tool.points_m``,
+            or the origin ``tool.xyz_m`` of a single-point tool.
+        rotation: the measured target frame's rotation in ``tool_parent`` (``tool.rpy_rad``).
+        registration_position: Registration 1.
+        registration_orientation: Registration 2.
+        effects: ``effects`` and what applying them needs (``payload_kg``,
+            ``time_column``, ``time_reference_s``); empty without effects.
+    """
+
+    tool_parent: str
+    points: np.ndarray
+    rotation: np.ndarray
+    registration_position: Registration
+    registration_orientation: Registration
+    effects: dict = field(default_factory=dict)
+
+
+def read_report(path: str | Path) -> ReportModel:
+    """Read the target and registrations of a REPORT.json (one clear error if malformed)."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise PincalError(f"{path}: no such report file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PincalError(f"{path}: not a readable JSON report ({exc})") from None
+    try:
+        tool = doc["tool"]
+        registration = doc["registration"]
+        pose = pose_from_xyz_rpy(tool.get("xyz_m", [0.0, 0.0, 0.0]), tool.get("rpy_rad", [0.0, 0.0, 0.0]))
+        points = np.asarray(tool["points_m"], dtype=float) if "points_m" in tool else pose[None, :3, 3]
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError("tool.points_m must be a list of [x, y, z]")
+        return ReportModel(
+            tool_parent=str(tool["parent_link"]),
+            points=points,
+            rotation=pose[:3, :3],
+            registration_position=Registration.from_dict(registration["position"]),
+            registration_orientation=Registration.from_dict(
+                registration.get("orientation", registration["position"])
+            ),
+            effects={
+                k: doc[k]
+                for k in ("effects", "payload_kg", "time_column", "time_reference_s", "approach_context")
+                if k in doc
+            },
+        )
+    except (KeyError, TypeError, ValueError, PincalError) as exc:
+        raise PincalError(
+            f"{path}: not a pincal report (missing or bad key {exc}); "
+            "pass the REPORT.json written by 'pincal calibrate'"
+        ) from None
+
+
+def chain_report(
+    result: "ChainCalibration",
+    chain: "KinematicChain",
+    tool_parent: str,
+    calibration_errors: PoseErrors,
+    n_rows: dict[str, int],
+    sources: dict[str, str],
+    notes: list[str],
+) -> dict[str, Any]:
+    """Build the REPORT.json document of a calibration at level registration/offsets/full."""
+    params = result.params
+    parameters = []
+    for i in range(params.size if params is not None else 0):
+        info = params.info[i]
+        determined = result.status[i] == "calibrated"
+        parameters.append(
+            {
+                "name": info.name,
+                "joint": info.joint,
+                "unit": info.unit,
+                "nominal": 0.0,
+                "calibrated": float(result.vector[i]) if determined else None,
+                "std": _number(result.std[i]) if determined else None,
+                "status": result.status[i],
+            }
+        )
+    tool = chain.tool
+    points = result.target.points @ tool[:3, :3].T + tool[:3, 3]  # in the parent link frame
+    rotation = tool[:3, :3] @ result.target.rotation
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, points[0]
+    xyz, rpy = xyz_rpy_from_pose(pose)
+    names = {i: params.info[i].name for i in range(params.size)} if params is not None else {}
+    selection = result.selection
+    return {
+        "pincal_version": __version__,
+        "report_version": REPORT_VERSION,
+        "method": None,
+        "level": result.level,
+        "model": "joint placements",
+        "sources": sources,
+        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names)},
+        "parameters": parameters,
+        "identifiability": {
+            "rank": result.rank,
+            "jacobian_condition": result.condition,
+            "selection": None
+            if selection is None
+            else {
+                "criterion": selection.criterion,
+                "kept": selection.chosen,
+                "value": float(selection.scores[selection.sizes.index(selection.chosen)]),
+                "candidates": [{"kept": n, "value": v} for n, v in zip(selection.sizes, selection.scores)],
+            },
+            "dropped": [
+                {
+                    "name": names[d.index],
+                    "reason": d.reason,
+                    "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into],
+                }
+                for d in result.dropped
+            ],
+            "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
+        },
+        "registration": {
+            "position": result.target.registration.as_dict(),
+            "orientation": result.target.registration.as_dict(),
+        },
+        "tool": {
+            "parent_link": tool_parent,
+            "points_m": points.tolist(),
+            "xyz_m": xyz.tolist(),
+            "rpy_rad": rpy.tolist(),
+        },
+        "noise": {
+            "sigma_pos_mm": result.sigma_pos_m * 1000.0,
+            "sigma_rot_deg": None if result.sigma_rot_rad is None else float(np.degrees(result.sigma_rot_rad)),
+        },
+        "outliers": [{"line": line, "robust_score": score} for line, score in result.outliers],
+        "removed_lines": list(result.removed_lines),
+        "fit": {
+            "rows": n_rows,
+            "rows_used": len(result.rows_used),
+            "rms_point_error_mm": result.rms_m * 1000.0,
+            "fit_seconds": result.fit_seconds,
+            "total_seconds": result.total_seconds,
+            "calibration_errors": calibration_errors.as_dict(),
+        },
+        "notes": list(result.notes) + list(notes),
+    }
+
+
+def diagnosis_report(diagnosis: "Diagnosis", payload_kg: float, time_column: str | None) -> dict[str, Any]:
+    """The ``effects`` list and the ``diagnosis`` section of a REPORT.json."""
+    from pincal.model.effects import effect_to_dict
+
+    def errors(e):
+        return None if e is None else e.as_dict()
+
+    approach = any(e.source == "approach" for e, _, _ in diagnosis.effects)
+    context = None
+    if approach and diagnosis.inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+        context = {
+            "time_s": (diagnosis.inputs.time + diagnosis.time_reference).tolist(),
+            "q": diagnosis.inputs.q.tolist(),
+        }
+    return {
+        "effects": [effect_to_dict(e, v, s) for e, v, s in diagnosis.effects],
+        "payload_kg": payload_kg,
+        "time_column": time_column,
+        "time_reference_s": diagnosis.time_reference,
+        "approach_context": context,
+        "diagnosis": {
+            "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
+                         "not offset-like, not ambiguous, not worse on held-out rows",
+            "steps": [
+                {
+                    "effect": effect_to_dict(step.effect, step.values, step.std),
+                    "delta_bic": step.delta_bic,
+                    "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
+                    "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
+                    "candidates": [_candidate(c) for c in step.candidates],
+                }
+                for step in diagnosis.steps
+            ],
+            "last_candidates": [_candidate(c) for c in diagnosis.last_candidates],
+            "unexplained": diagnosis.unexplained,
+            "calibration_errors": errors(diagnosis.calibration_errors),
+            "heldout_errors": errors(diagnosis.heldout_errors),
+            "notes": list(diagnosis.notes),
+        },
+    }
+
+
+def _candidate(candidate) -> dict[str, Any]:
+    from pincal.model.effects import effect_to_dict
+
+    return {
+        **effect_to_dict(candidate.effect, candidate.values, candidate.std),
+        "delta_bic": candidate.delta_bic,
+        "heldout_rms_mm": candidate.heldout_rms_mm,
+        "verdict": candidate.verdict,
+    }

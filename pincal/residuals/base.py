@@ -1,0 +1,125 @@
+"""Base of the residual vectors that calibration minimises.
+
+An :class:`Objective` is a residual vector r(x) over a *free* subset x of a
+parameter set's flat vector (the other parameters stay at their values in
+``base``), with its analytic Jacobian. A :class:`KinematicsCache` computes
+forward kinematics and parameter sensitivities once per x; the residual, the
+Jacobian (which scipy.optimize.least_squares asks for at the same point) and
+the parts of a combined objective all share it.
+
+The paper's objectives compare configurations in pairs (k, k + K/2) so that
+they do not depend on the sensor registration (eq 10–11, 14).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from pincal.errors import CalibrationError
+from pincal.model.sensitivity import Sensitivity, SensitivityModel, ToolPoses
+
+
+def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (k, k + K/2) for k = 0 .. K/2 - 1 (eq 10); an odd last row is unused."""
+    half = n_rows // 2
+    if half < 1:
+        raise CalibrationError(f"need at least 2 calibration rows to form pairs, got {n_rows}")
+    first = np.arange(half)
+    return first, first + half
+
+
+ParameterSet = Any  # DHParameterSet, JointOffsets or PlacementErrors (same interface)
+
+
+class KinematicsCache:
+    """Tool poses and parameter sensitivities at the last free-parameter vector.
+
+    Builds one :class:`pincal.model.sensitivity.SensitivityModel` for the free
+    parameters; each evaluation only updates its placements.
+
+    Args:
+        params: the parameter set (maps a flat vector to the chain's placements).
+        free: flat indices of the parameters being fitted.
+        base: the flat vector holding the values of the fixed parameters.
+        q: joint readings of the configurations used (K, N).
+    """
+
+    def __init__(
+        self,
+        params: "ParameterSet",
+        free: npt.ArrayLike,
+        base: npt.ArrayLike,
+        q: npt.ArrayLike,
+    ) -> None:
+        self.params = params
+        self.free = np.asarray(free, dtype=int)
+        self.base = np.array(base, dtype=float)
+        self.q = np.asarray(q, dtype=float)
+        slots = params.slots
+        self._slots = params.coupled(self.free)  # slots moved by the free parameters
+        self.model = SensitivityModel(params.chain, [slots[i] for i in self._slots])
+        self._x: np.ndarray | None = None
+        self._q: np.ndarray | None = None
+        self._tool: np.ndarray | None = None
+        self._result: tuple[ToolPoses, Sensitivity] | None = None
+
+    def full_vector(self, x: npt.ArrayLike) -> np.ndarray:
+        """The flat parameter vector with ``x`` in the free slots."""
+        vector = self.base.copy()
+        vector[self.free] = x
+        return vector
+
+    def evaluate(self, x: npt.ArrayLike, q: npt.ArrayLike | None = None) -> tuple[ToolPoses, Sensitivity]:
+        """Tool poses and the free parameters' sensitivities at ``x``, at the
+        cache's configurations or at ``q`` (K, N) when given (effects shift them)."""
+        x = np.asarray(x, dtype=float)
+        q = self.q if q is None else np.asarray(q, dtype=float)
+        if (
+            self._result is None
+            or not np.array_equal(x, self._x)
+            or not np.array_equal(q, self._q)
+            or not np.array_equal(self.params.chain.tool, self._tool)
+        ):
+            vector = self.full_vector(x)
+            self.model.set_state(
+                self.params.placements(vector),
+                self.params.slot_points(vector)[self._slots],
+                self.params.chain.tool,
+            )
+            poses, sens = self.model.evaluate(q)
+            to_slots = self.params.slot_jacobian(vector)
+            if to_slots is not None:  # d(slot twist)/d(parameter) is not the identity
+                block = to_slots[np.ix_(self._slots, self.free)]
+                sens = Sensitivity(
+                    angular=np.einsum("ksi,sf->kfi", sens.angular, block),
+                    linear=np.einsum("ksi,sf->kfi", sens.linear, block),
+                    origin=sens.origin,
+                    joint_angular=sens.joint_angular,
+                    joint_linear=sens.joint_linear,
+                )
+            self._x, self._q, self._tool = x.copy(), q.copy(), self.params.chain.tool
+            self._result = (poses, sens)
+        return self._result
+
+
+class Objective(ABC):
+    """Residual vector over the free parameters held by a :class:`KinematicsCache`."""
+
+    def __init__(self, cache: KinematicsCache) -> None:
+        self.cache = cache
+
+    @property
+    def n_free(self) -> int:
+        return len(self.cache.free)
+
+    @abstractmethod
+    def residual(self, x: npt.ArrayLike) -> np.ndarray:
+        """Residual vector r(x), shape (m,)."""
+
+    @abstractmethod
+    def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        """dr/dx, shape (m, n_free)."""

@@ -1,0 +1,390 @@
+"""Absolute residuals of measured target points (and orientations) in the sensor frame.
+
+For row k and target point p, with the tool pose (t_k, R_k) from the chain, the
+target's points m_p in the tool frame and the registration sensor_T_base
+(Omega, tau):
+
+    e_kp = w_k (Omega (t_k + R_k m_p) + tau − g_kp)            [dimensionless]
+    o_k  = v_k log(G_kᵀ Omega R_k R_T)                          (with orientations)
+
+w_k = 1/sigma_pos,k [1/m] and v_k = 1/sigma_rot,k [1/rad] weight each row by its
+measurement noise, so position and orientation need no ad-hoc scale. Unknowns,
+in this order: the free kinematic parameters (through the cache), the
+registration (Omega = Omega_0 exp(phi), tau), the points m_p, and the target
+rotation R_T = R_T0 exp(psi), and the values of unmodelled effects
+(:mod:`pincal.model.effects`): joint effects shift the joint readings before the
+forward kinematics, ``drift`` adds t_k u to the registration's translation and
+``sensor_scale`` multiplies the sensed coordinates by (1 + s). Each block can
+be held fixed.
+
+Jacobians (right perturbations, Pinocchio's Jexp3 and Jlog3):
+d e/d theta = w Omega · point velocity; d e/d phi = −w Omega [y]× Jexp3(phi) with
+y = t + R m; d e/d tau = w I; d e/d m_p = w Omega R. With E = G_kᵀ Omega R_k R_T:
+d o/d theta = v Jlog3(E) Eᵀ G_kᵀ Omega · angular velocity;
+d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi).
+
+With the chain's tool as the measured frame (one zero target point, R_T = I,
+neither fitted: :func:`tool_pose_residual`) and w = 1/sigma_p, v = 1/sigma_a
+the sensor's noise (eq 20–22), the least-squares solution is the
+maximum-likelihood estimate of :mod:`pincal.fit.ml_estimator`;
+:meth:`SensorResidual.noise_jacobian` gives the derivative with respect to the
+sensor noise that :mod:`pincal.fit.noise_limit` propagates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from pincal.errors import CalibrationError
+from pincal.model.chain import points_in_base
+from pincal.model.effects import (
+    JOINT_EFFECTS,
+    Effect,
+    EffectInputs,
+    joint_basis,
+    sensed_points,
+)
+from pincal.model.sensor import Registration
+from pincal.residuals.base import KinematicsCache, Objective
+
+#: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
+REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """[v]× for vectors (..., 3) → (..., 3, 3)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+@dataclass(frozen=True)
+class TargetEstimate:
+    """Registration and target geometry at a parameter vector.
+
+    Attributes:
+        registration: sensor_T_base.
+        points: target points in the tool frame [m], (P, 3).
+        rotation: target rotation R_T in the tool frame, (3, 3).
+    """
+
+    registration: Registration
+    points: np.ndarray
+    rotation: np.ndarray
+
+
+class SensorResidual(Objective):
+    """Eq of the module docstring over the rows the cache holds.
+
+    Args:
+        cache: kinematics of the K rows.
+        sensor_points: measured points g_kp [m], (K, P, 3).
+        sensor_rotations: measured target orientations G_k, (K, 3, 3), or None.
+        start: registration, points and target rotation to start from.
+        position_weight: w_k [1/m], scalar or (K,).
+        rotation_weight: v_k [1/rad], scalar or (K,).
+        fit_registration / fit_points / fit_rotation: which blocks are unknown.
+    """
+
+    def __init__(
+        self,
+        cache: KinematicsCache,
+        sensor_points: npt.ArrayLike,
+        sensor_rotations: npt.ArrayLike | None,
+        start: TargetEstimate,
+        position_weight: npt.ArrayLike = 1.0,
+        rotation_weight: npt.ArrayLike = 1.0,
+        fit_registration: bool = True,
+        fit_points: bool = True,
+        fit_rotation: bool = True,
+        effects: Sequence[Effect] = (),
+        inputs: EffectInputs | None = None,
+    ) -> None:
+        super().__init__(cache)
+        self.effects = tuple(effects)
+        self.inputs = inputs
+        if self.effects and inputs is None:
+            raise ValueError("effects need their inputs (gravity torques, time)")
+        joint_names = list(cache.params.chain.joint_names)
+        self._effect_joint = [joint_names.index(e.joint) if e.joint else -1 for e in self.effects]
+        self._effect_basis = [
+            joint_basis(e, inputs, j) if e.type in JOINT_EFFECTS else None
+            for e, j in zip(self.effects, self._effect_joint)
+        ]
+        if any(e.type == "drift" for e in self.effects) and (inputs is None or inputs.time is None):
+            raise ValueError("a drift effect needs a time column")
+        self.g = np.asarray(sensor_points, dtype=float)
+        self.G = None if sensor_rotations is None else np.asarray(sensor_rotations, dtype=float)
+        k, n_points = self.g.shape[:2]
+        self.start = start
+        self.w = np.broadcast_to(np.asarray(position_weight, dtype=float), (k,)).copy()
+        self.v = np.broadcast_to(np.asarray(rotation_weight, dtype=float), (k,)).copy()
+        n_kin = len(cache.free)
+        self._effect_slices = []
+        sizes = {
+            "kinematic": n_kin,
+            "registration": 6 if fit_registration else 0,
+            "points": 3 * n_points if fit_points else 0,
+            "rotation": 3 if (fit_rotation and self.G is not None) else 0,
+            "effects": sum(e.n_values for e in self.effects),
+        }
+        self.blocks: dict[str, slice] = {}
+        offset = 0
+        for name, size in sizes.items():
+            self.blocks[name] = slice(offset, offset + size)
+            offset += size
+        self.n_params = offset
+        start = self.blocks["effects"].start
+        for effect in self.effects:
+            self._effect_slices.append(slice(start, start + effect.n_values))
+            start += effect.n_values
+
+    @property
+    def n_free(self) -> int:
+        return self.n_params
+
+    def start_vector(self) -> np.ndarray:
+        """Kinematic values from the cache's base, zero registration/rotation steps, start points."""
+        x = np.zeros(self.n_params)
+        x[self.blocks["kinematic"]] = self.cache.base[self.cache.free]
+        reg, pts = self.blocks["registration"], self.blocks["points"]
+        if reg.stop > reg.start:
+            x[reg.start + 3 : reg.stop] = self.start.registration.translation
+        if pts.stop > pts.start:
+            x[pts] = self.start.points.ravel()
+        return x
+
+    def estimate(self, x: npt.ArrayLike) -> TargetEstimate:
+        """Registration, points and target rotation at ``x``."""
+        x = np.asarray(x, dtype=float)
+        reg = x[self.blocks["registration"]]
+        registration = self.start.registration
+        if reg.size:
+            registration = Registration(
+                rotation=registration.rotation @ pin.exp3(reg[:3]), translation=reg[3:].copy()
+            )
+        pts = x[self.blocks["points"]]
+        points = pts.reshape(-1, 3) if pts.size else self.start.points
+        rot = x[self.blocks["rotation"]]
+        rotation = self.start.rotation @ pin.exp3(rot) if rot.size else self.start.rotation
+        return TargetEstimate(registration, points, rotation)
+
+    def effect_values(self, x: npt.ArrayLike) -> list[np.ndarray]:
+        """Values of each effect at ``x``."""
+        x = np.asarray(x, dtype=float)
+        return [x[sl] for sl in self._effect_slices]
+
+    def _sensor_terms(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """Sensor scale s and drift offset t_k u (K, 3) at ``x``."""
+        scale, drift = 0.0, np.zeros((self.g.shape[0], 3))
+        for effect, sl in zip(self.effects, self._effect_slices):
+            if effect.type == "sensor_scale":
+                scale = float(x[sl][0])
+            elif effect.type == "drift":
+                drift = self.inputs.time[:, None] * x[sl]
+        return scale, drift
+
+    def _state(self, x: npt.ArrayLike):
+        x = np.asarray(x, dtype=float)
+        q = None
+        if self.effects:
+            shifts = np.zeros_like(self.inputs.q)
+            for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
+                if basis is not None:
+                    shifts[:, j] += basis @ x[sl]
+            q = self.inputs.q + shifts
+        poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]], q)
+        target = self.estimate(x)
+        world = points_in_base(poses.tool_positions, poses.tool_rotations, target.points)  # (K, P, 3)
+        return poses, sens, target, world
+
+    def predicted_points(self, x: npt.ArrayLike) -> np.ndarray:
+        """Model points in the sensor frame (K, P, 3) [m]: (1 + s)(Omega y + tau + t u)."""
+        x = np.asarray(x, dtype=float)
+        _, _, target, world = self._state(x)
+        return self._sensed(x, target, world)
+
+    def _sensed(self, x: np.ndarray, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
+        scale, drift = self._sensor_terms(x)
+        return sensed_points(target.registration, world, scale, drift)
+
+    def residual(self, x: npt.ArrayLike) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        poses, _, target, world = self._state(x)
+        position = (self._sensed(x, target, world) - self.g) * self.w[:, None, None]
+        parts = [position.reshape(-1)]
+        if self.G is not None:
+            relative = self._orientation_error(poses, target)
+            logs = np.stack([pin.log3(e) for e in relative]) * self.v[:, None]
+            parts.append(logs.reshape(-1))
+        return np.concatenate(parts)
+
+    def row_indices(self) -> np.ndarray:
+        """Where each row's residuals sit in :meth:`residual`, (K, 3P) or (K, 3P + 3).
+
+        Row k's entries are e_k1, ..., e_kP (three components each), then o_k
+        (with orientations): ``residual(x)[row_indices()]`` is the residual
+        row by row, in the order of :meth:`noise_jacobian`'s blocks.
+        """
+        k, n_points = self.g.shape[:2]
+        indices = np.arange(3 * k * n_points).reshape(k, 3 * n_points)
+        if self.G is None:
+            return indices
+        return np.hstack([indices, 3 * k * n_points + np.arange(3 * k).reshape(k, 3)])
+
+    def noise_jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        """Derivative of each row's residual with respect to that row's sensor noise.
+
+        The noise of row k is (zeta_k1, ..., zeta_kP [m], xi_k [rad]):
+        g_kp → g_kp + zeta_kp and G_k → exp(xi_k) G_k, the linearised sensor
+        model of eq 20–22 (R_ZYX(xi) and exp(xi) agree to first order). The
+        residual is block-diagonal in the rows: d e_kp/d zeta_kp = −w_k I and,
+        as G_kᵀ exp(−xi) = exp(−G_kᵀ xi) G_kᵀ, d o_k/d xi_k = −v_k Jlog3(E_k) E_kᵀ G_kᵀ.
+
+        Returns:
+            (K, m, m) with m = 3P (+ 3 with orientations): block k is the
+            derivative of row k's residuals (in the order of :meth:`row_indices`)
+            by row k's noise (zeta_k1, ..., zeta_kP, xi_k).
+        """
+        k, n_points = self.g.shape[:2]
+        n_pos = 3 * n_points
+        size = n_pos + (0 if self.G is None else 3)
+        blocks = np.zeros((k, size, size))
+        blocks[:, :n_pos, :n_pos] = -self.w[:, None, None] * np.eye(n_pos)
+        if self.G is not None:
+            poses, _, target, _ = self._state(x)
+            relative = self._orientation_error(poses, target)
+            jlog = np.stack([pin.Jlog3(e) for e in relative])
+            turn = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1)
+            blocks[:, n_pos:, n_pos:] = -self.v[:, None, None] * turn
+        return blocks
+
+    def _orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
+        """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
+        omega = target.registration.rotation
+        return self.G.transpose(0, 2, 1) @ omega @ poses.tool_rotations @ target.rotation
+
+    def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        poses, sens, target, world = self._state(x)
+        k, n_points = world.shape[:2]
+        omega = target.registration.rotation
+        rows_pos = np.zeros((k, n_points, 3, self.n_params))
+        kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
+        for p in range(n_points):
+            velocity = sens.point_velocity(world[:, p, :])  # (K, n_kin, 3)
+            rows_pos[:, p, :, kin] = np.einsum("ij,knj->kin", omega, velocity)
+        if reg.stop > reg.start:
+            jexp = pin.Jexp3(x[reg][:3])
+            rows_pos[..., reg.start : reg.start + 3] = -np.einsum(
+                "ij,kpjl,lm->kpim", omega, skew(world), jexp
+            )
+            rows_pos[..., reg.start + 3 : reg.stop] = np.eye(3)
+        if pts.stop > pts.start:
+            rotated = np.einsum("ij,kjl->kil", omega, poses.tool_rotations)  # Omega R_k
+            for p in range(n_points):
+                rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
+        scale, drift = self._sensor_terms(x)
+        for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self._effect_slices):
+            if basis is not None:  # joint shift: the joint's Jacobian column times the basis
+                for p in range(n_points):
+                    velocity = sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T  # (K, 3)
+                    rows_pos[:, p, :, sl] = velocity[:, :, None] * basis[:, None, :]
+            elif effect.type == "drift":
+                rows_pos[..., sl] = self.inputs.time[:, None, None, None] * np.eye(3)
+        rows_pos *= 1.0 + scale  # every term is scaled by the sensor's (1 + s)
+        for effect, sl in zip(self.effects, self._effect_slices):
+            if effect.type == "sensor_scale":
+                sensed = target.registration.apply_points(world) + drift[:, None, :]
+                rows_pos[..., sl] = sensed[..., None]
+        rows_pos *= self.w[:, None, None, None]
+        blocks = [rows_pos.reshape(-1, self.n_params)]
+        if self.G is not None:
+            blocks.append(self._orientation_jacobian(x, poses, sens, target))
+        return np.vstack(blocks)
+
+    def _orientation_jacobian(self, x, poses, sens, target: TargetEstimate) -> np.ndarray:
+        relative = self._orientation_error(poses, target)
+        omega = target.registration.rotation
+        k = len(relative)
+        rows = np.zeros((k, 3, self.n_params))
+        jlog = np.stack([pin.Jlog3(e) for e in relative])  # (K, 3, 3)
+        kin, reg, rot = self.blocks["kinematic"], self.blocks["registration"], self.blocks["rotation"]
+        # world angular velocity w of R_k: d log E = Jlog3(E) Eᵀ G_kᵀ Omega w
+        left = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
+        rows[:, :, kin] = np.einsum("kij,knj->kin", left, sens.angular)
+        tool = poses.tool_rotations @ target.rotation  # R_k R_T
+        if reg.stop > reg.start:
+            rows[:, :, reg.start : reg.start + 3] = jlog @ tool.transpose(0, 2, 1) @ pin.Jexp3(x[reg][:3])
+        if rot.stop > rot.start:
+            rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
+        for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
+            if basis is not None:
+                turn = np.einsum("kij,kj->ki", left, sens.joint_angular[:, j, :])  # (K, 3)
+                rows[:, :, sl] = turn[:, :, None] * basis[:, None, :]
+        rows *= self.v[:, None, None]
+        return rows.reshape(-1, self.n_params)
+
+
+def tool_pose_residual(
+    cache: KinematicsCache,
+    sensor_points: npt.ArrayLike,
+    sensor_rotations: npt.ArrayLike,
+    registration: Registration,
+    sigma_position_m: float = 1.0,
+    sigma_rotation_rad: float = 1.0,
+) -> SensorResidual:
+    """Noise-scaled pose residual of the chain's tool with the registration unknown.
+
+    The measured frame is the chain's tool (the TCP: one zero target point,
+    R_T = I, neither fitted), so row k's residual is
+
+        [ (Omega t_k + tau − g_k) / sigma_p ,  log(G_kᵀ Omega R_k) / sigma_a ]
+
+    with unknowns x = [the cache's free parameters, phi (3), tau (3)] and
+    Omega = Omega_0 exp(phi). With the sensor's noise as sigma_p, sigma_a the
+    least-squares solution is the maximum-likelihood estimate (eq 20–22);
+    ``start_vector()`` is the cache's base with Omega_0 and tau of ``registration``.
+
+    Args:
+        cache: kinematics of the K measured rows.
+        sensor_points: measured tool positions g_k [m], (K, 3) or (K, 1, 3).
+        sensor_rotations: measured tool orientations G_k, (K, 3, 3).
+        registration: sensor_T_base to start from (phi = 0).
+        sigma_position_m: sigma_p, the position noise per axis [m].
+        sigma_rotation_rad: sigma_a, the orientation noise per component [rad].
+
+    Raises:
+        CalibrationError: mismatched shapes or a non-positive sigma.
+    """
+    k = len(cache.q)
+    points = np.asarray(sensor_points, dtype=float)
+    rotations = np.asarray(sensor_rotations, dtype=float)
+    if points.shape not in ((k, 3), (k, 1, 3)) or rotations.shape != (k, 3, 3):
+        raise CalibrationError(
+            f"tool pose residual: expected points ({k}, 3) and rotations ({k}, 3, 3), "
+            f"got {points.shape} and {rotations.shape}"
+        )
+    if not (sigma_position_m > 0 and sigma_rotation_rad > 0):
+        raise CalibrationError(
+            f"noise scales must be positive, got sigma_p={sigma_position_m} m, "
+            f"sigma_a={sigma_rotation_rad} rad"
+        )
+    start = TargetEstimate(registration, np.zeros((1, 3)), np.eye(3))
+    return SensorResidual(
+        cache,
+        points.reshape(k, 1, 3),
+        rotations,
+        start,
+        position_weight=1.0 / sigma_position_m,
+        rotation_weight=1.0 / sigma_rotation_rad,
+        fit_points=False,
+        fit_rotation=False,
+    )

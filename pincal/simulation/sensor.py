@@ -1,0 +1,135 @@
+"""The simulated sensor: noise-free and noisy measurements of a chain through a registration (eq 20–22)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pincal.errors import PincalError
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain, points_in_base
+from pincal.model.effects import (
+    Effect,
+    EffectInputs,
+    gravity_torques,
+    joint_shifts,
+    sensed_points,
+)
+from pincal.model.sensor import Registration
+
+#: The arbitrary sensor registration of the simulations: sensor_T_base.
+DEFAULT_REGISTRATION = Registration(
+    rotation=Rotation.from_euler("ZYX", [35.0, -12.0, 8.0], degrees=True).as_matrix(),
+    translation=np.array([1.85, -0.62, 0.43]),
+)
+
+
+def cpa_configurations(lower: np.ndarray, upper: np.ndarray, per_joint: int) -> np.ndarray:
+    """Eq 23: joint n at lower_n + k·delta_n (k = 1..K_alpha), others at zero; (N·K_alpha, N)."""
+    n = len(lower)
+    rows = []
+    for joint in range(n):
+        step = (upper[joint] - lower[joint]) / (per_joint + 1)
+        block = np.zeros((per_joint, n))
+        block[:, joint] = lower[joint] + step * np.arange(1, per_joint + 1)
+        rows.append(block)
+    return np.vstack(rows)
+
+
+def measure(
+    chain: KinematicChain,
+    q: np.ndarray,
+    registration: Registration,
+    rng: np.random.Generator,
+    sigma_pos_m: float,
+    sigma_rot_rad: float,
+    role: str,
+    points: np.ndarray | None = None,
+    target_rotation: np.ndarray | None = None,
+    with_rotation: bool = True,
+    effects: Sequence[tuple[Effect, np.ndarray]] = (),
+    time: np.ndarray | None = None,
+    shifts: np.ndarray | None = None,
+) -> MeasurementSet:
+    """What the simulated sensor reports at configurations ``q`` (eq 20–22).
+
+    Args:
+        points: target points in the tool frame (P, 3) [m]; default: the tool origin.
+        target_rotation: the measured frame's rotation in the tool frame (default identity).
+        with_rotation: also report orientations.
+        effects: unmodelled effects acting on the robot and sensor, with their
+            values (see :mod:`pincal.model.effects`); the readings ``q`` are written
+            unchanged, the sensor sees the shifted joints.
+        time: row times [s], written as the extra column ``time``; drift grows
+            with it from t = 0.
+        shifts: joint shifts of these rows (K, N) when computed over a longer
+            sequence (approach flanks depend on the previous row); default:
+            computed from these rows alone (:func:`simulated_shifts`).
+    """
+    actual = np.asarray(q, dtype=float)
+    scale, drift = 0.0, np.zeros((len(q), 3))
+    if effects:
+        if shifts is None:
+            shifts = simulated_shifts(chain, actual, effects, time)
+        actual = actual + shifts
+        for effect, value in effects:
+            if effect.type == "sensor_scale":
+                scale = float(value[0])
+            elif effect.type == "drift":
+                if time is None:
+                    raise PincalError("a simulated drift needs row times")
+                drift = time[:, None] * np.asarray(value, dtype=float)
+    poses = chain.poses(actual)
+    points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
+    world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
+    sensed = sensed_points(registration, world, scale, drift)
+    sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
+    rotations = None
+    if with_rotation:
+        target = np.eye(3) if target_rotation is None else target_rotation
+        noise = Rotation.from_euler("ZYX", rng.normal(0.0, 1.0, (len(q), 3)) * sigma_rot_rad)
+        rotations = noise.as_matrix() @ registration.apply_rotations(poses.tool_rotations @ target)
+    return MeasurementSet(
+        joint_names=chain.joint_names,
+        q=q,
+        points=sensed,
+        rotations=rotations,
+        roles=np.array([role] * len(q), dtype=object),
+        lines=np.arange(2, len(q) + 2),
+        extra={} if time is None else {"time": np.asarray(time, dtype=float)},
+        source="<simulation>",
+    )
+
+
+def simulated_shifts(
+    chain: KinematicChain, q: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]], time: np.ndarray | None
+) -> np.ndarray:
+    """Joint shifts (K, N) the effects cause at readings ``q`` taken at ``time`` (row order if None)."""
+    inputs = EffectInputs(
+        q=q,
+        gravity=gravity_torques(chain, q),
+        time=time,
+        order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
+    )
+    return joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
+
+
+def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registration: Registration) -> MeasurementSet:
+    """``data`` as a noise-free sensor sees the chain in its current placements
+    (eq 20–21 without N_k and zeta_k): its tool origin and orientation."""
+    poses = chain.poses(data.q)
+    return replace(
+        data,
+        points=registration.apply_points(poses.tool_positions)[:, None, :],
+        rotations=registration.apply_rotations(poses.tool_rotations),
+    )
+
+
+def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
+    """Joint readings drawn uniformly within the limits (±pi for continuous joints), (count, N)."""
+    lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
+    upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    return rng.uniform(lower, upper, (count, len(lower)))

@@ -1,0 +1,93 @@
+"""The estimators a simulation study compares: the paper's Methods 1–3 and maximum likelihood.
+
+Methods 1, 2 and 3 minimise Err_pos, Err_rot and Err_full (eq 16–18) of
+Franaszek & Marvel (2022); Method 3 is run with w = 1 and w =
+:data:`SECOND_WEIGHT`. The noise-weighted maximum-likelihood estimator
+(:func:`pincal.fit.ml_estimator.calibrate_ml`) is this package's addition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pincal.fit.ml_estimator import calibrate_ml
+from pincal.fit.noise_limit import PredictedErrors, predicted_errors
+from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+from pincal.model.dh import KUKA_LWR4_DH, DHTable
+from pincal.simulation.paper import SimulatedExperiment
+
+#: Method 3's second weight w [mm²/deg²]: orientations dominate Err_full (eq 18).
+SECOND_WEIGHT = 100.0
+
+
+@dataclass(frozen=True)
+class Estimator:
+    """One estimator of the study.
+
+    Attributes:
+        method: 1, 2 or 3 (the paper's methods) or ``"ml"`` (noise-weighted
+            maximum likelihood, :func:`pincal.fit.ml_estimator.calibrate_ml`).
+        weight: w of Method 3 [mm²/deg²] (eq 18); None for the others.
+    """
+
+    method: int | str
+    weight: float | None = None
+
+    @classmethod
+    def of(cls, method: str, weight: float | None) -> "Estimator":
+        """The estimator of a table row's ``method`` and ``weight`` columns."""
+        return cls(method if method == "ml" else int(method), weight)
+
+    @property
+    def label(self) -> str:
+        """Human-readable name, e.g. ``Method 3 (w=100)``."""
+        if self.method == "ml":
+            return "ML estimator"
+        return f"Method {self.method}" + ("" if self.weight is None else f" (w={self.weight:g})")
+
+    @property
+    def registrations(self) -> tuple[int, ...]:
+        """Registrations it provides: Method 1 has positions only, hence Registration 1."""
+        return (1,) if self.method == 1 else (1, 2)
+
+    @property
+    def orientation_registration(self) -> int:
+        """The registration for orientations (the noise limit's): 2, or 1 for Method 1."""
+        return self.registrations[-1]
+
+    @property
+    def fit_weight(self) -> float:
+        """The w the fit is given [mm²/deg²] (eq 18): :attr:`weight`, or 1 when it is None."""
+        return 1.0 if self.weight is None else self.weight
+
+    def calibrate(
+        self, chain: KinematicChain, data: MeasurementSet, sigma: float, start: DHTable | None = None
+    ) -> PaperCalibration:
+        """Calibrate from Table 1 on ``data``'s ``cpa`` and ``calibration`` rows.
+
+        Args:
+            chain: the KUKA chain with the TCP as its tool.
+            data: the rows.
+            sigma: the noise level, sigma_p [mm] = sigma_a [deg]; the ML estimator
+                weighs with it (on noise-free data any equal weights give the truth).
+            start: starting eps, r, d of a paper method (default Table 1).
+        """
+        chain.set_placements(KUKA_LWR4_DH.joint_origins())
+        if self.method == "ml":
+            scale = sigma if sigma > 0 else 1.0
+            return calibrate_ml(chain, data, sigma_pos_mm=scale, sigma_rot_deg=scale, nominal=KUKA_LWR4_DH)
+        return calibrate_paper(chain, data, int(self.method), self.fit_weight, nominal=KUKA_LWR4_DH, start=start)
+
+    def noise_limit(self, chain: KinematicChain, experiment: SimulatedExperiment, sigma: float) -> PredictedErrors:
+        """Linearised (Cramér–Rao) prediction of the truth-referenced test errors at ``sigma``."""
+        return predicted_errors(chain, experiment, self.method, sigma, sigma, weight=self.fit_weight)
+
+
+METHOD_1, METHOD_2, METHOD_3 = Estimator(1), Estimator(2), Estimator(3, 1.0)
+ML_ESTIMATOR = Estimator("ml")
+#: The estimators of the study, in report order.
+ESTIMATORS = (METHOD_1, METHOD_2, METHOD_3, Estimator(3, SECOND_WEIGHT), ML_ESTIMATOR)
+#: The paper's three error functions Err_pos, Err_rot, Err_full: the restart test's subjects.
+RESTART_ESTIMATORS = (METHOD_1, METHOD_2, METHOD_3)
