@@ -28,7 +28,9 @@ from pincal.model.dh import (
     DHDeviations,
     DHTable,
 )
+from pincal.model.dh_csv import read_dh_csv
 from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.dh_robot import DHRobot
 from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.simulation.paper import (
@@ -36,8 +38,6 @@ from pincal.simulation.paper import (
     SimulationSettings,
     simulate_experiment,
 )
-
-
 
 __all__ = [
     "__version__",
@@ -53,6 +53,10 @@ __all__ = [
     "ChainPoses",
     "DHDeviations",
     "DHParameterSet",
+    "DHRobot",
+    "dh_robot_from_urdf",
+    "read_dh_csv",
+    "urdf_from_dh",
     "DHTable",
     "ErrorSummary",
     "JointSpec",
@@ -79,3 +83,17 @@ __all__ = [
     "write_measurements",
     "xyz_rpy_from_pose",
 ]
+
+#: Names imported on first use: they need yourdfpy (and trimesh), which every other
+#: ``import pincal`` — the CLI, each study worker — would otherwise pay for.
+_ON_FIRST_USE = {"dh_robot_from_urdf": "pincal.model.dh_urdf", "urdf_from_dh": "pincal.model.dh_urdf"}
+
+
+def __getattr__(name: str):
+    if name in _ON_FIRST_USE:
+        import importlib
+
+        value = getattr(importlib.import_module(_ON_FIRST_USE[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'pincal' has no attribute {name!r}")

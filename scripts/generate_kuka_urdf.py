@@ -12,7 +12,11 @@ joint origin the identity) is built programmatically with yourdfpy, then
 :func:`pincal.model.dh_urdf.apply_dh_table` — the package's DH → URDF adapter — writes
 the joint origins realising ``pincal.model.dh.KUKA_LWR4_DH`` (Table 1).
 
-Kinematics (see ``pincal/dh.py``): distal DH,
+The joint origins come from the one DH-row → joint-origin core,
+:func:`pincal.model.dh.dh_origin_rows` (through ``DHTable.joint_origins`` and
+:func:`pincal.model.dh.dh_chain_origins`), which ``pincal urdf-from-dh`` uses too.
+
+Kinematics (see ``pincal/model/dh.py``): distal DH,
 ``F_n = Rz(theta_n + eps_n) Tz(d_n) Tx(r_n) Rx(alpha_n)``. The value of joint
 ``lwr_joint_n`` is the paper's encoder angle theta_n; ``lwr_base_link`` is DH
 frame 0 and ``lwr_flange`` DH frame 7. The URDF child link of joint n,

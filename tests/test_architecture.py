@@ -19,13 +19,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
 #: Bottom to top; the rooms of one layer are peers and never import each other.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("_version", "errors"),
+    ("_version", "errors", "outputs"),
     ("measurements", "robots"),
     ("model",),
     ("simulation",),
     ("residuals",),
     ("fit",),
-    ("diagnosis", "study"),
+    ("diagnosis", "study", "planning"),
     ("report",),
     ("cli",),
 )

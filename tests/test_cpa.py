@@ -50,13 +50,29 @@ def test_axis_recovered_with_right_hand_sign(seed, k):
 
 
 def test_fit_circle_noise_and_out_of_plane_rms():
+    """Points pushed alternately +-h along the axis, and by up to h radially (in the
+    plane: not part of the out-of-plane RMS). The true plane leaves exactly h,
+    so the best plane cannot leave more. To first order in h / (in-plane spread)
+    the best plane is the least-squares regression of the offsets on the in-plane
+    coordinates (true plane, noise-free points): its residual and slope give the
+    fit's RMS and tilt, with relative errors of second order, below h / spread."""
     rng = np.random.default_rng(3)
     points, angles, u, center, radius = arc(rng, 40)
     h = 1e-4
     signs = np.where(np.arange(40) % 2 == 0, 1.0, -1.0)  # alternating offsets along the axis
-    fit = fit_circle(points + h * signs[:, None] * u, angles)
-    assert fit.rms_out_of_plane == pytest.approx(h, rel=0.05)
-    assert np.arccos(min(1.0, fit.axis @ u)) < 1e-3
+    outward = np.array([unit(v) for v in points - center])
+    radial = h * np.array([1.0, 0.0, -1.0])[np.arange(40) % 3]
+    fit = fit_circle(points + h * signs[:, None] * u + radial[:, None] * outward, angles)
+    assert fit.rms_out_of_plane <= h * (1 + 1e-12)
+    e1 = unit(np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0]))
+    in_plane = np.column_stack([(points - center) @ e1, (points - center) @ np.cross(u, e1), np.ones(40)])
+    slope, *_ = np.linalg.lstsq(in_plane, h * signs, rcond=None)
+    residual = h * signs - in_plane @ slope
+    spread = np.linalg.svd(in_plane[:, :2] - in_plane[:, :2].mean(axis=0), compute_uv=False)[-1] / np.sqrt(40)
+    second_order = h / spread  # 3e-3 here
+    assert fit.rms_out_of_plane == pytest.approx(np.sqrt(np.mean(residual**2)), rel=second_order)
+    tilt = np.arctan2(np.linalg.norm(np.cross(fit.axis, u)), fit.axis @ u)
+    assert tilt == pytest.approx(np.hypot(*slope[:2]), rel=second_order)
 
 
 def test_point_on_axis_is_rejected():

@@ -16,6 +16,7 @@ from pincal.model.effects import (
     gravity_torques,
     parse_effect,
 )
+from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
@@ -47,6 +48,8 @@ def test_sensor_residual_jacobian_with_every_effect(kuka_chain):
                                inputs=inputs, rotation_weight=2.0)
     x = objective.start_vector() + rng.normal(0, 0.01, objective.n_free)
     x[objective.blocks["effects"]] = rng.normal(0, 1e-3, objective.blocks["effects"].stop - objective.blocks["effects"].start)
+    # central differences, step 1e-6: truncation ~1e-12 × third derivatives, rounding
+    # ~1e-16 × |r| / 1e-6 ≈ 1e-9 for residuals of O(10); a wrong term is O(1e-2) or more
     assert_close(objective.jacobian(x), numeric_jacobian(objective.residual, x), 1e-6, "effects")
 
 
@@ -55,8 +58,21 @@ def test_gravity_torques_match_pinocchio_and_payload_adds_torque(kuka_chain):
     base = gravity_torques(kuka_chain, q)
     direct = pin.computeGeneralizedGravity(kuka_chain.model, kuka_chain.model.createData(), q[0])
     assert_close(base[0], direct, 1e-12, "gravity")
-    loaded = gravity_torques(kuka_chain, q, payload_kg=2.0, payload_point=np.array([0.0, 0.0, 0.1]))
-    assert np.abs(loaded - base).max() > 0.1
+    kuka_chain.set_tool(pose_from_xyz_rpy([0.045, -0.043, 0.118], [0.12, -0.25, 0.4]))  # the payload hangs on it
+    point = np.array([0.0, 0.0, 0.1])
+    loaded = gravity_torques(kuka_chain, q, payload_kg=2.0, payload_point=point)
+    # A point mass m at p(q) adds the gradient of its potential energy −m gᵀ p(q):
+    # −m J_pᵀ g, with J_p from central differences of Pinocchio FK (step 1e-6:
+    # error ~1e-12 m per rad, times m |g| ≈ 20 N, far below the 1e-6 N·m tolerance)
+    gravity = kuka_chain.model.gravity.linear
+
+    def payload_position(joints):
+        poses = kuka_chain.poses(joints[None])
+        return poses.tool_positions[0] + poses.tool_rotations[0] @ point
+
+    expected = -2.0 * numeric_jacobian(payload_position, q[0]).T @ gravity
+    assert_close(loaded[0] - base[0], expected, 1e-6, "payload torque")
+    assert np.abs(expected).max() > 1e3 * 1e-6  # the comparison is informative: far above its tolerance
     assert loaded[0, 0] == pytest.approx(base[0, 0], abs=1e-9)  # joint 1 turns about gravity's axis
 
 
@@ -96,3 +112,36 @@ def test_parse_effect_forms():
         parse_effect("compliance:lwr_joint_2")
     with pytest.raises(PincalError, match="unknown effect"):
         parse_effect("wobble:lwr_joint_2:1")
+
+
+def test_effect_columns_are_the_jacobian_columns_an_added_effect_brings(kuka_chain):
+    """SensorResidual.effect_columns (the screening's candidate columns) equal the
+    columns of the same objective with the effect added at value zero, on top of
+    effects already in the fit (a nonzero sensor scale scales the new columns)."""
+    rng = np.random.default_rng(12)
+    params = PlacementErrors(kuka_chain)
+    q = rng.uniform(-1.5, 1.5, (9, 7))
+    inputs = EffectInputs(q=q, gravity=gravity_torques(kuka_chain, q), time=np.linspace(-600, 600, 9),
+                          order=np.arange(9))
+    free = rng.permutation(params.size)[:12]
+    start = TargetEstimate(Registration(pin.exp3(rng.normal(size=3)), rng.normal(size=3)),
+                           rng.normal(0, 0.1, (2, 3)), pin.exp3(rng.normal(size=3)))
+    points, rotations = rng.normal(size=(9, 2, 3)), np.stack([pin.exp3(rng.normal(size=3)) for _ in q])
+    base, weights = rng.normal(0, 1e-2, params.size), rng.uniform(0.5, 2, 9)
+    present = [Effect("compliance", "lwr_joint_2"), Effect("sensor_scale")]
+    added = [e for e in ALL_EFFECTS if e not in present]
+
+    def objective(effects):
+        cache = KinematicsCache(params, free, base, q)
+        return SensorResidual(cache, points, rotations, start, effects=effects, inputs=inputs,
+                              position_weight=weights, rotation_weight=2.0)
+
+    fit = objective(present)
+    x = fit.start_vector() + rng.normal(0, 0.01, fit.n_free)
+    x[fit.blocks["effects"]] = [2e-4, 3e-3]
+    columns = fit.effect_columns(x, added)
+    for effect, block in zip(added, columns):
+        extended = objective(present + [effect])
+        full = extended.jacobian(np.concatenate([x, np.zeros(effect.n_values)]))
+        assert_close(block, full[:, extended._effect_slices[-1]], 1e-12, effect.label)
+

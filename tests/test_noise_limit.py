@@ -1,10 +1,12 @@
 """Linearised (Cramér–Rao) predictions of pincal.fit.noise_limit.
 
 The linearisation is checked against finite differences of the whole
-estimator (every stage re-run on perturbed data), the ML covariance against
-the Cramér–Rao bound computed directly, the mean-norm quadrature against
-closed forms and sampling, and the predicted mean errors against a Monte Carlo
-run of the methods on the same configurations.
+estimator (every stage re-run on perturbed data) and against the estimator's
+answer to a whole noise draw; the propagation to the test poses against a
+forward model written here in numpy; the ML covariance against the Cramér–Rao
+bound of that independent model; the mean-norm quadrature against closed forms
+and sampling; and the predicted mean errors against a Monte Carlo run of the
+methods on the same configurations.
 """
 
 from __future__ import annotations
@@ -18,14 +20,11 @@ from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
 from pincal.fit.metrics import pose_errors
-from pincal.fit.ml_estimator import calibrate_ml, ml_parameter_indices
+from pincal.fit.ml_estimator import calibrate_ml
 from pincal.fit.noise_limit import mean_norm, predicted_errors
 from pincal.fit.paper_methods import calibrate_paper
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL
-from pincal.model.dh_parameters import DHParameterSet
-from pincal.residuals.base import KinematicsCache
-from pincal.residuals.sensor import tool_pose_residual
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
@@ -82,51 +81,162 @@ def test_linearisation_matches_finite_differences_of_the_whole_estimator(kuka_ur
         assert np.abs(column - numeric).max() / scale < 1e-4, (row, component)
 
 
+def _draw_estimate(chain, experiment, method, z, sigma):
+    """Parameters [DH vector, Registration 1 (φ, τ), Registration 2 (φ, τ)] the method estimates
+    from the noise-free rows plus the noise ``z`` (K, 6): g + ζ and G → exp(ξ) G, as in the
+    columns of ``PredictedErrors.sensitivity``; φ is the left rotation from the true registration."""
+    data, truth = experiment.calibration, experiment.registration
+    points = data.points + z[:, None, :3]
+    rotations = Rotation.from_rotvec(z[:, 3:]).as_matrix() @ data.rotations
+    result = _calibrate(chain, replace(data, points=points, rotations=rotations), method, sigma, experiment.truth)
+    parts = [result.table.to_vector()]
+    for registration in (result.registration_position, result.registration_orientation):
+        parts += [pin.log3(registration.rotation @ truth.rotation.T), registration.translation]
+    return np.concatenate(parts)
+
+
 @pytest.mark.parametrize("method", [1, 2, 3, "ml"])
-def test_prediction_scales_linearly_with_noise(kuka_chain, method):
-    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_SMALL, SMALL)
-    low = predicted_errors(kuka_chain, experiment, method, 0.02, 0.02)
-    high = predicted_errors(kuka_chain, experiment, method, 0.06, 0.06)
-    assert low.position_mm > 0 and low.rotation_deg > 0
-    assert abs(high.position_mm / low.position_mm - 3) < 1e-9
-    assert abs(high.rotation_deg / low.rotation_deg - 3) < 1e-9
-    assert np.allclose(high.position_per_pose_mm, 3 * low.position_per_pose_mm, rtol=1e-9)
-    assert np.allclose(high.covariance, 9 * low.covariance, rtol=1e-9, atol=0)
-    zero = predicted_errors(kuka_chain, experiment, method, 0.0, 0.0)
-    assert zero.position_mm == 0 and zero.rotation_deg == 0
+def test_estimator_answers_a_noise_draw_linearly_with_the_predicted_slope(kuka_urdf, kuka_chain, method):
+    """Run the whole estimator on one draw of noise on every row (CPA and calibration,
+    positions and orientations) scaled by s, and compare its change with sensitivity @ (s z).
 
-
-def test_ml_prediction_is_the_cramer_rao_bound(kuka_chain):
-    """(JᵀΣ⁻¹J)⁻¹ of the ML problem at the truth, over its DH unknowns and the registration.
-
-    The residual's registration rotation is Ω₀ exp(φ_r); the prediction's φ is a
-    left rotation, φ = Ω₀ φ_r, so its block is Ω₀ (bound) Ω₀ᵀ.
+    If the sensitivity is the estimator's derivative, Taylor's theorem makes the misfit
+    second order: relative to the change it is c·s, so it falls tenfold from s = 0.1 to
+    s = 0.01. A sensitivity off by a relative δ in any direction the draw excites leaves a
+    misfit ≈ δ at every s instead. The misfit at s = 0.01 must also stay below 1e-4, the
+    accuracy the finite-difference test above asks of single columns. (Here c ≈ 7e-4 for
+    Methods 1-3 and 4e-5 for ML at σ_p = 0.05 mm, σ_a = 0.1 deg.)
     """
+    sigma = (0.05, 0.1)
+    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)  # noise-free rows
+    prediction = predicted_errors(kuka_chain, experiment, method, *sigma)
+    chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
+    n_rows = experiment.calibration.n_rows
+    z = np.random.default_rng(7).normal(size=(n_rows, 6)) * np.repeat([sigma[0] / 1000, np.radians(sigma[1])], 3)
+    start = _draw_estimate(chain, experiment, method, np.zeros_like(z), sigma)
+    misfit = {}
+    for s in (0.01, 0.1):
+        change = _draw_estimate(chain, experiment, method, s * z, sigma) - start
+        linear = prediction.sensitivity @ (s * z).ravel()
+        misfit[s] = np.abs(change - linear).max() / np.abs(linear).max()
+    assert misfit[0.01] < 1e-4, misfit
+    assert 8 < misfit[0.1] / misfit[0.01] < 12, misfit  # second order: tenfold for a tenfold s
+
+
+def _tool_poses(vector, q, tool):
+    """base_T_tool (K, 4, 4) of the DH table ``vector`` = [α, ε, r, d] at readings ``q`` (K, N):
+    F_1 ··· F_N F_T with F_n = Rz(θ_n + ε_n) Tz(d_n) Tx(r_n) Rx(α_n) (eq 2, 4-5), in numpy."""
+    alpha, epsilon, r, d = np.asarray(vector, dtype=float).reshape(4, -1)
+    pose = np.broadcast_to(np.eye(4), (len(q), 4, 4))
+    for n in range(alpha.size):
+        c, s = np.cos(q[:, n] + epsilon[n]), np.sin(q[:, n] + epsilon[n])
+        ca, sa = np.cos(alpha[n]), np.sin(alpha[n])
+        link = np.zeros((len(q), 4, 4))
+        link[:, 0] = np.stack([c, -s * ca, s * sa, r[n] * c], axis=1)
+        link[:, 1] = np.stack([s, c * ca, -c * sa, r[n] * s], axis=1)
+        link[:, 2, 1:] = sa, ca, d[n]
+        link[:, 3, 3] = 1.0
+        pose = pose @ link
+    return pose @ tool
+
+
+def _reading_jacobian(experiment, q, columns, h=1e-6):
+    """d(sensor reading)/dp by central differences, (K, 6, len(columns)), for p = [DH vector, φ, τ].
+
+    The reading of row k is g = Ω t + τ [m] and the rotation vector of G G₀ᵀ [rad] with
+    G = Ω R (eq 20-21 without noise), Ω = exp(φ) Ω₀ (φ a left rotation of the true
+    registration, the prediction's convention), at p₀ = [truth, 0, τ₀]: the sensor's noise
+    ζ and ξ (G → exp(ξ) G) add to exactly these coordinates.
+    """
+    registration = experiment.registration
+    p0 = np.concatenate([experiment.truth.to_vector(), np.zeros(3), registration.translation])
+    n_dh = p0.size - 6
+
+    def reading(p):
+        pose = _tool_poses(p[:n_dh], q, experiment.tool)
+        omega = Rotation.from_rotvec(p[n_dh : n_dh + 3]).as_matrix() @ registration.rotation
+        return pose[:, :3, 3] @ omega.T + p[n_dh + 3 :], omega @ pose[:, :3, :3]
+
+    _, rotations0 = reading(p0)
+    jac = np.zeros((len(q), 6, len(columns)))
+    for i, column in enumerate(columns):
+        step = np.zeros_like(p0)
+        step[column] = h
+        (g_plus, r_plus), (g_minus, r_minus) = reading(p0 + step), reading(p0 - step)
+        jac[:, :3, i] = (g_plus - g_minus) / (2 * h)
+        turn = Rotation.from_matrix(r_plus @ rotations0.transpose(0, 2, 1)).as_rotvec()
+        back = Rotation.from_matrix(r_minus @ rotations0.transpose(0, 2, 1)).as_rotvec()
+        jac[:, 3:, i] = (turn - back) / (2 * h)
+    return jac
+
+
+def _noise_scale(sigma_pos_mm, sigma_rot_deg, n_rows):
+    """Standard deviation of each noise component (eq 20-22), row by row: σ_p [m] per axis, σ_a [rad] per component."""
+    return np.tile(np.repeat([sigma_pos_mm / 1000.0, np.radians(sigma_rot_deg)], 3), n_rows)
+
+
+@pytest.mark.parametrize("method", [1, 2, 3, "ml"])
+def test_predicted_test_pose_errors_follow_from_an_independent_forward_model(kuka_chain, method):
+    """Propagate the sensitivity to the J test poses with a forward model of our own.
+
+    C_j = G_j S Σ_z Sᵀ G_jᵀ, with G_j the numpy DH model's finite-difference derivative of
+    test pose j's reading (position through Registration 1, orientation through
+    Registration 2; Method 1 and ML have one registration, copied into both), S the
+    sensitivity (checked against the estimator itself above) and Σ_z built here from
+    σ_p ≠ σ_a. E‖e_j‖ for e_j ~ N(0, C_j) is ``mean_norm`` (checked against closed forms
+    and sampling above). Tolerance 1e-6: finite differences with h = 1e-6 are accurate
+    to ~1e-9.
+    """
+    sigma_pos_mm, sigma_rot_deg = 0.05, 0.1
     experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
-    prediction = predicted_errors(kuka_chain, experiment, "ml", 0.05, 0.1)
-    kuka_chain.set_tool(experiment.tool)
-    params = DHParameterSet(kuka_chain, experiment.truth)
-    free = ml_parameter_indices(params)
-    cache = KinematicsCache(params, free, experiment.truth.to_vector(), experiment.calibration.q)
-    params.apply(experiment.truth.to_vector())
-    poses = kuka_chain.poses(experiment.calibration.q)
-    objective = tool_pose_residual(
-        cache,
-        experiment.registration.apply_points(poses.tool_positions),
-        experiment.registration.apply_rotations(poses.tool_rotations),
-        experiment.registration,
-        0.05e-3,
-        np.radians(0.1),
-    )
-    jac = objective.jacobian(objective.start_vector())
-    bound = np.linalg.inv(jac.T @ jac)
-    to_left = np.eye(len(bound))
-    to_left[len(free) : len(free) + 3, len(free) : len(free) + 3] = experiment.registration.rotation
-    bound = to_left @ bound @ to_left.T
-    index = np.concatenate([free, params.size + np.arange(6)])  # DH unknowns, Registration 1
-    predicted = prediction.covariance[np.ix_(index, index)]
-    assert np.abs(predicted - bound).max() < 1e-8 * np.abs(bound).max()
-    assert prediction.parameter_names[params.size] == "registration_position_phi_x"
+    prediction = predicted_errors(kuka_chain, experiment, method, sigma_pos_mm, sigma_rot_deg)
+    n_dh = experiment.truth.to_vector().size
+    jac = _reading_jacobian(experiment, experiment.validation.q, np.arange(n_dh + 6))
+    scaled = prediction.sensitivity * _noise_scale(sigma_pos_mm, sigma_rot_deg, experiment.calibration.n_rows)
+    registration = {"position": np.arange(n_dh, n_dh + 6), "orientation": np.arange(n_dh + 6, n_dh + 12)}
+    expected = {}
+    for which, part in (("position", slice(0, 3)), ("orientation", slice(3, 6))):
+        effect = jac[:, part, :] @ scaled[np.concatenate([np.arange(n_dh), registration[which]])]  # (J, 3, 6K)
+        expected[which] = mean_norm(effect @ effect.transpose(0, 2, 1))
+    np.testing.assert_allclose(prediction.position_per_pose_mm, 1000.0 * expected["position"], rtol=1e-6)
+    np.testing.assert_allclose(prediction.rotation_per_pose_deg, np.degrees(expected["orientation"]), rtol=1e-6)
+    assert prediction.position_mm == pytest.approx(1000.0 * expected["position"].mean(), rel=1e-6)
+    assert prediction.rotation_deg == pytest.approx(np.degrees(expected["orientation"].mean()), rel=1e-6)
+
+
+def test_ml_prediction_is_the_cramer_rao_bound_of_an_independent_model(kuka_chain):
+    """The ML covariance against (JᵀΣ⁻¹J)⁻¹ built without pincal's residuals or Jacobians.
+
+    J: finite differences of the numpy DH model's readings of every CPA and calibration
+    row with respect to the ML unknowns (every DH parameter but the registration's gauge
+    ε_1 and d_1, then φ and τ); Σ: σ_p = 0.05 mm per axis and σ_a = 0.1 deg per component
+    (unequal, so a swapped or mis-scaled σ shows). The bound must be the predicted
+    covariance of the DH parameters with either registration (the ML estimator has one),
+    and, propagated to the test poses by the same model, give the predicted mean errors.
+    Tolerance 1e-6: finite differences with h = 1e-6 are accurate to ~1e-9.
+    """
+    sigma_pos_mm, sigma_rot_deg = 0.05, 0.1
+    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
+    prediction = predicted_errors(kuka_chain, experiment, "ml", sigma_pos_mm, sigma_rot_deg)
+    n_joints = experiment.truth.n_joints
+    n_dh = 4 * n_joints
+    gauge = [n_joints, 3 * n_joints]  # ε_1 and d_1 in the flat [α, ε, r, d] vector
+    free = np.array([i for i in range(n_dh + 6) if i not in gauge])
+    jac = _reading_jacobian(experiment, experiment.calibration.q, free).reshape(-1, free.size)
+    weighted = jac / _noise_scale(sigma_pos_mm, sigma_rot_deg, experiment.calibration.n_rows)[:, None]
+    bound = np.linalg.inv(weighted.T @ weighted)
+
+    covariance = prediction.covariance
+    second = np.concatenate([free[free < n_dh], free[free >= n_dh] + 6])  # DH and Registration 2
+    for index in (free, second):
+        assert np.abs(covariance[np.ix_(index, index)] - bound).max() < 1e-6 * np.abs(bound).max()
+    assert not covariance[gauge].any() and not covariance[:, gauge].any()
+    assert prediction.parameter_names[n_dh] == "registration_position_phi_x"
+
+    test = _reading_jacobian(experiment, experiment.validation.q, free)
+    errors = test @ bound @ test.transpose(0, 2, 1)  # (J, 6, 6): covariance of each test pose's error
+    np.testing.assert_allclose(prediction.position_per_pose_mm, 1000.0 * mean_norm(errors[:, :3, :3]), rtol=1e-6)
+    np.testing.assert_allclose(prediction.rotation_per_pose_deg, np.degrees(mean_norm(errors[:, 3:, 3:])), rtol=1e-6)
 
 
 def test_chain_is_restored_and_bad_arguments_are_refused(kuka_chain):

@@ -385,17 +385,18 @@ def test_kuka_urdf_names_limits_and_provenance():
 def test_kuka_urdf_inertias_are_physical():
     model = pin.buildModelFromUrdf(str(kuka_lwr4plus_urdf()))
     total = 0.0
-    for name in KUKA_JOINTS:
+    source = load_generator().GAZ_MASS  # the masses the generator cites (Gaz, Flacco & De Luca 2016)
+    for name, mass in zip(KUKA_JOINTS, source):
         inertia = model.inertias[model.getJointId(name)]
-        assert 0.1 < inertia.mass < 10.0, name
+        assert inertia.mass == pytest.approx(mass, rel=1e-12), name  # written with full precision
         total += inertia.mass
-        assert np.linalg.norm(inertia.lever) < 0.5, name
+        assert np.linalg.norm(inertia.lever) < 0.5, name  # inside its link: the longest (d_3) is 0.4 m
         moments = np.linalg.eigvalsh(inertia.inertia)  # about the centre of mass
         assert np.all(moments > 0), name
         a, b, c = np.sort(moments)
         assert a + b >= c * (1 - 1e-12), name  # triangle inequality
         assert np.allclose(inertia.inertia, inertia.inertia.T)
-    assert 10.0 < total < 25.0
+    assert 10.0 < total < 25.0  # KUKA's datasheet gives 16 kg for the LWR 4+ arm
 
 
 def test_kuka_gravity_torques_finite_and_non_zero():
@@ -405,10 +406,11 @@ def test_kuka_gravity_torques_finite_and_non_zero():
     for q in rng.uniform(model.lowerPositionLimit, model.upperPositionLimit, size=(10, 7)):
         tau = pin.computeGeneralizedGravity(model, data, q)
         assert np.all(np.isfinite(tau))
-        assert np.linalg.norm(tau) > 1.0
+        assert np.linalg.norm(tau) > 1.0  # 17 kg of links: only COMs on vertical axes would give ~0
     # Upright, gravity is along the joint-1/3/5/7 axes: only the COM offsets load 2, 4, 6.
     tau = pin.computeGeneralizedGravity(model, data, np.radians([0, 90, 0, 0, 0, 0, 0]))
     assert abs(tau[0]) < 1e-9
-    # Upper arm horizontal at q = 0: joint 2 carries the whole arm (> 10 N m).
+    # Upper arm horizontal at q = 0: joint 2 carries the whole arm; links 4-7 alone
+    # (5.1 kg, Gaz et al.) sit at least d_3 = 0.4 m out, about 20 N m: half of it as a floor.
     tau = pin.computeGeneralizedGravity(model, data, np.zeros(7))
     assert abs(tau[1]) > 10.0

@@ -1,7 +1,8 @@
 """The ``pincal`` command line: a thin layer over :mod:`pincal.cli.workflows`.
 
-Every user error is printed as one line ``pincal: error: ...`` with exit code
-2; ``pincal evaluate`` exits 1 when a threshold is exceeded.
+The arguments are defined in :mod:`pincal.cli.parser`. Every user error is
+printed as one line ``pincal: error: ...`` with exit code 2; ``pincal
+evaluate`` exits 1 when a threshold is exceeded.
 """
 
 from __future__ import annotations
@@ -9,166 +10,18 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
-from pincal._version import __version__
+from pincal.cli.parser import build_parser
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
-from pincal.model.chain import pose_from_xyz_rpy
 from pincal.simulation.paper import SimulationSettings
 
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
-
-
-def _tool(text: str) -> np.ndarray:
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not np.all(np.isfinite(values)):
-        raise argparse.ArgumentTypeError(
-            f"'{text}' is not X,Y,Z,ROLL,PITCH,YAW (six numbers: metres, then radians)"
-        )
-    return pose_from_xyz_rpy(values[:3], values[3:])
-
-
-def _number(kind: type, minimum: float, what: str):
-    """argparse type: a finite ``kind`` (float or int) >= ``minimum``; ``what`` names it in errors."""
-
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"'{text}' is not {what}") from None
-        if not (np.isfinite(value) and value >= minimum):
-            raise argparse.ArgumentTypeError(f"'{text}' must be >= {minimum:g} (a finite {what})")
-        return value
-
-    return parse
-
-
-_non_negative = _number(float, 0.0, "number")
-_count_or_zero = _number(int, 0, "integer")
-_count = _number(int, 1, "integer")
-
-
-def _positive(text: str) -> float:
-    value = _non_negative(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be > 0")
-    return value
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="pincal",
-        description="Calibrate robot kinematic models (URDF) with Pinocchio.",
-    )
-    parser.add_argument("--version", action="version", version=f"pincal {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    sim = sub.add_parser("simulate", help="simulate the paper's KUKA LWR 4+ experiment (Section 7)")
-    sim.add_argument("--out", required=True, type=Path, help="output directory")
-    sim.add_argument("--deviations", choices=("small", "large"), default="large",
-                     help="Table 2 deviation set of the ground truth (default: large)")
-    sim.add_argument("--sigma-pos", type=_non_negative, default=0.055, metavar="MM",
-                     help="position noise per axis [mm] (default 0.055)")
-    sim.add_argument("--sigma-rot", type=_non_negative, default=0.055, metavar="DEG",
-                     help="orientation noise per angle [deg] (default 0.055)")
-    sim.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
-    sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
-                     help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
-                          "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
-                          "drift:VX:VY:VZ (m/s), sensor_scale:REL")
-
-    cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
-    cal.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
-    cal.add_argument("data", type=Path, help="measurement CSV (format v1)")
-    cal.add_argument("--method", type=int, choices=(1, 2, 3),
-                     help="1: positions only; 2: offsets from orientations, lengths from "
-                          "positions (default); 3: full pose in one cost")
-    cal.add_argument("--weight", type=_positive, default=1.0, metavar="W",
-                     help="Method 3 weight w of Err_rot [mm^2/deg^2] (default 1)")
-    cal.add_argument("--level", choices=("dh", "registration", "offsets", "full"),
-                     help="what to calibrate: dh = the paper's DH parameters (needs --tool); "
-                          "registration, offsets (joint zeros) or full (SE(3) error of every joint "
-                          "placement) on any chain, estimating the target. Default: dh when "
-                          "--method is given, else full")
-    cal.add_argument("--tool", type=_tool, metavar="X,Y,Z,ROLL,PITCH,YAW",
-                     help="known pose of the measured target in the tip link [m, rad]; "
-                          "without it (levels other than dh) the target is estimated")
-    cal.add_argument("--tool-parent", "--tip-link", dest="tip_link", metavar="LINK",
-                     help="link at the end of the calibrated chain, carrying the target")
-    cal.add_argument("--sigma-column", metavar="COLUMN",
-                     help="extra data column with a per-row noise scale [mm]: rows are weighted by it")
-    cal.add_argument("--reject-outliers", action="store_true",
-                     help="refit without the rows reported as outliers (> 5 robust sigma)")
-    cal.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
-                     help="criterion choosing how many weakly identified parameters to keep "
-                          "(default aic; computed on the calibration rows only)")
-    cal.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf",
-                     help="corrected URDF to write")
-    cal.add_argument("--report", required=True, type=Path, metavar="REPORT.json",
-                     help="report to write")
-
-    ev = sub.add_parser("evaluate", help="errors of a calibrated model on measured rows (eq 24)")
-    ev.add_argument("urdf", type=Path, help="corrected URDF")
-    ev.add_argument("report", type=Path, help="REPORT.json of the calibration")
-    ev.add_argument("data", type=Path, help="measurement CSV to evaluate on")
-    ev.add_argument("--json", type=Path, metavar="OUT", help="also write the metrics as JSON")
-    ev.add_argument("--max-pos-mm", type=_non_negative, metavar="X",
-                    help="fail (exit 1) if the largest position error exceeds X mm")
-    ev.add_argument("--max-rot-deg", type=_non_negative, metavar="Y",
-                    help="fail (exit 1) if the largest orientation error exceeds Y deg")
-
-    dia = sub.add_parser("diagnose", help="calibrate, then find and add the effects the model lacks")
-    dia.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
-    dia.add_argument("data", type=Path, help="measurement CSV (format v1)")
-    dia.add_argument("--validation", type=Path, metavar="DATA2",
-                     help="held-out measurements: errors reported before/after, effects that make them worse are refused")
-    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
-                     help="link at the end of the calibrated chain, carrying the target")
-    dia.add_argument("--level", choices=("registration", "offsets", "full"), default="full",
-                     help="geometric model under the effects (default full)")
-    dia.add_argument("--tool", type=_tool, metavar="X,Y,Z,ROLL,PITCH,YAW",
-                     help="known pose of the measured target in the tip link [m, rad] (default: estimated)")
-    dia.add_argument("--sigma-column", metavar="COLUMN", help="per-row noise scale column [mm]")
-    dia.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
-                     help="criterion for the geometric parameters (default aic)")
-    dia.add_argument("--payload-kg", type=_non_negative, default=0.0, metavar="KG",
-                     help="point mass at the target for gravity torques (default 0)")
-    dia.add_argument("--time-column", metavar="COLUMN",
-                     help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
-    dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
-    dia.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf", help="corrected URDF to write")
-    dia.add_argument("--report", required=True, type=Path, metavar="REPORT.json", help="report to write")
-
-    demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
-    demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
-                      help="output directory (default: ./pincal-demo)")
-    demo.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
-
-    study = sub.add_parser("study", help="the paper's simulation study (Section 7): all methods, "
-                                         "noise limit, findings, figures")
-    study.add_argument("--out", type=Path, default=Path("pincal-study"),
-                       help="output directory (default: ./pincal-study)")
-    study.add_argument("--reps", type=_count, default=25, metavar="N",
-                       help="noise realisations per level, N_rep (default 25)")
-    study.add_argument("--levels", type=_count, default=16, metavar="M",
-                       help="noise levels from 0 to 0.15, M_n (default 16)")
-    study.add_argument("--restarts", type=_count_or_zero, default=300, metavar="N",
-                       help="random starting points per restart case (default 300, the paper's; 0 skips)")
-    study.add_argument("--limit-pose-sets", type=_count_or_zero, default=2, metavar="L",
-                       help="pose sets the noise limit is averaged over (default 2; 0 skips it)")
-    study.add_argument("--workers", type=_count, default=None, metavar="N",
-                       help="local worker processes (default: all cores; 1 runs in this process)")
-    study.add_argument("--scheduler", metavar="ADDRESS",
-                       help="run on a Dask cluster at ADDRESS, or 'local' to start a Dask LocalCluster")
-    return parser
 
 
 def _error_columns(errors: PoseErrors) -> str:
@@ -253,16 +106,17 @@ def _print_chain_summary(run) -> None:
 def _run_evaluate(args: argparse.Namespace) -> int:
     from pincal.cli.workflows import evaluate_files
 
-    evaluation = evaluate_files(args.urdf, args.report, args.data)
+    evaluation = evaluate_files(args.urdf, args.report, args.data, allow_other_urdf=args.allow_other_urdf)
     _print_notes(evaluation.notes)
     errors = evaluation.errors
     print(_HEADER)
     print(f"{f'{errors.n_rows} rows':24s} {_error_columns(errors)}")
     if args.json:
-        from pincal.cli.workflows import refuse_overwrite
+        from pincal.cli.paths import refuse_overwrite
+        from pincal.outputs import write_text
 
         refuse_overwrite(args.json, args.urdf, args.report, args.data)
-        args.json.write_text(json.dumps(evaluation.as_dict(), indent=2) + "\n", encoding="utf-8")
+        write_text(args.json, json.dumps(evaluation.as_dict(), indent=2) + "\n")
         print(f"wrote {args.json}")
     failed = []
     if args.max_pos_mm is not None and errors.position.max > args.max_pos_mm:
@@ -338,14 +192,15 @@ def _run_demo(args: argparse.Namespace) -> int:
 
 
 def _run_study(args: argparse.Namespace) -> int:
-    from pincal.cli.workflows import ensure_directory
-    from pincal.study.run import ProgressBar, StudyConfig, run_study, write_study
+    from pincal.cli.progress import progress_bar
+    from pincal.cli.paths import ensure_directory
+    from pincal.study.run import StudyConfig, run_study, write_study
 
     ensure_directory(args.out)  # before the run, not after it
     config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts,
                          limit_pose_sets=args.limit_pose_sets)
-    progress = ProgressBar(sys.stderr) if sys.stderr.isatty() else None
-    result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress)
+    with progress_bar("study tasks", quiet=args.quiet) as progress:
+        result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress)
     paths = write_study(result, args.out)
     print(f"{len(result.rows)} rows from {config.levels} noise levels x {config.repeats} repeats x "
           f"{len(config.deviations)} deviation sets, {sum(r['starts'] for r in result.restart_summary)} restarts; "
@@ -360,12 +215,95 @@ def _run_study(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_urdf_from_dh(args: argparse.Namespace) -> int:
+    from pincal.cli.preparation import urdf_from_dh_file
+    from pincal.model.dh_urdf import DH_BASE_LINK, DH_FLANGE_LINK
+
+    run = urdf_from_dh_file(args.table, args.convention, args.out, name=args.name, degrees=args.degrees,
+                            flange=args.flange)
+    _print_notes(run.notes)
+    robot = run.robot
+    kinds = ", ".join(f"{robot.types.count(t)} {t}" for t in ("revolute", "prismatic") if t in robot.types)
+    print(f"read {args.table}: {robot.n_joints} joints ({kinds}), {robot.convention} DH convention")
+    print(f"wrote {args.out}: root link {DH_BASE_LINK}, joints {', '.join(robot.names)}, tip link "
+          f"{DH_FLANGE_LINK} (Pinocchio FK = DH product to {run.fk_error:.1e})")
+    print(f"next: pincal calibrate {args.out} DATA.csv --tip-link {DH_FLANGE_LINK} --level offsets "
+          "--out CORRECTED.urdf --report REPORT.json")
+    return 0
+
+
+def _run_plan(args: argparse.Namespace) -> int:
+    from pincal.cli.preparation import plan_files
+    from pincal.planning.planner import PlanSettings
+
+    settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
+                            sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,
+                            tool_known=args.tool is not None, seed=args.seed, alternate=args.alternate)
+    run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
+                     candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
+                     workspace_path=args.workspace, min_distance=args.min_distance)
+    _print_notes(run.notes)
+    _print_plan_summary(run)
+    print(f"wrote {args.out}\nwrote {args.report}")
+    return 0
+
+
+def _print_plan_summary(run) -> None:
+    """The choice, the prediction against random, identifiability and the visiting order."""
+    plan, doc = run.plan, run.document
+    settings = doc["settings"]
+    print(f"chose {len(plan.q)} of {run.n_candidates} candidates for criterion {plan.criterion} "
+          f"(level {settings['level']}, measure {settings['measure']}, noise {plan.sigma_pos_mm:.4g} mm"
+          + ("" if plan.sigma_rot_deg is None else f", {plan.sigma_rot_deg:.4g} deg")
+          + f", {plan.sigma_source}); {plan.swaps} exchange swaps, {plan.seconds:.2f} s")
+    if run.clearance is not None:
+        c = run.clearance
+        print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
+              f"self-collision, {c.too_close} closer than {c.min_distance_m:g} m ({c.pairs_checked} link pairs "
+              f"checked, {len(c.pairs_ignored)} ignored as closer at the zero configuration)")
+    others = len(plan.estimated) - len(plan.identifiable)
+    shown = ", ".join(plan.not_identifiable[:6]) + (", ..." if len(plan.not_identifiable) > 6 else "")
+    print(f"identifiable: {len(plan.identifiable)} kinematic parameters (+ {others} registration/target); "
+          f"not identifiable: {len(plan.not_identifiable)}" + (f" ({shown})" if shown else ""))
+
+    def errors(p) -> str:
+        if p is None:
+            return "not determined"
+        text = f"mean {p.mean_position_mm:.4g} mm, max {p.max_position_mm:.4g} mm"
+        if p.mean_rotation_deg is not None:
+            text += f"; orientation mean {p.mean_rotation_deg:.4g} deg, max {p.max_rotation_deg:.4g} deg"
+        return text + f" (condition {p.condition:.3g})"
+
+    print(f"predicted error, plan:   {errors(plan.prediction)}")
+    print(f"predicted error, random: {errors(plan.random)} [median of {plan.settings.random_draws} draws, "
+          f"{plan.random_singular} not determining the parameters]")
+    ratio = doc["predicted"]["plan_over_random_mean_position"]
+    if ratio is not None:
+        print(f"plan / random mean position error: {ratio:.2f}")
+    if plan.recorded is not None:
+        print(f"recorded rows alone: {errors(plan.recorded)}")
+        for entry in doc["additions"][:10]:
+            if entry["predicted_mean_mm"] is not None:
+                gain = "" if entry["gain_mm"] is None else f" (gain {entry['gain_mm']:.4g} mm)"
+                print(f"  add #{entry['priority']}: candidate {entry['candidate']} -> "
+                      f"{entry['predicted_mean_mm']:.4g} mm{gain}")
+    order = doc["order"]
+    print(f"order: {order['method']}, {plan.travel_s:.1f} s of moves at the velocity limits")
+    for balance in plan.balance:
+        if balance.joint in order["alternate"]:
+            corr = "n/a" if balance.correlation is None else f"{balance.correlation:+.2f}"
+            print(f"  {balance.joint}: {balance.from_below} from below, {balance.from_above} from above, "
+                  f"flank-position correlation {corr}")
+
+
 _COMMANDS = {
     "simulate": _run_simulate,
     "calibrate": _run_calibrate,
     "evaluate": _run_evaluate,
     "diagnose": _run_diagnose,
     "demo": _run_demo,
+    "plan": _run_plan,
+    "urdf-from-dh": _run_urdf_from_dh,
     "study": _run_study,
 }
 
@@ -374,7 +312,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pincal`` console script; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
-        return _COMMANDS[args.command](args)
+        # Many small factorisations: one BLAS thread each is faster than a pool that
+        # contends for the cores (the study's worker processes get the same setting).
+        with threadpool_limits(limits=1, user_api="blas"):
+            return _COMMANDS[args.command](args)
     except PincalError as exc:
         print(f"pincal: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

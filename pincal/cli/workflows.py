@@ -1,7 +1,9 @@
-"""End-to-end jobs behind the command line: simulate, calibrate, evaluate, demo.
+"""End-to-end jobs behind the command line: simulate, calibrate, evaluate, diagnose, demo.
 
 Each function takes paths and options, does the whole job, and returns what
 happened; the CLI (:mod:`pincal.cli.commands`) only parses arguments and prints.
+The workflows of urdf-from-dh and plan are in :mod:`pincal.cli.preparation`,
+the output path policy of all of them in :mod:`pincal.cli.paths`.
 """
 
 from __future__ import annotations
@@ -15,8 +17,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from pincal._version import __version__
+from pincal.cli.paths import ensure_directory, refuse_overwrite
 from pincal.diagnosis.diagnose import Diagnosis, diagnose
-from pincal.diagnosis.plots import plot_diagnosis
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
@@ -37,7 +39,7 @@ from pincal.model.effects import (
     parse_effect,
     time_column,
 )
-from pincal.model.urdf import same_file
+from pincal.outputs import file_sha256, write_text
 from pincal.report.document import (
     chain_report,
     diagnosis_report,
@@ -54,28 +56,6 @@ from pincal.simulation.paper import (
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
-
-
-def refuse_overwrite(output: Path, *inputs: Path) -> None:
-    """Raise if ``output`` is one of the input files; create its folder if needed."""
-    for path in inputs:
-        if same_file(output, path):
-            raise PincalError(f"{output}: refusing to overwrite an input file; choose another output path")
-    if output.is_dir():
-        raise PincalError(f"{output}: is a directory; give a file name")
-    ensure_directory(output.parent)
-
-
-def ensure_directory(path: str | Path) -> Path:
-    """Create the output folder ``path`` (and its parents); one clear error if impossible."""
-    path = Path(path)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        raise PincalError(f"{path}: exists and is not a directory; choose another output folder") from None
-    except OSError as exc:
-        raise PincalError(f"{path}: cannot create the output folder ({exc.strerror})") from None
-    return path
 
 
 # --- simulate ----------------------------------------------------------------
@@ -132,7 +112,7 @@ def simulate_to_directory(
             f"--out corrected.urdf --report REPORT.json"
         ),
     }
-    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
+    write_text(out / "truth.json", json.dumps(truth, indent=2) + "\n")
     return experiment, truth
 
 
@@ -194,7 +174,7 @@ def calibrate_files(
     urdf, data_path = Path(urdf), Path(data_path)
     out_urdf, report_path = Path(out_urdf), Path(report_path)
     refuse_overwrite(out_urdf, urdf, data_path)
-    refuse_overwrite(report_path, urdf, data_path, out_urdf)
+    refuse_overwrite(report_path, urdf, data_path, outputs=[out_urdf])
     if level == "dh" and tool_pose is None:
         raise PincalError(
             "the paper's methods (--level dh) need the tool: --tool X,Y,Z,ROLL,PITCH,YAW; "
@@ -227,7 +207,7 @@ def calibrate_files(
         )
         report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
         what = f"level {level}"
-    reload_error = write_checked_urdf(
+    reload_error, report["urdf_sha256"] = write_checked_urdf(
         urdf, out_urdf, chain, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {data_path.name}. "
         "Registration and tool: see the report.",
@@ -238,17 +218,29 @@ def calibrate_files(
 
 def write_checked_urdf(
     source: Path, destination: Path, chain: KinematicChain, nominal_placements, q: np.ndarray, comment: str
-) -> float:
-    """Write the corrected URDF, reload it and check it reproduces the chain's
-    tool poses at ``q`` to :data:`RELOAD_TOLERANCE`; returns the largest difference."""
-    write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment)
-    reload_error = _reload_error(destination, chain, q)
-    if reload_error > RELOAD_TOLERANCE:
-        raise CalibrationError(
-            f"{destination}: reloading the written URDF moves the tool by {reload_error:.3g} "
-            f"(> {RELOAD_TOLERANCE:g}); please report this as a bug"
-        )
-    return reload_error
+) -> tuple[float, str]:
+    """Write the corrected URDF, checking before it replaces ``destination`` that
+    reloading it reproduces the chain's tool poses at ``q`` to :data:`RELOAD_TOLERANCE`
+    (a failed check leaves the old file).
+
+    Returns:
+        The largest difference [m, -] and the SHA-256 (hex) of the bytes written
+        (the report's ``urdf_sha256``).
+    """
+    checked: list[float] = []
+    digest: list[str] = []
+
+    def verify(written: Path) -> None:
+        checked.append(_reload_error(written, chain, q))
+        if checked[-1] > RELOAD_TOLERANCE:
+            raise CalibrationError(
+                f"{destination}: reloading the written URDF moves the tool by {checked[-1]:.3g} "
+                f"(> {RELOAD_TOLERANCE:g}); not written; please report this as a bug"
+            )
+        digest.append(file_sha256(written))
+
+    write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify)
+    return checked[-1], digest[-1]
 
 
 def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
@@ -277,11 +269,29 @@ class Evaluation:
         return {**self.errors.as_dict(), "skipped_cpa_rows": self.n_skipped_cpa}
 
 
-def evaluate_files(urdf: str | Path, report_path: str | Path, data_path: str | Path) -> Evaluation:
-    """Eq 24 on every non-CPA row of ``data_path`` with the model and registrations of a report."""
+def evaluate_files(
+    urdf: str | Path, report_path: str | Path, data_path: str | Path, allow_other_urdf: bool = False
+) -> Evaluation:
+    """Eq 24 on every non-CPA row of ``data_path`` with the model and registrations of a report.
+
+    When the report records the SHA-256 of the URDF written with it
+    (``urdf_sha256``), ``urdf`` must be that file — a run killed between
+    writing the URDF and the report, or a report of another run, is refused —
+    unless ``allow_other_urdf`` (the URDF was edited on purpose; a note says so).
+    """
     report = read_report(report_path)
     chain = KinematicChain.from_urdf(urdf, report.tool_parent)
-    data, notes = read_measurements(data_path, chain.joint_specs)
+    notes: list[str] = []
+    if report.urdf_sha256 is not None and file_sha256(urdf) != report.urdf_sha256:
+        if not allow_other_urdf:
+            raise PincalError(
+                f"{urdf}: not the URDF {report_path} was written with (its SHA-256 differs from the report's "
+                "urdf_sha256); evaluate the pair calibrate wrote, or pass --allow-other-urdf if you changed it "
+                "on purpose"
+            )
+        notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
+    data, read_notes = read_measurements(data_path, chain.joint_specs)
+    notes += read_notes
     if data.n_points != len(report.points):
         raise PincalError(
             f"{data_path}: {data.n_points} target point(s) per row, but the report's tool has "
@@ -430,7 +440,7 @@ def diagnose_files(
     urdf, data_path, out_urdf, report_path = Path(urdf), Path(data_path), Path(out_urdf), Path(report_path)
     inputs = [urdf, data_path] + ([Path(validation_path)] if validation_path else [])
     refuse_overwrite(out_urdf, *inputs)
-    refuse_overwrite(report_path, *inputs, out_urdf)
+    refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     if level == "dh":
         raise PincalError("diagnose works on --level registration, offsets or full")
     started = time.perf_counter()
@@ -461,7 +471,7 @@ def diagnose_files(
         sigma_pos_m=diagnosis.sigma_pos_m, sigma_rot_rad=diagnosis.sigma_rot_rad,
         rms_m=float(np.sqrt(np.mean(diagnosis.calibration_errors.position_m**2))),
     )
-    write_checked_urdf(
+    _, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and {data_path.name}. "
         "Registration, tool and effects (which a URDF cannot carry): see the report.",
@@ -471,7 +481,12 @@ def diagnose_files(
                "validation": None if validation_path is None else str(validation_path)}
     report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
     report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
-    plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir)) if plots_dir is not None else []
+    report["urdf_sha256"] = urdf_sha256
+    plots = []
+    if plots_dir is not None:
+        from pincal.diagnosis.plots import plot_diagnosis  # matplotlib only when drawing
+
+        plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
     report["diagnosis"]["plots"] = [str(p) for p in plots]
     write_report(report_path, report)
     return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started)

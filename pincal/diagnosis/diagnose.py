@@ -10,10 +10,11 @@ information criterion on the calibration rows (Schwarz 1978),
     ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m),
 
 with the noise scales held at the geometric calibration's estimates. The best
-one is adopted when the evidence is very strong (ΔBIC < :data:`EVIDENCE`, Kass &
-Raftery 1995) and it is not one of the cases that fool a selection:
+one is adopted when the evidence is very strong (ΔBIC < −10, Kass & Raftery
+1995) and it is not one of the cases that fool a selection
+(:mod:`pincal.diagnosis.verdicts`):
 
-* a value outside physical range (:data:`PLAUSIBLE`) — a stand-in for something else;
+* a value outside physical range — a stand-in for something else;
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
 * a close competitor with a strongly correlated basis (e.g. the approach flanks
@@ -24,6 +25,15 @@ Such cases are reported, not adopted. The loop repeats until nothing
 significant remains; then a generic per-joint correction (polynomial and
 harmonics of the joint angle) tests whether structure remains that no
 candidate explains.
+
+Screening. Each step first scores every candidate by the linearised fit
+(:mod:`pincal.diagnosis.screening`: Gauss–Newton from the current solution, a
+score test). Only candidates whose score could put them in what the step
+reports or judges — the first eight, every one the adoption checks look at,
+with a margin for the linearisation — and, at the first step, every nearly
+inseparable one are refitted in full, from their Gauss–Newton step, so the
+ranking, values and verdicts are those of the full fits. All fits share one
+sensitivity model per set of free parameters.
 """
 
 from __future__ import annotations
@@ -34,6 +44,15 @@ from typing import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pincal.diagnosis.screening import (
+    SCREEN_CONDITION,
+    SCREEN_INSEPARABLE,
+    Linearisation,
+    Score,
+    may_reach,
+    screen,
+)
+from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
 from pincal.fit.metrics import PoseErrors
@@ -51,46 +70,16 @@ from pincal.model.effects import (
 )
 from pincal.residuals.sensor import SensorResidual
 
-#: ΔBIC below which the evidence for an effect is "very strong".
-EVIDENCE = -10.0
-#: Largest plausible magnitude of each effect's value(s), by type (revolute, prismatic).
-PLAUSIBLE = {
-    "compliance": (1e-3, 1e-4),  # rad/(N·m), m/N: stiffer than 1 000 N·m/rad
-    "encoder_scale": (0.02, 0.02),  # relative
-    "cyclic": (0.02, 0.005),  # rad, m
-    "backlash": (0.1, 0.01),  # rad, m
-    "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
-    "sensor_scale": (0.01, 0.01),  # relative
-}
-#: |mean| / RMS of a basis above which it is "nearly constant" (acts as an offset).
-OFFSET_LIKE = 0.95
-#: |correlation| of two candidates' bases above which they are hard to tell apart.
-AMBIGUOUS = 0.8
 #: Most effects adopted.
 MAX_EFFECTS = 4
 #: Refits with gravity torques recomputed on the refitted geometry.
 GRAVITY_REFRESHES = 2
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """One effect tried at one step.
-
-    Attributes:
-        effect: the effect.
-        values / std: fitted values and standard deviations.
-        delta_bic: BIC change on the calibration rows against the current model.
-        heldout_rms_mm: RMS point error on held-out rows, or None.
-        verdict: ``adopted``, ``significant`` (not the best), ``not significant``,
-            or why a significant one was not adopted.
-    """
-
-    effect: Effect
-    values: np.ndarray
-    std: np.ndarray
-    delta_bic: float
-    heldout_rms_mm: float | None
-    verdict: str
+#: Tolerance of a candidate's full fit (:func:`pincal.fit.solver.solve`): it ranks
+#: and is judged; an adopted effect is refitted at the solver's own tolerance.
+CANDIDATE_TOLERANCE = 1e-10
+#: Evaluations allowed to the full fit of a generic correction (an ill-posed one
+#: crawls along a valley of equivalent corrections; its linearised ΔBIC is then used).
+GENERIC_EVALUATIONS = 20
 
 
 @dataclass(frozen=True)
@@ -164,6 +153,7 @@ class _Model:
         self.row_weight = row_weight
         self.sigma_pos = calibration.sigma_pos_m
         self.sigma_rot = calibration.sigma_rot_rad
+        self.models: dict = {}  # sensitivity models, shared by every fit and held-out evaluation
 
     def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
         data = self.rows if data is None else data
@@ -171,7 +161,7 @@ class _Model:
         problem = FitProblem(
             self.chain, self.calibration.params, data, self.calibration.start,
             fit_target=self.calibration.fit_target, row_weight=weight,
-            effects=effects, inputs=self.inputs if inputs is None else inputs,
+            effects=effects, inputs=self.inputs if inputs is None else inputs, models=self.models,
         )
         problem.sigma_pos = self.sigma_pos
         problem.sigma_rot = self.sigma_rot
@@ -183,7 +173,8 @@ class _Model:
         problem.reestimate_sigmas(objective, solution)
         self.sigma_pos, self.sigma_rot = problem.sigma_pos, problem.sigma_rot
 
-    def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray]):
+    def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray],
+            max_evaluations: int | None = None, tolerance: float | None = None):
         """Fit geometry, registration, target and ``effects`` from a start."""
         problem = self.problem(effects)
         base = self.calibration.vector
@@ -193,42 +184,13 @@ class _Model:
         x0[:n_core] = x_start
         for sl, value in zip(objective._effect_slices, values_start):
             x0[sl] = value
-        solution = solve(objective, x0, what="effect fit")
+        solution = solve(objective, x0, what="effect fit", max_evaluations=max_evaluations, tolerance=tolerance)
         return objective, solution
 
 
 def _bic(residual: np.ndarray, n_params: int) -> float:
     m = residual.size
     return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
-
-
-def _basis(effect: Effect, inputs: EffectInputs, chain: KinematicChain) -> np.ndarray | None:
-    if effect.type not in JOINT_EFFECTS:
-        return inputs.time[:, None] if effect.type == "drift" else None
-    return joint_basis(effect, inputs, chain.joint_names.index(effect.joint))
-
-
-def _offset_like(basis: np.ndarray | None) -> bool:
-    if basis is None:
-        return False
-    columns = basis.reshape(len(basis), -1)
-    ratio = np.abs(columns.mean(axis=0)) / np.sqrt(np.mean(columns**2, axis=0) + 1e-300)
-    return bool(np.all(ratio > OFFSET_LIKE))
-
-
-def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> bool:
-    prismatic = effect.joint is not None and chain.joints[chain.joint_names.index(effect.joint)].kind == "prismatic"
-    limit = PLAUSIBLE[effect.type][1 if prismatic else 0]
-    magnitude = np.hypot(*values) if effect.type == "cyclic" else np.max(np.abs(values))
-    return bool(magnitude <= limit)
-
-
-def _correlation(a: np.ndarray | None, b: np.ndarray | None) -> float:
-    if a is None or b is None:
-        return 0.0
-    a, b = a[:, 0] - a[:, 0].mean(), b[:, 0] - b[:, 0].mean()
-    denominator = np.sqrt((a @ a) * (b @ b))
-    return float(a @ b / denominator) if denominator > 0 else 0.0
 
 
 def diagnose(
@@ -278,47 +240,57 @@ def diagnose(
         pool = [e for e in pool if e.type != "drift"]
 
     adopted: list[Effect] = []
-    values: list[np.ndarray] = []
     objective, solution = model.fit([], calibration.solution, [])
     current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size)
     steps: list[Step] = []
     notes: list[str] = []
     ranking: list[Candidate] = []
-    inseparable: list[str] = []
+    inseparable: set[str] = set()
     rejected: dict[str, str] = {}
-    current_objective = objective
+    current_objective, current_solution = objective, solution
     while len(adopted) < MAX_EFFECTS:
-        tried = []
-        for effect in pool:
-            if effect in adopted:
+        offered = [e for e in pool if e not in adopted]
+        screened = screen(current_objective, current_solution, offered, current_bic)
+        fits: dict[Effect, tuple | None] = {}
+
+        def refit(effect: Effect, score: Score) -> None:
+            if score.condition > SCREEN_INSEPARABLE:
+                sol = None
+            else:
+                start = current_x + score.step[: current_x.size]
+                try:
+                    obj, sol = model.fit(adopted + [effect], start[: current_objective.blocks["effects"].start],
+                                         [start[sl] for sl in current_objective._effect_slices]
+                                         + [score.step[current_x.size:]], tolerance=CANDIDATE_TOLERANCE)
+                except CalibrationError:
+                    sol = None
+            if sol is None:
+                if not steps:
+                    inseparable.add(effect.label)
+                fits[effect] = None
+                return
+            fits[effect] = (_bic(sol.residual, sol.x.size) - current_bic, effect, obj, sol)
+
+        held_rms = None if heldout is None else (
+            lambda objective, x, held_inputs=held_inputs: _heldout_rms(model, objective, x, heldout, held_inputs))
+        judge = Judge(inputs, chain, held_rms, current_objective, current_x)
+        if not steps:  # name every candidate the geometry absorbs
+            for effect, score in screened:
+                if score.condition > SCREEN_CONDITION:
+                    refit(effect, score)
+        while True:
+            tried = sorted((t for t in fits.values() if t is not None), key=lambda t: (t[0], pool.index(t[1])))
+            if len(tried) < SHOWN and len(fits) < len(screened):  # refit the next best until eight are shown
+                refit(*next((effect, score) for effect, score in screened if effect not in fits))
                 continue
-            try:
-                obj, sol = model.fit(adopted + [effect], current_x[: current_objective.blocks["effects"].start],
-                                     values + [np.zeros(effect.n_values)])
-            except CalibrationError:
-                if not steps and effect.label not in inseparable:
-                    inseparable.append(effect.label)
-                continue
-            delta = _bic(sol.residual, sol.x.size) - current_bic
-            tried.append((delta, effect, obj, sol))
-        tried.sort(key=lambda item: item[0])
-        ranking = []
-        chosen = None
-        for rank, (delta, effect, obj, sol) in enumerate(tried):
-            sl = obj._effect_slices[-1]
-            value, std = sol.x[sl], sol.std[sl]
-            held = _heldout_rms(model, obj, sol.x, heldout, held_inputs) if heldout is not None else None
-            verdict = "not significant"
-            if delta < EVIDENCE:
-                verdict = "significant"
-                if chosen is None:
-                    verdict = _rejection(effect, value, delta, tried, inputs, chain, held, model,
-                                         current_objective, current_x, heldout, held_inputs)
-                    if verdict == "adopted":
-                        chosen = (delta, effect, obj, sol)
-                    else:
-                        rejected[effect.label] = f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted"
-            ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
+            ranking, chosen, step_rejected, cut = judge.rank(tried)
+            pending = [(effect, score) for effect, score in screened
+                       if effect not in fits and may_reach(score.delta_bic, cut)]
+            if not pending:
+                break
+            for effect, score in pending:
+                refit(effect, score)
+        rejected.update(step_rejected)
         if chosen is None:
             break
         delta, effect, obj, sol = chosen
@@ -342,31 +314,31 @@ def diagnose(
                     held_inputs = replace(held_inputs, gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
                                      [sol.x[sl] for sl in obj._effect_slices])
-        values = [sol.x[sl] for sl in obj._effect_slices]
-        current_objective, current_x = obj, sol.x
+        current_objective, current_solution, current_x = obj, sol, sol.x
         current_bic = _bic(sol.residual, sol.x.size)
         steps.append(Step(
             effect=effect, values=sol.x[obj._effect_slices[-1]], std=sol.std[obj._effect_slices[-1]],
             delta_bic=float(delta), calibration_before=before_cal, calibration_after=_errors(obj, sol.x),
             heldout_before=before_held,
             heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
-            candidates=tuple(ranking[:8]),
+            candidates=tuple(ranking[:SHOWN]),
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
     if inseparable:
+        labels = [e.label for e in pool if e.label in inseparable]
         notes.append(
-            f"not separable from the calibrated geometry at this level (absorbed by it): {', '.join(inseparable)}"
+            f"not separable from the calibrated geometry at this level (absorbed by it): {', '.join(labels)}"
         )
     final_solution = solve(current_objective, current_x, what="final fit")
     effects = tuple(
         (e, final_solution.x[sl], final_solution.std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
     )
-    unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain, inputs)
+    unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain)
     return Diagnosis(
         effects=effects,
         steps=tuple(steps),
-        last_candidates=tuple(ranking[:8]),
+        last_candidates=tuple(ranking[:SHOWN]),
         unexplained=unexplained,
         objective=current_objective,
         solution_x=final_solution.x,
@@ -379,27 +351,6 @@ def diagnose(
         sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),
     )
-
-
-def _rejection(effect, value, delta, tried, inputs, chain, held, model, current_objective, current_x,
-               heldout, held_inputs) -> str:
-    """'adopted', or why the best significant candidate is only reported."""
-    if not _plausible(effect, value, chain):
-        return f"its value {np.round(value, 6).tolist()} is outside the physical range (a stand-in for something else)"
-    basis = _basis(effect, inputs, chain)
-    if _offset_like(basis):
-        return "its basis barely changes over the rows, so it acts as a joint offset"
-    for other_delta, other, _, _ in tried:
-        if other is effect or other_delta - delta > 6.0:
-            continue
-        if abs(_correlation(basis, _basis(other, inputs, chain))) > AMBIGUOUS:
-            return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
-                    f"{_correlation(basis, _basis(other, inputs, chain)):+.2f}: the data cannot tell them apart")
-    if heldout is not None and held is not None:
-        before = _heldout_rms(model, current_objective, current_x, heldout, held_inputs)
-        if held > before * 1.02:
-            return f"it makes the held-out rows worse ({before:.3f} → {held:.3f} mm RMS)"
-    return "adopted"
 
 
 def _errors(objective: SensorResidual, x: np.ndarray) -> PoseErrors:
@@ -429,20 +380,34 @@ def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
     return errors.position.rms
 
 
-def _remaining_structure(model, adopted, objective, solution, chain, inputs) -> str | None:
-    """Fit a generic joint-space correction per joint; report strong evidence of structure."""
+def _remaining_structure(model, adopted, objective, solution, chain) -> str | None:
+    """Fit a generic joint-space correction per joint; report strong evidence of structure.
+
+    Joints whose linearised test is far from significant are not refitted; a
+    full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
+    its ΔBIC and the linearised one."""
     base_bic = _bic(solution.residual, solution.x.size)
-    found = []
-    for j, name in enumerate(chain.joint_names):
+    corrections = []
+    for name in chain.joint_names:
         generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
-        generic = [e for e in generic if e not in adopted]
+        corrections.append([e for e in generic if e not in adopted])
+    columns = iter(objective.effect_columns(solution.x, [e for generic in corrections for e in generic]))
+    blocks = [np.hstack([next(columns) for _ in generic]) for generic in corrections]
+    scores = Linearisation(solution).test(blocks, base_bic)
+    found = []
+    for name, generic, score in zip(chain.joint_names, corrections, scores):
+        if score.condition <= SCREEN_CONDITION and not may_reach(score.delta_bic, EVIDENCE):
+            continue
         try:
             _, sol = model.fit(adopted + generic, solution.x[: objective.blocks["effects"].start],
                                [solution.x[sl] for sl in objective._effect_slices]
-                               + [np.zeros(e.n_values) for e in generic])
+                               + [np.zeros(e.n_values) for e in generic],
+                               max_evaluations=GENERIC_EVALUATIONS)
         except CalibrationError:
             continue
         delta = _bic(sol.residual, sol.x.size) - base_bic
+        if not sol.converged:
+            delta = min(delta, score.delta_bic)
         if delta < EVIDENCE:
             found.append(f"{name} (ΔBIC {delta:.1f})")
     if not found:

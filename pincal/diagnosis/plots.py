@@ -1,17 +1,17 @@
 """PNG figures of a diagnosis: each adopted effect against its driver, and the
-error distributions before and after (matplotlib, Agg backend)."""
+error distributions before and after (matplotlib's object API on the Agg
+canvas: no pyplot, no global figure state, no GUI backend)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-from pincal.diagnosis.diagnose import Diagnosis  # noqa: E402
-
-matplotlib.use("Agg")
+from pincal.diagnosis.diagnose import Diagnosis
+from pincal.outputs import replacing
 
 
 def _joint_unit(label: str) -> str:
@@ -26,7 +26,8 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
     for number, step in enumerate(diagnosis.steps, start=1):
         if step.driver is None:
             continue
-        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        fig = Figure(figsize=(6.4, 4.2), layout="tight")
+        ax = fig.subplots()
         order = np.argsort(step.driver, kind="stable")
         unit = _joint_unit(step.effect.joint or "")
         ax.plot(step.driver, step.joint_residual * 1000.0, "o", ms=4, alpha=0.7,
@@ -38,9 +39,7 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         path = out / f"diagnose_step{number}_{step.effect.label.replace(':', '_')}.png"
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
+        _save(fig, path)
         paths.append(path)
     paths.append(_error_distributions(diagnosis, out))
     return paths
@@ -53,7 +52,8 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
     if diagnosis.heldout_errors is not None:
         panels.append(("held-out rows", first.heldout_before if first else diagnosis.heldout_errors,
                        diagnosis.heldout_errors))
-    fig, axes = plt.subplots(1, len(panels), figsize=(6.0 * len(panels), 4.0), squeeze=False)
+    fig = Figure(figsize=(6.0 * len(panels), 4.0), layout="tight")
+    axes = fig.subplots(1, len(panels), squeeze=False)
     for ax, (title, before, after) in zip(axes[0], panels):
         b, a = before.position_m.ravel() * 1000.0, after.position_m.ravel() * 1000.0
         bins = np.linspace(0.0, max(b.max(), a.max()) * 1.05, 30)
@@ -65,7 +65,12 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     path = out / "diagnose_errors_before_after.png"
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path)
     return path
+
+
+def _save(fig: Figure, path: Path) -> None:
+    """Draw ``fig`` once (the tight layout is applied during that draw) into ``path``."""
+    FigureCanvasAgg(fig)
+    with replacing(path, "wb") as handle:
+        fig.savefig(handle, format="png", dpi=120)

@@ -35,7 +35,7 @@ from pincal.fit.identifiability import (
 )
 from pincal.fit.outliers import find_outliers
 from pincal.fit.registration import mean_rotation, register_points
-from pincal.fit.solver import Solution, solve
+from pincal.fit.solver import Solution, gram, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.parameter_sets import LEVELS, NoParameters
@@ -56,6 +56,10 @@ SELECTION_CRITERIA = {
 #: are re-estimated from the residuals (maximum likelihood with unknown variances).
 START_SIGMA_POS_M = 1e-3
 START_SIGMA_ROT_RAD = 1e-3
+
+#: Solver tolerance of the nested fits that only score a subset (their criterion
+#: moves by ~1e-8; the subset chosen is refitted at the solver's own tolerance).
+SELECTION_TOLERANCE = 1e-10
 
 KEPT = "calibrated"
 NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
@@ -185,22 +189,27 @@ def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
 
 
 class FitProblem:
-    """One weighted fit of registration, target and a subset of kinematic parameters."""
+    """One weighted fit of registration, target and a subset of kinematic parameters.
+
+    ``models``: sensitivity models by slots (:class:`KinematicsCache`), shared by
+    the objectives of this problem and of any problem given the same dict.
+    """
 
     def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight,
-                 effects=(), inputs=None):
+                 effects=(), inputs=None, models: dict | None = None):
         self.chain, self.params, self.data = chain, params, data
         self.start = start
         self.fit_target = fit_target
         self.row_weight = row_weight
         self.effects = tuple(effects)
         self.inputs = inputs
+        self.models = {} if models is None else models
         self.sigma_pos = START_SIGMA_POS_M
         self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
-        cache = KinematicsCache(params, free, base, self.data.q)
+        cache = KinematicsCache(params, free, base, self.data.q, self.models)
         return SensorResidual(
             cache,
             self.data.points,
@@ -352,8 +361,8 @@ def _calibrate_rows(
         params.apply(vector)
     else:
         chain.set_placements(nominal)
-    jac = objective.jacobian(x)
-    covariance = np.linalg.pinv(jac.T @ jac) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    jac = solution.jacobian
+    covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
     names = _column_names(objective, params, kept)
     correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
     k, p = rows.n_rows, rows.n_points
@@ -407,7 +416,7 @@ def _select(problem: FitProblem, ordering, base: np.ndarray, rows: MeasurementSe
         objective = problem.objective(kept, base)
         x0 = objective.start_vector() if previous is None else _warm_start(objective, previous, kept)
         try:
-            solution = solve(objective, x0, what="selection")
+            solution = solve(objective, x0, what="selection", tolerance=SELECTION_TOLERANCE)
         except CalibrationError:
             continue
         previous = (kept, solution.x, objective)
@@ -473,12 +482,15 @@ def _dropped(jac, ordering, kept, other_cols, full: SensorResidual, params) -> t
     kin_start = full.blocks["kinematic"].start
     kept_cols = np.concatenate([kin_start + kept, other_cols]).astype(int)
     names = _column_names(full, params, np.arange(params.size))
-    out = []
-    for rank_position, column in enumerate(ordering.order):
-        index = int(column - kin_start)
-        if index in set(kept.tolist()):
-            continue
-        reason = NOT_SELECTED if rank_position < ordering.rank else NOT_IDENTIFIABLE
-        absorbers = tuple((names[c], coef) for c, coef in absorbed_into(jac, int(column), kept_cols))
-        out.append(Dropped(index=index, reason=reason, absorbed_into=absorbers))
-    return tuple(out)
+    kept_set = set(kept.tolist())
+    dropped = [(position, int(column)) for position, column in enumerate(ordering.order)
+               if int(column - kin_start) not in kept_set]
+    absorbers = absorbed_into(jac, [column for _, column in dropped], kept_cols)
+    return tuple(
+        Dropped(
+            index=column - kin_start,
+            reason=NOT_SELECTED if position < ordering.rank else NOT_IDENTIFIABLE,
+            absorbed_into=tuple((names[c], coef) for c, coef in absorbing),
+        )
+        for (position, column), absorbing in zip(dropped, absorbers)
+    )

@@ -20,9 +20,13 @@ projected out:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 import scipy.linalg
+
+from pincal.fit.solver import condition_number as matrix_condition
+from pincal.fit.solver import triangular_factor
 
 #: Pivots below this fraction of the largest mean "not identifiable".
 RANK_TOLERANCE = 1e-8
@@ -54,7 +58,12 @@ def _scaled(jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def order_parameters(jacobian: np.ndarray, kinematic: np.ndarray, always: np.ndarray) -> Ordering:
-    """Pivoted QR of the kinematic columns after projecting out the ``always`` columns."""
+    """Pivoted QR of the kinematic columns after projecting out the ``always`` columns.
+
+    Exactly equivalent columns (e.g. two placement translations along one joint
+    axis) tie; LAPACK's pivoting then keeps whichever rounding favours, so this
+    runs on the projected Jacobian itself, as it always has, to keep that choice.
+    """
     scaled, _ = _scaled(jacobian)
     base = scaled[:, always]
     if base.shape[1]:
@@ -90,19 +99,28 @@ def press(jacobian: np.ndarray, residual: np.ndarray, block: int) -> float:
     return float(np.sum(loo**2))
 
 
-def absorbed_into(jacobian: np.ndarray, dropped: int, kept: np.ndarray) -> list[tuple[int, float]]:
-    """Kept columns that reproduce a dropped column, with scaled coefficients (largest first)."""
+def absorbed_into(jacobian: np.ndarray, dropped: Sequence[int], kept: np.ndarray) -> list[list[tuple[int, float]]]:
+    """For each dropped column, the kept columns that reproduce it, with scaled
+    coefficients (largest first, at most three): one least-squares solve for all."""
     scaled, _ = _scaled(jacobian)
-    coef, *_ = np.linalg.lstsq(scaled[:, kept], scaled[:, dropped], rcond=None)
-    order = np.argsort(-np.abs(coef))
-    return [(int(kept[i]), float(coef[i])) for i in order if abs(coef[i]) >= ABSORB_THRESHOLD][:3]
+    dropped = list(dropped)
+    if not dropped:
+        return []
+    # least squares through one triangular factor of [kept | dropped]: R11 C = R12
+    r = triangular_factor(scaled[:, np.concatenate([np.asarray(kept, dtype=int), dropped])])
+    n = len(kept)
+    coefs = scipy.linalg.solve_triangular(r[:n, :n], r[:n, n:])  # (kept, dropped)
+    out = []
+    for coef in coefs.T:
+        order = np.argsort(-np.abs(coef))
+        out.append([(int(kept[i]), float(coef[i])) for i in order if abs(coef[i]) >= ABSORB_THRESHOLD][:3])
+    return out
 
 
 def condition_number(jacobian: np.ndarray) -> float:
     """Condition number of the column-scaled Jacobian."""
     scaled, _ = _scaled(jacobian)
-    s = np.linalg.svd(scaled, compute_uv=False)
-    return float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
+    return matrix_condition(scaled)
 
 
 def correlated_pairs(covariance: np.ndarray) -> list[tuple[int, int, float]]:

@@ -26,7 +26,10 @@ it is identifiable, unlike in CPA), eps_2..N, r_1..N, d_2..N, φ (3), τ (3),
 with Ω = Ω_0 exp(φ) about Method 2's Registration 1 Ω_0.
 eps_1 and d_1 are a gauge of the registration (rotation about and translation
 along the first joint axis) and keep their nominal values. The fit starts from
-Method 2's solution and its Registration 1.
+Method 2's solution and its Registration 1 (computed, or given as ``start``).
+``withhold_orientations`` names row roles that enter with their positions only
+(orientation weight 0): the study's ablation gives the CPA rows no orientations,
+as the paper's CPA measures positions only.
 """
 
 from __future__ import annotations
@@ -109,16 +112,18 @@ def variance_components(objective: SensorResidual, x: npt.ArrayLike) -> tuple[fl
     σ² = ‖e‖² / (3K − tr H_type), with e the unscaled residuals of one type and
     H the hat matrix J (JᵀJ)⁻¹ Jᵀ of the scaled problem, whose diagonal over a
     type's rows is the number of unknowns that type absorbs (Förstner 1979).
-    ``objective`` is a :func:`tool_pose_residual` (weights 1/σ_p and 1/σ_a).
+    ``objective`` is a :func:`tool_pose_residual` (weights 1/σ_p and 1/σ_a);
+    rows of orientation weight 0 (withheld orientations) count for σ_p only.
     """
     rows = objective.row_indices()  # (K, 6): position, orientation
     basis, _ = np.linalg.qr(objective.jacobian(x))
     leverage = (basis**2).sum(axis=1)[rows]
     residual = objective.residual(x)[rows]
-    k = len(residual)
+    oriented = objective.v > 0  # (K,)
+    k, k_a = len(residual), int(oriented.sum())
     ss_p = float(((residual[:, :3] / objective.w[:, None]) ** 2).sum())
-    ss_a = float(((residual[:, 3:] / objective.v[:, None]) ** 2).sum())
-    return ss_p / (3 * k - leverage[:, :3].sum()), ss_a / (3 * k - leverage[:, 3:].sum())
+    ss_a = float(((residual[oriented, 3:] / objective.v[oriented, None]) ** 2).sum())
+    return ss_p / (3 * k - leverage[:, :3].sum()), ss_a / (3 * k_a - leverage[oriented, 3:].sum())
 
 
 def calibrate_ml(
@@ -129,6 +134,8 @@ def calibrate_ml(
     nominal: DHTable | None = None,
     *,
     fit_alpha_n: bool = True,
+    withhold_orientations: tuple[str, ...] = (),
+    start: PaperCalibration | None = None,
 ) -> MLCalibration:
     """Maximum-likelihood calibration on the ``cpa`` and ``calibration`` rows of ``data``.
 
@@ -141,10 +148,17 @@ def calibrate_ml(
         nominal: the default table (read from the chain's placements if None);
             eps_1 and d_1 (and alpha_N if not fitted) keep its values.
         fit_alpha_n: estimate alpha_N too (identifiable with a known tool).
+        withhold_orientations: roles (``cpa``, ``calibration``) whose rows enter
+            with their positions only (orientation weight 0), e.g. ``("cpa",)``
+            for the paper's position-only CPA.
+        start: Method 2's result on the same ``data`` (from
+            :func:`pincal.fit.paper_methods.calibrate_paper`), the fit's start;
+            computed if None. Its nominal table is the nominal one.
 
     Raises:
         CalibrationError: no orientations, several points per row, a σ that is
-            not positive, too few rows, or parameters the data cannot determine.
+            not positive, too few rows, a start that is not Method 2's or whose
+            nominal is not ``nominal``, or parameters the data cannot determine.
     """
     for value, name in ((sigma_pos_mm, "sigma_pos_mm"), (sigma_rot_deg, "sigma_rot_deg")):
         if value is not None and not value > 0:
@@ -154,28 +168,48 @@ def calibrate_ml(
             f"{data.source}: the ML estimator needs orientations (columns qx,qy,qz,qw); "
             "use --method 1 for positions only"
         )
-    start = calibrate_paper(chain, data, method=2, nominal=nominal)
+    if start is None:
+        start = calibrate_paper(chain, data, method=2, nominal=nominal)
+    elif start.method != 2 or (
+        nominal is not None and not np.array_equal(start.nominal.to_vector(), nominal.to_vector())
+    ):
+        raise CalibrationError(
+            f"ML estimator: the start must be Method 2's result from the same nominal table, "
+            f"got Method {start.method}'s"
+        )
     params = DHParameterSet(chain, start.nominal)
     rows = data.with_role("cpa", "calibration")
+    withheld = np.isin(rows.roles, withhold_orientations)  # (K,) rows entering with positions only
+    if withheld.all():
+        raise CalibrationError(
+            f"{data.source}: the ML estimator needs orientations; "
+            f"every row's are withheld ({', '.join(withhold_orientations)})"
+        )
     free = ml_parameter_indices(params, fit_alpha_n)
     cache = KinematicsCache(params, free, start.table.to_vector(), rows.q)
     points, rotations = rows.points[:, :1, :], rows.rotations
     reference = start.registration_position
+
+    def pose_residual(*sigma: float) -> SensorResidual:
+        """tool_pose_residual, with orientation weight 0 on the withheld rows."""
+        objective = tool_pose_residual(cache, points, rotations, reference, *sigma)
+        objective.v[withheld] = 0.0
+        return objective
 
     estimated = (sigma_pos_mm is None, sigma_rot_deg is None)
     sigma = np.array(
         [1.0 if sigma_pos_mm is None else sigma_pos_mm / 1000.0,
          1.0 if sigma_rot_deg is None else np.radians(sigma_rot_deg)]
     )
-    unscaled = tool_pose_residual(cache, points, rotations, reference)  # σ = 1: residuals in m and rad
+    unscaled = pose_residual()  # σ = 1: residuals in m and rad
     x = unscaled.start_vector()  # Method 2's table and Registration 1
     if any(estimated):  # start from the spread of the residuals of Method 2's solution
         residual = unscaled.residual(x)[unscaled.row_indices()]
-        first = np.sqrt([np.mean(residual[:, :3] ** 2), np.mean(residual[:, 3:] ** 2)])
+        first = np.sqrt([np.mean(residual[:, :3] ** 2), np.mean(residual[~withheld, 3:] ** 2)])
         sigma = np.where(estimated, np.maximum(first, SIGMA_FLOOR), sigma)
 
     def fit(sigma: np.ndarray, x: np.ndarray) -> tuple[SensorResidual, Solution]:
-        objective = tool_pose_residual(cache, points, rotations, reference, *sigma)
+        objective = pose_residual(*sigma)
         return objective, solve(objective, x, what="ML estimator")
 
     objective, solution = fit(sigma, x)
@@ -207,6 +241,11 @@ def calibrate_ml(
         f"sensor noise sigma_p = {sigma_mm:.4g} mm ({source[estimated[0]]}), "
         f"sigma_a = {sigma_deg:.4g} deg ({source[estimated[1]]})"
     ]
+    if withheld.any():
+        notes.append(
+            f"orientations of the {', '.join(withhold_orientations)} rows withheld ({int(withheld.sum())} rows "
+            "enter with their positions only)"
+        )
     if not converged:
         notes.append(f"noise estimate did not converge in {MAX_ITERATIONS} fits")
     stage = Stage(

@@ -3,7 +3,9 @@
 Each row's error is the RMS distance of its target points from the model
 [m]. With the median m and the MAD-based robust standard deviation
 s = 1.4826 · median(|e − m|) (Hampel 1974), a row is an outlier when
-(e − m) / s > :data:`OUTLIER_THRESHOLD`.
+(e − m) / s > :data:`OUTLIER_THRESHOLD` and its excess e − m is larger than
+:data:`OUTLIER_FLOOR_M`: on noise-free data the residuals are rounding noise,
+whose robust scores mean nothing.
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ import numpy as np
 #: Robust z-score above which a row is reported.
 OUTLIER_THRESHOLD = 5.0
 MAD_TO_SIGMA = 1.4826
+#: Excess over the median below which no row is an outlier [m]: 1 µm, a tenth of a
+#: laser tracker's resolution (~10 µm) and far above double-precision rounding.
+OUTLIER_FLOOR_M = 1e-6
 
 
 def robust_scores(errors: np.ndarray) -> np.ndarray:
@@ -34,6 +39,7 @@ def find_outliers(point_errors: np.ndarray, lines: np.ndarray) -> list[tuple[int
     """
     per_row = np.sqrt(np.mean(np.asarray(point_errors, dtype=float) ** 2, axis=1))
     scores = robust_scores(per_row)
-    flagged = np.flatnonzero(scores > OUTLIER_THRESHOLD)
+    excess = per_row - np.median(per_row)
+    flagged = np.flatnonzero((scores > OUTLIER_THRESHOLD) & (excess > OUTLIER_FLOOR_M))
     flagged = flagged[np.argsort(-scores[flagged])]
     return [(int(lines[i]), float(scores[i])) for i in flagged]

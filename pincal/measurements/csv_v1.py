@@ -16,6 +16,12 @@ Every problem raises :class:`~pincal.errors.MeasurementError` with a one-line
 message naming the file and, where relevant, the line (the header is line 1) and
 the column. Soft problems (joint limits, ignored columns) are returned as notes:
 this module never prints.
+
+:func:`read_table` is the one CSV table reader of pincal (:class:`CsvTable`:
+cells, line numbers, one-line errors of the caller's kind): measurement files,
+candidate configurations (:func:`read_joint_columns`) and DH tables
+(:mod:`pincal.model.dh_csv`) all go through it. Rows whose cells are all blank
+are skipped.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from typing import Literal, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pincal.errors import MeasurementError
+from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.data import (
     POSITION_COLUMN_RE,
     DEFAULT_ROLE,
@@ -41,6 +47,7 @@ from pincal.measurements.data import (
     MeasurementSet,
     is_reserved,
 )
+from pincal.outputs import replacing
 
 JointKind = Literal["revolute", "continuous", "prismatic"]
 
@@ -51,39 +58,62 @@ MAX_POSITION = 20.0
 
 
 @dataclass(frozen=True)
-class _Table:
-    """Raw CSV cells: stripped header names, data rows and their line numbers."""
+class CsvTable:
+    """The cells of a CSV table file: stripped header names, data rows and their line numbers.
+
+    Shared by every table pincal reads (measurements, candidate configurations,
+    DH tables); its errors are one line naming the file, the line, the joint and
+    the column, of the kind the caller chose (:func:`read_table`).
+    """
 
     source: str
     names: tuple[str, ...]
     rows: list[list[str]]
     lines: list[int]
+    header_line: int = 1
+    error_type: type[PincalError] = MeasurementError
 
-    def error(self, message: str, line: int | None = None, column: str | None = None) -> MeasurementError:
-        """Build a one-line error naming the file and, if given, the line and column."""
+    def error(
+        self, message: str, line: int | None = None, column: str | None = None, joint: str | None = None
+    ) -> PincalError:
+        """Build a one-line error naming the file and, if given, the line (and its joint) and column."""
         where = self.source
         if line is not None:
-            where += f": line {line}"
+            where += f": line {line}" + (f" (joint '{joint}')" if joint else "")
         if column is not None:
             where += f", column '{column}'" if line is not None else f": column '{column}'"
-        return MeasurementError(f"{where}: {message}")
+        return self.error_type(f"{where}: {message}")
+
+    def cell(self, k: int, name: str) -> str:
+        """Stripped cell of data row ``k`` in column ``name``; empty if the table has no such column."""
+        return self.rows[k][self.names.index(name)].strip() if name in self.names else ""
 
     def cells(self, name: str) -> list[str]:
         """Stripped cells of column ``name``, one per data row."""
         j = self.names.index(name)
         return [row[j].strip() for row in self.rows]
 
+    def number(self, k: int, name: str, joint: str | None = None) -> float | None:
+        """Cell (k, ``name``) as a finite float; None if it is empty or the column absent."""
+        text = self.cell(k, name)
+        if not text:
+            return None
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise self.error(f"{text!r} is not a finite number; give a number", self.lines[k], name, joint)
+        return value
+
     def numbers(self, name: str) -> np.ndarray:
-        """Column ``name`` as finite floats; any other cell is an error."""
+        """Column ``name`` as finite floats; an empty cell or any other text is an error."""
         out = np.empty(len(self.rows))
-        for k, (text, line) in enumerate(zip(self.cells(name), self.lines)):
-            try:
-                out[k] = float(text)
-            except ValueError:
-                out[k] = math.nan
-            if not math.isfinite(out[k]):
-                bad = "empty cell" if not text else f"bad value {text!r}"
-                raise self.error(f"{bad}; expected a finite number", line, name)
+        for k in range(len(self.rows)):
+            value = self.number(k, name)
+            if value is None:
+                raise self.error("empty cell; expected a finite number", self.lines[k], name)
+            out[k] = value
         return out
 
     def matrix(self, names: Sequence[str]) -> np.ndarray:
@@ -102,27 +132,50 @@ class _Table:
                 f"(|value| > {limit:g} {expected}); convert the column", self.lines[bad[0]], name)
 
 
-def _read_table(path: str | os.PathLike, source: str) -> _Table:
-    """Read the CSV cells; reject unreadable, empty or ragged files."""
+def read_table(
+    path: str | os.PathLike,
+    *,
+    rows_are: str = "robot configuration",
+    error_type: type[PincalError] = MeasurementError,
+    lowercase: bool = False,
+) -> CsvTable:
+    """Read a CSV table's cells; reject unreadable, empty, header-only or ragged files.
+
+    Rows whose cells are all blank are skipped; header names are stripped (and
+    lower-cased with ``lowercase``) and must be present and distinct.
+
+    Args:
+        path: the CSV file.
+        rows_are: what one data row describes, for the messages ("joint").
+        error_type: the :class:`~pincal.errors.PincalError` kind raised.
+        lowercase: compare header names case-insensitively.
+
+    Raises:
+        error_type: naming the file and, where relevant, the line and column.
+    """
+    source = str(path)
     records: list[tuple[int, list[str]]] = []
     reader = None
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:
             reader = csv.reader(handle)
-            records = [(reader.line_num, row) for row in reader if row]
+            records = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
     except FileNotFoundError:
-        raise MeasurementError(f"{source}: file not found; check the path") from None
+        raise error_type(f"{source}: file not found; check the path") from None
+    except IsADirectoryError:
+        raise error_type(f"{source}: is a directory; give a CSV file") from None
     except OSError as exc:
-        raise MeasurementError(f"{source}: cannot read file ({exc.strerror or exc})") from None
+        raise error_type(f"{source}: cannot read file ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
-        raise MeasurementError(f"{source}: not a UTF-8 text file; save it as CSV text") from None
+        raise error_type(f"{source}: not a UTF-8 text file; save it as CSV text") from None
     except csv.Error as exc:
         line = getattr(reader, "line_num", 0)
-        raise MeasurementError(f"{source}: line {line}: malformed CSV ({exc}); fix or delete the line") from None
+        raise error_type(f"{source}: line {line}: malformed CSV ({exc}); fix or delete the line") from None
     if not records:
-        raise MeasurementError(f"{source}: file is empty; expected a header line and one row per configuration")
+        raise error_type(f"{source}: file is empty; expected a header line and one row per {rows_are}")
     (header_line, header), data = records[0], records[1:]
-    table = _Table(source, tuple(h.strip() for h in header), [r for _, r in data], [n for n, _ in data])
+    names = tuple(h.strip().lower() if lowercase else h.strip() for h in header)
+    table = CsvTable(source, names, [r for _, r in data], [n for n, _ in data], header_line, error_type)
     for i, name in enumerate(table.names, start=1):
         if not name:
             raise table.error(f"header column {i} has no name; name it or delete the column", header_line)
@@ -130,7 +183,7 @@ def _read_table(path: str | os.PathLike, source: str) -> _Table:
     if duplicates:
         raise table.error(f"duplicate column(s) {', '.join(duplicates)}; keep one of each", header_line)
     if not data:
-        raise table.error("header only, no data rows; add one row per robot configuration")
+        raise table.error(f"header only, no data rows; add one row per {rows_are}")
     for line, row in data:
         if len(row) != len(header):
             raise table.error(
@@ -138,7 +191,38 @@ def _read_table(path: str | os.PathLike, source: str) -> _Table:
     return table
 
 
-def _point_columns(table: _Table, joint_names: Sequence[str]) -> list[tuple[str, str, str]]:
+def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec]) -> np.ndarray:
+    """The joint columns as (K, N) [rad or m], in ``joints``' order, checked for a unit mistake."""
+    joint_names = [j.name for j in joints]
+    missing = [n for n in joint_names if n not in table.names]
+    if missing:
+        hint = "; is the file comma-separated?" if len(table.names) == 1 else ""
+        raise table.error(f"missing joint column(s) {', '.join(missing)}; the URDF expects "
+                          f"{', '.join(joint_names)}{hint}")
+    q = table.matrix(joint_names)
+    for n, joint in enumerate(joints):
+        table.check_magnitude(joint.name, q[:, n], *JOINT_SANITY[joint.kind])
+    return q
+
+
+def read_joint_columns(path: str | os.PathLike, joints: Sequence[JointSpec]) -> tuple[np.ndarray, np.ndarray]:
+    """The joint readings of a CSV table: the joint columns of format v1, every other column ignored.
+
+    So a measurement file serves as a list of configurations as is.
+
+    Returns:
+        q (K, N) [rad or m] in ``joints``' order, and each row's line in the file (K,).
+
+    Raises:
+        MeasurementError: unreadable or ragged file, missing joint column, a cell
+            that is not a finite number, a value in degrees or millimetres —
+            naming the file, line and column.
+    """
+    table = read_table(path)
+    return _joint_matrix(table, joints), np.array(table.lines)
+
+
+def _point_columns(table: CsvTable, joint_names: Sequence[str]) -> list[tuple[str, str, str]]:
     """Names of the x,y,z columns of each target point, point 1 first."""
     axes: dict[int | None, set[str]] = {}
     for name in table.names:
@@ -164,7 +248,7 @@ def _point_columns(table: _Table, joint_names: Sequence[str]) -> list[tuple[str,
     return [(f"x{i}", f"y{i}", f"z{i}") for i in range(1, len(axes) + 1)]
 
 
-def _read_rotations(table: _Table) -> np.ndarray | None:
+def _read_rotations(table: CsvTable) -> np.ndarray | None:
     """Target orientations from qx,qy,qz,qw, normalised, as (K, 3, 3); None if absent."""
     present = [c for c in QUAT_COLUMNS if c in table.names]
     if not present:
@@ -182,7 +266,7 @@ def _read_rotations(table: _Table) -> np.ndarray | None:
     return Rotation.from_quat(quats / norms[:, None]).as_matrix()
 
 
-def _read_roles(table: _Table) -> np.ndarray:
+def _read_roles(table: CsvTable) -> np.ndarray:
     """The role of each row; ``calibration`` when the column or the cell is empty."""
     if ROLE_COLUMN not in table.names:
         return np.full(len(table.rows), DEFAULT_ROLE, dtype=object)
@@ -195,7 +279,7 @@ def _read_roles(table: _Table) -> np.ndarray:
     return roles
 
 
-def _read_extras(table: _Table, names: Sequence[str]) -> tuple[dict[str, np.ndarray], list[str]]:
+def _read_extras(table: CsvTable, names: Sequence[str]) -> tuple[dict[str, np.ndarray], list[str]]:
     """Numeric extra columns (empty cells become NaN) and the names of the ignored ones."""
     kept: dict[str, np.ndarray] = {}
     ignored: list[str] = []
@@ -212,7 +296,7 @@ def _read_extras(table: _Table, names: Sequence[str]) -> tuple[dict[str, np.ndar
     return kept, ignored
 
 
-def _limit_notes(table: _Table, q: np.ndarray, joints: Sequence[JointSpec]) -> list[str]:
+def _limit_notes(table: CsvTable, q: np.ndarray, joints: Sequence[JointSpec]) -> list[str]:
     """One note per joint with readings outside its limits."""
     notes = []
     for n, joint in enumerate(joints):
@@ -240,17 +324,10 @@ def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> t
     Raises:
         MeasurementError: naming the file, line and column of the first problem.
     """
-    table = _read_table(path, str(path))
+    table = read_table(path)
     joint_names = [j.name for j in joints]
-    missing = [n for n in joint_names if n not in table.names]
-    if missing:
-        hint = "; is the file comma-separated?" if len(table.names) == 1 else ""
-        raise table.error(f"missing joint column(s) {', '.join(missing)}; the URDF expects "
-                          f"{', '.join(joint_names)}{hint}")
+    q = _joint_matrix(table, joints)
     point_names = _point_columns(table, joint_names)
-    q = table.matrix(joint_names)
-    for n, joint in enumerate(joints):
-        table.check_magnitude(joint.name, q[:, n], *JOINT_SANITY[joint.kind])
     points = table.matrix([c for triplet in point_names for c in triplet])
     for i, name in enumerate(c for triplet in point_names for c in triplet):
         table.check_magnitude(name, points[:, i], MAX_POSITION, "millimetres", "metres")
@@ -290,7 +367,7 @@ def write_measurements(path: str | os.PathLike, data: MeasurementSet) -> None:
     numbers = np.hstack(numeric)
     extras = np.column_stack([data.extra[n] for n in data.extra]) if data.extra else np.empty((data.n_rows, 0))
     try:
-        with open(path, "w", newline="", encoding="utf-8") as handle:
+        with replacing(path, "w", newline="") as handle:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(header)
             for k in range(data.n_rows):

@@ -12,7 +12,7 @@ whose child is the tip link.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -67,7 +67,9 @@ def write_corrected_urdf(
     chain: KinematicChain,
     nominal_placements: Sequence[np.ndarray],
     comment: str | None = None,
+    verify: Callable[[Path], None] | None = None,
 ) -> None:
-    """Write ``source`` with the chain's calibrated placements to ``destination``."""
+    """Write ``source`` with the chain's calibrated placements to ``destination``;
+    ``verify`` checks the complete file before it replaces ``destination``."""
     origins = corrected_origins(source, chain, nominal_placements)
-    write_urdf_with_origins(source, destination, origins, comment=comment)
+    write_urdf_with_origins(source, destination, origins, comment=comment, verify=verify)

@@ -1,6 +1,7 @@
-"""Denavit–Hartenberg tables (distal variant) and their URDF joint placements.
+"""Denavit–Hartenberg tables and their URDF joint placements, in both conventions.
 
-The distal convention of Franaszek & Marvel (2022), eq 4–5::
+:class:`DHTable` is the paper's table: the distal (standard) convention of
+Franaszek & Marvel (2022), eq 4–5::
 
     F_n = Rz(theta_n + eps_n) · Tz(d_n) · Tx(r_n) · Rx(alpha_n)
 
@@ -15,6 +16,12 @@ of joint n, see :meth:`DHTable.joint_origins`. The child link of joint n is fram
 n-1 turned by ``theta_n + eps_n``; the fixed joint after the last revolute joint
 carries row N's ``Tz·Tx·Rx`` and its child is DH frame N (the flange).
 
+:func:`dh_chain_origins` places the joints of a table in either convention,
+``standard`` (distal, as above) or ``modified`` (proximal, Craig's
+``Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)``), every origin through the
+one DH row → joint origin core :func:`dh_origin_rows`;
+:func:`dh_chain_from_origins` reads a table back from the origins.
+
 Units: angles in radians, lengths in metres (Table 1 of the paper is in degrees
 and millimetres; the constants below convert).
 """
@@ -27,7 +34,7 @@ from typing import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from pincal.errors import PincalError
+from pincal.errors import ModelError, PincalError
 
 #: Order of the four DH rows in a flat parameter vector.
 DH_FIELDS = ("alpha", "epsilon", "r", "d")
@@ -203,20 +210,147 @@ def dh_joint_origins(vector: npt.ArrayLike) -> list[np.ndarray]:
     (1 <= n < N) is the origin of joint n+1 in the child link of joint n:
     ``Tz(d_n) Tx(r_n) Rx(alpha_n) Rz(eps_{n+1})``. Entry N is the origin of the
     fixed flange joint: ``Tz(d_N) Tx(r_N) Rx(alpha_N)``. Chaining
-    ``origin_n · Rz(theta_n)`` reproduces ``F_1 ··· F_N`` exactly.
+    ``origin_n · Rz(theta_n)`` reproduces ``F_1 ··· F_N`` exactly. This is
+    :func:`dh_chain_origins` with the ``standard`` convention.
     """
     alpha, epsilon, r, d = np.asarray(vector, dtype=float).reshape(4, -1)
-    n = alpha.size
-    eps_next = np.append(epsilon[1:], 0.0)  # the flange row has no Rz
+    return dh_chain_origins("standard", alpha, r, epsilon, d)
+
+
+#: The two DH conventions of :func:`dh_chain_origins`.
+DH_CONVENTIONS = ("standard", "modified")
+
+
+def check_convention(convention: str) -> str:
+    """``convention`` if it is one of :data:`DH_CONVENTIONS` (the one check of pincal's DH code).
+
+    Raises:
+        ModelError: naming the conventions.
+    """
+    if convention not in DH_CONVENTIONS:
+        raise ModelError(f"unknown DH convention '{convention}'; use one of {', '.join(DH_CONVENTIONS)}")
+    return convention
+
+
+def dh_origin_rows(
+    alpha: npt.ArrayLike,
+    a: npt.ArrayLike,
+    theta: npt.ArrayLike,
+    d_before: npt.ArrayLike,
+    d_after: npt.ArrayLike,
+) -> np.ndarray:
+    """``Tz(d_before) · Tx(a) · Rx(alpha) · Rz(theta) · Tz(d_after)`` in closed form, (n, 4, 4).
+
+    The one "DH row → joint origin" of pincal: every joint origin of a DH chain,
+    in either convention, is of this shape (:func:`dh_chain_origins`). Angles
+    [rad], lengths [m], arrays of the same length n. ``Tx`` and ``Rx`` commute,
+    so ``Rx(alpha) Tx(a)`` (Craig's order) is the same matrix.
+    """
+    alpha, a, theta, d_before, d_after = np.broadcast_arrays(
+        *(np.asarray(v, dtype=float).reshape(-1) for v in (alpha, a, theta, d_before, d_after))
+    )
     ca, sa = np.cos(alpha), np.sin(alpha)
-    ce, se = np.cos(eps_next), np.sin(eps_next)
-    rows = np.zeros((n, 4, 4))
-    # Tz(d) Tx(r) Rx(alpha) Rz(eps) in closed form
-    rows[:, 0, 0], rows[:, 0, 1], rows[:, 0, 3] = ce, -se, r
-    rows[:, 1, 0], rows[:, 1, 1], rows[:, 1, 2] = ca * se, ca * ce, -sa
-    rows[:, 2, 0], rows[:, 2, 1], rows[:, 2, 2], rows[:, 2, 3] = sa * se, sa * ce, ca, d
+    ct, st = np.cos(theta), np.sin(theta)
+    rows = np.zeros((alpha.size, 4, 4))
+    # rotation Rx(alpha) Rz(theta); translation (a, 0, d_before) + Rx(alpha) Rz(theta) (0, 0, d_after)
+    rows[:, 0, 0], rows[:, 0, 1], rows[:, 0, 3] = ct, -st, a
+    rows[:, 1, 0], rows[:, 1, 1], rows[:, 1, 2], rows[:, 1, 3] = ca * st, ca * ct, -sa, -sa * d_after
+    rows[:, 2, 0], rows[:, 2, 1], rows[:, 2, 2], rows[:, 2, 3] = sa * st, sa * ct, ca, d_before + ca * d_after
     rows[:, 3, 3] = 1.0
-    return [rot_z(epsilon[0])] + list(rows)
+    return rows
+
+
+def dh_chain_origins(
+    convention: str,
+    alpha: npt.ArrayLike,
+    a: npt.ArrayLike,
+    theta: npt.ArrayLike,
+    d: npt.ArrayLike,
+) -> list[np.ndarray]:
+    """URDF joint origins of an N-row DH table: N joint origins, then the fixed flange joint's.
+
+    Each joint moves by ``Rz(q)`` (revolute) or ``Tz(q)`` (prismatic: q adds to d)
+    after its origin, about the z axis of its child link; every origin is one
+    :func:`dh_origin_rows` row.
+
+    * ``standard`` (distal; Franaszek & Marvel 2022, eq 4–5), row n of the table
+      holds alpha_n, a_n, theta_n, d_n and
+      ``F_n = Rz(theta_n + q_n) Tz(d_n) Tx(a_n) Rx(alpha_n)``. The origin of joint 1
+      is ``Rz(theta_1)``, that of joint n+1 ``Tz(d_n) Tx(a_n) Rx(alpha_n) Rz(theta_{n+1})``,
+      the flange's ``Tz(d_N) Tx(a_N) Rx(alpha_N)``. The child link of joint n is
+      DH frame n-1 moved by joint n (not DH frame n).
+    * ``modified`` (proximal; Craig, *Introduction to Robotics*, eq 3.6), row i
+      holds alpha_{i-1}, a_{i-1}, theta_i, d_i and
+      ``T_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i + q_i) Tz(d_i)``. The origin of
+      joint i is ``Tx(a_{i-1}) Rx(alpha_{i-1}) Rz(theta_i) Tz(d_i)`` (Rz(q) and
+      Tz(d) commute), so the child link of joint i is DH frame i; the flange's
+      origin is the identity.
+
+    Args:
+        convention: ``standard`` or ``modified``.
+        alpha, a, theta, d: the table's columns (N,) [rad, m, rad, m]; theta is
+            the joint's constant offset.
+
+    Returns:
+        N + 1 matrices (4, 4): chaining ``origin_n · motion(q_n)`` and the flange
+        origin reproduces the DH product exactly.
+    """
+    alpha, a, theta, d = (np.asarray(v, dtype=float).reshape(-1) for v in (alpha, a, theta, d))
+    zero = np.zeros(1)
+    if check_convention(convention) == "standard":
+        rows = dh_origin_rows(
+            np.concatenate([zero, alpha]), np.concatenate([zero, a]), np.concatenate([theta, zero]),
+            np.concatenate([zero, d]), 0.0,
+        )
+    else:  # modified
+        rows = dh_origin_rows(
+            np.concatenate([alpha, zero]), np.concatenate([a, zero]), np.concatenate([theta, zero]),
+            0.0, np.concatenate([d, zero]),
+        )
+    return list(rows)
+
+
+def dh_chain_from_origins(
+    convention: str,
+    origins: Sequence[npt.ArrayLike],
+    tol: float = 1e-9,
+    names: Sequence[str] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse of :func:`dh_chain_origins`: ``(alpha, a, theta, d)`` (N,) each [rad, m, rad, m]
+    from N + 1 origins; angles in (-pi, pi].
+
+    Args:
+        convention: ``standard`` or ``modified``.
+        origins: the N joint origins and the flange joint's (4x4 each).
+        tol: largest deviation from the DH shape accepted [m, -].
+        names: labels of the origins, for messages.
+
+    Raises:
+        PincalError: an origin is not of the convention's shape; the message names it.
+    """
+    if check_convention(convention) == "standard":
+        table = DHTable.from_joint_origins(origins, tol=tol, names=names)
+        return table.alpha.copy(), table.r.copy(), table.epsilon.copy(), table.d.copy()
+    mats = np.array([np.asarray(o, dtype=float) for o in origins])
+    labels = list(names) if names is not None else [f"origin {i}" for i in range(len(mats))]
+    if len(mats) < 2:
+        raise PincalError("need at least two origins (one joint and the flange)")
+    rows = mats[:-1]
+    alpha = np.arctan2(-rows[:, 1, 2], rows[:, 2, 2])
+    theta = np.arctan2(-rows[:, 0, 1], rows[:, 0, 0])
+    a = rows[:, 0, 3]
+    d = -np.sin(alpha) * rows[:, 1, 3] + np.cos(alpha) * rows[:, 2, 3]
+    expected = dh_origin_rows(alpha, a, theta, 0.0, d)
+    for i, (m, e) in enumerate(zip(rows, expected)):
+        deviation = np.abs(m - e).max()
+        if deviation > tol:
+            raise PincalError(f"{labels[i]}: not of the modified DH shape Tx(a) Rx(alpha) Rz(theta) Tz(d) "
+                              f"(deviation {deviation:.3g})")
+    deviation = np.abs(mats[-1] - np.eye(4)).max()
+    if deviation > tol:
+        raise PincalError(f"{labels[-1]}: the flange origin of a modified DH chain is the identity "
+                          f"(deviation {deviation:.3g})")
+    return alpha, a, theta, d
 
 
 @dataclass(frozen=True)

@@ -1,15 +1,43 @@
-"""DH tables in and out of URDF joint origins: the DH→URDF adapter and its inverse for DH-shaped chains."""
+"""DH tables in and out of URDF joint origins: the DH→URDF adapter and its inverse for DH-shaped chains.
+
+Two writers share one path: :func:`apply_dh_table` (the paper's distal table into
+an existing URDF, used by ``scripts/generate_kuka_urdf.py``) and
+:func:`urdf_from_dh` (a whole URDF from a :class:`~pincal.model.dh_robot.DHRobot`
+of either convention, behind ``pincal urdf-from-dh``). Both take their joint
+origins from :func:`pincal.model.dh.dh_chain_origins` (one closed-form DH row →
+joint origin, :func:`pincal.model.dh.dh_origin_rows`) and write them with
+:func:`pincal.model.urdf.write_urdf_with_origins` through :func:`_write_chain_origins`.
+"""
 
 from __future__ import annotations
 
 import os
-from typing import Sequence
+import tempfile
+from pathlib import Path
+from typing import Callable, Sequence
 
 import numpy as np
+import numpy.typing as npt
+import yourdfpy
 
 from pincal.errors import ModelError, PincalError
-from pincal.model.dh import DHTable
+from pincal.model.dh import DHTable, dh_chain_from_origins
+from pincal.model.dh_robot import DHRobot
 from pincal.model.urdf import load_urdf, write_urdf_with_origins
+
+#: Root link of a URDF written by :func:`urdf_from_dh`: DH frame 0.
+DH_BASE_LINK = "base_link"
+#: Tip link of a URDF written by :func:`urdf_from_dh`: the last DH frame (times
+#: the flange transform, if one is given); the natural ``--tip-link``.
+DH_FLANGE_LINK = "flange"
+#: The fixed joint carrying :data:`DH_FLANGE_LINK`.
+DH_FLANGE_JOINT = "flange_joint"
+
+
+def dh_link_name(n: int) -> str:
+    """Child link of the ``n``-th joint (1-based) in a URDF written by :func:`urdf_from_dh`."""
+    return f"link_{n}"
+
 
 #: Tolerance [m, -] for an origin to be of the DH shape in :func:`dh_table_from_urdf`.
 DH_SHAPE_TOLERANCE = 1e-9
@@ -35,16 +63,94 @@ def apply_dh_table(
         ModelError: ``len(joint_names) != table.n_joints``, a name is repeated,
             or any condition of :func:`write_urdf_with_origins`.
     """
+    _write_chain_origins(source, destination, table.joint_origins(), joint_names, flange_joint, comment)
+
+
+def _write_chain_origins(
+    source: str | os.PathLike[str],
+    destination: str | os.PathLike[str],
+    origins: Sequence[np.ndarray],
+    joint_names: Sequence[str],
+    flange_joint: str,
+    comment: str | None,
+    verify: Callable[[Path], None] | None = None,
+) -> None:
+    """Copy ``source`` to ``destination`` with the N + 1 chain ``origins`` written
+    into the joints ``joint_names`` and ``flange_joint``."""
     names = [str(n) for n in joint_names]
-    if len(names) != table.n_joints:
+    if len(names) != len(origins) - 1:
         raise ModelError(
-            f"the DH table has {table.n_joints} joints but {len(names)} joint names were given"
+            f"the DH table has {len(origins) - 1} joints but {len(names)} joint names were given"
         )
     all_names = names + [str(flange_joint)]
     if len(set(all_names)) != len(all_names):
         raise ModelError(f"joint names must be distinct, got {all_names}")
-    origins = dict(zip(all_names, table.joint_origins()))
-    write_urdf_with_origins(source, destination, origins, comment=comment)
+    write_urdf_with_origins(source, destination, dict(zip(all_names, origins)), comment=comment, verify=verify)
+
+
+def urdf_from_dh(
+    robot: DHRobot,
+    destination: str | os.PathLike[str],
+    name: str = "robot",
+    flange: npt.ArrayLike | None = None,
+    comment: str | None = None,
+    verify: Callable[[Path], None] | None = None,
+) -> None:
+    """Write a URDF realising ``robot``'s DH table.
+
+    Links: :data:`DH_BASE_LINK` (DH frame 0, the root), ``link_1`` … ``link_N``
+    (the child of joint n, see :func:`pincal.model.dh.dh_chain_origins`: DH
+    frame n in the modified convention, DH frame n-1 moved by joint n in the
+    standard one), and :data:`DH_FLANGE_LINK` on the fixed joint
+    :data:`DH_FLANGE_JOINT`: the last DH frame times ``flange``. Joints are named
+    and limited as in ``robot``, turn or slide about their z axis, and their value
+    is the DH ``q`` (the table's theta or d is the constant part). No inertials.
+
+    Args:
+        robot: the DH table.
+        destination: URDF file to write; its folder must exist.
+        name: the ``<robot name>``.
+        flange: constant ``frameN_T_flange`` (4x4) [m]; identity if None.
+        comment: provenance text written as an XML comment before ``<robot>``.
+        verify: checks the complete file before it replaces ``destination``.
+
+    Raises:
+        ModelError: a joint is named like the flange joint, or the file cannot be written.
+    """
+    if DH_FLANGE_JOINT in robot.names:
+        raise ModelError(f"joint name '{DH_FLANGE_JOINT}' is reserved for the flange joint; rename the joint")
+    links = [yourdfpy.Link(name=DH_BASE_LINK)]
+    links += [yourdfpy.Link(name=dh_link_name(n)) for n in range(1, robot.n_joints + 1)]
+    links.append(yourdfpy.Link(name=DH_FLANGE_LINK))
+    joints = []
+    for n, joint in enumerate(robot.names):
+        joints.append(
+            yourdfpy.Joint(
+                name=joint,
+                type=robot.types[n],
+                parent=DH_BASE_LINK if n == 0 else dh_link_name(n),
+                child=dh_link_name(n + 1),
+                origin=np.eye(4),
+                axis=np.array([0.0, 0.0, 1.0]),
+                limit=yourdfpy.Limit(
+                    effort=float(robot.effort[n]),
+                    velocity=float(robot.velocity[n]),
+                    lower=float(robot.lower[n]),
+                    upper=float(robot.upper[n]),
+                ),
+            )
+        )
+    joints.append(
+        yourdfpy.Joint(name=DH_FLANGE_JOINT, type="fixed", parent=dh_link_name(robot.n_joints),
+                       child=DH_FLANGE_LINK, origin=np.eye(4))
+    )
+    template = yourdfpy.URDF(robot=yourdfpy.Robot(name=str(name), links=links, joints=joints),
+                             build_scene_graph=False, load_meshes=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "template.urdf"
+        template.write_xml().write(str(path), xml_declaration=True, encoding="utf-8", pretty_print=True)
+        _write_chain_origins(path, destination, robot.joint_origins(flange), robot.names,
+                             DH_FLANGE_JOINT, comment, verify)
 
 
 def _nearest_branch(angle: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -131,3 +237,65 @@ def dh_table_from_urdf(
     angles = slice(0, 2 * table.n_joints)  # alpha and epsilon
     vector[angles] = _nearest_branch(vector[angles], reference.to_vector()[angles])
     return DHTable.from_vector(vector)
+
+
+def dh_robot_from_urdf(
+    urdf_path: str | os.PathLike[str],
+    convention: str,
+    flange: npt.ArrayLike | None = None,
+    tol: float = DH_SHAPE_TOLERANCE,
+) -> DHRobot:
+    """Read back the DH table of a URDF written by :func:`urdf_from_dh` (the inverse).
+
+    The chain is the joints from :data:`DH_BASE_LINK` to :data:`DH_FLANGE_LINK`;
+    names, types and limits come from the joints, the DH parameters from their
+    origins (angles in (-pi, pi]).
+
+    Args:
+        urdf_path: URDF file.
+        convention: the convention it was written with.
+        flange: the flange transform it was written with (identity if None).
+        tol: largest deviation of an origin from the DH shape [m, -].
+
+    Raises:
+        ModelError: a link is missing, a joint is neither revolute nor prismatic
+            about +z, or an origin is not of the convention's shape; the message
+            names the joint.
+    """
+    urdf = load_urdf(urdf_path)
+    by_child = {joint.child: joint for joint in urdf.robot.joints}
+    chain, link = [], DH_FLANGE_LINK
+    while link != DH_BASE_LINK:
+        if link not in by_child:
+            raise ModelError(f"{urdf_path}: no chain from '{DH_BASE_LINK}' to '{DH_FLANGE_LINK}' "
+                             f"(link '{link}' has no parent joint); was it written by urdf_from_dh?")
+        chain.insert(0, by_child[link])
+        link = by_child[link].parent
+    *joints, flange_joint = chain
+    if not joints or flange_joint.type != "fixed":
+        raise ModelError(f"{urdf_path}: expected joints then the fixed joint '{DH_FLANGE_JOINT}' "
+                         f"before '{DH_FLANGE_LINK}'")
+    for joint in joints:
+        axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+        if joint.type not in ("revolute", "prismatic") or np.abs(axis - (0.0, 0.0, 1.0)).max() > tol:
+            raise ModelError(f"{urdf_path}: joint '{joint.name}' is {joint.type} about {axis.tolist()}; "
+                             "a DH joint is revolute or prismatic about [0, 0, 1]")
+    origins = [np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float) for j in chain]
+    if flange is not None:
+        origins[-1] = origins[-1] @ np.linalg.inv(np.asarray(flange, dtype=float))
+    try:
+        alpha, a, theta, d = dh_chain_from_origins(
+            convention, origins, tol=tol, names=[f"{urdf_path}: origin of joint '{j.name}'" for j in chain])
+    except PincalError as exc:
+        raise ModelError(str(exc)) from None
+    limits = [j.limit for j in joints]
+    for joint, lim in zip(joints, limits):
+        if lim is None or None in (lim.lower, lim.upper, lim.velocity, lim.effort):
+            raise ModelError(f"{urdf_path}: joint '{joint.name}' has no complete <limit>; "
+                             "was it written by urdf_from_dh?")
+    return DHRobot(
+        convention=convention, names=tuple(j.name for j in joints), alpha=alpha, a=a, theta=theta, d=d,
+        types=tuple(j.type for j in joints),
+        lower=[lim.lower for lim in limits], upper=[lim.upper for lim in limits],
+        velocity=[lim.velocity for lim in limits], effort=[lim.effort for lim in limits],
+    )

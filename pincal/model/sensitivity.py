@@ -145,8 +145,10 @@ class SensitivityModel:
             [np.arange(model.joints[j].idx_q, model.joints[j].idx_q + model.joints[j].nq) for j in self._real_ids]
         )
         self._q_template = pin.neutral(model)
-        self._identity = np.eye(4)
-        self._identity.setflags(write=False)
+        # per element of _order: its model joint, its chain joint, and whether its placement is the identity
+        self._element_ids = [self._real_ids[i] if what == "joint" else self._slot_ids[i] for what, i in self._order]
+        self._element_joints = [i if what == "joint" else self.slots[i].joint for what, i in self._order]
+        self._identity_at = [True] * len(self._order)
 
     def set_state(
         self,
@@ -164,29 +166,38 @@ class SensitivityModel:
             tip_T_tool: the tool (4, 4).
         """
         points = np.asarray(slot_points, dtype=float).reshape(len(self.slots), 3)
-        model = self.model
-        pending = np.eye(4)  # placement of the next element relative to the last frame
+        off_origin = np.any(points != 0.0, axis=1).tolist()
+        pending = None  # placement of the next element relative to the last frame; None: the identity
         group = -1
-        for what, index in self._order:
-            joint = index if what == "joint" else self.slots[index].joint
+        for k, (what, index) in enumerate(self._order):
+            joint = self._element_joints[k]
             if joint != group:  # first element of joint `joint`: its placement comes first
-                pending = pending @ placements[joint]
+                pending = placements[joint] if pending is None else pending @ placements[joint]
                 group = joint
-            if what == "joint":
-                model.jointPlacements[self._real_ids[index]] = pin.SE3(pending)
-                pending = self._identity
-            elif self.slots[index].kind == "revolute":  # turn about an axis through the point
-                point = points[index]
-                model.jointPlacements[self._slot_ids[index]] = pin.SE3(
-                    pending[:3, :3], pending[:3, :3] @ point + pending[:3, 3]
-                )
-                pending = self._identity.copy()
+            if what == "slot" and off_origin[index] and self.slots[index].kind == "revolute":
+                point = points[index]  # turn about an axis through the point
+                if pending is None:
+                    self._place(k, pin.SE3(np.eye(3), point.copy()))
+                else:
+                    self._place(k, pin.SE3(pending[:3, :3], pending[:3, :3] @ point + pending[:3, 3]))
+                pending = np.eye(4)
                 pending[:3, 3] = -point
             else:
-                model.jointPlacements[self._slot_ids[index]] = pin.SE3(pending)
-                pending = self._identity
-        tool = pending @ placements[-1] @ tip_T_tool
-        model.frames[self._tool_frame].placement = pin.SE3(tool)
+                self._place(k, None if pending is None else pin.SE3(pending))
+                pending = None
+        tool = placements[-1] @ tip_T_tool if pending is None else pending @ placements[-1] @ tip_T_tool
+        self.model.frames[self._tool_frame].placement = pin.SE3(tool)
+
+    def _place(self, element: int, placement: pin.SE3 | None) -> None:
+        """Set the placement of element ``element`` of the joint order (None: the identity,
+        which most slots keep: it is written only when it changes)."""
+        if placement is None:
+            if not self._identity_at[element]:
+                self.model.jointPlacements[self._element_ids[element]] = pin.SE3.Identity()
+                self._identity_at[element] = True
+        else:
+            self.model.jointPlacements[self._element_ids[element]] = placement
+            self._identity_at[element] = False
 
     def evaluate(self, q: npt.ArrayLike) -> tuple[ToolPoses, Sensitivity]:
         """Tool poses and parameter derivatives at K joint readings (K, N)."""

@@ -42,7 +42,7 @@ from __future__ import annotations
 import copy
 import os
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +50,7 @@ import yourdfpy
 from lxml import etree
 
 from pincal.errors import ModelError
+from pincal.outputs import replacing
 
 #: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
 #: proper rigid transform.
@@ -345,6 +346,7 @@ def write_urdf_with_origins(
     destination: str | os.PathLike[str],
     origins: Mapping[str, npt.ArrayLike],
     comment: str | None = None,
+    verify: Callable[[Path], None] | None = None,
 ) -> None:
     """Copy a URDF, replacing the origins of the named joints.
 
@@ -358,6 +360,9 @@ def write_urdf_with_origins(
             rigid transform.
         comment: optional text written as an XML comment just before ``<robot>``
             (e.g. provenance); multi-line text is kept.
+        verify: called with the complete written file before it replaces
+            ``destination`` (see :func:`pincal.outputs.replacing`); what it
+            raises cancels the write.
 
     Raises:
         ModelError: the destination is the source file, a named joint does not
@@ -390,4 +395,5 @@ def write_urdf_with_origins(
     tree = out_root.getroottree()
     if not dst_path.parent.exists():
         raise ModelError(f"cannot write {dst_path}: directory {dst_path.parent} does not exist")
-    tree.write(str(dst_path), xml_declaration=True, encoding="utf-8", pretty_print=True)
+    with replacing(dst_path, "wb", verify=verify) as handle:  # the old file or the whole new one, never half
+        tree.write(handle, xml_declaration=True, encoding="utf-8", pretty_print=True)

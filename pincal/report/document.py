@@ -14,13 +14,17 @@ Keys promised to users (never renamed, only extended):
 * levels registration/offsets/full add ``level``, ``identifiability`` (rank,
   condition number, the selection criterion and its value, what was dropped and
   what absorbs it, correlated pairs), ``noise``, ``outliers``;
-* ``fit``: stages, row counts and the errors (eq 24) on the calibration rows.
+* ``fit``: stages, row counts and the errors (eq 24) on the calibration rows;
+* ``urdf_sha256``: SHA-256 of the corrected URDF written with the report (the
+  bytes written), so ``pincal evaluate`` can tell the pair apart from a URDF of
+  another run.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,6 +38,7 @@ from pincal.fit.paper_methods import CALIBRATED, FROM_CPA, PaperCalibration
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.sensor import Registration
+from pincal.outputs import write_text
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
@@ -115,7 +120,7 @@ def paper_report(
 
 def write_report(path: str | Path, report: dict[str, Any]) -> None:
     """Write ``report`` as indented JSON."""
-    Path(path).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_text(path, json.dumps(report, indent=2) + "\n")
 
 
 @dataclass(frozen=True)
@@ -131,6 +136,8 @@ class ReportModel:
         registration_orientation: Registration 2.
         effects: ``effects`` and what applying them needs (``payload_kg``,
             ``time_column``, ``time_reference_s``); empty without effects.
+        urdf_sha256: SHA-256 (hex) of the corrected URDF written with the
+            report (``urdf_sha256``); None in reports older than the key.
     """
 
     tool_parent: str
@@ -139,6 +146,7 @@ class ReportModel:
     registration_position: Registration
     registration_orientation: Registration
     effects: dict = field(default_factory=dict)
+    urdf_sha256: str | None = None
 
 
 def read_report(path: str | Path) -> ReportModel:
@@ -157,6 +165,9 @@ def read_report(path: str | Path) -> ReportModel:
         points = np.asarray(tool["points_m"], dtype=float) if "points_m" in tool else pose[None, :3, 3]
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError("tool.points_m must be a list of [x, y, z]")
+        digest = doc.get("urdf_sha256")
+        if digest is not None and not (isinstance(digest, str) and re.fullmatch(r"[0-9a-f]{64}", digest)):
+            raise ValueError("urdf_sha256 must be 64 hexadecimal digits")
         return ReportModel(
             tool_parent=str(tool["parent_link"]),
             points=points,
@@ -170,6 +181,7 @@ def read_report(path: str | Path) -> ReportModel:
                 for k in ("effects", "payload_kg", "time_column", "time_reference_s", "approach_context")
                 if k in doc
             },
+            urdf_sha256=digest,
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(

@@ -46,6 +46,10 @@ class KinematicsCache:
         free: flat indices of the parameters being fitted.
         base: the flat vector holding the values of the fixed parameters.
         q: joint readings of the configurations used (K, N).
+        models: sensitivity models already built for ``params``, by their slots;
+            the fits of one problem share them (a model holds no state between
+            evaluations: each sets its placements first). Built and added here
+            when missing.
     """
 
     def __init__(
@@ -54,6 +58,7 @@ class KinematicsCache:
         free: npt.ArrayLike,
         base: npt.ArrayLike,
         q: npt.ArrayLike,
+        models: dict | None = None,
     ) -> None:
         self.params = params
         self.free = np.asarray(free, dtype=int)
@@ -61,7 +66,12 @@ class KinematicsCache:
         self.q = np.asarray(q, dtype=float)
         slots = params.slots
         self._slots = params.coupled(self.free)  # slots moved by the free parameters
-        self.model = SensitivityModel(params.chain, [slots[i] for i in self._slots])
+        self._block = np.ix_(self._slots, self.free)  # rows and columns of slot_jacobian used
+        key = tuple(slots[i] for i in self._slots)
+        models = {} if models is None else models
+        if key not in models:
+            models[key] = SensitivityModel(params.chain, key)
+        self.model = models[key]
         self._x: np.ndarray | None = None
         self._q: np.ndarray | None = None
         self._tool: np.ndarray | None = None
@@ -93,10 +103,10 @@ class KinematicsCache:
             poses, sens = self.model.evaluate(q)
             to_slots = self.params.slot_jacobian(vector)
             if to_slots is not None:  # d(slot twist)/d(parameter) is not the identity
-                block = to_slots[np.ix_(self._slots, self.free)]
+                block = to_slots[self._block].T  # (free, slots)
                 sens = Sensitivity(
-                    angular=np.einsum("ksi,sf->kfi", sens.angular, block),
-                    linear=np.einsum("ksi,sf->kfi", sens.linear, block),
+                    angular=block @ sens.angular,  # (K, free, 3): K small products, no BLAS threads
+                    linear=block @ sens.linear,
                     origin=sens.origin,
                     joint_angular=sens.joint_angular,
                     joint_linear=sens.joint_linear,

@@ -2,7 +2,7 @@
 
 Eq 14–17 of Franaszek & Marvel (2022): for pairs (k, k' = k + K/2),
 
-    D_k = G_k R_k^-1 R_k' G_k'^-1,    r_k = log(D_k)  (Pinocchio's SO(3) log)
+    D_k = G_k R_k^-1 R_k' G_k'^-1,    r_k = log(D_k)  (Pinocchio's SO(3) log, :mod:`pincal.residuals.so3`)
 
 so that ||r_k|| = psi_k, the angle of D_k (eq 15), and the sum of squares is
 sum psi_k^2. Independent of the registration rotation and of every length
@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
 
 from pincal.residuals.base import KinematicsCache, Objective, pair_indices
+from pincal.residuals.so3 import jlog3, log3
 
 
 class RotationResidual(Objective):
@@ -46,14 +46,14 @@ class RotationResidual(Objective):
         return g1 @ r1.transpose(0, 2, 1) @ r2 @ g2.transpose(0, 2, 1)
 
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
-        return np.concatenate([pin.log3(d) for d in self._relative(x)])
+        return log3(self._relative(x)).reshape(-1)
 
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         relative = self._relative(x)
         poses, sens = self.cache.evaluate(x)
         g2 = self.measured[self.second]
         r2 = poses.tool_rotations[self.second]
-        left = np.stack([pin.Jlog3(d) for d in relative]) @ g2 @ r2.transpose(0, 2, 1)
+        left = jlog3(relative) @ g2 @ r2.transpose(0, 2, 1)
         delta = sens.angular[self.second] - sens.angular[self.first]  # (P, n_free, 3)
         jac = np.einsum("pij,pnj->pin", left, delta)
         return jac.reshape(-1, self.n_free)

@@ -51,6 +51,7 @@ from pincal.model.effects import (
 )
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache, Objective
+from pincal.residuals.so3 import jlog3, log3
 
 #: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
@@ -145,6 +146,7 @@ class SensorResidual(Objective):
         for effect in self.effects:
             self._effect_slices.append(slice(start, start + effect.n_values))
             start += effect.n_values
+        self._memo = None
 
     @property
     def n_free(self) -> int:
@@ -192,6 +194,8 @@ class SensorResidual(Objective):
         return scale, drift
 
     def _state(self, x: npt.ArrayLike):
+        """Tool poses, sensitivities, target and target points in the base frame at ``x``
+        (the last one is kept: least_squares asks for the residual and the Jacobian at the same x)."""
         x = np.asarray(x, dtype=float)
         q = None
         if self.effects:
@@ -200,10 +204,16 @@ class SensorResidual(Objective):
                 if basis is not None:
                     shifts[:, j] += basis @ x[sl]
             q = self.inputs.q + shifts
-        poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]], q)
+        kinematics = self.cache.evaluate(x[self.blocks["kinematic"]], q)
+        memo = self._memo
+        if memo is not None and memo[1] is kinematics and np.array_equal(memo[0], x):
+            return memo[2]
+        poses, sens = kinematics
         target = self.estimate(x)
         world = points_in_base(poses.tool_positions, poses.tool_rotations, target.points)  # (K, P, 3)
-        return poses, sens, target, world
+        state = (poses, sens, target, world)
+        self._memo = (x.copy(), kinematics, state)
+        return state
 
     def predicted_points(self, x: npt.ArrayLike) -> np.ndarray:
         """Model points in the sensor frame (K, P, 3) [m]: (1 + s)(Omega y + tau + t u)."""
@@ -222,7 +232,7 @@ class SensorResidual(Objective):
         parts = [position.reshape(-1)]
         if self.G is not None:
             relative = self._orientation_error(poses, target)
-            logs = np.stack([pin.log3(e) for e in relative]) * self.v[:, None]
+            logs = log3(relative) * self.v[:, None]
             parts.append(logs.reshape(-1))
         return np.concatenate(parts)
 
@@ -261,7 +271,7 @@ class SensorResidual(Objective):
         if self.G is not None:
             poses, _, target, _ = self._state(x)
             relative = self._orientation_error(poses, target)
-            jlog = np.stack([pin.Jlog3(e) for e in relative])
+            jlog = jlog3(relative)
             turn = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1)
             blocks[:, n_pos:, n_pos:] = -self.v[:, None, None] * turn
         return blocks
@@ -273,53 +283,102 @@ class SensorResidual(Objective):
 
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)
-        poses, sens, target, world = self._state(x)
+        lin = self._linearisation(x, joints=any(b is not None for b in self._effect_basis))
+        poses, sens, target, world = lin["state"]
         k, n_points = world.shape[:2]
         omega = target.registration.rotation
         rows_pos = np.zeros((k, n_points, 3, self.n_params))
         kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
-        for p in range(n_points):
-            velocity = sens.point_velocity(world[:, p, :])  # (K, n_kin, 3)
-            rows_pos[:, p, :, kin] = np.einsum("ij,knj->kin", omega, velocity)
-        if reg.stop > reg.start:
-            jexp = pin.Jexp3(x[reg][:3])
-            rows_pos[..., reg.start : reg.start + 3] = -np.einsum(
-                "ij,kpjl,lm->kpim", omega, skew(world), jexp
-            )
+        rows_pos[..., kin] = _point_columns(sens.linear @ omega.T, sens.angular @ omega.T, lin["offsets"])
+        if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi) = -[Omega y]x Omega Jexp3(phi)
+            rows_pos[..., reg.start : reg.start + 3] = -skew(world @ omega.T) @ (omega @ pin.Jexp3(x[reg][:3]))
             rows_pos[..., reg.start + 3 : reg.stop] = np.eye(3)
         if pts.stop > pts.start:
-            rotated = np.einsum("ij,kjl->kil", omega, poses.tool_rotations)  # Omega R_k
+            rotated = omega @ poses.tool_rotations  # Omega R_k
             for p in range(n_points):
                 rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
-        scale, drift = self._sensor_terms(x)
         for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self._effect_slices):
-            if basis is not None:  # joint shift: the joint's Jacobian column times the basis
-                for p in range(n_points):
-                    velocity = sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T  # (K, 3)
-                    rows_pos[:, p, :, sl] = velocity[:, :, None] * basis[:, None, :]
-            elif effect.type == "drift":
-                rows_pos[..., sl] = self.inputs.time[:, None, None, None] * np.eye(3)
-        rows_pos *= 1.0 + scale  # every term is scaled by the sensor's (1 + s)
+            if effect.type != "sensor_scale":
+                rows_pos[..., sl] = self._effect_position_columns(lin, effect, j, basis)
+        rows_pos *= 1.0 + lin["scale"]  # every term is scaled by the sensor's (1 + s)
         for effect, sl in zip(self.effects, self._effect_slices):
             if effect.type == "sensor_scale":
-                sensed = target.registration.apply_points(world) + drift[:, None, :]
-                rows_pos[..., sl] = sensed[..., None]
+                rows_pos[..., sl] = lin["sensed"][..., None]
         rows_pos *= self.w[:, None, None, None]
         blocks = [rows_pos.reshape(-1, self.n_params)]
         if self.G is not None:
-            blocks.append(self._orientation_jacobian(x, poses, sens, target))
+            blocks.append(self._orientation_jacobian(x, lin))
         return np.vstack(blocks)
 
-    def _orientation_jacobian(self, x, poses, sens, target: TargetEstimate) -> np.ndarray:
-        relative = self._orientation_error(poses, target)
+    def effect_columns(self, x: npt.ArrayLike, effects: Sequence[Effect]) -> list[np.ndarray]:
+        """The Jacobian columns each of ``effects`` would add to this objective at
+        ``x``, its values zero: (m, n_values) per effect, in the row order of
+        :meth:`residual`. The effects need not be part of the objective (a
+        candidate's columns, for a linearised test of adding it); a sensor scale
+        already in the objective is not offered again."""
+        x = np.asarray(x, dtype=float)
+        lin = self._linearisation(x, joints=any(e.type in JOINT_EFFECTS for e in effects))
+        joint_names = list(self.cache.params.chain.joint_names)
+        out = []
+        for effect in effects:
+            j = joint_names.index(effect.joint) if effect.joint else -1
+            basis = joint_basis(effect, self.inputs, j) if effect.type in JOINT_EFFECTS else None
+            if effect.type == "sensor_scale":
+                position = lin["sensed"][..., None]
+            else:
+                position = self._effect_position_columns(lin, effect, j, basis) * (1.0 + lin["scale"])
+            parts = [(position * self.w[:, None, None, None]).reshape(-1, effect.n_values)]
+            if self.G is not None:
+                rotation = np.zeros((len(self.G), 3, effect.n_values))
+                if basis is not None:
+                    rotation = lin["joint_turns"][:, :, j, None] * basis[:, None, :]
+                parts.append((rotation * self.v[:, None, None]).reshape(-1, effect.n_values))
+            out.append(np.vstack(parts))
+        return out
+
+    def _linearisation(self, x: np.ndarray, joints: bool) -> dict:
+        """What the Jacobian blocks share at ``x``: the state; the target points'
+        offsets from the tool origin in the sensor frame (K, P, 3); the sensor
+        scale and the sensed points (1 + s excluded); with orientations, E_k, Jlog3(E_k)
+        and Jlog3(E_k) E_kᵀ G_kᵀ Omega ("left", K × 3 × 3); with ``joints``, the chain
+        joints' point columns d(point)/d(q_j) (K, P, 3, N) and turns (K, 3, N)."""
+        state = self._state(x)
+        poses, sens, target, world = state
         omega = target.registration.rotation
-        k = len(relative)
-        rows = np.zeros((k, 3, self.n_params))
-        jlog = np.stack([pin.Jlog3(e) for e in relative])  # (K, 3, 3)
+        scale, drift = self._sensor_terms(x)
+        lin = {
+            "state": state,
+            "offsets": (world - sens.origin[:, None, :]) @ omega.T,
+            "scale": scale,
+            "sensed": target.registration.apply_points(world) + drift[:, None, :],
+        }
+        if self.G is not None:
+            relative = self._orientation_error(poses, target)
+            lin["jlog"] = jlog3(relative)
+            lin["left"] = lin["jlog"] @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
+        if joints:
+            lin["joint_points"] = _point_columns(sens.joint_linear @ omega.T, sens.joint_angular @ omega.T,
+                                                 lin["offsets"])
+            if self.G is not None:
+                lin["joint_turns"] = lin["left"] @ sens.joint_angular.transpose(0, 2, 1)
+        return lin
+
+    def _effect_position_columns(self, lin: dict, effect: Effect, j: int, basis: np.ndarray | None) -> np.ndarray:
+        """d(sensed point)/d(effect values) before the sensor scale and weights, (K, P, 3, n_values)."""
+        k, n_points = lin["offsets"].shape[:2]
+        if basis is not None:  # joint shift: the joint's column times the basis
+            return lin["joint_points"][:, :, :, j, None] * basis[:, None, None, :]
+        if effect.type == "drift":
+            return np.broadcast_to(self.inputs.time[:, None, None, None] * np.eye(3), (k, n_points, 3, 3))
+        return np.zeros((k, n_points, 3, effect.n_values))
+
+    def _orientation_jacobian(self, x, lin: dict) -> np.ndarray:
+        poses, sens, target, _ = lin["state"]
+        jlog = lin["jlog"]  # (K, 3, 3)
+        rows = np.zeros((len(jlog), 3, self.n_params))
         kin, reg, rot = self.blocks["kinematic"], self.blocks["registration"], self.blocks["rotation"]
-        # world angular velocity w of R_k: d log E = Jlog3(E) Eᵀ G_kᵀ Omega w
-        left = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
-        rows[:, :, kin] = np.einsum("kij,knj->kin", left, sens.angular)
+        # world angular velocity w of R_k: d log E = Jlog3(E) Eᵀ G_kᵀ Omega w ("left" w)
+        rows[:, :, kin] = lin["left"] @ sens.angular.transpose(0, 2, 1)
         tool = poses.tool_rotations @ target.rotation  # R_k R_T
         if reg.stop > reg.start:
             rows[:, :, reg.start : reg.start + 3] = jlog @ tool.transpose(0, 2, 1) @ pin.Jexp3(x[reg][:3])
@@ -327,10 +386,23 @@ class SensorResidual(Objective):
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
         for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
             if basis is not None:
-                turn = np.einsum("kij,kj->ki", left, sens.joint_angular[:, j, :])  # (K, 3)
-                rows[:, :, sl] = turn[:, :, None] * basis[:, None, :]
+                rows[:, :, sl] = lin["joint_turns"][:, :, j, None] * basis[:, None, :]
         rows *= self.v[:, None, None]
         return rows.reshape(-1, self.n_params)
+
+
+def _point_columns(linear: np.ndarray, angular: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Velocities of points rigidly attached to the tool, per unit of each column:
+    v + w × o for column velocities (K, n, 3) and angular velocities (K, n, 3) at
+    the tool origin and point offsets o (K, P, 3) from it, all in one frame → (K, P, 3, n)."""
+    k, n_points = offsets.shape[:2]
+    out = np.empty((k, n_points, 3, linear.shape[1]))
+    a0, a1, a2 = (angular[:, None, :, i] for i in range(3))  # (K, 1, n)
+    o0, o1, o2 = (offsets[:, :, i, None] for i in range(3))  # (K, P, 1)
+    out[:, :, 0, :] = linear[:, None, :, 0] + (a1 * o2 - a2 * o1)
+    out[:, :, 1, :] = linear[:, None, :, 1] + (a2 * o0 - a0 * o2)
+    out[:, :, 2, :] = linear[:, None, :, 2] + (a0 * o1 - a1 * o0)
+    return out
 
 
 def tool_pose_residual(

@@ -4,6 +4,12 @@ Methods 1, 2 and 3 minimise Err_pos, Err_rot and Err_full (eq 16–18) of
 Franaszek & Marvel (2022); Method 3 is run with w = 1 and w =
 :data:`SECOND_WEIGHT`. The noise-weighted maximum-likelihood estimator
 (:func:`pincal.fit.ml_estimator.calibrate_ml`) is this package's addition.
+
+:func:`ml_without_cpa_orientations` is an ablation of the ML estimator, not one
+of the study's estimators: the simulator gives the CPA rows orientations too,
+while the paper's CPA measures positions only (Section 3), so the ML
+estimator sees more data than Method 2 does. The ablation withholds those
+orientations and measures how much of the ML estimator's gain they account for.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import KUKA_LWR4_DH, DHTable
+from pincal.model.sensor import Registration
 from pincal.simulation.paper import SimulatedExperiment
 
 #: Method 3's second weight w [mm²/deg²]: orientations dominate Err_full (eq 18).
@@ -91,3 +98,39 @@ ML_ESTIMATOR = Estimator("ml")
 ESTIMATORS = (METHOD_1, METHOD_2, METHOD_3, Estimator(3, SECOND_WEIGHT), ML_ESTIMATOR)
 #: The paper's three error functions Err_pos, Err_rot, Err_full: the restart test's subjects.
 RESTART_ESTIMATORS = (METHOD_1, METHOD_2, METHOD_3)
+
+
+def ml_without_cpa_orientations(
+    chain: KinematicChain,
+    data: MeasurementSet,
+    sigma_pos_mm: float,
+    sigma_rot_deg: float,
+    nominal: DHTable = KUKA_LWR4_DH,
+    withhold: tuple[str, ...] = ("cpa",),
+    start: PaperCalibration | None = None,
+) -> tuple[DHTable, Registration]:
+    """The ML estimator with the orientations of the ``withhold`` rows left out (an ablation).
+
+    :func:`pincal.fit.ml_estimator.calibrate_ml` with known noise and
+    ``withhold_orientations=withhold``: with the default, the CPA rows are
+    positions only, as in the paper. ``withhold=()`` is the ML estimator itself.
+
+    Args:
+        chain: the chain with the TCP as its tool; on return its placements
+            hold the calibrated table.
+        data: the rows (full poses).
+        sigma_pos_mm, sigma_rot_deg: σ_p [mm] and σ_a [deg], both positive.
+        nominal: the default table; eps_1 and d_1 keep its values.
+        withhold: roles whose orientations are left out.
+        start: Method 2's result on ``data`` from ``nominal`` if the caller has
+            it (the fit's start; computed if None).
+
+    Returns:
+        The calibrated table and the registration sensor_T_base (one for
+        positions and orientations).
+    """
+    chain.set_placements(nominal.joint_origins())
+    result = calibrate_ml(
+        chain, data, sigma_pos_mm, sigma_rot_deg, nominal, withhold_orientations=withhold, start=start
+    )
+    return result.table, result.registration_position

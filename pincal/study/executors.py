@@ -2,44 +2,22 @@
 
 A task is any picklable object with a ``run()`` method (the study's are in
 :mod:`pincal.study.tasks`); :func:`execute` returns the results in task
-order whatever ran them, and reports progress through a callback such as
-:class:`ProgressBar`.
+order whatever ran them, and reports progress through a ``progress(done, total)``
+callback (the command line draws it: :mod:`pincal.cli.progress`).
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
-import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
-from typing import Any, Callable, Sequence, TextIO
+from typing import Any, Callable, Sequence
 
 from pincal.errors import PincalError
 
 #: ``progress(done, total)``, called after each finished task.
 Progress = Callable[[int, int], None]
-
-
-class ProgressBar:
-    """A one-line text progress bar, e.g. ``study   412/909 [#####.....]   31 s``.
-
-    Args:
-        stream: where to draw; the CLI passes stderr, and only if it is a terminal.
-        label: text before the counts.
-        width: characters of the bar.
-    """
-
-    def __init__(self, stream: TextIO, label: str = "study", width: int = 30) -> None:
-        self.stream, self.label, self.width = stream, label, width
-        self.started = time.perf_counter()
-
-    def __call__(self, done: int, total: int) -> None:
-        filled = self.width * done // max(total, 1)
-        elapsed = time.perf_counter() - self.started
-        self.stream.write(f"\r{self.label} {done:>5d}/{total} [{'#' * filled}{'.' * (self.width - filled)}] "
-                          f"{elapsed:4.0f} s" + ("\n" if done >= total else ""))
-        self.stream.flush()
 
 
 def default_workers() -> int:

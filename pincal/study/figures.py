@@ -17,6 +17,7 @@ import matplotlib
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
 import numpy as np  # noqa: E402
 
+from pincal.outputs import replacing  # noqa: E402
 from pincal.study.estimators import Estimator  # noqa: E402
 from pincal.study.result import StudyResult  # noqa: E402
 
@@ -73,7 +74,8 @@ def _has(result: StudyResult, *estimators: Estimator) -> bool:
 
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
+    with replacing(path, "wb") as handle:
+        fig.savefig(handle, format="png", dpi=_DPI)
     plt.close(fig)
     return path
 

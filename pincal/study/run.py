@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from pincal.study.estimators import ESTIMATORS, RESTART_ESTIMATORS, Estimator
-from pincal.study.executors import Progress, ProgressBar, execute
+from pincal.study.executors import Progress, execute
 from pincal.study.files import write_study
 from pincal.study.findings import check_findings
 from pincal.study.protocol import (
@@ -72,7 +72,7 @@ from pincal.study.tasks import (
 
 __all__ = [
     "ESTIMATORS", "FIGURE2_REPEAT", "RESTART_SPREAD_DEG", "RESTART_SPREAD_MM", "STUDY_COLUMNS",
-    "SUMMARY_COLUMNS", "Estimator", "ProgressBar", "StudyConfig", "StudyResult", "noise_free_test_set",
+    "SUMMARY_COLUMNS", "Estimator", "StudyConfig", "StudyResult", "noise_free_test_set",
     "parameter_deviations", "random_start", "restart_cases", "run_study", "study_tasks", "task_seed",
     "write_study",
 ]

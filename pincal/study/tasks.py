@@ -4,7 +4,9 @@ A task is a small picklable object whose ``run()`` returns a list of row
 dicts; its ``key`` orders the rows of a study whatever executor ran them
 (:mod:`pincal.study.executors`). Four kinds:
 
-* :class:`TrialTask`: one (deviation set, level, repeat), every estimator;
+* :class:`TrialTask`: one (deviation set, level, repeat), every estimator (and,
+  on the trials of :func:`ablation_trial`, the ML estimator with the CPA rows'
+  orientations withheld, :func:`pincal.study.estimators.ml_without_cpa_orientations`);
 * :class:`RestartTask`: a chunk of the restart test's random starts (Section 7);
 * :class:`Figure2Task`: Figure 2's per-pose errors;
 * :class:`LimitTask`: the linearised noise limit of one estimator on one pose set.
@@ -30,7 +32,13 @@ from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH, DHTable
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import SimulatedExperiment, simulate_experiment
 from pincal.simulation.sensor import perfect_measurements
-from pincal.study.estimators import METHOD_1, METHOD_2, RESTART_ESTIMATORS
+from pincal.study.estimators import (
+    METHOD_1,
+    METHOD_2,
+    ML_ESTIMATOR,
+    RESTART_ESTIMATORS,
+    ml_without_cpa_orientations,
+)
 from pincal.study.protocol import (
     FIGURE2_REPEAT,
     FIGURE2_SIGMA,
@@ -55,6 +63,24 @@ def worker_chain() -> KinematicChain:
     if chain is None:
         chain = _LOCAL.chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
     return chain
+
+
+#: The CPA-orientation ablation runs on the first ABLATION_REPEATS repeats of :func:`ablation_levels`.
+ABLATION_REPEATS = 5
+#: Suffix of the ablation's eq 24 columns on the ML estimator's rows of those trials (in
+#: study.json, not in study.csv): e.g. ``rot_truth_mean_deg_cpa_positions_only``.
+ABLATION_SUFFIX = "_cpa_positions_only"
+
+
+def ablation_levels(config: StudyConfig) -> tuple[int, ...]:
+    """Levels of the CPA-orientation ablation: the middle and the highest non-zero level."""
+    nonzero = [level for level, sigma in enumerate(config.sigmas) if sigma > 0]
+    return tuple(sorted({nonzero[len(nonzero) // 2], nonzero[-1]})) if nonzero else ()
+
+
+def ablation_trial(config: StudyConfig, level: int, repeat: int) -> bool:
+    """Whether the trial (level, repeat) also runs the CPA-orientation ablation (needs the ML estimator)."""
+    return ML_ESTIMATOR in config.estimators and level in ablation_levels(config) and repeat < ABLATION_REPEATS
 
 
 def _simulate(config: StudyConfig, deviations: str, sigma: float, seed: int):
@@ -134,10 +160,10 @@ class TrialTask:
     def run(self) -> list[dict[str, Any]]:
         chain, experiment = _simulate(self.config, self.deviations, self.sigma, self.seed)
         test_sets = {"": experiment.validation, "_truth": noise_free_test_set(chain, experiment)}
-        rows = []
+        rows, results = [], {}
         for estimator in self.config.estimators:
             started = time.perf_counter()
-            result = estimator.calibrate(chain, experiment.calibration, self.sigma)
+            result = results[estimator] = estimator.calibrate(chain, experiment.calibration, self.sigma)
             fit_ms = (time.perf_counter() - started) * 1000.0
             chain.set_placements(result.table.joint_origins())
             deviations = parameter_deviations(result.table, experiment.truth)
@@ -153,6 +179,19 @@ class TrialTask:
                     row[f"pos{suffix}_mean_mm"] = errors.position.mean
                     row[f"rot{suffix}_mean_deg"] = errors.rotation.mean
                 rows.append({**row, "fit_ms": fit_ms, **deviations})
+        if ablation_trial(self.config, self.level, self.repeat):
+            # same data, the CPA rows as positions only (the paper's CPA); on the ML rows, kept out of study.csv
+            table, registration = ml_without_cpa_orientations(
+                chain, experiment.calibration, self.sigma, self.sigma, start=results.get(METHOD_2))
+            chain.set_placements(table.joint_origins())
+            ablation = {}
+            for suffix, data in test_sets.items():
+                errors = pose_errors(chain, data, registration, registration)
+                ablation[f"pos{suffix}_mean_mm{ABLATION_SUFFIX}"] = errors.position.mean
+                ablation[f"rot{suffix}_mean_deg{ABLATION_SUFFIX}"] = errors.rotation.mean
+            for row in rows:
+                if row["method"] == str(ML_ESTIMATOR.method):
+                    row.update(ablation)
         return rows
 
 

@@ -1,0 +1,260 @@
+"""The ``pincal`` command line's arguments: every subcommand, flag, default and
+argument type (values are checked here, so a bad number is one argparse line)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+import numpy as np
+
+from pincal._version import __version__
+from pincal.model.chain import pose_from_xyz_rpy
+from pincal.model.dh import DH_CONVENTIONS
+from pincal.model.dh_csv import MAX_ANGLE_RAD
+from pincal.planning.candidates import DEFAULT_SAMPLE
+from pincal.planning.information import PLAN_LEVELS, SensorModel
+from pincal.planning.planner import WORKSPACE_SIZE
+
+
+def tool_pose(text: str) -> np.ndarray:
+    """argparse type of ``--tool`` and ``--flange``: ``X,Y,Z,ROLL,PITCH,YAW`` (metres, then URDF
+    roll-pitch-yaw [rad]) as a 4x4 pose; angles beyond one turn are refused as degrees given as radians."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(
+            f"'{text}' is not X,Y,Z,ROLL,PITCH,YAW (six numbers: metres, then radians)"
+        )
+    if max(abs(v) for v in values[3:]) > MAX_ANGLE_RAD:
+        raise argparse.ArgumentTypeError(
+            f"'{text}': roll/pitch/yaw beyond one turn look like degrees; give radians"
+        )
+    return pose_from_xyz_rpy(values[:3], values[3:])
+
+
+def measure(text: str) -> SensorModel:
+    """argparse type of ``--measure``: ``point``, ``points:M`` (M >= 2) or ``pose``."""
+    if text in ("point", "pose"):
+        return SensorModel(text, 1)
+    match = re.fullmatch(r"points:([0-9]+)", text)
+    if match and int(match[1]) >= 2:
+        return SensorModel("points", int(match[1]))
+    raise argparse.ArgumentTypeError(
+        f"'{text}': use point, points:M (M >= 2 points of one rigid target) or pose"
+    )
+
+
+def target_points(text: str) -> np.ndarray:
+    """argparse type of ``--target-points``: ``X,Y,Z[;X,Y,Z...]`` [m] as (P, 3)."""
+    try:
+        points = np.array([[float(v) for v in point.split(",")] for point in text.split(";")])
+    except ValueError:
+        points = np.zeros((0, 0))
+    if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+        raise argparse.ArgumentTypeError(f"'{text}': give X,Y,Z[;X,Y,Z...] in metres, in the tip link")
+    return points
+
+
+def joint_names(text: str) -> tuple[str, ...]:
+    """argparse type of ``--alternate``: ``JOINT[,JOINT...]``, at least one name."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(f"'{text}': give JOINT[,JOINT...]")
+    return names
+
+
+def _number(kind: type, minimum: float, what: str):
+    """argparse type: a finite ``kind`` (float or int) >= ``minimum``; ``what`` names it in errors."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not {what}") from None
+        if not (np.isfinite(value) and value >= minimum):
+            raise argparse.ArgumentTypeError(f"'{text}' must be >= {minimum:g} (a finite {what})")
+        return value
+
+    return parse
+
+
+_non_negative = _number(float, 0.0, "number")
+_count_or_zero = _number(int, 0, "integer")
+_count = _number(int, 1, "integer")
+
+
+def _positive(text: str) -> float:
+    value = _non_negative(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be > 0")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pincal",
+        description="Calibrate robot kinematic models (URDF) with Pinocchio.",
+    )
+    parser.add_argument("--version", action="version", version=f"pincal {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    sim = sub.add_parser("simulate", help="simulate the paper's KUKA LWR 4+ experiment (Section 7)")
+    sim.add_argument("--out", required=True, type=Path, help="output directory")
+    sim.add_argument("--deviations", choices=("small", "large"), default="large",
+                     help="Table 2 deviation set of the ground truth (default: large)")
+    sim.add_argument("--sigma-pos", type=_non_negative, default=0.055, metavar="MM",
+                     help="position noise per axis [mm] (default 0.055)")
+    sim.add_argument("--sigma-rot", type=_non_negative, default=0.055, metavar="DEG",
+                     help="orientation noise per angle [deg] (default 0.055)")
+    sim.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
+    sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
+                     help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
+                          "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
+                          "drift:VX:VY:VZ (m/s), sensor_scale:REL")
+
+    cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
+    cal.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
+    cal.add_argument("data", type=Path, help="measurement CSV (format v1)")
+    cal.add_argument("--method", type=int, choices=(1, 2, 3),
+                     help="1: positions only; 2: offsets from orientations, lengths from "
+                          "positions (default); 3: full pose in one cost")
+    cal.add_argument("--weight", type=_positive, default=1.0, metavar="W",
+                     help="Method 3 weight w of Err_rot [mm^2/deg^2] (default 1)")
+    cal.add_argument("--level", choices=("dh", "registration", "offsets", "full"),
+                     help="what to calibrate: dh = the paper's DH parameters (needs --tool); "
+                          "registration, offsets (joint zeros) or full (SE(3) error of every joint "
+                          "placement) on any chain, estimating the target. Default: dh when "
+                          "--method is given, else full")
+    cal.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                     help="known pose of the measured target in the tip link [m, rad]; "
+                          "without it (levels other than dh) the target is estimated")
+    cal.add_argument("--tool-parent", "--tip-link", dest="tip_link", metavar="LINK",
+                     help="link at the end of the calibrated chain, carrying the target")
+    cal.add_argument("--sigma-column", metavar="COLUMN",
+                     help="extra data column with a per-row noise scale [mm]: rows are weighted by it")
+    cal.add_argument("--reject-outliers", action="store_true",
+                     help="refit without the rows reported as outliers (> 5 robust sigma)")
+    cal.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
+                     help="criterion choosing how many weakly identified parameters to keep "
+                          "(default aic; computed on the calibration rows only)")
+    cal.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf",
+                     help="corrected URDF to write")
+    cal.add_argument("--report", required=True, type=Path, metavar="REPORT.json",
+                     help="report to write")
+
+    ev = sub.add_parser("evaluate", help="errors of a calibrated model on measured rows (eq 24)")
+    ev.add_argument("urdf", type=Path, help="corrected URDF")
+    ev.add_argument("report", type=Path, help="REPORT.json of the calibration")
+    ev.add_argument("data", type=Path, help="measurement CSV to evaluate on")
+    ev.add_argument("--json", type=Path, metavar="OUT", help="also write the metrics as JSON")
+    ev.add_argument("--allow-other-urdf", action="store_true",
+                    help="evaluate a URDF other than the one the report was written with (edited on purpose)")
+    ev.add_argument("--max-pos-mm", type=_non_negative, metavar="X",
+                    help="fail (exit 1) if the largest position error exceeds X mm")
+    ev.add_argument("--max-rot-deg", type=_non_negative, metavar="Y",
+                    help="fail (exit 1) if the largest orientation error exceeds Y deg")
+
+    dia = sub.add_parser("diagnose", help="calibrate, then find and add the effects the model lacks")
+    dia.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
+    dia.add_argument("data", type=Path, help="measurement CSV (format v1)")
+    dia.add_argument("--validation", type=Path, metavar="DATA2",
+                     help="held-out measurements: errors reported before/after, effects that make them worse are refused")
+    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
+                     help="link at the end of the calibrated chain, carrying the target")
+    dia.add_argument("--level", choices=("registration", "offsets", "full"), default="full",
+                     help="geometric model under the effects (default full)")
+    dia.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                     help="known pose of the measured target in the tip link [m, rad] (default: estimated)")
+    dia.add_argument("--sigma-column", metavar="COLUMN", help="per-row noise scale column [mm]")
+    dia.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
+                     help="criterion for the geometric parameters (default aic)")
+    dia.add_argument("--payload-kg", type=_non_negative, default=0.0, metavar="KG",
+                     help="point mass at the target for gravity torques (default 0)")
+    dia.add_argument("--time-column", metavar="COLUMN",
+                     help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
+    dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
+    dia.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf", help="corrected URDF to write")
+    dia.add_argument("--report", required=True, type=Path, metavar="REPORT.json", help="report to write")
+
+    dh = sub.add_parser("urdf-from-dh", help="write a URDF from a DH table (CSV, standard or modified convention)")
+    dh.add_argument("table", type=Path, metavar="TABLE.csv",
+                    help="one row per joint: joint, a [m], alpha [rad], d [m], theta (offset) [rad]; "
+                         "optional type (revolute|prismatic), lower, upper, velocity, effort")
+    dh.add_argument("--convention", choices=DH_CONVENTIONS, required=True,
+                    help="what a row means: standard: Rz(theta+q) Tz(d) Tx(a) Rx(alpha) (distal); modified: "
+                         "Craig's Rx(alpha_i-1) Tx(a_i-1) Rz(theta_i+q) Tz(d_i)")
+    dh.add_argument("--out", type=Path, required=True, metavar="ROBOT.urdf",
+                    help="URDF to write (its folder is created if missing)")
+    dh.add_argument("--name", help="robot name (default: the output file's stem)")
+    dh.add_argument("--degrees", action="store_true",
+                    help="the table's alpha, theta and revolute limits are in degrees")
+    dh.add_argument("--flange", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                    help="constant flange transform after the last DH frame [m, rad; always radians]")
+
+    plan = sub.add_parser("plan", help="choose the robot configurations worth measuring, and their order")
+    plan.add_argument("urdf", type=Path, help="URDF of the robot")
+    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK",
+                      help="link at the end of the calibrated chain, carrying the target")
+    plan.add_argument("--count", type=_count, required=True, metavar="N", help="configurations to choose")
+    plan.add_argument("--out", required=True, type=Path, metavar="PLAN.csv", help="plan to write (visiting order)")
+    plan.add_argument("--report", required=True, type=Path, metavar="PLAN.json", help="prediction to write")
+    plan.add_argument("--level", choices=PLAN_LEVELS, default="full",
+                      help="what the calibration will estimate (default full); dh: the paper's DH parameters "
+                           "with the tool known (needs --tool), as calibrate --level dh estimates them")
+    plan.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                      help="known target pose in the tip link [m, rad] (default: the target is estimated)")
+    plan.add_argument("--measure", type=measure, metavar="point|points:M|pose",
+                      help="what the sensor sees (default: point, or what --existing holds)")
+    plan.add_argument("--target-points", type=target_points, metavar="X,Y,Z[;X,Y,Z...]",
+                      help="assumed target points in the tip link [m] (default: --existing's, or 0.05 m about "
+                           "(0, 0, 0.1))")
+    pool = plan.add_mutually_exclusive_group()
+    pool.add_argument("--candidates", type=Path, metavar="CSV", help="choose among these configurations "
+                      "(joint columns as in CSV v1; other columns ignored)")
+    pool.add_argument("--sample", type=_count, default=DEFAULT_SAMPLE, metavar="M",
+                      help=f"else draw M within the joint limits (default {DEFAULT_SAMPLE})")
+    plan.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
+    plan.add_argument("--existing", type=Path, metavar="DATA.csv", help="measurements already recorded: "
+                      "choose what adds most to them")
+    plan.add_argument("--workspace", type=Path, metavar="CSV", help="configurations where accuracy matters "
+                      f"(default: {WORKSPACE_SIZE} of the candidates)")
+    plan.add_argument("--criterion", choices=("accuracy", "d", "a"), default="accuracy",
+                      help="accuracy: predicted mean position error (default); d, a: D-/A-optimality")
+    plan.add_argument("--sigma-pos", type=_positive, metavar="MM", help="sensor noise per axis [mm] "
+                      "(default: from --existing, else 0.055)")
+    plan.add_argument("--sigma-rot", type=_positive, metavar="DEG", help="orientation noise [deg] (pose)")
+    plan.add_argument("--min-distance", type=_non_negative, metavar="M",
+                      help="refuse candidates in self-collision or with links closer than M metres")
+    plan.add_argument("--alternate", type=joint_names, default=(), metavar="JOINT[,JOINT...]",
+                      help="order so that these joints reach their positions from both directions equally")
+
+    demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
+    demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
+                      help="output directory (default: ./pincal-demo)")
+    demo.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
+
+    study = sub.add_parser("study", help="the paper's simulation study (Section 7): all methods, "
+                                         "noise limit, findings, figures")
+    study.add_argument("--out", type=Path, default=Path("pincal-study"),
+                       help="output directory (default: ./pincal-study)")
+    study.add_argument("--reps", type=_count, default=25, metavar="N",
+                       help="noise realisations per level, N_rep (default 25)")
+    study.add_argument("--levels", type=_count, default=16, metavar="M",
+                       help="noise levels from 0 to 0.15, M_n (default 16)")
+    study.add_argument("--restarts", type=_count_or_zero, default=300, metavar="N",
+                       help="random starting points per restart case (default 300, the paper's; 0 skips)")
+    study.add_argument("--limit-pose-sets", type=_count_or_zero, default=2, metavar="L",
+                       help="pose sets the noise limit is averaged over (default 2; 0 skips it)")
+    study.add_argument("--workers", type=_count, default=None, metavar="N",
+                       help="local worker processes (default: all cores; 1 runs in this process)")
+    study.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on a Dask cluster at ADDRESS, or 'local' to start a Dask LocalCluster")
+    study.add_argument("--quiet", action="store_true",
+                       help="no progress on stderr (default: a bar in a terminal, a line every 10 s in logs)")
+    return parser
+
+

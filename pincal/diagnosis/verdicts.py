@@ -1,0 +1,177 @@
+"""Ranking one step's fitted candidates, and the checks that keep a selection from being fooled.
+
+The best candidate is adopted when the evidence is very strong (ΔBIC <
+:data:`EVIDENCE`, Kass & Raftery 1995) and it is none of these cases, which are
+reported instead:
+
+* a value outside physical range (:data:`PLAUSIBLE`) — a stand-in for something else;
+* a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
+  as a joint offset, which the model already has;
+* a close competitor (within 6 of its ΔBIC) with a strongly correlated basis: the
+  data cannot tell them apart;
+* when held-out rows are given, an effect that makes them worse.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from pincal.model.chain import KinematicChain
+from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
+from pincal.residuals.sensor import SensorResidual
+
+#: ΔBIC below which the evidence for an effect is "very strong".
+EVIDENCE = -10.0
+#: Largest plausible magnitude of each effect's value(s), by type (revolute, prismatic).
+PLAUSIBLE = {
+    "compliance": (1e-3, 1e-4),  # rad/(N·m), m/N: stiffer than 1 000 N·m/rad
+    "encoder_scale": (0.02, 0.02),  # relative
+    "cyclic": (0.02, 0.005),  # rad, m
+    "backlash": (0.1, 0.01),  # rad, m
+    "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
+    "sensor_scale": (0.01, 0.01),  # relative
+}
+#: |mean| / RMS of a basis above which it is "nearly constant" (acts as an offset).
+OFFSET_LIKE = 0.95
+#: |correlation| of two candidates' bases above which they are hard to tell apart.
+AMBIGUOUS = 0.8
+#: Candidates shown per step.
+SHOWN = 8
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect tried at one step.
+
+    Attributes:
+        effect: the effect.
+        values / std: fitted values and standard deviations.
+        delta_bic: BIC change on the calibration rows against the current model.
+        heldout_rms_mm: RMS point error on held-out rows, or None.
+        verdict: ``adopted``, ``significant`` (not the best), ``not significant``,
+            or why a significant one was not adopted.
+    """
+
+    effect: Effect
+    values: np.ndarray
+    std: np.ndarray
+    delta_bic: float
+    heldout_rms_mm: float | None
+    verdict: str
+
+
+def effect_basis(effect: Effect, inputs: EffectInputs, chain: KinematicChain) -> np.ndarray | None:
+    """The basis of an effect over the rows (K, n_values): the joint shift's, drift's time, or None."""
+    if effect.type not in JOINT_EFFECTS:
+        return inputs.time[:, None] if effect.type == "drift" else None
+    return joint_basis(effect, inputs, chain.joint_names.index(effect.joint))
+
+
+def _offset_like(basis: np.ndarray | None) -> bool:
+    if basis is None:
+        return False
+    columns = basis.reshape(len(basis), -1)
+    ratio = np.abs(columns.mean(axis=0)) / np.sqrt(np.mean(columns**2, axis=0) + 1e-300)
+    return bool(np.all(ratio > OFFSET_LIKE))
+
+
+def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> bool:
+    prismatic = effect.joint is not None and chain.joints[chain.joint_names.index(effect.joint)].kind == "prismatic"
+    limit = PLAUSIBLE[effect.type][1 if prismatic else 0]
+    magnitude = np.hypot(*values) if effect.type == "cyclic" else np.max(np.abs(values))
+    return bool(magnitude <= limit)
+
+
+def _correlation(a: np.ndarray | None, b: np.ndarray | None) -> float:
+    if a is None or b is None:
+        return 0.0
+    a, b = a[:, 0] - a[:, 0].mean(), b[:, 0] - b[:, 0].mean()
+    denominator = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / denominator) if denominator > 0 else 0.0
+
+
+class Judge:
+    """Ranks a step's fitted candidates, gives their verdicts and picks the one to adopt.
+
+    Args:
+        inputs / chain: the effect inputs of the calibration rows and the chain.
+        held_rms: held-out RMS point error [mm] of an objective at x, or None
+            without held-out rows.
+        current_objective / current_x: the fit the candidates would extend.
+    """
+
+    def __init__(self, inputs: EffectInputs, chain: KinematicChain,
+                 held_rms: Callable[[SensorResidual, np.ndarray], float] | None,
+                 current_objective: SensorResidual, current_x: np.ndarray) -> None:
+        self.inputs, self.chain, self._held_rms = inputs, chain, held_rms
+        self.current_objective, self.current_x = current_objective, current_x
+        self._held: dict[Effect, float] = {}
+        self._before: float | None = None
+
+    def held(self, effect: Effect, objective: SensorResidual, x: np.ndarray) -> float | None:
+        """Held-out RMS [mm] of a candidate's fit (computed once per candidate)."""
+        if self._held_rms is None:
+            return None
+        if effect not in self._held:
+            self._held[effect] = self._held_rms(objective, x)
+        return self._held[effect]
+
+    def held_before(self) -> float:
+        if self._before is None:
+            self._before = self._held_rms(self.current_objective, self.current_x)
+        return self._before
+
+    def rank(self, tried):
+        """(ranking, chosen, rejected notes, cut): ``tried`` holds (ΔBIC, effect,
+        objective, solution) best first; the ranking covers the candidates shown
+        and judged. Any candidate whose ΔBIC is above ``cut`` would change none of it."""
+        ranking, chosen, rejected, compared = [], None, {}, []
+        for rank, (delta, effect, obj, sol) in enumerate(tried):
+            if rank >= SHOWN and (chosen is not None or delta >= EVIDENCE):
+                break
+            sl = obj._effect_slices[-1]
+            value, std = sol.x[sl], sol.std[sl]
+            held = self.held(effect, obj, sol.x)
+            verdict = "not significant"
+            if delta < EVIDENCE:
+                verdict = "significant"
+                if chosen is None:
+                    verdict = self.rejection(effect, value, delta, tried, held, compared)
+                    if verdict == "adopted":
+                        chosen = (delta, effect, obj, sol)
+                    else:
+                        rejected[effect.label] = f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted"
+            ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
+        # what is shown (the first eight), the competitors a check compared (within 6 of
+        # the candidate checked) and, when nothing is adopted, every significant candidate
+        cut = tried[SHOWN - 1][0] if len(tried) >= SHOWN else np.inf
+        if compared:
+            cut = max(cut, max(compared) + 6.0)
+        if chosen is None:
+            cut = max(cut, EVIDENCE)
+        return ranking, chosen, rejected, cut
+
+    def rejection(self, effect, value, delta, tried, held, compared: list) -> str:
+        """'adopted', or why the best significant candidate is only reported (``compared``
+        gains ``delta`` when the candidate was compared with its competitors)."""
+        inputs, chain = self.inputs, self.chain
+        if not _plausible(effect, value, chain):
+            return f"its value {np.round(value, 6).tolist()} is outside the physical range (a stand-in for something else)"
+        basis = effect_basis(effect, inputs, chain)
+        if _offset_like(basis):
+            return "its basis barely changes over the rows, so it acts as a joint offset"
+        compared.append(delta)
+        for other_delta, other, _, _ in tried:
+            if other is effect or other_delta - delta > 6.0:
+                continue
+            if abs(_correlation(basis, effect_basis(other, inputs, chain))) > AMBIGUOUS:
+                return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
+                        f"{_correlation(basis, effect_basis(other, inputs, chain)):+.2f}: the data cannot tell them apart")
+        if self._held_rms is not None and held is not None:
+            before = self.held_before()
+            if held > before * 1.02:
+                return f"it makes the held-out rows worse ({before:.3f} → {held:.3f} mm RMS)"
+        return "adopted"

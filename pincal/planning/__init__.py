@@ -1,0 +1,1 @@
+"""Measurement planning: which robot configurations to measure, how many, in which order (``pincal plan``)."""

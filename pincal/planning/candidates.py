@@ -1,0 +1,62 @@
+"""Candidate configurations: drawn within the URDF's joint limits, or read from a file.
+
+A candidate file is CSV with a header and one row per configuration; the joint
+columns are named as in CSV v1 (the URDF joint names; rad, m for prismatic
+joints); any other column is ignored, so a measurement file serves as is.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pincal.errors import MeasurementError, PincalError
+from pincal.measurements.csv_v1 import read_joint_columns
+from pincal.model.chain import KinematicChain
+from pincal.simulation.sensor import random_configurations
+
+#: Readings this far outside a limit are accepted as on it [rad or m]: a joint driven to its
+#: stop reads slightly beyond it (TIAGo's torso reads 0.35018 m at its 0.35 m limit in
+#: data/tiago_mocap), so 1 mrad / 1 mm, the sessions' own joint-reading tolerance.
+LIMIT_SLACK = 1e-3
+#: Configurations drawn when no candidate file is given.
+DEFAULT_SAMPLE = 2000
+
+
+def sample_candidates(chain: KinematicChain, count: int, seed: int) -> np.ndarray:
+    """``count`` configurations uniform within the joint limits (±π for continuous joints), (count, N)."""
+    if count < 1:
+        raise PincalError(f"--sample {count}: draw at least one configuration")
+    return random_configurations(chain, np.random.default_rng(seed), count)
+
+
+def read_candidates(path: str | Path, chain: KinematicChain) -> tuple[np.ndarray, np.ndarray]:
+    """Joint readings of a candidate file (:func:`pincal.measurements.csv_v1.read_joint_columns`).
+
+    Returns:
+        q (K, N) [rad or m] in the chain's joint order, and each row's line in the file (K,).
+
+    Raises:
+        MeasurementError: unreadable or ragged file, missing joint column, a cell
+            that is not a finite number, a value in degrees or millimetres, or a
+            value outside the joint's limits — naming the file, line and column.
+    """
+    q, lines = read_joint_columns(path, chain.joint_specs)
+    check_within_limits(q, chain, str(path), lines)
+    return q, lines
+
+
+def check_within_limits(q: np.ndarray, chain: KinematicChain, source: str, lines: np.ndarray) -> None:
+    """Reject readings outside the joint limits (beyond :data:`LIMIT_SLACK`), naming the first one."""
+    for n, joint in enumerate(chain.joints):
+        unit = "m" if joint.kind == "prismatic" else "rad"
+        values = q[:, n]
+        outside = np.flatnonzero((values < joint.lower - LIMIT_SLACK) | (values > joint.upper + LIMIT_SLACK))
+        if outside.size:
+            k = outside[0]
+            raise MeasurementError(
+                f"{source}: line {lines[k]}, column '{joint.name}': {values[k]:.6g} {unit} is outside the "
+                f"joint limits [{joint.lower:.6g}, {joint.upper:.6g}] {unit} ({outside.size} row(s)); "
+                "remove or correct those rows"
+            )

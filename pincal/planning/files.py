@@ -1,0 +1,150 @@
+"""PLAN.csv and PLAN.json, the files of ``pincal plan`` (its workflow: :mod:`pincal.cli.preparation`).
+
+PLAN.csv has one row per chosen configuration in visiting order: the joint
+columns (CSV v1 names, rad or m), then ``priority`` (1 = the configuration
+that helps most; measure in priority order if you may stop early) and
+``candidate`` (the line of the candidate file, or the index of the drawn
+sample). Add the measured columns (``x,y,z`` …) and it is a CSV v1 file for
+``pincal calibrate``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pincal._version import __version__
+from pincal.errors import PincalError
+from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
+from pincal.outputs import file_sha256, replacing, write_text
+from pincal.planning.collisions import Clearance
+from pincal.planning.design import CRITERIA
+from pincal.planning.planner import Plan, PlanSettings
+
+PLAN_VERSION = 1
+
+
+def _finite(value):
+    """The document with non-finite numbers as null (strict JSON)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: np.ndarray) -> str:
+    """PLAN.csv: joint columns, ``priority`` and ``candidate``, one row per configuration in visiting order.
+
+    Returns:
+        The SHA-256 (hex) of the bytes written, for PLAN.json's ``plan_csv_sha256``.
+    """
+    digest: list[str] = []
+    try:
+        with replacing(path, "w", newline="", verify=lambda written: digest.append(file_sha256(written))) as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow([*chain.joint_names, "priority", "candidate"])
+            for q, rank, index in zip(plan.q, plan.priority, plan.candidates):
+                writer.writerow([*(repr(float(v)) for v in q), int(rank), int(labels[index])])
+    except OSError as exc:
+        raise PincalError(f"{path}: cannot write the plan ({exc.strerror or exc})") from None
+    return digest[-1]
+
+
+def write_plan_json(path: str | Path, document: dict[str, Any]) -> None:
+    """PLAN.json: ``document`` as strict JSON (non-finite numbers as null)."""
+    try:
+        write_text(path, json.dumps(_finite(document), indent=2) + "\n")
+    except OSError as exc:
+        raise PincalError(f"{path}: cannot write the plan report ({exc.strerror or exc})") from None
+
+
+def _prediction(prediction) -> dict | None:
+    return None if prediction is None else prediction.as_dict()
+
+
+def plan_document(
+    plan: Plan,
+    chain: KinematicChain,
+    settings: PlanSettings,
+    sources: dict,
+    labels: np.ndarray,
+    n_candidates: int,
+    clearance: Clearance | None,
+    tool_pose: np.ndarray | None,
+    sample: int | None,
+    plan_csv_sha256: str | None = None,
+) -> dict[str, Any]:
+    """The PLAN.json document; ``plan_csv_sha256`` names the PLAN.csv it describes (its bytes' SHA-256)."""
+    ratio = None
+    if plan.prediction is not None and plan.random is not None and np.isfinite(plan.random.mean_position_mm):
+        ratio = plan.prediction.mean_position_mm / plan.random.mean_position_mm
+    tool = None
+    if tool_pose is not None:
+        xyz, rpy = xyz_rpy_from_pose(tool_pose)
+        tool = {"xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()}
+    kinematic = len(plan.identifiable)
+    return {
+        "pincal_version": __version__,
+        "plan_version": PLAN_VERSION,
+        "sources": sources,
+        "plan_csv_sha256": plan_csv_sha256,
+        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names)},
+        "settings": {
+            "count": settings.count,
+            "level": settings.level,
+            "measure": settings.sensor.label,
+            "criterion": settings.criterion,
+            "sigma_pos_mm": plan.sigma_pos_mm,
+            "sigma_rot_deg": plan.sigma_rot_deg,
+            "sigma_source": plan.sigma_source,
+            "tool": tool,
+            "target_points_m": plan.target_points.tolist(),
+            "seed": settings.seed,
+            "sample": sample,
+        },
+        "criterion": {"name": plan.criterion, "definition": CRITERIA[plan.criterion], "value": plan.criterion_value},
+        "predicted": {
+            "what": "linearised noise limit of the model calibrated on these configurations (all identifiable "
+                    "parameters estimated): expected error against the truth over the workspace sample",
+            "workspace_configurations": plan.workspace_size,
+            "plan": _prediction(plan.prediction),
+            "random": None if plan.random is None else {**plan.random.as_dict(), "draws": settings.random_draws,
+                                                        "singular_draws": plan.random_singular,
+                                                        "statistic": "median over draws"},
+            "plan_over_random_mean_position": ratio,
+            "recorded_only": _prediction(plan.recorded),
+        },
+        "identifiability": {
+            "identifiable": list(plan.identifiable),
+            "not_identifiable": list(plan.not_identifiable),
+            "estimated_parameters": len(plan.estimated),
+            "kinematic_parameters": kinematic,
+            "condition_number": None if plan.prediction is None else plan.prediction.condition,
+        },
+        "candidates": {
+            "count": n_candidates,
+            "usable": n_candidates if clearance is None else int(clearance.allowed.sum()),
+            "clearance": None if clearance is None else clearance.as_dict(),
+        },
+        "order": {
+            "method": "balanced approach directions" if settings.alternate else "short travel",
+            "alternate": list(settings.alternate),
+            "travel_s": plan.travel_s,
+            "approach_balance": [b.as_dict() for b in plan.balance],
+        },
+        "additions": [
+            {"priority": i + 1, "candidate": int(labels[a.candidate]),
+             "predicted_mean_mm": a.predicted_mean_mm, "gain_mm": a.gain_mm}
+            for i, a in enumerate(plan.additions)
+        ],
+        "exchange_swaps": plan.swaps,
+        "seconds": plan.seconds,
+        "notes": list(plan.notes),
+    }

@@ -1,0 +1,345 @@
+"""``pincal plan``: choose the N configurations worth measuring, predict what they give, order them.
+
+1. The information of each candidate follows from what the sensor sees
+   (:mod:`pincal.planning.information`), linearised at the URDF as loaded — or,
+   with data already recorded, at their calibration (its noise level and
+   target too, unless given).
+2. N candidates are chosen for the criterion (:mod:`pincal.planning.design`).
+3. The plan's predicted errors (the linearised noise limit of the calibrated
+   model over the workspace sample) are set beside those of N random
+   candidates (median of :data:`RANDOM_DRAWS` seeded draws).
+4. The chosen configurations are ordered (:mod:`pincal.planning.ordering`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from pincal.errors import PincalError
+from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, initial_target
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+from pincal.planning.design import DesignProblem, Prediction, select
+from pincal.planning.information import (
+    MeasurementModel,
+    SensorModel,
+    default_target_points,
+)
+from pincal.planning.ordering import Balance, alternating_order, approach_balance, move_times, short_tour
+
+#: Default sensor noise: the ``pincal simulate`` defaults (σ_p = 0.055 mm per axis,
+#: σ_a = 0.055° per angle; Franaszek & Marvel 2022, Section 7). Predicted errors scale with it.
+DEFAULT_SIGMA_POS_MM = 0.055
+DEFAULT_SIGMA_ROT_DEG = 0.055
+#: Workspace configurations the accuracy is averaged over (a seeded subsample of the candidates).
+WORKSPACE_SIZE = 500
+#: Random N-subsets of the candidates the plan is compared with.
+RANDOM_DRAWS = 20
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """What to plan for.
+
+    Attributes:
+        count: N, configurations to choose.
+        level: ``registration``, ``offsets``, ``full`` or ``dh``.
+        sensor: what is measured at each configuration; None: what the recorded
+            data hold, else one point.
+        criterion: ``accuracy``, ``d`` or ``a``.
+        sigma_pos_mm / sigma_rot_deg: sensor noise [mm, deg]; None: estimated from
+            the recorded data if any, else :data:`DEFAULT_SIGMA_POS_MM` / ``_ROT_DEG``.
+        target_points: target points in the tool frame [m], (P, 3); None: the
+            recorded data's estimate, or :func:`default_target_points`.
+        tool_known: the chain's tool is the measured point (not estimated).
+        alternate: joints whose approach direction the order balances.
+        seed: seed of the workspace subsample, the random comparison and the order.
+        workspace_size: candidates the accuracy is averaged over (when no workspace is given).
+        random_draws: random N-subsets the plan is compared with.
+    """
+
+    count: int
+    level: str = "full"
+    sensor: SensorModel | None = None
+    criterion: str = "accuracy"
+    sigma_pos_mm: float | None = None
+    sigma_rot_deg: float | None = None
+    target_points: np.ndarray | None = None
+    tool_known: bool = False
+    alternate: tuple[str, ...] = ()
+    seed: int = 0
+    workspace_size: int = WORKSPACE_SIZE
+    random_draws: int = RANDOM_DRAWS
+
+    def __post_init__(self) -> None:
+        if self.target_points is not None:
+            points = np.atleast_2d(np.asarray(self.target_points, dtype=float))
+            if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+                raise PincalError(f"target points must be finite (P, 3) [m], got shape {points.shape}")
+            object.__setattr__(self, "target_points", points)
+        object.__setattr__(self, "alternate", tuple(self.alternate))
+
+
+@dataclass(frozen=True)
+class Addition:
+    """One chosen configuration in priority order (the best first).
+
+    Attributes:
+        candidate: index into the candidates.
+        predicted_mean_mm: predicted mean position error after measuring it and
+            every configuration before it (None while the parameters are not all determined) [mm].
+        gain_mm: how much it lowers that prediction [mm] (None likewise).
+    """
+
+    candidate: int
+    predicted_mean_mm: float | None
+    gain_mm: float | None
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The planned measurements and what they are predicted to give.
+
+    Attributes:
+        q: chosen configurations in visiting order [rad or m], (N, n_joints).
+        candidates: their indices into the candidates, (N,).
+        priority: each visited row's rank in :attr:`additions` (1 = best), (N,).
+        additions: the chosen configurations in priority order.
+        criterion / criterion_value: see :data:`pincal.planning.design.CRITERIA`.
+        prediction: the plan's predicted errors (with the recorded rows).
+        random: the median of the same over random N-subsets of the candidates.
+        random_singular: random subsets that do not determine the parameters.
+        recorded: predicted errors of the recorded rows alone (``--existing``).
+        identifiable / not_identifiable: kinematic parameters the candidates can / cannot determine.
+        estimated: every parameter the calibration estimates (with registration and target).
+        balance: approach balance of each joint in the visiting order.
+        travel_s: time of the moves at the URDF's velocity limits [s].
+        sigma_pos_mm / sigma_rot_deg / sigma_source: the noise assumed and where it comes from.
+        target_points: target points in the tool frame [m], (P, 3).
+        workspace_size: configurations the accuracy is averaged over.
+        swaps: configurations the exchange passes replaced.
+        seconds: planning time [s].
+        settings: the settings, with the sensor resolved.
+        notes: what the user should know.
+    """
+
+    settings: PlanSettings
+    q: np.ndarray
+    candidates: np.ndarray
+    priority: np.ndarray
+    additions: tuple[Addition, ...]
+    criterion: str
+    criterion_value: float
+    prediction: Prediction | None
+    random: Prediction | None
+    random_singular: int
+    recorded: Prediction | None
+    identifiable: tuple[str, ...]
+    not_identifiable: tuple[str, ...]
+    estimated: tuple[str, ...]
+    balance: tuple[Balance, ...]
+    travel_s: float
+    sigma_pos_mm: float
+    sigma_rot_deg: float | None
+    sigma_source: str
+    target_points: np.ndarray
+    workspace_size: int
+    swaps: int
+    seconds: float
+    notes: tuple[str, ...] = field(default=())
+
+
+def plan_measurements(
+    chain: KinematicChain,
+    candidates: np.ndarray,
+    settings: PlanSettings,
+    existing: MeasurementSet | None = None,
+    workspace: np.ndarray | None = None,
+    allowed: np.ndarray | None = None,
+) -> Plan:
+    """Choose ``settings.count`` of the ``candidates`` (K, n_joints) and order them.
+
+    Args:
+        chain: the chain, its tool set when ``settings.tool_known``; its placements are restored on return.
+        existing: measurements already recorded (their calibration is the linearisation point).
+        workspace: configurations where accuracy matters (default: a subsample of the candidates).
+        allowed: candidates that may be chosen (default all; e.g. collision-free ones).
+
+    Raises:
+        PincalError: unknown joint in ``alternate``, a count the candidates cannot meet,
+            or recorded data that do not match the sensor.
+    """
+    started = time.perf_counter()
+    if settings.sensor is None:
+        sensor = SensorModel("point", 1)
+        if existing is not None:
+            sensor = (SensorModel("pose", 1) if existing.has_orientation
+                      else SensorModel("points", existing.n_points) if existing.n_points > 1 else sensor)
+        settings = replace(settings, sensor=sensor)
+    candidates = np.atleast_2d(np.asarray(candidates, dtype=float))
+    allowed = np.ones(len(candidates), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+    alternate = _joint_columns(chain, settings.alternate)
+    if settings.count < 1:
+        raise PincalError(f"--count {settings.count}: choose at least one configuration")
+    if settings.count > int(allowed.sum()):
+        refused = len(candidates) - int(allowed.sum())
+        raise PincalError(f"--count {settings.count} is more than the {int(allowed.sum())} usable candidates"
+                          + (f" ({refused} refused)" if refused else "") + "; lower --count or give more candidates")
+    rng = np.random.default_rng(settings.seed)
+    saved = chain.placements()
+    try:
+        model, sigma_source, recorded_q = _measurement_model(chain, settings, existing)
+        blocks = model.jacobian(candidates)
+        recorded = model.jacobian(recorded_q)
+        if workspace is None:
+            pool = np.flatnonzero(allowed)
+            workspace = candidates[rng.choice(pool, min(len(pool), settings.workspace_size), replace=False)]
+        problem = DesignProblem(blocks, model.kinematic, recorded, *model.error_jacobian(workspace))
+    finally:
+        chain.set_placements(saved)
+    rows = settings.sensor.rows
+    needed = int(np.ceil((problem.n - rows * len(recorded)) / rows))
+    if settings.count < needed:
+        raise PincalError(
+            f"--count {settings.count} cannot determine the {problem.n} parameters estimated at level "
+            f"{settings.level} ({rows} measurements per configuration): plan at least {needed}"
+        )
+    selection = select(problem, settings.count, settings.criterion, allowed)
+    prediction = problem.predict(selection.chosen)
+    random, singular = _random_baseline(problem, settings, allowed, rng)
+    recorded_prediction = problem.predict([]) if len(recorded) else None
+    additions = _additions(problem, selection.priority, recorded_prediction)
+    order = _visiting_order(chain, candidates[selection.chosen], recorded_q, alternate, settings.seed)
+    chosen = selection.chosen[order]
+    q = candidates[chosen]
+    rank = {int(c): i + 1 for i, c in enumerate(selection.priority)}
+    notes = []
+    if prediction is None:
+        notes.append("the chosen configurations do not determine every identifiable parameter; plan more")
+    return Plan(
+        settings=settings,
+        q=q,
+        candidates=chosen,
+        priority=np.array([rank[int(c)] for c in chosen]),
+        additions=additions,
+        criterion=settings.criterion,
+        criterion_value=problem.criterion(selection.chosen, settings.criterion),
+        prediction=prediction,
+        random=random,
+        random_singular=singular,
+        recorded=recorded_prediction,
+        identifiable=tuple(model.names[i] for i in problem.identifiable),
+        not_identifiable=tuple(model.names[i] for i in problem.not_identifiable),
+        estimated=tuple(model.names[i] for i in problem.columns),
+        balance=tuple(approach_balance(q, chain.joint_names)),
+        travel_s=float(move_times(q, _velocities(chain)).sum()),
+        sigma_pos_mm=model.sigma_pos_m * 1000.0,
+        sigma_rot_deg=float(np.degrees(model.sigma_rot_rad)) if settings.sensor.has_rotation else None,
+        sigma_source=sigma_source,
+        target_points=model.points,
+        workspace_size=len(workspace),
+        swaps=selection.swaps,
+        seconds=time.perf_counter() - started,
+        notes=tuple(notes),
+    )
+
+
+def _joint_columns(chain: KinematicChain, names) -> np.ndarray:
+    unknown = [n for n in names if n not in chain.joint_names]
+    if unknown:
+        raise PincalError(f"--alternate: no joint {', '.join(repr(n) for n in unknown)} on the chain; "
+                          f"its joints are {', '.join(chain.joint_names)}")
+    return np.array([chain.joint_names.index(n) for n in names], dtype=int)
+
+
+def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: MeasurementSet | None):
+    """The measurement model, where its noise comes from, and the recorded rows' configurations."""
+    sensor = settings.sensor
+    if settings.tool_known and sensor.n_points != 1:
+        raise PincalError(f"--measure {sensor.label} with --tool: a known tool is one point; "
+                          "leave out --tool to estimate the target's points")
+    points = settings.target_points
+    sigma_pos = None if settings.sigma_pos_mm is None else settings.sigma_pos_mm / 1000.0
+    sigma_rot = None if settings.sigma_rot_deg is None else np.radians(settings.sigma_rot_deg)
+    pos_source = "given" if sigma_pos is not None else "default"
+    rot_source = "given" if sigma_rot is not None else "default"
+    recorded_q = np.zeros((0, chain.n_joints))
+    if existing is not None:
+        rows = existing.select(existing.roles != "validation")
+        if rows.n_points != sensor.n_points or rows.has_orientation != sensor.has_rotation:
+            seen = ("pose" if rows.has_orientation else f"{rows.n_points} point(s)")
+            raise PincalError(f"{existing.source}: the recorded rows measure {seen} per configuration, "
+                              f"but --measure is {sensor.label}; plan for what the sensor sees")
+        recorded_q = rows.q
+        if settings.level in CHAIN_LEVELS:
+            result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known)
+            target = result.target
+            if sigma_pos is None:  # each sigma not given is estimated from the recorded rows
+                sigma_pos, pos_source = result.sigma_pos_m, f"estimated from {existing.source}"
+            if sigma_rot is None and result.sigma_rot_rad is not None:
+                sigma_rot, rot_source = result.sigma_rot_rad, f"estimated from {existing.source}"
+        else:
+            target = initial_target(chain, rows, fit_points=not settings.tool_known)
+        if points is None and not settings.tool_known:
+            points = target.points
+    if settings.tool_known:
+        points = np.zeros((1, 3))
+    elif points is None:
+        points = default_target_points(sensor.n_points)
+    sigma_pos = DEFAULT_SIGMA_POS_MM / 1000.0 if sigma_pos is None else sigma_pos
+    sigma_rot = np.radians(DEFAULT_SIGMA_ROT_DEG) if sigma_rot is None else sigma_rot
+    model = MeasurementModel(chain, settings.level, sensor, points, tool_known=settings.tool_known,
+                             sigma_pos_m=sigma_pos, sigma_rot_rad=sigma_rot)
+    source = pos_source if pos_source == rot_source or not sensor.has_rotation else (
+        f"position {pos_source}, orientation {rot_source}")
+    return model, source, recorded_q
+
+
+def _random_baseline(problem: DesignProblem, settings: PlanSettings, allowed: np.ndarray, rng):
+    """Median predicted errors of random N-subsets of the allowed candidates, and how many were singular."""
+    pool = np.flatnonzero(allowed)
+    draws = [problem.predict(rng.choice(pool, settings.count, replace=False)) for _ in range(settings.random_draws)]
+    good = [d for d in draws if d is not None]
+    singular = len(draws) - len(good)
+    if len(good) <= len(draws) // 2:
+        return None, singular
+    median = {}
+    for key in ("mean_position_mm", "max_position_mm", "mean_rotation_deg", "max_rotation_deg", "condition"):
+        values = [getattr(d, key) for d in good]
+        # the singular draws count as infinitely bad
+        median[key] = None if values[0] is None else float(np.median(values + [np.inf] * singular))
+    return Prediction(**median), singular
+
+
+def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Prediction | None) -> tuple[Addition, ...]:
+    """Predicted mean error after each prefix of the priority order, and each one's gain."""
+    out, previous = [], None if recorded is None else recorded.mean_position_mm
+    rows, recorded = problem.blocks.shape[1], len(problem.existing)
+    for k in range(1, len(priority) + 1):
+        enough = (k + recorded) * rows >= problem.n
+        prediction = problem.predict(priority[:k], condition=False) if enough else None
+        value = None if prediction is None else prediction.mean_position_mm
+        gain = None if value is None or previous is None else previous - value
+        out.append(Addition(int(priority[k - 1]), value, gain))
+        previous = value
+    return tuple(out)
+
+
+def _velocities(chain: KinematicChain) -> np.ndarray:
+    """Velocity limit of each chain joint [rad/s or m/s]; 1 where the URDF gives none."""
+    v = np.array([chain.model.velocityLimit[chain.model.joints[j].idx_v] for j in chain.joint_ids], dtype=float)
+    return np.where(np.isfinite(v) & (v > 0), v, 1.0)
+
+
+def _visiting_order(chain, q: np.ndarray, recorded_q: np.ndarray, alternate: np.ndarray, seed: int) -> np.ndarray:
+    """Permutation of the chosen rows: short travel, or balanced approaches of the ``alternate`` joints."""
+    lower = np.array([j.lower for j in chain.joints])
+    upper = np.array([j.upper for j in chain.joints])
+    start = recorded_q[-1] if len(recorded_q) else np.clip(np.zeros(chain.n_joints), lower, upper)
+    velocity = _velocities(chain)
+    if len(alternate):
+        return alternating_order(q, velocity, alternate, start, seed)
+    return short_tour(q, velocity, start)

@@ -1,0 +1,412 @@
+"""Outputs survive faults (issue 11, item 3): every file pincal writes is replaced atomically.
+
+Unit tests of :mod:`pincal.outputs`, a scan that no module of pincal writes a
+file around it, and kill tests: ``pincal calibrate`` and ``pincal study`` run as
+subprocesses and are SIGKILLed at seeded random moments; after every kill each
+output present must be whole (it parses and has the structure of a complete
+run's file) and every other file must be a temporary one that no output name
+or pattern can match. When the kill lands is machine dependent; what is
+asserted is not: it holds whatever the moment.
+"""
+
+from __future__ import annotations
+
+import ast
+import csv
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from lxml import etree
+
+from pincal import outputs
+from pincal.cli.commands import main
+from pincal.errors import MeasurementError
+from pincal.outputs import TEMP_SUFFIX, is_temporary, replacing, write_bytes, write_text
+
+PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # empty IEND chunk with its CRC
+OUTPUT_SUFFIXES = (".urdf", ".json", ".csv", ".md", ".png")
+#: A safety net against a hung subprocess, never an assertion about speed.
+HANG_S = 300.0
+
+
+# --- the writer ----------------------------------------------------------------
+
+def test_write_text_and_bytes_replace_the_file_and_leave_nothing_else(tmp_path):
+    target = tmp_path / "REPORT.json"
+    write_text(target, "old\n")
+    write_text(target, "new ü\n")
+    assert target.read_text(encoding="utf-8") == "new ü\n"
+    write_bytes(tmp_path / "fig.png", PNG_SIGNATURE + PNG_END)
+    assert (tmp_path / "fig.png").read_bytes() == PNG_SIGNATURE + PNG_END
+    assert sorted(os.listdir(tmp_path)) == ["REPORT.json", "fig.png"]
+
+
+class Boom(Exception):
+    pass
+
+
+def _fail_in_block(path: Path) -> None:
+    with replacing(path, "w") as handle:
+        handle.write("half of the new ")
+        handle.flush()
+        raise Boom
+
+
+def _interrupt_in_block(path: Path) -> None:
+    with replacing(path, "wb") as handle:
+        handle.write(b"half")
+        raise KeyboardInterrupt
+
+
+def _unencodable(path: Path) -> None:
+    write_text(path, "ok so far \udcff", encoding="utf-8")
+
+
+@pytest.mark.parametrize("fail, kind", [(_fail_in_block, Boom), (_interrupt_in_block, KeyboardInterrupt),
+                                        (_unencodable, UnicodeEncodeError)])
+def test_a_failing_write_keeps_the_old_file_and_removes_its_temporary(tmp_path, fail, kind):
+    target = tmp_path / "study.csv"
+    target.write_text("a,b\n1,2\n", encoding="utf-8")
+    with pytest.raises(kind):
+        fail(target)
+    assert target.read_text(encoding="utf-8") == "a,b\n1,2\n"
+    assert os.listdir(tmp_path) == ["study.csv"]
+
+
+def test_a_failing_first_write_leaves_no_file(tmp_path):
+    with pytest.raises(Boom):
+        _fail_in_block(tmp_path / "new.csv")
+    assert os.listdir(tmp_path) == []
+
+
+def test_data_reach_the_disk_before_the_rename(tmp_path, monkeypatch):
+    calls = []
+    fsync, rename = os.fsync, os.replace
+    monkeypatch.setattr(outputs.os, "fsync", lambda fd: (calls.append("fsync"), fsync(fd))[1])
+    monkeypatch.setattr(outputs.os, "replace", lambda a, b: (calls.append("replace"), rename(a, b))[1])
+    write_text(tmp_path / "a.json", "{}\n")
+    assert calls[:2] == ["fsync", "replace"]  # then the folder's fsync, where the platform allows
+
+
+def test_temporary_file_is_a_hidden_sibling_no_output_pattern_matches(tmp_path):
+    target = tmp_path / "summary.csv"
+    target.write_text("old\n", encoding="utf-8")
+    with replacing(target, "w") as handle:
+        handle.write("new\n")
+        handle.flush()
+        others = [name for name in os.listdir(tmp_path) if name != "summary.csv"]
+        assert len(others) == 1
+        temporary = others[0]
+        assert target.read_text(encoding="utf-8") == "old\n"  # not replaced before the block ends
+        assert list(tmp_path.glob("*.csv")) == [target]
+    assert temporary.startswith(".summary.csv.") and temporary.endswith(TEMP_SUFFIX)
+    assert is_temporary(temporary) and not is_temporary("summary.csv")
+    assert target.read_text(encoding="utf-8") == "new\n" and os.listdir(tmp_path) == ["summary.csv"]
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX permission bits")
+def test_permissions_are_those_of_a_plain_open(tmp_path):
+    plain = tmp_path / "plain.txt"
+    with open(plain, "w", encoding="utf-8") as handle:
+        handle.write("x")
+    write_text(tmp_path / "new.txt", "x")
+    assert stat.S_IMODE(os.stat(tmp_path / "new.txt").st_mode) == stat.S_IMODE(os.stat(plain).st_mode)
+    kept = tmp_path / "kept.txt"
+    kept.write_text("old", encoding="utf-8")
+    os.chmod(kept, 0o640)
+    write_text(kept, "new")
+    assert stat.S_IMODE(os.stat(kept).st_mode) == 0o640
+
+
+@pytest.mark.skipif(os.name != "posix", reason="symbolic links")
+def test_writing_through_a_symlink_replaces_its_target(tmp_path):
+    real = tmp_path / "real.json"
+    real.write_text("old", encoding="utf-8")
+    link = tmp_path / "link.json"
+    link.symlink_to(real)
+    write_text(link, "new")
+    assert link.is_symlink() and real.read_text(encoding="utf-8") == "new"
+
+
+def test_missing_folder_and_bad_mode_are_refused(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        write_text(tmp_path / "absent" / "x.json", "{}")
+    with pytest.raises(ValueError, match="mode"), replacing(tmp_path / "x.csv", "a"):
+        pass
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_failed_check_keeps_the_old_file(tmp_path):
+    """``verify`` sees the whole new file before the rename; what it raises cancels the write."""
+    target = tmp_path / "robot.urdf"
+    target.write_text("old")
+    seen = []
+
+    def verify(written: Path) -> None:
+        seen.append(written.read_text())
+        raise ValueError("wrong kinematics")
+
+    with pytest.raises(ValueError, match="wrong kinematics"):
+        with replacing(target, verify=verify) as handle:
+            handle.write("new")
+    assert seen == ["new"] and target.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["robot.urdf"]
+
+
+@pytest.mark.parametrize("where", ["open", "replace"])
+def test_errors_name_the_destination_not_the_temporary(tmp_path, monkeypatch, where):
+    """A user reads 'REPORT.json: Permission denied', never the hidden temporary's name."""
+    target = tmp_path / "REPORT.json"
+
+    def refuse(path, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", os.fspath(path))
+
+    monkeypatch.setattr(outputs.os, where, refuse)
+    with pytest.raises(PermissionError) as info:
+        write_text(target, "{}")
+    assert info.value.filename == str(target) and not is_temporary(info.value.filename)
+
+
+def test_csv_writer_keeps_its_error_kind(tmp_path, noisy_large_experiment):
+    from pincal.measurements.csv_v1 import write_measurements
+
+    data = noisy_large_experiment.validation
+    with pytest.raises(MeasurementError, match="cannot write"):
+        write_measurements(tmp_path / "absent" / "v.csv", data)
+    write_measurements(tmp_path / "v.csv", data)
+    lines = (tmp_path / "v.csv").read_text(encoding="utf-8").splitlines()
+    assert lines[0].startswith(",".join(data.joint_names)) and len(lines) == data.n_rows + 1
+    assert os.listdir(tmp_path) == ["v.csv"]
+
+
+# --- no write around the writer --------------------------------------------------
+
+_SAVERS = {"savefig", "savetxt", "save", "tofile", "to_csv", "dump"}
+
+
+def _called(func: ast.expr) -> str:
+    return func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
+
+
+def _inside(tree: ast.AST, context: str) -> set[int]:
+    """ids of the nodes in the body of every ``with context(...)`` of ``tree``."""
+    return {
+        id(sub)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.With)
+        and any(isinstance(i.context_expr, ast.Call) and _called(i.context_expr.func) == context for i in node.items)
+        for child in node.body
+        for sub in ast.walk(child)
+    }
+
+
+def raw_writes(source: str, filename: str) -> list[str]:
+    """Calls in ``source`` that write a file without :mod:`pincal.outputs`.
+
+    A saver given the file object of ``with replacing(...)`` is atomic; anything
+    written in ``with tempfile.TemporaryDirectory()`` is a scratch file deleted
+    with it, never an output.
+    """
+    tree = ast.parse(source, filename=filename)
+    guarded, scratch = _inside(tree, "replacing"), _inside(tree, "TemporaryDirectory")
+    bad = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call) or id(node) in scratch:
+            continue
+        name, where = _called(node.func), f"{filename}:{node.lineno}"
+        method = isinstance(node.func, ast.Attribute) and not (
+            isinstance(node.func.value, ast.Name) and node.func.value.id == "outputs")
+        mode = node.args[1] if len(node.args) > 1 else next((k.value for k in node.keywords if k.arg == "mode"), None)
+        if method and name in ("write_text", "write_bytes"):
+            bad.append(f"{where}: Path.{name}")
+        elif name == "open" and isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+"):
+            bad.append(f"{where}: open(..., {mode.value!r})")
+        elif id(node) not in guarded and (  # lxml's tree.write(path, xml_declaration=...) too
+                (method and name in _SAVERS)
+                or (name == "write" and any(k.arg in ("xml_declaration", "pretty_print") for k in node.keywords))):
+            bad.append(f"{where}: {name} outside `with replacing(...)`")
+    return bad
+
+
+def test_every_write_of_pincal_goes_through_outputs():
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name != "outputs.py":
+            found += raw_writes(path.read_text(encoding="utf-8"), str(path.relative_to(PACKAGE.parent)))
+    assert found == []
+
+
+def test_the_scan_catches_what_it_guards():
+    planted = (
+        "Path(p).write_text(t)\n"
+        "open(p, 'w')\n"
+        "open(p, mode='ab')\n"
+        "fig.savefig(p, dpi=1)\n"
+        "tree.write(p, xml_declaration=True)\n"
+        "json.dump(d, handle)\n"
+    )
+    assert len(raw_writes(planted, "planted")) == 6
+    allowed = (
+        "write_text(p, t)\n"
+        "open(p, newline='')\n"
+        "with replacing(p, 'wb') as h:\n"
+        "    fig.savefig(h, format='png')\n"
+        "    tree.write(h, xml_declaration=True)\n"
+        "with tempfile.TemporaryDirectory() as tmp:\n"
+        "    tree.write(tmp + '/scratch.urdf', xml_declaration=True)\n"
+        "    open(tmp + '/scratch.txt', 'w')\n"
+    )
+    assert raw_writes(allowed, "allowed") == []
+
+
+# --- kill tests --------------------------------------------------------------------
+
+def _snapshot(folder: Path) -> dict[str, tuple[int, int, int]]:
+    found = {}
+    for entry in os.scandir(folder):
+        try:
+            info = entry.stat()
+        except FileNotFoundError:  # a temporary file renamed away meanwhile
+            continue
+        found[entry.name] = (info.st_ino, info.st_mtime_ns, info.st_size)
+    return found
+
+
+def _start(argv: list[str], cwd: Path) -> subprocess.Popen:
+    """``pincal ARGV`` in ``cwd``; its stderr goes to ``cwd/stderr.log`` (a pipe nobody reads could block it)."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
+    with open(cwd / "stderr.log", "wb") as log:
+        return subprocess.Popen([sys.executable, "-m", "pincal", *argv], cwd=cwd, env=env,
+                                stdout=subprocess.DEVNULL, stderr=log)
+
+
+def _stderr(cwd: Path) -> str:
+    return (cwd / "stderr.log").read_text(encoding="utf-8", errors="replace")
+
+
+def _wait_for_first_write(proc: subprocess.Popen, folder: Path, before: dict) -> None:
+    """Return once ``folder`` changes (a file created, renamed or grown) or ``proc`` has exited."""
+    deadline = time.monotonic() + HANG_S
+    while proc.poll() is None and _snapshot(folder) == before:
+        assert time.monotonic() < deadline, "the command neither wrote nor exited"
+        time.sleep(0.002)
+
+
+def _reference_run(argv: list[str], cwd: Path, folder: Path) -> tuple[float, float]:
+    """Run to completion; return (seconds to the first write, seconds to the exit) to aim the kills."""
+    before = _snapshot(folder)
+    start = time.monotonic()
+    proc = _start(argv, cwd)
+    _wait_for_first_write(proc, folder, before)
+    first = time.monotonic() - start
+    proc.wait(timeout=HANG_S)
+    assert proc.returncode == 0, _stderr(cwd)
+    return first, time.monotonic() - start
+
+
+def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: bool, delay_s: float) -> int:
+    before = _snapshot(folder)
+    proc = _start(argv, cwd)
+    try:
+        if after_first_write:
+            _wait_for_first_write(proc, folder, before)
+        time.sleep(delay_s)
+        proc.send_signal(signal.SIGKILL)  # nothing happens if it has already finished
+        proc.wait(timeout=HANG_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode in (0, -signal.SIGKILL), _stderr(cwd)
+    return proc.returncode
+
+
+def whole_file(path: Path) -> tuple:
+    """The structure of a complete output; raises (or differs from a complete run's) if it is cut."""
+    data = path.read_bytes()
+    suffix = path.suffix
+    if suffix == ".png":
+        assert data.startswith(PNG_SIGNATURE) and data.endswith(PNG_END), "PNG without its IEND chunk"
+        return ("png", data[16:24])  # width and height from IHDR
+    text = data.decode("utf-8")
+    assert text.endswith("\n"), "no final newline"
+    if suffix == ".json":
+        return ("json", tuple(json.loads(text)))
+    if suffix == ".csv":
+        rows = list(csv.reader(text.splitlines()))
+        assert all(len(row) == len(rows[0]) for row in rows), "a row is cut"
+        return ("csv", tuple(rows[0]), len(rows))
+    if suffix == ".urdf":
+        root = etree.fromstring(data)
+        model = pin.buildModelFromUrdf(str(path))
+        return ("urdf", root.get("name"), tuple(j.get("name") for j in root.iter("joint")), model.nq)
+    if suffix == ".md":
+        return ("md", len(text.splitlines()))
+    raise AssertionError(f"unknown output {path.name}")
+
+
+def _check_outputs(folder: Path, reference: dict[str, tuple], what: str) -> list[str]:
+    """Every output present is whole; every other file is a temporary no output pattern matches."""
+    leftovers = []
+    for name in sorted(os.listdir(folder)):
+        if is_temporary(name):
+            assert not name.endswith(OUTPUT_SUFFIXES), f"{what}: temporary {name} looks like an output"
+            leftovers.append(name)
+            continue
+        assert name in reference, f"{what}: unexpected file {name}"
+        try:
+            found = whole_file(folder / name)
+        except Exception as exc:  # noqa: BLE001 - any failure to parse is the finding
+            pytest.fail(f"{what}: {name} is not whole ({type(exc).__name__}: {exc})")
+        assert found == reference[name], f"{what}: {name} is cut ({found} != {reference[name]})"
+    return leftovers
+
+
+def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: int, anywhere: int) -> None:
+    first_write_s, total_s = _reference_run(argv, cwd, folder)
+    reference = {name: whole_file(folder / name) for name in os.listdir(folder)}
+    assert reference and not any(is_temporary(n) for n in reference)
+    rng = np.random.default_rng(seed)
+    kinds = rng.permutation([True] * in_writes + [False] * anywhere)
+    write_span_s = max(total_s - first_write_s, 0.05)
+    for number, after_first_write in enumerate(kinds):
+        delay = rng.uniform(0.0, 1.2 * write_span_s) if after_first_write else rng.uniform(0.0, total_s)
+        what = f"kill {number} ({'after the first write + ' if after_first_write else 'after '}{delay:.3f} s)"
+        _killed_run(argv, cwd, folder, bool(after_first_write), delay)
+        _check_outputs(folder, reference, what)
+
+
+@pytest.fixture(scope="module")
+def simulated_kuka(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("kill")
+    assert main(["simulate", "--out", str(folder / "sim"), "--deviations", "large",
+                 "--sigma-pos", "0.055", "--sigma-rot", "0.055", "--seed", "1"]) == 0
+    return folder
+
+
+def test_killed_calibrate_leaves_old_or_whole_outputs(simulated_kuka, kuka_urdf):
+    out = simulated_kuka / "calibrated"
+    out.mkdir()
+    argv = ["calibrate", str(kuka_urdf), "sim/calibration.csv", "--method", "2",
+            "--tool", "0.045,-0.043,0.118,0.12,-0.25,0.4", "--tool-parent", "lwr_flange",
+            "--out", "calibrated/kuka_calibrated.urdf", "--report", "calibrated/REPORT.json"]
+    _kill_round(argv, simulated_kuka, out, seed=11_3, in_writes=4, anywhere=2)
+
+
+def test_killed_study_leaves_old_or_whole_outputs(tmp_path):
+    out = tmp_path / "study"
+    out.mkdir()
+    argv = ["study", "--reps", "1", "--levels", "2", "--restarts", "2", "--workers", "1",
+            "--out", str(out)]
+    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=2, anywhere=1)
