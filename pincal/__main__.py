@@ -1,7 +1,5 @@
 """``python -m pincal``: same as the ``pincal`` command."""
 
-import sys
+from pincal.cli.commands import console
 
-from pincal.cli.commands import main
-
-sys.exit(main())
+console()

@@ -217,3 +217,19 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
             assert linear.condition < SCREEN_INSEPARABLE
             assert abs(linear.delta_bic - delta) <= (SCREEN_MARGIN[0] + SCREEN_MARGIN[1] * abs(linear.delta_bic)) / 2
 
+
+
+def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment):
+    """A candidate list that is empty after filtering (a drift without a time column)
+    ends the search with nothing adopted, not with an error (review finding)."""
+    from pincal.diagnosis.diagnose import diagnose
+    from pincal.fit.chain_calibration import calibrate_chain
+    from pincal.model.chain import KinematicChain
+    from pincal.model.effects import Effect
+    from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+
+    chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
+    data = noisy_large_experiment.calibration
+    geometry = calibrate_chain(chain, data, "offsets")
+    result = diagnose(chain, geometry, data, candidates=[Effect("drift")])
+    assert [step.effect for step in result.steps] == []

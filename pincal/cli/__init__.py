@@ -2,6 +2,6 @@
 write, check). The top layer: nothing in pincal imports it.
 """
 
-from pincal.cli.commands import main
+from pincal.cli.commands import console, main
 
-__all__ = ["main"]
+__all__ = ["console", "main"]

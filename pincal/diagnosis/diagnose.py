@@ -250,6 +250,8 @@ def diagnose(
     current_objective, current_solution = objective, solution
     while len(adopted) < MAX_EFFECTS:
         offered = [e for e in pool if e not in adopted]
+        if not offered:  # every candidate adopted (or none offered)
+            break
         screened = screen(current_objective, current_solution, offered, current_bic)
         fits: dict[Effect, tuple | None] = {}
 
@@ -387,15 +389,20 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
     full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
     its ΔBIC and the linearised one."""
     base_bic = _bic(solution.residual, solution.x.size)
-    corrections = []
+    names, corrections = [], []
     for name in chain.joint_names:
         generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
-        corrections.append([e for e in generic if e not in adopted])
+        generic = [e for e in generic if e not in adopted]
+        if generic:  # a joint whose generic terms are all adopted has nothing left to test
+            names.append(name)
+            corrections.append(generic)
+    if not corrections:
+        return None
     columns = iter(objective.effect_columns(solution.x, [e for generic in corrections for e in generic]))
     blocks = [np.hstack([next(columns) for _ in generic]) for generic in corrections]
     scores = Linearisation(solution).test(blocks, base_bic)
     found = []
-    for name, generic, score in zip(chain.joint_names, corrections, scores):
+    for name, generic, score in zip(names, corrections, scores):
         if score.condition <= SCREEN_CONDITION and not may_reach(score.delta_bic, EVIDENCE):
             continue
         try:
@@ -406,7 +413,7 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
         except CalibrationError:
             continue
         delta = _bic(sol.residual, sol.x.size) - base_bic
-        if not sol.converged:
+        if not sol.converged and score.condition <= SCREEN_CONDITION:  # the linear score is trusted there
             delta = min(delta, score.delta_bic)
         if delta < EVIDENCE:
             found.append(f"{name} (ΔBIC {delta:.1f})")

@@ -60,6 +60,8 @@ class Linearisation:
     def test(self, blocks: Sequence[np.ndarray], current_bic: float) -> list[Score]:
         """:class:`Score` of each block of columns (m, e), each added alone to the
         fit whose BIC is ``current_bic``."""
+        if not blocks:
+            return []
         m, n = self.q.shape
         stacked = np.hstack(blocks)
         along_all = gram(self.q, stacked)  # Qᵀ B (n, Σe)

@@ -109,7 +109,10 @@ def absorbed_into(jacobian: np.ndarray, dropped: Sequence[int], kept: np.ndarray
     # least squares through one triangular factor of [kept | dropped]: R11 C = R12
     r = triangular_factor(scaled[:, np.concatenate([np.asarray(kept, dtype=int), dropped])])
     n = len(kept)
-    coefs = scipy.linalg.solve_triangular(r[:n, :n], r[:n, n:])  # (kept, dropped)
+    if n and np.abs(np.diag(r[:n, :n])).min() > 0:
+        coefs = scipy.linalg.solve_triangular(r[:n, :n], r[:n, n:])  # (kept, dropped)
+    else:  # an exactly dependent kept column: the minimum-norm solution copes
+        coefs = np.linalg.lstsq(scaled[:, np.asarray(kept, dtype=int)], scaled[:, dropped], rcond=None)[0]
     out = []
     for coef in coefs.T:
         order = np.argsort(-np.abs(coef))
