@@ -8,12 +8,16 @@ robot and write a corrected URDF. The first method is Franaszek & Marvel
 from pincal._version import __version__
 from pincal.errors import CalibrationError, MeasurementError, ModelError, PincalError
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
+from pincal.fit.level_choice import LevelChoice, choose_fixture_level, choose_level
+from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
 from pincal.fit.metrics import ErrorSummary, PoseErrors, pose_errors
 from pincal.fit.ml_estimator import MLCalibration, calibrate_ml
 from pincal.fit.noise_limit import PredictedErrors, predicted_errors
 from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
 from pincal.fit.registration import register_orientations, register_points
-from pincal.measurements.csv_v1 import read_measurements, write_measurements
+from pincal.measurements.csv_v1 import read_measurements, read_sessions, write_measurements
+from pincal.measurements.fixture import Fixture, FixtureData, read_fixture, read_fixture_data
 from pincal.measurements.data import JointSpec, MeasurementSet
 from pincal.model.chain import (
     ChainPoses,
@@ -48,6 +52,17 @@ __all__ = [
     "PlacementErrors",
     "PredictedErrors",
     "calibrate_chain",
+    "calibrate_fixture",
+    "choose_fixture_level",
+    "choose_level",
+    "LevelChoice",
+    "fixture_metrics",
+    "FixtureMetrics",
+    "Fixture",
+    "FixtureCalibration",
+    "FixtureData",
+    "read_fixture",
+    "read_fixture_data",
     "calibrate_ml",
     "predicted_errors",
     "ChainPoses",
@@ -56,6 +71,8 @@ __all__ = [
     "DHRobot",
     "dh_robot_from_urdf",
     "read_dh_csv",
+    "render_html",
+    "write_html",
     "urdf_from_dh",
     "DHTable",
     "ErrorSummary",
@@ -77,6 +94,7 @@ __all__ = [
     "pose_errors",
     "pose_from_xyz_rpy",
     "read_measurements",
+    "read_sessions",
     "register_orientations",
     "register_points",
     "simulate_experiment",
@@ -87,6 +105,7 @@ __all__ = [
 #: Names imported on first use: they need yourdfpy (and trimesh), which every other
 #: ``import pincal`` — the CLI, each study worker — would otherwise pay for.
 _ON_FIRST_USE = {"dh_robot_from_urdf": "pincal.model.dh_urdf", "urdf_from_dh": "pincal.model.dh_urdf"}
+_ON_FIRST_USE.update(render_html="pincal.report.html", write_html="pincal.report.html")  # jinja2, matplotlib
 
 
 def __getattr__(name: str):

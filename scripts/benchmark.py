@@ -12,8 +12,22 @@
     inside it, and the ratios K = 10 000 / K = 1 000.
 (d) ``pincal plan``: 100 of 10 000 sampled KUKA configurations at the full
     level, whole process and planning time, default and single-threaded BLAS.
+(f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
+    selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
+    6D rows (position + orientation) taken along 6 lines and 4 planes in joint
+    space with the wrist held straight (wrist_2 at zero up to encoder jitter of
+    5e-8 rad), so that the Jacobian of the identifiable parameters has a
+    condition number of ~1e8: whole process and the calibration inside it.
 
-    python scripts/benchmark.py --against REV [--pairs 5] [--only diagnose_tiago,calibrate_tiago]
+Each benchmark is printed beside a realistic lower bound: the Pinocchio
+kinematics its run asked for, at Pinocchio's own cost (one
+``computeJointJacobians`` + ``getFrameJacobian``, or one ``forwardKinematics``,
+per configuration on the plain chain model, timed here from Python), plus, for
+a whole process, starting Python and importing numpy and pinocchio. The
+configurations are counted in a separate run of the same work (every process,
+study workers included, counts its Pinocchio calls through a ``sitecustomize``).
+
+    python scripts/benchmark.py --against REV [--pairs 5] [--only diagnose_tiago,calibrate_tiago,calibrate_large]
 
 (e) ``--against REV``: builds REV (any git revision) in a temporary worktree and
     virtual environment (its own code, this environment's dependencies) and
@@ -21,6 +35,7 @@
     (REV then this tree, then this tree then REV, ...): each ratio REV / this
     is the median over the pairs, next to the absolute times and the load
     average, with the default BLAS threads (``--one-blas-thread`` for one).
+    ``calibrate_large`` is (f) (at 6975758 it takes minutes: use ``--pairs 1``).
     Writes ``scripts/benchmark_against.json`` (or ``--json``); nothing else runs.
 
 Prints a table and writes the numbers to ``scripts/benchmark_results.json``.
@@ -31,6 +46,7 @@ The machine's load average is recorded: other processes slow every number.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -88,6 +104,8 @@ def method2_calibration(runs: int) -> dict:
         started = time.perf_counter()
         calibrate_paper(chain, experiment.calibration, 2, nominal=KUKA_LWR4_DH)
         times.append((time.perf_counter() - started) * 1000.0)
+    with counting_pinocchio() as counts:
+        calibrate_paper(chain, experiment.calibration, 2, nominal=KUKA_LWR4_DH)
     return {
         "runs": runs,
         "median_ms": statistics.median(times),
@@ -95,6 +113,7 @@ def method2_calibration(runs: int) -> dict:
         "max_ms": max(times),
         "k": settings.n_calibration,
         "k_alpha": settings.n_cpa,
+        "pinocchio_calls": dict(counts),
     }
 
 
@@ -106,6 +125,8 @@ def default_study(workers: int) -> dict:
         subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
         wall = time.perf_counter() - started
         inner = json.loads((Path(tmp) / "study.json").read_text(encoding="utf-8"))
+    with tempfile.TemporaryDirectory() as tmp:
+        counts = counted_run([sys.executable, "-m", "pincal", "study", "--out", tmp, "--workers", str(workers)])
     return {
         "workers": workers,
         "command": "pincal study --workers " + str(workers),
@@ -113,6 +134,7 @@ def default_study(workers: int) -> dict:
         "study_wall_s": inner["wall_s"],
         "rows": len(inner["rows"]),
         "restarts": len(inner["restarts"]),
+        "pinocchio_calls": counts,
     }
 
 
@@ -125,7 +147,8 @@ def scaling(sizes: tuple[int, ...] = (100, 1_000, 10_000)) -> dict:
             [sys.executable, "-c", _SCALING_PROGRAM, str(k)], check=True, capture_output=True, text=True
         )
         wall = time.perf_counter() - started
-        out[str(k)] = {"process_wall_s": wall, **json.loads(completed.stdout)}
+        counts = counted_run([sys.executable, "-c", _SCALING_PROGRAM, str(k)])
+        out[str(k)] = {"process_wall_s": wall, **json.loads(completed.stdout), "pinocchio_calls": counts}
     if "1000" in out and "10000" in out:
         out["ratio_10000_over_1000"] = {
             "process_wall": out["10000"]["process_wall_s"] / out["1000"]["process_wall_s"],
@@ -152,7 +175,214 @@ def plan_benchmark(candidates: int = 10_000, count: int = 100) -> dict:
             doc = json.loads(Path(f"{tmp}/PLAN.json").read_text(encoding="utf-8"))
             out[name] = {"process_wall_s": wall, "plan_s": doc["seconds"],
                          "plan_over_random": doc["predicted"]["plan_over_random_mean_position"]}
+        Path(f"{tmp}/PLAN.csv").unlink()
+        Path(f"{tmp}/PLAN.json").unlink()
+        out["pinocchio_calls"] = counted_run(command)
     return out
+
+
+# --- lower bounds: the Pinocchio work a run asks for, at Pinocchio's own cost -------------------
+
+#: Written as ``sitecustomize.py`` into a folder put first on PYTHONPATH: every Python process of a
+#: counted run (study workers included) counts its Pinocchio kinematics calls and writes them, as
+#: JSON named by its pid, into $PINCAL_COUNT_DIR when it exits.
+_COUNTING_SITE = """
+import atexit, json, os
+import pinocchio as _pin
+_counts = {"jacobian": 0, "kinematics": 0}
+def _counted(name, key):
+    original = getattr(_pin, name)
+    def counted(*args, **kwargs):
+        _counts[key] += 1
+        return original(*args, **kwargs)
+    setattr(_pin, name, counted)
+_counted("computeJointJacobians", "jacobian")
+_counted("computeFrameJacobian", "jacobian")
+_counted("forwardKinematics", "kinematics")
+@atexit.register
+def _write():
+    with open(os.path.join(os.environ["PINCAL_COUNT_DIR"], str(os.getpid()) + ".json"), "w") as out:
+        json.dump(_counts, out)
+"""
+
+
+def counted_run(command: list[str], cwd: str | Path | None = None) -> dict:
+    """Run ``command`` (a Python process) with every process counting its Pinocchio calls:
+    configurations evaluated with Jacobians (``jacobian``) and forward kinematics only
+    (``kinematics``), summed over the processes."""
+    with tempfile.TemporaryDirectory() as site, tempfile.TemporaryDirectory() as counts:
+        (Path(site) / "sitecustomize.py").write_text(_COUNTING_SITE, encoding="utf-8")
+        path = os.pathsep.join(p for p in (site, os.environ.get("PYTHONPATH", "")) if p)
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=cwd,
+                       env={**os.environ, "PYTHONPATH": path, "PINCAL_COUNT_DIR": counts})
+        total = {"jacobian": 0, "kinematics": 0, "processes": 0}
+        for file in Path(counts).glob("*.json"):
+            for key, value in json.loads(file.read_text(encoding="utf-8")).items():
+                total[key] += value
+            total["processes"] += 1
+    return total
+
+
+def pinocchio_row_seconds(urdf: str | Path, tip_link: str, rows: int = 2000) -> dict:
+    """Pinocchio's cost per configuration on the plain chain model of ``urdf`` [s], called from
+    Python as pincal must: ``computeJointJacobians`` + ``getFrameJacobian`` (a residual with its
+    Jacobian) and ``forwardKinematics`` (a residual only); best of 5 passes over ``rows`` random
+    configurations."""
+    import numpy as np
+    import pinocchio as pin
+
+    from pincal.model.chain import KinematicChain
+
+    chain = KinematicChain.from_urdf(urdf, tip_link)
+    model, data, frame = chain.model, chain.data, chain.tip_frame_id
+    q = np.array([pin.randomConfiguration(model) for _ in range(rows)])
+    world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    best = {"jacobian": np.inf, "kinematics": np.inf}
+    for _ in range(5):
+        started = time.perf_counter()
+        for row in q:
+            pin.computeJointJacobians(model, data, row)
+            pin.getFrameJacobian(model, data, frame, world)
+        best["jacobian"] = min(best["jacobian"], (time.perf_counter() - started) / rows)
+        started = time.perf_counter()
+        for row in q:
+            pin.forwardKinematics(model, data, row)
+        best["kinematics"] = min(best["kinematics"], (time.perf_counter() - started) / rows)
+    return best
+
+
+def import_floor(runs: int = 5) -> float:
+    """Median wall time of ``python -c "import numpy, pinocchio"`` [s]: any Pinocchio-based
+    Python process pays it."""
+    times = []
+    for _ in range(runs):
+        started = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import numpy, pinocchio"], check=True)
+        times.append(time.perf_counter() - started)
+    return statistics.median(times)
+
+
+def lower_bound(counts: dict, per_row: dict, floor: float = 0.0, workers: int = 1) -> float:
+    """Seconds the counted Pinocchio work takes at ``per_row`` cost, shared by ``workers``
+    processes, plus ``floor`` (process start and imports) [s]."""
+    work = counts["jacobian"] * per_row["jacobian"] + counts["kinematics"] * per_row["kinematics"]
+    return floor + work / workers
+
+
+@contextlib.contextmanager
+def counting_pinocchio():
+    """In this process: count Pinocchio's kinematics calls inside the block (same keys as
+    :func:`counted_run`)."""
+    import pinocchio as pin
+
+    counts = {"jacobian": 0, "kinematics": 0}
+    saved = {name: getattr(pin, name) for name in ("computeJointJacobians", "computeFrameJacobian",
+                                                   "forwardKinematics")}
+
+    def counted(name: str, key: str):
+        def call(*args, **kwargs):
+            counts[key] += 1
+            return saved[name](*args, **kwargs)
+        return call
+
+    pin.computeJointJacobians = counted("computeJointJacobians", "jacobian")
+    pin.computeFrameJacobian = counted("computeFrameJacobian", "jacobian")
+    pin.forwardKinematics = counted("forwardKinematics", "kinematics")
+    try:
+        yield counts
+    finally:
+        for name, function in saved.items():
+            setattr(pin, name, function)
+
+
+# --- (f) large, badly conditioned data ------------------------------------------------------------
+
+_UR5_URDF = "ur_description/urdf/ur5_robot.urdf"
+_UR5_TIP = "tool0"
+#: Encoder jitter of the straight wrist [rad]: a 20-bit encoder behind a 1:100 gear reads 6e-8 rad.
+_WRIST_JITTER_RAD = 5e-8
+
+
+def large_session(path: Path, rows: int = 2500, seed: int = 11) -> dict:
+    """Write (f)'s measurements to ``path``; returns the condition number of the scaled Jacobian of
+    the identifiable parameters (with registration and target) at the nominal model, and its rank.
+
+    The UR5's 42 placement errors are N(0, 1 mm or 1 mrad); a laser tracker with a 6D probe
+    measures one point (σ 20 µm per axis) and its orientation (σ 0.002°). The rows lie on 6 lines
+    and 4 planes through random configurations (joint-space steps of up to ±0.5 along random
+    directions), wrist_2 at zero plus encoder jitter.
+    """
+    import numpy as np
+
+    from pincal.fit.chain_calibration import FitProblem, row_weights
+    from pincal.fit.identifiability import condition_number, order_parameters
+    from pincal.fit.sessions import initial_target
+    from pincal.measurements.csv_v1 import write_measurements
+    from pincal.model.chain import KinematicChain
+    from pincal.model.parameter_sets import PlacementErrors
+    from pincal.robots import example_robot_data_urdf
+    from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure
+
+    chain = KinematicChain.from_urdf(example_robot_data_urdf(_UR5_URDF), _UR5_TIP)
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(seed)
+    truth = rng.normal(0.0, 1e-3, params.size)
+    pieces, per = [], -(-rows // 10)
+    for piece in range(10):
+        q0, d1, d2 = rng.uniform(-1.5, 1.5, 6), rng.normal(size=6), rng.normal(size=6)
+        q0[4] = d1[4] = d2[4] = 0.0  # the wrist stays straight
+        if piece < 6:  # a line
+            pieces.append(q0 + np.linspace(-0.5, 0.5, per)[:, None] * d1)
+        else:  # a plane
+            pieces.append(q0 + rng.uniform(-0.5, 0.5, (per, 1)) * d1 + rng.uniform(-0.5, 0.5, (per, 1)) * d2)
+    q = np.vstack(pieces)[:rows]
+    q[:, 4] += rng.normal(0.0, _WRIST_JITTER_RAD, rows)
+    nominal = chain.placements()
+    params.apply(truth)
+    data = measure(chain, q, DEFAULT_REGISTRATION, rng, 20e-6, np.radians(0.002), "calibration",
+                   points=np.array([[0.03, -0.02, 0.12]]), with_rotation=True)
+    chain.set_placements(nominal)
+    write_measurements(path, data)
+    # the condition number the user's data has: every identifiable parameter, at the nominal model
+    problem = FitProblem(chain, params, data, initial_target(chain, data, fit_points=True), True,
+                         row_weights(data, None))
+    objective = problem.objective(np.arange(params.size), np.zeros(params.size))
+    jac = objective.jacobian(objective.start_vector())
+    others = np.arange(params.size, objective.n_params)
+    ordering = order_parameters(jac, np.arange(params.size), others)
+    identifiable = np.concatenate([ordering.order[: ordering.rank], others])
+    return {"rows": rows, "rank": ordering.rank, "condition": condition_number(jac[:, identifiable])}
+
+
+def large_calibration(per_row: dict | None = None, floor: float = 0.0) -> dict:
+    """(f): the whole ``pincal calibrate`` process on :func:`large_session`'s data, the
+    calibration time inside it (REPORT.json), what was kept, and the lower bound."""
+    from pincal.robots import example_robot_data_urdf
+
+    urdf = example_robot_data_urdf(_UR5_URDF)
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "tracker.csv"
+        session = large_session(data)
+        command = [sys.executable, "-m", "pincal", "calibrate", str(urdf), str(data), "--tip-link", _UR5_TIP,
+                   "--level", "full", "--out", f"{tmp}/ur5_calibrated.urdf", "--report", f"{tmp}/REPORT.json"]
+        started = time.perf_counter()
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        wall = time.perf_counter() - started
+        report = json.loads(Path(f"{tmp}/REPORT.json").read_text(encoding="utf-8"))
+        Path(f"{tmp}/ur5_calibrated.urdf").unlink()
+        counts = counted_run(command)
+    per_row = per_row or pinocchio_row_seconds(urdf, _UR5_TIP)
+    return {
+        **session,
+        "process_wall_s": wall,
+        "calibrate_s": report["fit"]["total_seconds"],
+        "final_fit_s": report["fit"]["fit_seconds"],
+        "kept": report["identifiability"]["selection"]["kept"],
+        "final_condition": report["identifiability"]["jacobian_condition"],
+        "pinocchio_calls": counts,
+        "lower_bound_calibrate_s": lower_bound(counts, per_row),
+        "lower_bound_process_s": lower_bound(counts, per_row, floor),
+    }
 
 
 # --- (e) side by side against another revision ----------------------------------------------
@@ -173,7 +403,15 @@ AGAINST = {
         "--tip-link", "wrist_ft_tool_link", "--level", "full",
         "--out", "{out}/tiago_calibrated.urdf", "--report", "{out}/REPORT.json",
     ],
+    "calibrate_large": [  # (f): {large} is the measurement file of :func:`large_session`
+        "calibrate", "{ur5}", "{large}", "--tip-link", _UR5_TIP, "--level", "full",
+        "--out", "{out}/ur5_calibrated.urdf", "--report", "{out}/REPORT.json",
+    ],
 }
+#: The robot (URDF in example-robot-data, tip link) of each benchmark of :data:`AGAINST`, for its lower bound.
+AGAINST_ROBOT = {"diagnose_tiago": (_TIAGO_URDF, "wrist_ft_tool_link"),
+                 "calibrate_tiago": (_TIAGO_URDF, "wrist_ft_tool_link"),
+                 "calibrate_large": (_UR5_URDF, _UR5_TIP)}
 _ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
@@ -204,17 +442,22 @@ def remove_revision(where: Path) -> None:
                    check=False, capture_output=True)
 
 
-def _timed_run(python: str | Path, arguments: list[str], env: dict) -> float:
-    """Wall time of one ``python -m pincal ARGUMENTS`` process [s] in a fresh output folder."""
+def _command(python: str | Path, arguments: list[str], out: str, files: dict) -> list[str]:
+    """``python -m pincal ARGUMENTS`` with {out} the output folder and the other placeholders
+    ({tiago}, {ur5}, {large}) from ``files``."""
     from pincal.robots import example_robot_data_urdf
 
+    paths = {"tiago": example_robot_data_urdf(_TIAGO_URDF), "ur5": example_robot_data_urdf(_UR5_URDF), **files}
+    return [str(python), "-m", "pincal"] + [a.format(out=out, **paths) for a in arguments]
+
+
+def _timed_run(python: str | Path, arguments: list[str], env: dict, files: dict | None = None) -> float:
+    """Wall time of one ``python -m pincal ARGUMENTS`` process [s] in a fresh output folder."""
     with tempfile.TemporaryDirectory() as out:
-        command = [str(python), "-m", "pincal"] + [
-            a.format(out=out, tiago=example_robot_data_urdf(_TIAGO_URDF)) for a in arguments
-        ]
+        command = _command(python, arguments, out, files or {})
         started = time.perf_counter()
-        completed = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                   env={**os.environ, **env}, cwd=out)
+        completed = subprocess.run(command, check=False, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                   text=True, env={**os.environ, **env}, cwd=out)
         wall = time.perf_counter() - started
     if completed.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed: {completed.stderr.strip()[-500:]}")
@@ -222,7 +465,7 @@ def _timed_run(python: str | Path, arguments: list[str], env: dict) -> float:
 
 
 def compare(python_old: str | Path, python_new: str | Path, arguments: list[str], pairs: int = 5,
-            env: dict | None = None) -> dict:
+            env: dict | None = None, files: dict | None = None) -> dict:
     """Run the same whole-process command with two interpreters, alternately: pair i runs
     old then new for even i, new then old for odd i. Returns the absolute times, the ratio
     old / new of each pair and their median, and the load average before and after."""
@@ -232,7 +475,7 @@ def compare(python_old: str | Path, python_new: str | Path, arguments: list[str]
     for i in range(pairs):
         order = ((python_old, old_times), (python_new, new_times))
         for python, times in order if i % 2 == 0 else order[::-1]:
-            times.append(_timed_run(python, arguments, env))
+            times.append(_timed_run(python, arguments, env, files))
     ratios = [o / n for o, n in zip(old_times, new_times)]
     return {
         "pairs": pairs,
@@ -259,8 +502,21 @@ def against(revision: str, pairs: int, names: list[str], one_blas_thread: bool) 
     try:
         python_old = build_revision(commit, where)
         env = _ONE_BLAS_THREAD if one_blas_thread else {}
+        files = {}
+        if "calibrate_large" in names:
+            files["large"] = str(where / "tracker.csv")
+            out["large_session"] = large_session(Path(files["large"]))
+        floor = import_floor()
+        out["import_floor_s"] = floor
         for name in names:
-            out[name] = compare(python_old, sys.executable, AGAINST[name], pairs, env)
+            out[name] = compare(python_old, sys.executable, AGAINST[name], pairs, env, files)
+            with tempfile.TemporaryDirectory() as tmp:
+                counts = counted_run(_command(sys.executable, AGAINST[name], tmp, files), cwd=tmp)
+            from pincal.robots import example_robot_data_urdf
+
+            urdf, tip = AGAINST_ROBOT[name]
+            per_row = pinocchio_row_seconds(example_robot_data_urdf(urdf), tip)
+            out[name].update(pinocchio_calls=counts, lower_bound_s=lower_bound(counts, per_row, floor))
     finally:
         remove_revision(where)
         shutil.rmtree(where, ignore_errors=True)
@@ -271,12 +527,19 @@ def _print_against(results: dict) -> None:
     print(f"against {results['revision']} ({results['commit'][:10]}), {results['pairs']} alternated pairs, "
           f"BLAS {results['blas']}")
     print(f"{'benchmark':20s} {'old median [s]':>15s} {'new median [s]':>15s} {'ratio (median)':>15s} "
-          f"{'ratio (min)':>12s} {'load before/after':>18s}")
+          f"{'ratio (min)':>12s} {'load before/after':>18s} {'lower bound [s]':>16s} {'new / bound':>12s}")
     for name, entry in results.items():
-        if isinstance(entry, dict):
+        if name in AGAINST:
             print(f"{name:20s} {entry['old_median_s']:15.2f} {entry['new_median_s']:15.2f} "
                   f"{entry['median_ratio']:15.1f} {entry['min_ratio']:12.1f} "
-                  f"{entry['load_average_before'][0]:8.2f}/{entry['load_average_after'][0]:.2f}")
+                  f"{entry['load_average_before'][0]:8.2f}/{entry['load_average_after'][0]:<9.2f} "
+                  f"{entry['lower_bound_s']:16.2f} {entry['new_median_s'] / entry['lower_bound_s']:12.1f}")
+    if "large_session" in results:
+        session = results["large_session"]
+        print(f"calibrate_large: {session['rows']} 6D rows, {session['rank']} identifiable parameters, "
+              f"condition number {session['condition']:.2g}")
+    print(f"lower bound = Python + import numpy, pinocchio ({results['import_floor_s']:.2f} s) + the Pinocchio "
+          "calls the run made, at Pinocchio's cost per call")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -289,7 +552,9 @@ def main(argv: list[str] | None = None) -> int:
                              "scripts/benchmark_against.json)")
     parser.add_argument("--against", metavar="REV", help="only (e): whole processes against git revision REV")
     parser.add_argument("--pairs", type=int, default=5, help="alternated pairs of (e) (default 5)")
-    parser.add_argument("--only", default=",".join(AGAINST), help=f"benchmarks of (e) (default {','.join(AGAINST)})")
+    default_against = "diagnose_tiago,calibrate_tiago"
+    parser.add_argument("--only", default=default_against,
+                        help=f"benchmarks of (e) among {','.join(AGAINST)} (default {default_against})")
     parser.add_argument("--one-blas-thread", action="store_true", help="(e) with OPENBLAS_NUM_THREADS=1 for both")
     args = parser.parse_args(argv)
     if args.against:
@@ -314,34 +579,60 @@ def main(argv: list[str] | None = None) -> int:
         },
         "goals": GOALS,
     }
+    from pincal.robots import (
+        KUKA_FLANGE_LINK,
+        example_robot_data_urdf,
+        kuka_lwr4plus_urdf,
+    )
+
+    kuka = pinocchio_row_seconds(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
+    floor = import_floor()
+    results["lower_bounds"] = {"import_floor_s": floor, "kuka_per_row_s": kuka}
     results["method2_calibration"] = method2_calibration(args.runs)
     results["scaling"] = scaling()
     if not args.skip_study:
         results["default_study"] = default_study(args.workers)
     results["plan"] = plan_benchmark()
+    ur5 = pinocchio_row_seconds(example_robot_data_urdf(_UR5_URDF), _UR5_TIP)
+    results["lower_bounds"]["ur5_per_row_s"] = ur5
+    results["large_calibration"] = large_calibration(ur5, floor)
     results["machine"]["load_average_after"] = os.getloadavg()
 
+    def row(label: str, value: float, goal: str = "", limit: float | None = None, note: str = "") -> None:
+        """One line: the benchmark, its value, its goal, the lower bound and how far pincal is from it."""
+        far = f"{limit:11.3g} {value / limit:8.1f}x" if limit else f"{'':11s} {'':9s}"
+        print(f"{label:62s} {value:10.3f} {goal:>6s} {far}  {note}")
+
+    print(f"{'benchmark':62s} {'value':>10s} {'goal':>6s} {'lower bound':>11s} {'how far':>9s}")
     a = results["method2_calibration"]
-    print(f"{'benchmark':58s} {'value':>10s} {'goal':>8s}")
-    print(f"{'(a) Method 2 calibration, K = 100, median of %d [ms]' % a['runs']:58s} "
-          f"{a['median_ms']:10.2f} {GOALS['method2_median_ms']:8.0f}")
+    row(f"(a) Method 2 calibration, K = 100, median of {a['runs']} [s]", a["median_ms"] / 1e3,
+        f"{GOALS['method2_median_ms'] / 1e3:g}", lower_bound(a["pinocchio_calls"], kuka))
     if "default_study" in results:
         b = results["default_study"]
-        print(f"{'(b) pincal study (defaults), %d workers, wall [s]' % b['workers']:58s} "
-              f"{b['wall_s']:10.1f} {GOALS['study_wall_s']:8.0f}")
+        row(f"(b) pincal study (defaults), {b['workers']} workers, wall [s]", b["wall_s"],
+            f"{GOALS['study_wall_s']:g}", lower_bound(b["pinocchio_calls"], kuka, floor, b["workers"]))
     for k, entry in results["scaling"].items():
         if k.isdigit():
-            print(f"{'(c) K = %s: process wall [s] / calibration [s]' % k:58s} "
-                  f"{entry['process_wall_s']:10.2f} / {entry['calibrate_s']:.3f}")
+            row(f"(c) K = {k}: process wall [s]", entry["process_wall_s"], "",
+                lower_bound(entry["pinocchio_calls"], kuka, floor), f"(calibration {entry['calibrate_s']:.3f} s)")
     ratio = results["scaling"].get("ratio_10000_over_1000")
     if ratio:
-        print(f"{'(c) K = 10000 / K = 1000, whole process':58s} {ratio['process_wall']:10.2f} "
-              f"{GOALS['k_ratio_10000_over_1000']:8.0f}")
-        print(f"{'(c) K = 10000 / K = 1000, calibration only':58s} {ratio['calibrate']:10.2f}")
-    for name, entry in results["plan"].items():
-        if isinstance(entry, dict):
-            print(f"{'(d) pincal plan KUKA full 100 of 10000, %s: wall / plan [s]' % name:58s} "
-                  f"{entry['process_wall_s']:10.2f} / {entry['plan_s']:.2f}")
+        row("(c) K = 10000 / K = 1000, whole process", ratio["process_wall"], f"{GOALS['k_ratio_10000_over_1000']:g}")
+        row("(c) K = 10000 / K = 1000, calibration only", ratio["calibrate"])
+    plan = results["plan"]
+    for name in ("default_blas", "one_blas_thread"):
+        entry = plan[name]
+        row(f"(d) pincal plan KUKA full 100 of 10000, {name}: wall [s]", entry["process_wall_s"], "",
+            lower_bound(plan["pinocchio_calls"], kuka, floor), f"(planning {entry['plan_s']:.2f} s)")
+    f = results["large_calibration"]
+    row(f"(f) UR5, 2500 6D rows, cond {f['condition']:.1e}, full level: wall [s]", f["process_wall_s"], "",
+        f["lower_bound_process_s"])
+    row("(f) the calibration inside it, selection included [s]", f["calibrate_s"], "", f["lower_bound_calibrate_s"],
+        f"({f['kept']} of {f['rank']} identifiable kept)")
+    print(f"lower bound: the Pinocchio calls each run made, at Pinocchio's cost per call from Python (KUKA "
+          f"{kuka['jacobian'] * 1e6:.1f} us with Jacobians, {kuka['kinematics'] * 1e6:.1f} us without; UR5 "
+          f"{ur5['jacobian'] * 1e6:.1f} / {ur5['kinematics'] * 1e6:.1f} us), plus for a whole process "
+          f"Python + import numpy, pinocchio ({floor:.2f} s)")
     load = results["machine"]
     print(f"load average before {load['load_average_before'][0]:.2f}, after {load['load_average_after'][0]:.2f} "
           f"({load['cpus']} CPUs)")

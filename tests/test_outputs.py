@@ -31,6 +31,7 @@ from pincal import outputs
 from pincal.cli.commands import main
 from pincal.errors import MeasurementError
 from pincal.outputs import TEMP_SUFFIX, is_temporary, replacing, write_bytes, write_text
+from pincal.study.checkpoints import CHECKPOINT_FOLDER
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -193,6 +194,11 @@ def test_csv_writer_keeps_its_error_kind(tmp_path, noisy_large_experiment):
 # --- no write around the writer --------------------------------------------------
 
 _SAVERS = {"savefig", "savetxt", "save", "tofile", "to_csv", "dump"}
+#: In-memory files: a saver writing into one writes no file.
+_MEMORY_FILES = {"BytesIO", "StringIO"}
+#: pincal's own classes whose saving methods write through pincal.outputs (checked by
+#: test_atomic_savers_write_through_outputs): a call on a receiver annotated with one is atomic.
+ATOMIC_SAVERS = {"TaskStore": ("pincal/study/checkpoints.py", {"save"})}
 
 
 def _called(func: ast.expr) -> str:
@@ -211,15 +217,114 @@ def _inside(tree: ast.AST, context: str) -> set[int]:
     }
 
 
+_FUNCTIONS = (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)
+#: Annotation names that only wrap the class that matters (``Optional[TaskStore]``).
+_WRAPPERS = {"Optional", "Union"}
+
+
+def _scopes(tree: ast.AST):
+    """The module and every function, each as (scope, the nodes of its own body, not of nested functions)."""
+    for scope in [tree, *(n for n in ast.walk(tree) if isinstance(n, _FUNCTIONS))]:
+        own, stack = [], list(ast.iter_child_nodes(scope))
+        while stack:
+            node = stack.pop()
+            own.append(node)
+            if not isinstance(node, _FUNCTIONS):
+                stack.extend(ast.iter_child_nodes(node))
+        yield scope, own
+
+
+def _in_memory(tree: ast.AST) -> set[int]:
+    """ids of saver calls whose target is a name bound, in the same scope, only to ``io.BytesIO()`` / ``StringIO()``."""
+    found = set()
+    for _, own in _scopes(tree):
+        bound: dict[str, bool] = {}  # name -> every binding in the scope is an in-memory file
+        for node in own:
+            if isinstance(node, ast.Assign):
+                memory = isinstance(node.value, ast.Call) and _called(node.value.func) in _MEMORY_FILES
+                for target in node.targets:
+                    for name in ast.walk(target):
+                        if isinstance(name, ast.Name):
+                            bound[name.id] = bound.get(name.id, True) and memory and isinstance(target, ast.Name)
+            elif isinstance(node, (ast.AnnAssign, ast.AugAssign, ast.For, ast.With, ast.NamedExpr, ast.arg)):
+                targets = [node.arg] if isinstance(node, ast.arg) else [
+                    n.id for n in ast.walk(getattr(node, "target", None) or node)
+                    if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)]
+                bound.update({name: False for name in targets})
+        memory_names = {name for name, memory in bound.items() if memory}
+        for node in own:
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in _SAVERS:
+                target = node.args[0] if node.args else next((k.value for k in node.keywords if k.arg == "fname"), None)
+                if isinstance(target, ast.Name) and target.id in memory_names:
+                    found.add(id(node))
+    return found
+
+
+def _annotation_names(annotation: ast.expr) -> set[str]:
+    if isinstance(annotation, ast.Constant) and isinstance(annotation.value, str):  # a string annotation
+        annotation = ast.parse(annotation.value, mode="eval")
+    return {n.id for n in ast.walk(annotation) if isinstance(n, ast.Name)} - _WRAPPERS
+
+
+def _scope_types(scope: ast.AST, own: list) -> dict[str, set[str]]:
+    """Receivers of one scope (``store``, ``self.store``) and the classes their annotations name:
+    its annotated arguments and assignments, and what is assigned one of those (``self.store = store``)."""
+    types: dict[str, set[str]] = {}
+    arguments = scope.args.args + scope.args.kwonlyargs + scope.args.posonlyargs if isinstance(
+        scope, _FUNCTIONS) else []
+    for arg in arguments:
+        types[arg.arg] = _annotation_names(arg.annotation) if arg.annotation is not None else {"?"}
+    for node in own:
+        if isinstance(node, ast.AnnAssign):
+            types.setdefault(ast.unparse(node.target), set()).update(_annotation_names(node.annotation))
+    for node in own:
+        if isinstance(node, ast.Assign):
+            for target in node.targets:
+                pairs = (zip(target.elts, node.value.elts) if isinstance(target, ast.Tuple)
+                         and isinstance(node.value, ast.Tuple) else [(target, node.value)])
+                for left, right in pairs:
+                    known = types.get(right.id) if isinstance(right, ast.Name) else None
+                    types.setdefault(ast.unparse(left), set()).update(known or {"?"})  # "?": not known
+    return types
+
+
+def _atomic_calls(tree: ast.AST) -> set[int]:
+    """ids of calls of an :data:`ATOMIC_SAVERS` method on a receiver every binding of which,
+    in its scope (``self.X``: in its class), is annotated with that method's class."""
+    attributes: dict[int, dict[str, set[str]]] = {}  # method -> the ``self.X`` of its class
+    scopes = list(_scopes(tree))
+    for cls in (n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)):
+        methods = [n for n in cls.body if isinstance(n, _FUNCTIONS)]
+        merged: dict[str, set[str]] = {}
+        for scope, own in scopes:
+            if scope in methods:
+                for key, names in _scope_types(scope, own).items():
+                    if key.startswith("self."):
+                        merged.setdefault(key, set()).update(names)
+        attributes.update({id(m): merged for m in methods})
+    found = set()
+    for scope, own in scopes:
+        types = {**attributes.get(id(scope), {}), **_scope_types(scope, own)}
+        for node in own:
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+                names = types.get(ast.unparse(node.func.value), set())
+                if names and all(c in ATOMIC_SAVERS and node.func.attr in ATOMIC_SAVERS[c][1] for c in names):
+                    found.add(id(node))
+    return found
+
+
 def raw_writes(source: str, filename: str) -> list[str]:
     """Calls in ``source`` that write a file without :mod:`pincal.outputs`.
 
     A saver given the file object of ``with replacing(...)`` is atomic; anything
     written in ``with tempfile.TemporaryDirectory()`` is a scratch file deleted
-    with it, never an output.
+    with it, never an output; a saver whose target is a name bound only to an
+    ``io.BytesIO()`` in its scope writes no file; a method of :data:`ATOMIC_SAVERS`
+    called on a receiver annotated with its class writes through :mod:`pincal.outputs`.
     """
     tree = ast.parse(source, filename=filename)
     guarded, scratch = _inside(tree, "replacing"), _inside(tree, "TemporaryDirectory")
+    guarded |= _in_memory(tree) | _atomic_calls(tree)
     bad = []
     for node in ast.walk(tree):
         if not isinstance(node, ast.Call) or id(node) in scratch:
@@ -270,11 +375,62 @@ def test_the_scan_catches_what_it_guards():
     assert raw_writes(allowed, "allowed") == []
 
 
+def test_the_scan_tells_memory_files_and_atomic_savers_from_files():
+    allowed = (
+        "def svg(fig):\n"
+        "    buffer = io.BytesIO()\n"
+        "    fig.savefig(buffer, format='svg')\n"
+        "class Results:\n"
+        "    def __init__(self, store: TaskStore | None):\n"
+        "        self.tasks, self.store = [], store\n"
+        "    def add(self, task, rows):\n"
+        "        self.store.save(task, rows)\n"
+        "def keep(store: 'TaskStore', task):\n"
+        "    store.save(task, [])\n"
+    )
+    assert raw_writes(allowed, "allowed") == []
+    planted = (
+        "def svg(fig, path):\n"
+        "    buffer = io.BytesIO()\n"
+        "    fig.savefig(path, format='svg')\n"  # a path, though a buffer is at hand
+        "def other(fig):\n"
+        "    fig.savefig(buffer)\n"  # the buffer of another function's scope
+        "def rebound(fig, path):\n"
+        "    buffer = io.BytesIO()\n"
+        "    buffer = path\n"
+        "    fig.savefig(buffer)\n"  # a name once bound to a file path
+        "def untyped(store, task):\n"
+        "    store.save(task, [])\n"  # not known to be a TaskStore
+        "def other_type(store: Path, task):\n"
+        "    store.save(task)\n"
+        "def also_open(store: TaskStore, path):\n"
+        "    open(path, 'w')\n"  # a raw write beside an atomic saver is still caught
+    )
+    assert [line.split(": ", 1)[0] for line in raw_writes(planted, "planted")] == [
+        "planted:3", "planted:5", "planted:9", "planted:11", "planted:13", "planted:15"]
+
+
+def test_atomic_savers_write_through_outputs():
+    """Each :data:`ATOMIC_SAVERS` method writes only through pincal.outputs (so allowing calls of it is sound)."""
+    for cls, (path, methods) in ATOMIC_SAVERS.items():
+        tree = ast.parse((PACKAGE.parent / path).read_text(encoding="utf-8"))
+        imported = {alias.asname or alias.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                    and node.module == "pincal.outputs" for alias in node.names}
+        (body,) = [n for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.name == cls]
+        for method in methods:
+            (function,) = [n for n in body.body if isinstance(n, ast.FunctionDef) and n.name == method]
+            calls = {_called(n.func) for n in ast.walk(function) if isinstance(n, ast.Call)}
+            assert calls & imported & {"write_text", "write_bytes", "replacing"}, f"{cls}.{method}"
+            assert raw_writes(ast.unparse(function), f"{cls}.{method}") == []
+
+
 # --- kill tests --------------------------------------------------------------------
 
 def _snapshot(folder: Path) -> dict[str, tuple[int, int, int]]:
     found = {}
     for entry in os.scandir(folder):
+        if entry.name == CHECKPOINT_FOLDER:  # a running study's finished tasks, not an output
+            continue
         try:
             info = entry.stat()
         except FileNotFoundError:  # a temporary file renamed away meanwhile
@@ -360,6 +516,8 @@ def _check_outputs(folder: Path, reference: dict[str, tuple], what: str) -> list
     """Every output present is whole; every other file is a temporary no output pattern matches."""
     leftovers = []
     for name in sorted(os.listdir(folder)):
+        if name == CHECKPOINT_FOLDER:  # a killed study's finished tasks, for its rerun
+            continue
         if is_temporary(name):
             assert not name.endswith(OUTPUT_SUFFIXES), f"{what}: temporary {name} looks like an output"
             leftovers.append(name)

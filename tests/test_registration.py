@@ -198,8 +198,13 @@ def test_register_orientations_errors():
         register_orientations(r3, r3[:2], t3, t3)
     with pytest.raises(CalibrationError, match="differ in number"):
         register_orientations(r3, r3, t3, np.eye(4)[:, :3])
-    with pytest.raises(CalibrationError, match="at least 3"):
-        register_orientations(r3, r3, t3[:2], t3[:2])
+    with pytest.raises(CalibrationError, match="at least 1"):
+        register_orientations(r3, r3, t3[:0], t3[:0])
+    # one point is enough: the orientations fix the rotation, eq 19 the translation from the centroid
+    turn = np.array(pin.exp3(np.array([0.3, -0.2, 0.5])))
+    one = register_orientations(r3[:1], turn[None], t3[:1], t3[:1] @ turn.T + [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(one.rotation, turn, atol=1e-12)
+    np.testing.assert_allclose(one.translation, [1.0, 2.0, 3.0], atol=1e-12)
     with pytest.raises(CalibrationError, match="proper rotation"):
         register_orientations(r3, -r3, t3, t3)
 

@@ -59,18 +59,28 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
 
 def _run_calibrate(args: argparse.Namespace) -> int:
+    from pincal.cli.progress import progress_bar
     from pincal.cli.workflows import calibrate_files
 
+    if args.fixture is not None:  # socket-fixture data, no sensor
+        from pincal.cli.fixture import run_calibrate
+
+        return run_calibrate(args)
     level = args.level or ("dh" if args.method is not None else "full")
     if args.tip_link is None:
         raise PincalError("give the end of the chain: --tip-link LINK (or --tool-parent LINK)")
     if level != "dh" and args.method is not None:
         raise PincalError(f"--method applies to --level dh only (got --level {level})")
     method = args.method or 2
-    run = calibrate_files(args.urdf, args.data, method, args.weight, args.tool, args.tip_link,
-                          args.out, args.report, level=level, sigma_column=args.sigma_column,
-                          reject_outliers=args.reject_outliers, selection=args.select)
+    _check_html(args.html, *_description_inputs(args), *args.data, outputs=[args.out, args.report])
+    weight = 1.0 if args.weight is None else args.weight  # None: not given (refused with --fixture)
+    with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
+        run = calibrate_files(args.urdf, args.data, method, weight, args.tool, args.tip_link,
+                              args.out, args.report, level=level, sigma_column=args.sigma_column,
+                              reject_outliers=args.reject_outliers, selection=args.select,
+                              xacro_args=args.xacro_args, progress=progress)
     _print_notes(run.notes + list(run.result.notes))
+    _print_level_choice(run.report)
     if level == "dh":
         for stage in run.result.stages:
             print(f"{stage.name}: {len(stage.parameters)} parameters, RMS residual {stage.rms:.4g} "
@@ -78,11 +88,60 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         print(f"Method {method} calibrated in {run.seconds * 1000:.1f} ms")
     else:
         _print_chain_summary(run)
+    several = run.sessions if len(run.sessions) > 1 else ()
+    for session in several:
+        print(f"session {session.name} ({session.source}, {session.rows} rows): "
+              f"registration {_registration_text(session.registration)}")
     print(_HEADER)
     print(f"{'calibration rows':24s} {_error_columns(run.errors)}")
+    for session in several:
+        print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
+    _write_html(args.html, run.report, args.report.parent)
     return 0
+
+
+def _print_level_choice(report: dict) -> None:
+    """The table of ``--level auto`` (REPORT.json's ``level_choice``), when the level was chosen."""
+    if "level_choice" in report:
+        from pincal.cli.level_table import level_choice_lines
+
+        print("\n".join(level_choice_lines(report["level_choice"])))
+
+
+def _registration_text(registration) -> str:
+    """sensor_T_base in one line: translation [m] and rotation vector [deg]."""
+    from scipy.spatial.transform import Rotation
+
+    turn = np.degrees(Rotation.from_matrix(registration.rotation).as_rotvec())
+    return (f"translation ({', '.join(f'{v:.4f}' for v in registration.translation)}) m, "
+            f"rotation vector ({', '.join(f'{v:.3f}' for v in turn)}) deg")
+
+
+def _description_inputs(args: argparse.Namespace) -> list:
+    """The run's URDF and, for a .xacro, the files it includes: outputs must overwrite none of them."""
+    from pincal.cli.paths import description_inputs
+
+    return description_inputs(args.urdf, args.xacro_args)
+
+
+def _check_html(html, *inputs, outputs=()) -> None:
+    """Refuse an ``--html`` path that is an input or another output, before the run."""
+    if html is not None:
+        from pincal.cli.paths import refuse_overwrite
+
+        refuse_overwrite(html, *[i for i in inputs if i is not None], outputs=[o for o in outputs if o is not None])
+
+
+def _write_html(html, document: dict, base, evaluation: dict | None = None, source=None) -> None:
+    """Write the HTML page of ``document`` (``--html``); ``base``: the report's folder;
+    ``source``: the report file read (named in errors)."""
+    if html is not None:
+        from pincal.report.html import write_html
+
+        write_html(html, document, evaluation=evaluation, base=base, source=source)
+        print(f"wrote {html}")
 
 
 def _print_chain_summary(run) -> None:
@@ -97,8 +156,9 @@ def _print_chain_summary(run) -> None:
     print(f"Jacobian condition number (scaled): {ident['jacobian_condition']:.3g}")
     for pair in ident["correlated_pairs"][:10]:
         print(f"correlated: {pair['a']} ~ {pair['b']} ({pair['correlation']:+.3f})")
-    for line, score in result.outliers:
-        print(f"outlier: line {line} (robust score {score:.1f})")
+    files = result.outlier_files if len(result.session_names) > 1 else [""] * len(result.outliers)
+    for (line, score), file in zip(result.outliers, files):
+        print(f"outlier: {file + ' ' if file else ''}line {line} (robust score {score:.1f})")
     print(f"estimated noise: {result.sigma_pos_m * 1000:.3f} mm"
           + ("" if result.sigma_rot_rad is None else f", {np.degrees(result.sigma_rot_rad):.4f} deg"))
     print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")
@@ -107,18 +167,47 @@ def _print_chain_summary(run) -> None:
 def _run_evaluate(args: argparse.Namespace) -> int:
     from pincal.cli.workflows import evaluate_files
 
-    evaluation = evaluate_files(args.urdf, args.report, args.data, allow_other_urdf=args.allow_other_urdf)
+    if args.fixture is not None:
+        from pincal.cli.fixture import run_evaluate
+
+        return run_evaluate(args)
+    if args.nominal is not None:
+        raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
+    _check_html(args.html, *_description_inputs(args), args.report, args.data, outputs=[args.json])
+    evaluation = evaluate_files(args.urdf, args.report, args.data, allow_other_urdf=args.allow_other_urdf,
+                                xacro_args=args.xacro_args, fixed_registration=args.fixed_registration,
+                                new_session=args.new_session)
+    thresholds = [flag for flag, value in (("--max-pos-mm", args.max_pos_mm), ("--max-rot-deg", args.max_rot_deg))
+                  if value is not None]
+    if thresholds and evaluation.threshold_problem():
+        raise PincalError(f"{args.data}: {thresholds[0]}: {evaluation.threshold_problem()}")
     _print_notes(evaluation.notes)
     errors = evaluation.errors
+    for session in evaluation.sessions:
+        text = f"session {session.name} ({session.rows} rows): registration: {session.source}"
+        if session.reestimated:
+            text += (f": {_registration_text(session.registration)}; {session.residuals} residuals, "
+                     f"{session.dof} degrees of freedom left")
+        print(text)
     print(_HEADER)
     print(f"{f'{errors.n_rows} rows':24s} {_error_columns(errors)}")
+    for session in evaluation.sessions if len(evaluation.sessions) > 1 else ():
+        print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
     if args.json:
         from pincal.cli.paths import refuse_overwrite
         from pincal.outputs import write_text
 
-        refuse_overwrite(args.json, args.urdf, args.report, args.data)
+        refuse_overwrite(args.json, *_description_inputs(args), args.report, args.data)
         write_text(args.json, json.dumps(evaluation.as_dict(), indent=2) + "\n")
         print(f"wrote {args.json}")
+    if args.html is not None:
+        from pincal.report.html import load_document
+        from pincal.report.row_errors import evaluation_document
+
+        shown = evaluation_document(str(args.urdf), str(args.data), errors, evaluation.lines, evaluation.n_skipped_cpa,
+                                    files=evaluation.files, sessions=evaluation.row_sessions,
+                                    registrations=[s.as_dict() for s in evaluation.sessions])
+        _write_html(args.html, load_document(args.report), args.report.parent, evaluation=shown, source=args.report)
     failed = []
     if args.max_pos_mm is not None and errors.position.max > args.max_pos_mm:
         failed.append(f"max position error {errors.position.max:.4f} mm > {args.max_pos_mm} mm")
@@ -133,14 +222,18 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
+    from pincal.cli.progress import progress_bar
     from pincal.cli.workflows import diagnose_files
 
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
-    run = diagnose_files(args.urdf, args.data, args.out, args.report, args.tip_link, level=args.level,
-                         tool_pose=args.tool, validation_path=args.validation, sigma_column=args.sigma_column,
-                         selection=args.select, payload_kg=args.payload_kg, time_column_name=args.time_column,
-                         plots_dir=plots)
+    _check_html(args.html, *_description_inputs(args), *args.data, args.validation, outputs=[args.out, args.report])
+    with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
+        run = diagnose_files(args.urdf, args.data, args.out, args.report, args.tip_link, level=args.level,
+                             tool_pose=args.tool, validation_path=args.validation, sigma_column=args.sigma_column,
+                             selection=args.select, payload_kg=args.payload_kg, time_column_name=args.time_column,
+                             plots_dir=plots, xacro_args=args.xacro_args, progress=progress)
     _print_notes(run.notes + list(run.calibration.notes))
+    _print_level_choice(run.report)
     diagnosis = run.diagnosis
     held = diagnosis.heldout_errors is not None
     print(f"geometric calibration ({run.calibration.level}), then {len(diagnosis.steps)} effect(s) adopted:")
@@ -168,6 +261,18 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     for path in run.plots:
         print(f"wrote {path}")
     print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
+    _write_html(args.html, run.report, args.report.parent)
+    return 0
+
+
+def _run_report(args: argparse.Namespace) -> int:
+    from pincal.cli.paths import refuse_overwrite
+    from pincal.report.html import load_document, write_html
+
+    document = load_document(args.document)
+    refuse_overwrite(args.out, args.document)
+    write_html(args.out, document, base=args.document.parent, source=args.document)
+    print(f"wrote {args.out}")
     return 0
 
 
@@ -195,14 +300,18 @@ def _run_demo(args: argparse.Namespace) -> int:
 def _run_study(args: argparse.Namespace) -> int:
     from pincal.cli.progress import progress_bar
     from pincal.cli.paths import ensure_directory
+    from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
     from pincal.study.run import StudyConfig, run_study, write_study
 
     ensure_directory(args.out)  # before the run, not after it
     config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts,
                          limit_pose_sets=args.limit_pose_sets)
+    checkpoints = args.out / CHECKPOINT_FOLDER  # finished tasks: a rerun after a crash resumes from them
     with progress_bar("study tasks", quiet=args.quiet) as progress:
-        result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress)
+        result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress,
+                           checkpoints=checkpoints)
     paths = write_study(result, args.out)
+    TaskStore(checkpoints).clear()
     print(f"{len(result.rows)} rows from {config.levels} noise levels x {config.repeats} repeats x "
           f"{len(config.deviations)} deviation sets, {sum(r['starts'] for r in result.restart_summary)} restarts; "
           f"{result.wall_s:.1f} s on {result.executor}")
@@ -235,14 +344,17 @@ def _run_urdf_from_dh(args: argparse.Namespace) -> int:
 
 def _run_plan(args: argparse.Namespace) -> int:
     from pincal.cli.preparation import plan_files
+    from pincal.cli.progress import progress_bar
     from pincal.planning.planner import PlanSettings
 
     settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
                             sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,
                             tool_known=args.tool is not None, seed=args.seed, alternate=args.alternate)
-    run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
-                     candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
-                     workspace_path=args.workspace, min_distance=args.min_distance)
+    with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
+        run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
+                         candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
+                         workspace_path=args.workspace, min_distance=args.min_distance, xacro_args=args.xacro_args,
+                         progress=progress)
     _print_notes(run.notes)
     _print_plan_summary(run)
     print(f"wrote {args.out}\nwrote {args.report}")
@@ -306,6 +418,7 @@ _COMMANDS = {
     "plan": _run_plan,
     "urdf-from-dh": _run_urdf_from_dh,
     "study": _run_study,
+    "report": _run_report,
 }
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from pincal._version import __version__
 from pincal.model.chain import pose_from_xyz_rpy
+from pincal.model.description import parse_xacro_arg
 from pincal.model.dh import DH_CONVENTIONS
 from pincal.model.dh_csv import MAX_ANGLE_RAD
 from pincal.planning.candidates import DEFAULT_SAMPLE
@@ -57,6 +58,25 @@ def target_points(text: str) -> np.ndarray:
     if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
         raise argparse.ArgumentTypeError(f"'{text}': give X,Y,Z[;X,Y,Z...] in metres, in the tip link")
     return points
+
+
+def xacro_arg(text: str) -> tuple[str, str]:
+    """argparse type of ``--xacro-arg``: ``NAME:=VALUE`` as ``(NAME, VALUE)``."""
+    try:
+        return parse_xacro_arg(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _add_xacro_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--xacro-arg", dest="xacro_args", type=xacro_arg, action="append", default=[],
+                        metavar="NAME:=VALUE", help="argument of a .xacro robot description (repeatable); "
+                        "the .xacro file is expanded in memory")
+
+
+def _add_quiet(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr (default: a bar in a terminal "
+                        "once the work takes over a second, a line every 10 s in logs; pincal.cli.progress)")
 
 
 def joint_names(text: str) -> tuple[str, ...]:
@@ -117,17 +137,20 @@ def build_parser() -> argparse.ArgumentParser:
                           "drift:VX:VY:VZ (m/s), sensor_scale:REL")
 
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
-    cal.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
-    cal.add_argument("data", type=Path, help="measurement CSV (format v1)")
+    cal.add_argument("urdf", type=Path, help="URDF to calibrate, or a .xacro (never overwritten)")
+    cal.add_argument("data", type=Path, nargs="+", metavar="DATA",
+                     help="measurement CSV(s) (format v1): each file a session with its own registration "
+                          "(and within a file, each value of its 'session' column)")
     cal.add_argument("--method", type=int, choices=(1, 2, 3),
                      help="1: positions only; 2: offsets from orientations, lengths from "
                           "positions (default); 3: full pose in one cost")
-    cal.add_argument("--weight", type=_positive, default=1.0, metavar="W",
+    cal.add_argument("--weight", type=_positive, metavar="W",
                      help="Method 3 weight w of Err_rot [mm^2/deg^2] (default 1)")
-    cal.add_argument("--level", choices=("dh", "registration", "offsets", "full"),
+    cal.add_argument("--level", choices=("dh", "registration", "offsets", "full", "auto"),
                      help="what to calibrate: dh = the paper's DH parameters (needs --tool); "
                           "registration, offsets (joint zeros) or full (SE(3) error of every joint "
-                          "placement) on any chain, estimating the target. Default: dh when "
+                          "placement) on any chain, estimating the target; auto = the one of those three "
+                          "that cross-validation on the calibration data supports. Default: dh when "
                           "--method is given, else full")
     cal.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
                      help="known pose of the measured target in the tip link [m, rad]; "
@@ -141,32 +164,54 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
                      help="criterion choosing how many weakly identified parameters to keep "
                           "(default aic; computed on the calibration rows only)")
+    cal.add_argument("--fixture", type=Path, metavar="FIXTURE.csv",
+                     help="socket-fixture data, no sensor: DATA names the socket of each row (point) and the "
+                          "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or point_a,point_b,distance)")
+    _add_xacro_arg(cal)
+    _add_quiet(cal)
     cal.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf",
                      help="corrected URDF to write")
     cal.add_argument("--report", required=True, type=Path, metavar="REPORT.json",
                      help="report to write")
+    cal.add_argument("--html", type=Path, metavar="REPORT.html",
+                     help="also write the report as one self-contained HTML page (figures embedded; opens from disk)")
 
     ev = sub.add_parser("evaluate", help="errors of a calibrated model on measured rows (eq 24)")
     ev.add_argument("urdf", type=Path, help="corrected URDF")
     ev.add_argument("report", type=Path, help="REPORT.json of the calibration")
     ev.add_argument("data", type=Path, help="measurement CSV to evaluate on")
     ev.add_argument("--json", type=Path, metavar="OUT", help="also write the metrics as JSON")
+    ev.add_argument("--fixed-registration", nargs="?", const="", metavar="NAME",
+                    help="evaluate every row through the registration of the report's session NAME (default: "
+                         "its only or first session) instead of re-estimating it for a session the fit has not seen")
+    ev.add_argument("--new-session", action="store_true",
+                    help="DATA is a session the fit has not seen (the sensor moved): re-estimate its registration "
+                         "(6 parameters; model and target fixed) even when the report has one session")
+    ev.add_argument("--html", type=Path, metavar="REPORT.html",
+                    help="also write the report with these errors (every row by file line) as one HTML page")
+    _add_xacro_arg(ev)
     ev.add_argument("--allow-other-urdf", action="store_true",
                     help="evaluate a URDF other than the one the report was written with (edited on purpose)")
+    ev.add_argument("--fixture", type=Path, metavar="FIXTURE.csv",
+                    help="socket-fixture data (calibrate --fixture): consistency and distortion of the ball centre")
+    ev.add_argument("--nominal", type=Path, metavar="URDF",
+                    help="with --fixture: the uncalibrated URDF, for 'before' (default: the report's sources.urdf)")
     ev.add_argument("--max-pos-mm", type=_non_negative, metavar="X",
                     help="fail (exit 1) if the largest position error exceeds X mm")
     ev.add_argument("--max-rot-deg", type=_non_negative, metavar="Y",
                     help="fail (exit 1) if the largest orientation error exceeds Y deg")
 
     dia = sub.add_parser("diagnose", help="calibrate, then find and add the effects the model lacks")
-    dia.add_argument("urdf", type=Path, help="URDF to calibrate (never overwritten)")
-    dia.add_argument("data", type=Path, help="measurement CSV (format v1)")
+    dia.add_argument("urdf", type=Path, help="URDF to calibrate, or a .xacro (never overwritten)")
+    dia.add_argument("data", type=Path, nargs="+", metavar="DATA",
+                     help="measurement CSV(s) (format v1): each file (or 'session' value) a session")
     dia.add_argument("--validation", type=Path, metavar="DATA2",
                      help="held-out measurements: errors reported before/after, effects that make them worse are refused")
     dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
                      help="link at the end of the calibrated chain, carrying the target")
-    dia.add_argument("--level", choices=("registration", "offsets", "full"), default="full",
-                     help="geometric model under the effects (default full)")
+    dia.add_argument("--level", choices=("registration", "offsets", "full", "auto"), default="full",
+                     help="geometric model under the effects (default full; auto: chosen by cross-validation "
+                          "of the geometric calibration)")
     dia.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
                      help="known pose of the measured target in the tip link [m, rad] (default: estimated)")
     dia.add_argument("--sigma-column", metavar="COLUMN", help="per-row noise scale column [mm]")
@@ -177,8 +222,12 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
+    _add_xacro_arg(dia)
+    _add_quiet(dia)
     dia.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf", help="corrected URDF to write")
     dia.add_argument("--report", required=True, type=Path, metavar="REPORT.json", help="report to write")
+    dia.add_argument("--html", type=Path, metavar="REPORT.html",
+                     help="also write the report as one self-contained HTML page (figures embedded; opens from disk)")
 
     dh = sub.add_parser("urdf-from-dh", help="write a URDF from a DH table (CSV, standard or modified convention)")
     dh.add_argument("table", type=Path, metavar="TABLE.csv",
@@ -196,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="constant flange transform after the last DH frame [m, rad; always radians]")
 
     plan = sub.add_parser("plan", help="choose the robot configurations worth measuring, and their order")
-    plan.add_argument("urdf", type=Path, help="URDF of the robot")
+    plan.add_argument("urdf", type=Path, help="URDF of the robot, or a .xacro")
     plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK",
                       help="link at the end of the calibrated chain, carrying the target")
     plan.add_argument("--count", type=_count, required=True, metavar="N", help="configurations to choose")
@@ -218,8 +267,8 @@ def build_parser() -> argparse.ArgumentParser:
     pool.add_argument("--sample", type=_count, default=DEFAULT_SAMPLE, metavar="M",
                       help=f"else draw M within the joint limits (default {DEFAULT_SAMPLE})")
     plan.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
-    plan.add_argument("--existing", type=Path, metavar="DATA.csv", help="measurements already recorded: "
-                      "choose what adds most to them")
+    plan.add_argument("--existing", type=Path, nargs="+", metavar="DATA.csv", help="measurements already "
+                      "recorded, one file per session (the plan continues the last): choose what adds most to them")
     plan.add_argument("--workspace", type=Path, metavar="CSV", help="configurations where accuracy matters "
                       f"(default: {WORKSPACE_SIZE} of the candidates)")
     plan.add_argument("--criterion", choices=("accuracy", "d", "a"), default="accuracy",
@@ -229,8 +278,15 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--sigma-rot", type=_positive, metavar="DEG", help="orientation noise [deg] (pose)")
     plan.add_argument("--min-distance", type=_non_negative, metavar="M",
                       help="refuse candidates in self-collision or with links closer than M metres")
+    _add_xacro_arg(plan)
+    _add_quiet(plan)
     plan.add_argument("--alternate", type=joint_names, default=(), metavar="JOINT[,JOINT...]",
                       help="order so that these joints reach their positions from both directions equally")
+
+    html = sub.add_parser("report", help="write the HTML page of an existing REPORT.json (or evaluate --json file)")
+    html.add_argument("document", type=Path, metavar="REPORT.json", help="report written by calibrate or diagnose")
+    html.add_argument("--out", required=True, type=Path, metavar="REPORT.html",
+                      help="HTML page to write: self-contained, figures embedded, no network")
 
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
@@ -253,8 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="local worker processes (default: all cores; 1 runs in this process)")
     study.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on a Dask cluster at ADDRESS, or 'local' to start a Dask LocalCluster")
-    study.add_argument("--quiet", action="store_true",
-                       help="no progress on stderr (default: a bar in a terminal, a line every 10 s in logs)")
+    _add_quiet(study)
     return parser
 
 

@@ -9,18 +9,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
-from pincal.cli.paths import refuse_overwrite
+from pincal.cli.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.errors import PincalError
-from pincal.measurements.csv_v1 import read_measurements
+from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.chain import KinematicChain
+from pincal.model.description import xacro_arguments
 from pincal.model.urdf_from_dh import DHUrdf, urdf_from_dh_table
 from pincal.planning.candidates import DEFAULT_SAMPLE, read_candidates, sample_candidates
 from pincal.planning.collisions import Clearance, check_clearance
 from pincal.planning.files import plan_document, write_plan_csv, write_plan_json
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
+from pincal.progress import Progress, Stages
 
 # --- urdf-from-dh ------------------------------------------------------------------------
 
@@ -66,15 +69,19 @@ def plan_files(
     tool_pose: np.ndarray | None = None,
     candidates_path: str | Path | None = None,
     sample: int = DEFAULT_SAMPLE,
-    existing_path: str | Path | None = None,
+    existing_path: str | Path | Sequence[str | Path] | None = None,
     workspace_path: str | Path | None = None,
     min_distance: float | None = None,
+    xacro_args: Sequence[tuple[str, str]] = (),
+    progress: Progress | None = None,
 ) -> PlanRun:
     """Plan ``settings.count`` measurements of the chain ``urdf`` → ``tip_link``; write PLAN.csv and PLAN.json.
 
     ``settings.tool_known`` must say whether ``tool_pose`` is given. Level ``dh``
     plans for the paper's DH parameters with the target known, so it needs
-    ``tool_pose``.
+    ``tool_pose``. A ``.xacro`` ``urdf`` is expanded in memory with ``xacro_args``.
+    ``progress(done, total)`` counts the clearance checks, then the search's steps
+    (:func:`pincal.planning.planner.plan_measurements`).
 
     Raises:
         PincalError: an output path that is an input, the other output or a
@@ -86,10 +93,12 @@ def plan_files(
             "(as calibrate --level dh needs), or plan --level registration|offsets|full"
         )
     urdf = Path(urdf)
-    inputs = [Path(p) for p in (urdf, candidates_path, existing_path, workspace_path) if p is not None]
+    existing_paths = [] if existing_path is None else input_paths(existing_path)
+    inputs = [*description_inputs(urdf, xacro_args),  # a xacro's included files are inputs too
+              *(Path(p) for p in (candidates_path, *existing_paths, workspace_path) if p is not None)]
     refuse_overwrite(out_csv, *inputs)
     refuse_overwrite(out_json, *inputs, outputs=[out_csv])
-    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose)
+    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
     notes: list[str] = []
     if candidates_path is not None:
         candidates, labels = read_candidates(candidates_path, chain)
@@ -97,20 +106,27 @@ def plan_files(
         candidates = sample_candidates(chain, sample, settings.seed)
         labels = np.arange(len(candidates))
     existing = None
-    if existing_path is not None:
-        existing, read_notes = read_measurements(existing_path, chain.joint_specs)
+    if existing_paths:  # several files: sessions, one registration each; the plan continues the last
+        existing, read_notes = read_sessions(existing_paths, chain.joint_specs)
         notes += read_notes
     workspace = read_candidates(workspace_path, chain)[0] if workspace_path is not None else None
-    clearance = check_clearance(urdf, chain, candidates, min_distance) if min_distance is not None else None
+    stages = Stages(progress)
+    clearance = (check_clearance(urdf, chain, candidates, min_distance, xacro_args=xacro_args, progress=stages.next())
+                 if min_distance is not None else None)
     plan = plan_measurements(chain, candidates, settings, existing=existing, workspace=workspace,
-                             allowed=None if clearance is None else clearance.allowed)
-    sources = {"urdf": str(urdf), "candidates": _text(candidates_path), "existing": _text(existing_path),
-               "workspace": _text(workspace_path)}
+                             allowed=None if clearance is None else clearance.allowed, progress=stages.next())
+    sources = {"urdf": str(urdf), "candidates": _text(candidates_path), "existing": _existing_source(existing_paths),
+               "workspace": _text(workspace_path), "xacro_args": dict(xacro_arguments(xacro_args))}
     digest = write_plan_csv(out_csv, plan, chain, labels)
     document = plan_document(plan, chain, plan.settings, sources, labels, len(candidates), clearance, tool_pose,
                              sample if candidates_path is None else None, plan_csv_sha256=digest)
     write_plan_json(out_json, document)
     return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes))
+
+
+def _existing_source(paths: list[Path]) -> str | list[str] | None:
+    """PLAN.json ``sources.existing``: the file, or the files of several sessions."""
+    return None if not paths else str(paths[0]) if len(paths) == 1 else [str(p) for p in paths]
 
 
 def _text(path) -> str | None:

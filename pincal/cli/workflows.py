@@ -17,36 +17,58 @@ from typing import Any, Sequence
 import numpy as np
 
 from pincal._version import __version__
-from pincal.cli.paths import ensure_directory, refuse_overwrite
+from pincal.cli.evaluation import Evaluation, SessionEvaluation, evaluate_files  # noqa: F401 (re-exported)
+from pincal.cli.paths import (
+    description_inputs,
+    ensure_directory,
+    input_paths,
+    refuse_overwrite,
+    refuse_overwrite_matching,
+)
 from pincal.diagnosis.diagnose import Diagnosis, diagnose
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+from pincal.fit.level_choice import LevelChoice, choose_level
 from pincal.fit.metrics import PoseErrors, pose_errors
 from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
 from pincal.fit.registration import register_orientations, register_points
-from pincal.measurements.csv_v1 import read_measurements, write_measurements
+from pincal.fit.sessions import (
+    check_registrable,
+    session_pose_errors,
+    session_rows,
+    where,
+)
+from pincal.measurements.csv_v1 import (
+    read_measurements,
+    read_sessions,
+    write_measurements,
+)
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.corrected_urdf import write_corrected_urdf
+from pincal.model.description import xacro_arguments
 from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.effects import (
     TIME_COLUMNS,
-    effect_from_dict,
-    effect_inputs,
     effect_to_dict,
-    joint_shifts,
     parse_effect,
     time_column,
 )
 from pincal.outputs import file_sha256, write_text
+from pincal.progress import Progress, Stages
 from pincal.report.document import (
     chain_report,
     diagnosis_report,
     paper_report,
-    read_report,
     write_report,
 )
+from pincal.report.row_errors import (
+    chain_row_errors,
+    diagnosis_row_errors,
+    paper_row_errors,
+)
+from pincal.report.sessions import session_entries, session_errors
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import (
     SimulatedExperiment,
@@ -130,6 +152,8 @@ class CalibrationRun:
         notes: reader and method notes for the user.
         seconds: wall time of the calibration itself [s].
         reload_error: largest TCP difference after reloading the written URDF [m].
+        sessions: each session's registration and errors (levels other than dh).
+        level_choice: how ``--level auto`` chose the level (None for a level given).
     """
 
     result: PaperCalibration | ChainCalibration
@@ -138,6 +162,8 @@ class CalibrationRun:
     notes: list[str]
     seconds: float
     reload_error: float
+    sessions: tuple[SessionEvaluation, ...] = ()
+    level_choice: LevelChoice | None = None
 
 
 def calibrate_chain_dh(
@@ -152,7 +178,7 @@ def calibrate_chain_dh(
 
 def calibrate_files(
     urdf: str | Path,
-    data_path: str | Path,
+    data_path: str | Path | Sequence[str | Path],
     method: int,
     weight: float,
     tool_pose: np.ndarray | None,
@@ -163,65 +189,118 @@ def calibrate_files(
     sigma_column: str | None = None,
     reject_outliers: bool = False,
     selection: str = "aic",
+    xacro_args: Sequence[tuple[str, str]] = (),
+    progress: Progress | None = None,
 ) -> CalibrationRun:
     """Calibrate ``urdf`` on ``data_path`` and write the corrected URDF and the report.
 
+    ``data_path`` may be several files: each is a session with its own registration
+    (:func:`pincal.measurements.csv_v1.read_sessions`; levels other than dh).
     ``level`` ``dh`` runs the paper's Method ``method`` (needs ``tool_pose``);
     ``registration``, ``offsets`` and ``full`` calibrate any chain
     (:func:`pincal.fit.chain_calibration.calibrate_chain`), estimating the target
-    unless ``tool_pose`` is given.
+    unless ``tool_pose`` is given; ``auto`` is the one of those three that cross-validation
+    on the calibration rows supports (:func:`pincal.fit.level_choice.choose_level`).
+    A ``.xacro`` ``urdf`` is expanded with ``xacro_args`` (NAME, VALUE).
+    ``progress(done, total)`` counts the fits of those levels (:mod:`pincal.progress`).
     """
-    urdf, data_path = Path(urdf), Path(data_path)
+    urdf, data_paths = Path(urdf), input_paths(data_path)
+    data_label = " + ".join(str(p) for p in data_paths)
     out_urdf, report_path = Path(out_urdf), Path(report_path)
-    refuse_overwrite(out_urdf, urdf, data_path)
-    refuse_overwrite(report_path, urdf, data_path, outputs=[out_urdf])
+    inputs = [*description_inputs(urdf, xacro_args), *data_paths]  # a xacro's included files too
+    refuse_overwrite(out_urdf, *inputs)
+    refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     if level == "dh" and tool_pose is None:
         raise PincalError(
             "the paper's methods (--level dh) need the tool: --tool X,Y,Z,ROLL,PITCH,YAW; "
             "or use --level registration|offsets|full to estimate the target"
         )
-    chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose)
-    data, notes = read_measurements(data_path, chain.joint_specs)
+    chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
+    data, notes = read_sessions(data_paths, chain.joint_specs)
     nominal_placements = chain.placements()
     n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
-    sources = {"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf)}
+    sources = {"urdf": str(urdf), "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
+               "corrected_urdf": str(out_urdf)}
+    choice = None
     if level == "dh":
+        if len(data.session_names) > 1:
+            raise PincalError(
+                f"{data.source}: {len(data.session_names)} sessions ({', '.join(data.session_names)}); the paper's "
+                "methods (--level dh) take one registration: calibrate several sessions with --level "
+                "registration|offsets|full")
+        check_registrable(data.with_role("calibration"), orientations=False)
+        session_list = ()
         result, params, seconds = calibrate_chain_dh(chain, data, method, weight)
         errors = pose_errors(
             chain, data.with_role("calibration"), result.registration_position, result.registration_orientation
         )
         report = paper_report(result, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
+        report["row_errors"] = paper_row_errors(chain, nominal_placements, data.with_role("calibration"), errors,
+                                                data_label)
         what = f"Method {method} of Franaszek & Marvel 2022"
     else:
         start = time.perf_counter()
+        stages = Stages(progress)
+        if level == "auto":
+            choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
+                                  reject_outliers=reject_outliers, selection=selection, progress=stages.next())
+            level = choice.chosen
         result = calibrate_chain(
             chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
-            reject_outliers=reject_outliers, selection=selection,
+            reject_outliers=reject_outliers, selection=selection, progress=stages.next(),
         )
         seconds = time.perf_counter() - start
-        registration = result.target.registration
-        used = data.select(np.isin(data.lines, result.rows_used))
-        errors = pose_errors(
-            chain, used, registration, registration, points=result.target.points,
-            target_rotation=result.target.rotation,
-        )
+        notes += unfitted_sessions(data, result.session_names)
+        used = data.select(result.used_index)
+        sessions = session_rows(used, result.session_names)
+        errors = session_pose_errors(chain, used, sessions, result.target.registrations,
+                                     points=result.target.points, target_rotation=result.target.rotation)
         report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
+        report["sessions"] = session_entries(result.session_names, result.target.registrations, used, sessions, errors)
+        session_list = tuple(
+            SessionEvaluation(entry["name"], entry["rows"], registration, registration, f"fitted on {entry['file']}",
+                              session_errors(errors, sessions == s))
+            for s, (entry, registration) in enumerate(zip(report["sessions"], result.target.registrations)))
+        if len(result.session_names) > 1:
+            report["notes"].append(f"registration: of the first session, '{result.session_names[0]}'; every "
+                                   "session's registration and errors are under 'sessions'")
+        report["row_errors"] = chain_row_errors(chain, nominal_placements, used, result, errors, data_label)
         what = f"level {level}"
+        if choice is not None:
+            report["level_choice"] = choice.as_dict()
+            what += ", chosen by --level auto"
     reload_error, report["urdf_sha256"] = write_checked_urdf(
         urdf, out_urdf, chain, nominal_placements, data.q,
-        f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {data_path.name}. "
-        "Registration and tool: see the report.",
+        f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {', '.join(p.name for p in data_paths)}. "
+        "Registration and tool: see the report.", xacro_args,
     )
+    report["xacro_args"] = dict(xacro_arguments(xacro_args))
     write_report(report_path, report)
-    return CalibrationRun(result, report, errors, notes, seconds, reload_error)
+    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice)
+
+
+def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
+    """A note for each session of ``data`` the fit left out (``fitted``: the sessions it
+    registered) — all of its rows have role ``validation`` — so none vanishes silently."""
+    notes = []
+    for name in data.session_names:
+        if name not in fitted:
+            rows = int(np.sum(data.sessions == name))
+            how = ("evaluate re-estimates the registration of a session the fit has not seen" if len(fitted) > 1
+                   else "pass --new-session, or evaluate uses the report's one registration")
+            notes.append(f"{where(data, name)}: all {rows} row(s) have role 'validation', so this session is not "
+                         f"in the fit and the report has no registration for it; to evaluate them, give its file to "
+                         f"pincal evaluate ({how})")
+    return notes
 
 
 def write_checked_urdf(
-    source: Path, destination: Path, chain: KinematicChain, nominal_placements, q: np.ndarray, comment: str
+    source: Path, destination: Path, chain: KinematicChain, nominal_placements, q: np.ndarray, comment: str,
+    xacro_args: Sequence[tuple[str, str]] = (),
 ) -> tuple[float, str]:
     """Write the corrected URDF, checking before it replaces ``destination`` that
     reloading it reproduces the chain's tool poses at ``q`` to :data:`RELOAD_TOLERANCE`
-    (a failed check leaves the old file).
+    (a failed check leaves the old file); a ``.xacro`` source is expanded with ``xacro_args``.
 
     Returns:
         The largest difference [m, -] and the SHA-256 (hex) of the bytes written
@@ -239,7 +318,8 @@ def write_checked_urdf(
             )
         digest.append(file_sha256(written))
 
-    write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify)
+    write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify,
+                         xacro_args=xacro_args)
     return checked[-1], digest[-1]
 
 
@@ -254,95 +334,7 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
     )
 
 
-# --- evaluate --------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Evaluation:
-    """Outcome of :func:`evaluate_files`: eq 24 errors on the evaluated rows."""
-
-    errors: PoseErrors
-    n_skipped_cpa: int
-    notes: list[str]
-
-    def as_dict(self) -> dict[str, Any]:
-        return {**self.errors.as_dict(), "skipped_cpa_rows": self.n_skipped_cpa}
-
-
-def evaluate_files(
-    urdf: str | Path, report_path: str | Path, data_path: str | Path, allow_other_urdf: bool = False
-) -> Evaluation:
-    """Eq 24 on every non-CPA row of ``data_path`` with the model and registrations of a report.
-
-    When the report records the SHA-256 of the URDF written with it
-    (``urdf_sha256``), ``urdf`` must be that file — a run killed between
-    writing the URDF and the report, or a report of another run, is refused —
-    unless ``allow_other_urdf`` (the URDF was edited on purpose; a note says so).
-    """
-    report = read_report(report_path)
-    chain = KinematicChain.from_urdf(urdf, report.tool_parent)
-    notes: list[str] = []
-    if report.urdf_sha256 is not None and file_sha256(urdf) != report.urdf_sha256:
-        if not allow_other_urdf:
-            raise PincalError(
-                f"{urdf}: not the URDF {report_path} was written with (its SHA-256 differs from the report's "
-                "urdf_sha256); evaluate the pair calibrate wrote, or pass --allow-other-urdf if you changed it "
-                "on purpose"
-            )
-        notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
-    data, read_notes = read_measurements(data_path, chain.joint_specs)
-    notes += read_notes
-    if data.n_points != len(report.points):
-        raise PincalError(
-            f"{data_path}: {data.n_points} target point(s) per row, but the report's tool has "
-            f"{len(report.points)}; evaluate with data of the same target"
-        )
-    rows = data.roles != "cpa"
-    if not np.any(rows):
-        raise PincalError(f"{data_path}: no rows to evaluate (all rows have role 'cpa')")
-    data = data.select(rows)
-    corrections = _effect_corrections(chain, data, report.effects, report.points)
-    errors = pose_errors(
-        chain,
-        data,
-        report.registration_position,
-        report.registration_orientation,
-        points=report.points,
-        target_rotation=report.rotation,
-        **corrections,
-    )
-    return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes)
-
-
-def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray) -> dict:
-    """Joint readings corrected by the report's effects, and its sensor terms."""
-    entries = effects.get("effects", [])
-    if not entries:
-        return {}
-    parsed = [effect_from_dict(e) for e in entries]
-    needs_time = any(e.type == "drift" for e, _ in parsed)
-    row_time = time_column(data, effects.get("time_column")) if needs_time else time_column(data)
-    if needs_time and row_time is None:
-        raise PincalError(f"{data.source}: the report has a drift effect; the data need its time column")
-    reference = effects.get("time_reference_s")
-    context = effects.get("approach_context") or {}
-    try:
-        payload = float(effects.get("payload_kg", 0.0))
-        context_q = np.asarray(context["q"], dtype=float) if context else None
-        context_time = np.asarray(context["time_s"], dtype=float) if context else None
-    except (KeyError, TypeError, ValueError):
-        raise PincalError(f"{data.source}: the report's payload_kg or approach_context is malformed") from None
-    inputs = effect_inputs(chain, data, payload, points.mean(axis=0), row_time,
-                           time_reference=reference if row_time is not None else None,
-                           context_q=context_q, context_time=context_time)
-    q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
-    out: dict = {"q": q}
-    for effect, value in parsed:
-        if effect.type == "sensor_scale":
-            out["sensor_scale"] = float(value[0])
-        elif effect.type == "drift":
-            out["drift"] = inputs.time[:, None] * value
-    return out
+# --- evaluate: pincal.cli.evaluation (re-exported here) ----------------------------------
 
 
 # --- demo ----------------------------------------------------------------------------
@@ -418,11 +410,12 @@ class DiagnoseRun:
     notes: list[str]
     plots: list[Path]
     seconds: float
+    level_choice: LevelChoice | None = None
 
 
 def diagnose_files(
     urdf: str | Path,
-    data_path: str | Path,
+    data_path: str | Path | Sequence[str | Path],
     out_urdf: str | Path,
     report_path: str | Path,
     tip_link: str,
@@ -434,29 +427,42 @@ def diagnose_files(
     payload_kg: float = 0.0,
     time_column_name: str | None = None,
     plots_dir: str | Path | None = None,
+    xacro_args: Sequence[tuple[str, str]] = (),
+    progress: Progress | None = None,
 ) -> DiagnoseRun:
     """Calibrate, search the residuals for missing effects, write the corrected
-    URDF, the report (with ``effects``) and the plots."""
-    urdf, data_path, out_urdf, report_path = Path(urdf), Path(data_path), Path(out_urdf), Path(report_path)
-    inputs = [urdf, data_path] + ([Path(validation_path)] if validation_path else [])
+    URDF, the report (with ``effects``) and the plots; a ``.xacro`` is expanded with ``xacro_args``.
+    ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
+    Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
+    urdf, data_paths, out_urdf, report_path = Path(urdf), input_paths(data_path), Path(out_urdf), Path(report_path)
+    inputs = [*description_inputs(urdf, xacro_args), *data_paths] + ([Path(validation_path)] if validation_path else [])
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    if plots_dir is not None:  # the names pincal.diagnosis.plots gives its figures
+        refuse_overwrite_matching(plots_dir, "diagnose_*.png", *inputs)
     if level == "dh":
         raise PincalError("diagnose works on --level registration, offsets or full")
     started = time.perf_counter()
-    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose)
-    data, notes = read_measurements(data_path, chain.joint_specs)
+    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
+    data, notes = read_sessions(data_paths, chain.joint_specs)
     heldout = held_time = None
     if validation_path:
         heldout, held_notes = read_measurements(validation_path, chain.joint_specs)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
     nominal_placements = chain.placements()
+    stages = Stages(progress)
+    choice = None
+    if level == "auto":  # the geometric level by cross-validation of the geometric calibration
+        choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
+                              selection=selection, progress=stages.next())
+        level = choice.chosen
     calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None,
-                                  sigma_column=sigma_column, selection=selection)
+                                  sigma_column=sigma_column, selection=selection, progress=stages.next())
+    notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
-                         payload_kg=payload_kg, time=row_time, heldout_time=held_time)
+                         payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next())
     objective, x = diagnosis.objective, diagnosis.solution_x
     kinematic = objective.blocks["kinematic"]
     vector = calibration.vector.copy()
@@ -473,15 +479,24 @@ def diagnose_files(
     )
     _, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, nominal_placements, data.q,
-        f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and {data_path.name}. "
-        "Registration, tool and effects (which a URDF cannot carry): see the report.",
+        f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
+        f"{', '.join(p.name for p in data_paths)}. "
+        "Registration, tool and effects (which a URDF cannot carry): see the report.", xacro_args,
     )
     n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
-    sources = {"urdf": str(urdf), "data": str(data_path), "corrected_urdf": str(out_urdf),
-               "validation": None if validation_path is None else str(validation_path)}
+    sources = {"urdf": str(urdf), "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
+               "corrected_urdf": str(out_urdf), "validation": None if validation_path is None else str(validation_path)}
     report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
+    used = data.select(calibration.used_index)
+    report["sessions"] = session_entries(final.session_names, final.target.registrations, used,
+                                         session_rows(used, final.session_names), diagnosis.calibration_errors)
     report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
+    report["row_errors"] = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
+                                                (" + ".join(str(p) for p in data_paths), sources["validation"]))
     report["urdf_sha256"] = urdf_sha256
+    report["xacro_args"] = dict(xacro_arguments(xacro_args))
+    if choice is not None:
+        report["level_choice"] = choice.as_dict()
     plots = []
     if plots_dir is not None:
         from pincal.diagnosis.plots import plot_diagnosis  # matplotlib only when drawing
@@ -489,7 +504,7 @@ def diagnose_files(
         plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
     report["diagnosis"]["plots"] = [str(p) for p in plots]
     write_report(report_path, report)
-    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started)
+    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice)
 
 
 def _time_name(data: MeasurementSet) -> str | None:

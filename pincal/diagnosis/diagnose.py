@@ -55,6 +55,7 @@ from pincal.diagnosis.screening import (
 from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
+from pincal.fit.sessions import session_rows
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
@@ -68,6 +69,7 @@ from pincal.model.effects import (
     effect_inputs,
     joint_basis,
 )
+from pincal.progress import Counter, Progress
 from pincal.residuals.sensor import SensorResidual
 
 #: Most effects adopted.
@@ -162,6 +164,7 @@ class _Model:
             self.chain, self.calibration.params, data, self.calibration.start,
             fit_target=self.calibration.fit_target, row_weight=weight,
             effects=effects, inputs=self.inputs if inputs is None else inputs, models=self.models,
+            session_names=self.calibration.session_names,
         )
         problem.sigma_pos = self.sigma_pos
         problem.sigma_rot = self.sigma_rot
@@ -203,6 +206,7 @@ def diagnose(
     time: np.ndarray | None = None,
     heldout_time: np.ndarray | None = None,
     candidates: Sequence[Effect] | None = None,
+    progress: Progress | None = None,
 ) -> Diagnosis:
     """Search the calibrated model's residuals for missing effects (module docstring).
 
@@ -210,14 +214,20 @@ def diagnose(
         chain: the chain, holding the geometric calibration.
         calibration: its result (:func:`calibrate_chain`).
         data: the measurement set it was calibrated on.
-        heldout: rows of another session to report (and veto) on.
+        heldout: held-out rows to report (and veto) on, in the registration of
+            their calibrated session (the only one, or the one their ``session`` names).
         sigma_column: the row-weight column used by the calibration.
         payload_kg: point mass at the target for gravity torques [kg].
         time / heldout_time: row times [s] of ``data`` / ``heldout``, or None.
         candidates: effects to try (default: :func:`candidate_effects`).
+        progress: ``progress(done, total)`` (:mod:`pincal.progress`): each step counts
+            one unit per candidate offered (refitted or screened out) and one for
+            adopting the best; the final fit and the search for remaining structure one.
     """
-    rows = data.select(np.isin(data.lines, calibration.rows_used))
-    row_time = None if time is None else time[np.isin(data.lines, calibration.rows_used)]
+    rows = data.select(calibration.used_index)
+    row_time = None if time is None else time[calibration.used_index]
+    if heldout is not None:  # its rows need a calibrated session's registration
+        session_rows(heldout, calibration.session_names)
     points = calibration.target.points
     point = points.mean(axis=0)
     reference = None if row_time is None else float(np.mean(row_time))
@@ -248,10 +258,13 @@ def diagnose(
     inseparable: set[str] = set()
     rejected: dict[str, str] = {}
     current_objective, current_solution = objective, solution
+    counter = Counter(progress)
     while len(adopted) < MAX_EFFECTS:
         offered = [e for e in pool if e not in adopted]
         if not offered:  # every candidate adopted (or none offered)
             break
+        counter.expect(len(offered) + 1)
+        step_end = counter.total
         screened = screen(current_objective, current_solution, offered, current_bic)
         fits: dict[Effect, tuple | None] = {}
 
@@ -266,6 +279,7 @@ def diagnose(
                                          + [score.step[current_x.size:]], tolerance=CANDIDATE_TOLERANCE)
                 except CalibrationError:
                     sol = None
+            counter.tick()
             if sol is None:
                 if not steps:
                     inseparable.add(effect.label)
@@ -293,6 +307,7 @@ def diagnose(
             for effect, score in pending:
                 refit(effect, score)
         rejected.update(step_rejected)
+        counter.tick(step_end - 1 - counter.done)  # the candidates the screen ruled out
         if chosen is None:
             break
         delta, effect, obj, sol = chosen
@@ -318,6 +333,7 @@ def diagnose(
                                      [sol.x[sl] for sl in obj._effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x
         current_bic = _bic(sol.residual, sol.x.size)
+        counter.tick()
         steps.append(Step(
             effect=effect, values=sol.x[obj._effect_slices[-1]], std=sol.std[obj._effect_slices[-1]],
             delta_bic=float(delta), calibration_before=before_cal, calibration_after=_errors(obj, sol.x),
@@ -332,11 +348,13 @@ def diagnose(
         notes.append(
             f"not separable from the calibrated geometry at this level (absorbed by it): {', '.join(labels)}"
         )
+    counter.expect(1)
     final_solution = solve(current_objective, current_x, what="final fit")
     effects = tuple(
         (e, final_solution.x[sl], final_solution.std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
     )
     unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain)
+    counter.settle()
     return Diagnosis(
         effects=effects,
         steps=tuple(steps),
@@ -441,8 +459,12 @@ def _partial_residual(effect, objective, solution, inputs, chain):
     fitted = basis @ solution.x[objective._effect_slices[-1]]
     _, sens, target, world = objective._state(solution.x)
     residual = objective.predicted_points(solution.x) - objective.g  # (K, P, 3)
-    omega = target.registration.rotation
-    column = np.stack([sens.joint_point_velocity(world[:, p, :])[:, j, :] @ omega.T
+    omega, _ = objective.row_frames(target)  # (3, 3), or (K, 3, 3) with several sessions
+
+    def sensed(v):  # base-frame velocities (K, 3) in each row's sensor frame
+        return v @ omega.T if omega.ndim == 2 else np.einsum("kij,kj->ki", omega, v)
+
+    column = np.stack([sensed(sens.joint_point_velocity(world[:, p, :])[:, j, :])
                        for p in range(world.shape[1])], axis=1)  # (K, P, 3)
     a = column.reshape(len(column), -1)
     r = residual.reshape(len(residual), -1)

@@ -31,35 +31,25 @@ from pincal.fit.identifiability import (
     condition_number,
     correlated_pairs,
     order_parameters,
-    press,
 )
 from pincal.fit.outliers import find_outliers
-from pincal.fit.registration import mean_rotation, register_points
+from pincal.fit.selection import SELECTION_CRITERIA
+from pincal.fit.selection import select_subset as _select
+from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
 from pincal.fit.solver import Solution, gram, solve
 from pincal.measurements.data import MeasurementSet
-from pincal.model.chain import KinematicChain, points_in_base
+from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import LEVELS, NoParameters
+from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 
 CHAIN_LEVELS = ("registration", "offsets", "full")
 
-#: How the number of identifiable kinematic parameters kept is chosen.
-SELECTION_CRITERIA = {
-    "aic": "Akaike information criterion m ln(RSS/m) + 2n on the calibration rows",
-    "bic": "Bayesian information criterion m ln(RSS/m) + n ln(m) on the calibration rows",
-    "press": "linearised leave-one-row-out cross-validation (PRESS) on the calibration rows",
-    "all": "every identifiable parameter (AIC reported)",
-}
-
 #: Starting noise scales for weighting positions against orientations; both
 #: are re-estimated from the residuals (maximum likelihood with unknown variances).
 START_SIGMA_POS_M = 1e-3
 START_SIGMA_ROT_RAD = 1e-3
-
-#: Solver tolerance of the nested fits that only score a subset (their criterion
-#: moves by ~1e-8; the subset chosen is refitted at the solver's own tolerance).
-SELECTION_TOLERANCE = 1e-10
 
 KEPT = "calibrated"
 NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
@@ -85,8 +75,8 @@ class ChainCalibration:
         vector: calibrated kinematic parameters (zero = nominal), (n,).
         std: their standard deviations, NaN where not estimated, (n,).
         status: per kinematic parameter, :data:`KEPT` or a reason it is not.
-        target: registration, target points and rotation.
-        target_std: standard deviations of registration (6) and target parameters.
+        target: registration(s) (one per session), target points and rotation.
+        target_std: standard deviations of the registrations (6 per session) and target parameters.
         sigma_pos_m / sigma_rot_rad: noise scales estimated from the residuals.
         rank, condition, selection, dropped, correlated: identifiability report.
         outliers: (file line, robust score) of rows flagged as outliers.
@@ -96,6 +86,9 @@ class ChainCalibration:
         total_seconds: time including selection [s].
         rms_m: RMS point residual of the final fit [m].
         notes: things the user should know.
+        session_names: the sessions, in the order of ``target.registrations``.
+        used_index: rows of the data given to :func:`calibrate_chain` in the final fit (indices).
+        outlier_files / removed_files: the file of each outlier / removed row.
     """
 
     level: str
@@ -124,11 +117,16 @@ class ChainCalibration:
     start: TargetEstimate | None = None
     fit_target: bool = True
     notes: tuple[str, ...] = field(default=())
+    session_names: tuple[str, ...] = ()
+    used_index: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
+    outlier_files: tuple[str, ...] = ()
+    removed_files: tuple[str, ...] = ()
 
     def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
         """Linearised prediction of the RMS error of the target points at
         configurations ``q`` due to the parameters' estimation noise [m]
-        (covariance of the fit propagated through the measurement Jacobian)."""
+        (covariance of the fit propagated through the measurement Jacobian;
+        with several sessions, in the first session's registration)."""
         params = self.params if self.params is not None else NoParameters(chain)
         k, n_points = len(q), len(self.target.points)
         cache = KinematicsCache(params, self.kept, self.vector, q)
@@ -139,33 +137,11 @@ class ChainCalibration:
             self.start,
             fit_points=self.fit_target,
             fit_rotation=self.fit_target,
+            sessions=np.zeros(k, dtype=int),
         )
         jac = objective.jacobian(self.solution)[: 3 * k * n_points]
         variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
         return float(np.sqrt(variance.sum() / (k * n_points)))
-
-
-def initial_target(
-    chain: KinematicChain, data: MeasurementSet, fit_points: bool, iterations: int = 10
-) -> TargetEstimate:
-    """Registration and target points from the nominal model, alternating
-    Registration 1 (Arun) with the linear solution for the points."""
-    poses = chain.poses(data.q)
-    t, rot = poses.tool_positions, poses.tool_rotations
-    n_points = data.n_points
-    points = np.zeros((n_points, 3))
-    for _ in range(iterations if fit_points else 1):
-        world = points_in_base(t, rot, points)
-        registration = register_points(world.reshape(-1, 3), data.points.reshape(-1, 3))
-        if not fit_points:
-            break
-        local = (data.points - registration.translation) @ registration.rotation  # Ωᵀ(g − τ)
-        points = np.einsum("kji,kpj->kpi", rot, local - t[:, None, :]).mean(axis=0)
-    rotation = np.eye(3)
-    if data.rotations is not None:
-        relative = rot.transpose(0, 2, 1) @ registration.rotation.T @ data.rotations  # R_kᵀ Ωᵀ G_k
-        rotation = mean_rotation(relative)
-    return TargetEstimate(registration, points, rotation)
 
 
 def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
@@ -193,11 +169,15 @@ class FitProblem:
 
     ``models``: sensitivity models by slots (:class:`KinematicsCache`), shared by
     the objectives of this problem and of any problem given the same dict.
+    ``session_names``: the sessions of ``start.registrations`` (default: those of
+    ``data``); each row uses its session's (:func:`pincal.fit.sessions.session_rows`).
     """
 
     def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight,
-                 effects=(), inputs=None, models: dict | None = None):
+                 effects=(), inputs=None, models: dict | None = None, session_names=None):
         self.chain, self.params, self.data = chain, params, data
+        self.session_names = tuple(data.session_names if session_names is None else session_names)
+        self.sessions = session_rows(data, self.session_names)
         self.start = start
         self.fit_target = fit_target
         self.row_weight = row_weight
@@ -221,6 +201,7 @@ class FitProblem:
             fit_rotation=self.fit_target,
             effects=self.effects,
             inputs=self.inputs,
+            sessions=self.sessions,
         )
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
@@ -249,6 +230,7 @@ def calibrate_chain(
     reject_outliers: bool = False,
     sigma_iterations: int = 2,
     selection: str = "aic",
+    progress: Progress | None = None,
 ) -> ChainCalibration:
     """Calibrate ``chain`` at ``level`` on the non-validation rows of ``data``.
 
@@ -263,6 +245,7 @@ def calibrate_chain(
         selection: criterion choosing how many identifiable parameters to keep
             (:data:`SELECTION_CRITERIA`).
         sigma_iterations: refits re-estimating the position/orientation noise scales.
+        progress: ``progress(done, total)`` after the registration, each subset scored, the fit.
 
     On return the chain holds the calibrated placements.
     """
@@ -271,7 +254,8 @@ def calibrate_chain(
     if selection not in SELECTION_CRITERIA:
         raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{selection}'")
     started = time.perf_counter()
-    rows = data.select(data.roles != "validation")
+    index = np.flatnonzero(data.roles != "validation")  # rows of ``data`` in the fit
+    rows = data.select(index)
     if rows.n_rows < 3:
         raise CalibrationError(
             f"{data.source}: {rows.n_rows} calibration row(s) (rows with role 'validation' are not used); "
@@ -282,53 +266,62 @@ def calibrate_chain(
             f"{data.source}: a known --tool is one point; this file has {rows.n_points} points "
             "per row — leave out --tool to estimate the target's points"
         )
+    check_registrable(rows)
     params = LEVELS[level](chain) if level in LEVELS else None
     notes: list[str] = []
-    outliers: list[tuple[int, float]] = []
+    flagged: list[int] = []  # outlier rows, as indices into ``data``
     removed: list[int] = []
+    counter = Counter(progress)
     for attempt in range(2):
         result, point_errors = _calibrate_rows(
-            chain, params, rows, level, tool_known, sigma_column, sigma_iterations, selection
+            chain, params, rows, level, tool_known, sigma_column, sigma_iterations, selection, counter
         )
-        outliers = find_outliers(point_errors, rows.lines)
+        outliers = find_outliers(point_errors, index)  # (row of ``data``, robust score)
+        flagged = [k for k, _ in outliers]
         if not (reject_outliers and outliers and attempt == 0):
             break
-        removed = [line for line, _ in outliers]
-        rows = rows.select(~np.isin(rows.lines, removed))
-        notes.append(f"removed {len(removed)} outlier row(s) at lines {removed} and refitted")
-    if outliers and not removed:
+        removed = flagged
+        keep = ~np.isin(index, removed)
+        index, rows = index[keep], rows.select(keep)
+        check_registrable(rows)
+        notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)} and refitted")
+    if flagged and not removed:
         notes.append(
-            f"{len(outliers)} row(s) look like outliers (lines {[l for l, _ in outliers]}); "
+            f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
             "rerun with --reject-outliers to refit without them"
         )
+    if result.selection is not None:
+        notes.extend(result.selection.notes)
+    counter.settle()
     return replace(
-        result,
-        outliers=tuple(outliers),
-        removed_lines=tuple(removed),
-        rows_used=tuple(int(l) for l in rows.lines),
-        total_seconds=time.perf_counter() - started,
-        notes=tuple(notes),
+        result, rows_used=tuple(int(l) for l in rows.lines), used_index=index,
+        total_seconds=time.perf_counter() - started, notes=tuple(notes),
+        outliers=tuple((int(data.lines[k]), score) for k, score in outliers), outlier_files=tuple(data.files[flagged]),
+        removed_lines=tuple(int(data.lines[k]) for k in removed), removed_files=tuple(data.files[removed]),
     )
 
 
 def _calibrate_rows(
-    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion
+    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion, counter: Counter
 ) -> tuple[ChainCalibration, np.ndarray]:
     """One calibration of ``rows``; returns the result (without the outlier
-    bookkeeping) and each target point's distance from the model (K, P) [m]."""
+    bookkeeping) and each target point's distance from the model (K, P) [m].
+    ``counter`` counts the registration fits, each subset scored and the final fits as one each."""
     nominal = chain.placements()
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
-        start = TargetEstimate(start.registration, np.zeros((1, 3)), np.eye(3))
+        start = replace(start, points=np.zeros((1, 3)), rotation=np.eye(3))
     problem = FitProblem(chain, params, rows, start, fit_target=not tool_known, row_weight=row_weights(rows, sigma_column))
     size = params.size if params is not None else 0
     base = np.zeros(size)
     empty = np.array([], dtype=int)
     # registration and target first, with the nominal kinematics
+    counter.expect(2)
     objective, solution = problem.fit(empty, base, what="registration")
     for _ in range(sigma_iterations):
         problem.reestimate_sigmas(objective, solution)
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
+    counter.tick()
     problem.start = objective.estimate(solution.x)
     selection, dropped, rank, kept = None, (), 0, empty
     if size:
@@ -340,14 +333,17 @@ def _calibrate_rows(
         other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
         ordering = order_parameters(jac, kinematic_cols, other_cols)
         rank = ordering.rank
-        selection, kept = _select(problem, ordering, base, rows, criterion)
-        dropped = _dropped(jac, ordering, kept, other_cols, full, params)
+        selection, kept = _select(problem, ordering, base, rows, criterion, counter)
+        dropped = _dropped(jac, ordering, kept, other_cols, full, params, problem.session_names)
     fit_started = time.perf_counter()
-    objective, solution = problem.fit(kept, base, what=f"{level} fit")
+    # from the selected subset's solution (the selection fitted it at SELECTION_TOLERANCE)
+    x0 = None if selection is None else selection.solution
+    objective, solution = problem.fit(kept, base, x0, what=f"{level} fit")
     fit_seconds = time.perf_counter() - fit_started
     for _ in range(sigma_iterations if size else 0):
         problem.reestimate_sigmas(objective, solution)
         objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
+    counter.tick()
     x = solution.x
     vector = base.copy()
     vector[kept] = x[objective.blocks["kinematic"]]
@@ -363,7 +359,7 @@ def _calibrate_rows(
         chain.set_placements(nominal)
     jac = solution.jacobian
     covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
-    names = _column_names(objective, params, kept)
+    names = _column_names(objective, params, kept, problem.session_names)
     correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
     k, p = rows.n_rows, rows.n_points
     point_residual = solution.residual[: 3 * k * p].reshape(k, p, 3) * problem.sigma_pos / problem.row_weight[:, None, None]
@@ -394,82 +390,16 @@ def _calibrate_rows(
         covariance=covariance,
         start=problem.start,
         fit_target=not tool_known,
+        session_names=problem.session_names,
     )
     return result, point_errors
 
 
-def _select(problem: FitProblem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str):
-    """Score nested subsets of the ordered identifiable parameters; keep the best.
-
-    ``aic``: Akaike's information criterion m ln(RSS/m) + 2n (Akaike 1974), which
-    estimates the expected prediction error on new measurements; ``bic``: the
-    same with ln(m) per parameter (Schwarz 1978); ``press``: linearised
-    leave-one-row-out cross-validation (Allen 1974); ``all``: every
-    identifiable parameter.
-    """
-    sizes, scores = [], []
-    previous = None
-    block = 3 * rows.n_points + (3 if rows.rotations is not None else 0)
-    candidates = [ordering.rank] if criterion == "all" else range(0, ordering.rank + 1)
-    for n_kept in candidates:
-        kept = np.sort(ordering.order[:n_kept])
-        objective = problem.objective(kept, base)
-        x0 = objective.start_vector() if previous is None else _warm_start(objective, previous, kept)
-        try:
-            solution = solve(objective, x0, what="selection", tolerance=SELECTION_TOLERANCE)
-        except CalibrationError:
-            continue
-        previous = (kept, solution.x, objective)
-        m, rss = solution.residual.size, float(solution.residual @ solution.residual)
-        if criterion == "press":
-            jac = objective.jacobian(solution.x)
-            residual = _row_blocks(solution.residual, rows, block)
-            score = press(_row_blocks(jac, rows, block), residual, block)
-        elif criterion == "bic":
-            score = m * np.log(rss / m) + np.log(m) * solution.x.size
-        else:  # aic, all
-            score = m * np.log(rss / m) + 2.0 * solution.x.size
-        sizes.append(n_kept)
-        scores.append(float(score))
-    if not sizes:
-        raise CalibrationError("no subset of the parameters could be fitted")
-    chosen = sizes[int(np.argmin(scores))]
-    selection = Selection(
-        criterion=SELECTION_CRITERIA[criterion],
-        sizes=tuple(sizes),
-        scores=tuple(scores),
-        chosen=chosen,
-    )
-    return selection, np.sort(ordering.order[:chosen])
-
-
-def _warm_start(objective: SensorResidual, previous, kept: np.ndarray) -> np.ndarray:
-    """Start a larger subset from the previous subset's solution."""
-    prev_kept, prev_x, prev_objective = previous
-    x0 = objective.start_vector()
-    kin = objective.blocks["kinematic"]
-    values = dict(zip(prev_kept.tolist(), prev_x[prev_objective.blocks["kinematic"]]))
-    x0[kin] = [values.get(int(i), 0.0) for i in kept]
-    x0[kin.stop :] = prev_x[prev_objective.blocks["kinematic"].stop :]
-    return x0
-
-
-def _row_blocks(values: np.ndarray, rows: MeasurementSet, block: int) -> np.ndarray:
-    """Reorder residual rows (positions first, then orientations) into per-row blocks."""
-    k, p = rows.n_rows, rows.n_points
-    n_pos = 3 * k * p
-    pos = values[:n_pos].reshape((k, 3 * p) + values.shape[1:])
-    if rows.rotations is None:
-        return pos.reshape((k * block,) + values.shape[1:])
-    rot = values[n_pos:].reshape((k, 3) + values.shape[1:])
-    return np.concatenate([pos, rot], axis=1).reshape((k * block,) + values.shape[1:])
-
-
-def _column_names(objective: SensorResidual, params, kept: np.ndarray) -> list[str]:
+def _column_names(objective: SensorResidual, params, kept: np.ndarray, sessions=()) -> list[str]:
     names = [params.info[i].name for i in kept] if params is not None else []
     if objective.blocks["registration"].stop > objective.blocks["registration"].start:
-        names += ["registration.rx", "registration.ry", "registration.rz",
-                  "registration.x", "registration.y", "registration.z"]
+        prefixes = ["registration"] if objective.n_sessions == 1 else [f"registration[{n}]" for n in sessions]
+        names += [f"{prefix}.{axis}" for prefix in prefixes for axis in ("rx", "ry", "rz", "x", "y", "z")]
     pts = objective.blocks["points"]
     names += [f"target.point{i // 3 + 1}.{'xyz'[i % 3]}" for i in range(pts.stop - pts.start)]
     rot = objective.blocks["rotation"]
@@ -477,11 +407,11 @@ def _column_names(objective: SensorResidual, params, kept: np.ndarray) -> list[s
     return names
 
 
-def _dropped(jac, ordering, kept, other_cols, full: SensorResidual, params) -> tuple[Dropped, ...]:
+def _dropped(jac, ordering, kept, other_cols, full: SensorResidual, params, sessions=()) -> tuple[Dropped, ...]:
     """Each parameter not kept, with the kept parameters that absorb it."""
     kin_start = full.blocks["kinematic"].start
     kept_cols = np.concatenate([kin_start + kept, other_cols]).astype(int)
-    names = _column_names(full, params, np.arange(params.size))
+    names = _column_names(full, params, np.arange(params.size), sessions)
     kept_set = set(kept.tolist())
     dropped = [(position, int(column)) for position, column in enumerate(ordering.order)
                if int(column - kin_start) not in kept_set]

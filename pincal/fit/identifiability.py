@@ -19,8 +19,8 @@ projected out:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 import scipy.linalg
@@ -141,8 +141,12 @@ class Selection:
     Attributes:
         criterion: description of the criterion.
         sizes: candidate numbers of kinematic parameters.
-        scores: criterion value of each candidate (same order).
+        scores: criterion value of each candidate (same order): of its nonlinear
+            fit for the sizes in ``refitted``, linearised for the others
+            (:mod:`pincal.fit.selection`).
         chosen: the number kept.
+        refitted: the sizes fitted nonlinearly (the chosen one among them).
+        solution: the chosen subset's fitted unknowns (to start the final fit from).
     """
 
     criterion: str
@@ -150,3 +154,5 @@ class Selection:
     scores: tuple[float, ...]
     chosen: int
     notes: tuple[str, ...] = field(default=())
+    refitted: tuple[int, ...] = ()
+    solution: np.ndarray | None = field(default=None, compare=False, repr=False)

@@ -63,7 +63,10 @@ def register_points(robot_points, sensor_points, weights=None) -> Registration:
     for pts, name in ((tc, "robot_points"), (gc, "sensor_points")):
         s = np.linalg.svd(pts * np.sqrt(w)[:, None], compute_uv=False)
         if s[1] <= 1e-9 * max(s[0], 1e-300):
-            raise CalibrationError(f"{name} are collinear or coincident (rank < 2): rotation undetermined")
+            raise CalibrationError(
+                f"{name}: the {len(pts)} points are collinear or coincident (rank < 2), so the registration's "
+                "rotation about their line is undetermined; measure 3 or more points not on one line, or add "
+                "orientations (Registration 2)")
     u, _, vt = np.linalg.svd((tc * w[:, None]).T @ gc)  # H = Σ w t_k g_k^T = U S V^T
     d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
@@ -107,19 +110,22 @@ def register_orientations(robot_rotations, sensor_rotations, robot_points, senso
     Args:
         robot_rotations: (K, 3, 3) model orientations R_k in the robot base.
         sensor_rotations: (K, 3, 3) measured orientations G_k in the sensor frame.
-        robot_points: (L, 3) points t_l in robot-base coordinates [m], L >= 3.
+        robot_points: (L, 3) points t_l in robot-base coordinates [m], L >= 1:
+            the orientations fix Ω, so eq 19 needs only the points' centroid (one
+            6D row registers a session, where Registration 1 needs 3 points not on
+            one line).
         sensor_points: (L, 3) the same points g_l measured by the sensor [m].
 
     Raises:
-        CalibrationError: mismatched shapes or counts, fewer than 3 points, NaN,
+        CalibrationError: mismatched shapes or counts, no point, NaN,
             non-rotation matrices.
     """
     r = checked_rotations(robot_rotations, "robot_rotations")
     g_rot = checked_rotations(sensor_rotations, "sensor_rotations")
     if len(r) != len(g_rot):
         raise CalibrationError(f"robot_rotations ({len(r)}) and sensor_rotations ({len(g_rot)}) differ in number")
-    t = checked_array(robot_points, (3,), "robot_points", 3)
-    g = checked_array(sensor_points, (3,), "sensor_points", 3)
+    t = checked_array(robot_points, (3,), "robot_points", 1)
+    g = checked_array(sensor_points, (3,), "sensor_points", 1)
     if len(t) != len(g):
         raise CalibrationError(f"robot_points ({len(t)}) and sensor_points ({len(g)}) differ in number")
     rotation = mean_rotation(g_rot @ r.transpose(0, 2, 1))

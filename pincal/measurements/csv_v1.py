@@ -10,6 +10,10 @@ Format v1 has one row per robot configuration and these columns:
   quaternion, scalar last as in :class:`scipy.spatial.transform.Rotation`);
 * optionally ``role``: ``cpa``, ``calibration`` (default, also for an empty cell)
   or ``validation``;
+* optionally ``session``: a name (text) per row; rows of one session share one
+  registration (the sensor did not move between them). Empty or absent: the
+  file's name without extension. :func:`read_sessions` reads several files,
+  each its own session (``STEM`` or ``STEM:VALUE``);
 * any other column is an extra: kept when numeric, ignored otherwise.
 
 Every problem raises :class:`~pincal.errors.MeasurementError` with a one-line
@@ -29,7 +33,8 @@ from __future__ import annotations
 import csv
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Literal, Sequence
 
 import numpy as np
@@ -43,9 +48,12 @@ from pincal.measurements.data import (
     QUAT_COLUMNS,
     ROLE_COLUMN,
     ROLES,
+    SESSION_COLUMN,
     JointSpec,
     MeasurementSet,
+    default_session_name,
     is_reserved,
+    join_sets,
 )
 from pincal.outputs import replacing
 
@@ -82,7 +90,8 @@ class CsvTable:
             where += f": line {line}" + (f" (joint '{joint}')" if joint else "")
         if column is not None:
             where += f", column '{column}'" if line is not None else f": column '{column}'"
-        return self.error_type(f"{where}: {message}")
+        text = f"{where}: {message}"  # cells quoted in the message may hold line breaks: keep it one line
+        return self.error_type(text.replace("\r", "\\r").replace("\n", "\\n"))
 
     def cell(self, k: int, name: str) -> str:
         """Stripped cell of data row ``k`` in column ``name``; empty if the table has no such column."""
@@ -142,7 +151,10 @@ def read_table(
     """Read a CSV table's cells; reject unreadable, empty, header-only or ragged files.
 
     Rows whose cells are all blank are skipped; header names are stripped (and
-    lower-cased with ``lowercase``) and must be present and distinct.
+    lower-cased with ``lowercase``) and must be present and distinct. Accepted as
+    real files have them: a UTF-8 BOM, Windows (CRLF) line endings, quoted header
+    names and cells, spaces around cells, and trailing commas (empty cells after
+    the last named column, on the header or on data rows).
 
     Args:
         path: the CSV file.
@@ -158,7 +170,7 @@ def read_table(
     reader = None
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:
-            reader = csv.reader(handle)
+            reader = csv.reader(handle, skipinitialspace=True)  # ' "x"' is x, as in '"x"'
             records = [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
     except FileNotFoundError:
         raise error_type(f"{source}: file not found; check the path") from None
@@ -167,13 +179,17 @@ def read_table(
     except OSError as exc:
         raise error_type(f"{source}: cannot read file ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
-        raise error_type(f"{source}: not a UTF-8 text file; save it as CSV text") from None
+        raise error_type(f"{source}: not a UTF-8 text file{_encoding_hint(path)}; save it as CSV (UTF-8)") from None
     except csv.Error as exc:
         line = getattr(reader, "line_num", 0)
         raise error_type(f"{source}: line {line}: malformed CSV ({exc}); fix or delete the line") from None
     if not records:
         raise error_type(f"{source}: file is empty; expected a header line and one row per {rows_are}")
     (header_line, header), data = records[0], records[1:]
+    while len(header) > 1 and not header[-1].strip():  # trailing commas on the header line
+        header = header[:-1]
+    data = [(line, row[: len(header)] if not any(c.strip() for c in row[len(header):]) else row)
+            for line, row in data]  # trailing commas on data rows
     names = tuple(h.strip().lower() if lowercase else h.strip() for h in header)
     table = CsvTable(source, names, [r for _, r in data], [n for n, _ in data], header_line, error_type)
     for i, name in enumerate(table.names, start=1):
@@ -189,6 +205,18 @@ def read_table(
             raise table.error(
                 f"{len(row)} fields but the header has {len(header)}; give one value per column", line)
     return table
+
+
+def _encoding_hint(path: str | os.PathLike) -> str:
+    """`` (it is UTF-16)`` when the file starts with a UTF-16 or UTF-32 byte order mark, else empty."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4)
+    except OSError:
+        return ""
+    if head.startswith((b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff")):
+        return " (it is UTF-32)"
+    return " (it is UTF-16, e.g. Excel's 'Unicode text')" if head.startswith((b"\xff\xfe", b"\xfe\xff")) else ""
 
 
 def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec]) -> np.ndarray:
@@ -279,6 +307,14 @@ def _read_roles(table: CsvTable) -> np.ndarray:
     return roles
 
 
+def _read_sessions(table: CsvTable) -> np.ndarray:
+    """The session of each row: the ``session`` cell, or the file's stem where empty or absent."""
+    default = default_session_name(table.source)
+    if SESSION_COLUMN not in table.names:
+        return np.full(len(table.rows), default, dtype=object)
+    return np.array([text or default for text in table.cells(SESSION_COLUMN)], dtype=object)
+
+
 def _read_extras(table: CsvTable, names: Sequence[str]) -> tuple[dict[str, np.ndarray], list[str]]:
     """Numeric extra columns (empty cells become NaN) and the names of the ignored ones."""
     kept: dict[str, np.ndarray] = {}
@@ -340,15 +376,53 @@ def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> t
     if extra:
         notes.append(f"{table.source}: kept numeric extra column(s): {', '.join(extra)}")
     data = MeasurementSet(tuple(joint_names), q, points.reshape(len(q), len(point_names), 3),
-                          rotations, roles, np.array(table.lines), extra, table.source)
+                          rotations, roles, np.array(table.lines), extra, table.source,
+                          sessions=_read_sessions(table))
     return data, notes
+
+
+def read_sessions(
+    paths: Sequence[str | os.PathLike], joints: Sequence[JointSpec]
+) -> tuple[MeasurementSet, list[str]]:
+    """Read one or several measurement files as the sessions of one calibration.
+
+    One file: :func:`read_measurements` (its sessions are the values of its
+    ``session`` column, the file's stem where empty or absent). Several files:
+    each row's session is its file's stem — or the path as given when two files
+    share a stem — followed by ``:VALUE`` for a ``session`` value of its own;
+    every row keeps its file and line (:attr:`MeasurementSet.files`, ``lines``).
+
+    Raises:
+        MeasurementError: a file given twice, files that measure differently
+            (:func:`pincal.measurements.data.join_sets`), or any problem of one file.
+    """
+    paths = [Path(p) for p in paths]
+    if len(paths) == 1:
+        return read_measurements(paths[0], joints)
+    seen: dict[str, Path] = {}
+    for path in paths:
+        key = os.path.normcase(os.path.abspath(path))
+        if key in seen:
+            raise MeasurementError(f"{path}: given twice (also as {seen[key]}); give each session's file once")
+        seen[key] = path
+    stems = [p.stem for p in paths]
+    sets, notes = [], []
+    for path, stem in zip(paths, stems):
+        data, file_notes = read_measurements(path, joints)
+        notes += file_notes
+        name = stem if stems.count(stem) == 1 else str(path)
+        own = default_session_name(data.source)
+        labels = [name if label == own else f"{name}:{label}" for label in data.sessions]
+        sets.append(replace(data, sessions=np.array(labels, dtype=object)))
+    return join_sets(sets), notes
 
 
 def write_measurements(path: str | os.PathLike, data: MeasurementSet) -> None:
     """Write ``data`` in format v1, exactly readable back by :func:`read_measurements`.
 
     Columns: joints, ``x,y,z`` (one point) or ``x1,y1,z1,...``, ``qx,qy,qz,qw`` if
-    orientations were measured, ``role``, then the extras. Floats are written with
+    orientations were measured, ``role``, ``session`` when the rows belong to
+    several sessions, then the extras. Floats are written with
     ``repr`` (shortest exact form), so q, points and extras round-trip bit for bit
     and rotations to ~1e-15.
 
@@ -363,6 +437,9 @@ def write_measurements(path: str | os.PathLike, data: MeasurementSet) -> None:
         numeric.append(Rotation.from_matrix(data.rotations).as_quat())
         header += QUAT_COLUMNS
     header.append(ROLE_COLUMN)
+    labelled = len(data.session_names) > 1
+    if labelled:
+        header.append(SESSION_COLUMN)
     header += list(data.extra)
     numbers = np.hstack(numeric)
     extras = np.column_stack([data.extra[n] for n in data.extra]) if data.extra else np.empty((data.n_rows, 0))
@@ -371,7 +448,8 @@ def write_measurements(path: str | os.PathLike, data: MeasurementSet) -> None:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(header)
             for k in range(data.n_rows):
-                writer.writerow([*map(_format, numbers[k]), data.roles[k], *map(_format, extras[k])])
+                labels = [data.sessions[k]] if labelled else []
+                writer.writerow([*map(_format, numbers[k]), data.roles[k], *labels, *map(_format, extras[k])])
     except OSError as exc:
         raise MeasurementError(f"{path}: cannot write file ({exc.strerror or exc})") from None
 

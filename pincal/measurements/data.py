@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from pathlib import PurePath
 from types import MappingProxyType
 from typing import Mapping, Sequence
 
@@ -15,6 +16,8 @@ from pincal.errors import MeasurementError, ModelError
 ROLES = ("cpa", "calibration", "validation")
 DEFAULT_ROLE = "calibration"
 ROLE_COLUMN = "role"
+#: Optional text column naming each row's session (one registration per session).
+SESSION_COLUMN = "session"
 QUAT_COLUMNS = ("qx", "qy", "qz", "qw")
 
 
@@ -60,8 +63,13 @@ def _frozen(values, dtype) -> np.ndarray:
 
 def is_reserved(name: str, joint_names: Sequence[str]) -> bool:
     """Whether ``name`` is a column the format gives a meaning to (so not an extra)."""
-    return (name in joint_names or name in QUAT_COLUMNS or name == ROLE_COLUMN
+    return (name in joint_names or name in QUAT_COLUMNS or name in (ROLE_COLUMN, SESSION_COLUMN)
             or POSITION_COLUMN_RE.fullmatch(name) is not None)
+
+
+def default_session_name(source: str) -> str:
+    """The session of rows that name none: their file's name without its extension."""
+    return PurePath(source).stem or str(source)
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +84,12 @@ class MeasurementSet:
         roles: (K,) object array of ``"cpa"``, ``"calibration"`` or ``"validation"``.
         lines: (K,) 1-based line numbers in the source file (header is line 1).
         extra: numeric extra columns by name, each (K,).
-        source: file path the data came from, or ``"<memory>"``.
+        source: file path the data came from, or ``"<memory>"`` (several files: joined by ``" + "``).
+        sessions: (K,) object array, each row's session name (rows of one session
+            share one registration, sensor_T_base); default: every row in one
+            session named after ``source`` (:func:`default_session_name`).
+        files: (K,) object array, the file each row came from (``lines`` count in it);
+            default: ``source``.
     """
 
     joint_names: tuple[str, ...]
@@ -87,6 +100,8 @@ class MeasurementSet:
     lines: np.ndarray
     extra: Mapping[str, np.ndarray] = field(default_factory=dict)
     source: str = "<memory>"
+    sessions: np.ndarray | None = None
+    files: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -102,6 +117,10 @@ class MeasurementSet:
         for key, value in values.items():
             object.__setattr__(self, key, value)
         k = self.q.shape[0] if self.q.ndim == 2 else -1
+        for key, default in (("sessions", default_session_name(self.source)), ("files", self.source)):
+            given = getattr(self, key)
+            labels = np.full(max(k, 0), default, dtype=object) if given is None else given
+            object.__setattr__(self, key, _frozen([str(v) for v in np.ravel(labels)], object))
         problems = [
             (self.q.shape != (k, len(names)), f"q has shape {self.q.shape}, expected (K, {len(names)})"),
             (self.points.ndim != 3 or self.points.shape[0] != k or self.points.shape[2] != 3
@@ -110,6 +129,9 @@ class MeasurementSet:
              f"rotations has shape {getattr(self.rotations, 'shape', None)}, expected ({k}, 3, 3)"),
             (self.roles.shape != (k,), f"roles has shape {self.roles.shape}, expected ({k},)"),
             (self.lines.shape != (k,), f"lines has shape {self.lines.shape}, expected ({k},)"),
+            (self.sessions.shape != (k,), f"sessions has {self.sessions.size} labels, expected {k}"),
+            (self.files.shape != (k,), f"files has {self.files.size} labels, expected {k}"),
+            (any(not label for label in self.sessions), "a session name is empty"),
             (len(set(names)) != len(names), "joint names are not unique"),
             (not set(self.roles.ravel().tolist()) <= set(ROLES), f"roles must be among {', '.join(ROLES)}"),
         ]
@@ -135,6 +157,17 @@ class MeasurementSet:
         """Whether target orientations were measured."""
         return self.rotations is not None
 
+    @property
+    def session_names(self) -> tuple[str, ...]:
+        """The sessions, in the order of their first row."""
+        return tuple(dict.fromkeys(self.sessions.tolist()))
+
+    @property
+    def session_index(self) -> np.ndarray:
+        """Each row's session as an index into :attr:`session_names`, (K,)."""
+        order = {name: i for i, name in enumerate(self.session_names)}
+        return np.array([order[name] for name in self.sessions], dtype=np.intp)
+
     def select(self, mask: np.ndarray) -> MeasurementSet:
         """Return the rows picked by a boolean mask of shape (K,) or an index array."""
         index = np.asarray(mask)
@@ -149,6 +182,8 @@ class MeasurementSet:
             lines=self.lines[index],
             extra={name: column[index] for name, column in self.extra.items()},
             source=self.source,
+            sessions=self.sessions[index],
+            files=self.files[index],
         )
 
     def with_role(self, *roles: str) -> MeasurementSet:
@@ -159,3 +194,41 @@ class MeasurementSet:
                 f"{self.source}: unknown role(s) {', '.join(unknown)}; allowed: {', '.join(ROLES)}"
             )
         return self.select(np.array([role in roles for role in self.roles], dtype=bool))
+
+
+def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
+    """The rows of several measurement sets, in order, as one set (each row keeps its
+    session, file and line); extra columns missing from one of them are dropped.
+
+    Raises:
+        MeasurementError: the sets differ in joints, in target points per row,
+            or in whether orientations were measured — naming the two files.
+    """
+    if not sets:
+        raise MeasurementError("no measurement files given")
+    first = sets[0]
+    for other in sets[1:]:
+        differs = [
+            (other.joint_names != first.joint_names, "joint columns"),
+            (other.n_points != first.n_points,
+             f"target points per row ({other.n_points} against {first.n_points})"),
+            (other.has_orientation != first.has_orientation, "orientation columns qx,qy,qz,qw"),
+        ]
+        for failed, what in differs:
+            if failed:
+                raise MeasurementError(
+                    f"{other.source}: differs from {first.source} in its {what}; the sessions of one "
+                    "calibration measure the same target the same way")
+    common = [name for name in first.extra if all(name in s.extra for s in sets)]
+    return MeasurementSet(
+        joint_names=first.joint_names,
+        q=np.concatenate([s.q for s in sets]),
+        points=np.concatenate([s.points for s in sets]),
+        rotations=None if first.rotations is None else np.concatenate([s.rotations for s in sets]),
+        roles=np.concatenate([s.roles for s in sets]),
+        lines=np.concatenate([s.lines for s in sets]),
+        extra={name: np.concatenate([s.extra[name] for s in sets]) for name in common},
+        source=" + ".join(s.source for s in sets),
+        sessions=np.concatenate([s.sessions for s in sets]),
+        files=np.concatenate([s.files for s in sets]),
+    )

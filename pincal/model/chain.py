@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +23,7 @@ import pinocchio as pin
 
 from pincal.errors import ModelError
 from pincal.measurements.data import JointSpec
+from pincal.model.description import read_description
 
 _KINDS = {
     "JointModelRX": "revolute",
@@ -151,17 +152,24 @@ class KinematicChain:
 
     @classmethod
     def from_urdf(
-        cls, urdf_path: str | Path, tip_link: str, tool: npt.ArrayLike | None = None
+        cls,
+        urdf_path: str | Path,
+        tip_link: str,
+        tool: npt.ArrayLike | None = None,
+        xacro_args: Mapping[str, str] | Iterable[tuple[str, str]] | None = None,
     ) -> "KinematicChain":
-        """Load ``urdf_path`` with Pinocchio and take the chain from its root to ``tip_link``."""
-        path = Path(urdf_path)
-        if not path.is_file():
-            raise ModelError(f"{path}: no such URDF file")
+        """Load ``urdf_path`` with Pinocchio and take the chain from its root to ``tip_link``.
+
+        A ``*.xacro`` file is expanded in memory with ``xacro_args``
+        (:func:`pincal.model.description.read_description`, which also checks the tree).
+        """
+        description = read_description(urdf_path, xacro_args)
         try:
-            model = pin.buildModelFromUrdf(str(path))
+            model = pin.buildModelFromXML(description.text)
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
-            raise ModelError(f"{path}: Pinocchio cannot read this URDF ({exc})") from None
-        return cls(model, tip_link, tool=tool, source=str(path))
+            reason = " ".join(str(exc).split())
+            raise ModelError(f"{description.source}: Pinocchio cannot read this URDF ({reason})") from None
+        return cls(model, tip_link, tool=tool, source=description.source)
 
     # --- names and sizes -------------------------------------------------
 

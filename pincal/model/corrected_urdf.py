@@ -18,12 +18,12 @@ import numpy as np
 
 from pincal.errors import ModelError
 from pincal.model.chain import KinematicChain
-from pincal.model.urdf import load_urdf, read_joint_origins, write_urdf_with_origins
+from pincal.model.urdf import XacroArgs, load_urdf, read_joint_origins, write_urdf_with_origins
 
 
-def _tip_joint(urdf_path: Path, tip_link: str) -> tuple[str | None, bool]:
+def _tip_joint(urdf_path: Path, tip_link: str, xacro_args: XacroArgs = None) -> tuple[str | None, bool]:
     """Name of the joint whose child is ``tip_link`` and whether it is fixed."""
-    robot = load_urdf(urdf_path).robot
+    robot = load_urdf(urdf_path, xacro_args).robot
     for joint in robot.joints:
         if joint.child == tip_link:
             return joint.name, joint.type == "fixed"
@@ -34,23 +34,25 @@ def corrected_origins(
     urdf_path: str | Path,
     chain: KinematicChain,
     nominal_placements: Sequence[np.ndarray],
+    xacro_args: XacroArgs = None,
 ) -> dict[str, np.ndarray]:
     """URDF joint origins realising the chain's current placements.
 
     Args:
-        urdf_path: the URDF the chain was loaded from.
+        urdf_path: the URDF the chain was loaded from (or its ``*.xacro``).
         chain: the calibrated chain.
         nominal_placements: the chain's placements as loaded (see
             :meth:`KinematicChain.placements`).
+        xacro_args: the arguments the chain's xacro file was expanded with.
     """
     urdf_path = Path(urdf_path)
-    origins = read_joint_origins(urdf_path)
+    origins = read_joint_origins(urdf_path, xacro_args)
     current = chain.placements()
     out: dict[str, np.ndarray] = {}
     for name, nominal, new in zip(chain.joint_names, nominal_placements[:-1], current[:-1]):
         out[name] = origins[name] @ np.linalg.inv(nominal) @ new
     tip_nominal, tip_new = nominal_placements[-1], current[-1]
-    tip_joint, fixed = _tip_joint(urdf_path, chain.tip_link)
+    tip_joint, fixed = _tip_joint(urdf_path, chain.tip_link, xacro_args)
     if tip_joint is not None and fixed:
         out[tip_joint] = origins[tip_joint] @ np.linalg.inv(tip_nominal) @ tip_new
     elif np.abs(tip_new - tip_nominal).max() > 0:
@@ -68,8 +70,11 @@ def write_corrected_urdf(
     nominal_placements: Sequence[np.ndarray],
     comment: str | None = None,
     verify: Callable[[Path], None] | None = None,
+    xacro_args: XacroArgs = None,
 ) -> None:
     """Write ``source`` with the chain's calibrated placements to ``destination``;
-    ``verify`` checks the complete file before it replaces ``destination``."""
-    origins = corrected_origins(source, chain, nominal_placements)
-    write_urdf_with_origins(source, destination, origins, comment=comment, verify=verify)
+    ``verify`` checks the complete file before it replaces ``destination``. A
+    ``*.xacro`` source (expanded with ``xacro_args``) gives a plain URDF that says
+    in a comment which xacro file and arguments it came from."""
+    origins = corrected_origins(source, chain, nominal_placements, xacro_args)
+    write_urdf_with_origins(source, destination, origins, comment=comment, verify=verify, xacro_args=xacro_args)

@@ -40,9 +40,10 @@ Units: lengths in metres, angles in radians, 4x4 homogeneous matrices
 from __future__ import annotations
 
 import copy
+import io
 import os
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable, Iterable, Mapping
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +51,7 @@ import yourdfpy
 from lxml import etree
 
 from pincal.errors import ModelError
+from pincal.model.description import RobotDescription, read_description
 from pincal.outputs import replacing
 
 #: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
@@ -195,26 +197,28 @@ def check_rigid_transform(matrix: npt.ArrayLike, what: str) -> np.ndarray:
 # --------------------------------------------------------------------------- loading
 
 
-def _as_path(path: str | os.PathLike[str], role: str) -> Path:
-    p = Path(path)
-    if not p.is_file():
-        raise ModelError(f"{role} URDF {p} does not exist or is not a file")
-    return p
+XacroArgs = Mapping[str, str] | Iterable[tuple[str, str]] | None
 
 
-def load_urdf(urdf_path: str | os.PathLike[str]) -> yourdfpy.URDF:
+def load_urdf(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs = None) -> yourdfpy.URDF:
     """Load a URDF with yourdfpy without touching meshes.
 
     No scene graph is built and no mesh is loaded; mesh file names (including
-    unresolvable ``package://`` ones) are kept exactly as written.
+    unresolvable ``package://`` ones) are kept exactly as written. A ``*.xacro``
+    file is expanded in memory with ``xacro_args``
+    (:func:`pincal.model.description.read_description`).
 
     Raises:
-        ModelError: if the file does not exist or cannot be parsed.
+        ModelError: if the file does not exist, cannot be parsed or expanded, or
+            is not a kinematic tree.
     """
-    path = _as_path(urdf_path, "input")
+    return _load(read_description(urdf_path, xacro_args))
+
+
+def _load(description: RobotDescription) -> yourdfpy.URDF:
     try:
         return yourdfpy.URDF.load(
-            str(path),
+            io.BytesIO(description.xml),
             build_scene_graph=False,
             build_collision_scene_graph=False,
             load_meshes=False,
@@ -222,20 +226,20 @@ def load_urdf(urdf_path: str | os.PathLike[str]) -> yourdfpy.URDF:
             filename_handler=yourdfpy.filename_handler_null,
         )
     except Exception as exc:  # yourdfpy raises assorted exceptions on bad XML
-        raise ModelError(f"cannot read URDF {path}: {exc}") from None
+        raise ModelError(f"cannot read URDF {description.source}: {' '.join(str(exc).split())}") from None
 
 
-def read_joint_origins(urdf_path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+def read_joint_origins(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs = None) -> dict[str, np.ndarray]:
     """Origins of all joints of a URDF.
 
     Args:
-        urdf_path: URDF file.
+        urdf_path: URDF file (or ``*.xacro``, expanded with ``xacro_args``).
 
     Returns:
         ``{joint name: 4x4 parent_T_child origin}`` [m, rad]; a joint without an
         ``<origin>`` element has the identity.
     """
-    urdf = load_urdf(urdf_path)
+    urdf = load_urdf(urdf_path, xacro_args)
     return {
         joint.name: (np.eye(4) if joint.origin is None else np.array(joint.origin, dtype=float))
         for joint in urdf.robot.joints
@@ -253,14 +257,6 @@ def same_file(a: Path, b: Path) -> bool:
         except OSError:
             pass
     return a.resolve() == b.resolve()
-
-
-def _parse_source_tree(path: Path) -> etree._Element:
-    parser = etree.XMLParser(remove_blank_text=True, remove_comments=True)
-    try:
-        return etree.parse(str(path), parser).getroot()
-    except etree.XMLSyntaxError as exc:
-        raise ModelError(f"cannot parse URDF {path}: {exc}") from None
 
 
 def _is_element(node: object) -> bool:
@@ -347,11 +343,14 @@ def write_urdf_with_origins(
     origins: Mapping[str, npt.ArrayLike],
     comment: str | None = None,
     verify: Callable[[Path], None] | None = None,
+    xacro_args: XacroArgs = None,
 ) -> None:
     """Copy a URDF, replacing the origins of the named joints.
 
     Everything else is preserved (see the module docstring for the exact
     guarantees and for what yourdfpy cannot keep: comments and element order).
+    A ``*.xacro`` source is expanded in memory with ``xacro_args``; the output is
+    plain URDF whose comment also says which xacro file and arguments it came from.
 
     Args:
         source: input URDF; never modified.
@@ -363,21 +362,24 @@ def write_urdf_with_origins(
         verify: called with the complete written file before it replaces
             ``destination`` (see :func:`pincal.outputs.replacing`); what it
             raises cancels the write.
+        xacro_args: arguments of a ``*.xacro`` source (``{"prefix": "left_"}``).
 
     Raises:
         ModelError: the destination is the source file, a named joint does not
             exist (the message lists the joints that do), an origin is not a
             proper rigid transform, or the source cannot be read.
     """
-    src_path = _as_path(source, "input")
-    dst_path = Path(destination)
+    description = read_description(source, xacro_args)
+    src_path, dst_path = description.path, Path(destination)
     if same_file(src_path, dst_path):
         raise ModelError(f"refusing to write {dst_path}: it is the input URDF; never overwrite the input")
+    if any(same_file(Path(f), dst_path) for f in description.included):
+        raise ModelError(f"refusing to write {dst_path}: {src_path} includes it; never overwrite an input")
     checked = {
         str(name): check_rigid_transform(matrix, f"origin of joint '{name}'")
         for name, matrix in origins.items()
     }
-    urdf = load_urdf(src_path)
+    urdf = _load(description)
     joint_map = {joint.name: joint for joint in urdf.robot.joints}
     unknown = [name for name in checked if name not in joint_map]
     if unknown:
@@ -389,7 +391,8 @@ def write_urdf_with_origins(
         joint_map[name].origin = matrix.copy()
 
     out_root = urdf.write_xml().getroot()
-    _postprocess(_parse_source_tree(src_path), out_root, checked)
+    _postprocess(description.root(), out_root, checked)
+    comment = "\n".join(text for text in (comment, description.provenance()) if text)
     if comment:
         out_root.addprevious(_xml_comment(comment))
     tree = out_root.getroottree()

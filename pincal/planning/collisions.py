@@ -14,12 +14,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import pinocchio as pin
 
 from pincal.errors import ModelError
 from pincal.model.chain import KinematicChain
+from pincal.model.description import is_xacro, read_description
+from pincal.progress import Counter, Progress
 
 
 @dataclass(frozen=True)
@@ -53,13 +56,18 @@ class Clearance:
         }
 
 
-def _geometry(urdf: Path, chain: KinematicChain):
-    """Chain model and collision geometry reduced like :class:`KinematicChain` does."""
+def _geometry(urdf: Path, chain: KinematicChain, xacro_args: Sequence[tuple[str, str]] = ()):
+    """Chain model and collision geometry reduced like :class:`KinematicChain` does
+    (a ``.xacro`` is expanded in memory with ``xacro_args``)."""
+    package_dirs = [str(p) for p in urdf.resolve().parents]
     try:
-        model = pin.buildModelFromUrdf(str(urdf))
-        geometry = pin.buildGeomFromUrdf(
-            model, str(urdf), pin.GeometryType.COLLISION, package_dirs=[str(p) for p in urdf.resolve().parents]
-        )
+        if is_xacro(urdf):
+            text = read_description(urdf, xacro_args).text
+            model = pin.buildModelFromXML(text)
+            geometry = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.COLLISION, package_dirs=package_dirs)
+        else:
+            model = pin.buildModelFromUrdf(str(urdf))
+            geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=package_dirs)
     except (RuntimeError, ValueError) as exc:
         raise ModelError(f"{urdf}: cannot load the collision geometry for --min-distance ({exc})") from None
     if geometry.ngeoms == 0:
@@ -72,9 +80,15 @@ def _geometry(urdf: Path, chain: KinematicChain):
     return model, geometry
 
 
-def check_clearance(urdf: str | Path, chain: KinematicChain, q: np.ndarray, min_distance: float) -> Clearance:
-    """Which configurations ``q`` (K, N) keep every moving pair of links at least ``min_distance`` [m] apart."""
-    model, geometry = _geometry(Path(urdf), chain)
+def check_clearance(
+    urdf: str | Path, chain: KinematicChain, q: np.ndarray, min_distance: float,
+    xacro_args: Sequence[tuple[str, str]] = (),
+    progress: Progress | None = None,
+) -> Clearance:
+    """Which configurations ``q`` (K, N) keep every moving pair of links at least ``min_distance`` [m] apart.
+
+    ``progress(done, total)`` counts the configurations checked (those too close twice: then for contact)."""
+    model, geometry = _geometry(Path(urdf), chain, xacro_args)
     geometry.addAllCollisionPairs()  # pairs on different joints only
     data, geometry_data = model.createData(), geometry.createData()
     zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])
@@ -91,9 +105,13 @@ def check_clearance(urdf: str | Path, chain: KinematicChain, q: np.ndarray, min_
         geometry.addCollisionPair(pair)
     geometry_data = geometry.createData()
     configurations = chain.configurations(q)
-    close = _collisions(model, data, geometry, geometry_data, configurations, min_distance)
+    counter = Counter(progress)
+    counter.expect(len(configurations))
+    close = _collisions(model, data, geometry, geometry_data, configurations, min_distance, counter)
     touching = np.zeros_like(close)
-    touching[close] = _collisions(model, data, geometry, geometry_data, configurations[close], 0.0)
+    counter.expect(int(close.sum()))
+    touching[close] = _collisions(model, data, geometry, geometry_data, configurations[close], 0.0, counter)
+    counter.settle()
     return Clearance(
         min_distance_m=float(min_distance),
         allowed=~close,
@@ -104,9 +122,13 @@ def check_clearance(urdf: str | Path, chain: KinematicChain, q: np.ndarray, min_
     )
 
 
-def _collisions(model, data, geometry, geometry_data, configurations: np.ndarray, margin: float) -> np.ndarray:
+def _collisions(model, data, geometry, geometry_data, configurations: np.ndarray, margin: float,
+                counter: Counter) -> np.ndarray:
     """Whether any checked pair is closer than ``margin`` [m] at each configuration, (K,)."""
     for request in geometry_data.collisionRequests:
         request.security_margin = margin
-    return np.array([pin.computeCollisions(model, data, geometry, geometry_data, c, True) for c in configurations],
-                    dtype=bool)
+    found = np.zeros(len(configurations), dtype=bool)
+    for k, c in enumerate(configurations):
+        found[k] = pin.computeCollisions(model, data, geometry, geometry_data, c, True)
+        counter.tick()
+    return found

@@ -33,6 +33,7 @@ import numpy as np
 from pincal.errors import PincalError
 from pincal.fit.identifiability import condition_number, order_parameters
 from pincal.fit.noise_limit import mean_norm
+from pincal.progress import Counter
 
 CRITERIA = {
     "accuracy": "predicted mean squared position error of the calibrated model over the workspace sample "
@@ -233,7 +234,9 @@ class _Search:
         k = int(np.argmin(delta))
         return k, float(delta[k])
 
-    def greedy(self, count: int, refresh_every: int = 20) -> list[int]:
+    def greedy(self, count: int, refresh_every: int = 20, counter: Counter | None = None) -> list[int]:
+        """``count`` greedy additions (``counter`` ticks once per addition; announced by the caller)."""
+        counter = Counter(None) if counter is None else counter
         order = []
         for step in range(count):
             k, _ = self.best_addition()
@@ -241,15 +244,20 @@ class _Search:
             order.append(k)
             if (step + 1) % refresh_every == 0:
                 self.refresh()
+            counter.tick()
         self.refresh()
         return order
 
-    def exchange(self, passes: int = MAX_PASSES) -> int:
+    def exchange(self, passes: int = MAX_PASSES, counter: Counter | None = None) -> int:
         """Sequential exchange passes until one improves the criterion by less than
-        :data:`PASS_TOLERANCE` (relative; for ``d`` in the geometric-mean eigenvalue); returns the swaps made."""
+        :data:`PASS_TOLERANCE` (relative; for ``d`` in the geometric-mean eigenvalue); returns the swaps made.
+        ``counter`` ticks once per configuration tried; the first pass is announced by the caller."""
+        counter = Counter(None) if counter is None else counter
         swaps = 0
-        for _ in range(passes):
+        for number in range(passes):
             before, changed = self.value, 0
+            if number:
+                counter.expect(int(self.chosen.sum()))
             for k in np.flatnonzero(self.chosen):
                 back = float(self.deltas(-1.0, [k])[0])  # criterion change of removing k
                 removal = self._step(k, -1.0)  # tried first without changing the state
@@ -260,6 +268,7 @@ class _Search:
                     self.update(k, -1.0, removal)
                     self.update(candidate, +1.0)
                     changed += 1
+                counter.tick()
             self.refresh()
             swaps += changed
             gain = before - self.value if self.B is None else (before - self.value) / abs(before)
@@ -283,8 +292,13 @@ class Selection:
     swaps: int
 
 
-def select(problem: DesignProblem, count: int, criterion: str, allowed: np.ndarray | None = None) -> Selection:
+def select(problem: DesignProblem, count: int, criterion: str, allowed: np.ndarray | None = None,
+           counter: Counter | None = None) -> Selection:
     """Choose ``count`` candidates minimising (``d``: maximising) the criterion.
+
+    ``counter`` counts the greedy additions, the configurations each exchange pass
+    tries and the additions of :func:`priority_order` (another pass is announced
+    when it starts).
 
     Raises:
         PincalError: unknown criterion, or fewer allowed candidates than ``count``.
@@ -295,19 +309,23 @@ def select(problem: DesignProblem, count: int, criterion: str, allowed: np.ndarr
     if count > int(allowed.sum()):
         raise PincalError(f"--count {count} is more than the {int(allowed.sum())} usable candidates; "
                           "lower --count or give more candidates")
+    counter = Counter(None) if counter is None else counter
+    counter.expect(3 * count)  # greedy, the first exchange pass, the priority order
     search = _Search(problem.blocks, problem.base, _weight(problem, criterion), allowed)
-    search.greedy(count)
-    swaps = search.exchange()
+    search.greedy(count, counter=counter)
+    swaps = search.exchange(counter=counter)
     chosen = np.flatnonzero(search.chosen)
-    return Selection(chosen=chosen, priority=priority_order(problem, chosen, criterion), swaps=swaps)
+    return Selection(chosen=chosen, priority=priority_order(problem, chosen, criterion, counter), swaps=swaps)
 
 
 def _weight(problem: DesignProblem, criterion: str) -> np.ndarray | None:
     return None if criterion == "d" else (np.eye(problem.n) if criterion == "a" else problem.workspace)
 
 
-def priority_order(problem: DesignProblem, chosen: np.ndarray, criterion: str) -> np.ndarray:
-    """``chosen`` ordered greedily: each next one improves the criterion most given the previous ones."""
+def priority_order(problem: DesignProblem, chosen: np.ndarray, criterion: str,
+                   counter: Counter | None = None) -> np.ndarray:
+    """``chosen`` ordered greedily: each next one improves the criterion most given the previous ones
+    (``counter`` ticks once per addition; announced by the caller)."""
     chosen = np.asarray(chosen, dtype=int)
     search = _Search(problem.blocks[chosen], problem.base, _weight(problem, criterion), np.ones(len(chosen), bool))
-    return chosen[np.array(search.greedy(len(chosen)), dtype=int)]
+    return chosen[np.array(search.greedy(len(chosen), counter=counter), dtype=int)]

@@ -29,6 +29,8 @@ from pincal.planning.information import (
     default_target_points,
 )
 from pincal.planning.ordering import Balance, alternating_order, approach_balance, move_times, short_tour
+from pincal.progress import Counter, Progress
+from pincal.residuals.sensor import REGISTRATION_NAMES
 
 #: Default sensor noise: the ``pincal simulate`` defaults (σ_p = 0.055 mm per axis,
 #: σ_a = 0.055° per angle; Franaszek & Marvel 2022, Section 7). Predicted errors scale with it.
@@ -159,6 +161,7 @@ def plan_measurements(
     existing: MeasurementSet | None = None,
     workspace: np.ndarray | None = None,
     allowed: np.ndarray | None = None,
+    progress: Progress | None = None,
 ) -> Plan:
     """Choose ``settings.count`` of the ``candidates`` (K, n_joints) and order them.
 
@@ -167,6 +170,9 @@ def plan_measurements(
         existing: measurements already recorded (their calibration is the linearisation point).
         workspace: configurations where accuracy matters (default: a subsample of the candidates).
         allowed: candidates that may be chosen (default all; e.g. collision-free ones).
+        progress: ``progress(done, total)`` (:mod:`pincal.progress`) over the search's steps
+            (:func:`pincal.planning.design.select`), the random draws and the predictions
+            of each prefix of the priority order.
 
     Raises:
         PincalError: unknown joint in ``alternate``, a count the candidates cannot meet,
@@ -191,13 +197,14 @@ def plan_measurements(
     rng = np.random.default_rng(settings.seed)
     saved = chain.placements()
     try:
-        model, sigma_source, recorded_q = _measurement_model(chain, settings, existing)
-        blocks = model.jacobian(candidates)
-        recorded = model.jacobian(recorded_q)
+        model, sigma_source, recorded_q, recorded_sessions = _measurement_model(chain, settings, existing)
         if workspace is None:
             pool = np.flatnonzero(allowed)
             workspace = candidates[rng.choice(pool, min(len(pool), settings.workspace_size), replace=False)]
-        problem = DesignProblem(blocks, model.kinematic, recorded, *model.error_jacobian(workspace))
+        blocks, recorded, errors, names = _session_columns(
+            model, model.jacobian(candidates), model.jacobian(recorded_q), recorded_sessions,
+            model.error_jacobian(workspace))
+        problem = DesignProblem(blocks, model.kinematic, recorded, *errors)
     finally:
         chain.set_placements(saved)
     rows = settings.sensor.rows
@@ -207,11 +214,14 @@ def plan_measurements(
             f"--count {settings.count} cannot determine the {problem.n} parameters estimated at level "
             f"{settings.level} ({rows} measurements per configuration): plan at least {needed}"
         )
-    selection = select(problem, settings.count, settings.criterion, allowed)
+    counter = Counter(progress)
+    counter.expect(settings.random_draws + settings.count)  # the random draws, the additions
+    selection = select(problem, settings.count, settings.criterion, allowed, counter)
     prediction = problem.predict(selection.chosen)
-    random, singular = _random_baseline(problem, settings, allowed, rng)
+    random, singular = _random_baseline(problem, settings, allowed, rng, counter)
     recorded_prediction = problem.predict([]) if len(recorded) else None
-    additions = _additions(problem, selection.priority, recorded_prediction)
+    additions = _additions(problem, selection.priority, recorded_prediction, counter)
+    counter.settle()
     order = _visiting_order(chain, candidates[selection.chosen], recorded_q, alternate, settings.seed)
     chosen = selection.chosen[order]
     q = candidates[chosen]
@@ -231,9 +241,9 @@ def plan_measurements(
         random=random,
         random_singular=singular,
         recorded=recorded_prediction,
-        identifiable=tuple(model.names[i] for i in problem.identifiable),
-        not_identifiable=tuple(model.names[i] for i in problem.not_identifiable),
-        estimated=tuple(model.names[i] for i in problem.columns),
+        identifiable=tuple(names[i] for i in problem.identifiable),
+        not_identifiable=tuple(names[i] for i in problem.not_identifiable),
+        estimated=tuple(names[i] for i in problem.columns),
         balance=tuple(approach_balance(q, chain.joint_names)),
         travel_s=float(move_times(q, _velocities(chain)).sum()),
         sigma_pos_mm=model.sigma_pos_m * 1000.0,
@@ -256,7 +266,7 @@ def _joint_columns(chain: KinematicChain, names) -> np.ndarray:
 
 
 def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: MeasurementSet | None):
-    """The measurement model, where its noise comes from, and the recorded rows' configurations."""
+    """The measurement model, where its noise comes from, and the recorded rows' configurations and sessions."""
     sensor = settings.sensor
     if settings.tool_known and sensor.n_points != 1:
         raise PincalError(f"--measure {sensor.label} with --tool: a known tool is one point; "
@@ -267,13 +277,14 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
     pos_source = "given" if sigma_pos is not None else "default"
     rot_source = "given" if sigma_rot is not None else "default"
     recorded_q = np.zeros((0, chain.n_joints))
+    recorded_sessions = np.zeros(0, dtype=object)
     if existing is not None:
         rows = existing.select(existing.roles != "validation")
         if rows.n_points != sensor.n_points or rows.has_orientation != sensor.has_rotation:
             seen = ("pose" if rows.has_orientation else f"{rows.n_points} point(s)")
             raise PincalError(f"{existing.source}: the recorded rows measure {seen} per configuration, "
                               f"but --measure is {sensor.label}; plan for what the sensor sees")
-        recorded_q = rows.q
+        recorded_q, recorded_sessions = rows.q, rows.sessions
         if settings.level in CHAIN_LEVELS:
             result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known)
             target = result.target
@@ -295,13 +306,47 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
                              sigma_pos_m=sigma_pos, sigma_rot_rad=sigma_rot)
     source = pos_source if pos_source == rot_source or not sensor.has_rotation else (
         f"position {pos_source}, orientation {rot_source}")
-    return model, source, recorded_q
+    return model, source, recorded_q, recorded_sessions
 
 
-def _random_baseline(problem: DesignProblem, settings: PlanSettings, allowed: np.ndarray, rng):
+def _session_columns(model: MeasurementModel, blocks, recorded, sessions, errors):
+    """Registration columns of several recorded sessions.
+
+    The planned rows continue the session of the last recorded row (the sensor
+    stays where it is) and share its registration, the model's columns; rows of
+    each other session get 6 registration columns of their own, appended (zero
+    for the candidates and the workspace). Returns the candidates' and recorded
+    blocks, the workspace error rows and the column names.
+    """
+    names = list(model.names)
+    others = [name for name in dict.fromkeys(sessions.tolist()) if len(sessions) and name != sessions[-1]]
+    if not others:
+        return blocks, recorded, errors, tuple(names)
+    reg = len(model.kinematic) + np.arange(6)  # the registration follows the kinematic columns
+    extra = 6 * len(others)
+    recorded = np.concatenate([recorded, np.zeros(recorded.shape[:2] + (extra,))], axis=2)
+    for s, name in enumerate(others):
+        rows = sessions == name
+        block = recorded[rows]  # (k_s, m, n): its registration moves to its own columns
+        block[:, :, recorded.shape[2] - extra + 6 * s + np.arange(6)] = block[:, :, reg]
+        block[:, :, reg] = 0.0
+        recorded[rows] = block
+        names += [f"registration[{name}].{axis}" for axis in REGISTRATION_NAMES]
+    position, rotation = errors
+
+    def pad(a):
+        return None if a is None else np.concatenate([a, np.zeros(a.shape[:-1] + (extra,))], axis=-1)
+
+    return pad(blocks), recorded, (pad(position), pad(rotation)), tuple(names)
+
+
+def _random_baseline(problem: DesignProblem, settings: PlanSettings, allowed: np.ndarray, rng, counter: Counter):
     """Median predicted errors of random N-subsets of the allowed candidates, and how many were singular."""
     pool = np.flatnonzero(allowed)
-    draws = [problem.predict(rng.choice(pool, settings.count, replace=False)) for _ in range(settings.random_draws)]
+    draws = []
+    for _ in range(settings.random_draws):
+        draws.append(problem.predict(rng.choice(pool, settings.count, replace=False)))
+        counter.tick()
     good = [d for d in draws if d is not None]
     singular = len(draws) - len(good)
     if len(good) <= len(draws) // 2:
@@ -314,7 +359,8 @@ def _random_baseline(problem: DesignProblem, settings: PlanSettings, allowed: np
     return Prediction(**median), singular
 
 
-def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Prediction | None) -> tuple[Addition, ...]:
+def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Prediction | None,
+               counter: Counter) -> tuple[Addition, ...]:
     """Predicted mean error after each prefix of the priority order, and each one's gain."""
     out, previous = [], None if recorded is None else recorded.mean_position_mm
     rows, recorded = problem.blocks.shape[1], len(problem.existing)
@@ -325,6 +371,7 @@ def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Predictio
         gain = None if value is None or previous is None else previous - value
         out.append(Addition(int(priority[k - 1]), value, gain))
         previous = value
+        counter.tick()
     return tuple(out)
 
 

@@ -17,7 +17,17 @@ Keys promised to users (never renamed, only extended):
 * ``fit``: stages, row counts and the errors (eq 24) on the calibration rows;
 * ``urdf_sha256``: SHA-256 of the corrected URDF written with the report (the
   bytes written), so ``pincal evaluate`` can tell the pair apart from a URDF of
-  another run.
+  another run;
+* ``xacro_args``: ``{NAME: VALUE}`` the ``.xacro`` URDF was expanded with
+  (``--xacro-arg``; ``{}`` for a URDF file or the xacro's defaults);
+* ``row_errors``: the error of every row by file line, nominal geometry to the
+  reported model, for the calibration (and held-out) rows
+  (:mod:`pincal.report.row_errors`); ``chain.joint_kinds`` (levels other than
+  dh): revolute, continuous or prismatic, per joint;
+* ``sessions`` (levels other than dh): one entry per session — ``name``,
+  ``file``, ``rows``, its ``registration`` (keys as the top-level one) and
+  ``calibration_errors`` (:mod:`pincal.report.sessions`); with several
+  sessions the top-level ``registration`` is the first session's.
 """
 
 from __future__ import annotations
@@ -138,6 +148,12 @@ class ReportModel:
             ``time_column``, ``time_reference_s``); empty without effects.
         urdf_sha256: SHA-256 (hex) of the corrected URDF written with the
             report (``urdf_sha256``); None in reports older than the key.
+        sessions: (name, Registration 1, Registration 2) of each session
+            (``sessions``); empty in reports without the key (one session).
+        noise: the noise scales the fit estimated (``noise``: ``sigma_pos_mm``,
+            ``sigma_rot_deg``); empty if not reported.
+        session_files: the file(s) each session's rows were read from, as given to
+            calibrate (``sessions[].file``), in the order of ``sessions``.
     """
 
     tool_parent: str
@@ -147,6 +163,9 @@ class ReportModel:
     registration_orientation: Registration
     effects: dict = field(default_factory=dict)
     urdf_sha256: str | None = None
+    sessions: tuple[tuple[str, Registration, Registration], ...] = ()
+    noise: dict = field(default_factory=dict)
+    session_files: tuple[tuple[str, ...], ...] = ()
 
 
 def read_report(path: str | Path) -> ReportModel:
@@ -158,6 +177,8 @@ def read_report(path: str | Path) -> ReportModel:
         raise PincalError(f"{path}: no such report file") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise PincalError(f"{path}: not a readable JSON report ({exc})") from None
+    if isinstance(doc, dict) and "fixture" in doc:  # pincal.report.fixture: no sensor, no registration
+        raise PincalError(f"{path}: the report of a socket-fixture calibration; evaluate it with --fixture FIXTURE.csv")
     try:
         tool = doc["tool"]
         registration = doc["registration"]
@@ -182,6 +203,17 @@ def read_report(path: str | Path) -> ReportModel:
                 if k in doc
             },
             urdf_sha256=digest,
+            sessions=tuple(
+                (str(entry["name"]), Registration.from_dict(entry["registration"]["position"]),
+                 Registration.from_dict(entry["registration"].get("orientation", entry["registration"]["position"])))
+                for entry in doc.get("sessions") or ()
+            ),
+            noise=dict(doc.get("noise") or {}),
+            session_files=tuple(
+                tuple(str(f) for f in (entry.get("file") if isinstance(entry.get("file"), list) else [entry.get("file")])
+                      if f is not None)
+                for entry in doc.get("sessions") or ()
+            ),
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(
@@ -231,7 +263,8 @@ def chain_report(
         "level": result.level,
         "model": "joint placements",
         "sources": sources,
-        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names)},
+        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
+                  "joint_kinds": [spec.kind for spec in chain.joint_specs]},
         "parameters": parameters,
         "identifiability": {
             "rank": result.rank,
@@ -243,6 +276,8 @@ def chain_report(
                 "kept": selection.chosen,
                 "value": float(selection.scores[selection.sizes.index(selection.chosen)]),
                 "candidates": [{"kept": n, "value": v} for n, v in zip(selection.sizes, selection.scores)],
+                # the candidates fitted nonlinearly; the others' values are linearised (pincal/fit/selection.py)
+                "refitted": list(selection.refitted),
             },
             "dropped": [
                 {
@@ -268,8 +303,11 @@ def chain_report(
             "sigma_pos_mm": result.sigma_pos_m * 1000.0,
             "sigma_rot_deg": None if result.sigma_rot_rad is None else float(np.degrees(result.sigma_rot_rad)),
         },
-        "outliers": [{"line": line, "robust_score": score} for line, score in result.outliers],
+        "outliers": [{"line": line, "robust_score": score, "file": file}
+                     for (line, score), file in zip(result.outliers,
+                                                    result.outlier_files or [None] * len(result.outliers))],
         "removed_lines": list(result.removed_lines),
+        "removed_files": list(result.removed_files),
         "fit": {
             "rows": n_rows,
             "rows_used": len(result.rows_used),

@@ -2,7 +2,8 @@
 
 For row k and target point p, with the tool pose (t_k, R_k) from the chain, the
 target's points m_p in the tool frame and the registration sensor_T_base
-(Omega, tau):
+(Omega, tau) of row k's session (one registration per session: the sensor moved
+between sessions, the robot and the target did not):
 
     e_kp = w_k (Omega (t_k + R_k m_p) + tau − g_kp)            [dimensionless]
     o_k  = v_k log(G_kᵀ Omega R_k R_T)                          (with orientations)
@@ -10,7 +11,8 @@ target's points m_p in the tool frame and the registration sensor_T_base
 w_k = 1/sigma_pos,k [1/m] and v_k = 1/sigma_rot,k [1/rad] weight each row by its
 measurement noise, so position and orientation need no ad-hoc scale. Unknowns,
 in this order: the free kinematic parameters (through the cache), the
-registration (Omega = Omega_0 exp(phi), tau), the points m_p, and the target
+registrations (Omega_s = Omega_s0 exp(phi_s), tau_s: 6 per session, session 0
+first), the points m_p, and the target
 rotation R_T = R_T0 exp(psi), and the values of unmodelled effects
 (:mod:`pincal.model.effects`): joint effects shift the joint readings before the
 forward kinematics, ``drift`` adds t_k u to the registration's translation and
@@ -19,7 +21,8 @@ be held fixed.
 
 Jacobians (right perturbations, Pinocchio's Jexp3 and Jlog3):
 d e/d theta = w Omega · point velocity; d e/d phi = −w Omega [y]× Jexp3(phi) with
-y = t + R m; d e/d tau = w I; d e/d m_p = w Omega R. With E = G_kᵀ Omega R_k R_T:
+y = t + R m; d e/d tau = w I; d e/d m_p = w Omega R (a row's registration columns
+are those of its own session, zero in the others'). With E = G_kᵀ Omega R_k R_T:
 d o/d theta = v Jlog3(E) Eᵀ G_kᵀ Omega · angular velocity;
 d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi).
 
@@ -51,19 +54,10 @@ from pincal.model.effects import (
 )
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache, Objective
-from pincal.residuals.so3 import jlog3, log3
+from pincal.residuals.so3 import jlog3, log3, skew
 
 #: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
-
-
-def skew(v: np.ndarray) -> np.ndarray:
-    """[v]× for vectors (..., 3) → (..., 3, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
 
 
 @dataclass(frozen=True)
@@ -71,14 +65,24 @@ class TargetEstimate:
     """Registration and target geometry at a parameter vector.
 
     Attributes:
-        registration: sensor_T_base.
+        registration: sensor_T_base (of the first session when there are several).
         points: target points in the tool frame [m], (P, 3).
         rotation: target rotation R_T in the tool frame, (3, 3).
+        registrations: sensor_T_base of each session (default: ``(registration,)``);
+            when given, ``registration`` is set to its first.
     """
 
     registration: Registration
     points: np.ndarray
     rotation: np.ndarray
+    registrations: tuple[Registration, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.registrations:
+            object.__setattr__(self, "registrations", tuple(self.registrations))
+            object.__setattr__(self, "registration", self.registrations[0])
+        else:
+            object.__setattr__(self, "registrations", (self.registration,))
 
 
 class SensorResidual(Objective):
@@ -92,6 +96,8 @@ class SensorResidual(Objective):
         position_weight: w_k [1/m], scalar or (K,).
         rotation_weight: v_k [1/rad], scalar or (K,).
         fit_registration / fit_points / fit_rotation: which blocks are unknown.
+        sessions: (K,) each row's session, an index into ``start.registrations``;
+            needed when there are several (default: every row in session 0).
     """
 
     def __init__(
@@ -107,6 +113,7 @@ class SensorResidual(Objective):
         fit_rotation: bool = True,
         effects: Sequence[Effect] = (),
         inputs: EffectInputs | None = None,
+        sessions: npt.ArrayLike | None = None,
     ) -> None:
         super().__init__(cache)
         self.effects = tuple(effects)
@@ -125,13 +132,20 @@ class SensorResidual(Objective):
         self.G = None if sensor_rotations is None else np.asarray(sensor_rotations, dtype=float)
         k, n_points = self.g.shape[:2]
         self.start = start
+        self.n_sessions = len(start.registrations)
+        if sessions is None and self.n_sessions > 1:
+            raise ValueError(f"{self.n_sessions} registrations need each row's session")
+        self.sessions = np.zeros(k, dtype=np.intp) if sessions is None else np.asarray(sessions, dtype=np.intp)
+        if self.sessions.shape != (k,) or np.any((self.sessions < 0) | (self.sessions >= self.n_sessions)):
+            raise ValueError(f"sessions must be ({k},) indices below {self.n_sessions}")
+        self._session_rows = [np.flatnonzero(self.sessions == s) for s in range(self.n_sessions)]
         self.w = np.broadcast_to(np.asarray(position_weight, dtype=float), (k,)).copy()
         self.v = np.broadcast_to(np.asarray(rotation_weight, dtype=float), (k,)).copy()
         n_kin = len(cache.free)
         self._effect_slices = []
         sizes = {
             "kinematic": n_kin,
-            "registration": 6 if fit_registration else 0,
+            "registration": 6 * self.n_sessions if fit_registration else 0,
             "points": 3 * n_points if fit_points else 0,
             "rotation": 3 if (fit_rotation and self.G is not None) else 0,
             "effects": sum(e.n_values for e in self.effects),
@@ -158,25 +172,50 @@ class SensorResidual(Objective):
         x[self.blocks["kinematic"]] = self.cache.base[self.cache.free]
         reg, pts = self.blocks["registration"], self.blocks["points"]
         if reg.stop > reg.start:
-            x[reg.start + 3 : reg.stop] = self.start.registration.translation
+            for s, registration in enumerate(self.start.registrations):
+                x[reg.start + 6 * s + 3 : reg.start + 6 * s + 6] = registration.translation
         if pts.stop > pts.start:
             x[pts] = self.start.points.ravel()
         return x
 
     def estimate(self, x: npt.ArrayLike) -> TargetEstimate:
-        """Registration, points and target rotation at ``x``."""
+        """Registrations, points and target rotation at ``x``."""
         x = np.asarray(x, dtype=float)
         reg = x[self.blocks["registration"]]
-        registration = self.start.registration
+        registrations = self.start.registrations
         if reg.size:
-            registration = Registration(
-                rotation=registration.rotation @ pin.exp3(reg[:3]), translation=reg[3:].copy()
+            registrations = tuple(
+                Registration(rotation=start.rotation @ pin.exp3(reg[6 * s : 6 * s + 3]),
+                             translation=reg[6 * s + 3 : 6 * s + 6].copy())
+                for s, start in enumerate(registrations)
             )
         pts = x[self.blocks["points"]]
         points = pts.reshape(-1, 3) if pts.size else self.start.points
         rot = x[self.blocks["rotation"]]
         rotation = self.start.rotation @ pin.exp3(rot) if rot.size else self.start.rotation
-        return TargetEstimate(registration, points, rotation)
+        return TargetEstimate(registrations[0], points, rotation, registrations)
+
+    def row_frames(self, target: TargetEstimate) -> tuple[np.ndarray, np.ndarray]:
+        """Omega and tau of each row's session: (3, 3) and (3,) with one session,
+        (K, 3, 3) and (K, 3) [m] with several (both broadcast against per-row stacks)."""
+        if self.n_sessions == 1:
+            return target.registration.rotation, target.registration.translation
+        rotations = np.stack([r.rotation for r in target.registrations])
+        translations = np.stack([r.translation for r in target.registrations])
+        return rotations[self.sessions], translations[self.sessions]
+
+    def _session_blocks(self, target: TargetEstimate):
+        """(session, its rows, its registration): all rows as one slice with one session."""
+        if self.n_sessions == 1:
+            return [(0, slice(None), target.registration)]
+        return list(zip(range(self.n_sessions), self._session_rows, target.registrations))
+
+    def _registered(self, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
+        """Omega y + tau of each row's session for base-frame points ``world`` (K, P, 3) [m]."""
+        if self.n_sessions == 1:
+            return target.registration.apply_points(world)
+        omega, tau = self.row_frames(target)
+        return world @ omega.transpose(0, 2, 1) + tau[:, None, :]
 
     def effect_values(self, x: npt.ArrayLike) -> list[np.ndarray]:
         """Values of each effect at ``x``."""
@@ -223,7 +262,9 @@ class SensorResidual(Objective):
 
     def _sensed(self, x: np.ndarray, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
         scale, drift = self._sensor_terms(x)
-        return sensed_points(target.registration, world, scale, drift)
+        if self.n_sessions == 1:
+            return sensed_points(target.registration, world, scale, drift)
+        return (1.0 + scale) * (self._registered(target, world) + drift[:, None, :])
 
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)
@@ -278,7 +319,7 @@ class SensorResidual(Objective):
 
     def _orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
         """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
-        omega = target.registration.rotation
+        omega, _ = self.row_frames(target)
         return self.G.transpose(0, 2, 1) @ omega @ poses.tool_rotations @ target.rotation
 
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
@@ -286,13 +327,16 @@ class SensorResidual(Objective):
         lin = self._linearisation(x, joints=any(b is not None for b in self._effect_basis))
         poses, sens, target, world = lin["state"]
         k, n_points = world.shape[:2]
-        omega = target.registration.rotation
+        omega, _ = self.row_frames(target)
+        omega_t = np.swapaxes(omega, -1, -2)
         rows_pos = np.zeros((k, n_points, 3, self.n_params))
         kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
-        rows_pos[..., kin] = _point_columns(sens.linear @ omega.T, sens.angular @ omega.T, lin["offsets"])
-        if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi) = -[Omega y]x Omega Jexp3(phi)
-            rows_pos[..., reg.start : reg.start + 3] = -skew(world @ omega.T) @ (omega @ pin.Jexp3(x[reg][:3]))
-            rows_pos[..., reg.start + 3 : reg.stop] = np.eye(3)
+        rows_pos[..., kin] = _point_columns(sens.linear @ omega_t, sens.angular @ omega_t, lin["offsets"])
+        if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi) = -[Omega y]x Omega Jexp3(phi), per session
+            for s, rows, registration in self._session_blocks(target):
+                col, om = reg.start + 6 * s, registration.rotation
+                rows_pos[rows, ..., col : col + 3] = -skew(world[rows] @ om.T) @ (om @ pin.Jexp3(x[col : col + 3]))
+                rows_pos[rows, ..., col + 3 : col + 6] = np.eye(3)
         if pts.stop > pts.start:
             rotated = omega @ poses.tool_rotations  # Omega R_k
             for p in range(n_points):
@@ -344,20 +388,21 @@ class SensorResidual(Objective):
         joints' point columns d(point)/d(q_j) (K, P, 3, N) and turns (K, 3, N)."""
         state = self._state(x)
         poses, sens, target, world = state
-        omega = target.registration.rotation
+        omega, _ = self.row_frames(target)
+        omega_t = np.swapaxes(omega, -1, -2)
         scale, drift = self._sensor_terms(x)
         lin = {
             "state": state,
-            "offsets": (world - sens.origin[:, None, :]) @ omega.T,
+            "offsets": (world - sens.origin[:, None, :]) @ omega_t,
             "scale": scale,
-            "sensed": target.registration.apply_points(world) + drift[:, None, :],
+            "sensed": self._registered(target, world) + drift[:, None, :],
         }
         if self.G is not None:
             relative = self._orientation_error(poses, target)
             lin["jlog"] = jlog3(relative)
             lin["left"] = lin["jlog"] @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
         if joints:
-            lin["joint_points"] = _point_columns(sens.joint_linear @ omega.T, sens.joint_angular @ omega.T,
+            lin["joint_points"] = _point_columns(sens.joint_linear @ omega_t, sens.joint_angular @ omega_t,
                                                  lin["offsets"])
             if self.G is not None:
                 lin["joint_turns"] = lin["left"] @ sens.joint_angular.transpose(0, 2, 1)
@@ -381,7 +426,10 @@ class SensorResidual(Objective):
         rows[:, :, kin] = lin["left"] @ sens.angular.transpose(0, 2, 1)
         tool = poses.tool_rotations @ target.rotation  # R_k R_T
         if reg.stop > reg.start:
-            rows[:, :, reg.start : reg.start + 3] = jlog @ tool.transpose(0, 2, 1) @ pin.Jexp3(x[reg][:3])
+            for s, session_rows, _ in self._session_blocks(target):
+                col = reg.start + 6 * s
+                rows[session_rows, :, col : col + 3] = (
+                    jlog[session_rows] @ tool[session_rows].transpose(0, 2, 1) @ pin.Jexp3(x[col : col + 3]))
         if rot.stop > rot.start:
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
         for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):

@@ -13,6 +13,7 @@ with Pinocchio's Taylor expansions for small angles (alpha = 1/12 + theta²/720,
 diagonal term 1 − theta²/12). The angle comes from scipy's quaternion
 extraction, accurate up to and including theta = pi. (sin θ / (1 − cos θ) is
 written cot(θ/2), which loses no digits to cancellation at small angles.)
+:func:`skew` is the hat map [v]× over stacks of vectors.
 """
 
 from __future__ import annotations
@@ -59,4 +60,13 @@ def jlog3(rotations: npt.ArrayLike, logs: np.ndarray | None = None) -> np.ndarra
     out[:, 1, 2] -= half[:, 0]
     out[:, 2, 0] -= half[:, 1]
     out[:, 2, 1] += half[:, 0]
+    return out
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """[v]× for vectors (..., 3) → (..., 3, 3)."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
     return out

@@ -4,20 +4,28 @@ A task is any picklable object with a ``run()`` method (the study's are in
 :mod:`pincal.study.tasks`); :func:`execute` returns the results in task
 order whatever ran them, and reports progress through a ``progress(done, total)``
 callback (the command line draws it: :mod:`pincal.cli.progress`).
+
+Faults. A Dask worker that dies is replaced (a LocalCluster's nanny restarts it)
+and the scheduler reruns its tasks, so the results are the same number for
+number. When the scheduler is lost, or a local worker process dies, the run
+stops with a one-line :class:`pincal.errors.PincalError`; given a
+:class:`pincal.study.checkpoints.TaskStore`, every task finished until then is
+kept and a rerun runs only the others.
 """
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from contextlib import contextmanager
-from typing import Any, Callable, Sequence
+from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager, nullcontext
+from typing import Any, Sequence
 
 from pincal.errors import PincalError
-
-#: ``progress(done, total)``, called after each finished task.
-Progress = Callable[[int, int], None]
+from pincal.progress import Progress  # called after each finished task
+from pincal.study.checkpoints import TaskStore
 
 
 def default_workers() -> int:
@@ -52,8 +60,49 @@ def _run_task(task) -> list[dict[str, Any]]:
     return task.run()
 
 
+class _Results:
+    """The tasks' results by task index: those a store already holds, then each one as it arrives
+    (kept in the store, counted, reported)."""
+
+    def __init__(self, tasks: Sequence, store: TaskStore | None, report: Progress) -> None:
+        self.tasks, self.store, self.report = tasks, store, report
+        self.values: list = [None] * len(tasks)
+        self.pending: list[int] = []
+        for index, task in enumerate(tasks):
+            stored = None if store is None else store.load(task)
+            if stored is None:
+                self.pending.append(index)
+            else:
+                self.values[index] = stored
+        self.resumed = self.done = len(tasks) - len(self.pending)
+        if self.resumed:
+            report(self.done, len(tasks))
+
+    def add(self, index: int, rows: list[dict[str, Any]]) -> None:
+        self.values[index] = rows
+        if self.store is not None:
+            self.store.save(self.tasks[index], rows)
+        self.done += 1
+        self.report(self.done, len(self.tasks))
+
+    def describe(self, executor: str) -> str:
+        if not self.resumed:
+            return executor
+        return f"{executor}; {self.resumed} of {len(self.tasks)} tasks resumed from an interrupted run"
+
+    def lost(self, what: str) -> PincalError:
+        """The one-line error of an executor that died, saying how to go on."""
+        kept = (f"the {self.done} finished are kept in {self.store.folder}: rerun the same command to resume"
+                if self.store is not None else "rerun the study")
+        return PincalError(f"{what} after {self.done} of {len(self.tasks)} study tasks; {kept}")
+
+
 def execute(
-    tasks: Sequence, workers: int | None = None, scheduler: Any = None, progress: Progress | None = None
+    tasks: Sequence,
+    workers: int | None = None,
+    scheduler: Any = None,
+    progress: Progress | None = None,
+    store: TaskStore | None = None,
 ) -> tuple[list, str]:
     """Run ``task.run()`` for every task; results in task order, whatever the executor.
 
@@ -63,36 +112,45 @@ def execute(
             process); with ``scheduler="local"``, the LocalCluster's processes.
         scheduler: None (local processes), a Dask scheduler address, ``"local"``
             (start a Dask LocalCluster) or a ``distributed.Client``.
-        progress: called as ``progress(done, total)`` after each task.
+        progress: called as ``progress(done, total)`` after each task (and once
+            at the start with the tasks taken from ``store``).
+        store: finished tasks of an interrupted run (reused), where each task
+            finished now is kept (:mod:`pincal.study.checkpoints`).
 
     Returns:
         The results and a description of the executor.
+
+    Raises:
+        PincalError: the Dask scheduler or a worker process was lost for good
+            (a Dask worker lost once is replaced and its tasks rerun).
     """
-    report = progress or (lambda done, total: None)
+    results = _Results(tasks, store, progress or (lambda done, total: None))
     if scheduler is not None:
-        return _execute_dask(tasks, workers, scheduler, report)
+        description = _execute_dask(tasks, workers, scheduler, results)
+        return results.values, results.describe(description)
     workers = default_workers() if workers is None else workers
     if workers < 1:
         raise PincalError(f"workers must be >= 1, got {workers}")
-    results: list = [None] * len(tasks)
     if workers == 1:
-        for index, task in enumerate(tasks):
-            results[index] = _run_task(task)
-            report(index + 1, len(tasks))
-        return results, "in-process"
+        for index in results.pending:
+            results.add(index, _run_task(tasks[index]))
+        return results.values, results.describe("in-process")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
         with _single_threaded_blas():  # the workers start while the tasks are submitted
-            futures = {pool.submit(_run_task, task): index for index, task in enumerate(tasks)}
-        for done, future in enumerate(as_completed(futures), start=1):
-            results[futures[future]] = future.result()
-            report(done, len(tasks))
+            futures = {pool.submit(_run_task, tasks[index]): index for index in results.pending}
+        for future in as_completed(futures):
+            results.add(futures[future], future.result())
+    except BrokenProcessPool:
+        raise results.lost("a local worker process died (out of memory?)") from None
     finally:
         pool.shutdown(cancel_futures=True)
-    return results, f"{workers} local processes"
+    return results.values, results.describe(f"{workers} local processes")
 
 
-def _execute_dask(tasks: Sequence, workers: int | None, scheduler: Any, report: Progress) -> tuple[list, str]:
+def _execute_dask(tasks: Sequence, workers: int | None, scheduler: Any, results: _Results) -> str:
+    """Run the pending tasks on Dask; a lost worker's tasks are rerun by the scheduler (up to its
+    ``distributed.scheduler.allowed-failures``); returns the description of the executor."""
     try:
         import distributed
     except ImportError:
@@ -114,11 +172,34 @@ def _execute_dask(tasks: Sequence, workers: int | None, scheduler: Any, report: 
     else:
         client = scheduler
         description = f"Dask client of {client.scheduler.address}"
+    lost = False
     try:
-        futures = client.map(_run_task, list(tasks), pure=False)
-        for done, _ in enumerate(distributed.as_completed(futures), start=1):
-            report(done, len(futures))
-        return list(client.gather(futures)), description
+        futures = client.map(_run_task, [tasks[index] for index in results.pending], pure=False)
+        index_of = {future.key: index for future, index in zip(futures, results.pending)}
+        for future in distributed.as_completed(futures):
+            results.add(index_of[future.key], future.result())  # gathered one by one, placed by key
+            future.release()
+    except CancelledError:  # the client lost its scheduler and cancelled every future
+        lost = True
+        raise results.lost(f"lost the Dask scheduler ({description})") from None
+    except distributed.KilledWorker as exc:
+        raise results.lost(f"a task killed one Dask worker after another ({exc})") from None
     finally:
-        for resource in owned:
-            resource.close()
+        # closing a client that lost its scheduler interrupts its reconnection, which Dask
+        # logs as a traceback: the one-line error above says it all
+        with _silenced("distributed.client") if lost else nullcontext():
+            for resource in owned:
+                resource.close()
+    return description
+
+
+@contextmanager
+def _silenced(logger: str):
+    """Drop the log records of ``logger`` inside the block."""
+    log = logging.getLogger(logger)
+    was = log.disabled
+    log.disabled = True
+    try:
+        yield
+    finally:
+        log.disabled = was

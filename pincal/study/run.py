@@ -37,10 +37,12 @@ Modules: :mod:`pincal.study.estimators` (the estimators),
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pincal.study.checkpoints import TaskStore
 from pincal.study.estimators import ESTIMATORS, RESTART_ESTIMATORS, Estimator
 from pincal.study.executors import Progress, execute
 from pincal.study.files import write_study
@@ -129,6 +131,7 @@ def run_study(
     workers: int | None = None,
     scheduler: Any = None,
     progress: Progress | None = None,
+    checkpoints: str | Path | None = None,
 ) -> StudyResult:
     """Run the simulation study of Section 7 and check the findings of Sections 8–9.
 
@@ -137,10 +140,13 @@ def run_study(
         workers: local worker processes (default all cores; 1 = this process).
         scheduler: Dask scheduler address, ``"local"``, a ``distributed.Client``, or None.
         progress: ``progress(done, total)`` callback.
+        checkpoints: folder keeping each finished task, reused by a rerun after a
+            crash (:mod:`pincal.study.checkpoints`); None keeps nothing.
     """
     started = time.perf_counter()
     tasks = study_tasks(config)
-    results, executor = execute(tasks, workers, scheduler, progress)
+    store = None if checkpoints is None else TaskStore(checkpoints)
+    results, executor = execute(tasks, workers, scheduler, progress, store)
     by_kind: dict[type, list] = {TrialTask: [], RestartTask: [], Figure2Task: [], LimitTask: []}
     for task, rows in sorted(zip(tasks, results), key=lambda pair: pair[0].key):
         by_kind[type(task)].extend(rows)

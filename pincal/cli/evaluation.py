@@ -1,0 +1,323 @@
+"""``pincal evaluate``: eq 24 errors of a calibrated model on measured rows, session by session.
+
+Which registration (sensor_T_base) the rows of DATA are evaluated through — the
+rule, in order:
+
+1. ``--fixed-registration [NAME]``: the reported registration of session NAME
+   (default: the report's only or first session) for every row.
+2. ``--new-session``: every session of DATA is new; its registration is re-estimated.
+3. A report of one session (and reports older than ``sessions``): its
+   registration for every row, as before several sessions existed — whatever
+   the file is called and whatever its ``session`` column says (a note says so
+   when DATA names sessions of its own: pass ``--new-session`` if the sensor moved).
+4. A report of several sessions, per session of DATA: rows whose ``session``
+   cell names a reported session in full (``A``, ``BC:B``) use its
+   registration; so do the rows of a file whose path is the one a reported
+   session was read from (REPORT.json ``sessions[].file``, as given to
+   calibrate): rows without a ``session`` cell take that file's session, rows
+   with a cell VALUE the session ``STEM:VALUE`` (or ``VALUE``) of that file.
+   Any other session — a file merely named like a session (``val/A.csv``) —
+   is one the fit has not seen: its registration is re-estimated.
+
+Re-estimated means only its 6 parameters, with the model and the target fixed
+(:func:`pincal.fit.sessions.register_session`), on the evaluated rows: those
+errors then leave out the error of a registration, and are optimistic — after
+fitting 6 parameters to N residuals (3 per target point of a row, 3 more with
+an orientation) the RMS of what is left is about sqrt((N − 6) / N) of the true
+error. Each re-estimated session reports N and its degrees of freedom N − 6
+(``registration_dof``); a threshold (``--max-pos-mm``, ``--max-rot-deg``) is
+refused when a re-estimated session has fewer than :data:`MIN_THRESHOLD_DOF`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pincal.errors import PincalError
+from pincal.fit.metrics import PoseErrors
+from pincal.fit.sessions import register_session, session_pose_errors
+from pincal.measurements.csv_v1 import read_measurements, read_table
+from pincal.measurements.data import (
+    SESSION_COLUMN,
+    MeasurementSet,
+    default_session_name,
+)
+from pincal.model.chain import KinematicChain
+from pincal.model.effects import (
+    effect_from_dict,
+    effect_inputs,
+    joint_shifts,
+    time_column,
+)
+from pincal.model.sensor import Registration
+from pincal.outputs import file_sha256
+from pincal.report.document import ReportModel, read_report
+from pincal.report.sessions import session_errors
+
+REESTIMATED = "re-estimated on these rows (6 parameters; model and target fixed)"
+#: Registration parameters a re-estimated session fits to its own rows.
+REGISTRATION_PARAMETERS = 6
+#: Fewest degrees of freedom (residuals − 6) a re-estimated session must leave for a
+#: threshold check: below 6 the errors are under sqrt(1/2) ≈ 0.71 of the true error
+#: (the factor sqrt((N − 6) / N) at N = 12), too optimistic to pass or fail a robot on.
+MIN_THRESHOLD_DOF = 6
+
+
+@dataclass(frozen=True)
+class SessionEvaluation:
+    """One session of the evaluated rows.
+
+    Attributes:
+        name: the session in DATA.
+        rows: rows evaluated.
+        registration: the registration used (Registration 1; ``orientation`` Registration 2).
+        source: ``reported session 'NAME'``, ``the report's registration`` or :data:`REESTIMATED`.
+        errors: eq 24 on its rows.
+        residuals: scalar residuals of its rows (3 per target point, 3 more with an orientation).
+    """
+
+    name: str
+    rows: int
+    registration: Registration
+    orientation: Registration
+    source: str
+    errors: PoseErrors
+    residuals: int = 0
+
+    @property
+    def reestimated(self) -> bool:
+        return self.source == REESTIMATED
+
+    @property
+    def dof(self) -> int | None:
+        """Degrees of freedom left by a re-estimated registration: residuals − 6 (None if reported)."""
+        return self.residuals - REGISTRATION_PARAMETERS if self.reestimated else None
+
+    @property
+    def shrink(self) -> float | None:
+        """sqrt((N − 6) / N): about how much smaller than the true error its errors are (re-estimated only)."""
+        if not self.reestimated or self.residuals <= 0:
+            return None
+        return float(np.sqrt(max(self.dof, 0) / self.residuals))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "rows": self.rows, "registration_source": self.source,
+                "registration_reestimated": self.reestimated,
+                "residuals": self.residuals, "registration_dof": self.dof,
+                "registration": {"position": self.registration.as_dict(), "orientation": self.orientation.as_dict()},
+                "errors": self.errors.as_dict()}
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Outcome of :func:`evaluate_files`: eq 24 errors on the evaluated rows."""
+
+    errors: PoseErrors
+    n_skipped_cpa: int
+    notes: list[str]
+    lines: tuple[int, ...] = ()  # file line of each evaluated row (the HTML report's row table)
+    sessions: tuple[SessionEvaluation, ...] = ()
+    files: tuple[str, ...] = ()  # the file of each evaluated row
+    row_sessions: tuple[str, ...] = ()  # the session (in DATA) of each evaluated row
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**self.errors.as_dict(), "skipped_cpa_rows": self.n_skipped_cpa,
+                "sessions": [s.as_dict() for s in self.sessions]}
+
+    def threshold_problem(self) -> str | None:
+        """Why a threshold cannot judge these errors (a re-estimated session with fewer than
+        :data:`MIN_THRESHOLD_DOF` degrees of freedom left), with what to do; None if it can."""
+        for session in self.sessions:
+            if session.reestimated and session.dof < MIN_THRESHOLD_DOF:
+                per_row = session.residuals // max(session.rows, 1)
+                needed = -(-(REGISTRATION_PARAMETERS + MIN_THRESHOLD_DOF) // max(per_row, 1))
+                return (f"session '{session.name}': its registration is re-estimated from its own "
+                        f"{session.residuals} residuals ({session.dof} degree(s) of freedom left, fewer than "
+                        f"{MIN_THRESHOLD_DOF}), so its errors are about {session.shrink:.2f} of the true ones: too "
+                        f"optimistic for a threshold; measure at least {needed} rows in the session, or reuse a "
+                        "reported registration (--fixed-registration NAME)")
+        return None
+
+
+def evaluate_files(
+    urdf: str | Path, report_path: str | Path, data_path: str | Path, allow_other_urdf: bool = False,
+    xacro_args: Sequence[tuple[str, str]] = (), fixed_registration: str | None = None, new_session: bool = False,
+) -> Evaluation:
+    """Eq 24 on every non-CPA row of ``data_path`` with the model of a report, each
+    session through the registration the module's rule gives it.
+
+    When the report records the SHA-256 of the URDF written with it
+    (``urdf_sha256``), ``urdf`` must be that file — a run killed between
+    writing the URDF and the report, or a report of another run, is refused —
+    unless ``allow_other_urdf`` (the URDF was edited on purpose; a note says so).
+
+    Args:
+        fixed_registration: a reported session's name, or ``""`` for the only/first
+            one, whose registration every row uses (``--fixed-registration``).
+        new_session: re-estimate the registration of every session of the data.
+    """
+    if fixed_registration is not None and new_session:
+        raise PincalError("--fixed-registration and --new-session exclude each other; give one")
+    report = read_report(report_path)
+    chain = KinematicChain.from_urdf(urdf, report.tool_parent, xacro_args=xacro_args)
+    notes: list[str] = []
+    if report.urdf_sha256 is not None and file_sha256(urdf) != report.urdf_sha256:
+        if not allow_other_urdf:
+            raise PincalError(
+                f"{urdf}: not the URDF {report_path} was written with (its SHA-256 differs from the report's "
+                "urdf_sha256); evaluate the pair calibrate wrote, or pass --allow-other-urdf if you changed it "
+                "on purpose"
+            )
+        notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
+    data, read_notes = read_measurements(data_path, chain.joint_specs)
+    notes += read_notes
+    if data.n_points != len(report.points):
+        raise PincalError(
+            f"{data_path}: {data.n_points} target point(s) per row, but the report's tool has "
+            f"{len(report.points)}; evaluate with data of the same target"
+        )
+    rows = data.roles != "cpa"
+    if not np.any(rows):
+        raise PincalError(f"{data_path}: no rows to evaluate (all rows have role 'cpa')")
+    data = data.select(rows)
+    corrections = _effect_corrections(chain, data, report.effects, report.points)
+    plan, plan_notes = _registrations(report, data, _labelled(data_path, data), fixed_registration, new_session,
+                                      report_path, data_path)
+    notes += plan_notes
+    index = np.empty(data.n_rows, dtype=np.intp)
+    positions, orientations, sources = [], [], []
+    for s, (name, members, reported) in enumerate(plan):
+        index[members] = s
+        if reported is None:
+            q, drift = corrections.get("q"), corrections.get("drift")
+            sigma_pos = report.noise.get("sigma_pos_mm")
+            sigma_rot = report.noise.get("sigma_rot_deg")
+            registration = register_session(
+                chain, data.select(members), report.points, report.rotation,
+                q=None if q is None else q[members], sensor_scale=corrections.get("sensor_scale", 0.0),
+                drift=None if drift is None else drift[members],
+                sigma_pos_m=sigma_pos / 1000.0 if sigma_pos else 1e-3,
+                sigma_rot_rad=np.radians(sigma_rot) if sigma_rot else 1e-3,
+            )
+            reported = (REESTIMATED, registration, registration)
+        sources.append(reported[0])
+        positions.append(reported[1])
+        orientations.append(reported[2])
+    errors = session_pose_errors(chain, data, index, positions, orientations, points=report.points,
+                                 target_rotation=report.rotation, **corrections)
+    per_row = 3 * data.n_points + (3 if data.has_orientation else 0)  # scalar residuals of a row
+    sessions = tuple(
+        SessionEvaluation(name, len(members), positions[s], orientations[s], sources[s],
+                          session_errors(errors, members), per_row * len(members))
+        for s, (name, members, _) in enumerate(plan)
+    )
+    for session in sessions:
+        if session.reestimated:
+            notes.append(
+                f"{data_path}: session '{session.name}': errors are after fitting {REGISTRATION_PARAMETERS} "
+                f"registration parameters to {session.residuals} residuals ({session.dof} degree(s) of freedom "
+                f"left); expect them about sqrt(({session.residuals}−{REGISTRATION_PARAMETERS})/{session.residuals}) "
+                f"= {session.shrink:.2f} of the true error")
+    return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes,
+                      lines=tuple(int(line) for line in data.lines), sessions=sessions,
+                      files=tuple(str(f) for f in data.files), row_sessions=tuple(str(n) for n in data.sessions))
+
+
+def _labelled(path: str | Path, data: MeasurementSet) -> np.ndarray:
+    """Whether each row of ``data`` (read from ``path``) names its session in a ``session`` cell (K,)."""
+    table = read_table(path)
+    if SESSION_COLUMN not in table.names:
+        return np.zeros(data.n_rows, dtype=bool)
+    given = dict(zip(table.lines, (bool(cell) for cell in table.cells(SESSION_COLUMN))))
+    return np.array([given.get(int(line), False) for line in data.lines], dtype=bool)
+
+
+def _same_path(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name one file (relative paths from the current folder)."""
+    try:
+        return Path(a).resolve() == Path(b).resolve() or Path(a).samefile(b)
+    except OSError:
+        return False
+
+
+def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarray, fixed: str | None,
+                   new_session: bool, report_path, data_path) -> tuple[list, list[str]]:
+    """The module's rule: (session name, its rows, (source, Registration 1, Registration 2)
+    or None to re-estimate) for each session of ``data``, and the notes it gives.
+
+    Args:
+        labelled: (K,) whether each row names its session in a ``session`` cell.
+    """
+    reported = {name: (f"reported session '{name}'", position, orientation)
+                for name, position, orientation in report.sessions}
+    if not reported:  # a report without ``sessions``: one session, its top-level registration
+        reported = {"": ("the report's registration", report.registration_position, report.registration_orientation)}
+    first = next(iter(reported.values()))
+    index = data.session_index
+    groups = [(name, np.flatnonzero(index == s)) for s, name in enumerate(data.session_names)]
+    if fixed is not None:
+        if fixed and fixed not in reported:
+            raise PincalError(f"--fixed-registration {fixed}: {report_path} has no session '{fixed}'; its sessions "
+                              f"are: {', '.join(n for n in reported if n) or '(one, unnamed: give no NAME)'}")
+        chosen = reported[fixed] if fixed else first
+        return [(name, members, chosen) for name, members in groups], []
+    if new_session:
+        return [(name, members, None) for name, members in groups], []
+    if len(reported) == 1:  # one registration: every row's, as before sessions existed
+        own = [name for name, members in groups if labelled[members].any() and name not in reported]
+        notes = []
+        if own:
+            notes.append(f"{data_path}: session(s) {', '.join(repr(n) for n in own)} evaluated through "
+                         f"{first[0]} (a one-session report's registration is kept); pass --new-session if the "
+                         "sensor moved")
+        return [(name, members, first) for name, members in groups], notes
+    # several: a reported session named in full by a ``session`` cell, or the sessions of the file it was read from
+    stem = default_session_name(str(data_path))
+    files = dict(zip(reported, report.session_files))
+    here = {n for n, paths in files.items() if any(_same_path(f, data_path) for f in paths)}
+    prefixes = {stem} | {f for n in here for f in files[n]}  # how calibrate named this file's sessions
+    plan = []
+    for name, members in groups:
+        if labelled[members].any() and name in reported:
+            known = reported[name]
+        else:  # rows of the file a session was read from: its own name for it (STEM, STEM:VALUE or VALUE)
+            names = prefixes if name == stem else {name} | {f"{prefix}:{name}" for prefix in prefixes}
+            known = next((reported[n] for n in reported if n in here and n in names), None)
+        plan.append((name, members, known))
+    return plan, []
+
+
+def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray) -> dict:
+    """Joint readings corrected by the report's effects, and its sensor terms."""
+    entries = effects.get("effects", [])
+    if not entries:
+        return {}
+    parsed = [effect_from_dict(e) for e in entries]
+    needs_time = any(e.type == "drift" for e, _ in parsed)
+    row_time = time_column(data, effects.get("time_column")) if needs_time else time_column(data)
+    if needs_time and row_time is None:
+        raise PincalError(f"{data.source}: the report has a drift effect; the data need its time column")
+    reference = effects.get("time_reference_s")
+    context = effects.get("approach_context") or {}
+    try:
+        payload = float(effects.get("payload_kg", 0.0))
+        context_q = np.asarray(context["q"], dtype=float) if context else None
+        context_time = np.asarray(context["time_s"], dtype=float) if context else None
+    except (KeyError, TypeError, ValueError):
+        raise PincalError(f"{data.source}: the report's payload_kg or approach_context is malformed") from None
+    inputs = effect_inputs(chain, data, payload, points.mean(axis=0), row_time,
+                           time_reference=reference if row_time is not None else None,
+                           context_q=context_q, context_time=context_time)
+    q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
+    out: dict = {"q": q}
+    for effect, value in parsed:
+        if effect.type == "sensor_scale":
+            out["sensor_scale"] = float(value[0])
+        elif effect.type == "drift":
+            out["drift"] = inputs.time[:, None] * value
+    return out

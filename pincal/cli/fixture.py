@@ -1,0 +1,356 @@
+"""``pincal calibrate --fixture`` and ``pincal evaluate --fixture``: socket-fixture data, no sensor.
+
+calibrate: the data files (:mod:`pincal.measurements.fixture`) and the
+fixture file → :func:`pincal.fit.fixture_calibration.calibrate_fixture` → the
+corrected URDF (the writer and reload check of every calibration) and
+REPORT.json (:mod:`pincal.report.fixture`). evaluate: the consistency and
+distortion (:mod:`pincal.fit.socket_metrics`) of the corrected URDF with the
+reported ball centre on placements the fit has not seen — no registration,
+nothing re-estimated — and of the nominal URDF with the ball centre fitted to
+it ("before"), when that URDF is at hand. Both write ``--html`` pages
+(:mod:`pincal.report.fixture_html`); the flags of sensor data are refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pincal._version import __version__
+from pincal.cli.level_table import level_choice_lines
+from pincal.cli.paths import description_inputs, refuse_overwrite
+from pincal.errors import PincalError
+from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
+from pincal.fit.level_choice import choose_fixture_level
+from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
+from pincal.measurements.fixture import Fixture, read_fixture, read_fixture_data
+from pincal.model.chain import KinematicChain
+from pincal.model.description import is_xacro, xacro_arguments
+from pincal.outputs import file_sha256, write_text
+from pincal.report.document import write_report
+from pincal.report.fixture import fixture_report, read_fixture_block
+
+#: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
+CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
+                         "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers"}
+#: Flags of a sensor evaluation that a fixture evaluation has no use for.
+EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
+                        "fixed_registration": "--fixed-registration", "new_session": "--new-session"}
+#: Largest difference between a socket distance of the evaluated fixture file and the
+#: calibration's [m]: far below any fixture's manufacturing tolerance (~1e-5 m for a
+#: 3D print), far above the rounding of distances rebuilt by classical scaling (~1e-16 m).
+SAME_FIXTURE_M = 1e-9
+
+
+def _paths(data) -> list[Path]:
+    return [Path(p) for p in (data if isinstance(data, (list, tuple)) else [data])]
+
+
+@dataclass(frozen=True)
+class FixtureRun:
+    """Outcome of :func:`calibrate_fixture_files`."""
+
+    result: FixtureCalibration
+    report: dict[str, Any]
+    seconds: float
+    reload_error: float
+
+
+def calibrate_fixture_files(
+    urdf: str | Path,
+    data_paths: Sequence[str | Path],
+    fixture_path: str | Path,
+    tip_link: str,
+    out_urdf: str | Path,
+    report_path: str | Path,
+    level: str = "full",
+    selection: str = "aic",
+    xacro_args: Sequence[tuple[str, str]] = (),
+) -> FixtureRun:
+    """Calibrate ``urdf`` on socket-fixture data; write the corrected URDF and the report.
+    ``level`` ``auto``: the level cross-validation over the placements supports
+    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``)."""
+    from pincal.cli.workflows import write_checked_urdf
+
+    urdf, fixture_path, out_urdf, report_path = Path(urdf), Path(fixture_path), Path(out_urdf), Path(report_path)
+    data_paths = _paths(data_paths)
+    inputs = [*description_inputs(urdf, xacro_args), fixture_path, *data_paths]  # a xacro's includes too
+    refuse_overwrite(out_urdf, *inputs)
+    refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    chain = KinematicChain.from_urdf(urdf, tip_link, xacro_args=xacro_args or None)
+    fixture = read_fixture(fixture_path)
+    data = read_fixture_data(data_paths, chain.joint_specs, fixture)
+    nominal_placements = chain.placements()
+    started = time.perf_counter()
+    choice = None
+    if level == "auto":  # leave-one-placement-out (or folds of rows) on the calibration data
+        choice = choose_fixture_level(chain, data, selection=selection)
+        level = choice.chosen
+    result = calibrate_fixture(chain, data, level, selection=selection)
+    seconds = time.perf_counter() - started
+    sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
+               "corrected_urdf": str(out_urdf)}
+    report = fixture_report(result, chain, data, sources, [], file_sha256(urdf))
+    if choice is not None:
+        report["level_choice"] = choice.as_dict()
+    report["xacro_args"] = dict(xacro_arguments(xacro_args))  # evaluate --fixture rebuilds the nominal with them
+    names = ", ".join(p.name for p in data_paths)
+    reload_error, report["urdf_sha256"] = write_checked_urdf(
+        urdf, out_urdf, chain, nominal_placements, data.q,
+        f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
+        f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args,
+    )
+    write_report(report_path, report)
+    return FixtureRun(result, report, seconds, reload_error)
+
+
+@dataclass(frozen=True)
+class FixtureEvaluation:
+    """Outcome of :func:`evaluate_fixture_files`: after (corrected URDF) and before (nominal, if at hand).
+
+    Attributes:
+        not_held_out: evaluated placements the calibration also used (their errors are not held out).
+    """
+
+    after: FixtureMetrics
+    before: FixtureMetrics | None
+    notes: list[str]
+    not_held_out: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"after": self.after.as_dict(), "before": None if self.before is None else self.before.as_dict(),
+                "not_held_out": list(self.not_held_out), "notes": list(self.notes)}
+
+
+def _read_report(report_path: Path) -> tuple[dict[str, Any], tuple]:
+    try:
+        document = json.loads(report_path.read_text(encoding="utf-8"))
+        return document, read_fixture_block(document)
+    except FileNotFoundError:
+        raise PincalError(f"{report_path}: no such report file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError):
+        raise PincalError(f"{report_path}: not the report of a socket-fixture calibration (no 'fixture' block); "
+                          "pass the REPORT.json written by 'pincal calibrate --fixture'") from None
+
+
+def _reported_nominal(document: dict[str, Any], report_path: Path, sha: str | None) -> tuple[Path | None, list[Path], str]:
+    """The report's ``sources.urdf`` as written, else beside the report: the file with the recorded SHA-256.
+
+    ``sources.urdf`` is the path calibrate was given, relative to where it ran; so it
+    is looked for there (the current folder), then relative to the report's folder,
+    then by name in the report's folder. Returns the match (or None), every
+    candidate that exists (inputs all) and, for a None, why.
+    """
+    text = str((document.get("sources") or {}).get("urdf") or "")
+    if not text:
+        return None, [], "the report names no nominal URDF (sources.urdf)"
+    given = Path(text)
+    tried = list(dict.fromkeys([given] if given.is_absolute() else
+                               [given, report_path.parent / given, report_path.parent / given.name]))
+    existing = [p for p in tried if p.is_file()]
+    match = next((p for p in existing if file_sha256(p) == sha), None)
+    if existing:
+        why = (f"the nominal URDF {existing[0]} (the report's sources.urdf) was changed since the calibration "
+               "(its SHA-256 differs)")
+    else:
+        why = f"the nominal URDF {text} (the report's sources.urdf) is not at {' nor '.join(map(str, tried))}"
+    return match, existing, why
+
+
+def _check_same_fixture(fixture: Fixture, document: dict[str, Any], fixture_path: Path, report_path: Path) -> None:
+    """Refuse a fixture file whose sockets or socket distances differ from the calibration's (REPORT.json)."""
+    block = document["fixture"]
+    if "sockets" not in block or "distances_mm" not in block:
+        return
+    recorded = [str(s["name"]) for s in block["sockets"]]
+    if sorted(recorded) != sorted(fixture.names):
+        raise PincalError(f"{fixture_path}: sockets {', '.join(fixture.names)}, but the calibration's fixture "
+                          f"({report_path}) has {', '.join(recorded)}; evaluate with the fixture file the "
+                          "calibration used")
+    index = {name: i for i, name in enumerate(fixture.names)}
+    for pair in block["distances_mm"]:
+        mm = fixture.distance(index[str(pair["a"])], index[str(pair["b"])]) * 1000.0
+        if abs(mm - float(pair["mm"])) > SAME_FIXTURE_M * 1000.0:
+            raise PincalError(f"{fixture_path}: sockets {pair['a']} and {pair['b']} are {mm:.6f} mm apart, in the "
+                              f"calibration's fixture ({report_path}) {float(pair['mm']):.6f} mm; evaluate with the "
+                              f"fixture file the calibration used (tolerance {SAME_FIXTURE_M:g} m)")
+
+
+def evaluate_fixture_files(
+    urdf: str | Path,
+    report_path: str | Path,
+    data_paths: Sequence[str | Path],
+    fixture_path: str | Path,
+    nominal_urdf: str | Path | None = None,
+    allow_other_urdf: bool = False,
+    xacro_args: Sequence[tuple[str, str]] = (),
+    outputs: Sequence[str | Path] = (),
+) -> FixtureEvaluation:
+    """Consistency and distortion of a fixture calibration on socket-fixture data.
+
+    The "before" uses ``nominal_urdf`` or, when not given, the report's
+    ``sources.urdf`` (found as :func:`_reported_nominal` says) if that file is
+    still the one calibrated (same SHA-256); otherwise it is left out with a note.
+    The fixture file must have the calibration's sockets and distances (to
+    :data:`SAME_FIXTURE_M`). ``xacro_args`` apply to whichever URDF is a ``.xacro``
+    (the nominal found through the report gets the report's ``xacro_args``).
+    ``outputs``: the files the caller will write; each is checked against every input
+    (the URDFs, what a xacro includes, the report, the fixture and data files) first.
+    """
+    urdf, report_path, fixture_path = Path(urdf), Path(report_path), Path(fixture_path)
+    data_paths = _paths(data_paths)
+    document, (tip, ball, nominal_ball, nominal_sha) = _read_report(report_path)
+    notes: list[str] = []
+    recorded = document.get("urdf_sha256")
+    if recorded is not None and file_sha256(urdf) != recorded:
+        if not allow_other_urdf:
+            raise PincalError(
+                f"{urdf}: not the URDF {report_path} was written with (its SHA-256 differs from the report's "
+                "urdf_sha256); evaluate the pair calibrate wrote, or pass --allow-other-urdf if you changed it "
+                "on purpose")
+        notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
+    candidates: list[Path] = []
+    if nominal_urdf is not None:
+        nominal: Path | None = Path(nominal_urdf)
+        nominal_args = tuple(xacro_args)
+    else:
+        nominal, candidates, why = _reported_nominal(document, report_path, nominal_sha)
+        nominal_args = tuple(xacro_args) or tuple((document.get("xacro_args") or {}).items())
+        if nominal is None:
+            notes.append(f"no 'before': {why}; pass --nominal URDF")
+    if xacro_args and not (is_xacro(urdf) or (nominal is not None and is_xacro(nominal))):
+        raise PincalError("--xacro-arg applies to a .xacro URDF, and neither the evaluated nor the nominal URDF "
+                          "is one; drop --xacro-arg")
+
+    def args_of(path: Path) -> tuple:
+        return (nominal_args if path == nominal else tuple(xacro_args)) if is_xacro(path) else ()
+
+    inputs = [*description_inputs(urdf, args_of(urdf)), report_path, fixture_path, *data_paths, *candidates]
+    if nominal is not None:
+        inputs += description_inputs(nominal, args_of(nominal))
+    for n, output in enumerate(outputs):
+        refuse_overwrite(output, *inputs, outputs=[o for m, o in enumerate(outputs) if m != n])
+    fixture = read_fixture(fixture_path)
+    _check_same_fixture(fixture, document, fixture_path, report_path)
+    chain = KinematicChain.from_urdf(urdf, tip, xacro_args=args_of(urdf) or None)
+    data = read_fixture_data(data_paths, chain.joint_specs, fixture)
+    trained = {str(p.get("name")) for p in document["fixture"].get("placements") or []}
+    seen = tuple(name for name in data.placements if name in trained)
+    if seen:
+        notes.append(f"not held out: placement(s) {', '.join(seen)} of the calibration's ({report_path}); "
+                     "their errors are not those of new placements")
+    after = fixture_metrics(chain, data, ball)
+    before = None
+    if nominal is not None:
+        if file_sha256(nominal) != nominal_sha:
+            notes.append(f"{nominal}: not the URDF the calibration started from (SHA-256 differs)")
+        before = fixture_metrics(KinematicChain.from_urdf(nominal, tip, xacro_args=args_of(nominal) or None), data,
+                                 nominal_ball)
+    return FixtureEvaluation(after, before, notes, seen)
+
+
+# --- what the commands print -------------------------------------------------------------
+
+
+def _refuse(args: argparse.Namespace, flags: dict[str, str]) -> None:
+    """One line for flags given that socket-fixture data have no use for: a value flag is given
+    when not None (a ``--tool`` pose is an array: never compared by value), a switch when True."""
+    given = [flag for name, flag in flags.items() if getattr(args, name, None) is not None
+             and getattr(args, name) is not False]
+    if given:
+        verb = "does" if len(given) == 1 else "do"
+        raise PincalError(f"{', '.join(given)} {verb} not apply to socket-fixture data (--fixture: no sensor, the "
+                          "ball centre is estimated); drop " + ("it" if len(given) == 1 else "them"))
+
+
+def _write_html(html: Path | None, document: dict[str, Any], base: Path, evaluation: dict | None = None) -> None:
+    if html is not None:
+        from pincal.report.html import write_html
+
+        write_html(html, document, evaluation=evaluation, base=base)
+        print(f"wrote {html}")
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """``pincal calibrate URDF DATA... --fixture FIXTURE.csv --tip-link LINK``."""
+    _refuse(args, CALIBRATE_SENSOR_ONLY)
+    level = args.level or "full"
+    if level == "dh":
+        raise PincalError("--level dh (the paper's methods) needs a sensor; use registration, offsets or full "
+                          "with --fixture")
+    if args.tip_link is None:
+        raise PincalError("give the link carrying the ball: --tip-link LINK")
+    xacro_args = getattr(args, "xacro_args", ()) or ()
+    if args.html is not None:  # before the fit, as every other output
+        refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *_paths(args.data),
+                         outputs=[args.out, args.report])
+    run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.tip_link, args.out, args.report,
+                                  level=level, selection=args.select, xacro_args=xacro_args)
+    result, report = run.result, run.report
+    level = result.level
+    for note in report["notes"]:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    if "level_choice" in report:
+        print("\n".join(level_choice_lines(report["level_choice"])))
+    ident = report["identifiability"]
+    kept = sum(1 for p in report["parameters"] if p["calibrated"] is not None)
+    print(f"socket fixture, level {level}: {result.n_rows} rows in {len(result.placements)} placement(s); "
+          f"{kept} kinematic parameters kept of {len(report['parameters'])} ({ident['rank']} identifiable), "
+          "plus the ball centre and the placements")
+    if ident["selection"]:
+        print(f"selection: {ident['selection']['criterion']} = {ident['selection']['value']:.4g} "
+              f"with {ident['selection']['kept']} kept")
+    ball, std = result.ball * 1000.0, result.ball_std * 1000.0
+    print(f"ball centre in {args.tip_link}: " + ", ".join(f"{v:.3f} ± {s:.3f}" for v, s in zip(ball, std)) + " mm")
+    for placement in result.placements:
+        turn = " (turn about the socket line not determined)" if placement.line_direction is not None else ""
+        print(f"placement {placement.name}: {placement.rows} rows, sockets {', '.join(placement.sockets)}{turn}")
+    for file, line, score in result.outliers:
+        print(f"outlier (kept in the fit): {file} line {line} (robust score {score:.1f})")
+    _print_metrics("calibration placements", result.nominal_training, result.training)
+    print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")
+    print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
+    print(f"wrote {args.report}")
+    _write_html(args.html, report, Path(args.report).parent)
+    return 0
+
+
+def _print_metrics(title: str, before: FixtureMetrics | None, after: FixtureMetrics) -> None:
+    print(f"{title:24s} {'consistency [mm]':>22s} {'distortion [mm]':>22s}")
+    rows = [(p.placement, b, p) for p, b in zip(after.placements, before.placements if before else
+                                               [None] * len(after.placements))]
+    rows.append(("all", before, after))
+    for name, b, a in rows:
+        cons = f"{a.consistency_mm:8.3f}" if b is None else f"{b.consistency_mm:8.3f} -> {a.consistency_mm:7.3f}"
+        dist = f"{a.distortion_mm:8.3f}" if b is None else f"{b.distortion_mm:8.3f} -> {a.distortion_mm:7.3f}"
+        print(f"{name:24s} {cons:>22s} {dist:>22s}")
+    print("(nominal -> calibrated)" if before is not None else "(calibrated model only)")
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """``pincal evaluate CORRECTED.urdf REPORT.json DATA... --fixture FIXTURE.csv [--nominal URDF]``."""
+    _refuse(args, EVALUATE_SENSOR_ONLY)
+    outputs = [Path(o) for o in (args.json, args.html) if o is not None]
+    evaluation = evaluate_fixture_files(args.urdf, args.report, args.data, args.fixture, nominal_urdf=args.nominal,
+                                        allow_other_urdf=args.allow_other_urdf,
+                                        xacro_args=getattr(args, "xacro_args", ()) or (), outputs=outputs)
+    for note in evaluation.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    _print_metrics("evaluated placements" + (" (not held out)" if evaluation.not_held_out else ""),
+                   evaluation.before, evaluation.after)
+    if args.json:
+        write_text(args.json, json.dumps(evaluation.as_dict(), indent=2) + "\n")
+        print(f"wrote {args.json}")
+    if args.html is not None:
+        from pincal.report.html import load_document
+
+        shown = {"urdf": str(args.urdf), "data": ", ".join(str(p) for p in _paths(args.data)),
+                 "fixture": evaluation.as_dict()}
+        _write_html(args.html, load_document(args.report), Path(args.report).parent, evaluation=shown)
+    return 0

@@ -1,0 +1,361 @@
+"""Calibration of a serial chain from a ball seated in fixture sockets (no external sensor).
+
+The model is eq F1 of :mod:`pincal.residuals.fixture`: one kinematic model
+(levels ``registration``, ``offsets``, ``full`` of
+:mod:`pincal.fit.chain_calibration`), one ball centre m in the tip frame, and
+one pose of the fixture per placement, of which only what the placement's
+sockets determine is estimated (two sockets: the position and the direction
+of their line, never the turn about it).
+
+The start comes from the nominal model by linear least squares: every row of
+socket i in placement s satisfies t_k + R_k m = p_si, linear in m and the socket
+centres p_si (pivot calibration); each placement's pose then maps the
+fixture's sockets onto its p_si (Arun et al. 1987 for sockets spanning a plane,
+the shortest turn of the socket line onto the measured one for collinear
+sockets). The fit with the nominal kinematics (level ``registration``) is the
+"before" of a calibration. Which kinematic parameters the data determine, and
+how many weak ones to keep (AIC by default), is decided exactly as for sensor
+data (:func:`pincal.fit.identifiability.order_parameters`, the selection of
+:mod:`pincal.fit.chain_calibration`), on the calibration placements only.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import (
+    CHAIN_LEVELS,
+    KEPT,
+    NOT_IDENTIFIABLE,
+    NOT_SELECTED,
+    SELECTION_CRITERIA,
+    Dropped,
+)
+from pincal.fit.identifiability import (
+    Selection,
+    absorbed_into,
+    condition_number,
+    correlated_pairs,
+    order_parameters,
+)
+from pincal.fit.outliers import find_outliers
+from pincal.fit.registration import register_points
+from pincal.fit.selection import select_subset
+from pincal.fit.socket_metrics import FixtureMetrics, metrics_of_positions
+from pincal.fit.solver import gram, solve
+from pincal.measurements.data import MeasurementSet
+from pincal.measurements.fixture import FixtureData
+from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import LEVELS, NoParameters
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.fixture import FixtureEstimate, FixtureResidual, rotation_basis
+
+#: Columns whose smallest singular value (unit columns) is below this fraction of the largest are dependent.
+DEPENDENT_COLUMNS = 1e-8
+
+
+@dataclass(frozen=True)
+class PlacementEstimate:
+    """What the data determine of one placement's pose, in the URDF root frame.
+
+    Attributes:
+        name: the placement.
+        rows: its rows in the fit.
+        sockets: names of the sockets it used.
+        socket_positions: their centres c_s + R_s f_i [m], (M_s, 3).
+        socket_std: standard deviations of those [m], (M_s, 3).
+        line_direction: R_s u, the sockets' line in the root frame (collinear
+            sockets; the turn about it is not determined), else None.
+        rotation: R_s (sockets spanning a plane), else None.
+        translation: c_s, the fixture frame's origin (sockets spanning a plane), else None.
+    """
+
+    name: str
+    rows: int
+    sockets: tuple[str, ...]
+    socket_positions: np.ndarray
+    socket_std: np.ndarray
+    line_direction: np.ndarray | None
+    rotation: np.ndarray | None
+    translation: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class FixtureCalibration:
+    """Outcome of :func:`calibrate_fixture`.
+
+    Attributes:
+        level: ``registration``, ``offsets`` or ``full``.
+        params: the kinematic parameter set (None at level ``registration``).
+        vector / std / status: kinematic parameters (zero = nominal), their
+            standard deviations (NaN where not estimated) and why not.
+        ball / ball_std: the ball centre m in the tip (tool) frame and its std [m].
+        placements: what each placement's pose is, as far as determined.
+        nominal_ball: m fitted with the nominal kinematics (the "before") [m].
+        training / nominal_training: consistency and distortion of the fit and of
+            the nominal kinematics on the calibration rows.
+        rank, condition, selection, dropped, correlated: identifiability report.
+        rms_m / nominal_rms_m: RMS of eq F1 per coordinate at the solution, and
+            with the nominal kinematics [m].
+        outliers: (file, line, robust score) of rows far from the others (reported, kept in the fit).
+        n_rows: rows in the fit.
+        fit_seconds / total_seconds: the final fit; everything, selection included [s].
+        kept: indices of the kinematic parameters estimated.
+        notes: things the user should know.
+    """
+
+    level: str
+    params: object | None
+    vector: np.ndarray
+    std: np.ndarray
+    status: tuple[str, ...]
+    ball: np.ndarray
+    ball_std: np.ndarray
+    placements: tuple[PlacementEstimate, ...]
+    nominal_ball: np.ndarray
+    training: FixtureMetrics
+    nominal_training: FixtureMetrics
+    rank: int
+    condition: float
+    selection: Selection | None
+    dropped: tuple[Dropped, ...]
+    correlated: tuple[tuple[str, str, float], ...]
+    rms_m: float
+    nominal_rms_m: float
+    outliers: tuple[tuple[str, int, float], ...]
+    n_rows: int
+    fit_seconds: float
+    total_seconds: float
+    kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
+    notes: tuple[str, ...] = ()
+
+
+def initial_fixture(chain: KinematicChain, data: FixtureData) -> tuple[FixtureEstimate, list[np.ndarray], list]:
+    """Ball centre and placement poses from the chain as it is (pivot calibration, then the poses).
+
+    Returns:
+        The estimate, B_s of each placement (:func:`pincal.residuals.fixture.rotation_basis`)
+        and each placement's line direction u in the fixture frame (None when not collinear).
+    """
+    poses = chain.poses(data.q)
+    groups = data.placement * len(data.fixture.names) + data.socket  # one unknown centre per (s, i)
+    labels, group = np.unique(groups, return_inverse=True)
+    k = data.n_rows
+    # R_k m − p_g = −t_k: 3K equations in m (3) and the group centres (3G)
+    a = np.zeros((k, 3, 3 + 3 * len(labels)))
+    a[:, :, :3] = poses.tool_rotations
+    for row, g in enumerate(group):
+        a[row, :, 3 + 3 * g : 6 + 3 * g] = -np.eye(3)
+    solution = np.linalg.lstsq(a.reshape(3 * k, -1), -poses.tool_positions.reshape(-1), rcond=None)[0]
+    ball, centres = solution[:3], solution[3:].reshape(-1, 3)
+    rotations, positions, bases, lines = [], [], [], []
+    for s in range(len(data.placements)):
+        mine = labels // len(data.fixture.names) == s
+        f = data.fixture.points[labels[mine] % len(data.fixture.names)]
+        measured = centres[mine]
+        basis, line = rotation_basis(f)
+        if line is None:
+            registration = register_points(f, measured)  # measured ≈ R f + c
+            rotation, position = registration.rotation, registration.translation
+        else:
+            direction = np.linalg.svd(measured - measured.mean(axis=0))[2][0]
+            if ((f - f.mean(axis=0)) @ line) @ ((measured - measured.mean(axis=0)) @ direction) < 0:
+                direction = -direction
+            rotation = pin.Quaternion.FromTwoVectors(line, direction).matrix()
+            position = measured.mean(axis=0) - rotation @ f.mean(axis=0)
+        rotations.append(rotation)
+        positions.append(position)
+        bases.append(basis)
+        lines.append(line)
+    return FixtureEstimate(ball, np.array(rotations), np.array(positions)), bases, lines
+
+
+class FixtureProblem:
+    """Fits of eq F1 over subsets of the kinematic parameters (the interface the selection uses)."""
+
+    def __init__(self, chain: KinematicChain, params, data: FixtureData, start: FixtureEstimate, bases) -> None:
+        self.chain, self.params, self.data = chain, params, data
+        self.start, self.bases = start, bases
+        self.models: dict = {}
+
+    def objective(self, free: np.ndarray, base: np.ndarray) -> FixtureResidual:
+        params = self.params if self.params is not None else NoParameters(self.chain)
+        cache = KinematicsCache(params, free, base, self.data.q, self.models)
+        return FixtureResidual(cache, self.data.placement, self.data.socket_points, self.bases, self.start)
+
+    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
+        objective = self.objective(free, base)
+        solution = solve(objective, objective.start_vector() if x0 is None else x0, what=what)
+        return objective, solution
+
+    def rows_view(self) -> MeasurementSet:
+        """The rows as one-point measurements (the socket in its fixture frame), for the selection's bookkeeping."""
+        data = self.data
+        return MeasurementSet(data.joint_names, data.q, data.socket_points[:, None, :], None,
+                              np.full(data.n_rows, "calibration", dtype=object), data.lines, {},
+                              ", ".join(data.sources))
+
+
+def calibrate_fixture(
+    chain: KinematicChain, data: FixtureData, level: str, selection: str = "aic"
+) -> FixtureCalibration:
+    """Calibrate ``chain`` at ``level`` from the socket-fixture rows ``data``.
+
+    The chain's tool frame is the frame the ball centre is estimated in. On
+    return the chain holds the calibrated placements.
+
+    Raises:
+        CalibrationError: an unknown level or criterion, too few rows for the
+            unknowns, or a fit the data cannot determine.
+    """
+    if level not in CHAIN_LEVELS:
+        raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
+    if selection not in SELECTION_CRITERIA:
+        raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{selection}'")
+    started = time.perf_counter()
+    params = LEVELS[level](chain) if level in LEVELS else None
+    start, bases, lines = initial_fixture(chain, data)
+    problem = FixtureProblem(chain, params, data, start, bases)
+    size = params.size if params is not None else 0
+    base, empty = np.zeros(size), np.array([], dtype=int)
+    objective, solution = problem.fit(empty, base, what="ball and placements (nominal kinematics)")
+    nominal = objective.estimate(solution.x)
+    nominal_rms = solution.rms
+    nominal_training = metrics_of_positions(objective.ball_positions(solution.x), data)
+    problem.start = nominal
+    chosen, dropped, rank, kept = None, (), 0, empty
+    if size:
+        full = problem.objective(np.arange(size), base)
+        jac, turn = _identifiability_jacobian(full)
+        kinematic = np.arange(size)
+        others = np.arange(size, jac.shape[1])
+        ordering = order_parameters(jac, kinematic, others)
+        rank = ordering.rank
+        chosen, kept = select_subset(problem, ordering, base, problem.rows_view(), selection)
+        names = column_names(full, params, np.arange(size), data) + [f"root_frame.r{a}" for a in "xyz"][:turn]
+        dropped = _dropped(jac, ordering, kept, others, names)
+    fit_started = time.perf_counter()
+    objective, solution = problem.fit(kept, base, what=f"{level} fit")
+    fit_seconds = time.perf_counter() - fit_started
+    x = solution.x
+    vector = base.copy()
+    vector[kept] = x[objective.blocks["kinematic"]]
+    std = np.full(size, np.nan)
+    std[kept] = solution.std[objective.blocks["kinematic"]]
+    status = np.array([NOT_IDENTIFIABLE] * size, dtype=object)
+    if size:
+        status[ordering.order[:rank]] = NOT_SELECTED
+        status[kept] = KEPT
+        params.apply(vector)
+    jac = solution.jacobian
+    covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    names = column_names(objective, params, kept, data)
+    errors = np.linalg.norm(solution.residual.reshape(-1, 3), axis=1)
+    return FixtureCalibration(
+        level=level,
+        params=params,
+        vector=vector,
+        std=std,
+        status=tuple(status),
+        ball=x[objective.blocks["ball"]].copy(),
+        ball_std=np.sqrt(np.diag(covariance)[objective.blocks["ball"]]),
+        placements=_placements(objective, x, covariance, data, lines),
+        nominal_ball=nominal.ball,
+        training=metrics_of_positions(objective.ball_positions(x), data),
+        nominal_training=nominal_training,
+        rank=rank,
+        condition=condition_number(jac),
+        selection=chosen,
+        dropped=dropped,
+        correlated=tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance)),
+        rms_m=solution.rms,
+        nominal_rms_m=nominal_rms,
+        outliers=tuple((data.sources[data.files[k]], int(data.lines[k]), score)
+                       for k, score in find_outliers(errors[:, None], np.arange(data.n_rows))),
+        n_rows=data.n_rows,
+        fit_seconds=fit_seconds,
+        total_seconds=time.perf_counter() - started,
+        kept=kept,
+    )
+
+
+def _identifiability_jacobian(full: FixtureResidual) -> tuple[np.ndarray, int]:
+    """The Jacobian at the start, with the turn of the root frame appended to the
+    always-estimated columns (:meth:`FixtureResidual.root_rotation_columns`), unless
+    the placements already absorb it column for column (sockets spanning a plane
+    and a consistent model): dependent columns would give the projection of
+    :func:`pincal.fit.identifiability.order_parameters` arbitrary directions.
+
+    Returns:
+        (3K, n + t) and t, the number of root-frame columns appended (3 or 0).
+    """
+    x = full.start_vector()
+    jac = full.jacobian(x)
+    turn = full.root_rotation_columns(x)
+    always = np.hstack([jac[:, full.blocks["kinematic"].stop:], turn])
+    always = always / np.linalg.norm(always, axis=0)
+    singular = np.linalg.svd(always, compute_uv=False)
+    if singular[-1] <= DEPENDENT_COLUMNS * singular[0]:
+        return jac, 0
+    return np.hstack([jac, turn]), 3
+
+
+def _placements(objective: FixtureResidual, x: np.ndarray, covariance: np.ndarray, data: FixtureData,
+                lines: list) -> tuple[PlacementEstimate, ...]:
+    """Socket centres (with their spread, propagated from the fit's covariance) and the
+    determined part of each placement's pose."""
+    estimate = objective.estimate(x)
+    out = []
+    for s, name in enumerate(data.placements):
+        used = np.unique(data.socket[data.placement == s])
+        f = data.fixture.points[used]
+        rotation, position = estimate.rotations[s], estimate.positions[s]
+        pos, rot = objective.position_slices[s], objective.rotation_slices[s]
+        phi = objective.bases[s] @ x[rot]
+        spread = []
+        for point in f:  # d(c + R f) / d(c, a) = [I, -R [f]x Jexp3(phi) B]
+            jac = np.zeros((3, objective.n_params))
+            jac[:, pos] = np.eye(3)
+            jac[:, rot] = -rotation @ pin.skew(point) @ pin.Jexp3(phi) @ objective.bases[s]
+            spread.append(np.sqrt(np.clip(np.diag(jac @ covariance @ jac.T), 0.0, None)))
+        collinear = lines[s] is not None
+        out.append(PlacementEstimate(
+            name=name,
+            rows=int(np.sum(data.placement == s)),
+            sockets=tuple(data.fixture.names[i] for i in used),
+            socket_positions=position + f @ rotation.T,
+            socket_std=np.array(spread),
+            line_direction=rotation @ lines[s] if collinear else None,
+            rotation=None if collinear else rotation,
+            translation=None if collinear else position,
+        ))
+    return tuple(out)
+
+
+def column_names(objective: FixtureResidual, params, kept: np.ndarray, data: FixtureData) -> list[str]:
+    """Names of the objective's columns: kinematic, ``ball.x`` …, ``placement[P].x`` …, ``placement[P].turn1`` …"""
+    names = [params.info[i].name for i in kept] if params is not None else []
+    names += [f"ball.{a}" for a in "xyz"]
+    for s, name in enumerate(data.placements):
+        names += [f"placement[{name}].{a}" for a in "xyz"]
+        sl = objective.rotation_slices[s]
+        names += [f"placement[{name}].turn{j + 1}" for j in range(sl.stop - sl.start)]
+    return names
+
+
+def _dropped(jac: np.ndarray, ordering, kept: np.ndarray, others: np.ndarray, names: list[str]) -> tuple[Dropped, ...]:
+    """Each kinematic parameter not kept, with the kept columns that absorb it."""
+    kept_cols = np.concatenate([kept, others]).astype(int)
+    kept_set = set(kept.tolist())
+    dropped = [(position, int(c)) for position, c in enumerate(ordering.order) if int(c) not in kept_set]
+    absorbers = absorbed_into(jac, [c for _, c in dropped], kept_cols)
+    return tuple(
+        Dropped(index=c, reason=NOT_SELECTED if position < ordering.rank else NOT_IDENTIFIABLE,
+                absorbed_into=tuple((names[a], coef) for a, coef in absorbing))
+        for (position, c), absorbing in zip(dropped, absorbers)
+    )

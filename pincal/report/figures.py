@@ -1,0 +1,211 @@
+"""Figures of the HTML report, drawn from a REPORT.json document alone.
+
+Each figure is an SVG (matplotlib's object API on its SVG canvas: no pyplot,
+no global state) returned as a ``data:`` URI, so the page embeds it and needs
+nothing else; text stays text (``svg.fonttype = none``) and the output is
+deterministic (fixed hash salt, no date).
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib import rc_context
+from matplotlib.backends.backend_svg import FigureCanvasSVG
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+
+from pincal.fit.outliers import OUTLIER_THRESHOLD
+
+#: Model colours, nominal first, the reported model last (the page's CSS uses the same).
+NOMINAL_COLOUR = "#9aa5b1"
+MIDDLE_COLOUR = "#e0a23b"
+FINAL_COLOUR = "#2563eb"
+FLAG_COLOUR = "#d1342f"
+_STYLE = {
+    "svg.fonttype": "none",
+    "svg.hashsalt": "pincal-report",
+    "font.family": "sans-serif",
+    "font.size": 9,
+    "axes.edgecolor": "#c5ccd3",
+    "axes.labelcolor": "#33404d",
+    "xtick.color": "#52606d",
+    "ytick.color": "#52606d",
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "axes.grid": True,
+    "grid.color": "#e4e8ec",
+    "grid.linewidth": 0.8,
+    "legend.frameon": False,
+}
+
+
+def model_colours(count: int) -> list[str]:
+    """Colours of ``count`` models, nominal first and the reported model last."""
+    if count == 1:
+        return [FINAL_COLOUR]
+    return [NOMINAL_COLOUR] + [MIDDLE_COLOUR] * (count - 2) + [FINAL_COLOUR]
+
+
+def _svg_uri(fig: Figure) -> str:
+    FigureCanvasSVG(fig)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="svg", metadata={"Date": None})
+    return "data:image/svg+xml;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def png_uri(path: Path) -> str | None:
+    """A PNG file as a ``data:`` URI, or None if ``path`` is not a readable PNG."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    if not data.startswith(b"\x89PNG\r\n\x1a\n"):
+        return None
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def overview_figure(stages: Sequence[dict[str, Any]]) -> str | None:
+    """RMS position (and orientation) error of each row set under each model, as bars.
+
+    Args:
+        stages: per row set, ``{"set": name, "models": [(model, rms_mm, rms_deg or None), ...]}``.
+    """
+    if not stages:
+        return None
+    has_rotation = any(m[2] is not None for s in stages for m in s["models"])
+    with rc_context(_STYLE):
+        fig = Figure(figsize=(7.2 if has_rotation else 5.2, 0.5 + 0.62 * sum(len(s["models"]) for s in stages)),
+                     layout="constrained")
+        axes = fig.subplots(1, 2 if has_rotation else 1, squeeze=False)[0]
+        for ax, column, unit in zip(axes, (1, 2), ("mm", "deg")):
+            labels, values, colours, y = [], [], [], 0.0
+            ticks = []
+            for stage in stages:
+                for (model, *rms), colour in zip(stage["models"], model_colours(len(stage["models"]))):
+                    value = rms[column - 1]
+                    labels.append(f"{stage['set']}: {model}")
+                    values.append(np.nan if value is None else value)
+                    colours.append(colour)
+                    ticks.append(y)
+                    y += 1.0
+                y += 0.5
+            finite = [v for v in values if np.isfinite(v) and v > 0]
+            spread = max(finite) / min(finite) if finite else 1.0
+            if spread > 30.0:  # nominal errors hundreds of times the calibrated ones: both stay readable
+                ax.set_xscale("log")
+            ax.barh(ticks, values, color=colours, height=0.8)
+            for tick, value in zip(ticks, values):
+                if np.isfinite(value):
+                    ax.text(value, tick, f" {value:#.3g}".rstrip("."), va="center", fontsize=8, color="#33404d")
+            ax.set_yticks(ticks, labels if column == 1 else [""] * len(labels))
+            ax.invert_yaxis()
+            ax.set_xlabel(f"RMS {'position' if unit == 'mm' else 'orientation'} error [{unit}]"
+                          + (" (log scale)" if spread > 30.0 else ""))
+            ax.grid(axis="y", visible=False)
+            if spread > 30.0:
+                ax.set_xlim(min(finite) / 3.0, max(finite) * 4.0)
+            else:
+                ax.set_xlim(0, 1.18 * max(finite) if finite else 1)
+        return _svg_uri(fig)
+
+
+def row_errors_figure(entry: dict[str, Any], flagged: Sequence[int]) -> str:
+    """Per-row errors of one ``row_errors`` set against file line: bars for the reported
+    model, markers for the earlier ones, the 5-robust-σ line, flagged rows in red.
+
+    Args:
+        entry: the ``row_errors`` set.
+        flagged: the flagged rows, as indices into ``entry["lines"]``.
+    """
+    files = [str(f) for f in entry.get("files") or []]
+    several = len(set(files)) > 1 and len(files) == len(entry["lines"])
+    # rows of several files share line numbers: then each row is drawn at its place in the set
+    lines = np.arange(1.0, len(files) + 1.0) if several else np.asarray(entry["lines"], dtype=float)
+    labels = [f"{Path(f).name}:{int(n)}" for f, n in zip(files, entry["lines"])] if several else \
+        [str(int(n)) for n in entry["lines"]]
+    models = entry["models"]
+    has_rotation = models[-1].get("orientation_deg") is not None
+    colours = model_colours(len(models))
+    flagged_set = {int(f) for f in flagged}
+    width = 0.8 * (float(np.min(np.diff(np.sort(lines)))) if lines.size > 1 else 1.0)
+    with rc_context(_STYLE):
+        fig = Figure(figsize=(11.0, 3.0 + (2.4 if has_rotation else 0.0)), layout="constrained")
+        axes = fig.subplots(2 if has_rotation else 1, 1, squeeze=False, sharex=True)[:, 0]
+        for ax, key, unit in zip(axes, ("position_mm", "orientation_deg"), ("mm", "deg")):
+            final = np.asarray(models[-1][key], dtype=float)
+            bar_colours = [FLAG_COLOUR if k in flagged_set else colours[-1] for k in range(len(lines))]
+            ax.bar(lines, final, width=width, color=bar_colours, zorder=2)
+            median = float(np.median(final))
+            scale = 1.4826 * float(np.median(np.abs(final - median)))
+            threshold = median + OUTLIER_THRESHOLD * scale
+            top = max(float(np.max(final)), threshold if scale > 0 else 0.0)
+            off_scale = []
+            for model, colour in zip(models[:-1], colours[:-1]):
+                values = None if model.get(key) is None else np.asarray(model[key], dtype=float)
+                if values is None:
+                    continue
+                if np.max(values) > 3.0 * top:  # would flatten the reported model's bars: say so instead
+                    off_scale.append(f"{model['model']} off scale (up to {np.max(values):.3g} {unit})")
+                    continue
+                ax.plot(lines, values, "o" if colour == NOMINAL_COLOUR else "_", ms=4 if colour ==
+                        NOMINAL_COLOUR else 7, mew=1.6, color=colour, label=model["model"], zorder=3)
+                top = max(top, float(np.max(values)))
+            if scale > 0:
+                ax.axhline(threshold, color=FLAG_COLOUR, lw=0.9, ls="--",
+                           label=f"median + {OUTLIER_THRESHOLD:g} robust σ", zorder=1)
+            if off_scale:
+                ax.text(0.995, 0.97, "; ".join(off_scale), transform=ax.transAxes, ha="right", va="top",
+                        fontsize=8, color="#52606d")
+            for k, (line, value) in enumerate(zip(lines, final)):
+                if k in flagged_set:
+                    ax.annotate(labels[k], (line, value), textcoords="offset points", xytext=(0, 3),
+                                ha="center", fontsize=7, color=FLAG_COLOUR)
+            ax.set_ylabel("position error [mm]\n(RMS over the target's points)" if key == "position_mm"
+                          else "orientation error [deg]")
+            ax.set_ylim(0, 1.15 * top if top > 0 else None)
+        files = list(dict.fromkeys(files)) if several else entry.get("file") or "the data file"
+        names = ", ".join(Path(str(f)).name for f in (files if isinstance(files, list) else [files]))
+        axes[-1].set_xlabel(f"row of {names}, in file and line order" if several else f"line in {names}")
+        handles, labels = axes[0].get_legend_handles_labels()  # earlier models, then the threshold line
+        bars = [Patch(color=colours[-1], label=models[-1]["model"])]
+        if flagged_set:
+            bars.append(Patch(color=FLAG_COLOUR, label="flagged rows"))
+        threshold = [h for h, label in zip(handles, labels) if label.startswith("median")]
+        handles = [h for h, label in zip(handles, labels) if not label.startswith("median")] + bars + threshold
+        fig.legend(handles=handles, loc="outside upper left", ncols=len(handles), fontsize=8)
+        return _svg_uri(fig)
+
+
+def parameter_figure(rows: Sequence[dict[str, Any]]) -> str | None:
+    """Calibrated change ± 2σ of every determined parameter, one panel per display unit.
+
+    Args:
+        rows: ``{"name", "change", "std", "unit"}`` in display units (mm, mrad, ...).
+    """
+    rows = [r for r in rows if r["change"] is not None]
+    if not rows:
+        return None
+    units = list(dict.fromkeys(r["unit"] for r in rows))
+    heights = [sum(1 for r in rows if r["unit"] == u) for u in units]
+    with rc_context(_STYLE):
+        fig = Figure(figsize=(7.2, 0.9 + 0.2 * sum(heights) + 0.5 * len(units)), layout="constrained")
+        axes = fig.subplots(len(units), 1, squeeze=False, height_ratios=[h + 1.5 for h in heights])[:, 0]
+        for ax, unit in zip(axes, units):
+            chosen = [r for r in rows if r["unit"] == unit]
+            y = np.arange(len(chosen))
+            change = np.array([r["change"] for r in chosen], dtype=float)
+            spread = np.array([np.nan if r["std"] is None else 2.0 * r["std"] for r in chosen], dtype=float)
+            ax.errorbar(change, y, xerr=np.where(np.isfinite(spread), spread, 0.0), fmt="o", ms=3.5,
+                        color=FINAL_COLOUR, ecolor="#93b4f5", elinewidth=2, capsize=0)
+            ax.axvline(0.0, color="#52606d", lw=0.8)
+            ax.set_yticks(y, [r["name"] for r in chosen], fontsize=7.5)
+            ax.invert_yaxis()
+            ax.set_xlabel(f"change from nominal [{unit}] (bars: ± 2 standard deviations)")
+            ax.grid(axis="y", visible=False)
+        return _svg_uri(fig)

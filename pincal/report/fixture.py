@@ -1,0 +1,153 @@
+"""REPORT.json of a socket-fixture calibration (``pincal calibrate --fixture``).
+
+The keys of a sensor calibration keep their meaning (:mod:`pincal.report.document`):
+``level``, ``parameters``, ``identifiability``, ``chain``, ``sources``,
+``tool`` (``parent_link``, ``points_m`` and ``xyz_m``: the ball centre in the
+tip link; no ``rpy_rad``, a ball has no orientation the data could see),
+``noise``, ``outliers``, ``fit``, ``notes``, ``urdf_sha256``. There is no
+``registration``: no sensor. The ``fixture`` block adds:
+
+* ``file``, ``sockets`` (name, ``xyz_m`` in the fixture frame), ``distances_mm``;
+* ``ball_centre_m`` and ``ball_centre_std_m`` (tip link frame);
+* ``placements``: per placement its ``rows``, each used socket's centre in the
+  URDF root frame (``position_m``, ``std_m``) and what the data determine of
+  its pose: ``line_direction`` for collinear sockets (``rotation_xyzw`` and
+  ``translation_m`` are then null: the turn about the line is not determined),
+  else the whole pose;
+* ``training``: consistency and distortion (:mod:`pincal.fit.socket_metrics`)
+  of the nominal model (``before``) and of the calibrated one (``after``) on
+  the calibration placements;
+* ``nominal``: the ball centre fitted with the nominal kinematics and the
+  SHA-256 of the nominal URDF — what ``pincal evaluate --fixture`` needs for
+  its "before".
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pincal._version import __version__
+from pincal.fit.fixture_calibration import FixtureCalibration
+from pincal.measurements.fixture import FixtureData
+from pincal.model.chain import KinematicChain
+from pincal.report.document import REPORT_VERSION
+
+#: What the report says of a collinear placement's rotation.
+TURN_NOT_DETERMINED = "the turn about the socket line: the sockets are collinear"
+
+
+def _number(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def fixture_report(
+    result: FixtureCalibration,
+    chain: KinematicChain,
+    data: FixtureData,
+    sources: dict[str, Any],
+    notes: list[str],
+    nominal_urdf_sha256: str,
+) -> dict[str, Any]:
+    """Build the REPORT.json document of a socket-fixture calibration."""
+    params = result.params
+    size = params.size if params is not None else 0
+    names = {i: params.info[i].name for i in range(size)}
+    parameters = [
+        {
+            "name": params.info[i].name,
+            "joint": params.info[i].joint,
+            "unit": params.info[i].unit,
+            "nominal": 0.0,
+            "calibrated": float(result.vector[i]) if result.status[i] == "calibrated" else None,
+            "std": _number(result.std[i]) if result.status[i] == "calibrated" else None,
+            "status": result.status[i],
+        }
+        for i in range(size)
+    ]
+    selection = result.selection
+    fixture = data.fixture
+    ball = result.ball.tolist()
+    return {
+        "pincal_version": __version__,
+        "report_version": REPORT_VERSION,
+        "method": None,
+        "level": result.level,
+        "model": "joint placements",
+        "measurement": "socket fixture",
+        "sources": sources,
+        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
+                  "joint_kinds": [spec.kind for spec in chain.joint_specs]},
+        "parameters": parameters,
+        "identifiability": {
+            "rank": result.rank,
+            "jacobian_condition": result.condition,
+            "selection": None if selection is None else {
+                "criterion": selection.criterion,
+                "kept": selection.chosen,
+                "value": float(selection.scores[selection.sizes.index(selection.chosen)]),
+                "candidates": [{"kept": n, "value": v} for n, v in zip(selection.sizes, selection.scores)],
+            },
+            "dropped": [
+                {"name": names[d.index], "reason": d.reason,
+                 "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into]}
+                for d in result.dropped
+            ],
+            "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
+        },
+        "tool": {"parent_link": chain.tip_link, "points_m": [ball], "xyz_m": ball},
+        "noise": {"sigma_pos_mm": result.rms_m * 1000.0, "sigma_rot_deg": None},
+        "outliers": [{"file": file, "line": line, "robust_score": score} for file, line, score in result.outliers],
+        "removed_lines": [],
+        "fit": {
+            "rows": {"calibration": result.n_rows},
+            "rows_used": result.n_rows,
+            "rms_point_error_mm": result.rms_m * math.sqrt(3.0) * 1000.0,
+            "fit_seconds": result.fit_seconds,
+            "total_seconds": result.total_seconds,
+        },
+        "fixture": {
+            "file": sources.get("fixture"),
+            "sockets": [{"name": n, "xyz_m": p.tolist()} for n, p in zip(fixture.names, fixture.points)],
+            "distances_mm": [
+                {"a": fixture.names[a], "b": fixture.names[b], "mm": fixture.distance(a, b) * 1000.0}
+                for a in range(len(fixture.names)) for b in range(a + 1, len(fixture.names))
+            ],
+            "ball_centre_m": ball,
+            "ball_centre_std_m": result.ball_std.tolist(),
+            "placements": [_placement(p) for p in result.placements],
+            "training": {"before": result.nominal_training.as_dict(), "after": result.training.as_dict()},
+            "nominal": {"urdf_sha256": nominal_urdf_sha256, "ball_centre_m": result.nominal_ball.tolist(),
+                        "rms_point_error_mm": result.nominal_rms_m * math.sqrt(3.0) * 1000.0},
+        },
+        "notes": list(result.notes) + list(notes),
+    }
+
+
+def _placement(placement) -> dict[str, Any]:
+    collinear = placement.line_direction is not None
+    return {
+        "name": placement.name,
+        "rows": placement.rows,
+        "sockets": [{"name": n, "position_m": p.tolist(), "std_m": s.tolist()}
+                    for n, p, s in zip(placement.sockets, placement.socket_positions, placement.socket_std)],
+        "line_direction": placement.line_direction.tolist() if collinear else None,
+        "rotation_xyzw": None if collinear else Rotation.from_matrix(placement.rotation).as_quat().tolist(),
+        "translation_m": None if collinear else placement.translation.tolist(),
+        "not_determined": TURN_NOT_DETERMINED if collinear else None,
+    }
+
+
+def read_fixture_block(document: dict[str, Any]) -> tuple[str, np.ndarray, np.ndarray, str | None]:
+    """Tip link, ball centre, nominal ball centre [m] and nominal URDF SHA-256 of a fixture report.
+
+    Raises:
+        KeyError, TypeError, ValueError: not a fixture report (the caller names the file).
+    """
+    block = document["fixture"]
+    ball = np.asarray(block["ball_centre_m"], dtype=float).reshape(3)
+    nominal = np.asarray(block["nominal"]["ball_centre_m"], dtype=float).reshape(3)
+    return str(document["tool"]["parent_link"]), ball, nominal, block["nominal"].get("urdf_sha256")

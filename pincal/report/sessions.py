@@ -1,0 +1,61 @@
+"""REPORT.json ``sessions``: each session's registration and errors.
+
+A calibration of several sessions (files, or values of a ``session`` column)
+estimates one registration sensor_T_base per session with one model and one
+target (:mod:`pincal.fit.sessions`). Each entry::
+
+    {"name": "day2", "file": "day2.csv", "rows": 40,
+     "registration": {"position": {...}, "orientation": {...}},
+     "calibration_errors": {...eq 24 on the session's rows...}}
+
+``registration`` has the keys of the report's top-level ``registration``
+(``rotation_xyzw``, ``translation_m``: g ≈ Omega t + tau); one estimate serves
+positions and orientations. A one-session report has one entry, equal to the
+top-level ``registration``; with several, the top-level one is the first
+session's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from pincal.fit.metrics import PoseErrors
+from pincal.measurements.data import MeasurementSet
+from pincal.model.sensor import Registration
+
+
+def session_errors(errors: PoseErrors, rows: np.ndarray) -> PoseErrors:
+    """The errors of the rows ``rows`` (mask or indices) of ``errors``."""
+    return PoseErrors(position_m=errors.position_m[rows],
+                      rotation_rad=None if errors.rotation_rad is None else errors.rotation_rad[rows])
+
+
+def session_entries(
+    names: Sequence[str],
+    registrations: Sequence[Registration],
+    data: MeasurementSet,
+    sessions: np.ndarray,
+    errors: PoseErrors,
+) -> list[dict[str, Any]]:
+    """The ``sessions`` list of a report.
+
+    Args:
+        names / registrations: the sessions and their registrations, in fit order.
+        data: the rows in the fit; ``sessions`` (K,) each one's index into ``names``.
+        errors: eq 24 errors of those rows (in the same order).
+    """
+    entries = []
+    for s, (name, registration) in enumerate(zip(names, registrations)):
+        rows = np.flatnonzero(np.asarray(sessions) == s)
+        files = list(dict.fromkeys(data.files[rows].tolist()))
+        entries.append({
+            "name": name,
+            "file": files[0] if len(files) == 1 else files,
+            "rows": int(rows.size),
+            "registration": {"position": registration.as_dict(), "orientation": registration.as_dict()},
+            "calibration_errors": session_errors(errors, rows).as_dict() if rows.size else None,
+        })
+    return entries
