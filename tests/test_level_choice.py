@@ -202,6 +202,25 @@ def test_cli_session_too_small_to_hold_out_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "o.urdf").exists()
 
 
+def test_a_session_whose_absence_leaves_too_few_rows_is_one_line():
+    """Two rows of four markers make a registrable, holdable session (24 coordinates), but holding
+    the big session out leaves those 2 rows to calibrate on: refused before any fit, with advice."""
+    chain = KinematicChain.from_urdf(UR5, "tool0")
+    markers = np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 0.05, 0.0], [0.0, 0.0, 0.05]])
+
+    def session(rows, seed, name):
+        rng = np.random.default_rng(seed)
+        q = random_configurations(chain, rng, rows)
+        data = measure(chain, q, DEFAULT_REGISTRATION, rng, 1e-4, 0.0, "calibration", points=markers,
+                       with_rotation=False)
+        return replace(data, source=f"{name}.csv", sessions=None, files=None)
+
+    data = join_sets([session(20, 1, "rest"), session(2, 2, "pair")])
+    with pytest.raises(CalibrationError, match=r"leaves 2 row\(s\) to calibrate on") as info:
+        choose_level(chain, data)
+    assert "rest" in str(info.value) and "\n" not in str(info.value)
+
+
 def test_cli_one_session_with_too_few_configurations_is_one_line(tmp_path, capsys):
     data = tmp_path / "few.csv"
     write_measurements(data, _ur5_rows("offsets", 4, 2, 1e-4))

@@ -140,6 +140,8 @@ def test_missing_joint_columns(tmp_path):
 
 def test_no_position_columns(tmp_path):
     rejects(write(tmp_path, csv_text("j1,slide,wheel", "0,0,0")), "no target position", "x,y,z")
+    # socket-fixture rows read without --fixture: the line points the user at the flag
+    rejects(write(tmp_path, csv_text("j1,slide,wheel,point", "0,0,0,hole_0")), "no target position", "--fixture")
 
 
 def test_incomplete_triplet(tmp_path):

@@ -185,3 +185,21 @@ def test_undetermined_directions_of_a_straight_wrist_are_left_out():
     assert any("not determined" in note for note in result.notes)
     # what is kept is determined: standard deviations of micrometres and microradians, far from metres
     assert np.nanmax(result.std) < 1e-4
+
+
+def test_press_is_undefined_not_a_crash_when_a_row_has_leverage_one():
+    """A parameter only one row informs fits that row exactly (leverage 1): leaving the row out
+    predicts nothing, so PRESS is +inf there (and is reported as null), never a LinAlgError."""
+    from pincal.fit.identifiability import press
+
+    rng = np.random.default_rng(3)
+    jacobian = rng.normal(size=(12, 2))
+    jacobian = np.column_stack([jacobian, np.r_[np.zeros(9), 1.0, 0.0, 0.0]])  # column 3: row 4 only
+    assert press(jacobian, rng.normal(size=12), block=3) == np.inf
+    assert np.isfinite(press(jacobian[:, :2], rng.normal(size=12), block=3))
+    # the reviewer's case: six TIAGo rows at the full level, PRESS selection
+    chain = KinematicChain.from_urdf(example_robot_data_urdf("tiago_description/robots/tiago.urdf"),
+                                     "wrist_ft_tool_link")
+    data, _ = read_measurements(TIAGO_TRAIN, chain.joint_specs)
+    result = calibrate_chain(chain, data.select(np.arange(data.n_rows) < 6), "full", selection="press")
+    assert result.selection.chosen in result.selection.refitted

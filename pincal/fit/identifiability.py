@@ -32,6 +32,9 @@ from pincal.fit.solver import triangular_factor
 RANK_TOLERANCE = 1e-8
 #: Pairs of kept parameters with |correlation| above this are reported.
 CORRELATION_THRESHOLD = 0.9
+#: Smallest eigenvalue of I − H_kk below which a row block counts as fitted exactly (leverage 1):
+#: its leave-one-out prediction, and so PRESS, is undefined.
+LEVERAGE_FLOOR = 1e-10
 #: Absorbing coefficients below this (in scaled units) are not listed.
 ABSORB_THRESHOLD = 0.1
 
@@ -94,8 +97,10 @@ def press(jacobian: np.ndarray, residual: np.ndarray, block: int) -> float:
     k = residual.size // block
     ub = u.reshape(k, block, -1)
     hat = np.einsum("kin,kjn->kij", ub, ub)  # H_kk blocks
-    eye = np.eye(block)
-    loo = np.linalg.solve(eye - hat, residual.reshape(k, block, 1))
+    complement = np.eye(block) - hat
+    if np.min(np.linalg.eigvalsh(complement), initial=1.0) < LEVERAGE_FLOOR:
+        return np.inf  # a row with leverage 1: the fit reproduces it whatever it measured
+    loo = np.linalg.solve(complement, residual.reshape(k, block, 1))
     return float(np.sum(loo**2))
 
 

@@ -68,6 +68,8 @@ SEED = 0
 #: Joint readings that agree to this in every joint are one configuration [rad or m]
 #: (0.06°: far below any two postures a calibration plans, above encoder noise).
 SAME_CONFIGURATION_RAD = 1e-3
+#: Fewest rows a fold may calibrate on (a calibration needs 3: pincal.fit.chain_calibration).
+MIN_TRAINING_ROWS = 3
 #: Fewest configurations of one session to cross-validate over (one held out leaves 4 to fit).
 MIN_CONFIGURATIONS = 5
 #: A held-out session must leave at least as many coordinates as its registration has
@@ -204,7 +206,8 @@ def row_folds(keys: np.ndarray, strata: np.ndarray | None = None, folds: int = D
 
 
 def configuration_keys(q: np.ndarray) -> np.ndarray:
-    """Rows whose joint readings agree to :data:`SAME_CONFIGURATION_RAD` get equal keys (K, N)."""
+    """Each row's joint readings on a :data:`SAME_CONFIGURATION_RAD` grid (K, N): repeats of one posture
+    share a key unless a reading straddles a grid line (then the twins may land in different folds)."""
     return np.round(np.asarray(q, dtype=float) / SAME_CONFIGURATION_RAD).astype(np.int64)
 
 
@@ -275,7 +278,13 @@ def sensor_folds(data: MeasurementSet, folds: int = DEFAULT_FOLDS, seed: int = S
                     f"{MIN_HELD_OUT_COORDINATES} measured coordinates ({-(-MIN_HELD_OUT_COORDINATES // per_row)} rows "
                     f"here) to leave any for the error; add rows, give the rows the session of others if the "
                     "sensor did not move, or choose the level (--level offsets)")
-            out.append(Fold(name, np.setdiff1d(everything, test), test))
+            train = np.setdiff1d(everything, test)
+            if train.size < MIN_TRAINING_ROWS:
+                raise CalibrationError(
+                    f"{where(data, name)}: holding this session out leaves {train.size} row(s) to calibrate on "
+                    f"(--level auto needs at least {MIN_TRAINING_ROWS}); add rows to the other sessions, merge "
+                    "sessions whose sensor did not move, or choose the level (--level offsets)")
+            out.append(Fold(name, train, test))
         return "leave-one-session-out", out
     keys = configuration_keys(data.q)
     n_configurations = len(np.unique(keys, axis=0))

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pincal.errors import CalibrationError
-from pincal.fit.identifiability import Selection, press
+from pincal.fit.identifiability import LEVERAGE_FLOOR, Selection, press
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.progress import Counter
@@ -209,9 +209,17 @@ def _nested_press(q: np.ndarray, projected: np.ndarray, residual: np.ndarray, a:
             column = qb[:, :, a + j - 1]
             hat += column[:, :, None] * column[:, None, :]
             error = error - column * projected[a + j - 1]
-        left_out = np.linalg.solve(eye - hat, error[..., None])
-        out[j] = float(np.sum(left_out**2))
+        out[j] = _left_out_sum(eye - hat, error)
     return out
+
+
+def _left_out_sum(complement: np.ndarray, error: np.ndarray) -> float:
+    """Σ_k |(I − H_kk)⁻¹ e_k|², or inf when a row block has leverage 1 (the prefix fits that row
+    exactly whatever it measured, so leaving it out predicts nothing: PRESS is undefined)."""
+    if np.min(np.linalg.eigvalsh(complement), initial=1.0) < LEVERAGE_FLOOR:
+        return np.inf
+    left_out = np.linalg.solve(complement, error[..., None])
+    return float(np.sum(left_out**2))
 
 
 def curvature_ratios(fits: NestedFits, jacobian: np.ndarray, jacobian_at: Callable[[np.ndarray], np.ndarray],

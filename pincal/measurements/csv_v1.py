@@ -259,8 +259,12 @@ def _point_columns(table: CsvTable, joint_names: Sequence[str]) -> list[tuple[st
             index = None if match[2] is None else int(match[2])
             axes.setdefault(index, set()).add(match[1])
     if not axes:
+        fixture_hint = (
+            "; it has a 'point' column: socket-fixture data is read with --fixture FIXTURE.csv"
+            if "point" in table.names else ""
+        )
         raise table.error("no target position columns; expected x,y,z (one point) "
-                          "or x1,y1,z1,x2,y2,z2,... (several points), in metres")
+                          "or x1,y1,z1,x2,y2,z2,... (several points), in metres" + fixture_hint)
     if None in axes and len(axes) > 1:
         raise table.error("both x,y,z and numbered x1,y1,z1,... columns; keep one form (ambiguous)")
     for index, present in axes.items():

@@ -128,6 +128,21 @@ def paper_report(
     }
 
 
+def selection_report(selection) -> dict[str, Any] | None:
+    """REPORT.json ``identifiability.selection`` of a :class:`pincal.fit.identifiability.Selection`
+    (None without one); a criterion value that is undefined (e.g. PRESS with a row of leverage 1) is null."""
+    if selection is None:
+        return None
+    return {
+        "criterion": selection.criterion,
+        "kept": selection.chosen,
+        "value": _number(selection.scores[selection.sizes.index(selection.chosen)]),
+        "candidates": [{"kept": n, "value": _number(v)} for n, v in zip(selection.sizes, selection.scores)],
+        # the candidates fitted nonlinearly; the others' values are linearised (pincal/fit/selection.py)
+        "refitted": list(selection.refitted),
+    }
+
+
 def write_report(path: str | Path, report: dict[str, Any]) -> None:
     """Write ``report`` as indented JSON."""
     write_text(path, json.dumps(report, indent=2) + "\n")
@@ -269,16 +284,7 @@ def chain_report(
         "identifiability": {
             "rank": result.rank,
             "jacobian_condition": result.condition,
-            "selection": None
-            if selection is None
-            else {
-                "criterion": selection.criterion,
-                "kept": selection.chosen,
-                "value": float(selection.scores[selection.sizes.index(selection.chosen)]),
-                "candidates": [{"kept": n, "value": v} for n, v in zip(selection.sizes, selection.scores)],
-                # the candidates fitted nonlinearly; the others' values are linearised (pincal/fit/selection.py)
-                "refitted": list(selection.refitted),
-            },
+            "selection": selection_report(selection),
             "dropped": [
                 {
                     "name": names[d.index],

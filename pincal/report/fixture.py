@@ -34,7 +34,7 @@ from pincal._version import __version__
 from pincal.fit.fixture_calibration import FixtureCalibration
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
-from pincal.report.document import REPORT_VERSION
+from pincal.report.document import REPORT_VERSION, selection_report
 
 #: What the report says of a collinear placement's rotation.
 TURN_NOT_DETERMINED = "the turn about the socket line: the sockets are collinear"
@@ -85,12 +85,7 @@ def fixture_report(
         "identifiability": {
             "rank": result.rank,
             "jacobian_condition": result.condition,
-            "selection": None if selection is None else {
-                "criterion": selection.criterion,
-                "kept": selection.chosen,
-                "value": float(selection.scores[selection.sizes.index(selection.chosen)]),
-                "candidates": [{"kept": n, "value": v} for n, v in zip(selection.sizes, selection.scores)],
-            },
+            "selection": selection_report(selection),
             "dropped": [
                 {"name": names[d.index], "reason": d.reason,
                  "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into]}
