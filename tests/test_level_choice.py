@@ -248,6 +248,24 @@ def test_cli_fixture_level_auto_holds_out_each_placement(tmp_path, capsys):
     assert "eq F1" in choice["error"]
 
 
+def test_cli_fixture_socket_of_repeated_postures_is_one_line(tmp_path, capsys):
+    """One placement whose socket hole_0 holds one posture seated 6 times: the row count passes, but a
+    fold holding that posture out would leave none of its rows; refused in one line before any fit."""
+    mukca = Path(__file__).resolve().parent.parent / "data" / "mukca"
+    lines = (mukca / "kuka_14" / "front.csv").read_text().splitlines()
+    hole_0 = [line for line in lines[1:] if ",hole_0," in line]
+    hole_1 = [line for line in lines[1:] if ",hole_1," in line]
+    data = tmp_path / "dup.csv"
+    data.write_text("\n".join([lines[0], *[hole_0[0]] * 6, *hole_1]) + "\n")
+    code = main(["calibrate", str(mukca / "urdf" / "iiwa14.urdf"), str(data), "--fixture", str(mukca / "fixture.csv"),
+                 "--tip-link", "tool0", "--level", "auto", "--quiet", "--out", str(tmp_path / "o.urdf"),
+                 "--report", str(tmp_path / "r.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "dup.csv" in err[0] and "'hole_0' has only 1 distinct configuration" in err[0]
+    assert not (tmp_path / "o.urdf").exists()
+
+
 def test_cli_diagnose_level_auto(tmp_path, capsys):
     data = tmp_path / "cal.csv"
     write_measurements(data, _ur5_rows("offsets", rows=15, seed=2, sigma_m=1e-4))

@@ -413,6 +413,17 @@ def fixture_folds(data: FixtureData, folds: int = DEFAULT_FOLDS, seed: int = SEE
     keys = configuration_keys(data.q)
     folds = min(folds, max(len(np.unique(keys[data.socket == i], axis=0)) for i in sockets))
     blocks = row_folds(keys, data.socket, folds, seed)
+    for block in blocks:  # repeated postures are dealt whole, so a share can exceed n / K
+        kept = np.bincount(data.socket[np.setdiff1d(everything, block)], minlength=len(data.fixture.names))
+        short = [i for i in sockets if kept[i] < MIN_ROWS_PER_SOCKET]
+        if short:
+            socket = data.fixture.names[short[0]]
+            n_distinct = len(np.unique(keys[data.socket == short[0]], axis=0))
+            raise CalibrationError(
+                f"{', '.join(data.sources)}: one placement, and socket '{socket}' has only {n_distinct} distinct "
+                f"configuration(s); holding a share out leaves {kept[short[0]]} of its rows, and --level auto "
+                f"needs {MIN_ROWS_PER_SOCKET}; seat the ball in more postures, add a placement, or choose the "
+                "level (--level offsets)")
     return f"{folds}-fold over each socket's configurations (seed {seed})", [
         Fold(f"fold {f + 1}", np.setdiff1d(everything, b), b) for f, b in enumerate(blocks)]
 
