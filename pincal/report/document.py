@@ -128,6 +128,53 @@ def paper_report(
     }
 
 
+def chain_summary(chain: KinematicChain) -> dict[str, Any]:
+    """REPORT.json ``chain``: root and tip links, the joints and their kinds."""
+    return {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
+            "joint_kinds": [spec.kind for spec in chain.joint_specs]}
+
+
+def parameters_report(result) -> list[dict[str, Any]]:
+    """REPORT.json ``parameters`` of a placement-level fit (sensor or fixture): each parameter's
+    nominal (0) and calibrated value and std in its unit, None where the data cannot determine it."""
+    params = result.params
+    out = []
+    for i in range(params.size if params is not None else 0):
+        info = params.info[i]
+        determined = result.status[i] == "calibrated"
+        out.append({
+            "name": info.name,
+            "joint": info.joint,
+            "unit": info.unit,
+            "nominal": 0.0,
+            "calibrated": float(result.vector[i]) if determined else None,
+            "std": _number(result.std[i]) if determined else None,
+            "status": result.status[i],
+        })
+    return out
+
+
+def identifiability_report(result) -> dict[str, Any]:
+    """REPORT.json ``identifiability`` of a placement-level fit: rank, condition number, selection,
+    the dropped parameters with what absorbs them, and the strongly correlated pairs."""
+    params = result.params
+    names = {i: params.info[i].name for i in range(params.size)} if params is not None else {}
+    return {
+        "rank": result.rank,
+        "jacobian_condition": result.condition,
+        "selection": selection_report(result.selection),
+        "dropped": [
+            {
+                "name": names[d.index],
+                "reason": d.reason,
+                "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into],
+            }
+            for d in result.dropped
+        ],
+        "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
+    }
+
+
 def selection_report(selection) -> dict[str, Any] | None:
     """REPORT.json ``identifiability.selection`` of a :class:`pincal.fit.identifiability.Selection`
     (None without one); a criterion value that is undefined (e.g. PRESS with a row of leverage 1) is null."""
@@ -247,30 +294,12 @@ def chain_report(
     notes: list[str],
 ) -> dict[str, Any]:
     """Build the REPORT.json document of a calibration at level registration/offsets/full."""
-    params = result.params
-    parameters = []
-    for i in range(params.size if params is not None else 0):
-        info = params.info[i]
-        determined = result.status[i] == "calibrated"
-        parameters.append(
-            {
-                "name": info.name,
-                "joint": info.joint,
-                "unit": info.unit,
-                "nominal": 0.0,
-                "calibrated": float(result.vector[i]) if determined else None,
-                "std": _number(result.std[i]) if determined else None,
-                "status": result.status[i],
-            }
-        )
     tool = chain.tool
     points = result.target.points @ tool[:3, :3].T + tool[:3, 3]  # in the parent link frame
     rotation = tool[:3, :3] @ result.target.rotation
     pose = np.eye(4)
     pose[:3, :3], pose[:3, 3] = rotation, points[0]
     xyz, rpy = xyz_rpy_from_pose(pose)
-    names = {i: params.info[i].name for i in range(params.size)} if params is not None else {}
-    selection = result.selection
     return {
         "pincal_version": __version__,
         "report_version": REPORT_VERSION,
@@ -278,23 +307,9 @@ def chain_report(
         "level": result.level,
         "model": "joint placements",
         "sources": sources,
-        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
-                  "joint_kinds": [spec.kind for spec in chain.joint_specs]},
-        "parameters": parameters,
-        "identifiability": {
-            "rank": result.rank,
-            "jacobian_condition": result.condition,
-            "selection": selection_report(selection),
-            "dropped": [
-                {
-                    "name": names[d.index],
-                    "reason": d.reason,
-                    "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into],
-                }
-                for d in result.dropped
-            ],
-            "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
-        },
+        "chain": chain_summary(chain),
+        "parameters": parameters_report(result),
+        "identifiability": identifiability_report(result),
         "registration": {
             "position": result.target.registration.as_dict(),
             "orientation": result.target.registration.as_dict(),

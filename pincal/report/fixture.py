@@ -34,14 +34,10 @@ from pincal._version import __version__
 from pincal.fit.fixture_calibration import FixtureCalibration
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
-from pincal.report.document import REPORT_VERSION, selection_report
+from pincal.report.document import REPORT_VERSION, chain_summary, identifiability_report, parameters_report
 
 #: What the report says of a collinear placement's rotation.
 TURN_NOT_DETERMINED = "the turn about the socket line: the sockets are collinear"
-
-
-def _number(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None
 
 
 def fixture_report(
@@ -53,22 +49,6 @@ def fixture_report(
     nominal_urdf_sha256: str,
 ) -> dict[str, Any]:
     """Build the REPORT.json document of a socket-fixture calibration."""
-    params = result.params
-    size = params.size if params is not None else 0
-    names = {i: params.info[i].name for i in range(size)}
-    parameters = [
-        {
-            "name": params.info[i].name,
-            "joint": params.info[i].joint,
-            "unit": params.info[i].unit,
-            "nominal": 0.0,
-            "calibrated": float(result.vector[i]) if result.status[i] == "calibrated" else None,
-            "std": _number(result.std[i]) if result.status[i] == "calibrated" else None,
-            "status": result.status[i],
-        }
-        for i in range(size)
-    ]
-    selection = result.selection
     fixture = data.fixture
     ball = result.ball.tolist()
     return {
@@ -79,20 +59,9 @@ def fixture_report(
         "model": "joint placements",
         "measurement": "socket fixture",
         "sources": sources,
-        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
-                  "joint_kinds": [spec.kind for spec in chain.joint_specs]},
-        "parameters": parameters,
-        "identifiability": {
-            "rank": result.rank,
-            "jacobian_condition": result.condition,
-            "selection": selection_report(selection),
-            "dropped": [
-                {"name": names[d.index], "reason": d.reason,
-                 "absorbed_into": [{"name": n, "coefficient": c} for n, c in d.absorbed_into]}
-                for d in result.dropped
-            ],
-            "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
-        },
+        "chain": chain_summary(chain),
+        "parameters": parameters_report(result),
+        "identifiability": identifiability_report(result),
         "tool": {"parent_link": chain.tip_link, "points_m": [ball], "xyz_m": ball},
         "noise": {"sigma_pos_mm": result.rms_m * 1000.0, "sigma_rot_deg": None},
         "outliers": [{"file": file, "line": line, "robust_score": score} for file, line, score in result.outliers],
