@@ -21,7 +21,12 @@ on data the choice never saw:
 
 Nothing is tuned to the evaluation data.
 
-Run:  python examples/level_auto.py [--case tiago|iiwa14|panda|sim] [--seeds N]
+``--select`` is the selection within each level (default aic; ``prior``: the
+MAP fit with physical priors of pincal.fit.prior), used by auto's cross-validation
+fits and by the fixed levels alike.
+
+Run:  python examples/level_auto.py [--case tiago|iiwa14|panda|sim] [--seeds N] [--first-seed S]
+                                   [--select aic|bic|press|all|prior]
 """
 
 from __future__ import annotations
@@ -59,6 +64,8 @@ ROOT = Path(__file__).resolve().parent.parent
 LEVELS = ("registration", "offsets", "full")
 #: Auto may be worse than the best fixed level by this factor (issue 12's "Done when").
 MARGIN = 1.10
+#: The selection within each level (--select).
+SELECT = {"selection": "aic"}
 
 
 def _fixed_and_auto(held: dict[str, float], chosen: str) -> str:
@@ -78,14 +85,14 @@ def tiago() -> str:
     test, _ = read_measurements(data / "qualisys_2021-11-26_static_postures.csv", chain.joint_specs)
     novel = np.abs(test.q[:, None, :] - train.q[None, :, :]).max(axis=2).min(axis=1) > 0.02
     started = time.perf_counter()
-    choice = choose_level(chain, train)
+    choice = choose_level(chain, train, **SELECT)
     seconds = time.perf_counter() - started
-    others = [choose_level(chain, train, seed=seed) for seed in range(1, 6)]  # other deals of the folds
+    others = [choose_level(chain, train, seed=seed, **SELECT) for seed in range(1, 6)]  # other deals of the folds
     nominal = chain.placements()
     held, held_novel, kept = {}, {}, {}
     for level in LEVELS:
         chain.set_placements(nominal)
-        result = calibrate_chain(chain, train, level)
+        result = calibrate_chain(chain, train, level, **SELECT)
         registration = result.target.registration
         errors = pose_errors(chain, test, registration, registration, points=result.target.points)
         marker1 = errors.position_m[:, 0] * 1000.0
@@ -108,7 +115,8 @@ def _ratio(held: dict[str, float], level: str) -> str:
 
 
 def _cv_table(choice) -> str:
-    head = f"{choice.scheme}; rule: one standard error; lowest {choice.lowest}, chosen {choice.chosen}"
+    rule = "richest" if choice.selection == "prior" else "simplest"
+    head = f"{choice.scheme}; rule: {rule} level within one standard error; lowest {choice.lowest}, chosen {choice.chosen}"
     rows = [f"| {s.level} | {s.cv_error_mm:.3f} ± {s.standard_error_mm:.3f} | "
             + " ".join(f"{e:.2f}" for e in s.fold_errors_mm) + " |" for s in choice.scores]
     return "\n".join([head, "", "| level | CV error ± SE [mm] | folds [mm] |", "|---|---|---|", *rows])
@@ -135,12 +143,12 @@ def mukca(robot: str) -> str:
         train = read_fixture_data([data / folder / f"{p}.csv" for p in placements if p != held],
                                   chain.joint_specs, fixture)
         test = read_fixture_data([data / folder / f"{held}.csv"], chain.joint_specs, fixture)
-        choice = choose_fixture_level(chain, train)
+        choice = choose_fixture_level(chain, train, **SELECT)
         nominal = chain.placements()
         metrics = {}
         for level in LEVELS:
             chain.set_placements(nominal)
-            result = calibrate_fixture(chain, train, level)
+            result = calibrate_fixture(chain, train, level, **SELECT)
             after = fixture_metrics(chain, test, result.ball)
             metrics[level] = (after.consistency_mm, after.distortion_mm)
         metrics["auto"] = metrics[choice.chosen]
@@ -185,24 +193,24 @@ def simulated_case(robot: str, rows: int, seed: int) -> tuple[dict[str, float], 
     train = measure(chain, q_train, DEFAULT_REGISTRATION, rng, SIGMA_M, 0.0, "calibration", **common)
     test = measure(chain, q_test, DEFAULT_REGISTRATION, rng, 0.0, 0.0, "calibration", **common)
     chain.set_placements(nominal)
-    choice = choose_level(chain, train)
+    choice = choose_level(chain, train, **SELECT)
     held = {}
     for level in LEVELS:
         chain.set_placements(nominal)
-        result = calibrate_chain(chain, train, level)
+        result = calibrate_chain(chain, train, level, **SELECT)
         registration = result.target.registration
         errors = pose_errors(chain, test, registration, registration, points=result.target.points)
         held[level] = float(np.sqrt(np.mean(errors.position_m**2)) * 1000.0)
     return held, choice.chosen, choice.lowest
 
 
-def simulated(seeds: int) -> str:
+def simulated(seeds: int, first: int = 0) -> str:
     lines = [("| arm, rows | registration | offsets | full | auto chose (seeds) | auto | auto / best (mean) | "
              "seeds auto > 1.1 × best | lowest CV: mean, / best, seeds > 1.1 × best |"),
              "|---|---|---|---|---|---|---|---|---|"]
     for robot in SIMULATED:
         for rows in (12, 100):
-            runs = [simulated_case(robot, rows, seed) for seed in range(seeds)]
+            runs = [simulated_case(robot, rows, seed) for seed in range(first, first + seeds)]
             held = {level: np.mean([r[0][level] for r in runs]) for level in LEVELS}
             auto = np.mean([r[0][r[1]] for r in runs])
             best = min(held.values())
@@ -222,13 +230,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--case", choices=("tiago", "iiwa14", "panda", "sim"), action="append",
                         help="default: all")
     parser.add_argument("--seeds", type=int, default=10, help="seeds per simulated case (default 10)")
+    parser.add_argument("--first-seed", type=int, default=0, help="first simulated seed (default 0)")
+    parser.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default="aic",
+                        help="selection within each level (default aic; prior: pincal.fit.prior's MAP fit)")
     args = parser.parse_args(argv)
+    SELECT["selection"] = args.select
     for case in args.case or ("tiago", "iiwa14", "panda", "sim"):
         started = time.perf_counter()
         if case == "tiago":
             text = tiago()
         elif case == "sim":
-            text = simulated(args.seeds)
+            text = simulated(args.seeds, args.first_seed)
         else:
             text = mukca(case)
         print(f"\n## {case} ({time.perf_counter() - started:.0f} s)\n\n{text}", flush=True)

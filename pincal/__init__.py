@@ -5,43 +5,82 @@ robot and write a corrected URDF. The first method is Franaszek & Marvel
 (2022), "Using Full Pose Measurement for Serial Robot Calibration".
 """
 
+from typing import TYPE_CHECKING
+
 from pincal._version import __version__
 from pincal.errors import CalibrationError, MeasurementError, ModelError, PincalError
-from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
-from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
-from pincal.fit.level_choice import LevelChoice, choose_fixture_level, choose_level
-from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
-from pincal.fit.metrics import ErrorSummary, PoseErrors, pose_errors
-from pincal.fit.ml_estimator import MLCalibration, calibrate_ml
-from pincal.fit.noise_limit import PredictedErrors, predicted_errors
-from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
-from pincal.fit.registration import register_orientations, register_points
-from pincal.measurements.csv_v1 import read_measurements, read_sessions, write_measurements
-from pincal.measurements.fixture import Fixture, FixtureData, read_fixture, read_fixture_data
-from pincal.measurements.data import JointSpec, MeasurementSet
-from pincal.model.chain import (
-    ChainPoses,
-    KinematicChain,
-    pose_from_xyz_rpy,
-    xyz_rpy_from_pose,
-)
-from pincal.model.dh import (
-    KUKA_LWR4_DH,
-    TABLE2_LARGE,
-    TABLE2_SMALL,
-    DHDeviations,
-    DHTable,
-)
-from pincal.model.dh_csv import read_dh_csv
-from pincal.model.dh_parameters import DHParameterSet
-from pincal.model.dh_robot import DHRobot
-from pincal.model.parameter_sets import JointOffsets, PlacementErrors
-from pincal.model.sensor import Registration
-from pincal.simulation.paper import (
-    SimulatedExperiment,
-    SimulationSettings,
-    simulate_experiment,
-)
+
+#: Where each public name is defined. ``import pincal`` imports none of these modules: a name's
+#: module is imported on its first use (PEP 562 ``__getattr__`` below), so the command line and each
+#: study worker load only what they run (``pincal calibrate`` neither the planner nor the diagnosis).
+_DEFINED_IN = {
+    "pincal.fit.chain_calibration": ("ChainCalibration", "calibrate_chain"),
+    "pincal.fit.fixture_calibration": ("FixtureCalibration", "calibrate_fixture"),
+    "pincal.fit.level_choice": ("LevelChoice", "choose_fixture_level", "choose_level"),
+    "pincal.fit.socket_metrics": ("FixtureMetrics", "fixture_metrics"),
+    "pincal.fit.metrics": ("ErrorSummary", "PoseErrors", "pose_errors"),
+    "pincal.fit.ml_estimator": ("MLCalibration", "calibrate_ml"),
+    "pincal.fit.noise_limit": ("PredictedErrors", "predicted_errors"),
+    "pincal.fit.paper_methods": ("PaperCalibration", "calibrate_paper"),
+    "pincal.fit.registration": ("register_orientations", "register_points"),
+    "pincal.measurements.csv_v1": ("read_measurements", "read_sessions", "write_measurements"),
+    "pincal.measurements.fixture": ("Fixture", "FixtureData", "read_fixture", "read_fixture_data"),
+    "pincal.measurements.data": ("JointSpec", "MeasurementSet"),
+    "pincal.model.chain": ("ChainPoses", "KinematicChain", "pose_from_xyz_rpy", "xyz_rpy_from_pose"),
+    "pincal.model.dh": ("KUKA_LWR4_DH", "TABLE2_LARGE", "TABLE2_SMALL", "DHDeviations", "DHTable"),
+    "pincal.model.dh_csv": ("read_dh_csv",),
+    "pincal.model.dh_parameters": ("DHParameterSet",),
+    "pincal.model.dh_robot": ("DHRobot",),
+    "pincal.model.parameter_sets": ("JointOffsets", "PlacementErrors"),
+    "pincal.model.sensor": ("Registration",),
+    "pincal.simulation.paper": ("SimulatedExperiment", "SimulationSettings", "simulate_experiment"),
+}
+
+if TYPE_CHECKING:  # what static analysers see; at run time the names come from __getattr__
+    from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+    from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
+    from pincal.fit.level_choice import LevelChoice, choose_fixture_level, choose_level
+    from pincal.fit.metrics import ErrorSummary, PoseErrors, pose_errors
+    from pincal.fit.ml_estimator import MLCalibration, calibrate_ml
+    from pincal.fit.noise_limit import PredictedErrors, predicted_errors
+    from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
+    from pincal.fit.registration import register_orientations, register_points
+    from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
+    from pincal.measurements.csv_v1 import (
+        read_measurements,
+        read_sessions,
+        write_measurements,
+    )
+    from pincal.measurements.data import JointSpec, MeasurementSet
+    from pincal.measurements.fixture import (
+        Fixture,
+        FixtureData,
+        read_fixture,
+        read_fixture_data,
+    )
+    from pincal.model.chain import (
+        ChainPoses,
+        KinematicChain,
+        pose_from_xyz_rpy,
+        xyz_rpy_from_pose,
+    )
+    from pincal.model.dh import (
+        KUKA_LWR4_DH,
+        TABLE2_LARGE,
+        TABLE2_SMALL,
+        DHDeviations,
+        DHTable,
+    )
+    from pincal.model.dh_csv import read_dh_csv
+    from pincal.model.dh_parameters import DHParameterSet
+    from pincal.model.dh_robot import DHRobot
+    from pincal.model.parameter_sets import JointOffsets, PlacementErrors
+    from pincal.model.sensor import Registration
+    from pincal.simulation.paper import (
+        SimulatedExperiment,
+        SimulationSettings,
+        simulate_experiment,
+    )
 
 __all__ = [
     "__version__",
@@ -102,10 +141,9 @@ __all__ = [
     "xyz_rpy_from_pose",
 ]
 
-#: Names imported on first use: they need yourdfpy (and trimesh), which every other
-#: ``import pincal`` — the CLI, each study worker — would otherwise pay for.
-_ON_FIRST_USE = {"dh_robot_from_urdf": "pincal.model.dh_urdf", "urdf_from_dh": "pincal.model.dh_urdf"}
-_ON_FIRST_USE.update(render_html="pincal.report.html", write_html="pincal.report.html")  # jinja2, matplotlib
+_DEFINED_IN.update({"pincal.model.dh_urdf": ("dh_robot_from_urdf", "urdf_from_dh"),
+                    "pincal.report.html": ("render_html", "write_html")})  # yourdfpy; jinja2, matplotlib
+_ON_FIRST_USE = {name: module for module, names in _DEFINED_IN.items() for name in names}
 
 
 def __getattr__(name: str):
@@ -116,3 +154,7 @@ def __getattr__(name: str):
         globals()[name] = value
         return value
     raise AttributeError(f"module 'pincal' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -35,7 +35,8 @@ study workers included, counts its Pinocchio calls through a ``sitecustomize``).
     (REV then this tree, then this tree then REV, ...): each ratio REV / this
     is the median over the pairs, next to the absolute times and the load
     average, with the default BLAS threads (``--one-blas-thread`` for one).
-    ``calibrate_large`` is (f) (at 6975758 it takes minutes: use ``--pairs 1``).
+    ``calibrate_large`` is (f) (at 6975758 it takes minutes: use ``--pairs 1``); ``study`` is (b)
+    (minutes per pair at 6975758).
     Writes ``scripts/benchmark_against.json`` (or ``--json``); nothing else runs.
 
 Prints a table and writes the numbers to ``scripts/benchmark_results.json``.
@@ -201,20 +202,32 @@ _counted("computeFrameJacobian", "jacobian")
 _counted("forwardKinematics", "kinematics")
 @atexit.register
 def _write():
-    with open(os.path.join(os.environ["PINCAL_COUNT_DIR"], str(os.getpid()) + ".json"), "w") as out:
+    name = os.path.join(os.environ["PINCAL_COUNT_DIR"], str(os.getpid()))
+    with open(name + ".part", "w") as out:
         json.dump(_counts, out)
+    os.replace(name + ".part", name + ".json")
 """
 
 
 def counted_run(command: list[str], cwd: str | Path | None = None) -> dict:
     """Run ``command`` (a Python process) with every process counting its Pinocchio calls:
     configurations evaluated with Jacobians (``jacobian``) and forward kinematics only
-    (``kinematics``), summed over the processes."""
-    with tempfile.TemporaryDirectory() as site, tempfile.TemporaryDirectory() as counts:
+    (``kinematics``), summed over the processes. Worker processes may outlive the command's
+    process (the console script leaves without waiting for them): their counts are awaited until
+    no new one has come for a second (at most 30 s)."""
+    with (tempfile.TemporaryDirectory() as site,
+          tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as counts):
         (Path(site) / "sitecustomize.py").write_text(_COUNTING_SITE, encoding="utf-8")
         path = os.pathsep.join(p for p in (site, os.environ.get("PYTHONPATH", "")) if p)
         subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=cwd,
                        env={**os.environ, "PYTHONPATH": path, "PINCAL_COUNT_DIR": counts})
+        seen, deadline = -1, time.perf_counter() + 30.0
+        while time.perf_counter() < deadline:
+            written = len(list(Path(counts).glob("*.json")))
+            if written == seen:
+                break
+            seen = written
+            time.sleep(1.0)
         total = {"jacobian": 0, "kinematics": 0, "processes": 0}
         for file in Path(counts).glob("*.json"):
             for key, value in json.loads(file.read_text(encoding="utf-8")).items():
@@ -407,11 +420,17 @@ AGAINST = {
         "calibrate", "{ur5}", "{large}", "--tip-link", _UR5_TIP, "--level", "full",
         "--out", "{out}/ur5_calibrated.urdf", "--report", "{out}/REPORT.json",
     ],
+    # (b): the paper's protocol (both deviation sets, 16 levels, 25 repeats, every estimator, 2 700
+    # restarts) on 2 worker processes; minutes at 6975758 (use --pairs 3 or fewer)
+    "study": ["study", "--out", "{out}/study", "--workers", "2"],
 }
 #: The robot (URDF in example-robot-data, tip link) of each benchmark of :data:`AGAINST`, for its lower bound.
 AGAINST_ROBOT = {"diagnose_tiago": (_TIAGO_URDF, "wrist_ft_tool_link"),
                  "calibrate_tiago": (_TIAGO_URDF, "wrist_ft_tool_link"),
-                 "calibrate_large": (_UR5_URDF, _UR5_TIP)}
+                 "calibrate_large": (_UR5_URDF, _UR5_TIP),
+                 "study": ("kuka", "lwr_flange")}  # "kuka": the packaged KUKA LWR 4+ URDF
+#: Worker processes of a benchmark of :data:`AGAINST` (its Pinocchio work is shared by them).
+AGAINST_WORKERS = {"study": 2}
 _ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
@@ -512,11 +531,13 @@ def against(revision: str, pairs: int, names: list[str], one_blas_thread: bool) 
             out[name] = compare(python_old, sys.executable, AGAINST[name], pairs, env, files)
             with tempfile.TemporaryDirectory() as tmp:
                 counts = counted_run(_command(sys.executable, AGAINST[name], tmp, files), cwd=tmp)
-            from pincal.robots import example_robot_data_urdf
+            from pincal.robots import example_robot_data_urdf, kuka_lwr4plus_urdf
 
             urdf, tip = AGAINST_ROBOT[name]
-            per_row = pinocchio_row_seconds(example_robot_data_urdf(urdf), tip)
-            out[name].update(pinocchio_calls=counts, lower_bound_s=lower_bound(counts, per_row, floor))
+            path = kuka_lwr4plus_urdf() if urdf == "kuka" else example_robot_data_urdf(urdf)
+            per_row = pinocchio_row_seconds(path, tip)
+            out[name].update(pinocchio_calls=counts,
+                             lower_bound_s=lower_bound(counts, per_row, floor, AGAINST_WORKERS.get(name, 1)))
     finally:
         remove_revision(where)
         shutil.rmtree(where, ignore_errors=True)

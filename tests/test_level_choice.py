@@ -29,6 +29,7 @@ from pincal.fit.level_choice import (
     one_standard_error,
     row_folds,
 )
+from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.socket_metrics import fixture_metrics
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.measurements.data import join_sets
@@ -188,6 +189,21 @@ def test_cli_calibrate_level_auto_reports_and_prints_the_choice(tmp_path, capsys
     assert all(len(entry["fold_errors_mm"]) == len(choice["folds"]) == 10 for entry in choice["levels"])
     assert "one-standard-error" in choice["rule"] and choice["scheme"].startswith("10-fold")
     assert "level auto:" in printed and "chosen: offsets" in printed and "level offsets:" in printed
+    # without --select, auto fits under the physical priors and takes the richest level within one SE
+    # (README, "Choosing the level": the rule that kept auto within 10 % of the best fixed level)
+    assert choice["rule"].startswith("with --select prior, the richest level")
+    assert document["identifiability"]["selection"]["criterion"] == SELECTION_CRITERIA["prior"]
+
+
+def test_cli_level_auto_with_an_explicit_select_keeps_it(tmp_path):
+    data = tmp_path / "cal.csv"
+    write_measurements(data, _ur5_rows("offsets", rows=15, seed=2, sigma_m=1e-4))
+    report = tmp_path / "REPORT.json"
+    code = main(["calibrate", str(UR5), str(data), "--tip-link", "tool0", "--level", "auto", "--select", "aic",
+                 "--quiet", "--out", str(tmp_path / "ur5.urdf"), "--report", str(report)])
+    document = json.loads(report.read_text())
+    assert code == 0 and document["identifiability"]["selection"]["criterion"] == SELECTION_CRITERIA["aic"]
+    assert document["level_choice"]["rule"].startswith("the simplest level")
 
 
 def test_cli_session_too_small_to_hold_out_is_one_line(tmp_path, capsys):

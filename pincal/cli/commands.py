@@ -16,10 +16,9 @@ from typing import Sequence
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from pincal.cli.parser import build_parser
+from pincal.cli.parser import build_parser, selection_criterion
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
-from pincal.simulation.paper import SimulationSettings
 
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
@@ -46,6 +45,7 @@ def _print_notes(notes: Sequence[str]) -> None:
 
 def _run_simulate(args: argparse.Namespace) -> int:
     from pincal.cli.workflows import simulate_to_directory
+    from pincal.simulation.paper import SimulationSettings
 
     settings = SimulationSettings(sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, seed=args.seed)
     experiment, truth = simulate_to_directory(args.out, args.deviations, settings, effects=args.effect)
@@ -77,7 +77,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
         run = calibrate_files(args.urdf, args.data, method, weight, args.tool, args.tip_link,
                               args.out, args.report, level=level, sigma_column=args.sigma_column,
-                              reject_outliers=args.reject_outliers, selection=args.select,
+                              reject_outliers=args.reject_outliers, selection=selection_criterion(args),
                               xacro_args=args.xacro_args, progress=progress)
     _print_notes(run.notes + list(run.result.notes))
     _print_level_choice(run.report)
@@ -230,7 +230,8 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         run = diagnose_files(args.urdf, args.data, args.out, args.report, args.tip_link, level=args.level,
                              tool_pose=args.tool, validation_path=args.validation, sigma_column=args.sigma_column,
-                             selection=args.select, payload_kg=args.payload_kg, time_column_name=args.time_column,
+                             selection=selection_criterion(args), payload_kg=args.payload_kg,
+                             time_column_name=args.time_column,
                              plots_dir=plots, xacro_args=args.xacro_args, progress=progress)
     _print_notes(run.notes + list(run.calibration.notes))
     _print_level_choice(run.report)
@@ -278,6 +279,7 @@ def _run_report(args: argparse.Namespace) -> int:
 
 def _run_demo(args: argparse.Namespace) -> int:
     from pincal.cli.workflows import run_demo
+    from pincal.simulation.paper import SimulationSettings
 
     settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=args.seed)
     print("KUKA LWR 4+ (Table 1), ground truth = Table 1 + large deviations (Table 2),")

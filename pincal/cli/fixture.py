@@ -24,6 +24,7 @@ from typing import Any
 
 from pincal._version import __version__
 from pincal.cli.level_table import level_choice_lines
+from pincal.cli.parser import selection_criterion
 from pincal.cli.paths import description_inputs, refuse_overwrite
 from pincal.errors import PincalError
 from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
@@ -291,7 +292,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *_paths(args.data),
                          outputs=[args.out, args.report])
     run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.tip_link, args.out, args.report,
-                                  level=level, selection=args.select, xacro_args=xacro_args)
+                                  level=level, selection=selection_criterion(args), xacro_args=xacro_args)
     result, report = run.result, run.report
     level = result.level
     for note in report["notes"]:

@@ -10,13 +10,18 @@ from pathlib import Path
 import numpy as np
 
 from pincal._version import __version__
+from pincal.errors import PincalError
+from pincal.fit.prior import (
+    DEFAULT_ROTATION_DEG,
+    DEFAULT_TRANSLATION_MM,
+    SCALE_RANGE,
+    Prior,
+)
 from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.description import parse_xacro_arg
 from pincal.model.dh import DH_CONVENTIONS
-from pincal.model.dh_csv import MAX_ANGLE_RAD
-from pincal.planning.candidates import DEFAULT_SAMPLE
+from pincal.planning.candidates import DEFAULT_SAMPLE, WORKSPACE_SIZE
 from pincal.planning.information import PLAN_LEVELS, SensorModel
-from pincal.planning.planner import WORKSPACE_SIZE
 
 
 def tool_pose(text: str) -> np.ndarray:
@@ -30,11 +35,56 @@ def tool_pose(text: str) -> np.ndarray:
         raise argparse.ArgumentTypeError(
             f"'{text}' is not X,Y,Z,ROLL,PITCH,YAW (six numbers: metres, then radians)"
         )
+    # imported here: `pincal calibrate` without --tool does not load the DH table reader
+    from pincal.model.dh_csv import MAX_ANGLE_RAD
+
     if max(abs(v) for v in values[3:]) > MAX_ANGLE_RAD:
         raise argparse.ArgumentTypeError(
             f"'{text}': roll/pitch/yaw beyond one turn look like degrees; give radians"
         )
     return pose_from_xyz_rpy(values[:3], values[3:])
+
+
+def prior_scale(text: str) -> tuple[float, float]:
+    """argparse type of ``--prior-scale``: ``MM,DEG``, the prior std of placement translations [mm]
+    and rotations [deg] (two numbers within :data:`pincal.fit.prior.SCALE_RANGE`)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    low, high = SCALE_RANGE
+    if len(values) != 2 or not all(np.isfinite(v) and low <= v <= high for v in values):
+        raise argparse.ArgumentTypeError(
+            f"'{text}' is not MM,DEG (two numbers from {low:g} to {high:g}: the prior std of translations in mm, "
+            "of rotations in degrees)")
+    return values[0], values[1]
+
+
+def selection_criterion(args: argparse.Namespace) -> str:
+    """``--select`` as the fits take it: with ``prior``, a :class:`pincal.fit.prior.Prior` of ``--prior-scale``.
+
+    Raises:
+        PincalError: ``--prior-scale`` without ``--select prior``; ``--select prior`` or
+            ``--prior-scale`` with ``--level registration`` or ``dh`` (``--method``), which fit no
+            kinematic parameter a prior could hold (refused rather than silently ignored).
+    """
+    scale = getattr(args, "prior_scale", None)
+    select = args.select
+    level = getattr(args, "level", None) or ("dh" if getattr(args, "method", None) is not None else None)
+    if level in ("registration", "dh") and (select == "prior" or scale is not None):
+        flag = "--select prior" if select == "prior" else "--prior-scale"
+        what = "fits no kinematic parameter" if level == "registration" else "runs the paper's methods, which have none"
+        raise PincalError(f"{flag} does not apply to --level {level} (it {what}): use --level offsets, full or "
+                          f"auto, or drop {flag}")
+    if select is None:  # the default: AIC, but the prior rule under --level auto (README, "Choosing the level")
+        select = "prior" if level == "auto" else "aic"
+        if scale is not None:
+            raise PincalError("--prior-scale needs --select prior (no --select was given; the default here is aic)")
+    if select != "prior":
+        if scale is not None:
+            raise PincalError(f"--prior-scale applies to --select prior only (got --select {select})")
+        return select
+    return Prior(*scale) if scale is not None else Prior()
 
 
 def measure(text: str) -> SensorModel:
@@ -107,6 +157,13 @@ _count_or_zero = _number(int, 0, "integer")
 _count = _number(int, 1, "integer")
 
 
+def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
+    sub.add_argument("--prior-scale", type=prior_scale, metavar="MM,DEG",
+                     help="with --select prior: prior std of each placement translation and prismatic joint zero "
+                          f"[mm] and of each rotation and revolute joint zero [deg] (default "
+                          f"{DEFAULT_TRANSLATION_MM:g},{DEFAULT_ROTATION_DEG:g})")
+
+
 def _positive(text: str) -> float:
     value = _non_negative(text)
     if value == 0:
@@ -161,9 +218,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="extra data column with a per-row noise scale [mm]: rows are weighted by it")
     cal.add_argument("--reject-outliers", action="store_true",
                      help="refit without the rows reported as outliers (> 5 robust sigma)")
-    cal.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
+    cal.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default=None,
                      help="criterion choosing how many weakly identified parameters to keep "
-                          "(default aic; computed on the calibration rows only)")
+                          "(default aic, prior with --level auto; computed on the calibration rows only); prior: keep every identifiable "
+                          "one, each pulled towards nominal by a Gaussian prior (--prior-scale)")
+    _add_prior_scale(cal)
     cal.add_argument("--fixture", type=Path, metavar="FIXTURE.csv",
                      help="socket-fixture data, no sensor: DATA names the socket of each row (point) and the "
                           "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or point_a,point_b,distance)")
@@ -215,8 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
                      help="known pose of the measured target in the tip link [m, rad] (default: estimated)")
     dia.add_argument("--sigma-column", metavar="COLUMN", help="per-row noise scale column [mm]")
-    dia.add_argument("--select", choices=("aic", "bic", "press", "all"), default="aic",
-                     help="criterion for the geometric parameters (default aic)")
+    dia.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default=None,
+                     help="criterion for the geometric parameters (default aic, prior with --level auto; prior: see calibrate)")
+    _add_prior_scale(dia)
     dia.add_argument("--payload-kg", type=_non_negative, default=0.0, metavar="KG",
                      help="point mass at the target for gravity torques (default 0)")
     dia.add_argument("--time-column", metavar="COLUMN",

@@ -12,7 +12,7 @@ import json
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -25,12 +25,9 @@ from pincal.cli.paths import (
     refuse_overwrite,
     refuse_overwrite_matching,
 )
-from pincal.diagnosis.diagnose import Diagnosis, diagnose
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
-from pincal.fit.level_choice import LevelChoice, choose_level
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
 from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import (
     check_registrable,
@@ -70,11 +67,12 @@ from pincal.report.row_errors import (
 )
 from pincal.report.sessions import session_entries, session_errors
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-from pincal.simulation.paper import (
-    SimulatedExperiment,
-    SimulationSettings,
-    simulate_experiment,
-)
+
+if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
+    from pincal.diagnosis.diagnose import Diagnosis
+    from pincal.fit.level_choice import LevelChoice
+    from pincal.fit.paper_methods import PaperCalibration
+    from pincal.simulation.paper import SimulatedExperiment, SimulationSettings
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
@@ -92,6 +90,8 @@ def simulate_to_directory(
     ``effects`` (``TYPE:JOINT:VALUE`` strings, see :func:`pincal.model.effects.parse_effect`)
     are injected into the data without being declared in it; truth.json records them.
     """
+    from pincal.simulation.paper import simulate_experiment
+
     if deviations not in DEVIATION_SETS:
         raise PincalError(f"unknown deviation set '{deviations}'; use one of {sorted(DEVIATION_SETS)}")
     urdf = kuka_lwr4plus_urdf()
@@ -170,6 +170,8 @@ def calibrate_chain_dh(
     chain: KinematicChain, data: MeasurementSet, method: int, weight: float
 ) -> tuple[PaperCalibration, DHParameterSet, float]:
     """Run a paper method on a loaded chain; returns the result, the parameter set and the time [s]."""
+    from pincal.fit.paper_methods import calibrate_paper
+
     params = DHParameterSet(chain)
     start = time.perf_counter()
     result = calibrate_paper(chain, data, method, weight=weight, nominal=params.nominal)
@@ -242,6 +244,8 @@ def calibrate_files(
         start = time.perf_counter()
         stages = Stages(progress)
         if level == "auto":
+            from pincal.fit.level_choice import choose_level
+
             choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
                                   reject_outliers=reject_outliers, selection=selection, progress=stages.next())
             level = choice.chosen
@@ -434,6 +438,9 @@ def diagnose_files(
     URDF, the report (with ``effects``) and the plots; a ``.xacro`` is expanded with ``xacro_args``.
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
+    from pincal.diagnosis.diagnose import diagnose
+    from pincal.fit.level_choice import choose_level
+
     urdf, data_paths, out_urdf, report_path = Path(urdf), input_paths(data_path), Path(out_urdf), Path(report_path)
     inputs = [*description_inputs(urdf, xacro_args), *data_paths] + ([Path(validation_path)] if validation_path else [])
     refuse_overwrite(out_urdf, *inputs)

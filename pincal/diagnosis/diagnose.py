@@ -38,8 +38,8 @@ sensitivity model per set of free parameters.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -55,8 +55,9 @@ from pincal.diagnosis.screening import (
 from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
-from pincal.fit.sessions import session_rows
 from pincal.fit.metrics import PoseErrors
+from pincal.fit.prior import standard_deviations
+from pincal.fit.sessions import session_rows
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
@@ -148,7 +149,13 @@ def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
 
 
 class _Model:
-    """The calibrated geometry plus a list of effects, refittable on calibration rows."""
+    """The calibrated geometry plus a list of effects, refittable on calibration rows.
+
+    Under ``--select prior`` every fit keeps the calibration's prior on the geometry
+    (``calibration.prior_sigma``, eq P1 of :mod:`pincal.fit.prior`): its residual ends with
+    the prior rows and its ΔBIC compares the penalised sums of squares. The effects get no
+    prior (their columns are zero on the prior rows).
+    """
 
     def __init__(self, chain, calibration: ChainCalibration, rows: MeasurementSet, row_weight, inputs):
         self.chain, self.calibration, self.rows, self.inputs = chain, calibration, rows, inputs
@@ -166,6 +173,7 @@ class _Model:
             effects=effects, inputs=self.inputs if inputs is None else inputs, models=self.models,
             session_names=self.calibration.session_names,
         )
+        problem.prior = self.calibration.prior_sigma  # the geometry's prior, if any (class docstring)
         problem.sigma_pos = self.sigma_pos
         problem.sigma_rot = self.sigma_rot
         return problem
@@ -335,7 +343,8 @@ def diagnose(
         current_bic = _bic(sol.residual, sol.x.size)
         counter.tick()
         steps.append(Step(
-            effect=effect, values=sol.x[obj._effect_slices[-1]], std=sol.std[obj._effect_slices[-1]],
+            effect=effect, values=sol.x[obj._effect_slices[-1]],
+            std=standard_deviations(obj, sol)[obj._effect_slices[-1]],
             delta_bic=float(delta), calibration_before=before_cal, calibration_after=_errors(obj, sol.x),
             heldout_before=before_held,
             heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
@@ -350,8 +359,9 @@ def diagnose(
         )
     counter.expect(1)
     final_solution = solve(current_objective, current_x, what="final fit")
+    final_std = standard_deviations(current_objective, final_solution)  # the posterior's under a prior
     effects = tuple(
-        (e, final_solution.x[sl], final_solution.std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
+        (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
     )
     unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain)
     counter.settle()
@@ -366,7 +376,7 @@ def diagnose(
         time_reference=reference,
         calibration_errors=_errors(current_objective, final_solution.x),
         heldout_errors=_heldout_errors(model, current_objective, final_solution.x, heldout, held_inputs),
-        solution_std=final_solution.std,
+        solution_std=final_std,
         sigma_pos_m=model.sigma_pos,
         sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),

@@ -14,11 +14,12 @@ reported instead:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
+from pincal.fit.prior import standard_deviations
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 from pincal.residuals.sensor import SensorResidual
@@ -133,7 +134,7 @@ class Judge:
             if rank >= SHOWN and (chosen is not None or delta >= EVIDENCE):
                 break
             sl = obj._effect_slices[-1]
-            value, std = sol.x[sl], sol.std[sl]
+            value, std = sol.x[sl], standard_deviations(obj, sol)[sl]
             held = self.held(effect, obj, sol.x)
             verdict = "not significant"
             if delta < EVIDENCE:

@@ -33,6 +33,17 @@ from pincal.fit.identifiability import (
     order_parameters,
 )
 from pincal.fit.outliers import find_outliers
+from pincal.fit.prior import (
+    MAX_SCALE_ITERATIONS,
+    PRIOR_STATUS,
+    PriorResidual,
+    data_rows,
+    map_outcome,
+    prior_of,
+    prior_sigmas,
+    reestimated_scales,
+    settled,
+)
 from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.selection import select_subset as _select
 from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
@@ -89,6 +100,8 @@ class ChainCalibration:
         session_names: the sessions, in the order of ``target.registrations``.
         used_index: rows of the data given to :func:`calibrate_chain` in the final fit (indices).
         outlier_files / removed_files: the file of each outlier / removed row.
+        prior_sigma: with ``--select prior``, σ_i of every kinematic parameter of ``params`` in its
+            own unit (m or rad) (:func:`pincal.fit.prior.prior_sigmas`), (n,); None without a prior.
     """
 
     level: str
@@ -121,6 +134,7 @@ class ChainCalibration:
     used_index: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
     outlier_files: tuple[str, ...] = ()
     removed_files: tuple[str, ...] = ()
+    prior_sigma: np.ndarray | None = None
 
     def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
         """Linearised prediction of the RMS error of the target points at
@@ -186,11 +200,12 @@ class FitProblem:
         self.models = {} if models is None else models
         self.sigma_pos = START_SIGMA_POS_M
         self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
+        self.prior = None  # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.data.q, self.models)
-        return SensorResidual(
+        objective = SensorResidual(
             cache,
             self.data.points,
             self.data.rotations,
@@ -203,6 +218,7 @@ class FitProblem:
             inputs=self.inputs,
             sessions=self.sessions,
         )
+        return objective if self.prior is None else PriorResidual(objective, self.prior[free])
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
         objective = self.objective(free, base)
@@ -211,9 +227,14 @@ class FitProblem:
         return objective, solution
 
     def reestimate_sigmas(self, objective: SensorResidual, solution: Solution) -> None:
-        """Maximum likelihood with unknown variances: sigma² = mean squared residual per kind."""
+        """Maximum likelihood with unknown variances: sigma² = mean squared residual per kind;
+        with a prior, eq P2 of :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
         k, p = self.data.n_rows, self.data.n_points
         n_pos = 3 * k * p
+        if isinstance(objective, PriorResidual):
+            self.sigma_pos, self.sigma_rot = reestimated_scales(solution, objective.n_prior, n_pos, self.sigma_pos,
+                                                                self.sigma_rot)
+            return
         pos = solution.residual[:n_pos] * self.sigma_pos
         self.sigma_pos = float(np.sqrt(np.mean(pos**2))) or self.sigma_pos
         if self.sigma_rot is not None:
@@ -243,8 +264,10 @@ def calibrate_chain(
         sigma_column: extra column holding a per-row noise scale [mm] (weights).
         reject_outliers: refit without the rows flagged as outliers.
         selection: criterion choosing how many identifiable parameters to keep
-            (:data:`SELECTION_CRITERIA`).
-        sigma_iterations: refits re-estimating the position/orientation noise scales.
+            (:data:`SELECTION_CRITERIA`); ``"prior"`` (or a :class:`pincal.fit.prior.Prior`
+            with its scales) keeps all of them in a MAP fit.
+        sigma_iterations: refits re-estimating the position/orientation noise scales (with a
+            prior: up to eq P2's fixed point instead, :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
         progress: ``progress(done, total)`` after the registration, each subset scored, the fit.
 
     On return the chain holds the calibrated placements.
@@ -333,6 +356,8 @@ def _calibrate_rows(
         other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
         ordering = order_parameters(jac, kinematic_cols, other_cols)
         rank = ordering.rank
+        prior = prior_of(criterion)
+        problem.prior = None if prior is None else prior_sigmas(params, prior)
         selection, kept = _select(problem, ordering, base, rows, criterion, counter)
         dropped = _dropped(jac, ordering, kept, other_cols, full, params, problem.session_names)
     fit_started = time.perf_counter()
@@ -340,8 +365,11 @@ def _calibrate_rows(
     x0 = None if selection is None else selection.solution
     objective, solution = problem.fit(kept, base, x0, what=f"{level} fit")
     fit_seconds = time.perf_counter() - fit_started
-    for _ in range(sigma_iterations if size else 0):
+    for _ in range((sigma_iterations if problem.prior is None else MAX_SCALE_ITERATIONS) if size else 0):
+        before = problem.sigma_pos, problem.sigma_rot
         problem.reestimate_sigmas(objective, solution)
+        if problem.prior is not None and settled(before, (problem.sigma_pos, problem.sigma_rot)):
+            break  # a prior's fixed point of eq P2 (pincal.fit.prior)
         objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
     counter.tick()
     x = solution.x
@@ -359,6 +387,12 @@ def _calibrate_rows(
         chain.set_placements(nominal)
     jac = solution.jacobian
     covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    if isinstance(objective, PriorResidual):  # the posterior, and what the prior determines (pincal.fit.prior)
+        covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept, problem.prior, selection,
+                                                  params, prior_of(criterion))
+        std_all = np.sqrt(np.diag(covariance))
+        std[kept] = std_all[objective.blocks["kinematic"]]
+        status[weak] = PRIOR_STATUS
     names = _column_names(objective, params, kept, problem.session_names)
     correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
     k, p = rows.n_rows, rows.n_points
@@ -375,7 +409,7 @@ def _calibrate_rows(
         sigma_pos_m=problem.sigma_pos,
         sigma_rot_rad=problem.sigma_rot,
         rank=rank,
-        condition=condition_number(jac),
+        condition=condition_number(data_rows(jac, objective)),  # the data's, not the prior rows'
         selection=selection,
         dropped=dropped,
         correlated=correlated,
@@ -391,6 +425,7 @@ def _calibrate_rows(
         start=problem.start,
         fit_target=not tool_known,
         session_names=problem.session_names,
+        prior_sigma=problem.prior,
     )
     return result, point_errors
 

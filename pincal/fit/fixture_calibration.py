@@ -44,6 +44,18 @@ from pincal.fit.identifiability import (
     order_parameters,
 )
 from pincal.fit.outliers import find_outliers
+from pincal.fit.prior import (
+    MAX_SCALE_ITERATIONS,
+    PRIOR_STATUS,
+    PriorResidual,
+    data_rows,
+    effective_scale,
+    hat_diagonal,
+    map_outcome,
+    prior_of,
+    prior_sigmas,
+    settled,
+)
 from pincal.fit.registration import register_points
 from pincal.fit.selection import select_subset
 from pincal.fit.socket_metrics import FixtureMetrics, metrics_of_positions
@@ -182,11 +194,14 @@ class FixtureProblem:
         self.chain, self.params, self.data = chain, params, data
         self.start, self.bases = start, bases
         self.models: dict = {}
+        self.prior = None  # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
+        self.noise = 1.0  # with a prior: the residuals' noise scale σ [m] weighting its rows
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> FixtureResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.data.q, self.models)
-        return FixtureResidual(cache, self.data.placement, self.data.socket_points, self.bases, self.start)
+        objective = FixtureResidual(cache, self.data.placement, self.data.socket_points, self.bases, self.start)
+        return objective if self.prior is None else PriorResidual(objective, self.prior[free], self.noise)
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
         objective = self.objective(free, base)
@@ -207,7 +222,9 @@ def calibrate_fixture(
     """Calibrate ``chain`` at ``level`` from the socket-fixture rows ``data``.
 
     The chain's tool frame is the frame the ball centre is estimated in. On
-    return the chain holds the calibrated placements.
+    return the chain holds the calibrated placements. ``selection`` as for
+    :func:`pincal.fit.chain_calibration.calibrate_chain` (``"prior"``: the MAP fit of
+    :mod:`pincal.fit.prior`, its rows weighted by the residuals' noise σ [m], eq P2).
 
     Raises:
         CalibrationError: an unknown level or criterion, too few rows for the
@@ -236,11 +253,21 @@ def calibrate_fixture(
         others = np.arange(size, jac.shape[1])
         ordering = order_parameters(jac, kinematic, others)
         rank = ordering.rank
+        prior = prior_of(selection)
+        if prior is not None:  # its rows weighted by the noise of the nominal fit at first (eq P1, P2)
+            problem.prior, problem.noise = prior_sigmas(params, prior), nominal_rms
         chosen, kept = select_subset(problem, ordering, base, problem.rows_view(), selection)
         names = column_names(full, params, np.arange(size), data) + [f"root_frame.r{a}" for a in "xyz"][:turn]
         dropped = _dropped(jac, ordering, kept, others, names)
     fit_started = time.perf_counter()
     objective, solution = problem.fit(kept, base, what=f"{level} fit")
+    for _ in range(MAX_SCALE_ITERATIONS if isinstance(objective, PriorResidual) else 0):  # eq P2's fixed point
+        before = problem.noise
+        problem.noise = effective_scale(solution.residual[: -objective.n_prior],
+                                        hat_diagonal(solution.jacobian, objective.n_prior)) or before
+        if settled((before,), (problem.noise,)):
+            break
+        objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
     fit_seconds = time.perf_counter() - fit_started
     x = solution.x
     vector = base.copy()
@@ -254,8 +281,14 @@ def calibrate_fixture(
         params.apply(vector)
     jac = solution.jacobian
     covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    residual = solution.residual[: 3 * data.n_rows]  # without a prior's rows
+    if isinstance(objective, PriorResidual):  # the posterior, and what the prior determines (pincal.fit.prior)
+        covariance, weak, chosen = map_outcome(jac, solution.residual, objective, kept, problem.prior, chosen,
+                                               params, prior)
+        std[kept] = np.sqrt(np.diag(covariance))[objective.blocks["kinematic"]]
+        status[weak] = PRIOR_STATUS
     names = column_names(objective, params, kept, data)
-    errors = np.linalg.norm(solution.residual.reshape(-1, 3), axis=1)
+    errors = np.linalg.norm(residual.reshape(-1, 3), axis=1)
     return FixtureCalibration(
         level=level,
         params=params,
@@ -269,11 +302,11 @@ def calibrate_fixture(
         training=metrics_of_positions(objective.ball_positions(x), data),
         nominal_training=nominal_training,
         rank=rank,
-        condition=condition_number(jac),
+        condition=condition_number(data_rows(jac, objective)),  # the data's, not the prior rows'
         selection=chosen,
         dropped=dropped,
         correlated=tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance)),
-        rms_m=solution.rms,
+        rms_m=float(np.sqrt(np.mean(residual**2))),
         nominal_rms_m=nominal_rms,
         outliers=tuple((data.sources[data.files[k]], int(data.lines[k]), score)
                        for k, score in find_outliers(errors[:, None], np.arange(data.n_rows))),
@@ -281,6 +314,7 @@ def calibrate_fixture(
         fit_seconds=fit_seconds,
         total_seconds=time.perf_counter() - started,
         kept=kept,
+        notes=() if chosen is None else tuple(chosen.notes),  # the selection's (and a prior's) notes
     )
 
 

@@ -152,6 +152,8 @@ class Selection:
         chosen: the number kept.
         refitted: the sizes fitted nonlinearly (the chosen one among them).
         solution: the chosen subset's fitted unknowns (to start the final fit from).
+        prior_scale: with ``--select prior``, the prior's ``translation_mm`` and ``rotation_deg``
+            (``scores`` then holds the effective number of kinematic parameters).
     """
 
     criterion: str
@@ -161,3 +163,4 @@ class Selection:
     notes: tuple[str, ...] = field(default=())
     refitted: tuple[int, ...] = ()
     solution: np.ndarray | None = field(default=None, compare=False, repr=False)
+    prior_scale: dict[str, float] | None = None  # --select prior: its scales (pincal.fit.prior)

@@ -34,7 +34,11 @@ level generalises is measured, not assumed:
 3. **The one-standard-error rule** (Breiman, Friedman, Olshen & Stone 1984, ch. 3; Hastie,
    Tibshirani & Friedman 2009, §7.10): CV = mean of e_f over the F folds,
    SE = sample std of e_f / sqrt(F). The chosen level is the simplest whose CV is
-   within one SE of the lowest CV (:func:`one_standard_error`).
+   within one SE of the lowest CV (:func:`one_standard_error`). With ``--select prior`` the
+   richest such level (:data:`RULE_PRIOR`): each level then keeps every identifiable
+   parameter under physical priors, so a simpler level is not a smaller fit but a
+   narrower prior (zero width on the placements it leaves out), and is chosen only
+   when its CV is lower by more than the SE.
 
 :func:`choose_level` (sensor data) and :func:`choose_fixture_level` return a
 :class:`LevelChoice`; the caller then calibrates all rows at the chosen level.
@@ -78,6 +82,13 @@ MIN_HELD_OUT_COORDINATES = 12
 
 RULE = ("the simplest level whose mean held-out error over the folds is within one standard error "
         "(std over folds / sqrt(folds)) of the lowest (one-standard-error rule)")
+#: With --select prior (pincal.fit.prior) every level keeps all its identifiable parameters under
+#: physical priors, and a simpler level is the richer one with those priors shrunk to zero width
+#: (its placements claimed exact): the richest level is the model, and a simpler one is chosen
+#: only when its CV is lower by more than the lowest CV's standard error.
+RULE_PRIOR = ("with --select prior, the richest level whose mean held-out error over the folds is within one "
+              "standard error (std over folds / sqrt(folds)) of the lowest (one-standard-error rule, richest "
+              "first: the priors already shrink what the data do not support)")
 
 
 @dataclass(frozen=True)
@@ -136,6 +147,7 @@ class LevelChoice:
         threshold_mm: lowest CV + its SE [mm].
         selection: the criterion choosing the kept parameters within each level.
         seconds: wall time [s].
+        rule: how ``chosen`` follows from the scores (:data:`RULE`, or :data:`RULE_PRIOR` with ``prior``).
     """
 
     scheme: str
@@ -147,11 +159,12 @@ class LevelChoice:
     threshold_mm: float
     selection: str
     seconds: float
+    rule: str = RULE
 
     def as_dict(self) -> dict:
         """REPORT.json's ``level_choice``."""
         return {
-            "rule": RULE,
+            "rule": self.rule,
             "scheme": self.scheme,
             "error": self.error,
             "selection": self.selection,
@@ -165,12 +178,15 @@ class LevelChoice:
         }
 
 
-def one_standard_error(errors: npt.ArrayLike, standard_errors: npt.ArrayLike) -> tuple[int, int, float]:
+def one_standard_error(errors: npt.ArrayLike, standard_errors: npt.ArrayLike,
+                       richest: bool = False) -> tuple[int, int, float]:
     """The one-standard-error rule over candidates ordered simplest first.
 
     Args:
         errors: mean held-out error of each candidate (inf or NaN: not a candidate).
         standard_errors: the standard error of each mean.
+        richest: choose the richest candidate within the threshold instead of the simplest
+            (:data:`RULE_PRIOR`).
 
     Returns:
         (index of the lowest error, index chosen, threshold = lowest + its SE).
@@ -185,7 +201,7 @@ def one_standard_error(errors: npt.ArrayLike, standard_errors: npt.ArrayLike) ->
         raise CalibrationError("no level could be fitted on every fold of the cross-validation")
     lowest = int(np.argmin(np.where(finite, errors, np.inf)))
     threshold = float(errors[lowest] + standard_errors[lowest])
-    chosen = int(np.flatnonzero(finite & (errors <= threshold))[0])
+    chosen = int(np.flatnonzero(finite & (errors <= threshold))[-1 if richest else 0])
     return lowest, chosen, threshold
 
 
@@ -220,10 +236,11 @@ def _score(level: str, errors: list[float], kept: list[int], failures: list[str]
 
 
 def _choice(scheme, error, folds, scores, selection, started) -> LevelChoice:
+    richest = selection == "prior"
     lowest, chosen, threshold = one_standard_error([s.cv_error_mm for s in scores],
-                                                   [s.standard_error_mm for s in scores])
+                                                   [s.standard_error_mm for s in scores], richest)
     return LevelChoice(scheme, error, tuple(folds), tuple(scores), scores[lowest].level, scores[chosen].level,
-                       threshold, selection, time.perf_counter() - started)
+                       threshold, selection, time.perf_counter() - started, RULE_PRIOR if richest else RULE)
 
 
 def _cross_validate(folds, levels, fit_and_score, counter: Counter, restore) -> list[LevelScore]:

@@ -107,15 +107,15 @@ def pose_errors(
         sensor_scale / drift: sensor effects: the model point is
             (1 + s)(Omega x + tau + drift_j) (see :mod:`pincal.model.effects`).
     """
-    poses = chain.poses(data.q if q is None else q)
+    tool_rotations, tool_positions = chain.tool_poses(data.q if q is None else q)
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
-    world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
+    world = points_in_base(tool_positions, tool_rotations, points)
     predicted = sensed_points(registration_position, world, sensor_scale, drift)
     position = np.linalg.norm(predicted - data.points, axis=2)
     rotation = None
     if data.rotations is not None:
         target = np.eye(3) if target_rotation is None else np.asarray(target_rotation, dtype=float)
-        model = registration_orientation.apply_rotations(poses.tool_rotations @ target)
+        model = registration_orientation.apply_rotations(tool_rotations @ target)
         relative = data.rotations.transpose(0, 2, 1) @ model  # G_j^-1 Omega R_j R_T
         rotation = np.array([np.linalg.norm(pin.log3(r)) for r in relative])
     return PoseErrors(position_m=position, rotation_rad=rotation)

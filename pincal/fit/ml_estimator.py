@@ -136,6 +136,7 @@ def calibrate_ml(
     fit_alpha_n: bool = True,
     withhold_orientations: tuple[str, ...] = (),
     start: PaperCalibration | None = None,
+    models: dict | None = None,
 ) -> MLCalibration:
     """Maximum-likelihood calibration on the ``cpa`` and ``calibration`` rows of ``data``.
 
@@ -154,6 +155,9 @@ def calibrate_ml(
         start: Method 2's result on the same ``data`` (from
             :func:`pincal.fit.paper_methods.calibrate_paper`), the fit's start;
             computed if None. Its nominal table is the nominal one.
+        models: Pinocchio sensitivity models of ``chain`` by their slots, shared by
+            many fits of one chain (:class:`pincal.residuals.base.KinematicsCache`);
+            the fit adds those it builds. None: built for this fit only.
 
     Raises:
         CalibrationError: no orientations, several points per row, a σ that is
@@ -169,7 +173,7 @@ def calibrate_ml(
             "use --method 1 for positions only"
         )
     if start is None:
-        start = calibrate_paper(chain, data, method=2, nominal=nominal)
+        start = calibrate_paper(chain, data, method=2, nominal=nominal, models=models)
     elif start.method != 2 or (
         nominal is not None and not np.array_equal(start.nominal.to_vector(), nominal.to_vector())
     ):
@@ -186,7 +190,7 @@ def calibrate_ml(
             f"every row's are withheld ({', '.join(withhold_orientations)})"
         )
     free = ml_parameter_indices(params, fit_alpha_n)
-    cache = KinematicsCache(params, free, start.table.to_vector(), rows.q)
+    cache = KinematicsCache(params, free, start.table.to_vector(), rows.q, models)
     points, rotations = rows.points[:, :1, :], rows.rotations
     reference = start.registration_position
 
@@ -237,9 +241,9 @@ def calibrate_ml(
     sigma_mm, sigma_deg = sigma[0] * 1000.0, float(np.degrees(sigma[1]))
     source = {True: "estimated from the residuals", False: "given"}
     notes = list(start.notes) + [
-        f"ML estimator on {rows.n_rows} rows (cpa and calibration), started from Method 2; "
-        f"sensor noise sigma_p = {sigma_mm:.4g} mm ({source[estimated[0]]}), "
-        f"sigma_a = {sigma_deg:.4g} deg ({source[estimated[1]]})"
+        (f"ML estimator on {rows.n_rows} rows (cpa and calibration), started from Method 2; "
+         f"sensor noise sigma_p = {sigma_mm:.4g} mm ({source[estimated[0]]}), "
+         f"sigma_a = {sigma_deg:.4g} deg ({source[estimated[1]]})")
     ]
     if withheld.any():
         notes.append(

@@ -173,6 +173,8 @@ def calibrate_paper(
     weight: float = 1.0,
     nominal: DHTable | None = None,
     start: DHTable | None = None,
+    twists: tuple[np.ndarray, np.ndarray, list[str]] | None = None,
+    models: dict | None = None,
 ) -> PaperCalibration:
     """Run Method 1, 2 or 3 on the ``cpa`` and ``calibration`` rows of ``data``.
 
@@ -186,6 +188,11 @@ def calibrate_paper(
             parameters the data cannot determine keep its values.
         start: starting values of the fitted eps, r, d (default: ``nominal``,
             as in the paper); alpha always starts from CPA.
+        twists: ``estimate_twists(chain, nominal, data.with_role("cpa"))`` if the
+            caller has it (fits of one data set share one CPA); computed if None.
+        models: Pinocchio sensitivity models of ``chain`` by their slots, shared by
+            many fits of one chain (:class:`pincal.residuals.base.KinematicsCache`);
+            the fit adds those it builds. None: built for this fit only.
     """
     if method not in METHODS:
         raise CalibrationError(f"method must be one of {METHODS}, got {method}")
@@ -205,7 +212,9 @@ def calibrate_paper(
             f"{data.source}: Method {method} needs orientations (columns qx,qy,qz,qw); "
             "use --method 1 for positions only"
         )
-    alpha, alpha_estimated, notes = estimate_twists(chain, nominal, data.with_role("cpa"))
+    if twists is None:
+        twists = estimate_twists(chain, nominal, data.with_role("cpa"))
+    alpha, alpha_estimated, notes = twists[0].copy(), twists[1], list(twists[2])
     start_vector = nominal.to_vector()
     offsets = params.indices("epsilon", range(1, n))
     lengths = np.concatenate([params.indices("r"), params.indices("d", range(1, n))])
@@ -241,17 +250,17 @@ def calibrate_paper(
     stages = []
     vector = start_vector
     if method == 1:
-        cache = KinematicsCache(params, np.concatenate([offsets, lengths]), vector, q)
+        cache = KinematicsCache(params, np.concatenate([offsets, lengths]), vector, q, models)
         stages.append(fit(DistanceResidual(cache, points), cache, "Err_pos", "m"))
         vector = cache.base
     elif method == 2:
-        cache = KinematicsCache(params, offsets, vector, q)
+        cache = KinematicsCache(params, offsets, vector, q, models)
         stages.append(fit(RotationResidual(cache, rotations), cache, "Err_rot", "rad"))
-        cache = KinematicsCache(params, lengths, cache.base, q)
+        cache = KinematicsCache(params, lengths, cache.base, q, models)
         stages.append(fit(DistanceResidual(cache, points), cache, "Err_pos", "m"))
         vector = cache.base
     else:
-        cache = KinematicsCache(params, np.concatenate([offsets, lengths]), vector, q)
+        cache = KinematicsCache(params, np.concatenate([offsets, lengths]), vector, q, models)
         objective = FullPoseResidual(cache, points, rotations, weight)
         stages.append(fit(objective, cache, "Err_full", "mm | sqrt(w) deg"))
         vector = cache.base

@@ -67,6 +67,8 @@ SELECTION_CRITERIA = {
     "bic": "Bayesian information criterion m ln(RSS/m) + n ln(m) on the calibration rows",
     "press": "linearised leave-one-row-out cross-validation (PRESS) on the calibration rows",
     "all": "every identifiable parameter (AIC reported)",
+    "prior": ("every identifiable parameter, with Gaussian priors of physical scale about nominal (MAP fit, "
+              "pincal.fit.prior; value: effective number of kinematic parameters)"),
 }
 
 #: Solver tolerance of the nested fits that only score a subset (their criterion
@@ -303,7 +305,8 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
     estimates the expected prediction error on new measurements; ``bic``: the
     same with ln(m) per parameter (Schwarz 1978); ``press``: linearised
     leave-one-row-out cross-validation (Allen 1974); ``all``: every
-    identifiable parameter. Every prefix of the ordering is scored from one QR
+    identifiable parameter; ``prior``: every identifiable one, the problem's
+    objectives carrying the prior rows (:mod:`pincal.fit.prior`). Every prefix of the ordering is scored from one QR
     factorisation of the Jacobian at the start (:func:`nested_fits`);
     only finalists are refitted (:func:`refine`), and the
     kept subset is the best refitted one. ``counter`` ticks once per refit.
@@ -339,7 +342,7 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
                                                           np.log(m) if criterion == "bic" else 2.0))
         return out
 
-    if criterion == "all":
+    if criterion in ("all", "prior"):  # prior: the problem's objectives carry its rows (pincal.fit.prior)
         linear = np.full(rank + 1, np.inf)
         linear[rank] = 0.0
     else:  # every prefix from one factorisation at the start (eq S1, S2)

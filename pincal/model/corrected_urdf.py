@@ -18,16 +18,9 @@ import numpy as np
 
 from pincal.errors import ModelError
 from pincal.model.chain import KinematicChain
-from pincal.model.urdf import XacroArgs, load_urdf, read_joint_origins, write_urdf_with_origins
-
-
-def _tip_joint(urdf_path: Path, tip_link: str, xacro_args: XacroArgs = None) -> tuple[str | None, bool]:
-    """Name of the joint whose child is ``tip_link`` and whether it is fixed."""
-    robot = load_urdf(urdf_path, xacro_args).robot
-    for joint in robot.joints:
-        if joint.child == tip_link:
-            return joint.name, joint.type == "fixed"
-    return None, False
+from pincal.model.description import read_description
+from pincal.model.urdf import XacroArgs, write_urdf_with_origins
+from pincal.model.urdf_elements import joint_origins, parent_joint
 
 
 def corrected_origins(
@@ -46,13 +39,14 @@ def corrected_origins(
         xacro_args: the arguments the chain's xacro file was expanded with.
     """
     urdf_path = Path(urdf_path)
-    origins = read_joint_origins(urdf_path, xacro_args)
+    robot = read_description(urdf_path, xacro_args).root()
+    origins = joint_origins(robot)
     current = chain.placements()
     out: dict[str, np.ndarray] = {}
     for name, nominal, new in zip(chain.joint_names, nominal_placements[:-1], current[:-1]):
         out[name] = origins[name] @ np.linalg.inv(nominal) @ new
     tip_nominal, tip_new = nominal_placements[-1], current[-1]
-    tip_joint, fixed = _tip_joint(urdf_path, chain.tip_link, xacro_args)
+    tip_joint, fixed = parent_joint(robot, chain.tip_link)
     if tip_joint is not None and fixed:
         out[tip_joint] = origins[tip_joint] @ np.linalg.inv(tip_nominal) @ tip_new
     elif np.abs(tip_new - tip_nominal).max() > 0:

@@ -149,6 +149,9 @@ def read_description(
 ) -> RobotDescription:
     """Read ``path`` as a URDF, expanding it with xacro if its name ends in ``.xacro``; check the tree.
 
+    A description read before in this process, with the same bytes (the same expansion),
+    is returned as it was, not parsed and checked again (:data:`_CHECKED`).
+
     Args:
         path: a URDF file, or a xacro file (``*.xacro``).
         xacro_args: arguments of the xacro file (``{"prefix": "left_"}``); only for a xacro file.
@@ -165,6 +168,9 @@ def read_description(
     args = xacro_arguments(xacro_args)
     if is_xacro(p):
         xml, notes, included = _expand_cached(p, args)
+        key = (str(p), str(p.resolve()), args, xml)
+        if key in _CHECKED:
+            return _CHECKED[key]
         description = RobotDescription(p, xml, args, notes, included)
     else:
         if args:
@@ -174,10 +180,23 @@ def read_description(
             raw = p.read_bytes()
         except OSError as exc:
             raise ModelError(f"{p}: cannot read the URDF ({exc.strerror or exc})") from None
+        key = (str(p), str(p.resolve()), args, raw)
+        if key in _CHECKED:
+            return _CHECKED[key]
         root = _parse_xml(raw, str(p))
         description = RobotDescription(p, etree.tostring(root, encoding="utf-8", xml_declaration=True))
     check_urdf_tree(description.root(), description.source, plain=not description.is_xacro)
+    if len(_CHECKED) >= _CACHE_SIZE:
+        _CHECKED.pop(next(iter(_CHECKED)))
+    _CHECKED[key] = description
     return description
+
+
+#: Descriptions already read and checked in this process, by (path as given, resolved,
+#: xacro arguments, the file's bytes or the expansion): one calibrate run reads its URDF
+#: for the chain, the corrected origins, the tip joint and the writer, and parses and
+#: checks it once. Keyed by content, not modification time, so a rewritten file is read again.
+_CHECKED: dict[tuple[str, str, tuple[tuple[str, str], ...], bytes], RobotDescription] = {}
 
 
 # --------------------------------------------------------------------------- XML
@@ -329,7 +348,7 @@ def _name_of(element: etree._Element) -> str:
     return element.get("name") or ""
 
 
-def _check_numbers(element: etree._Element, where: str, rules: Mapping[str, int], finite: bool) -> None:
+def _check_numbers(element: etree._Element, source: str, rules: Mapping[str, int], finite: bool) -> None:
     for attribute, count in rules.items():
         text = element.get(attribute)
         if text is None:
@@ -341,6 +360,8 @@ def _check_numbers(element: etree._Element, where: str, rules: Mapping[str, int]
         ok = len(values) == count and all(not math.isnan(v) and (math.isfinite(v) or not finite) for v in values)
         if not ok:
             expected = "a finite number" if count == 1 else f"{count} finite numbers"
+            owner = next((a for a in element.iterancestors() if a.tag in ("joint", "link")), None)
+            where = source if owner is None else f"{source}: {owner.tag} '{_name_of(owner)}'"
             raise ModelError(f"{where}: <{element.tag} {attribute}=\"{text}\"> is not {expected}; fix the value")
 
 
@@ -352,9 +373,7 @@ def _check_numeric_attributes(robot: etree._Element, source: str) -> None:
         rules = _NUMERIC.get((parent.tag, element.tag))
         if rules is None:
             continue
-        owner = next((a for a in element.iterancestors() if a.tag in ("joint", "link")), None)
-        where = source if owner is None else f"{source}: {owner.tag} '{_name_of(owner)}'"
-        _check_numbers(element, where, rules, (parent.tag, element.tag) not in _MAY_BE_INFINITE)
+        _check_numbers(element, source, rules, (parent.tag, element.tag) not in _MAY_BE_INFINITE)
 
 
 def _single_link(joint: etree._Element, role: str, where: str) -> str:

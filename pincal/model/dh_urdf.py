@@ -18,7 +18,6 @@ from typing import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
-import yourdfpy
 
 from pincal.errors import ModelError, PincalError
 from pincal.model.dh import DHTable, dh_chain_from_origins
@@ -117,6 +116,8 @@ def urdf_from_dh(
     Raises:
         ModelError: a joint is named like the flange joint, or the file cannot be written.
     """
+    import yourdfpy  # the template's object model; imported here, not on the calibrate path
+
     if DH_FLANGE_JOINT in robot.names:
         raise ModelError(f"joint name '{DH_FLANGE_JOINT}' is reserved for the flange joint; rename the joint")
     links = [yourdfpy.Link(name=DH_BASE_LINK)]

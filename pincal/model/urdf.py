@@ -1,19 +1,18 @@
 """Reading and writing URDF joint origins, everything else preserved.
 
-yourdfpy is the XML reader and writer: a URDF is loaded with it (no meshes, no
-scene graph, ``package://`` file names left untouched), the origins of the named
-joints are replaced in its model and the model is written back. Three
-post-processing steps on yourdfpy's output tree make the result faithful:
+lxml reads and writes: the file is written in the form yourdfpy 0.0.60 gave it
+(:func:`pincal.model.urdf_elements.render`: links, then joints, then materials,
+numbers in their shortest round-trip form), which pincal wrote through yourdfpy
+until it stopped importing it on the calibrate path; the bytes are the same.
+Three steps on that tree make the result faithful:
 
-* **Origins at full precision.** yourdfpy writes an origin as ``xyz``/``rpy``
-  strings computed by ``trimesh.transformations``; the replaced origins are
-  instead written with :func:`format_floats` (shortest round-trip ``repr``, i.e.
-  all 17 significant digits when needed) from a gimbal-safe RPY extraction
-  (:func:`rpy_from_matrix`), so that reading them back reproduces the matrix to
-  about 1e-15. Every origin that was *not* replaced (other joints, inertials,
-  visuals, collisions) gets its original attribute text back verbatim, so it is
-  bit-for-bit what the source said rather than yourdfpy's matrix→RPY round trip.
-* **What yourdfpy drops is put back.** yourdfpy 0.0.60 parses only ``<link>``,
+* **Origins at full precision.** The replaced origins are written with
+  :func:`format_floats` (shortest round-trip ``repr``, i.e. all 17 significant
+  digits when needed) from a gimbal-safe RPY extraction (:func:`rpy_from_matrix`),
+  so that reading them back reproduces the matrix to about 1e-15. Every origin
+  that was *not* replaced (other joints, inertials, visuals, collisions) keeps
+  its original attribute text verbatim.
+* **What the form drops is put back.** yourdfpy 0.0.60 parses only ``<link>``,
   ``<joint>`` and ``<material>`` under ``<robot>`` (so ``<transmission>``,
   ``<gazebo>``, ``<ros2_control>`` ... are lost), its writer omits a joint's
   ``<mimic>``, ``<calibration>`` and ``<safety_controller>``, and it keeps only the
@@ -24,10 +23,10 @@ post-processing steps on yourdfpy's output tree make the result faithful:
   attributes it omitted are copied back, and children it does not model are
   deep-copied back; top-level extras are appended after the materials in their
   original order. Attributes of ``<robot>`` other than ``name`` are restored too.
-* **What yourdfpy adds is removed.** yourdfpy writes ``<axis xyz="1 0 0"/>`` for a
+* **What the form adds is removed.** yourdfpy writes ``<axis xyz="1 0 0"/>`` for a
   joint that had no ``<axis>`` (the URDF default); it is removed again.
 
-What is *not* preserved: XML comments (yourdfpy strips them), the interleaving of
+What is *not* preserved: XML comments (yourdfpy stripped them), the interleaving of
 links/joints/extras (yourdfpy writes all links, then all joints, then materials;
 URDF semantics do not depend on order), unused namespace declarations such as
 ``xmlns:xacro``, and the textual form of numbers outside origins (e.g. ``1e3``
@@ -43,16 +42,19 @@ import copy
 import io
 import os
 from pathlib import Path
-from typing import Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Callable, Iterable, Mapping
 
 import numpy as np
 import numpy.typing as npt
-import yourdfpy
 from lxml import etree
 
 from pincal.errors import ModelError
 from pincal.model.description import RobotDescription, read_description
+from pincal.model.urdf_elements import joint_origins, render
 from pincal.outputs import replacing
+
+if TYPE_CHECKING:
+    import yourdfpy
 
 #: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
 #: proper rigid transform.
@@ -201,7 +203,8 @@ XacroArgs = Mapping[str, str] | Iterable[tuple[str, str]] | None
 
 
 def load_urdf(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs = None) -> yourdfpy.URDF:
-    """Load a URDF with yourdfpy without touching meshes.
+    """Load a URDF with yourdfpy without touching meshes (for :mod:`pincal.model.dh_urdf`;
+    yourdfpy, trimesh and networkx are imported on the first call).
 
     No scene graph is built and no mesh is loaded; mesh file names (including
     unresolvable ``package://`` ones) are kept exactly as written. A ``*.xacro``
@@ -216,6 +219,8 @@ def load_urdf(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs = None) -
 
 
 def _load(description: RobotDescription) -> yourdfpy.URDF:
+    import yourdfpy
+
     try:
         return yourdfpy.URDF.load(
             io.BytesIO(description.xml),
@@ -239,11 +244,7 @@ def read_joint_origins(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs 
         ``{joint name: 4x4 parent_T_child origin}`` [m, rad]; a joint without an
         ``<origin>`` element has the identity.
     """
-    urdf = load_urdf(urdf_path, xacro_args)
-    return {
-        joint.name: (np.eye(4) if joint.origin is None else np.array(joint.origin, dtype=float))
-        for joint in urdf.robot.joints
-    }
+    return joint_origins(read_description(urdf_path, xacro_args).root())
 
 
 # --------------------------------------------------------------------------- writing
@@ -379,19 +380,19 @@ def write_urdf_with_origins(
         str(name): check_rigid_transform(matrix, f"origin of joint '{name}'")
         for name, matrix in origins.items()
     }
-    urdf = _load(description)
-    joint_map = {joint.name: joint for joint in urdf.robot.joints}
-    unknown = [name for name in checked if name not in joint_map]
+    src_root = description.root()
+    joints = [joint.get("name") for joint in src_root.findall("joint")]
+    unknown = [name for name in checked if name not in joints]
     if unknown:
         raise ModelError(
             f"joint(s) {', '.join(repr(n) for n in unknown)} not found in {src_path}; "
-            f"its joints are: {', '.join(joint_map)}"
+            f"its joints are: {', '.join(joints)}"
         )
-    for name, matrix in checked.items():
-        joint_map[name].origin = matrix.copy()
-
-    out_root = urdf.write_xml().getroot()
-    _postprocess(description.root(), out_root, checked)
+    for joint in src_root.findall("joint"):  # a replaced origin sits where the form puts one
+        if joint.get("name") in checked and joint.find("origin") is None:
+            etree.SubElement(joint, "origin")
+    out_root = render(src_root, description.source)
+    _postprocess(src_root, out_root, checked)
     comment = "\n".join(text for text in (comment, description.provenance()) if text)
     if comment:
         out_root.addprevious(_xml_comment(comment))

@@ -22,6 +22,8 @@ from pincal.simulation.sensor import random_configurations
 LIMIT_SLACK = 1e-3
 #: Configurations drawn when no candidate file is given.
 DEFAULT_SAMPLE = 2000
+#: Workspace configurations the accuracy is averaged over (a seeded subsample of the candidates).
+WORKSPACE_SIZE = 500
 
 
 def sample_candidates(chain: KinematicChain, count: int, seed: int) -> np.ndarray:

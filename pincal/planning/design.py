@@ -22,6 +22,10 @@ with S = I ± F_k P F_kᵀ, P' = P ∓ P F_kᵀ S⁻¹ F_k P, ln det changes by
 ± ln det S and tr(P B) by ∓ tr(S⁻¹ F_k P B P F_kᵀ). The quantities of every
 candidate (F P, F P Fᵀ, F P B P Fᵀ) are updated by the same rank-m terms, so a
 step costs O(K m² n) for K candidates, not O(K m n²).
+
+:func:`continuous_design` bounds what any choice can reach: the optimal
+weights over the candidates (the convex relaxation), certified by the
+equivalence theorem (scripts/plan_design_bound.py compares plans with it).
 """
 
 from __future__ import annotations
@@ -143,17 +147,21 @@ class DesignProblem:
         info = self.information(chosen)
         if _singular(info):
             return None
-        covariance = np.linalg.inv(info)
-        position = self.position.reshape(-1, 3, self.n)
-        pos = mean_norm(position @ covariance @ position.transpose(0, 2, 1), *QUADRATURE) * 1000.0
-        rot_mean = rot_max = None
-        if self.rotation is not None:
-            rotation = self.rotation @ covariance @ self.rotation.transpose(0, 2, 1)
-            rot = np.degrees(mean_norm(rotation, *QUADRATURE))
-            rot_mean, rot_max = float(rot.mean()), float(rot.max())
+        pos, rot = self.expected_errors(np.linalg.inv(info))
+        rot_mean, rot_max = (None, None) if rot is None else (float(rot.mean()), float(rot.max()))
         rows = np.concatenate([self.existing, self.blocks[np.asarray(chosen, dtype=int)]]).reshape(-1, self.n)
         cond = condition_number(rows) if condition else float("nan")
         return Prediction(float(pos.mean()), float(pos.max()), rot_mean, rot_max, cond)
+
+    def expected_errors(self, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """E‖position error‖ [mm] at each workspace configuration and target point, (E·P,), and
+        E‖orientation error‖ [deg], (E,) or None, of a model whose scaled parameters have ``covariance`` (n, n)."""
+        position = self.position.reshape(-1, 3, self.n)
+        pos = mean_norm(position @ covariance @ position.transpose(0, 2, 1), *QUADRATURE) * 1000.0
+        if self.rotation is None:
+            return pos, None
+        rotation = self.rotation @ covariance @ self.rotation.transpose(0, 2, 1)
+        return pos, np.degrees(mean_norm(rotation, *QUADRATURE))
 
 
 def _singular(info: np.ndarray) -> bool:
@@ -329,3 +337,90 @@ def priority_order(problem: DesignProblem, chosen: np.ndarray, criterion: str,
     chosen = np.asarray(chosen, dtype=int)
     search = _Search(problem.blocks[chosen], problem.base, _weight(problem, criterion), np.ones(len(chosen), bool))
     return chosen[np.array(search.greedy(len(chosen), counter=counter), dtype=int)]
+
+
+@dataclass(frozen=True)
+class ContinuousDesign:
+    """The best approximate (continuous) design: weights over the candidates instead of N of them.
+
+    With weights w (Σ w_k = 1) the information per measured configuration is
+    M(w) = Σ w_k F_kᵀ F_k; the criterion is convex in w, so its optimum over the
+    candidates is found to any accuracy and bounds every exact design: N
+    configurations, each chosen at most once, give tr(B M_N⁻¹) ≥ ψ*/N
+    (``accuracy``, ``a``) and ln det M_N ≤ n ln N + ln det M(w*) (``d``).
+
+    Attributes:
+        weights: w, (K,), zero outside ``allowed``.
+        value: ψ(w) = tr(B M(w)⁻¹) for ``accuracy`` [m² per configuration] and ``a``;
+            ln det M(w) for ``d``.
+        efficiency: certified lower bound on the efficiency of w (general equivalence
+            theorem, Kiefer & Wolfowitz 1960; Pukelsheim 1993, §5.15): with d_k the
+            directional derivative of candidate k (see :func:`continuous_design`),
+            ψ*/ψ(w) ≥ ψ(w)/max_k d_k for ``accuracy`` and ``a``, and
+            (det M*/det M(w))^(−1/n) ≥ n/max_k d_k for ``d``; 1 at the optimum.
+        bound: the optimum's value certified by ``efficiency``: ψ* ≥ ψ(w)·efficiency, or
+            ln det M* ≤ ln det M(w) − n ln efficiency.
+        iterations: multiplicative steps taken.
+    """
+
+    weights: np.ndarray
+    value: float
+    efficiency: float
+    bound: float
+    iterations: int
+
+
+#: Multiplicative steps of :func:`continuous_design` at most, and its default target efficiency.
+CONTINUOUS_ITERATIONS = 5000
+CONTINUOUS_EFFICIENCY = 0.999
+
+
+def continuous_design(problem: DesignProblem, criterion: str, allowed: np.ndarray | None = None,
+                      efficiency: float = CONTINUOUS_EFFICIENCY,
+                      iterations: int = CONTINUOUS_ITERATIONS) -> ContinuousDesign:
+    """Optimal weights over the candidates by the multiplicative algorithm.
+
+    With P = M(w)⁻¹ and H_k = F_kᵀF_k, the directional derivatives are
+    d_k = tr(B P H_k P) (``accuracy``: B the workspace; ``a``: B = I) and
+    d_k = tr(P H_k) (``d``); Σ w_k d_k is ψ(w) or n, and w is optimal iff no
+    d_k exceeds it (equivalence theorem). Each step sets w_k ← w_k (d_k/Σ w d)^ρ,
+    ρ = 1/2 for ``accuracy`` and ``a`` and ρ = 1 for ``d``, which never worsens the
+    criterion (Silvey, Titterington & Torsney 1978; Yu 2010, Ann. Statist. 38,
+    1593–1606), until the certified efficiency reaches ``efficiency``.
+
+    Raises:
+        PincalError: unknown criterion, recorded rows in the problem (the bound holds
+            for new configurations alone), or no allowed candidate.
+    """
+    if criterion not in CRITERIA:
+        raise PincalError(f"--criterion must be one of {', '.join(CRITERIA)}, got '{criterion}'")
+    if len(problem.existing):
+        raise PincalError("the continuous design bounds plans without recorded rows; leave out --existing")
+    allowed = np.ones(problem.n_candidates, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+    if not allowed.any():
+        raise PincalError("no usable candidate for the continuous design")
+    F = problem.blocks[allowed]  # (K', m, n)
+    K, m, n = F.shape
+    B = _weight(problem, criterion)
+    rows = F.reshape(-1, n)
+    w = np.full(K, 1.0 / K)
+    for step in range(1, iterations + 1):
+        info = (rows * np.repeat(w, m)[:, None]).T @ rows  # M(w)
+        P = np.linalg.inv(info)
+        G = (rows @ P).reshape(K, m, n)  # F_k P
+        if B is None:
+            d = np.einsum("kin,kin->k", G, F)  # tr(P H_k)
+            value, total, power = float(np.linalg.slogdet(info)[1]), float(n), 1.0
+        else:
+            d = np.einsum("kin,kin->k", (G.reshape(-1, n) @ B).reshape(K, m, n), G)  # tr(B P H_k P)
+            value = total = float(np.trace(P @ B))
+            power = 0.5
+        achieved = total / float(d.max())
+        if achieved >= efficiency or step == iterations:
+            break
+        w = w * (d / total) ** power
+        w /= w.sum()
+    bound = value - n * np.log(achieved) if B is None else value * achieved
+    weights = np.zeros(problem.n_candidates)
+    weights[allowed] = w
+    return ContinuousDesign(weights=weights, value=value, efficiency=achieved, bound=float(bound), iterations=step)

@@ -22,6 +22,7 @@ from pincal.errors import PincalError
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, initial_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.planning.candidates import WORKSPACE_SIZE
 from pincal.planning.design import DesignProblem, Prediction, select
 from pincal.planning.information import (
     MeasurementModel,
@@ -36,8 +37,6 @@ from pincal.residuals.sensor import REGISTRATION_NAMES
 #: σ_a = 0.055° per angle; Franaszek & Marvel 2022, Section 7). Predicted errors scale with it.
 DEFAULT_SIGMA_POS_MM = 0.055
 DEFAULT_SIGMA_ROT_DEG = 0.055
-#: Workspace configurations the accuracy is averaged over (a seeded subsample of the candidates).
-WORKSPACE_SIZE = 500
 #: Random N-subsets of the candidates the plan is compared with.
 RANDOM_DRAWS = 20
 

@@ -44,7 +44,6 @@ import numpy as np
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.paper_methods import CALIBRATED, FROM_CPA, PaperCalibration
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.sensor import Registration
@@ -53,6 +52,7 @@ from pincal.outputs import write_text
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
     from pincal.fit.chain_calibration import ChainCalibration
+    from pincal.fit.paper_methods import PaperCalibration
     from pincal.model.chain import KinematicChain
 
 
@@ -74,6 +74,9 @@ def paper_report(
     notes: list[str],
 ) -> dict[str, Any]:
     """Build the REPORT.json document of a paper-method calibration."""
+    # imported here: `pincal calibrate --level full` does not load the paper's methods
+    from pincal.fit.paper_methods import CALIBRATED, FROM_CPA
+
     nominal = result.nominal.to_vector()
     calibrated = result.table.to_vector()
     parameters = []
@@ -187,6 +190,7 @@ def selection_report(selection) -> dict[str, Any] | None:
         "candidates": [{"kept": n, "value": _number(v)} for n, v in zip(selection.sizes, selection.scores)],
         # the candidates fitted nonlinearly; the others' values are linearised (pincal/fit/selection.py)
         "refitted": list(selection.refitted),
+        **({"prior_scale": selection.prior_scale} if getattr(selection, "prior_scale", None) else {}),
     }
 
 

@@ -36,8 +36,8 @@ sensor noise that :mod:`pincal.fit.noise_limit` propagates.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -328,14 +328,17 @@ class SensorResidual(Objective):
         poses, sens, target, world = lin["state"]
         k, n_points = world.shape[:2]
         omega, _ = self.row_frames(target)
-        omega_t = np.swapaxes(omega, -1, -2)
         rows_pos = np.zeros((k, n_points, 3, self.n_params))
         kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
-        rows_pos[..., kin] = _point_columns(sens.linear @ omega_t, sens.angular @ omega_t, lin["offsets"])
-        if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi) = -[Omega y]x Omega Jexp3(phi), per session
+        # einsum in the order of 6975758's code: the same arithmetic, the same fits (pincal.residuals.so3)
+        turn = "ij,knj->kin" if omega.ndim == 2 else "kij,knj->kin"  # one session, or each row's
+        for p in range(n_points):  # Omega (v + w x o), the point's velocity in the base frame turned
+            rows_pos[:, p, :, kin] = np.einsum(turn, omega, sens.point_velocity(world[:, p, :]))
+        if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi), per session
             for s, rows, registration in self._session_blocks(target):
                 col, om = reg.start + 6 * s, registration.rotation
-                rows_pos[rows, ..., col : col + 3] = -skew(world[rows] @ om.T) @ (om @ pin.Jexp3(x[col : col + 3]))
+                rows_pos[rows, ..., col : col + 3] = -np.einsum(
+                    "ij,kpjl,lm->kpim", om, skew(world[rows]), pin.Jexp3(x[col : col + 3]))
                 rows_pos[rows, ..., col + 3 : col + 6] = np.eye(3)
         if pts.stop > pts.start:
             rotated = omega @ poses.tool_rotations  # Omega R_k
@@ -423,7 +426,7 @@ class SensorResidual(Objective):
         rows = np.zeros((len(jlog), 3, self.n_params))
         kin, reg, rot = self.blocks["kinematic"], self.blocks["registration"], self.blocks["rotation"]
         # world angular velocity w of R_k: d log E = Jlog3(E) Eᵀ G_kᵀ Omega w ("left" w)
-        rows[:, :, kin] = lin["left"] @ sens.angular.transpose(0, 2, 1)
+        rows[:, :, kin] = np.einsum("kij,knj->kin", lin["left"], sens.angular)
         tool = poses.tool_rotations @ target.rotation  # R_k R_T
         if reg.stop > reg.start:
             for s, session_rows, _ in self._session_blocks(target):

@@ -82,16 +82,16 @@ def measure(
                 if time is None:
                     raise PincalError("a simulated drift needs row times")
                 drift = time[:, None] * np.asarray(value, dtype=float)
-    poses = chain.poses(actual)
+    tool_rotations, tool_positions = chain.tool_poses(actual)
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
-    world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
+    world = points_in_base(tool_positions, tool_rotations, points)
     sensed = sensed_points(registration, world, scale, drift)
     sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
     rotations = None
     if with_rotation:
         target = np.eye(3) if target_rotation is None else target_rotation
         noise = Rotation.from_euler("ZYX", rng.normal(0.0, 1.0, (len(q), 3)) * sigma_rot_rad)
-        rotations = noise.as_matrix() @ registration.apply_rotations(poses.tool_rotations @ target)
+        rotations = noise.as_matrix() @ registration.apply_rotations(tool_rotations @ target)
     return MeasurementSet(
         joint_names=chain.joint_names,
         q=q,
@@ -120,11 +120,11 @@ def simulated_shifts(
 def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registration: Registration) -> MeasurementSet:
     """``data`` as a noise-free sensor sees the chain in its current placements
     (eq 20–21 without N_k and zeta_k): its tool origin and orientation."""
-    poses = chain.poses(data.q)
+    tool_rotations, tool_positions = chain.tool_poses(data.q)
     return replace(
         data,
-        points=registration.apply_points(poses.tool_positions)[:, None, :],
-        rotations=registration.apply_rotations(poses.tool_rotations),
+        points=registration.apply_points(tool_positions)[:, None, :],
+        rotations=registration.apply_rotations(tool_rotations),
     )
 
 

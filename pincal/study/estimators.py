@@ -43,7 +43,7 @@ class Estimator:
     weight: float | None = None
 
     @classmethod
-    def of(cls, method: str, weight: float | None) -> "Estimator":
+    def of(cls, method: str, weight: float | None) -> Estimator:
         """The estimator of a table row's ``method`` and ``weight`` columns."""
         return cls(method if method == "ml" else int(method), weight)
 
@@ -70,7 +70,14 @@ class Estimator:
         return 1.0 if self.weight is None else self.weight
 
     def calibrate(
-        self, chain: KinematicChain, data: MeasurementSet, sigma: float, start: DHTable | None = None
+        self,
+        chain: KinematicChain,
+        data: MeasurementSet,
+        sigma: float,
+        start: DHTable | None = None,
+        twists: tuple | None = None,
+        method2: PaperCalibration | None = None,
+        models: dict | None = None,
     ) -> PaperCalibration:
         """Calibrate from Table 1 on ``data``'s ``cpa`` and ``calibration`` rows.
 
@@ -80,12 +87,21 @@ class Estimator:
             sigma: the noise level, sigma_p [mm] = sigma_a [deg]; the ML estimator
                 weighs with it (on noise-free data any equal weights give the truth).
             start: starting eps, r, d of a paper method (default Table 1).
+            twists: the CPA of ``data`` from Table 1
+                (:func:`pincal.fit.paper_methods.estimate_twists`), shared by the
+                estimators of one trial; computed if None.
+            method2: Method 2's result on ``data`` (from :data:`METHOD_2`), the ML
+                estimator's start; computed if None. Either way the numbers are the same.
+            models: Pinocchio sensitivity models of ``chain`` by their slots, shared
+                by the fits of one worker (:func:`pincal.study.tasks.worker_models`).
         """
         chain.set_placements(KUKA_LWR4_DH.joint_origins())
         if self.method == "ml":
             scale = sigma if sigma > 0 else 1.0
-            return calibrate_ml(chain, data, sigma_pos_mm=scale, sigma_rot_deg=scale, nominal=KUKA_LWR4_DH)
-        return calibrate_paper(chain, data, int(self.method), self.fit_weight, nominal=KUKA_LWR4_DH, start=start)
+            return calibrate_ml(chain, data, sigma_pos_mm=scale, sigma_rot_deg=scale, nominal=KUKA_LWR4_DH,
+                                start=method2, models=models)
+        return calibrate_paper(chain, data, int(self.method), self.fit_weight, nominal=KUKA_LWR4_DH, start=start,
+                               twists=twists, models=models)
 
     def noise_limit(self, chain: KinematicChain, experiment: SimulatedExperiment, sigma: float) -> PredictedErrors:
         """Linearised (Cramér–Rao) prediction of the truth-referenced test errors at ``sigma``."""
@@ -108,6 +124,7 @@ def ml_without_cpa_orientations(
     nominal: DHTable = KUKA_LWR4_DH,
     withhold: tuple[str, ...] = ("cpa",),
     start: PaperCalibration | None = None,
+    models: dict | None = None,
 ) -> tuple[DHTable, Registration]:
     """The ML estimator with the orientations of the ``withhold`` rows left out (an ablation).
 
@@ -124,6 +141,7 @@ def ml_without_cpa_orientations(
         withhold: roles whose orientations are left out.
         start: Method 2's result on ``data`` from ``nominal`` if the caller has
             it (the fit's start; computed if None).
+        models: Pinocchio sensitivity models of ``chain`` by their slots, shared by many fits.
 
     Returns:
         The calibrated table and the registration sensor_T_base (one for
@@ -131,6 +149,7 @@ def ml_without_cpa_orientations(
     """
     chain.set_placements(nominal.joint_origins())
     result = calibrate_ml(
-        chain, data, sigma_pos_mm, sigma_rot_deg, nominal, withhold_orientations=withhold, start=start
+        chain, data, sigma_pos_mm, sigma_rot_deg, nominal, withhold_orientations=withhold, start=start,
+        models=models
     )
     return result.table, result.registration_position

@@ -11,7 +11,8 @@ dicts; its ``key`` orders the rows of a study whatever executor ran them
 * :class:`Figure2Task`: Figure 2's per-pose errors;
 * :class:`LimitTask`: the linearised noise limit of one estimator on one pose set.
 
-Each worker process loads the KUKA chain once (:func:`worker_chain`).
+Each worker process loads the KUKA chain once (:func:`worker_chain`) and keeps
+the Pinocchio sensitivity models its fits build (:func:`worker_models`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.metrics import pose_errors
+from pincal.fit.paper_methods import estimate_twists
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH, DHTable
@@ -65,6 +67,16 @@ def worker_chain() -> KinematicChain:
     return chain
 
 
+def worker_models() -> dict:
+    """The sensitivity models of :func:`worker_chain` by their slots, shared by every fit of
+    this worker process (and thread): each estimator builds its one or two once, not per fit
+    (:class:`pincal.residuals.base.KinematicsCache`; a model keeps no state between evaluations)."""
+    models = getattr(_LOCAL, "models", None)
+    if models is None:
+        models = _LOCAL.models = {}
+    return models
+
+
 #: The CPA-orientation ablation runs on the first ABLATION_REPEATS repeats of :func:`ablation_levels`.
 ABLATION_REPEATS = 5
 #: Suffix of the ablation's eq 24 columns on the ML estimator's rows of those trials (in
@@ -89,6 +101,12 @@ def _simulate(config: StudyConfig, deviations: str, sigma: float, seed: int):
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], config.settings(sigma, seed))
     chain.set_tool(experiment.tool)
     return chain, experiment
+
+
+def _twists(chain: KinematicChain, experiment: SimulatedExperiment) -> tuple:
+    """The CPA link twists of the experiment's ``cpa`` rows from Table 1 (Section 3, eq 9): the
+    same for every estimator and start on these rows, so a task computes them once."""
+    return estimate_twists(chain, KUKA_LWR4_DH, experiment.calibration.with_role("cpa"))
 
 
 def noise_free_test_set(chain: KinematicChain, experiment: SimulatedExperiment) -> MeasurementSet:
@@ -161,9 +179,12 @@ class TrialTask:
         chain, experiment = _simulate(self.config, self.deviations, self.sigma, self.seed)
         test_sets = {"": experiment.validation, "_truth": noise_free_test_set(chain, experiment)}
         rows, results = [], {}
+        twists = _twists(chain, experiment)  # CPA once; ML starts from this trial's Method 2
         for estimator in self.config.estimators:
             started = time.perf_counter()
-            result = results[estimator] = estimator.calibrate(chain, experiment.calibration, self.sigma)
+            result = results[estimator] = estimator.calibrate(
+                chain, experiment.calibration, self.sigma, twists=twists, method2=results.get(METHOD_2),
+                models=worker_models())
             fit_ms = (time.perf_counter() - started) * 1000.0
             chain.set_placements(result.table.joint_origins())
             deviations = parameter_deviations(result.table, experiment.truth)
@@ -182,7 +203,8 @@ class TrialTask:
         if ablation_trial(self.config, self.level, self.repeat):
             # same data, the CPA rows as positions only (the paper's CPA); on the ML rows, kept out of study.csv
             table, registration = ml_without_cpa_orientations(
-                chain, experiment.calibration, self.sigma, self.sigma, start=results.get(METHOD_2))
+                chain, experiment.calibration, self.sigma, self.sigma, start=results.get(METHOD_2),
+                models=worker_models())
             chain.set_placements(table.joint_origins())
             ablation = {}
             for suffix, data in test_sets.items():
@@ -217,7 +239,10 @@ class RestartTask:
     def run(self) -> list[dict[str, Any]]:
         estimator = RESTART_ESTIMATORS[self.estimator_index]
         chain, experiment = _simulate(self.config, self.deviations, self.sigma, self.seed)
-        reference = estimator.calibrate(chain, experiment.calibration, self.sigma).table
+        twists = _twists(chain, experiment)  # the same CPA for the reference and every start
+        models = worker_models()
+        reference = estimator.calibrate(chain, experiment.calibration, self.sigma, twists=twists,
+                                        models=models).table
         rows = []
         for start_index in range(self.first, self.first + self.count):
             seed = restart_start_seed(self.config.entropy, self.case, self.estimator_index, start_index)
@@ -229,7 +254,8 @@ class RestartTask:
                 "start": start_index,
             }
             try:
-                table = estimator.calibrate(chain, experiment.calibration, self.sigma, start=start).table
+                table = estimator.calibrate(chain, experiment.calibration, self.sigma, start=start,
+                                            twists=twists, models=models).table
             except CalibrationError as exc:
                 rows.append({**row, "same_solution": False, "max_deps_deg": math.nan,
                              "max_dlength_mm": math.nan, "error": str(exc)})
@@ -255,9 +281,10 @@ class Figure2Task:
 
     def run(self) -> list[dict[str, Any]]:
         chain, experiment = _simulate(self.config, self.deviations, FIGURE2_SIGMA, self.seed)
-        out = []
+        out, twists = [], _twists(chain, experiment)
         for estimator in (METHOD_1, METHOD_2):
-            result = estimator.calibrate(chain, experiment.calibration, FIGURE2_SIGMA)
+            result = estimator.calibrate(chain, experiment.calibration, FIGURE2_SIGMA, twists=twists,
+                                         models=worker_models())
             chain.set_placements(result.table.joint_origins())
             errors = pose_errors(
                 chain, experiment.validation, result.registration_position, result.registration_orientation

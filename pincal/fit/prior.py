@@ -1,0 +1,262 @@
+"""``--select prior``: every identifiable parameter, each pulled towards nominal by a physical prior.
+
+Instead of keeping a subset of the identifiable kinematic parameters
+(:mod:`pincal.fit.selection`), the maximum a posteriori (MAP) fit keeps all of
+them (``ordering.rank`` of :func:`pincal.fit.identifiability.order_parameters`;
+the non-identifiable ones stay nominal and are reported as not determined) with
+independent Gaussian priors θ_i ~ N(0, σ_i²) about the nominal model:
+σ_i = :data:`DEFAULT_TRANSLATION_MM` (1 mm) for a translation or a prismatic
+joint's zero, :data:`DEFAULT_ROTATION_DEG` (0.5°) for a rotation or a revolute
+joint's zero — the placement errors of machined and assembled arms the issue
+names (``--prior-scale MM,DEG`` sets them). The registration and the target are
+not penalised. With the residuals r(x) already divided by their noise scales
+(σ_pos, σ_rot), the MAP estimate minimises
+
+    ‖r(x)‖² + Σ_i (θ_i / σ_i)²                                       (P1)
+
+(Bishop 2006, §3.3; Tikhonov regularisation), i.e. least squares on r(x)
+stacked with the rows θ_i / σ_i (:class:`PriorResidual`); for a residual in
+metres with noise σ (socket fixture) the rows are σ θ_i / σ_i.
+
+**Noise scale.** Re-estimated after each fit and the fit repeated, up to
+the fixed point (:data:`SCALE_TOLERANCE`). With W the data rows of the whitened Jacobian at the solution
+and Λ = diag(1/σ_i²) (zero for the unpenalised columns), the hat matrix of the
+regularised fit is H = W (WᵀW + Λ)⁻¹ Wᵀ and its trace the effective number of
+parameters (Hastie, Tibshirani & Friedman 2009, §7.6, eq 7.34). Each kind of
+residual k (positions, orientations) re-estimates its scale from its rows as
+
+    σ_k² = ‖e_k‖² / (m_k − tr H_kk)                                    (P2)
+
+(e_k in the kind's units, m_k its rows, H_kk its diagonal block): maximum
+likelihood's mean square ‖e_k‖²/m_k would shrink σ as the parameters absorb
+noise, which weakens the prior and lets them absorb more — on sparse data the
+scale collapses.
+
+**Posterior.** The covariance of the unknowns is (WᵀW/s² + Λ)⁻¹ with
+s² = ‖W-row residual‖² / (m − tr H) from the final fit (eq P2 over all data
+rows; with a prior far wider than the data's information it is the usual
+s² (WᵀW)⁻¹). A parameter whose posterior standard deviation exceeds
+:data:`PRIOR_DOMINATED` × σ_i takes more of its information from the prior than
+from the data (posterior precision = prior precision + data precision, so
+std / σ_i > 1/√2 ⇔ data precision < prior precision): it is reported as
+determined mainly by the prior, its value (near nominal, in the corrected
+model) is not presented as measured.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pincal.errors import CalibrationError
+from pincal.fit.identifiability import Selection
+from pincal.fit.solver import Solution, gram
+
+#: Prior standard deviation of a translation, or of a prismatic joint's zero [mm].
+DEFAULT_TRANSLATION_MM = 1.0
+#: Prior standard deviation of a rotation, or of a revolute joint's zero [deg].
+DEFAULT_ROTATION_DEG = 0.5
+#: Posterior std / prior std above which a parameter is determined mainly by the prior (1/√2: the
+#: data's precision is below the prior's).
+PRIOR_DOMINATED = 1.0 / math.sqrt(2.0)
+#: Most refits re-estimating the noise scale by eq P2 (each from the last; from the registration
+#: fit's scale, noise-free data take ~6 to reach rounding level).
+MAX_SCALE_ITERATIONS = 20
+#: Relative change of every noise scale below which eq P2 has reached its fixed point: the prior's
+#: relative weight then moves by 2e-3 (it scales as 1/σ²).
+SCALE_TOLERANCE = 1e-3
+#: Accepted range of each prior scale, inclusive (mm for translations, degrees for rotations): 1 nm to
+#: 1 km and 1e-6° to 1e6°. Beyond it the prior rows outweigh the data by ~1e12 or more (σ_data² / σ²)
+#: and the normal equations lose every digit (1e-300 ends in a singular-matrix error), or the
+#: prior is no prior at all.
+SCALE_RANGE = (1e-6, 1e6)
+PRIOR_STATUS = ("determined mainly by the prior (posterior std > 0.71 x prior std): kept near nominal, "
+                "not measured")
+
+
+class Prior(str):
+    """The selection criterion ``"prior"`` (equal to that string) carrying its scales.
+
+    Equality: a Prior equals the plain string ``"prior"`` (so ``selection == "prior"`` and
+    ``SELECTION_CRITERIA[selection]`` work), and another Prior only with the same scales; its
+    hash is the string's. It pickles and copies with its scales.
+
+    Attributes:
+        translation_mm: prior std of translations and prismatic joint zeros [mm].
+        rotation_deg: prior std of rotations and revolute joint zeros [deg].
+
+    Raises:
+        CalibrationError: a scale that is not a number within :data:`SCALE_RANGE`.
+    """
+
+    translation_mm: float
+    rotation_deg: float
+
+    def __new__(cls, translation_mm: float = DEFAULT_TRANSLATION_MM, rotation_deg: float = DEFAULT_ROTATION_DEG):
+        low, high = SCALE_RANGE
+        for name, unit, value in (("translation", "mm", translation_mm), ("rotation", "deg", rotation_deg)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise CalibrationError(f"prior scale: the {name} scale must be a positive number, got {value!r}")
+            if not low <= value <= high:
+                raise CalibrationError(f"prior scale: the {name} scale must be from {low:g} to {high:g} {unit}, "
+                                       f"got {value!r}")
+        out = super().__new__(cls, "prior")
+        out.translation_mm, out.rotation_deg = float(translation_mm), float(rotation_deg)
+        return out
+
+    def __reduce__(self):
+        return type(self), (self.translation_mm, self.rotation_deg)
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, Prior):
+            return (self.translation_mm, self.rotation_deg) == (other.translation_mm, other.rotation_deg)
+        return str.__eq__(self, other)
+
+    def __ne__(self, other) -> bool:
+        return not self == other
+
+    __hash__ = str.__hash__
+
+    def as_dict(self) -> dict[str, float]:
+        """REPORT.json ``identifiability.selection.prior_scale``."""
+        return {"translation_mm": self.translation_mm, "rotation_deg": self.rotation_deg}
+
+
+def prior_of(selection: str) -> Prior | None:
+    """The prior of a selection criterion: its own for a :class:`Prior`, the defaults for the
+    string ``"prior"``, None for any other criterion."""
+    if selection != "prior":
+        return None
+    return selection if isinstance(selection, Prior) else Prior()
+
+
+def prior_sigmas(params, prior: Prior) -> np.ndarray:
+    """σ_i of every parameter of ``params`` in its own unit (m or rad), (n,)."""
+    return np.array([prior.translation_mm * 1e-3 if info.unit == "m" else math.radians(prior.rotation_deg)
+                     for info in params.info])
+
+
+class PriorResidual:
+    """An objective with the prior rows of eq P1 appended: [r(x); noise · x_kin / σ].
+
+    Args:
+        objective: the data objective (its ``blocks["kinematic"]`` are θ of the free parameters).
+        sigma: σ_i of the free kinematic parameters, in their order (n_kin,).
+        noise: the data residual's noise scale in its own units (1 for whitened residuals).
+
+    Every other attribute is the data objective's.
+    """
+
+    def __init__(self, objective, sigma: np.ndarray, noise: float = 1.0) -> None:
+        self.objective = objective
+        self.noise = float(noise)
+        self.weight = noise / np.asarray(sigma, dtype=float)
+        self.n_prior = self.weight.size
+
+    def __getattr__(self, name):
+        return getattr(self.objective, name)
+
+    def residual(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        return np.concatenate([self.objective.residual(x), self.weight * x[self.objective.blocks["kinematic"]]])
+
+    def jacobian(self, x) -> np.ndarray:
+        data = self.objective.jacobian(x)
+        rows = np.zeros((self.weight.size, data.shape[1]))
+        kin = self.objective.blocks["kinematic"]
+        rows[:, kin] = np.diag(self.weight)
+        return np.vstack([data, rows])
+
+    def effect_columns(self, x, effects) -> list[np.ndarray]:
+        """The data objective's effect columns with zero prior rows appended: effects
+        (``pincal diagnose``) have no prior, (m + n_prior, n_values) each."""
+        return [np.vstack([block, np.zeros((self.n_prior, block.shape[1]))])
+                for block in self.objective.effect_columns(x, effects)]
+
+
+def settled(before, after) -> bool:
+    """Whether every noise scale (None where absent) changed by less than :data:`SCALE_TOLERANCE` relative."""
+    return all(a is None or abs(a - b) <= SCALE_TOLERANCE * b for b, a in zip(before, after))
+
+
+def hat_diagonal(jacobian: np.ndarray, n_prior: int) -> np.ndarray:
+    """diag H of eq P2 for the data rows of a MAP Jacobian whose last ``n_prior`` rows are the prior's (m,)."""
+    data = jacobian[: jacobian.shape[0] - n_prior]
+    inverse = np.linalg.pinv(gram(jacobian))  # (WᵀW + Λ)⁻¹: the prior rows' Gram is Λ
+    return np.einsum("ij,jk,ik->i", data, inverse, data)
+
+
+def effective_scale(residual: np.ndarray, hat: np.ndarray, floor: float = 1.0) -> float:
+    """σ of eq P2: sqrt(‖e‖² / (m − tr H)) over the rows given (e in its own units); the
+    denominator is at least ``floor`` (a fit that reproduces every row)."""
+    return float(np.sqrt(residual @ residual / max(residual.size - float(hat.sum()), floor)))
+
+
+def posterior(jacobian: np.ndarray, residual: np.ndarray, n_prior: int, noise: float = 1.0) -> tuple[np.ndarray, float]:
+    """The posterior covariance (JᵀJ/s² + Λ)⁻¹ of the unknowns and s² (module docstring), from
+    the MAP fit's Jacobian and residual (prior rows last, weighted by ``noise`` as in
+    :class:`PriorResidual`; data rows whitened when ``noise`` is 1, else in its units)."""
+    m = jacobian.shape[0] - n_prior
+    data, prior = jacobian[:m], jacobian[m:]
+    s2 = effective_scale(residual[:m], hat_diagonal(jacobian, n_prior)) ** 2
+    return np.linalg.pinv(gram(data) / s2 + gram(prior) / noise**2), s2
+
+
+def standard_deviations(objective, solution: Solution) -> np.ndarray:
+    """Standard deviations of a fit's unknowns: the posterior's (:func:`posterior`) for a MAP fit
+    (:class:`PriorResidual`), else the solver's (n,)."""
+    if not isinstance(objective, PriorResidual):
+        return solution.std
+    covariance, _ = posterior(solution.jacobian, solution.residual, objective.n_prior, objective.noise)
+    return np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+
+
+def data_rows(jacobian: np.ndarray, objective) -> np.ndarray:
+    """The data rows of a fit's Jacobian: without a :class:`PriorResidual`'s prior rows."""
+    return jacobian[: jacobian.shape[0] - objective.n_prior] if isinstance(objective, PriorResidual) else jacobian
+
+
+def dominated(std: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Which parameters are determined mainly by the prior: posterior std > :data:`PRIOR_DOMINATED` σ_i."""
+    return np.asarray(std) > PRIOR_DOMINATED * np.asarray(sigma)
+
+
+def reestimated_scales(solution: Solution, n_prior: int, n_pos: int, sigma_pos: float,
+                       sigma_rot: float | None) -> tuple[float, float | None]:
+    """σ_pos [m] and σ_rot [rad] by eq P2 from a MAP fit whose data rows were divided by
+    ``sigma_pos`` (the first ``n_pos``) and ``sigma_rot`` (the rest), prior rows last."""
+    hat = hat_diagonal(solution.jacobian, n_prior)
+    data = solution.residual[: hat.size]
+    out_pos = effective_scale(data[:n_pos] * sigma_pos, hat[:n_pos]) or sigma_pos
+    if sigma_rot is None:
+        return out_pos, None
+    return out_pos, effective_scale(data[n_pos:] * sigma_rot, hat[n_pos:]) or sigma_rot
+
+
+def map_outcome(jacobian: np.ndarray, residual: np.ndarray, objective: PriorResidual, kept: np.ndarray,
+                sigma: np.ndarray, selection: Selection | None, params, prior: Prior):
+    """What a MAP fit reports: the posterior covariance of its unknowns, the kept parameters
+    (indices of ``params``) determined mainly by the prior, and the selection with the
+    effective number of kinematic parameters as its value and a note naming those parameters.
+
+    The effective number is n_kin − Σ_i [(WᵀW + Λ)⁻¹]_ii Λ_ii (the kinematic part of tr H,
+    eq P2: tr H = n − tr((WᵀW + Λ)⁻¹Λ), and only penalised columns enter the second term).
+    """
+    covariance, _ = posterior(jacobian, residual, objective.n_prior, objective.noise)
+    kin = objective.blocks["kinematic"]
+    std = np.sqrt(np.diag(covariance))[kin]
+    weak = np.asarray(kept)[dominated(std, sigma[kept])]
+    inverse = np.diag(np.linalg.pinv(gram(jacobian)))[kin]
+    effective = float(kept.size - np.sum(inverse * objective.weight**2))
+    notes = list(selection.notes) if selection is not None else []
+    if weak.size:
+        names = ", ".join(params.info[i].name for i in weak)
+        notes.append(f"{weak.size} of the {kept.size} identifiable parameters are determined mainly by the prior "
+                     f"(posterior std > {PRIOR_DOMINATED:.2f} x prior std of {prior.translation_mm:g} mm / "
+                     f"{prior.rotation_deg:g} deg): {names}; the corrected model holds them near nominal, "
+                     "and their values are not reported as measured")
+    out = Selection(criterion=selection.criterion if selection is not None else "prior", sizes=(int(kept.size),),
+                    scores=(effective,), chosen=int(kept.size), notes=tuple(notes), refitted=(int(kept.size),),
+                    solution=None if selection is None else selection.solution, prior_scale=prior.as_dict())
+    return covariance, weak, out

@@ -1,0 +1,157 @@
+"""``--select prior`` as diagnose, the socket fixture, the command line and pickling see it."""
+
+from __future__ import annotations
+
+import copy
+import json
+import pickle
+
+import numpy as np
+import pytest
+from test_select_prior import SIGMA_M, UR5, _heldout_m, _rows
+
+from pincal.cli.commands import main
+from pincal.diagnosis.diagnose import diagnose
+from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.fixture_calibration import calibrate_fixture
+from pincal.fit.prior import PRIOR_STATUS, SCALE_RANGE, Prior, prior_sigmas
+from pincal.measurements.csv_v1 import write_measurements
+from pincal.measurements.fixture import Fixture
+from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
+from pincal.model.parameter_sets import PlacementErrors
+from pincal.robots import example_robot_data_urdf
+from pincal.simulation.fixture import simulate_fixture
+
+
+def test_diagnose_keeps_the_prior_of_the_calibration():
+    """9 rows, 27 coordinates for 18 + 9 unknowns: unregularised, the full fit reproduces the noise
+    (5.3 mm held-out on this seed); the MAP fit 0.46 mm. With no effect adopted (none offered),
+    diagnose's fit is the calibration's."""
+    chain, train, test = _rows(9, seed=3, sigma_m=SIGMA_M)
+    nominal = chain.placements()
+    unregularised = _heldout_m(chain, calibrate_chain(chain, train, "full", selection="all"), test)
+    chain.set_placements(nominal)
+    calibration = calibrate_chain(chain, train, "full", selection="prior")
+    held = _heldout_m(chain, calibration, test)
+    assert calibration.prior_sigma is not None
+    diagnosis = diagnose(chain, calibration, train, heldout=test, candidates=[])
+    kin = diagnosis.objective.blocks["kinematic"]
+    std = calibration.std[calibration.kept]
+    # the same MAP problem refitted from its solution: it moves by the solvers' stopping tolerance
+    # (seen 1.8e-4 std); the fit without the prior moves by several std
+    assert np.all(np.abs(diagnosis.solution_x[kin] - calibration.solution[kin]) < 1e-3 * std)
+    assert np.allclose(diagnosis.solution_std[kin], std, rtol=1e-3)  # the posterior's std (seen 2.5e-5)
+    assert diagnosis.heldout_errors.position.rms == pytest.approx(held * 1e3, rel=1e-3)  # mm, as above
+    assert unregularised > 5 * held  # the data make the difference clear (5.29 vs 0.46 mm)
+
+
+def test_diagnose_report_gives_the_posterior_std(tmp_path):
+    """40 rows on which diagnose adopts no effect (on 9 or 15 it adopts one: fewer rows than unknowns
+    leave the search room); the report's values and std are the calibration's MAP fit's."""
+    data = tmp_path / "cal.csv"
+    write_measurements(data, _rows(40, seed=2, sigma_m=SIGMA_M)[1])
+    reports = {}
+    for command in ("calibrate", "diagnose"):
+        report = tmp_path / f"{command}.json"
+        assert main([command, str(UR5), str(data), "--tip-link", "tool0", "--level", "full", "--select", "prior",
+                     "--quiet", "--out", str(tmp_path / f"{command}.urdf"), "--report", str(report)]) == 0
+        reports[command] = json.loads(report.read_text())
+    assert not reports["diagnose"]["diagnosis"]["steps"]
+    pairs = list(zip(reports["calibrate"]["parameters"], reports["diagnose"]["parameters"]))
+    assert any(a["std"] is not None for a, _ in pairs)
+    for a, b in pairs:  # the same MAP fit: values and posterior std to the solvers' tolerance (as above)
+        assert a["status"] == b["status"]
+        if a["std"] is not None:
+            assert b["std"] == pytest.approx(a["std"], rel=1e-3)
+            assert abs(b["calibrated"] - a["calibrated"]) < 1e-3 * a["std"]
+
+
+def _fixture_data():
+    """The data of tests/test_select_prior.py's fixture test (Panda, 8 rows per placement)."""
+    panda = example_robot_data_urdf("panda_description/urdf/panda.urdf")
+    truth = KinematicChain.from_urdf(panda, "panda_link8")
+    rng = np.random.default_rng(7)
+    PlacementErrors(truth).apply(rng.normal(0.0, 1e-3, PlacementErrors(truth).size))
+    fixture = Fixture(("hole_0", "hole_1"), np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0]]))
+    poses = (pose_from_xyz_rpy([0.5, 0.1, 0.05], [0.0, 0.0, 0.3]), pose_from_xyz_rpy([0.4, -0.3, 0.2], [0.1, 0.0, -0.5]))
+    data = simulate_fixture(truth, fixture, poses, np.array([0.01, -0.005, 0.12]), 8, rng)
+    return KinematicChain.from_urdf(panda, "panda_link8"), data
+
+
+def test_fixture_prior_notes_are_reported():
+    chain, data = _fixture_data()
+    tight = calibrate_fixture(chain, data, "full", selection=Prior(1e-6, 1e-6))  # the prior decides
+    assert tight.status.count(PRIOR_STATUS) > 0
+    assert any("determined mainly by the prior" in note for note in tight.notes)
+
+
+def test_jacobian_condition_is_the_data_rows():
+    """A tight prior's rows (weight σ_pos / 1 µm ~ 50 against data rows of order 1) would change the
+    condition number; the data rows' one moves only with the solution (seen 0.08 %)."""
+    chain, train, _ = _rows(12, seed=5, sigma_m=SIGMA_M)
+    nominal = chain.placements()
+    every = calibrate_chain(chain, train, "full", selection="all")
+    chain.set_placements(nominal)
+    tight = calibrate_chain(chain, train, "full", selection=Prior(1e-3, 1e-3))
+    assert np.array_equal(every.kept, tight.kept)
+    assert tight.condition == pytest.approx(every.condition, rel=0.05)
+
+
+def test_prior_scale_range():
+    low, high = SCALE_RANGE
+    Prior(low, high), Prior(high, low)  # inclusive
+    for bad in ((1e-300, 1e-300), (1.0, high * 10), (low / 10, 0.5)):
+        with pytest.raises(CalibrationError, match="must be from"):
+            Prior(*bad)
+
+
+def test_prior_pickles_copies_and_compares_with_its_scales():
+    prior = Prior(2.0, 0.25)
+    for twin in (pickle.loads(pickle.dumps(prior)), copy.copy(prior), copy.deepcopy(prior)):
+        assert isinstance(twin, Prior) and twin.as_dict() == prior.as_dict() and twin == prior
+    assert prior == "prior" and hash(prior) == hash("prior")  # still the criterion's name
+    assert prior != Prior() and (prior == Prior(2.0, 0.3)) is False  # the scales count
+    chain = KinematicChain.from_urdf(UR5, "tool0")
+    params = PlacementErrors(chain)
+    assert np.array_equal(prior_sigmas(params, pickle.loads(pickle.dumps(prior))), prior_sigmas(params, prior))
+
+
+def _cli(tmp_path, *arguments):
+    data = tmp_path / "cal.csv"
+    if not data.exists():
+        write_measurements(data, _rows(15, seed=6, sigma_m=SIGMA_M)[1])
+    return main(["calibrate", str(UR5), str(data), "--tip-link", "tool0", "--quiet",
+                 "--out", str(tmp_path / "ur5.urdf"), "--report", str(tmp_path / "REPORT.json"), *arguments])
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+def test_cli_tiny_prior_scale_is_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        _cli(tmp_path, "--level", "full", "--select", "prior", "--prior-scale", "1e-300,1e-300")
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if "error" in line]  # argparse: usage, then one error line
+    assert len(errors) == 1 and "--prior-scale" in errors[0] and "1e-06 to 1e+06" in errors[0]
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("arguments", [("--level", "registration", "--select", "prior"),
+                                       ("--level", "registration", "--prior-scale", "1,0.5"),
+                                       ("--level", "dh", "--select", "prior"),
+                                       ("--method", "2", "--prior-scale", "1,0.5")])
+def test_cli_prior_where_it_cannot_apply_is_refused(tmp_path, capsys, arguments):
+    assert _cli(tmp_path, *arguments) == 2
+    err = _one_line(capsys)
+    assert "does not apply to --level" in err and not (tmp_path / "REPORT.json").exists()
+
+
+def test_cli_prior_scale_without_any_select_says_so(tmp_path, capsys):
+    assert _cli(tmp_path, "--level", "full", "--prior-scale", "1,0.5") == 2
+    err = _one_line(capsys)
+    assert "--prior-scale needs --select prior" in err and "got --select" not in err
