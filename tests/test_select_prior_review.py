@@ -155,3 +155,21 @@ def test_cli_prior_scale_without_any_select_says_so(tmp_path, capsys):
     assert _cli(tmp_path, "--level", "full", "--prior-scale", "1,0.5") == 2
     err = _one_line(capsys)
     assert "--prior-scale needs --select prior" in err and "got --select" not in err
+
+
+def test_cli_prior_scale_under_level_auto_needs_no_select(tmp_path):
+    """Under --level auto the default selection is the prior, so its scale is accepted as is."""
+    assert _cli(tmp_path, "--level", "auto", "--prior-scale", "2,0.5") == 0
+    document = json.loads((tmp_path / "REPORT.json").read_text())
+    assert document["identifiability"]["selection"]["prior_scale"] == {"translation_mm": 2.0, "rotation_deg": 0.5}
+
+
+def test_diagnose_bic_counts_the_data_rows_not_the_prior_rows():
+    """BIC's m is the number of observations: counting the prior's pseudo-rows inflated ΔBIC by about
+    m_all/m_data and adopted encoder_scale:wrist_2_joint (ΔBIC −11.9 against the −10 cut) on these 25
+    effect-free rows (seed 3); with m the data rows it is −9.0 and nothing is adopted."""
+
+    chain, train, _ = _rows(25, seed=3, sigma_m=SIGMA_M)
+    calibration = calibrate_chain(chain, train, "full", selection="prior")
+    diagnosis = diagnose(chain, calibration, train)
+    assert [step.effect.label for step in diagnosis.steps] == []

@@ -203,3 +203,50 @@ def test_press_is_undefined_not_a_crash_when_a_row_has_leverage_one():
     data, _ = read_measurements(TIAGO_TRAIN, chain.joint_specs)
     result = calibrate_chain(chain, data.select(np.arange(data.n_rows) < 6), "full", selection="press")
     assert result.selection.chosen in result.selection.refitted
+
+
+def test_prefixes_with_more_unknowns_than_residuals_are_not_feasible():
+    """12 residuals, 3 always-estimated columns and 15 ordered ones: prefixes up to 8 columns leave
+    a residual degree of freedom (AIC's ln RSS needs RSS > 0); the longer ones are infeasible,
+    not an IndexError (a 4-row file at the full level raised one)."""
+    rng = np.random.default_rng(4)
+    jac, residual, blocks = _problem(rng, m=12, a=3, n=15)
+    fits = nested_fits(jac, residual, [0, 1, 2], list(range(3, 18)), blocks)
+    assert fits.rss.shape == fits.press.shape == fits.feasible.shape == (16,)
+    assert fits.feasible[:9].all() and not fits.feasible[9:].any()
+    for criterion in ("aic", "bic", "press"):
+        scores = fits.scores(criterion)
+        assert np.all(np.isinf(scores[9:]))
+        assert np.isfinite(scores[:9]).all() or criterion == "press"  # PRESS: inf where a block has leverage 1
+
+
+def test_rows_that_leave_nothing_for_the_kinematics_are_one_line(tmp_path, capsys):
+    """3 point rows: 9 coordinates, all taken by the registration (6) and the target (3)."""
+    from pincal.cli.commands import main
+    from pincal.measurements.csv_v1 import write_measurements
+
+    ur5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
+    chain = KinematicChain.from_urdf(ur5, "tool0")
+    rng = np.random.default_rng(2)
+    data = measure(chain, rng.uniform(-2.0, 2.0, (3, 6)), DEFAULT_REGISTRATION, rng, 1e-4, 0.0, "calibration",
+                   points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False)
+    write_measurements(tmp_path / "three.csv", data)
+    for select in ("aic", "prior"):
+        code = main(["calibrate", str(ur5), str(tmp_path / "three.csv"), "--tip-link", "tool0", "--level", "full",
+                     "--select", select, "--quiet", "--out", str(tmp_path / "o.urdf"),
+                     "--report", str(tmp_path / "r.json")])
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        assert code == 2 and "three.csv" in err and "none is left for the kinematics" in err
+    assert not (tmp_path / "o.urdf").exists()
+
+
+def test_as_many_residuals_as_unknowns_calibrates_with_a_degree_of_freedom_left():
+    """9 point rows of a UR5 at the full level: 27 coordinates, 9 registration and target unknowns and 18
+    identifiable combinations; the largest subset leaving a residual degree of freedom is 17 (the
+    curvature check runs on the prefixes that remain, not on all 18)."""
+    chain = KinematicChain.from_urdf(example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf"), "tool0")
+    rng = np.random.default_rng(3)
+    data = measure(chain, rng.uniform(-2.0, 2.0, (9, 6)), DEFAULT_REGISTRATION, rng, 5e-5, 0.0, "calibration",
+                   points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False)
+    result = calibrate_chain(chain, data, "full", selection="aic")
+    assert result.rank == 18 and len(result.kept) <= 17

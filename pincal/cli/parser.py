@@ -78,7 +78,7 @@ def selection_criterion(args: argparse.Namespace) -> str:
                           f"auto, or drop {flag}")
     if select is None:  # the default: AIC, but the prior rule under --level auto (README, "Choosing the level")
         select = "prior" if level == "auto" else "aic"
-        if scale is not None:
+        if scale is not None and select != "prior":
             raise PincalError("--prior-scale needs --select prior (no --select was given; the default here is aic)")
     if select != "prior":
         if scale is not None:

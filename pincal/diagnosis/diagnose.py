@@ -199,9 +199,16 @@ class _Model:
         return objective, solution
 
 
-def _bic(residual: np.ndarray, n_params: int) -> float:
-    m = residual.size
+def _bic(residual: np.ndarray, n_params: int, n_prior: int = 0) -> float:
+    """BIC m ln(RSS/m) + n ln m with m the data rows: under ``--select prior`` the last ``n_prior``
+    rows of the residual are the prior's (their squares stay in the penalised RSS), not observations."""
+    m = residual.size - n_prior
     return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
+
+
+def _n_prior(objective) -> int:
+    """Rows of the prior in ``objective``'s residual (0 without ``--select prior``)."""
+    return int(getattr(objective, "n_prior", 0))
 
 
 def diagnose(
@@ -259,7 +266,7 @@ def diagnose(
 
     adopted: list[Effect] = []
     objective, solution = model.fit([], calibration.solution, [])
-    current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size)
+    current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size, _n_prior(objective))
     steps: list[Step] = []
     notes: list[str] = []
     ranking: list[Candidate] = []
@@ -293,7 +300,7 @@ def diagnose(
                     inseparable.add(effect.label)
                 fits[effect] = None
                 return
-            fits[effect] = (_bic(sol.residual, sol.x.size) - current_bic, effect, obj, sol)
+            fits[effect] = (_bic(sol.residual, sol.x.size, _n_prior(obj)) - current_bic, effect, obj, sol)
 
         held_rms = None if heldout is None else (
             lambda objective, x, held_inputs=held_inputs: _heldout_rms(model, objective, x, heldout, held_inputs))
@@ -340,7 +347,7 @@ def diagnose(
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
                                      [sol.x[sl] for sl in obj._effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x
-        current_bic = _bic(sol.residual, sol.x.size)
+        current_bic = _bic(sol.residual, sol.x.size, _n_prior(obj))
         counter.tick()
         steps.append(Step(
             effect=effect, values=sol.x[obj._effect_slices[-1]],
@@ -416,7 +423,7 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
     Joints whose linearised test is far from significant are not refitted; a
     full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
     its ΔBIC and the linearised one."""
-    base_bic = _bic(solution.residual, solution.x.size)
+    base_bic = _bic(solution.residual, solution.x.size, _n_prior(objective))
     names, corrections = [], []
     for name in chain.joint_names:
         generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
@@ -428,7 +435,7 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
         return None
     columns = iter(objective.effect_columns(solution.x, [e for generic in corrections for e in generic]))
     blocks = [np.hstack([next(columns) for _ in generic]) for generic in corrections]
-    scores = Linearisation(solution).test(blocks, base_bic)
+    scores = Linearisation(solution, _n_prior(objective)).test(blocks, base_bic)
     found = []
     for name, generic, score in zip(names, corrections, scores):
         if score.condition <= SCREEN_CONDITION and not may_reach(score.delta_bic, EVIDENCE):
@@ -440,7 +447,7 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
                                max_evaluations=GENERIC_EVALUATIONS)
         except CalibrationError:
             continue
-        delta = _bic(sol.residual, sol.x.size) - base_bic
+        delta = _bic(sol.residual, sol.x.size, _n_prior(objective)) - base_bic
         if not sol.converged and score.condition <= SCREEN_CONDITION:  # the linear score is trusted there
             delta = min(delta, score.delta_bic)
         if delta < EVIDENCE:

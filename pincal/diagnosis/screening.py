@@ -52,7 +52,10 @@ class Score(NamedTuple):
 class Linearisation:
     """A fit's Jacobian J (m, n) at its solution, factored once: J = Q R."""
 
-    def __init__(self, solution: Solution) -> None:
+    def __init__(self, solution: Solution, n_prior: int = 0) -> None:
+        """``n_prior``: the last rows of the fit's residual that are a prior's (``--select prior``):
+        not observations, so the BIC's m leaves them out."""
+        self.n_prior = n_prior
         self.residual = solution.residual
         self.q, self.r = thin_qr(solution.jacobian)
         self.along_j = np.einsum("ki,k->i", self.q, self.residual)  # Qᵀ r
@@ -63,6 +66,7 @@ class Linearisation:
         if not blocks:
             return []
         m, n = self.q.shape
+        m -= self.n_prior
         stacked = np.hstack(blocks)
         along_all = gram(self.q, stacked)  # Qᵀ B (n, Σe)
         projected_all = stacked - np.einsum("ki,ij->kj", self.q, along_all)  # B's part orthogonal to J
@@ -89,7 +93,8 @@ def screen(objective: SensorResidual, solution: Solution, effects: Sequence[Effe
            current_bic: float) -> list[tuple[Effect, Score]]:
     """The linearised test of adding each effect to the fit (``objective`` at
     ``solution``), best first; equal scores keep the order of ``effects``."""
-    scores = Linearisation(solution).test(objective.effect_columns(solution.x, effects), current_bic)
+    scores = Linearisation(solution, int(getattr(objective, "n_prior", 0))).test(
+        objective.effect_columns(solution.x, effects), current_bic)
     return sorted(zip(effects, scores), key=lambda item: item[1].delta_bic)
 
 

@@ -341,6 +341,12 @@ def _calibrate_rows(
     # registration and target first, with the nominal kinematics
     counter.expect(2)
     objective, solution = problem.fit(empty, base, what="registration")
+    if size and solution.residual.size <= solution.x.size:
+        raise CalibrationError(
+            f"{rows.source}: {rows.n_rows} calibration row(s) give {solution.residual.size} measured coordinates and "
+            f"the registration and target alone take {solution.x.size}: none is left for the kinematics; "
+            "add calibration rows"
+        )
     for _ in range(sigma_iterations):
         problem.reestimate_sigmas(objective, solution)
         objective, solution = problem.fit(empty, base, solution.x, what="registration")

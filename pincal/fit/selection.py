@@ -51,7 +51,7 @@ slow when the weakest directions are nearly undetermined; instead:
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -157,6 +157,13 @@ def nested_fits(
     """
     always, ordered = list(always), list(ordered)
     a, n = len(always), len(ordered)
+    usable = max(0, min(n, np.shape(residual)[0] - a - 1))  # a prefix must leave a residual degree of freedom
+    if usable < n:  # the longer prefixes: not feasible (more unknowns than residuals, or an exact fit)
+        fits = nested_fits(jacobian, residual, always, ordered[:usable], blocks)
+        pad = n - usable
+        return replace(fits, rss=np.concatenate([fits.rss, np.full(pad, fits.rss[-1])]),
+                       press=None if fits.press is None else np.concatenate([fits.press, np.full(pad, np.inf)]),
+                       feasible=np.concatenate([fits.feasible, np.zeros(pad, dtype=bool)]))
     columns = np.asarray(jacobian, dtype=float)[:, always + ordered]
     scale = np.linalg.norm(columns, axis=0)
     scale[scale == 0.0] = 1.0
@@ -357,7 +364,8 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
         blocks = _row_blocks(np.arange(residual.size), rows, block).reshape(rows.n_rows, block)
         fits = nested_fits(jac, residual, always, columns[len(always):], blocks if criterion == "press" else None)
         linear = fits.scores(criterion)
-        undetermined = _first_undetermined(fits, objective, x0, jac[:, columns], columns, linear)
+        used = columns[: fits.scale.size]  # nested_fits drops prefixes that leave no residual degree of freedom
+        undetermined = _first_undetermined(fits, objective, x0, jac[:, used], used, linear)
         if undetermined is not None:
             size, ratio = undetermined
             linear[size:] = np.inf
@@ -366,7 +374,8 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
                          f"information along the weakest: ratio {ratio:.2g} >= 1); at most {size - 1} are kept")
     chosen, exact = refine(linear, refit)
     if chosen is None:
-        raise CalibrationError("no subset of the parameters could be fitted")
+        raise CalibrationError(f"{rows.source}: no subset of the kinematic parameters could be fitted to its "
+                               f"{rows.n_rows} row(s); add calibration rows or use a lower --level")
     sizes = [n for n in range(rank + 1) if exact.get(n) is not None or (n not in exact and np.isfinite(linear[n]))]
     selection = Selection(
         criterion=SELECTION_CRITERIA[criterion],
