@@ -146,3 +146,24 @@ def test_batched_so3_log_and_jacobian_are_pinocchios():
         numeric = numeric_jacobian(lambda d: log3((rotation @ pin.exp3(d))[None])[0], np.zeros(3))
         assert_close(jlog3(rotation[None])[0], numeric, 1e-8, "Jlog3 vs differences")
 
+
+
+@pytest.mark.parametrize("urdf, tip", [("ur_description/urdf/ur5_robot.urdf", "tool0"),
+                                       ("tiago_description/robots/tiago.urdf", "wrist_ft_tool_link")])
+def test_tool_poses_are_the_tool_part_of_poses_bit_for_bit(urdf, tip):
+    """KinematicChain.tool_poses skips copying the joint frames; its numbers are poses()'s exactly
+    (the study's reference numbers depend on it), with perturbed placements and a tool."""
+    from pincal.model.chain import KinematicChain
+    from pincal.model.parameter_sets import PlacementErrors
+    from pincal.robots import example_robot_data_urdf
+    from pincal.simulation.sensor import random_configurations
+
+    chain = KinematicChain.from_urdf(example_robot_data_urdf(urdf), tip)
+    rng = np.random.default_rng(8)
+    params = PlacementErrors(chain)
+    params.apply(rng.normal(0.0, 1e-3, params.size))
+    chain.set_tool(pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.1).homogeneous)
+    q = random_configurations(chain, rng, 20)
+    rotations, positions = chain.tool_poses(q)
+    poses = chain.poses(q)
+    assert np.array_equal(rotations, poses.tool_rotations) and np.array_equal(positions, poses.tool_positions)

@@ -50,7 +50,9 @@ from pincal.diagnosis.screening import (
     Linearisation,
     Score,
     may_reach,
+    n_prior_rows,
     screen,
+    testable,
 )
 from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
 from pincal.errors import CalibrationError
@@ -206,11 +208,6 @@ def _bic(residual: np.ndarray, n_params: int, n_prior: int = 0) -> float:
     return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
 
 
-def _n_prior(objective) -> int:
-    """Rows of the prior in ``objective``'s residual (0 without ``--select prior``)."""
-    return int(getattr(objective, "n_prior", 0))
-
-
 def diagnose(
     chain: KinematicChain,
     calibration: ChainCalibration,
@@ -266,12 +263,13 @@ def diagnose(
 
     adopted: list[Effect] = []
     objective, solution = model.fit([], calibration.solution, [])
-    current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size, _n_prior(objective))
+    current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size, n_prior_rows(objective))
     steps: list[Step] = []
     notes: list[str] = []
     ranking: list[Candidate] = []
     inseparable: set[str] = set()
     rejected: dict[str, str] = {}
+    untested: dict[str, float] = {}  # candidates too many for the residual degrees of freedom (_testable)
     current_objective, current_solution = objective, solution
     counter = Counter(progress)
     while len(adopted) < MAX_EFFECTS:
@@ -284,6 +282,12 @@ def diagnose(
         fits: dict[Effect, tuple | None] = {}
 
         def refit(effect: Effect, score: Score) -> None:
+            enough, dof = testable(current_objective, current_solution, effect.n_values, EVIDENCE)
+            if not enough:
+                untested[effect.label] = dof
+                counter.tick()
+                fits[effect] = None
+                return
             if score.condition > SCREEN_INSEPARABLE:
                 sol = None
             else:
@@ -300,7 +304,7 @@ def diagnose(
                     inseparable.add(effect.label)
                 fits[effect] = None
                 return
-            fits[effect] = (_bic(sol.residual, sol.x.size, _n_prior(obj)) - current_bic, effect, obj, sol)
+            fits[effect] = (_bic(sol.residual, sol.x.size, n_prior_rows(obj)) - current_bic, effect, obj, sol)
 
         held_rms = None if heldout is None else (
             lambda objective, x, held_inputs=held_inputs: _heldout_rms(model, objective, x, heldout, held_inputs))
@@ -331,8 +335,17 @@ def diagnose(
         driver, driver_label, joint_residual, fitted = _partial_residual(effect, obj, sol, inputs, chain)
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
+        scales = model.sigma_pos, model.sigma_rot
         model.reestimate(obj, sol)
-        obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj._effect_slices])
+        try:
+            obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
+                                 [sol.x[sl] for sl in obj._effect_slices])
+        except CalibrationError as error:  # sparse data: with the scales re-estimated it is not determined
+            adopted.pop()
+            model.sigma_pos, model.sigma_rot = scales
+            rejected[effect.label] = (f"{effect.label} not adopted: its refit with the noise re-estimated "
+                                      f"fails ({error}); the search stops here")
+            break
         if any(e.type == "compliance" or e.source == "gravity" for e in adopted):
             # gravity torques on the refitted geometry, not the one fitted without the effects
             for _ in range(GRAVITY_REFRESHES):
@@ -347,7 +360,7 @@ def diagnose(
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
                                      [sol.x[sl] for sl in obj._effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x
-        current_bic = _bic(sol.residual, sol.x.size, _n_prior(obj))
+        current_bic = _bic(sol.residual, sol.x.size, n_prior_rows(obj))
         counter.tick()
         steps.append(Step(
             effect=effect, values=sol.x[obj._effect_slices[-1]],
@@ -359,6 +372,10 @@ def diagnose(
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
+    if untested:
+        notes.append(f"not tested, {len(untested)} candidate(s): the fit leaves {min(untested.values()):.1f} residual "
+                     f"degrees of freedom, too few to test their values (noise alone would reach the evidence cut "
+                     f"ΔBIC < {EVIDENCE:g}); add rows: {', '.join(untested)}")
     if inseparable:
         labels = [e.label for e in pool if e.label in inseparable]
         notes.append(
@@ -423,19 +440,19 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
     Joints whose linearised test is far from significant are not refitted; a
     full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
     its ΔBIC and the linearised one."""
-    base_bic = _bic(solution.residual, solution.x.size, _n_prior(objective))
+    base_bic = _bic(solution.residual, solution.x.size, n_prior_rows(objective))
     names, corrections = [], []
     for name in chain.joint_names:
         generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
         generic = [e for e in generic if e not in adopted]
-        if generic:  # a joint whose generic terms are all adopted has nothing left to test
+        if generic and testable(objective, solution, sum(e.n_values for e in generic), EVIDENCE)[0]:  # a joint whose generic terms are all adopted has nothing left to test
             names.append(name)
             corrections.append(generic)
     if not corrections:
         return None
     columns = iter(objective.effect_columns(solution.x, [e for generic in corrections for e in generic]))
     blocks = [np.hstack([next(columns) for _ in generic]) for generic in corrections]
-    scores = Linearisation(solution, _n_prior(objective)).test(blocks, base_bic)
+    scores = Linearisation(solution, n_prior_rows(objective)).test(blocks, base_bic)
     found = []
     for name, generic, score in zip(names, corrections, scores):
         if score.condition <= SCREEN_CONDITION and not may_reach(score.delta_bic, EVIDENCE):
@@ -447,7 +464,7 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
                                max_evaluations=GENERIC_EVALUATIONS)
         except CalibrationError:
             continue
-        delta = _bic(sol.residual, sol.x.size, _n_prior(objective)) - base_bic
+        delta = _bic(sol.residual, sol.x.size, n_prior_rows(objective)) - base_bic
         if not sol.converged and score.condition <= SCREEN_CONDITION:  # the linear score is trusted there
             delta = min(delta, score.delta_bic)
         if delta < EVIDENCE:

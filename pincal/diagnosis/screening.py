@@ -18,6 +18,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 import scipy.linalg
 
+from pincal.fit.prior import hat_diagonal
 from pincal.fit.solver import Solution, gram, thin_qr
 from pincal.model.effects import Effect
 from pincal.residuals.sensor import SensorResidual
@@ -101,3 +102,24 @@ def screen(objective: SensorResidual, solution: Solution, effects: Sequence[Effe
 def may_reach(linear_delta: float, cut: float) -> bool:
     """Could a candidate screened at ``linear_delta`` have a full-fit ΔBIC at or below ``cut``?"""
     return linear_delta - (SCREEN_MARGIN[0] + SCREEN_MARGIN[1] * abs(linear_delta)) <= cut
+
+
+def n_prior_rows(objective) -> int:
+    """Rows of the prior in ``objective``'s residual (0 without ``--select prior``)."""
+    return int(getattr(objective, "n_prior", 0))
+
+
+def testable(objective, solution, n_values: int, evidence: float) -> tuple[bool, float]:
+    """Whether the fit leaves enough residual degrees of freedom d to test ``n_values`` more, and d.
+
+    d = m − tr H over the data rows (m − n without a prior; under ``--select prior`` the hat
+    matrix's trace, eq P2 of :mod:`pincal.fit.prior`). Fitting e values to pure noise shrinks the
+    RSS by e/d on average, a ΔBIC of m ln(1 − e/d) + e ln m: a candidate is testable only when
+    that is above the evidence cut ``evidence`` (:data:`pincal.diagnosis.verdicts.EVIDENCE`), i.e.
+    when noise alone would not pass it.
+    """
+    n_prior = n_prior_rows(objective)
+    m = solution.residual.size - n_prior
+    used = float(hat_diagonal(solution.jacobian, n_prior).sum()) if n_prior else float(solution.x.size)
+    d = m - used
+    return bool(d > n_values and m * np.log1p(-n_values / d) + n_values * np.log(m) > evidence), d
