@@ -282,7 +282,9 @@ def diagnose(
         fits: dict[Effect, tuple | None] = {}
 
         def refit(effect: Effect, score: Score) -> None:
-            enough, dof = testable(current_objective, current_solution, effect.n_values, EVIDENCE)
+            enough, dof = True, 0.0
+            if score.condition <= SCREEN_INSEPARABLE:  # an effect the geometry absorbs is inseparable, below
+                enough, dof = testable(current_objective, current_solution, effect.n_values, EVIDENCE)
             if not enough:
                 untested[effect.label] = dof
                 counter.tick()
@@ -345,6 +347,7 @@ def diagnose(
             model.sigma_pos, model.sigma_rot = scales
             rejected[effect.label] = (f"{effect.label} not adopted: its refit with the noise re-estimated "
                                       f"fails ({error}); the search stops here")
+            ranking = [replace(c, verdict="refit failed, not adopted") if c.effect == effect else c for c in ranking]
             break
         if any(e.type == "compliance" or e.source == "gravity" for e in adopted):
             # gravity torques on the refitted geometry, not the one fitted without the effects
@@ -372,6 +375,8 @@ def diagnose(
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
+    untested = {label: d for label, d in untested.items()
+                if label not in rejected and label not in {e.label for e in adopted}}
     if untested:
         notes.append(f"not tested, {len(untested)} candidate(s): the fit leaves {min(untested.values()):.1f} residual "
                      f"degrees of freedom, too few to test their values (noise alone would reach the evidence cut "
