@@ -293,3 +293,28 @@ def test_cli_diagnose_level_auto(tmp_path, capsys):
     document = json.loads(report.read_text())
     assert document["level"] == document["level_choice"]["chosen"] == "offsets"  # as calibrate on these rows
     assert "geometric calibration (offsets)" in printed and "level auto:" in printed
+
+
+def test_tiago_level_auto_under_the_prior_is_within_ten_percent_of_the_best_fixed_level():
+    """Issue 12's bound (auto never more than 10 % worse on held-out data than the best fixed level),
+    on the real TIAGo sessions: choose on 2021-11-30 by CV only, then marker-1 RMS on 2021-11-26 with
+    the training registration (examples/level_auto.py; README, "Choosing the level")."""
+    from pincal.fit.chain_calibration import calibrate_chain
+    from pincal.fit.metrics import pose_errors
+    from pincal.fit.prior import Prior
+    from pincal.measurements.csv_v1 import read_measurements
+
+    data = Path(__file__).resolve().parent.parent / "data" / "tiago_mocap"
+    chain = KinematicChain.from_urdf(example_robot_data_urdf("tiago_description/robots/tiago.urdf"),
+                                     "wrist_ft_tool_link")
+    train, _ = read_measurements(data / "qualisys_2021-11-30_static_postures.csv", chain.joint_specs)
+    test, _ = read_measurements(data / "qualisys_2021-11-26_static_postures.csv", chain.joint_specs)
+    choice = choose_level(chain, train, selection=Prior())
+    nominal, held = chain.placements(), {}
+    for level in ("registration", "offsets", "full"):
+        chain.set_placements(nominal)
+        result = calibrate_chain(chain, train, level, selection=Prior())
+        registration = result.target.registration
+        marker1 = pose_errors(chain, test, registration, registration, points=result.target.points).position_m[:, 0]
+        held[level] = float(np.sqrt(np.mean(marker1**2)))
+    assert held[choice.chosen] <= 1.10 * min(held.values())

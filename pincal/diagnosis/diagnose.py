@@ -49,6 +49,7 @@ from pincal.diagnosis.screening import (
     SCREEN_INSEPARABLE,
     Linearisation,
     Score,
+    bic,
     may_reach,
     n_prior_rows,
     screen,
@@ -201,13 +202,6 @@ class _Model:
         return objective, solution
 
 
-def _bic(residual: np.ndarray, n_params: int, n_prior: int = 0) -> float:
-    """BIC m ln(RSS/m) + n ln m with m the data rows: under ``--select prior`` the last ``n_prior``
-    rows of the residual are the prior's (their squares stay in the penalised RSS), not observations."""
-    m = residual.size - n_prior
-    return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
-
-
 def diagnose(
     chain: KinematicChain,
     calibration: ChainCalibration,
@@ -263,7 +257,7 @@ def diagnose(
 
     adopted: list[Effect] = []
     objective, solution = model.fit([], calibration.solution, [])
-    current_x, current_bic = solution.x, _bic(solution.residual, solution.x.size, n_prior_rows(objective))
+    current_x, current_bic = solution.x, bic(solution.residual, solution.x.size, n_prior_rows(objective))
     steps: list[Step] = []
     notes: list[str] = []
     ranking: list[Candidate] = []
@@ -306,7 +300,7 @@ def diagnose(
                     inseparable.add(effect.label)
                 fits[effect] = None
                 return
-            fits[effect] = (_bic(sol.residual, sol.x.size, n_prior_rows(obj)) - current_bic, effect, obj, sol)
+            fits[effect] = (bic(sol.residual, sol.x.size, n_prior_rows(obj)) - current_bic, effect, obj, sol)
 
         held_rms = None if heldout is None else (
             lambda objective, x, held_inputs=held_inputs: _heldout_rms(model, objective, x, heldout, held_inputs))
@@ -363,7 +357,7 @@ def diagnose(
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
                                      [sol.x[sl] for sl in obj._effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x
-        current_bic = _bic(sol.residual, sol.x.size, n_prior_rows(obj))
+        current_bic = bic(sol.residual, sol.x.size, n_prior_rows(obj))
         counter.tick()
         steps.append(Step(
             effect=effect, values=sol.x[obj._effect_slices[-1]],
@@ -393,6 +387,8 @@ def diagnose(
         (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
     )
     unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain)
+    if unexplained is None and not testable(current_objective, final_solution, 1 + 2 * len(HARMONICS), EVIDENCE)[0]:
+        notes.append(GENERIC_NOT_RUN)
     counter.settle()
     return Diagnosis(
         effects=effects,
@@ -439,13 +435,18 @@ def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
     return errors.position.rms
 
 
+#: Note when too few residual degrees of freedom are left to test a generic correction (:func:`testable`).
+GENERIC_NOT_RUN = ("the generic joint-angle check (linear + harmonics per joint) was not run: the fit leaves too few "
+                   "residual degrees of freedom to test it; add rows")
+
+
 def _remaining_structure(model, adopted, objective, solution, chain) -> str | None:
     """Fit a generic joint-space correction per joint; report strong evidence of structure.
 
     Joints whose linearised test is far from significant are not refitted; a
     full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
     its ΔBIC and the linearised one."""
-    base_bic = _bic(solution.residual, solution.x.size, n_prior_rows(objective))
+    base_bic = bic(solution.residual, solution.x.size, n_prior_rows(objective))
     names, corrections = [], []
     for name in chain.joint_names:
         generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
@@ -469,7 +470,7 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
                                max_evaluations=GENERIC_EVALUATIONS)
         except CalibrationError:
             continue
-        delta = _bic(sol.residual, sol.x.size, n_prior_rows(objective)) - base_bic
+        delta = bic(sol.residual, sol.x.size, n_prior_rows(objective)) - base_bic
         if not sol.converged and score.condition <= SCREEN_CONDITION:  # the linear score is trusted there
             delta = min(delta, score.delta_bic)
         if delta < EVIDENCE:

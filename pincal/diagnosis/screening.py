@@ -123,3 +123,10 @@ def testable(objective, solution, n_values: int, evidence: float) -> tuple[bool,
     used = float(hat_diagonal(solution.jacobian, n_prior).sum()) if n_prior else float(solution.x.size)
     d = m - used
     return bool(d > n_values and m * np.log1p(-n_values / d) + n_values * np.log(m) > evidence), d
+
+
+def bic(residual: np.ndarray, n_params: int, n_prior: int = 0) -> float:
+    """BIC m ln(RSS/m) + n ln m with m the data rows: under ``--select prior`` the last ``n_prior``
+    rows of the residual are the prior's (their squares stay in the penalised RSS), not observations."""
+    m = residual.size - n_prior
+    return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
