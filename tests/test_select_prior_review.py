@@ -189,6 +189,6 @@ def test_diagnose_does_not_test_effects_the_residual_freedom_cannot_carry():
     # an effect the geometry absorbs is inseparable (more rows would not help), not "not tested"
     assert "compliance:shoulder_pan_joint" not in untested[0]
     assert any("not separable" in note and "compliance:shoulder_pan_joint" in note for note in diagnosis.notes)
-    from pincal.diagnosis.diagnose import GENERIC_NOT_RUN
+    from pincal.diagnosis.screening import GENERIC_NOT_RUN
 
     assert diagnosis.unexplained is None and GENERIC_NOT_RUN in diagnosis.notes  # said, not "no structure left"

@@ -254,7 +254,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(f"final model: {effect.label} = {value}")
     for note in diagnosis.notes:
         print(f"reported, not adopted: {note}")
-    from pincal.diagnosis.diagnose import GENERIC_NOT_RUN  # loaded already by the run
+    from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run
 
     if diagnosis.unexplained or GENERIC_NOT_RUN not in diagnosis.notes:
         print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")

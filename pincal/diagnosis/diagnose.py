@@ -45,6 +45,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pincal.diagnosis.screening import (
+    GENERIC_NOT_RUN,
     SCREEN_CONDITION,
     SCREEN_INSEPARABLE,
     Linearisation,
@@ -52,6 +53,7 @@ from pincal.diagnosis.screening import (
     bic,
     may_reach,
     n_prior_rows,
+    residual_freedom,
     screen,
     testable,
 )
@@ -274,13 +276,12 @@ def diagnose(
         step_end = counter.total
         screened = screen(current_objective, current_solution, offered, current_bic)
         fits: dict[Effect, tuple | None] = {}
+        freedom = residual_freedom(current_objective, current_solution)
 
         def refit(effect: Effect, score: Score) -> None:
-            enough, dof = True, 0.0
-            if score.condition <= SCREEN_INSEPARABLE:  # an effect the geometry absorbs is inseparable, below
-                enough, dof = testable(current_objective, current_solution, effect.n_values, EVIDENCE)
-            if not enough:
-                untested[effect.label] = dof
+            # an effect the geometry absorbs is inseparable (below), whatever the freedom left
+            if score.condition <= SCREEN_INSEPARABLE and not testable(freedom, effect.n_values, EVIDENCE):
+                untested[effect.label] = freedom[1]
                 counter.tick()
                 fits[effect] = None
                 return
@@ -386,8 +387,9 @@ def diagnose(
     effects = tuple(
         (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
     )
-    unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain)
-    if unexplained is None and not testable(current_objective, final_solution, 1 + 2 * len(HARMONICS), EVIDENCE)[0]:
+    freedom = residual_freedom(current_objective, final_solution)
+    unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain, freedom)
+    if unexplained is None and not testable(freedom, 1 + 2 * len(HARMONICS), EVIDENCE):
         notes.append(GENERIC_NOT_RUN)
     counter.settle()
     return Diagnosis(
@@ -435,15 +437,11 @@ def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
     return errors.position.rms
 
 
-#: Note when too few residual degrees of freedom are left to test a generic correction (:func:`testable`).
-GENERIC_NOT_RUN = ("the generic joint-angle check (linear + harmonics per joint) was not run: the fit leaves too few "
-                   "residual degrees of freedom to test it; add rows")
-
-
-def _remaining_structure(model, adopted, objective, solution, chain) -> str | None:
+def _remaining_structure(model, adopted, objective, solution, chain, freedom) -> str | None:
     """Fit a generic joint-space correction per joint; report strong evidence of structure.
 
-    Joints whose linearised test is far from significant are not refitted; a
+    Joints whose correction the fit's ``freedom`` (:func:`residual_freedom`) cannot test are
+    left out; joints whose linearised test is far from significant are not refitted; a
     full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
     its ΔBIC and the linearised one."""
     base_bic = bic(solution.residual, solution.x.size, n_prior_rows(objective))
@@ -451,7 +449,8 @@ def _remaining_structure(model, adopted, objective, solution, chain) -> str | No
     for name in chain.joint_names:
         generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
         generic = [e for e in generic if e not in adopted]
-        if generic and testable(objective, solution, sum(e.n_values for e in generic), EVIDENCE)[0]:  # a joint whose generic terms are all adopted has nothing left to test
+        # a joint whose generic terms are all adopted has nothing left to test
+        if generic and testable(freedom, sum(e.n_values for e in generic), EVIDENCE):
             names.append(name)
             corrections.append(generic)
     if not corrections:

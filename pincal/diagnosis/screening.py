@@ -19,6 +19,7 @@ import numpy as np
 import scipy.linalg
 
 from pincal.fit.prior import hat_diagonal
+from pincal.fit.selection import information_criterion
 from pincal.fit.solver import Solution, gram, thin_qr
 from pincal.model.effects import Effect
 from pincal.residuals.sensor import SensorResidual
@@ -86,7 +87,7 @@ class Linearisation:
             step = np.zeros(n + e)
             if condition <= SCREEN_CONDITION:
                 step = scipy.linalg.solve_triangular(triangle, -np.concatenate([self.along_j, gain]))
-            scores.append(Score(float(m * np.log(rss / m) + (n + e) * np.log(m) - current_bic), condition, step))
+            scores.append(Score(float(information_criterion(rss, m, n + e, np.log(m)) - current_bic), condition, step))
         return scores
 
 
@@ -94,7 +95,7 @@ def screen(objective: SensorResidual, solution: Solution, effects: Sequence[Effe
            current_bic: float) -> list[tuple[Effect, Score]]:
     """The linearised test of adding each effect to the fit (``objective`` at
     ``solution``), best first; equal scores keep the order of ``effects``."""
-    scores = Linearisation(solution, int(getattr(objective, "n_prior", 0))).test(
+    scores = Linearisation(solution, n_prior_rows(objective)).test(
         objective.effect_columns(solution.x, effects), current_bic)
     return sorted(zip(effects, scores), key=lambda item: item[1].delta_bic)
 
@@ -109,24 +110,33 @@ def n_prior_rows(objective) -> int:
     return int(getattr(objective, "n_prior", 0))
 
 
-def testable(objective, solution, n_values: int, evidence: float) -> tuple[bool, float]:
-    """Whether the fit leaves enough residual degrees of freedom d to test ``n_values`` more, and d.
+#: Note when too few residual degrees of freedom are left to test a generic correction (:func:`testable`; ``pincal diagnose``).
+GENERIC_NOT_RUN = ("the generic joint-angle check (linear + harmonics per joint) was not run: the fit leaves too few "
+                   "residual degrees of freedom to test it; add rows")
 
-    d = m − tr H over the data rows (m − n without a prior; under ``--select prior`` the hat
-    matrix's trace, eq P2 of :mod:`pincal.fit.prior`). Fitting e values to pure noise shrinks the
-    RSS by e/d on average, a ΔBIC of m ln(1 − e/d) + e ln m: a candidate is testable only when
-    that is above the evidence cut ``evidence`` (:data:`pincal.diagnosis.verdicts.EVIDENCE`), i.e.
-    when noise alone would not pass it.
-    """
+
+def residual_freedom(objective, solution: Solution) -> tuple[int, float]:
+    """(m, d) of a fit: its data rows m and residual degrees of freedom d = m − tr H (m − n without
+    a prior; under ``--select prior`` the hat matrix's trace, eq P2 of :mod:`pincal.fit.prior`)."""
     n_prior = n_prior_rows(objective)
     m = solution.residual.size - n_prior
     used = float(hat_diagonal(solution.jacobian, n_prior).sum()) if n_prior else float(solution.x.size)
-    d = m - used
-    return bool(d > n_values and m * np.log1p(-n_values / d) + n_values * np.log(m) > evidence), d
+    return m, m - used
+
+
+def testable(freedom: tuple[int, float], n_values: int, evidence: float) -> bool:
+    """Whether a fit of :func:`residual_freedom` ``(m, d)`` can test ``n_values`` more values.
+
+    Fitting e values to pure noise shrinks the RSS by e/d on average, a ΔBIC of
+    m ln(1 − e/d) + e ln m: a candidate is testable only when that is above the evidence cut
+    ``evidence`` (:data:`pincal.diagnosis.verdicts.EVIDENCE`), i.e. when noise alone would not pass it.
+    """
+    m, d = freedom
+    return bool(d > n_values and m * np.log1p(-n_values / d) + n_values * np.log(m) > evidence)
 
 
 def bic(residual: np.ndarray, n_params: int, n_prior: int = 0) -> float:
     """BIC m ln(RSS/m) + n ln m with m the data rows: under ``--select prior`` the last ``n_prior``
     rows of the residual are the prior's (their squares stay in the penalised RSS), not observations."""
     m = residual.size - n_prior
-    return float(m * np.log(residual @ residual / m) + n_params * np.log(m))
+    return float(information_criterion(residual @ residual, m, n_params, np.log(m)))

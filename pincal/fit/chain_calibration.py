@@ -392,8 +392,9 @@ def _calibrate_rows(
     else:
         chain.set_placements(nominal)
     jac = solution.jacobian
-    covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
-    if isinstance(objective, PriorResidual):  # the posterior, and what the prior determines (pincal.fit.prior)
+    if not isinstance(objective, PriorResidual):
+        covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    else:  # the posterior, and what the prior determines (pincal.fit.prior)
         covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept, problem.prior, selection,
                                                   params, prior_of(criterion))
         std_all = np.sqrt(np.diag(covariance))

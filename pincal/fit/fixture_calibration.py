@@ -280,9 +280,10 @@ def calibrate_fixture(
         status[kept] = KEPT
         params.apply(vector)
     jac = solution.jacobian
-    covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
     residual = solution.residual[: 3 * data.n_rows]  # without a prior's rows
-    if isinstance(objective, PriorResidual):  # the posterior, and what the prior determines (pincal.fit.prior)
+    if not isinstance(objective, PriorResidual):
+        covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    else:  # the posterior, and what the prior determines (pincal.fit.prior)
         covariance, weak, chosen = map_outcome(jac, solution.residual, objective, kept, problem.prior, chosen,
                                                params, prior)
         std[kept] = np.sqrt(np.diag(covariance))[objective.blocks["kinematic"]]
