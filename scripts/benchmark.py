@@ -185,8 +185,8 @@ def plan_benchmark(candidates: int = 10_000, count: int = 100) -> dict:
 # --- lower bounds: the Pinocchio work a run asks for, at Pinocchio's own cost -------------------
 
 #: Written as ``sitecustomize.py`` into a folder put first on PYTHONPATH: every Python process of a
-#: counted run (study workers included) counts its Pinocchio kinematics calls and writes them, as
-#: JSON named by its pid, into $PINCAL_COUNT_DIR when it exits.
+#: counted run (study workers included, spawned or forked) counts its Pinocchio kinematics calls and
+#: writes them, as JSON named by its pid, into $PINCAL_COUNT_DIR when it exits.
 _COUNTING_SITE = """
 import atexit, json, os
 import pinocchio as _pin
@@ -206,6 +206,15 @@ def _write():
     with open(name + ".part", "w") as out:
         json.dump(_counts, out)
     os.replace(name + ".part", name + ".json")
+def _forked():  # a forked worker counts from zero and leaves by os._exit, without atexit
+    for key in _counts:
+        _counts[key] = 0
+    leave = os._exit
+    def _exit(status):
+        _write()
+        leave(status)
+    os._exit = _exit
+os.register_at_fork(after_in_child=_forked)
 """
 
 

@@ -206,7 +206,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
         shown = evaluation_document(str(args.urdf), str(args.data), errors, evaluation.lines, evaluation.n_skipped_cpa,
                                     files=evaluation.files, sessions=evaluation.row_sessions,
-                                    registrations=[s.as_dict() for s in evaluation.sessions])
+                                    registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift)
         _write_html(args.html, load_document(args.report), args.report.parent, evaluation=shown, source=args.report)
     failed = []
     if args.max_pos_mm is not None and errors.position.max > args.max_pos_mm:
@@ -315,7 +315,7 @@ def _run_study(args: argparse.Namespace) -> int:
     with progress_bar("study tasks", quiet=args.quiet) as progress:
         result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress,
                            checkpoints=checkpoints)
-    paths = write_study(result, args.out)
+    paths = write_study(result, args.out, workers=args.workers)  # figures drawn by as many processes
     TaskStore(checkpoints).clear()
     print(f"{len(result.rows)} rows from {config.levels} noise levels x {config.repeats} repeats x "
           f"{len(config.deviations)} deviation sets, {sum(r['starts'] for r in result.restart_summary)} restarts; "

@@ -19,6 +19,15 @@ rule, in order:
    Any other session — a file merely named like a session (``val/A.csv``) —
    is one the fit has not seen: its registration is re-estimated.
 
+A ``drift`` effect of the report is never extrapolated: a row outside the time
+span of the rows it was fitted on in the session whose registration it uses
+(another day) is evaluated with the drift held at that session's mean time —
+for a one-session fit, without the drift term; a re-estimated registration
+(which absorbs any constant offset) holds it at the nearer end of one span for
+the whole session, the span nearest its median time
+(:func:`pincal.model.effects.drift_offsets`); a note says how many rows,
+and ``drift`` in ``--json`` records it.
+
 Re-estimated means only its 6 parameters, with the model and the target fixed
 (:func:`pincal.fit.sessions.register_session`), on the evaluated rows: those
 errors then leave out the error of a registration, and are optimistic — after
@@ -49,9 +58,11 @@ from pincal.measurements.data import (
 )
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import (
+    drift_offsets,
     effect_from_dict,
     effect_inputs,
     joint_shifts,
+    read_time_spans,
     time_column,
 )
 from pincal.model.sensor import Registration
@@ -66,6 +77,14 @@ REGISTRATION_PARAMETERS = 6
 #: threshold check: below 6 the errors are under sqrt(1/2) ≈ 0.71 of the true error
 #: (the factor sqrt((N − 6) / N) at N = 12), too optimistic to pass or fail a robot on.
 MIN_THRESHOLD_DOF = 6
+#: The session a report without ``sessions`` holds a drift in: no session name (not None, which is
+#: a re-estimated registration): :func:`drift_offsets` takes the span nearest the rows (its only one).
+THE_REGISTRATION = ""
+#: How rows outside the fitted time spans are evaluated (``drift.held_rule`` in ``--json``).
+HELD_DRIFT = ("drift not extrapolated: a row outside the time span it was fitted on in its registration's session "
+              "uses the drift at that session's mean time (no drift term for a one-session fit); a re-estimated "
+              "registration, at the nearer end of the span nearest its session's median time; without time_spans_s (older reports) every row "
+              "uses offset 0")
 
 
 @dataclass(frozen=True)
@@ -124,10 +143,11 @@ class Evaluation:
     sessions: tuple[SessionEvaluation, ...] = ()
     files: tuple[str, ...] = ()  # the file of each evaluated row
     row_sessions: tuple[str, ...] = ()  # the session (in DATA) of each evaluated row
+    drift: dict[str, Any] | None = None  # how the report's drift was applied (_effect_corrections); None without
 
     def as_dict(self) -> dict[str, Any]:
         return {**self.errors.as_dict(), "skipped_cpa_rows": self.n_skipped_cpa,
-                "sessions": [s.as_dict() for s in self.sessions]}
+                "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift}
 
     def threshold_problem(self) -> str | None:
         """Why a threshold cannot judge these errors (a re-estimated session with fewer than
@@ -185,10 +205,18 @@ def evaluate_files(
     if not np.any(rows):
         raise PincalError(f"{data_path}: no rows to evaluate (all rows have role 'cpa')")
     data = data.select(rows)
-    corrections = _effect_corrections(chain, data, report.effects, report.points)
     plan, plan_notes = _registrations(report, data, _labelled(data_path, data), fixed_registration, new_session,
                                       report_path, data_path)
     notes += plan_notes
+    held = np.empty(data.n_rows, dtype=object)  # the session whose time span holds a drift (None: re-estimated)
+    group = np.empty(data.n_rows, dtype=np.intp)  # the evaluated session of each row: one span each
+    for g, (_, members, reported) in enumerate(plan):
+        held[members] = None if reported is None else reported[3]
+        group[members] = g
+    corrections, drift_use = _effect_corrections(chain, data, report.effects, report.points, (held, group),
+                                                 report_path)
+    if drift_use is not None and drift_use["rows_held"]:
+        notes.append(_drift_note(data_path, drift_use))
     index = np.empty(data.n_rows, dtype=np.intp)
     positions, orientations, sources = [], [], []
     for s, (name, members, reported) in enumerate(plan):
@@ -225,7 +253,8 @@ def evaluate_files(
                 f"= {session.shrink:.2f} of the true error")
     return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes,
                       lines=tuple(int(line) for line in data.lines), sessions=sessions,
-                      files=tuple(str(f) for f in data.files), row_sessions=tuple(str(n) for n in data.sessions))
+                      files=tuple(str(f) for f in data.files), row_sessions=tuple(str(n) for n in data.sessions),
+                      drift=drift_use)
 
 
 def _labelled(path: str | Path, data: MeasurementSet) -> np.ndarray:
@@ -247,16 +276,17 @@ def _same_path(a: str | Path, b: str | Path) -> bool:
 
 def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarray, fixed: str | None,
                    new_session: bool, report_path, data_path) -> tuple[list, list[str]]:
-    """The module's rule: (session name, its rows, (source, Registration 1, Registration 2)
-    or None to re-estimate) for each session of ``data``, and the notes it gives.
+    """The module's rule: (session name, its rows, (source, Registration 1, Registration 2,
+    reported session name or None) or None to re-estimate) for each session of ``data``, and the notes it gives.
 
     Args:
         labelled: (K,) whether each row names its session in a ``session`` cell.
     """
-    reported = {name: (f"reported session '{name}'", position, orientation)
+    reported = {name: (f"reported session '{name}'", position, orientation, name)
                 for name, position, orientation in report.sessions}
     if not reported:  # a report without ``sessions``: one session, its top-level registration
-        reported = {"": ("the report's registration", report.registration_position, report.registration_orientation)}
+        reported = {"": ("the report's registration", report.registration_position, report.registration_orientation,
+                         THE_REGISTRATION)}
     first = next(iter(reported.values()))
     index = data.session_index
     groups = [(name, np.flatnonzero(index == s)) for s, name in enumerate(data.session_names)]
@@ -292,17 +322,30 @@ def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarr
     return plan, []
 
 
-def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray) -> dict:
-    """Joint readings corrected by the report's effects, and its sensor terms."""
+def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray,
+                        held: tuple[np.ndarray, np.ndarray], report_path) -> tuple[dict, dict | None]:
+    """Joint readings corrected by the report's effects, and its sensor terms; with a
+    drift, how it was applied (``rows_applied`` inside the fitted span of the session
+    ``held`` = (names (K,), evaluated sessions (K,)) gives each row
+    (:func:`drift_offsets`), ``rows_held`` outside it).
+    """
     entries = effects.get("effects", [])
     if not entries:
-        return {}
+        return {}, None
     parsed = [effect_from_dict(e) for e in entries]
-    needs_time = any(e.type == "drift" for e, _ in parsed)
-    row_time = time_column(data, effects.get("time_column")) if needs_time else time_column(data)
+    has_drift = any(e.type == "drift" for e, _ in parsed)
+    reference = effects.get("time_reference_s")
+    if (has_drift or reference is not None) and (isinstance(reference, bool) or not isinstance(reference, (int, float))
+                                                 or not np.isfinite(reference)):
+        raise PincalError(f"{report_path}: time_reference_s must be the time [s] a drift's offset is zero at "
+                          f"(a finite number), not {reference!r}; rewrite the report with pincal diagnose")
+    spans = read_time_spans(effects.get("time_spans_s"), str(report_path)) if has_drift else None
+    needs_time = has_drift and spans is not None  # without spans (older reports) no row gets the drift
+    named = effects.get("time_column") if has_drift and (needs_time or effects.get("time_column") in data.extra) \
+        else None
+    row_time = time_column(data, named)
     if needs_time and row_time is None:
         raise PincalError(f"{data.source}: the report has a drift effect; the data need its time column")
-    reference = effects.get("time_reference_s")
     context = effects.get("approach_context") or {}
     try:
         payload = float(effects.get("payload_kg", 0.0))
@@ -315,9 +358,48 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
                            context_q=context_q, context_time=context_time)
     q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
     out: dict = {"q": q}
+    drift = None
     for effect, value in parsed:
         if effect.type == "sensor_scale":
             out["sensor_scale"] = float(value[0])
         elif effect.type == "drift":
-            out["drift"] = inputs.time[:, None] * value
-    return out
+            if value.size != 3:
+                raise PincalError(f"{report_path}: a drift's value is [vx, vy, vz] in m/s; it has {value.size} "
+                                  "number(s)")
+            time = np.full(data.n_rows, np.nan) if row_time is None else row_time  # None: no spans, offset 0
+            offsets = drift_offsets(time, value, reference, spans, held[0], held[1])
+            out["drift"] = offsets.offsets
+            outside = ~offsets.inside
+            drift = {"velocity_m_per_s": value.tolist(), "time_column": effects.get("time_column"),
+                     "time_reference_s": reference,
+                     "time_spans_s": None if spans is None else [span.as_dict() for span in spans],
+                     "rows_applied": int(np.sum(offsets.inside)), "rows_held": int(np.sum(outside)),
+                     "max_gap_s": float(np.max(offsets.gap[outside])) if outside.any() and spans else None,
+                     "held_rule": HELD_DRIFT}
+    return out, drift
+
+
+def _duration(seconds: float) -> str:
+    """A time gap in its readable unit (s, min, h or days)."""
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
+def _drift_note(data_path, drift: dict) -> str:
+    """The one note on rows a drift was not extrapolated to (``drift`` from :func:`_effect_corrections`)."""
+    held = drift["rows_held"]
+    total = held + drift["rows_applied"]
+    spans = drift["time_spans_s"]
+    if spans is None:
+        where = ("the report does not record the time span the drift was fitted on (written before pincal recorded "
+                 "time_spans_s; rerun diagnose to record it), so no row is known to lie inside it")
+    else:
+        ranges = ", ".join(f"{span['first']:.10g}–{span['last']:.10g} s" for span in spans)
+        where = (f"{held} of {total} row(s) lie outside the time span of the rows it was fitted on "
+                 f"({ranges} in column '{drift['time_column'] or 'time'}'), up to {_duration(drift['max_gap_s'])} away")
+    held_at = ("its session's mean time (no drift term for a one-session fit; a re-estimated registration: the "
+               "nearer end of the span)" if spans is not None else "zero offset (its time_reference_s)")
+    return (f"{data_path}: the report's drift is not extrapolated: {where}; those rows are evaluated with the "
+            f"drift held at {held_at}: a drift describes the session it was measured in")

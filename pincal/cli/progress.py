@@ -27,6 +27,16 @@ LOG_INTERVAL_S = 10.0
 TERMINAL_DELAY_S = 1.0
 
 
+class _Bar(tqdm):
+    """tqdm without its monitor thread (``monitor_interval = 0``), so that the process drawing
+    the bar keeps one Python thread and may fork its workers
+    (:func:`pincal.study.executors.fork_is_safe`). The monitor's job, redrawing when reports
+    slow down after a fast start, is done by an explicit ``miniters=0`` (no adaptive skipping of reports:
+    ``mininterval`` alone limits the redraws)."""
+
+    monitor_interval = 0
+
+
 class _LogLines:
     """A stream for logs: each status tqdm draws becomes one line of its own
     (tqdm redraws with carriage returns, which a log file would run together)."""
@@ -62,11 +72,12 @@ def progress_bar(label: str, quiet: bool = False, stream: TextIO | None = None,
     bar: tqdm | None = None
     if not quiet:  # started now: the delays count from the start of the work, not from its first report
         if interactive:
-            bar = tqdm(total=None, desc=label, file=stream, unit=unit, dynamic_ncols=True, leave=True,
-                       delay=TERMINAL_DELAY_S)
+            bar = _Bar(total=None, desc=label, file=stream, unit=unit, dynamic_ncols=True, leave=True,
+                       delay=TERMINAL_DELAY_S, miniters=0)
         else:
-            bar = tqdm(total=None, desc=label, file=_LogLines(stream), unit=unit, ncols=80, ascii=True,
-                       mininterval=LOG_INTERVAL_S, maxinterval=LOG_INTERVAL_S, delay=LOG_INTERVAL_S)
+            bar = _Bar(total=None, desc=label, file=_LogLines(stream), unit=unit, ncols=80, ascii=True,
+                       mininterval=LOG_INTERVAL_S, maxinterval=LOG_INTERVAL_S, delay=LOG_INTERVAL_S,
+                       miniters=0)
     started = False
 
     def report(done: int, total: int) -> None:

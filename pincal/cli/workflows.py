@@ -65,7 +65,7 @@ from pincal.report.row_errors import (
     diagnosis_row_errors,
     paper_row_errors,
 )
-from pincal.report.sessions import session_entries, session_errors
+from pincal.report.sessions import drift_spans, session_entries, session_errors
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
@@ -498,6 +498,7 @@ def diagnose_files(
     report["sessions"] = session_entries(final.session_names, final.target.registrations, used,
                                          session_rows(used, final.session_names), diagnosis.calibration_errors)
     report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
+    report.update(drift_spans(diagnosis, row_time, calibration, used))  # where a drift holds (evaluate)
     report["row_errors"] = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
                                                 (" + ".join(str(p) for p in data_paths), sources["validation"]))
     report["urdf_sha256"] = urdf_sha256

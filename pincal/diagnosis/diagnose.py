@@ -250,9 +250,9 @@ def diagnose(
     model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
-        held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time,
-                                    time_reference=reference if heldout_time is not None else None,
-                                    context_q=rows.q, context_time=row_time)
+        held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference, rows.q, row_time,
+                                    held_sessions=(session_rows(heldout, calibration.session_names),  # as evaluate
+                                                   session_rows(rows, calibration.session_names)))
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]

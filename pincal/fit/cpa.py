@@ -94,6 +94,52 @@ def circle_axis(points, angles) -> np.ndarray:
     return fit_circle(points, angles).axis
 
 
+def circle_axis_derivative(points, angles) -> tuple[np.ndarray, np.ndarray]:
+    """The axis of :func:`circle_axis` and its first derivative with respect to the points.
+
+    The axis b is ± the right-singular vector v₃ of the centred points X = P − 1 p̄ᵀ
+    (K, 3) with the smallest singular value, i.e. the eigenvector of M = XᵀX = Σ_i s_i² v_i v_iᵀ
+    for λ₃ = s₃². First-order perturbation of a simple eigenvalue's eigenvector of a
+    symmetric matrix (e.g. Golub & Van Loan, Matrix Computations, 4th ed., Sec. 8.1.2):
+
+        db = Σ_{i=1,2} v_i (v_iᵀ dM b) / (s₃² − s_i²).
+
+    With Xᵀ1 = 0 the centroid's change drops out of dM b = dPᵀ X b + Xᵀ dP b, so moving
+    point k along coordinate c gives dM b = e_c h_k + x_k b_c with h = X b (the
+    out-of-plane offsets [m]) and x_k the k-th centred point:
+
+        ∂b/∂p_{kc} = Σ_{i=1,2} v_i (v_{ic} h_k + (x_k · v_i) b_c) / (s₃² − s_i²).
+
+    The sign of b (right-hand rule, set by :func:`fit_circle`) is locally constant, and
+    the formula is linear in b, so it holds for either sign. This is the limit that
+    central finite differences of :func:`circle_axis` with step h approach with an
+    error O(h²) (truncation) plus O(ε_mach/h) (rounding).
+
+    Args:
+        points: (K, 3) arc points [m], as for :func:`fit_circle`.
+        angles: (K,) joint angles [rad].
+
+    Returns:
+        The unit axis b, (3,), bit-identical to :func:`circle_axis`, and
+        ∂b/∂p, (3, K, 3) [1/m]: entry [a, k, c] is ∂b_a/∂p_{kc} for ``points[k, c]``.
+
+    Raises:
+        CalibrationError: as :func:`fit_circle`, or the two smallest singular
+            values are equal (the plane normal is not a smooth function of the points).
+    """
+    axis = circle_axis(points, angles)
+    centred = np.asarray(points, dtype=float)
+    centred = centred - centred.mean(axis=0)
+    _, s, vt = np.linalg.svd(centred)
+    if s[1] - s[2] <= 1e-9 * s[0]:
+        raise CalibrationError("the arc's two smallest singular values coincide: the plane normal is undetermined")
+    offsets = centred @ axis  # h, (K,)
+    in_plane = centred @ vt[:2].T  # x_k · v_i, (K, 2)
+    gap = s[2] ** 2 - s[:2] ** 2  # s₃² − s_i², (2,)
+    coefficient = (vt[:2, None, :] * offsets[None, :, None] + in_plane.T[:, :, None] * axis) / gap[:, None, None]
+    return axis, np.einsum("ia,ikc->akc", vt[:2], coefficient)
+
+
 def twists_from_axes(axes, nominal_alpha) -> np.ndarray:
     """Link twists from consecutive joint axes, eq 9.
 
@@ -124,3 +170,45 @@ def twists_from_axes(axes, nominal_alpha) -> np.ndarray:
         raise CalibrationError(f"axis {int(np.argmin(norms)) + 1} has zero length")
     angle = np.arctan2(np.linalg.norm(np.cross(b[:-1], b[1:]), axis=1), np.sum(b[:-1] * b[1:], axis=1))
     return np.append(np.sign(alpha0[:-1]) * angle, alpha0[-1])
+
+
+def twist_gradients(axes, nominal_alpha) -> np.ndarray:
+    """First derivatives of the twists of :func:`twists_from_axes` (eq 9) with respect to the axes.
+
+    α̃_n = sign(α_{0,n}) · ∠(b_n, b_{n+1}) depends on the directions only; with unit
+    b̂ = b/‖b‖, cos α = b̂_n · b̂_{n+1} and sin α = ‖b̂_n × b̂_{n+1}‖, differentiating
+    cos α gives
+
+        ∂α/∂b_n = −(b̂_{n+1} − cos α b̂_n) / (‖b_n‖ sin α),
+
+    and symmetrically for b_{n+1}. Where the nominal twist is 0 (eq 9 gives the constant
+    0) or the axes are parallel (the angle has a kink, |·|, and no derivative; its
+    central differences are 0) the gradient is 0.
+
+    Args:
+        axes: (N, 3) joint axis directions b_n, as for :func:`twists_from_axes`.
+        nominal_alpha: (N,) nominal twists α_{0,n} [rad].
+
+    Returns:
+        (N − 1, 2, 3) [rad per unit of b]: [n, 0] is ∂α̃_n/∂b_n and [n, 1] is
+        ∂α̃_n/∂b_{n+1}; α_N keeps its nominal value and has no gradient.
+
+    Raises:
+        CalibrationError: as :func:`twists_from_axes`.
+    """
+    twists_from_axes(axes, nominal_alpha)  # validates
+    b = np.asarray(axes, dtype=float)
+    norms = np.linalg.norm(b, axis=1)
+    unit = b / norms[:, None]
+    first, second = unit[:-1], unit[1:]
+    cos = np.sum(first * second, axis=1)
+    sin = np.linalg.norm(np.cross(first, second), axis=1)
+    sign = np.sign(np.asarray(nominal_alpha, dtype=float)[:-1])
+    scale = np.divide(-sign, sin, out=np.zeros_like(sin), where=(sign != 0) & (sin > 1e-12))
+    return np.stack(
+        [
+            (second - cos[:, None] * first) * (scale / norms[:-1])[:, None],
+            (first - cos[:, None] * second) * (scale / norms[1:])[:, None],
+        ],
+        axis=1,
+    )

@@ -25,11 +25,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from pincal.errors import CalibrationError
 from pincal.fit.solver import condition_number as matrix_condition
 from pincal.fit.solver import triangular_factor
 
 #: Pivots below this fraction of the largest mean "not identifiable".
 RANK_TOLERANCE = 1e-8
+#: Pivot candidates within this much of the longest tie (:func:`pivoted_order`; unit-scaled
+#: columns). Rounding separates exactly equivalent columns by ~1e-15 absolute (a few ε of
+#: the unit columns, whatever their projected length); columns that differ by less than 1e-10
+#: are equally well determined to far below RANK_TOLERANCE (1e-8), so either choice is sound.
+PIVOT_TIE = 1e-10
 #: Pairs of kept parameters with |correlation| above this are reported.
 CORRELATION_THRESHOLD = 0.9
 #: Smallest eigenvalue of I − H_kk below which a row block counts as fitted exactly (leverage 1):
@@ -44,9 +50,11 @@ class Ordering:
     """Kinematic parameters ordered by how well the data determine them.
 
     Attributes:
-        order: kinematic column indices, best determined first (all of them).
+        order: kinematic column indices, best determined first (all of them; the
+            ``rank`` identifiable ones, then the others in their given order).
         rank: how many of them are identifiable.
-        pivots: |R_ii| of the pivoted QR, scaled units, same order.
+        pivots: |R_ii| of the pivoted QR, scaled units, for the ``rank`` identifiable ones;
+            the others' (below ``RANK_TOLERANCE`` of the largest) in their listed order.
     """
 
     order: np.ndarray
@@ -61,12 +69,8 @@ def _scaled(jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def order_parameters(jacobian: np.ndarray, kinematic: np.ndarray, always: np.ndarray) -> Ordering:
-    """Pivoted QR of the kinematic columns after projecting out the ``always`` columns.
-
-    Exactly equivalent columns (e.g. two placement translations along one joint
-    axis) tie; LAPACK's pivoting then keeps whichever rounding favours, so this
-    runs on the projected Jacobian itself, as it always has, to keep that choice.
-    """
+    """Pivoted QR of the kinematic columns after projecting out the ``always`` columns
+    (:func:`pivoted_order`: exactly equivalent columns keep the first listed)."""
     scaled, _ = _scaled(jacobian)
     base = scaled[:, always]
     if base.shape[1]:
@@ -76,12 +80,71 @@ def order_parameters(jacobian: np.ndarray, kinematic: np.ndarray, always: np.nda
         projected = scaled[:, kinematic]
     if projected.shape[1] == 0:
         return Ordering(np.array([], dtype=int), 0, np.array([]))
-    _, r, piv = scipy.linalg.qr(projected, mode="economic", pivoting=True)
-    pivots = np.abs(np.diag(r))
-    pivots = np.concatenate([pivots, np.zeros(len(piv) - len(pivots))])
+    piv, pivots = pivoted_order(projected)
     top = pivots[0] if pivots.size and pivots[0] > 0 else 1.0
     rank = int(np.sum(pivots > RANK_TOLERANCE * top))
+    tail = rank + np.argsort(piv[rank:], kind="stable")  # not identifiable: rounding orders them, list them as given
+    piv, pivots = np.concatenate([piv[:rank], piv[tail]]), np.concatenate([pivots[:rank], pivots[tail]])
     return Ordering(order=np.asarray(kinematic)[piv], rank=rank, pivots=pivots)
+
+
+def pivoted_order(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Column order and pivots |R_ii| of a QR with column pivoting (Businger & Golub 1965)
+    of ``a`` (m, n), columns scaled to unit norm, with a reproducible choice among tied columns.
+
+    Each step takes the column whose part orthogonal to the columns taken so far
+    is longest. Exactly equivalent columns (two placement translations along one
+    joint axis, a joint offset and the registration's turn about the same axis)
+    tie in exact arithmetic, and LAPACK's pivoting (``dgeqp3``) keeps whichever
+    rounding favours: a report's kept/dropped split then moved with the BLAS
+    build or the order of a sum. Here a column within :data:`PIVOT_TIE` (absolute,
+    in the unit-scaled columns) of the longest counts as tied, and the first
+    listed of the tied ones is taken.
+
+    The pivoting runs on the triangular factor of an unpivoted LAPACK QR of ``a``
+    (same column norms and inner products, n × n instead of m × n): each chosen
+    direction is orthogonalised against the earlier ones a second time, and the
+    remaining columns lose their component along it (one projection per step,
+    modified Gram–Schmidt). Columns left after min(m, n) steps follow in their
+    listed order with pivot 0.
+
+    Returns:
+        (n,) column indices in pivot order, and (n,) the pivots (zeros past min(m, n)).
+
+    Raises:
+        CalibrationError: ``a`` has NaN or infinite entries.
+    """
+    work = np.array(a, dtype=float)
+    if not np.all(np.isfinite(work)):
+        raise CalibrationError("the measurement Jacobian has NaN or infinite entries; check the data for extreme values")
+    m, n = work.shape
+    if m > n:
+        work = np.linalg.qr(work, mode="r")
+    basis = np.empty((work.shape[0], 0))
+    order: list[int] = []
+    pivots: list[float] = []
+    left = np.arange(n)
+    for _ in range(min(m, n)):
+        norms = np.sqrt(np.einsum("ij,ij->j", work[:, left], work[:, left]))
+        longest = norms.max() if norms.size else 0.0
+        if not longest > 0.0:
+            break
+        position = int(np.flatnonzero(norms >= longest - PIVOT_TIE)[0])
+        column = left[position]
+        direction = work[:, column].copy()
+        direction -= basis @ (basis.T @ direction)  # second pass (the first is in ``work``)
+        length = np.linalg.norm(direction)
+        order.append(int(column))
+        pivots.append(float(norms[position]))
+        left = np.delete(left, position)
+        if not length > 0.0:
+            continue
+        direction /= length
+        basis = np.column_stack([basis, direction])
+        work[:, left] -= np.outer(direction, direction @ work[:, left])
+    order += [int(c) for c in left]
+    pivots += [0.0] * len(left)
+    return np.array(order, dtype=int), np.array(pivots)
 
 
 def press(jacobian: np.ndarray, residual: np.ndarray, block: int) -> float:

@@ -94,6 +94,7 @@ def pose_errors(
     q: npt.ArrayLike | None = None,
     sensor_scale: float = 0.0,
     drift: npt.ArrayLike | None = None,
+    tool_poses: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> PoseErrors:
     """Eq 24 on every row of ``data``.
 
@@ -106,8 +107,12 @@ def pose_errors(
         q: joint values to use instead of the readings (readings corrected by effects).
         sensor_scale / drift: sensor effects: the model point is
             (1 + s)(Omega x + tau + drift_j) (see :mod:`pincal.model.effects`).
+        tool_poses: ``chain.tool_poses`` of the rows' joint values when the caller has
+            them (errors of one chain through several registrations share them).
     """
-    tool_rotations, tool_positions = chain.tool_poses(data.q if q is None else q)
+    if tool_poses is None:
+        tool_poses = chain.tool_poses(data.q if q is None else q)
+    tool_rotations, tool_positions = tool_poses
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
     world = points_in_base(tool_positions, tool_rotations, points)
     predicted = sensed_points(registration_position, world, sensor_scale, drift)

@@ -9,8 +9,12 @@ residual r(θ, z), linearised at its noise-free solution (where r = 0), gives
     dθ̂/dz = −(JᵀJ)⁻¹ Jᵀ (∂r/∂z + ∂r/∂θ_prev · dθ̂_prev/dz)
 
 with θ_prev the outputs of the earlier stages it depends on. The stages are
-chained as the methods run them: CPA (eq 9; the derivatives of the plane
-normals are central finite differences of the circle fit) → Err_rot (eq 14–17)
+chained as the methods run them: CPA (eq 9; the plane normals' derivatives are
+the first-order perturbation of the plane fit's SVD,
+:func:`pincal.fit.cpa.circle_axis_derivative`, the twists' are
+:func:`pincal.fit.cpa.twist_gradients`; the central differences with a 1e-6 m
+step they replaced differ by their truncation, ~(h · |∂b/∂p|)² relative, and
+rounding, ~1e-9: the study's limits moved by < 1e-10 relative) → Err_rot (eq 14–17)
 → Err_pos (eq 10–12), or Err_full (eq 18) → Registration 1 (Arun: the
 least-squares fit of Ω t + τ to g) and Registration 2 (the mean rotation, which
 minimises Σ ‖log(G_kᵀ Ω R_k)‖², then τ by eq 19). For the ML estimator
@@ -28,6 +32,7 @@ mean is a fixed Gauss–Legendre × trapezoid quadrature (spectrally accurate).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +40,7 @@ import pinocchio as pin
 from scipy import sparse
 
 from pincal.errors import CalibrationError
-from pincal.fit.cpa import circle_axis, twists_from_axes
+from pincal.fit.cpa import circle_axis_derivative, twist_gradients
 from pincal.fit.ml_estimator import METHOD as ML
 from pincal.fit.ml_estimator import calibrate_ml
 from pincal.fit.paper_methods import (
@@ -58,8 +63,6 @@ from pincal.simulation.paper import SimulatedExperiment
 from pincal.simulation.sensor import perfect_measurements
 
 METHODS = (1, 2, 3, ML)
-
-CPA_STEP = 1e-6  # finite-difference step on the CPA points [m]
 
 _CHI3_MEAN = 2.0 * np.sqrt(2.0 / np.pi)  # E‖u‖ for u ~ N(0, I₃)
 
@@ -103,11 +106,13 @@ class PredictedErrors:
     sensitivity: np.ndarray
 
 
-def mean_norm(covariances: np.ndarray, n_polar: int = 24, n_azimuth: int = 48) -> np.ndarray:
-    """E‖e‖ for zero-mean Gaussians e ~ N(0, C) in 3D, C of shape (..., 3, 3).
+@functools.lru_cache(maxsize=8)
+def _sphere_quadrature(n_polar: int, n_azimuth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes and weights of :func:`mean_norm`'s sphere rule, built once per size.
 
-    E‖e‖ = 2√(2/π) · (1/4π) ∮ √(nᵀ C n) dn, the sphere integral by Gauss–Legendre
-    in cos θ (``n_polar`` nodes) times the trapezoid rule in the azimuth.
+    Returns:
+        n_i n_j of the M = n_polar · n_azimuth unit directions, (M, 9), and the
+        weights, (M,), summing to 1; both read-only.
     """
     cos, weight = np.polynomial.legendre.leggauss(n_polar)
     azimuth = 2.0 * np.pi * np.arange(n_azimuth) / n_azimuth
@@ -117,7 +122,20 @@ def mean_norm(covariances: np.ndarray, n_polar: int = 24, n_azimuth: int = 48) -
         axis=-1,
     ).reshape(-1, 3)
     weights = np.repeat(weight / 2.0, n_azimuth) / n_azimuth  # sums to 1
-    quadratic = np.einsum("mi,...ij,mj->...m", directions, np.asarray(covariances), directions)
+    outer = (directions[:, :, None] * directions[:, None, :]).reshape(-1, 9)
+    outer.flags.writeable = weights.flags.writeable = False
+    return outer, weights
+
+
+def mean_norm(covariances: np.ndarray, n_polar: int = 24, n_azimuth: int = 48) -> np.ndarray:
+    """E‖e‖ for zero-mean Gaussians e ~ N(0, C) in 3D, C of shape (..., 3, 3).
+
+    E‖e‖ = 2√(2/π) · (1/4π) ∮ √(nᵀ C n) dn, the sphere integral by Gauss–Legendre
+    in cos θ (``n_polar`` nodes) times the trapezoid rule in the azimuth.
+    """
+    outer, weights = _sphere_quadrature(n_polar, n_azimuth)
+    covariances = np.asarray(covariances, dtype=float)
+    quadratic = covariances.reshape(*covariances.shape[:-2], 9) @ outer.T  # nᵀ C n = Σ_ij C_ij n_i n_j
     return _CHI3_MEAN * np.sqrt(np.clip(quadratic, 0.0, None)) @ weights
 
 
@@ -135,11 +153,13 @@ class _Propagation:
     The estimate is p = [DH vector (4N), Registration 1 (φ, τ), Registration 2 (φ, τ)]
     with φ a left rotation of the noise-free registration; z is the sensor
     noise, 6 components per row of ``data`` (ζ [m] then ξ [rad]). :attr:`d`
-    holds dp/dz, shape (4N + 12, 6 K).
+    holds dp/dz, shape (4N + 12, 6 K). ``models``: Pinocchio sensitivity models
+    of the chain by their slots, shared by every stage's kinematics (see
+    :class:`pincal.residuals.base.KinematicsCache`).
     """
 
-    def __init__(self, params: DHParameterSet, result: PaperCalibration, data: MeasurementSet):
-        self.params, self.result, self.data = params, result, data
+    def __init__(self, params: DHParameterSet, result: PaperCalibration, data: MeasurementSet, models: dict):
+        self.params, self.result, self.data, self.models = params, result, data, models
         self.vector = result.table.to_vector()
         self.n_dh = params.size
         self.n_noise = 6 * data.n_rows
@@ -159,7 +179,7 @@ class _Propagation:
 
     def cache(self, rows: np.ndarray) -> KinematicsCache:
         """Kinematics of ``rows`` of the data with every DH parameter free."""
-        return KinematicsCache(self.params, np.arange(self.n_dh), self.vector, self.data.q[rows])
+        return KinematicsCache(self.params, np.arange(self.n_dh), self.vector, self.data.q[rows], self.models)
 
     def embed(self, blocks: np.ndarray, rows: np.ndarray) -> sparse.csr_matrix:
         """Per-row noise blocks (R, m, 6) of data ``rows`` → dr/dz, sparse (R·m, 6 K)."""
@@ -181,8 +201,8 @@ class _Propagation:
         """
         is_free = np.isin(columns, free)
         solve = -np.linalg.pinv(jac[:, is_free])  # −(JᵀJ)⁻¹Jᵀ
-        previous = jac[:, ~is_free] @ self.d[columns[~is_free]]
-        self.d[columns[is_free]] = solve @ previous + (noise.T @ solve.T).T
+        # (solve · J_prev) · dθ_prev/dz: the small product first (free × prev, not free × 6K)
+        self.d[columns[is_free]] = (solve @ jac[:, ~is_free]) @ self.d[columns[~is_free]] + (noise.T @ solve.T).T
 
     def pose_jacobians(
         self, data: MeasurementSet, which: str, sigma: tuple[float, float] = (1.0, 1.0)
@@ -200,7 +220,7 @@ class _Propagation:
             so dr/dφ = dr/dφ_r Ω₀ᵀ at φ = 0. And dr/dz per row, (R, 6, 6).
         """
         registration = getattr(self.result, f"registration_{which}")
-        cache = KinematicsCache(self.params, np.arange(self.n_dh), self.vector, data.q)
+        cache = KinematicsCache(self.params, np.arange(self.n_dh), self.vector, data.q, self.models)
         objective = tool_pose_residual(cache, data.points[:, :1], data.rotations, registration, *sigma)
         x = objective.start_vector()
         jac = objective.jacobian(x)[objective.row_indices().ravel()]
@@ -220,25 +240,14 @@ class _Propagation:
         q, points = self.data.q[cpa], self.data.points[cpa, 0]
         axes, d_axes = {}, {}
         for joint, rows in cpa_groups(q).items():
-            arc, angles = points[rows], q[rows, joint]
-            axes[joint] = circle_axis(arc, angles)
+            axes[joint], d_arc = circle_axis_derivative(points[rows], q[rows, joint])  # d_arc (3, K, 3)
             d_axes[joint] = np.zeros((3, self.n_noise))  # d axis / dz
-            for local, c in np.ndindex(len(rows), 3):
-                step = np.zeros_like(arc)
-                step[local, c] = CPA_STEP
-                plus, minus = circle_axis(arc + step, angles), circle_axis(arc - step, angles)
-                d_axes[joint][:, 6 * cpa[rows[local]] + c] = (plus - minus) / (2 * CPA_STEP)
+            columns = 6 * cpa[rows][:, None] + np.arange(3)  # ζ_k[c] of the arc's rows, (K, 3)
+            d_axes[joint][:, columns.ravel()] = d_arc.reshape(3, -1)
         nominal = self.result.nominal.alpha
         for i in estimated:
-            pair = np.stack([axes[i], axes[i + 1]])
-            grad = np.zeros(6)
-            for c in range(6):
-                step = np.zeros(6)
-                step[c] = CPA_STEP
-                plus = twists_from_axes(pair + step.reshape(2, 3), nominal[i : i + 2])[0]
-                minus = twists_from_axes(pair - step.reshape(2, 3), nominal[i : i + 2])[0]
-                grad[c] = (plus - minus) / (2 * CPA_STEP)
-            self.d[alpha[i]] = grad[:3] @ d_axes[i] + grad[3:] @ d_axes[i + 1]
+            grad = twist_gradients(np.stack([axes[i], axes[i + 1]]), nominal[i : i + 2])[0]  # (2, 3)
+            self.d[alpha[i]] = grad[0] @ d_axes[i] + grad[1] @ d_axes[i + 1]
 
     def pairs(self, name: str, free_names: tuple[str, ...], weight: float) -> None:
         """Err_pos (eq 10–11), Err_rot (eq 14–17) or Err_full (eq 18) on the calibration rows."""
@@ -346,11 +355,14 @@ def _sensitivity(
     """
     data = _noise_free(chain, experiment.truth, experiment.registration, experiment.calibration)
     validation = _noise_free(chain, experiment.truth, experiment.registration, experiment.validation)
+    models: dict = {}  # Pinocchio sensitivity models by their slots, built once for the fit and the stages
     if method == ML:
-        result = calibrate_ml(chain, data, ml_sigma[0] * 1000.0, np.degrees(ml_sigma[1]), nominal=experiment.truth)
+        result = calibrate_ml(
+            chain, data, ml_sigma[0] * 1000.0, np.degrees(ml_sigma[1]), nominal=experiment.truth, models=models
+        )
     else:
-        result = calibrate_paper(chain, data, method, weight=weight, nominal=experiment.truth)
-    propagation = _Propagation(DHParameterSet(chain, result.nominal), result, data)
+        result = calibrate_paper(chain, data, method, weight=weight, nominal=experiment.truth, models=models)
+    propagation = _Propagation(DHParameterSet(chain, result.nominal), result, data, models)
     if method == ML:
         propagation.maximum_likelihood(result.stages[-1].parameters, ml_sigma)
     else:

@@ -94,16 +94,25 @@ def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit", max_evalua
             f"{what}: {m} residuals cannot determine {n} parameters; add calibration rows"
         )
     known = [r0]  # the start's residual, for least_squares' first call
+    jacobians: dict[bytes, np.ndarray] = {}  # the last two, by x: scipy asks again for the final x
 
     def residual(x: np.ndarray) -> np.ndarray:
         start = known.pop() if known else None
         return start if start is not None and np.array_equal(x, x0) else objective.residual(x)
 
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in jacobians:
+            if len(jacobians) == 2:
+                del jacobians[next(iter(jacobians))]
+            jacobians[key] = objective.jacobian(x)
+        return jacobians[key].copy()  # scipy and MINPACK may write into what they get
+
     try:
         result = least_squares(
             residual,
             x0,
-            jac=objective.jacobian,
+            jac=jacobian,
             method="lm",
             x_scale="jac",
             xtol=XTOL if tolerance is None else tolerance,

@@ -17,6 +17,14 @@ Two effects act on the sensor side: ``drift`` moves the registration's
 translation linearly with time (u [m/s], 3 values; thermal drift) and
 ``sensor_scale`` scales the sensor's lengths (relative).
 
+A drift describes the session it was fitted on: its offset is (t_k − t̄) u,
+t̄ the mean time of the fitted rows (``time_reference_s``), and it holds only
+inside the time span [first_S, last_S] of the session's fitted rows
+(``time_spans_s``). It is never extrapolated: a row outside the span of the
+session S whose registration it uses (another day) is held at that session's
+mean time t̄_S, offset (t̄_S − t̄) u — zero for a one-session fit, where t̄_S = t̄:
+no drift term (:func:`drift_offsets`).
+
 Each shift is linear in its values: shift = basis(k) · values, so the
 calibration's Jacobian for an effect is the joint's Jacobian column times its
 basis (see :mod:`pincal.residuals.sensor`).
@@ -102,6 +110,9 @@ class EffectInputs:
             rows of the same session (e.g. held-out rows between calibration
             rows): the approach flank of a row follows the row before it in
             time, whichever set it belongs to. None without them.
+        flank_time: the rows' own time relative to the mean (K,) [s] when ``time``
+            is the drift's, held outside a fitted span (:func:`effect_inputs`
+            ``held_sessions``), for the approach flanks; None otherwise.
     """
 
     q: np.ndarray
@@ -110,6 +121,7 @@ class EffectInputs:
     order: np.ndarray
     context_q: np.ndarray | None = None
     context_time: np.ndarray | None = None
+    flank_time: np.ndarray | None = None
 
 
 def gravity_torques(
@@ -157,23 +169,35 @@ def effect_inputs(
     time_reference: float | None = None,
     context_q: np.ndarray | None = None,
     context_time: np.ndarray | None = None,
+    held_sessions: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> EffectInputs:
     """Gravity torques, time (minus ``time_reference``, default its mean) and
     time order of the rows of ``data``. ``context_q`` (M, N) with
     ``context_time`` (M,) [s] are the joint readings of other rows of the same
-    session, interleaved in time, for approach flanks (readings only)."""
+    session, interleaved in time, for approach flanks (readings only).
+
+    ``held_sessions`` = (the session of each row (K,), of each context row (M,)):
+    the context rows are the rows a drift is fitted on, and these rows (held-out
+    rows) take the drift's time as ``evaluate`` does (:func:`held_times`):
+    outside their session's span of context rows, its mean time."""
     order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
     if time is not None and time_reference is None:
         time_reference = float(np.mean(time))
     centred = None if time is None else time - time_reference
     with_context = context_q is not None and context_time is not None and time is not None
+    drift_time = centred
+    if with_context and held_sessions is not None:
+        own, fitted = (np.asarray(sessions).astype(str) for sessions in held_sessions)
+        spans = time_spans(context_time, fitted)
+        drift_time = held_times(time, spans, own.tolist(), own)[0] - time_reference
     return EffectInputs(
         q=np.asarray(data.q, dtype=float),
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
-        time=centred,
+        time=drift_time,
         order=order,
         context_q=np.asarray(context_q, dtype=float) if with_context else None,
         context_time=np.asarray(context_time, dtype=float) - time_reference if with_context else None,
+        flank_time=centred if drift_time is not centred else None,
     )
 
 
@@ -223,7 +247,8 @@ def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
     if inputs.context_q is None:
         return approach_flank(q, inputs.order)[:, None]
     merged = np.concatenate([q, inputs.context_q[:, joint]])
-    order = np.argsort(np.concatenate([inputs.time, inputs.context_time]), kind="stable")
+    own = inputs.time if inputs.flank_time is None else inputs.flank_time
+    order = np.argsort(np.concatenate([own, inputs.context_time]), kind="stable")
     return approach_flank(merged, order)[: len(q), None]
 
 
@@ -301,3 +326,120 @@ def effect_from_dict(entry: dict) -> tuple[Effect, np.ndarray]:
         return effect, np.atleast_1d(np.asarray(entry["value"], dtype=float))
     except (KeyError, TypeError, ValueError) as exc:
         raise PincalError(f"bad effect entry {entry} in the report ({exc})") from None
+
+
+@dataclass(frozen=True)
+class TimeSpan:
+    """The times of one session's rows a drift was fitted on (REPORT.json ``time_spans_s``).
+
+    Attributes:
+        session: the calibrated session's name.
+        first / last / mean: earliest, latest and mean row time [s], in the time column's units.
+    """
+
+    session: str
+    first: float
+    last: float
+    mean: float
+
+    def as_dict(self) -> dict:
+        return {"session": self.session, "first": self.first, "last": self.last, "mean": self.mean}
+
+
+def time_spans(time: np.ndarray, sessions: Sequence[str]) -> tuple[TimeSpan, ...]:
+    """The span of the row times ``time`` (K,) [s] of each session (``sessions`` (K,)
+    each row's name), in the order of their first row."""
+    time, sessions = np.asarray(time, dtype=float), np.asarray(sessions, dtype=object)
+    spans = []
+    for name in dict.fromkeys(sessions.tolist()):
+        own = time[sessions == name]
+        first, last = float(np.min(own)), float(np.max(own))
+        # the rounded mean of equal times can land an ulp outside them
+        spans.append(TimeSpan(str(name), first, last, min(max(float(np.mean(own)), first), last)))
+    return tuple(spans)
+
+
+def read_time_spans(entries, where: str) -> tuple[TimeSpan, ...] | None:
+    """REPORT.json ``time_spans_s`` (a list of :meth:`TimeSpan.as_dict`) back; None if absent.
+
+    Raises:
+        PincalError: a malformed entry (``where`` names the report).
+    """
+    if entries is None:
+        return None
+    try:
+        spans = tuple(TimeSpan(str(e["session"]), float(e["first"]), float(e["last"]), float(e["mean"]))
+                      for e in entries)
+    except (KeyError, TypeError, ValueError):
+        spans = ()
+    if not spans or not all(np.isfinite([s.first, s.last, s.mean]).all() and s.first <= s.mean <= s.last
+                            for s in spans):
+        raise PincalError(f"{where}: time_spans_s must be a list of {{session, first, last, mean}} with "
+                          "first <= mean <= last (finite seconds); rewrite it with pincal diagnose")
+    return spans
+
+
+@dataclass(frozen=True)
+class DriftOffsets:
+    """The drift offsets of evaluated rows and where the drift was not extrapolated.
+
+    Attributes:
+        offsets: the offset t u added to each row's registration translation [m], (K, 3).
+        inside: whether each row lies in its session's fitted span (its offset (t_k − t̄) u), (K,).
+        gap: how far each row lies from that span [s], 0 inside, (K,).
+    """
+
+    offsets: np.ndarray
+    inside: np.ndarray
+    gap: np.ndarray
+
+
+def held_times(
+    time: np.ndarray, spans: Sequence[TimeSpan], held_session: Sequence[str | None], group: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The time [s] a drift is taken at for rows of times ``time`` (K,), and each
+    row's distance from its span [s] (0 inside), (K,) each (:func:`drift_offsets`)."""
+    time = np.asarray(time, dtype=float)
+    first = np.array([s.first for s in spans])
+    last = np.array([s.last for s in spans])
+    mean = np.array([s.mean for s in spans])
+    index = {s.session: i for i, s in enumerate(spans)}
+    own = np.array([index.get(name, -1) if name is not None else -1 for name in held_session], dtype=np.intp)
+    group = np.arange(time.size) if group is None else np.asarray(group)
+    for g in np.unique(group[own < 0]):  # one span per evaluated session: the nearest to its median time
+        members = np.flatnonzero((group == g) & (own < 0))
+        centre = float(np.median(time[members]))
+        own[members] = int(np.argmin(np.maximum(np.maximum(first - centre, centre - last), 0.0)))
+    gap = np.maximum(np.maximum(first[own] - time, time - last[own]), 0.0)
+    reestimated = np.array([name is None for name in held_session], dtype=bool)
+    return np.where(reestimated, np.clip(time, first[own], last[own]), np.where(gap == 0.0, time, mean[own])), gap
+
+
+def drift_offsets(
+    time: np.ndarray, velocity: np.ndarray, reference: float, spans: Sequence[TimeSpan] | None,
+    held_session: Sequence[str | None], group: np.ndarray | None = None,
+) -> DriftOffsets:
+    """The drift's offsets at rows of times ``time`` (K,) [s], never extrapolated.
+
+    S is the span of the session ``held_session[k]`` names (the session whose
+    registration the row uses). A name without a span, or None, takes one span
+    for all the rows of its evaluated session (``group`` (K,), default each row
+    alone): the span nearest the group's median time, so that one session is
+    never split between two spans. Inside S (first_S <= t <= last_S) the offset
+    is (t − t̄) u as fitted, t̄ = ``reference``, u = ``velocity`` [m/s] (3,);
+    outside it the drift is held at S's mean time, (t̄_S − t̄) u: the session's
+    average state, where its registration is best determined (t is centred
+    there, so registration and drift are uncorrelated); 0 for a one-session fit.
+    A row named None (a registration re-estimated on the evaluated rows, which
+    absorbs any constant offset) is held instead at the nearer end of S,
+    (clip(t, first_S, last_S) − t̄) u, so that its session's rows stay
+    continuous across the span's end. Without ``spans`` (a report older than
+    ``time_spans_s``) no row is known to lie inside: every row gets offset 0.
+    """
+    time = np.asarray(time, dtype=float)
+    velocity = np.asarray(velocity, dtype=float).reshape(3)
+    if not spans:
+        return DriftOffsets(offsets=np.zeros((time.size, 3)), inside=np.zeros(time.size, dtype=bool),
+                            gap=np.full(time.size, np.inf))
+    effective, gap = held_times(time, spans, held_session, group)
+    return DriftOffsets(offsets=(effective - reference)[:, None] * velocity, inside=gap == 0.0, gap=gap)

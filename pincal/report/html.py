@@ -167,10 +167,23 @@ def evaluated_sessions(evaluation: dict | None) -> list[dict[str, Any]]:
 
 
 def _registration_notes(evaluation: dict | None) -> list[str]:
-    """The evaluated card's lines on registrations re-estimated on the evaluated rows."""
-    return [f"session {s['name']}: registration re-estimated on these rows — {s['residuals']} residuals, "
-            f"{s['dof']} degrees of freedom left: errors about {s['shrink']} × the true error"
-            for s in evaluated_sessions(evaluation) if s["reestimated"]]
+    """The evaluated card's lines on registrations re-estimated on the evaluated rows, and on
+    rows a drift was not extrapolated to (``drift`` of ``evaluate --json``)."""
+    drift = (evaluation or {}).get("drift")
+    held = drift.get("rows_held") if isinstance(drift, dict) else None
+    sessions = evaluated_sessions(evaluation)
+    notes = [f"session {s['name']}: registration re-estimated on these rows — {s['residuals']} residuals, "
+             f"{s['dof']} degrees of freedom left: errors about {s['shrink']} × the true error"
+             for s in sessions if s["reestimated"]]
+    if isinstance(held, int) and held > 0:  # where evaluate held it (pincal.model.effects.drift_offsets)
+        kinds = {s["reestimated"] for s in sessions}
+        at = ("at zero offset (no span recorded)" if not drift.get("time_spans_s")
+              else "held at the nearer end of the span (registration re-estimated)" if kinds == {True}
+              else "held at its session's mean time" if kinds == {False}
+              else "held at its session's mean time (a re-estimated registration: at the nearer end of the span)")
+        notes.append(f"drift not extrapolated: {held} row(s) outside the time span it was fitted on are evaluated "
+                     f"with it {at}")
+    return notes
 
 
 def _facts(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
@@ -355,7 +368,7 @@ def render_html(document: dict[str, Any], evaluation: dict[str, Any] | None = No
 def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: str | Path | None) -> str:
     if "parameters" not in document and "position" in document:  # evaluate --json alone
         evaluation = {"errors": document, "data": None, "urdf": None, "sessions": document.get("sessions") or [],
-                      **(evaluation or {})}
+                      "drift": document.get("drift"), **(evaluation or {})}
         document = {}
     base = Path(base) if base is not None else Path.cwd()
     kinds = dict(zip((document.get("chain") or {}).get("joints") or [],

@@ -168,14 +168,16 @@ def diagnosis_row_errors(
 def evaluation_document(
     urdf: str, data: str, errors: PoseErrors, lines: Sequence[int], skipped_cpa: int = 0,
     files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
-    registrations: Sequence[dict[str, Any]] = (),
+    registrations: Sequence[dict[str, Any]] = (), drift: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """What ``evaluate --html`` shows beside the report: the evaluated files, the eq 24
     summary (as ``evaluate --json`` writes it), the evaluated rows by file line (and
     each row's file and session), and ``sessions``: each evaluated session's entry of
     ``evaluate --json`` (its registration's source, ``registration_reestimated``,
-    ``residuals`` and ``registration_dof``)."""
+    ``residuals`` and ``registration_dof``); ``drift``: how the report's drift was
+    applied (``evaluate --json`` ``drift``), or None."""
     return {
+        "drift": drift,
         "urdf": urdf,
         "data": data,
         "errors": {**errors.as_dict(), "skipped_cpa_rows": skipped_cpa},

@@ -23,7 +23,9 @@ from typing import Any
 import numpy as np
 
 from pincal.fit.metrics import PoseErrors
+from pincal.fit.sessions import session_rows
 from pincal.measurements.data import MeasurementSet
+from pincal.model.effects import time_spans
 from pincal.model.sensor import Registration
 
 
@@ -59,3 +61,21 @@ def session_entries(
             "calibration_errors": session_errors(errors, rows).as_dict() if rows.size else None,
         })
     return entries
+
+
+def drift_spans(diagnosis, time: np.ndarray | None, calibration, used: MeasurementSet) -> dict[str, Any]:
+    """REPORT.json ``time_spans_s`` when ``diagnosis`` adopted a drift: the time span
+    (first, last, mean [s]) of the rows it was fitted on, per calibrated session —
+    where ``evaluate`` applies it (:func:`pincal.model.effects.drift_offsets`); {} without a drift.
+
+    Args:
+        diagnosis: :class:`pincal.diagnosis.diagnose.Diagnosis`.
+        time: the time of every row of the data (K,) [s], or None.
+        calibration: the geometric calibration (``used_index``, ``session_names``).
+        used: the rows of the fit, ``data.select(calibration.used_index)``.
+    """
+    if time is None or not any(effect.type == "drift" for effect, _, _ in diagnosis.effects):
+        return {}
+    names = np.asarray(calibration.session_names, dtype=object)[session_rows(used, calibration.session_names)]
+    spans = time_spans(np.asarray(time, dtype=float)[calibration.used_index], names)
+    return {"time_spans_s": [span.as_dict() for span in spans]}

@@ -1,7 +1,8 @@
 """Finished study tasks kept on disk, so that a study killed mid-run resumes where it stopped.
 
 While a study runs, each finished task's rows are written, atomically
-(:func:`pincal.outputs.write_text`), to one JSON file in a hidden folder
+(:func:`pincal.outputs.write_text`, without fsync: a file that a machine crash
+truncated fails to parse and its task simply runs again), to one JSON file in a hidden folder
 (:data:`CHECKPOINT_FOLDER`) of the output folder, named by the SHA-256 of the
 pincal version, a digest of pincal's own source files and the task's full ``repr`` — the task kind, its key and seed,
 and the whole :class:`pincal.study.protocol.StudyConfig`. A rerun of the same
@@ -56,24 +57,32 @@ class TaskStore:
         return f"pincal {__version__} {source_digest()}\n{task!r}"
 
     def path(self, task: Any) -> Path:
-        digest = hashlib.sha256(self.identity(task).encode("utf-8")).hexdigest()
-        return self.folder / f"{digest}.json"
+        return self._file(self.identity(task))
+
+    def _file(self, identity: str) -> Path:
+        return self.folder / f"{hashlib.sha256(identity.encode('utf-8')).hexdigest()}.json"
 
     def load(self, task: Any) -> list[dict[str, Any]] | None:
         """The stored rows of ``task``, or None if it has none (or a file that does not match it)."""
+        identity = self.identity(task)
         try:
-            document = json.loads(self.path(task).read_text(encoding="utf-8"))
+            document = json.loads(self._file(identity).read_text(encoding="utf-8"))
         except (OSError, ValueError):  # absent, or unreadable: run the task again
             return None
-        if not isinstance(document, dict) or document.get("task") != self.identity(task):
+        if not isinstance(document, dict) or document.get("task") != identity:
             return None
         rows = document.get("rows")
         return rows if isinstance(rows, list) else None
 
     def save(self, task: Any, rows: list[dict[str, Any]]) -> None:
         """Keep the rows of a finished task (NaN as JSON's ``NaN``; floats exact)."""
-        self.folder.mkdir(exist_ok=True)
-        write_text(self.path(task), json.dumps({"task": self.identity(task), "rows": rows}) + "\n")
+        identity = self.identity(task)
+        path, text = self._file(identity), json.dumps({"task": identity, "rows": rows}) + "\n"
+        try:
+            write_text(path, text, durable=False)
+        except FileNotFoundError:  # no folder yet (the first save): create it, not once per save
+            self.folder.mkdir(exist_ok=True)
+            write_text(path, text, durable=False)
 
     def clear(self) -> None:
         """Remove the stored tasks (and temporary files a kill left) and the folder if nothing else is in it."""

@@ -18,6 +18,8 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import sys
+import threading
 from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager, nullcontext
@@ -40,6 +42,30 @@ def default_workers() -> int:
 #: several multi-threaded BLAS pools on the same cores slow every task down (Dask's
 #: nanny sets the same variables for its worker processes).
 _SINGLE_THREADED_BLAS = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+def fork_is_safe() -> bool:
+    """Whether worker processes may be forked from this one rather than started afresh.
+
+    A forked worker starts at once with this process's imports (numpy, scipy,
+    Pinocchio: ~0.6 s of CPU that a fresh ``spawn`` worker spends importing them
+    again). A fork copies only the calling thread, though, so a lock another
+    thread held would stay locked in the child: fork only while this process runs
+    one Python thread (BLAS pools are native and re-created after a fork), and
+    only on Linux (macOS system frameworks are not fork-safe; Windows has no fork).
+    """
+    return sys.platform.startswith("linux") and threading.active_count() == 1
+
+
+def _one_blas_thread(user_set: bool) -> None:
+    """Initializer of forked workers: one BLAS and one OpenMP thread, as
+    :data:`_SINGLE_THREADED_BLAS` gives spawned ones (a forked worker's libraries read the
+    environment when this process loaded them), unless the user set one of those variables:
+    their pools then keep the user's setting, as spawned workers would."""
+    from threadpoolctl import threadpool_limits
+
+    if not user_set:
+        threadpool_limits(limits=1)
 
 
 @contextmanager
@@ -135,9 +161,14 @@ def execute(
         for index in results.pending:
             results.add(index, _run_task(tasks[index]))
         return results.values, results.describe("in-process")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    if fork_is_safe():
+        user_set = any(name in os.environ for name in _SINGLE_THREADED_BLAS)  # before the block below sets them
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                   initializer=_one_blas_thread, initargs=(user_set,))
+    else:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
-        with _single_threaded_blas():  # the workers start while the tasks are submitted
+        with _single_threaded_blas():  # the (spawned) workers start while the tasks are submitted
             futures = {pool.submit(_run_task, tasks[index]): index for index in results.pending}
         for future in as_completed(futures):
             results.add(futures[future], future.result())

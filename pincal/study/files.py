@@ -1,7 +1,8 @@
 """The files of a simulation study: study.csv, summary.csv, restarts.csv, findings.md, study.json.
 
 :func:`write_study` writes them all, and the figures of
-:mod:`pincal.study.figures` (matplotlib is imported only then). CSV cells
+:mod:`pincal.study.figures` (matplotlib is imported only then), drawn by
+other processes while this one writes the tables. CSV cells
 hold floats at full precision and None as an empty cell; study.json is
 strict JSON (NaN and infinities as null).
 """
@@ -17,6 +18,7 @@ import numpy as np
 
 from pincal.outputs import write_text
 from pincal.study.estimators import Estimator
+from pincal.study.executors import default_workers
 from pincal.study.findings import ML_COLUMNS, PAPER_MAX_DEVIATIONS
 from pincal.study.protocol import (
     RESTART_SPREAD_DEG,
@@ -113,8 +115,15 @@ def study_json(result: StudyResult) -> dict[str, Any]:
     })
 
 
-def write_study(result: StudyResult, out_dir: str | Path, figures: bool = True) -> dict[str, Any]:
+def write_study(result: StudyResult, out_dir: str | Path, figures: bool = True, workers: int | None = None,
+                ) -> dict[str, Any]:
     """Write study.csv, summary.csv, restarts.csv, findings.md, study.json and the figures.
+
+    Args:
+        result, out_dir: the study and the folder of its files (created).
+        figures: draw the figures.
+        workers: processes drawing the figures while this one writes the tables
+            (:func:`pincal.study.figures.start_figures`; default all cores, 1 = this process).
 
     Returns:
         {name: path} of the files written; ``figures`` is the list of PNG paths.
@@ -124,15 +133,20 @@ def write_study(result: StudyResult, out_dir: str | Path, figures: bool = True) 
     paths: dict[str, Any] = {name: out / file for name, file in (
         ("study", "study.csv"), ("summary", "summary.csv"), ("restarts", "restarts.csv"),
         ("findings", "findings.md"), ("json", "study.json"))}
-    write_csv(paths["study"], result.rows, STUDY_COLUMNS)
-    write_csv(paths["summary"], result.summary, SUMMARY_COLUMNS)
-    write_csv(paths["restarts"], result.restarts, RESTART_COLUMNS)
-    write_text(paths["findings"], findings_markdown(result))
-    write_text(paths["json"], json.dumps(study_json(result), indent=1, allow_nan=False) + "\n")
+    drawn = None
     if figures:
-        from pincal.study.figures import write_figures  # matplotlib only when drawing
+        from pincal.study.figures import start_figures  # matplotlib only when drawing
 
-        paths["figures"] = write_figures(result, out)
+        drawn = start_figures(result, out, default_workers() if workers is None else workers)
+    try:
+        write_csv(paths["study"], result.rows, STUDY_COLUMNS)
+        write_csv(paths["summary"], result.summary, SUMMARY_COLUMNS)
+        write_csv(paths["restarts"], result.restarts, RESTART_COLUMNS)
+        write_text(paths["findings"], findings_markdown(result))
+        write_text(paths["json"], json.dumps(study_json(result), indent=1, allow_nan=False) + "\n")
+    finally:  # even when a table failed, the drawing processes are waited for (and their errors raised)
+        if drawn is not None:
+            paths["figures"] = drawn()
     return paths
 
 

@@ -189,6 +189,7 @@ class TrialTask:
             chain.set_placements(result.table.joint_origins())
             deviations = parameter_deviations(result.table, experiment.truth)
             registrations = {1: result.registration_position, 2: result.registration_orientation}
+            tool = {suffix: chain.tool_poses(data.q) for suffix, data in test_sets.items()}  # both registrations'
             for index in estimator.registrations:
                 row = {
                     "deviations": self.deviations, "level": self.level, "sigma_pos_mm": self.sigma,
@@ -196,7 +197,8 @@ class TrialTask:
                     "method": str(estimator.method), "weight": estimator.weight, "registration": index,
                 }
                 for suffix, data in test_sets.items():  # eq 24 through this registration
-                    errors = pose_errors(chain, data, registrations[index], registrations[index])
+                    errors = pose_errors(chain, data, registrations[index], registrations[index],
+                                         tool_poses=tool[suffix])
                     row[f"pos{suffix}_mean_mm"] = errors.position.mean
                     row[f"rot{suffix}_mean_deg"] = errors.rotation.mean
                 rows.append({**row, "fit_ms": fit_ms, **deviations})

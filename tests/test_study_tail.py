@@ -1,0 +1,178 @@
+"""The study's serial tail and start-up: forked workers (same results, one BLAS thread, only when
+safe), figures drawn by other processes (the same PNG bytes), checkpoints without fsync (a
+truncated one only reruns its task), and a progress bar that starts no thread.
+
+No test is timed: each checks where the work ran, what it wrote, or what the fork inherited.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+import pincal.outputs as outputs
+from pincal.cli.progress import progress_bar
+from pincal.study import figures
+from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
+from pincal.study.executors import execute, fork_is_safe
+from pincal.study.protocol import StudyConfig
+from pincal.study.run import run_study
+
+#: Set by a test before its workers start: a forked worker sees the new value, a spawned one
+#: (which imports this module afresh) the old one.
+_PARENT_MARK = "imported"
+_ON_LINUX = sys.platform.startswith("linux")
+
+
+class _WhereAmI:
+    """A task reporting the process that ran it, what it inherited, and its BLAS threads."""
+
+    def __init__(self, number: int) -> None:
+        self.number = number
+
+    def __repr__(self) -> str:
+        return f"_WhereAmI({self.number})"
+
+    def run(self) -> list[dict]:
+        blas = sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"})
+        return [{"number": self.number, "pid": os.getpid(), "mark": _PARENT_MARK, "blas": blas}]
+
+
+@pytest.fixture
+def marked(monkeypatch):
+    monkeypatch.setattr(f"{__name__}._PARENT_MARK", "set by the parent")
+
+
+def _forked_rows(folder: str) -> dict:
+    """What :func:`test_local_workers_are_forked_with_one_blas_thread` checks, run in a process of
+    its own: threads other tests leave behind (a Dask client's) would make the pool spawn."""
+    global _PARENT_MARK
+    _PARENT_MARK = "set by the parent"
+    store = TaskStore(Path(folder) / CHECKPOINT_FOLDER)
+    # the parent's BLAS pools keep two threads, as a library caller's would: the forked workers
+    # must still run with one, as spawned ones do (OPENBLAS_NUM_THREADS=1)
+    with threadpool_limits(limits=2, user_api="blas"):
+        results, executor = execute([_WhereAmI(n) for n in range(4)], workers=2, store=store)
+    return {"executor": executor, "rows": [rows[0] for rows in results], "pid": os.getpid(),
+            "stored": len(list(store.folder.glob("*.json")))}
+
+
+@pytest.mark.skipif(not _ON_LINUX, reason="workers are forked on Linux only")
+def test_local_workers_are_forked_with_one_blas_thread(tmp_path):
+    script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+              f"import test_study_tail as t; print(json.dumps(t._forked_rows({str(tmp_path)!r})))")
+    environment = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                                     "MKL_NUM_THREADS")}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=environment,
+                          timeout=300, check=True)
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    rows = out["rows"]
+    assert out["executor"] == "2 local processes"
+    assert [r["number"] for r in rows] == [0, 1, 2, 3]
+    assert all(r["pid"] != out["pid"] for r in rows)
+    assert {r["mark"] for r in rows} == {"set by the parent"}  # forked: the parent's state, no re-import
+    assert {tuple(r["blas"]) for r in rows} <= {(1,), ()}, rows
+    assert out["stored"] == 4
+
+
+def test_workers_are_spawned_while_another_thread_runs(marked):
+    """A fork copies only the calling thread: with another thread alive the workers start afresh."""
+    safe_before = fork_is_safe()  # False if other tests left threads (a Dask client's)
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert not fork_is_safe()
+        results, _ = execute([_WhereAmI(n) for n in range(2)], workers=2)
+    finally:
+        stop.set()
+        other.join()
+    assert {rows[0]["mark"] for rows in results} == {"imported"}  # a fresh interpreter imported it
+    assert fork_is_safe() == (_ON_LINUX and safe_before)  # safe again once that thread ended
+
+
+def test_the_progress_bar_starts_no_thread():
+    """tqdm's monitor thread would make every study spawn its workers (fork_is_safe)."""
+    for interactive in (True, False):
+        with progress_bar("study tasks", stream=io.StringIO(), interactive=interactive) as report:
+            before = set(threading.enumerate())  # other tests may leave threads (a Dask client's)
+            report(1, 2)
+            assert set(threading.enumerate()) <= before
+
+
+def test_checkpoints_skip_fsync_and_a_truncated_one_reruns_its_task(tmp_path, monkeypatch):
+    synced = []
+    monkeypatch.setattr(outputs.os, "fsync", lambda fd: synced.append(fd))
+    store = TaskStore(tmp_path / CHECKPOINT_FOLDER)
+    rows = [{"number": 1, "third": 1 / 3}]
+    store.save(_WhereAmI(1), rows)
+    assert synced == []  # a cache checked on reading: no fsync (~1-5 ms each, 875 per study)
+    assert store.load(_WhereAmI(1)) == rows
+    assert not any(outputs.is_temporary(p) for p in os.listdir(store.folder))  # renamed into place
+    # what a machine crash may leave of a file renamed before its data reached the disk
+    path = store.path(_WhereAmI(1))
+    for cut in (b"", path.read_bytes()[:-3]):
+        path.write_bytes(cut)
+        assert store.load(_WhereAmI(1)) is None
+    # every other output still reaches the disk before its rename
+    outputs.write_text(tmp_path / "study.csv", "a\n")
+    assert synced  # the file (and its folder, where the platform allows)
+
+
+@pytest.fixture(scope="module")
+def small_result():
+    """A study small enough for seconds whose summary draws every figure (no noise limit)."""
+    return run_study(StudyConfig(deviations=("large",), levels=2, repeats=1, restarts=0, limit_pose_sets=0),
+                     workers=1)
+
+
+def test_figures_drawn_by_other_processes_are_the_same_bytes(small_result, tmp_path, monkeypatch):
+    def recording(name, draw):
+        def wrapper(result, path):
+            (path.parent / f"{name}.pid").write_text(str(os.getpid()))
+            return draw(result, path)
+        return wrapper
+
+    here = figures.write_figures(small_result, tmp_path / "here", workers=1)
+    monkeypatch.setattr(figures, "FIGURES", {name: recording(name, draw) for name, draw in figures.FIGURES.items()})
+    forked = figures.write_figures(small_result, tmp_path / "forked", workers=2)
+    assert [p.name for p in here] == [p.name for p in forked] == list(figures.FIGURES)
+    for a, b in zip(here, forked):
+        assert a.read_bytes() == b.read_bytes(), a.name
+    drawn_by = {int((tmp_path / "forked" / f"{p.name}.pid").read_text()) for p in forked}
+    if _ON_LINUX and fork_is_safe():  # else (threads left by other tests) drawn here: see the next test
+        assert os.getpid() not in drawn_by  # forked processes drew them, this one wrote the tables meanwhile
+    assert sorted(figures._LONGEST_FIRST) == sorted(figures.FIGURES)
+
+
+def _figure_pids(folder: str) -> dict:
+    """Who drew the figures of a small study, in a process of its own (no threads other tests left)."""
+    result = run_study(StudyConfig(deviations=("large",), levels=2, repeats=1, restarts=0, limit_pose_sets=0),
+                       workers=1)
+    def recording(name, draw):
+        def wrapper(result, path):
+            (path.parent / f"{name}.pid").write_text(str(os.getpid()))
+            return draw(result, path)
+        return wrapper
+
+    figures.FIGURES = {name: recording(name, draw) for name, draw in figures.FIGURES.items()}  # forked: inherited
+    figures.write_figures(result, Path(folder), workers=2)
+    return {"pid": os.getpid(), "fork_is_safe": fork_is_safe()}
+
+
+@pytest.mark.skipif(not _ON_LINUX, reason="figures are drawn by forked processes on Linux only")
+def test_figures_are_drawn_by_forked_processes(tmp_path):
+    script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+              f"import test_study_tail as t; print(json.dumps(t._figure_pids({str(tmp_path)!r})))")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True)
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    drawn_by = {int(p.read_text()) for p in tmp_path.glob("*.pid")}
+    assert out["fork_is_safe"] and len(drawn_by) >= 1 and out["pid"] not in drawn_by
