@@ -92,6 +92,18 @@ def test_axis_derivative_refuses_what_the_fit_refuses():
         circle_axis_derivative(points[:, :1] * [1.0, 2.0, 3.0], angles)
 
 
+def test_axis_derivative_refuses_an_undetermined_plane_normal():
+    # a long box with a square cross-section: the two smallest singular values are equal
+    # (0.02 m each), so the normal may turn freely between them; the fit picks one, the
+    # derivative (1 / (s3^2 - s2^2)) does not exist
+    square = 0.01 * np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]] * 2)
+    points = np.column_stack([np.repeat([-0.5, 0.5], 4), square])
+    angles = 0.3 * np.arange(8)
+    circle_axis(points, angles)  # the fit alone accepts it
+    with pytest.raises(CalibrationError, match="coincide"):
+        circle_axis_derivative(points, angles)
+
+
 @SETTINGS
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 7))
 def test_twist_gradients_equal_central_differences(seed, n):

@@ -279,3 +279,35 @@ def test_write_read_round_trip(tmp_path, k, p, rotations, seed):
     if rotations:
         np.testing.assert_allclose(back.rotations, data.rotations, rtol=0, atol=1e-12)
     assert any("time" in n for n in notes)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 12), oriented=st.booleans())
+def test_selected_rows_equal_a_validated_set_and_stay_read_only(seed, rows, oriented):
+    """select() on a valid set skips re-validation (a study selects ~13 000 times): the result must
+    be what the validating constructor makes of the same rows, every array read-only and a copy."""
+    rng = np.random.default_rng(seed)
+    data = MeasurementSet(
+        joint_names=("a", "b"), q=rng.normal(size=(rows, 2)), points=rng.normal(size=(rows, 2, 3)),
+        rotations=Rotation.random(rows, random_state=seed % 2**31).as_matrix() if oriented else None,
+        roles=rng.choice(ROLES, rows), lines=np.arange(2, rows + 2), extra={"t": rng.normal(size=rows)},
+        sessions=rng.choice(["s1", "s2"], rows),
+    )
+    for index in (rng.random(rows) < 0.5, rng.permutation(rows)[: rows // 2 + 1]):
+        picked = data.select(index)
+        validated = MeasurementSet(
+            joint_names=data.joint_names, q=data.q[index], points=data.points[index],
+            rotations=None if data.rotations is None else data.rotations[index], roles=data.roles[index],
+            lines=data.lines[index], extra={"t": data.extra["t"][index]}, source=data.source,
+            sessions=data.sessions[index], files=data.files[index],
+        )
+        for name in ("q", "points", "rotations", "roles", "lines", "sessions", "files"):
+            mine, theirs = getattr(picked, name), getattr(validated, name)
+            if theirs is None:
+                assert mine is None
+                continue
+            assert mine.dtype == theirs.dtype and np.array_equal(mine, theirs), name
+            assert not mine.flags.writeable and not np.shares_memory(mine, getattr(data, name)), name
+        assert np.array_equal(picked.extra["t"], validated.extra["t"]) and not picked.extra["t"].flags.writeable
+        assert picked.joint_names == validated.joint_names and picked.source == validated.source
+    assert data.with_role("calibration").n_rows == int(np.sum(data.roles == "calibration"))

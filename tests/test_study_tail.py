@@ -42,8 +42,9 @@ class _WhereAmI:
         return f"_WhereAmI({self.number})"
 
     def run(self) -> list[dict]:
-        blas = sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"})
-        return [{"number": self.number, "pid": os.getpid(), "mark": _PARENT_MARK, "blas": blas}]
+        pools = {api: sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == api})
+                 for api in ("blas", "openmp")}
+        return [{"number": self.number, "pid": os.getpid(), "mark": _PARENT_MARK, **pools}]
 
 
 @pytest.fixture
@@ -57,22 +58,25 @@ def _forked_rows(folder: str) -> dict:
     global _PARENT_MARK
     _PARENT_MARK = "set by the parent"
     store = TaskStore(Path(folder) / CHECKPOINT_FOLDER)
-    # the parent's BLAS pools keep two threads, as a library caller's would: the forked workers
-    # must still run with one, as spawned ones do (OPENBLAS_NUM_THREADS=1)
-    with threadpool_limits(limits=2, user_api="blas"):
+    # the parent's BLAS and OpenMP pools keep two threads, as a library caller's would: the forked
+    # workers must still run with one, as spawned ones do (OPENBLAS_NUM_THREADS=1, OMP_NUM_THREADS=1)
+    with threadpool_limits(limits=2):
         results, executor = execute([_WhereAmI(n) for n in range(4)], workers=2, store=store)
     return {"executor": executor, "rows": [rows[0] for rows in results], "pid": os.getpid(),
             "stored": len(list(store.folder.glob("*.json")))}
 
 
 @pytest.mark.skipif(not _ON_LINUX, reason="workers are forked on Linux only")
-def test_local_workers_are_forked_with_one_blas_thread(tmp_path):
+@pytest.mark.parametrize("user_setting", [{}, {"MKL_NUM_THREADS": "1"}])
+def test_local_workers_are_forked_with_one_blas_thread(tmp_path, user_setting):
+    """Also when the user set one of the variables (here MKL's, which OpenBLAS ignores): the
+    pools whose variables are unset still get one thread."""
     script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
               f"import test_study_tail as t; print(json.dumps(t._forked_rows({str(tmp_path)!r})))")
     environment = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                                      "MKL_NUM_THREADS")}
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=environment,
-                          timeout=300, check=True)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env={**environment, **user_setting}, timeout=300, check=True)
     out = json.loads(done.stdout.strip().splitlines()[-1])
     rows = out["rows"]
     assert out["executor"] == "2 local processes"
@@ -80,6 +84,7 @@ def test_local_workers_are_forked_with_one_blas_thread(tmp_path):
     assert all(r["pid"] != out["pid"] for r in rows)
     assert {r["mark"] for r in rows} == {"set by the parent"}  # forked: the parent's state, no re-import
     assert {tuple(r["blas"]) for r in rows} <= {(1,), ()}, rows
+    assert {tuple(r["openmp"]) for r in rows} <= {(1,), ()}, rows
     assert out["stored"] == 4
 
 
@@ -102,9 +107,9 @@ def test_workers_are_spawned_while_another_thread_runs(marked):
 def test_the_progress_bar_starts_no_thread():
     """tqdm's monitor thread would make every study spawn its workers (fork_is_safe)."""
     for interactive in (True, False):
+        before = set(threading.enumerate())  # other tests may leave threads (a Dask client's)
         with progress_bar("study tasks", stream=io.StringIO(), interactive=interactive) as report:
-            before = set(threading.enumerate())  # other tests may leave threads (a Dask client's)
-            report(1, 2)
+            report(1, 2)  # tqdm starts its monitor when a bar is created
             assert set(threading.enumerate()) <= before
 
 

@@ -17,6 +17,14 @@ from pincal.errors import CalibrationError
 #: The arc radius must exceed this multiple of the RMS distance of the points from the
 #: fitted circle, otherwise the point is (nearly) on the joint axis.
 MIN_RADIUS_TO_SCATTER = 10.0
+#: Singular values of the centred arc points closer than this fraction of the largest count
+#: as equal (rank deficiency, or the plane normal undetermined): 1e-9 of a 1 m arc is 1 nm,
+#: three orders below a laser tracker's ~1 µm resolution and seven above rounding
+#: (~1e-16 of the coordinates), so only degenerate geometry, never a measured arc, trips it.
+DEGENERATE = 1e-9
+#: Largest |Σ (p_k − c) × (p_{k+1} − c) · b| taken as "no turn", as a fraction of r²: the
+#: rounding of those cross products (~1e-16 r² each) over a few hundred points, with margin.
+NO_TURN = 1e-12
 
 
 @dataclass(frozen=True)
@@ -61,9 +69,9 @@ def fit_circle(points, angles) -> CircleFit:
         raise CalibrationError("consecutive joint angles differ by π or more: arc direction is ambiguous")
     centroid = p.mean(axis=0)
     _, s, vt = np.linalg.svd(p - centroid)
-    if s[0] / np.sqrt(len(p)) <= 1e-9 * max(1.0, np.abs(p).max()):
+    if s[0] / np.sqrt(len(p)) <= DEGENERATE * max(1.0, np.abs(p).max()):
         raise CalibrationError("all points coincide: the measured point is on the joint axis (arc radius 0)")
-    if s[1] <= 1e-9 * s[0]:
+    if s[1] <= DEGENERATE * s[0]:
         raise CalibrationError("points are collinear (rank < 2): the arc plane is undetermined")
     uv = (p - centroid) @ vt[:2].T  # in-plane coordinates
     a = np.column_stack([2.0 * uv, np.ones(len(p))])
@@ -80,7 +88,7 @@ def fit_circle(points, angles) -> CircleFit:
         )
     r = p - center
     turn = np.cross(r[:-1], r[1:]).sum(axis=0) @ vt[2]
-    if abs(turn) <= 1e-12 * radius**2:
+    if abs(turn) <= NO_TURN * radius**2:
         raise CalibrationError("joint angles do not change: the arc direction is undetermined")
     axis = vt[2] * np.sign(turn)
     return CircleFit(axis, center, radius, float(np.sqrt(np.mean(out_of_plane**2))))
@@ -131,7 +139,7 @@ def circle_axis_derivative(points, angles) -> tuple[np.ndarray, np.ndarray]:
     centred = np.asarray(points, dtype=float)
     centred = centred - centred.mean(axis=0)
     _, s, vt = np.linalg.svd(centred)
-    if s[1] - s[2] <= 1e-9 * s[0]:
+    if s[1] - s[2] <= DEGENERATE * s[0]:
         raise CalibrationError("the arc's two smallest singular values coincide: the plane normal is undetermined")
     offsets = centred @ axis  # h, (K,)
     in_plane = centred @ vt[:2].T  # x_k · v_i, (K, 2)

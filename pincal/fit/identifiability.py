@@ -31,10 +31,11 @@ from pincal.fit.solver import triangular_factor
 
 #: Pivots below this fraction of the largest mean "not identifiable".
 RANK_TOLERANCE = 1e-8
-#: Pivot candidates within this much of the longest tie (:func:`pivoted_order`; unit-scaled
-#: columns). Rounding separates exactly equivalent columns by ~1e-15 absolute (a few ε of
-#: the unit columns, whatever their projected length); columns that differ by less than 1e-10
-#: are equally well determined to far below RANK_TOLERANCE (1e-8), so either choice is sound.
+#: Pivot candidates within this much of the longest tie (:func:`pivoted_order`), as a fraction
+#: of the first pivot (1 for unit-scaled columns). Rounding separates exactly equivalent columns
+#: by ~1e-15 of it (a few ε of the columns, whatever their projected length); columns that
+#: differ by less than 1e-10 are equally well determined to far below RANK_TOLERANCE (1e-8),
+#: so either choice is sound.
 PIVOT_TIE = 1e-10
 #: Pairs of kept parameters with |correlation| above this are reported.
 CORRELATION_THRESHOLD = 0.9
@@ -82,7 +83,10 @@ def order_parameters(jacobian: np.ndarray, kinematic: np.ndarray, always: np.nda
         return Ordering(np.array([], dtype=int), 0, np.array([]))
     piv, pivots = pivoted_order(projected)
     top = pivots[0] if pivots.size and pivots[0] > 0 else 1.0
-    rank = int(np.sum(pivots > RANK_TOLERANCE * top))
+    # the leading run above the threshold: a tie may take a column up to PIVOT_TIE shorter
+    # first, so a later pivot can exceed an earlier one
+    above = pivots > RANK_TOLERANCE * top
+    rank = int(above.size if above.all() else np.argmin(above))
     tail = rank + np.argsort(piv[rank:], kind="stable")  # not identifiable: rounding orders them, list them as given
     piv, pivots = np.concatenate([piv[:rank], piv[tail]]), np.concatenate([pivots[:rank], pivots[tail]])
     return Ordering(order=np.asarray(kinematic)[piv], rank=rank, pivots=pivots)
@@ -97,9 +101,9 @@ def pivoted_order(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     joint axis, a joint offset and the registration's turn about the same axis)
     tie in exact arithmetic, and LAPACK's pivoting (``dgeqp3``) keeps whichever
     rounding favours: a report's kept/dropped split then moved with the BLAS
-    build or the order of a sum. Here a column within :data:`PIVOT_TIE` (absolute,
-    in the unit-scaled columns) of the longest counts as tied, and the first
-    listed of the tied ones is taken.
+    build or the order of a sum. Here a column within :data:`PIVOT_TIE` times the
+    first pivot (the longest column) of the longest counts as tied, and the first
+    listed of the tied ones is taken; pivots may then rise by up to that much.
 
     The pivoting runs on the triangular factor of an unpivoted LAPACK QR of ``a``
     (same column norms and inner products, n × n instead of m × n): each chosen
@@ -124,12 +128,14 @@ def pivoted_order(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     order: list[int] = []
     pivots: list[float] = []
     left = np.arange(n)
+    tie = None  # PIVOT_TIE times the first pivot
     for _ in range(min(m, n)):
         norms = np.sqrt(np.einsum("ij,ij->j", work[:, left], work[:, left]))
         longest = norms.max() if norms.size else 0.0
         if not longest > 0.0:
             break
-        position = int(np.flatnonzero(norms >= longest - PIVOT_TIE)[0])
+        tie = PIVOT_TIE * longest if tie is None else tie
+        position = int(np.flatnonzero(norms >= longest - tie)[0])
         column = left[position]
         direction = work[:, column].copy()
         direction -= basis @ (basis.T @ direction)  # second pass (the first is in ``work``)

@@ -173,6 +173,8 @@ class MeasurementSet:
         index = np.asarray(mask)
         if index.dtype != bool:
             index = index.astype(np.intp)
+        if index.ndim == 1:  # rows of a valid set are a valid set: only new arrays to freeze
+            return MeasurementSet._of_rows(self, index)
         return MeasurementSet(
             joint_names=self.joint_names,
             q=self.q[index],
@@ -186,6 +188,31 @@ class MeasurementSet:
             files=self.files[index],
         )
 
+    @classmethod
+    def _of_rows(cls, parent: MeasurementSet, index: np.ndarray) -> MeasurementSet:
+        """The rows ``index`` (1-D mask or indices) of the validated set ``parent``, without
+        validating them again: NumPy's indexing copies each array, which is frozen in place."""
+        def frozen(array: np.ndarray) -> np.ndarray:
+            array.flags.writeable = False
+            return array
+
+        rows = object.__new__(cls)
+        values = {
+            "joint_names": parent.joint_names,
+            "q": frozen(parent.q[index]),
+            "points": frozen(parent.points[index]),
+            "rotations": None if parent.rotations is None else frozen(parent.rotations[index]),
+            "roles": frozen(parent.roles[index]),
+            "lines": frozen(parent.lines[index]),
+            "extra": MappingProxyType({name: frozen(column[index]) for name, column in parent.extra.items()}),
+            "source": parent.source,
+            "sessions": frozen(parent.sessions[index]),
+            "files": frozen(parent.files[index]),
+        }
+        for key, value in values.items():
+            object.__setattr__(rows, key, value)
+        return rows
+
     def with_role(self, *roles: str) -> MeasurementSet:
         """Return the rows whose role is one of ``roles``, in file order."""
         unknown = sorted(set(roles) - set(ROLES))
@@ -193,7 +220,7 @@ class MeasurementSet:
             raise MeasurementError(
                 f"{self.source}: unknown role(s) {', '.join(unknown)}; allowed: {', '.join(ROLES)}"
             )
-        return self.select(np.array([role in roles for role in self.roles], dtype=bool))
+        return self.select(np.isin(self.roles, roles))
 
 
 def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:

@@ -246,18 +246,20 @@ def dh_origin_rows(
     [rad], lengths [m], arrays of the same length n. ``Tx`` and ``Rx`` commute,
     so ``Rx(alpha) Tx(a)`` (Craig's order) is the same matrix.
     """
-    alpha, a, theta, d_before, d_after = np.broadcast_arrays(
-        *(np.asarray(v, dtype=float).reshape(-1) for v in (alpha, a, theta, d_before, d_after))
+    alpha, a, theta, d_before, d_after = (
+        np.asarray(v, dtype=float).reshape(-1) for v in (alpha, a, theta, d_before, d_after)
     )
     ca, sa = np.cos(alpha), np.sin(alpha)
     ct, st = np.cos(theta), np.sin(theta)
-    rows = np.zeros((alpha.size, 4, 4))
+    n = max(alpha.size, a.size, theta.size, d_before.size, d_after.size)  # length-1 arrays broadcast
+    # the 16 entries of each matrix, row-major: an entry's n values are contiguous, cheap to fill
+    entries = np.zeros((16, n))
     # rotation Rx(alpha) Rz(theta); translation (a, 0, d_before) + Rx(alpha) Rz(theta) (0, 0, d_after)
-    rows[:, 0, 0], rows[:, 0, 1], rows[:, 0, 3] = ct, -st, a
-    rows[:, 1, 0], rows[:, 1, 1], rows[:, 1, 2], rows[:, 1, 3] = ca * st, ca * ct, -sa, -sa * d_after
-    rows[:, 2, 0], rows[:, 2, 1], rows[:, 2, 2], rows[:, 2, 3] = sa * st, sa * ct, ca, d_before + ca * d_after
-    rows[:, 3, 3] = 1.0
-    return rows
+    entries[0], entries[1], entries[3] = ct, -st, a
+    entries[4], entries[5], entries[6], entries[7] = ca * st, ca * ct, -sa, -sa * d_after
+    entries[8], entries[9], entries[10], entries[11] = sa * st, sa * ct, ca, d_before + ca * d_after
+    entries[15] = 1.0
+    return np.ascontiguousarray(entries.T).reshape(n, 4, 4)
 
 
 def dh_chain_origins(
@@ -296,17 +298,13 @@ def dh_chain_origins(
         origin reproduces the DH product exactly.
     """
     alpha, a, theta, d = (np.asarray(v, dtype=float).reshape(-1) for v in (alpha, a, theta, d))
-    zero = np.zeros(1)
+    padded = np.zeros((4, alpha.size + 1))  # the columns with a zero added before or after
     if check_convention(convention) == "standard":
-        rows = dh_origin_rows(
-            np.concatenate([zero, alpha]), np.concatenate([zero, a]), np.concatenate([theta, zero]),
-            np.concatenate([zero, d]), 0.0,
-        )
+        padded[0, 1:], padded[1, 1:], padded[2, :-1], padded[3, 1:] = alpha, a, theta, d
+        rows = dh_origin_rows(padded[0], padded[1], padded[2], padded[3], 0.0)
     else:  # modified
-        rows = dh_origin_rows(
-            np.concatenate([alpha, zero]), np.concatenate([a, zero]), np.concatenate([theta, zero]),
-            0.0, np.concatenate([d, zero]),
-        )
+        padded[:, :-1] = alpha, a, theta, d
+        rows = dh_origin_rows(padded[0], padded[1], padded[2], 0.0, padded[3])
     return list(rows)
 
 

@@ -32,6 +32,8 @@ from pincal.model.chain import KinematicChain
 
 _ALIGNED_REVOLUTE = {0: pin.JointModelRX, 1: pin.JointModelRY, 2: pin.JointModelRZ}
 _ALIGNED_PRISMATIC = {0: pin.JointModelPX, 1: pin.JointModelPY, 2: pin.JointModelPZ}
+_EYE3 = np.eye(3)
+_IDENTITY = pin.SE3.Identity()
 
 
 @dataclass(frozen=True)
@@ -145,10 +147,14 @@ class SensitivityModel:
             [np.arange(model.joints[j].idx_q, model.joints[j].idx_q + model.joints[j].nq) for j in self._real_ids]
         )
         self._q_template = pin.neutral(model)
-        # per element of _order: its model joint, its chain joint, and whether its placement is the identity
-        self._element_ids = [self._real_ids[i] if what == "joint" else self._slot_ids[i] for what, i in self._order]
-        self._element_joints = [i if what == "joint" else self.slots[i].joint for what, i in self._order]
-        self._identity_at = [True] * len(self._order)
+        # per element of _order: its model joint, its chain joint, and its slot if that is revolute
+        # (turning about a point, which set_state places) else None
+        self._elements = [
+            (self._real_ids[i], i, None) if what == "joint"
+            else (self._slot_ids[i], self.slots[i].joint, i if self.slots[i].kind == "revolute" else None)
+            for what, i in self._order
+        ]
+        self._identity_at = [True] * len(self._order)  # whether an element's placement is the identity
 
     def set_state(
         self,
@@ -167,37 +173,32 @@ class SensitivityModel:
         """
         points = np.asarray(slot_points, dtype=float).reshape(len(self.slots), 3)
         off_origin = np.any(points != 0.0, axis=1).tolist()
+        joint_placements, identity_at = self.model.jointPlacements, self._identity_at
         pending = None  # placement of the next element relative to the last frame; None: the identity
         group = -1
-        for k, (what, index) in enumerate(self._order):
-            joint = self._element_joints[k]
+        for k, (element, joint, revolute) in enumerate(self._elements):
             if joint != group:  # first element of joint `joint`: its placement comes first
                 pending = placements[joint] if pending is None else pending @ placements[joint]
                 group = joint
-            if what == "slot" and off_origin[index] and self.slots[index].kind == "revolute":
-                point = points[index]  # turn about an axis through the point
+            if revolute is not None and off_origin[revolute]:
+                point = points[revolute]  # turn about an axis through the point
                 if pending is None:
-                    self._place(k, pin.SE3(np.eye(3), point.copy()))
+                    placement = pin.SE3(_EYE3, point)
                 else:
-                    self._place(k, pin.SE3(pending[:3, :3], pending[:3, :3] @ point + pending[:3, 3]))
+                    placement = pin.SE3(pending[:3, :3], pending[:3, :3] @ point + pending[:3, 3])
                 pending = np.eye(4)
                 pending[:3, 3] = -point
-            else:
-                self._place(k, None if pending is None else pin.SE3(pending))
+            elif pending is not None:
+                placement = pin.SE3(pending)
                 pending = None
+            elif identity_at[k]:  # the identity, which most slots keep: written only when it changes
+                continue
+            else:
+                placement = _IDENTITY
+            joint_placements[element] = placement
+            identity_at[k] = placement is _IDENTITY
         tool = placements[-1] @ tip_T_tool if pending is None else pending @ placements[-1] @ tip_T_tool
         self.model.frames[self._tool_frame].placement = pin.SE3(tool)
-
-    def _place(self, element: int, placement: pin.SE3 | None) -> None:
-        """Set the placement of element ``element`` of the joint order (None: the identity,
-        which most slots keep: it is written only when it changes)."""
-        if placement is None:
-            if not self._identity_at[element]:
-                self.model.jointPlacements[self._element_ids[element]] = pin.SE3.Identity()
-                self._identity_at[element] = True
-        else:
-            self.model.jointPlacements[self._element_ids[element]] = placement
-            self._identity_at[element] = False
 
     def evaluate(self, q: npt.ArrayLike) -> tuple[ToolPoses, Sensitivity]:
         """Tool poses and parameter derivatives at K joint readings (K, N)."""
@@ -205,16 +206,17 @@ class SensitivityModel:
         k = configurations.shape[0]
         augmented = np.tile(self._q_template, (k, 1))
         augmented[:, self._real_q] = configurations
-        poses = np.empty((k, 4, 4))
-        jacobians = np.empty((k, 6, self.model.nv))
         model, data, fid = self.model, self.data, self._tool_frame
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         joint_jacobians, frame_jacobian = pin.computeJointJacobians, pin.getFrameJacobian
         frame_placement = pin.updateFramePlacement
-        for row in range(k):
-            joint_jacobians(model, data, augmented[row])  # forward kinematics + joint Jacobians
-            jacobians[row] = frame_jacobian(model, data, fid, world)
-            poses[row] = frame_placement(model, data, fid).homogeneous
+        rows_jacobians, rows_poses = [], []  # stacked once at the end: cheaper than a copy per row
+        for configuration in augmented:
+            joint_jacobians(model, data, configuration)  # forward kinematics + joint Jacobians
+            rows_jacobians.append(frame_jacobian(model, data, fid, world))  # a new (6, nv) array
+            rows_poses.append(frame_placement(model, data, fid).homogeneous)  # a new (4, 4) array
+        jacobians = np.array(rows_jacobians).reshape(k, 6, model.nv)  # reshape: the shape for K = 0 too
+        poses = np.array(rows_poses).reshape(k, 4, 4)
         joints = jacobians[:, :, self._real_columns].transpose(0, 2, 1)
         jacobians = jacobians[:, :, self._slot_columns].transpose(0, 2, 1)
         positions = poses[:, :3, 3]

@@ -72,10 +72,8 @@ class KinematicsCache:
         if key not in models:
             models[key] = SensitivityModel(params.chain, key)
         self.model = models[key]
-        self._x: np.ndarray | None = None
-        self._q: np.ndarray | None = None
-        self._tool: np.ndarray | None = None
-        self._result: tuple[ToolPoses, Sensitivity] | None = None
+        # the last few results with their inputs (bytes of x, shape and bytes of q, the tool), newest last
+        self._recent: list[tuple[tuple, tuple[ToolPoses, Sensitivity]]] = []
 
     def full_vector(self, x: npt.ArrayLike) -> np.ndarray:
         """The flat parameter vector with ``x`` in the free slots."""
@@ -83,22 +81,31 @@ class KinematicsCache:
         vector[self.free] = x
         return vector
 
+    #: Results kept: a fit's caller evaluates again at the solution, which is the
+    #: last but one point evaluated when MINPACK's last trial step was rejected.
+    RECENT = 2
+
     def evaluate(self, x: npt.ArrayLike, q: npt.ArrayLike | None = None) -> tuple[ToolPoses, Sensitivity]:
         """Tool poses and the free parameters' sensitivities at ``x``, at the
-        cache's configurations or at ``q`` (K, N) when given (effects shift them)."""
+        cache's configurations or at ``q`` (K, N) when given (effects shift them).
+
+        The result is shared with later calls at the same inputs: do not write into it.
+        """
         x = np.asarray(x, dtype=float)
         q = self.q if q is None else np.asarray(q, dtype=float)
-        if (
-            self._result is None
-            or not np.array_equal(x, self._x)
-            or not np.array_equal(q, self._q)
-            or not np.array_equal(self.params.chain.tool, self._tool)
-        ):
+        tool = self.params.chain.tool
+        key = (x.tobytes(), q.shape, q.tobytes(), tool.tobytes())
+        recent = self._recent
+        for index, (inputs, result) in enumerate(recent):
+            if inputs == key:  # computed already: `result`
+                del recent[index]
+                break
+        else:  # not among the recent results: compute it
             vector = self.full_vector(x)
             self.model.set_state(
                 self.params.placements(vector),
                 self.params.slot_points(vector)[self._slots],
-                self.params.chain.tool,
+                tool,
             )
             poses, sens = self.model.evaluate(q)
             to_slots = self.params.slot_jacobian(vector)
@@ -111,9 +118,11 @@ class KinematicsCache:
                     joint_angular=sens.joint_angular,
                     joint_linear=sens.joint_linear,
                 )
-            self._x, self._q, self._tool = x.copy(), q.copy(), self.params.chain.tool
-            self._result = (poses, sens)
-        return self._result
+            result = (poses, sens)
+            if len(recent) == self.RECENT:
+                del recent[0]  # the least recently used
+        recent.append((key, result))
+        return result
 
 
 class Objective(ABC):

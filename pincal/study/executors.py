@@ -57,15 +57,21 @@ def fork_is_safe() -> bool:
     return sys.platform.startswith("linux") and threading.active_count() == 1
 
 
-def _one_blas_thread(user_set: bool) -> None:
-    """Initializer of forked workers: one BLAS and one OpenMP thread, as
-    :data:`_SINGLE_THREADED_BLAS` gives spawned ones (a forked worker's libraries read the
-    environment when this process loaded them), unless the user set one of those variables:
-    their pools then keep the user's setting, as spawned workers would."""
-    from threadpoolctl import threadpool_limits
+#: The thread pool (threadpoolctl's internal API name) each variable of :data:`_SINGLE_THREADED_BLAS` sets.
+_POOL_OF_VARIABLE = {"OMP_NUM_THREADS": "openmp", "OPENBLAS_NUM_THREADS": "openblas", "MKL_NUM_THREADS": "mkl"}
 
-    if not user_set:
-        threadpool_limits(limits=1)
+
+def _one_blas_thread(unset: Sequence[str]) -> None:
+    """Initializer of forked workers: one thread in each pool whose variable of
+    :data:`_SINGLE_THREADED_BLAS` the user left unset (``unset``), as spawned workers get
+    from the environment (a forked worker's libraries read it when this process loaded
+    them); a pool whose variable the user set keeps the user's setting, as it would in a
+    spawned worker."""
+    from threadpoolctl import ThreadpoolController
+
+    pools = [_POOL_OF_VARIABLE[name] for name in unset]
+    if pools:
+        ThreadpoolController().select(internal_api=pools).limit(limits=1)
 
 
 @contextmanager
@@ -162,9 +168,9 @@ def execute(
             results.add(index, _run_task(tasks[index]))
         return results.values, results.describe("in-process")
     if fork_is_safe():
-        user_set = any(name in os.environ for name in _SINGLE_THREADED_BLAS)  # before the block below sets them
+        unset = [name for name in _SINGLE_THREADED_BLAS if name not in os.environ]  # before the block below sets them
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                   initializer=_one_blas_thread, initargs=(user_set,))
+                                   initializer=_one_blas_thread, initargs=(unset,))
     else:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:

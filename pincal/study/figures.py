@@ -6,8 +6,9 @@ bars of one standard deviation; curves of one panel are shifted slightly
 along the noise axis, as in the paper. Two more figures compare the
 estimators with their linearised noise limit and the maximum-likelihood
 estimator with Method 2. Drawn with matplotlib's Agg backend into PNG files,
-by forked worker processes where that is safe (:func:`start_figures`): the
-seven figures take ~3 s of one core, about half of that on two.
+by forked worker processes where that is safe (:func:`start_figures`; as many
+as the study's workers, at most seven): the seven figures take ~3 s of one core,
+about half of that on two.
 """
 
 from __future__ import annotations
@@ -252,7 +253,7 @@ FIGURES: dict[str, Any] = {
 
 
 #: The figures, the longest to draw first (measured: fig_noise_limit ~27 % of the drawing time,
-#: fig3 and fig5 ~18 % each, the others ~9 % each), so that two processes finish together.
+#: fig3 and fig5 ~18 % each, the others ~9 % each), so that the processes finish close together.
 _LONGEST_FIRST = ("fig_noise_limit.png", "fig3_registrations_method2.png", "fig5_methods.png",
                   "fig_ml_vs_method2.png", "fig2_per_pose_errors.png", "fig4_registrations_method3.png",
                   "fig6_method3_weights.png")
