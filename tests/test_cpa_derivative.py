@@ -92,16 +92,22 @@ def test_axis_derivative_refuses_what_the_fit_refuses():
         circle_axis_derivative(points[:, :1] * [1.0, 2.0, 3.0], angles)
 
 
-def test_axis_derivative_refuses_an_undetermined_plane_normal():
-    # a long box with a square cross-section: the two smallest singular values are equal
-    # (0.02 m each), so the normal may turn freely between them; the fit picks one, the
-    # derivative (1 / (s3^2 - s2^2)) does not exist
+def test_points_off_a_plane_are_refused():
+    """A long box with a square cross-section (the two smallest singular values equal, 0.02 m):
+    the plane normal may turn freely between them, so neither the axis nor its derivative
+    (1 / (s3^2 - s2^2)) exists; and a short arc whose sagitta is within the noise."""
     square = 0.01 * np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]] * 2)
     points = np.column_stack([np.repeat([-0.5, 0.5], 4), square])
     angles = 0.3 * np.arange(8)
-    circle_axis(points, angles)  # the fit alone accepts it
-    with pytest.raises(CalibrationError, match="coincide"):
-        circle_axis_derivative(points, angles)
+    for function in (circle_axis, circle_axis_derivative):
+        with pytest.raises(CalibrationError, match="do not lie on a plane"):
+            function(points, angles)
+    rng = np.random.default_rng(5)
+    angles = np.linspace(0.0, 0.02, 12)  # 1.1 deg of a 0.3 m arc: sagitta 15 um, noise 50 um
+    arc = 0.3 * np.column_stack([np.cos(angles), np.sin(angles), np.zeros(12)])
+    with pytest.raises(CalibrationError, match="do not lie on a plane"):
+        circle_axis(arc + rng.normal(scale=5e-5, size=arc.shape), angles)
+    circle_axis(arc + rng.normal(scale=5e-8, size=arc.shape), angles)  # 50 nm: the plane holds
 
 
 @SETTINGS

@@ -6,6 +6,8 @@ the accuracy the paper reports for Method 2 (issue "Done when").
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.stats import f as f_distribution
@@ -146,6 +148,21 @@ def test_twists_come_from_cpa_and_alpha_n_is_not_claimed(kuka_urdf, noisy_large_
     assert np.isnan(result.std[6])
     err = np.degrees(np.abs(result.table.alpha[:6] - noisy_large_experiment.truth.alpha[:6]))
     assert err.max() < 0.3  # the paper's largest twist deviation over all its runs (Section 8, 0.3 deg)
+
+
+def test_a_bad_cpa_arc_is_named_by_joint_and_lines(kuka_urdf, noisy_large_experiment):
+    """An arc CPA cannot use (joint 3's points pushed 2 cm off their plane, alternately up and
+    down) is refused naming the joint and the file lines, not with a bare geometry message."""
+    data = noisy_large_experiment.calibration
+    cpa = np.flatnonzero(data.roles == "cpa")
+    third = cpa[cpa_groups(data.q[cpa], data.lines[cpa])[2]]  # rows of joint 3's arc
+    points = data.points.copy()
+    points[third, 0, :] += 0.02 * np.where(np.arange(len(third)) % 2 == 0, 1.0, -1.0)[:, None] * [0.6, 0.0, 0.8]
+    chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=noisy_large_experiment.tool)
+    lines = data.lines[third]
+    expected = rf"CPA arc of joint 'lwr_joint_3' \(lines {lines.min()}-{lines.max()}\): "
+    with pytest.raises(CalibrationError, match=expected):
+        calibrate_paper(chain, dataclasses.replace(data, points=points), 2)
 
 
 def test_without_cpa_rows_twists_stay_nominal(kuka_urdf, noisy_large_experiment):

@@ -17,8 +17,14 @@ from pincal.errors import CalibrationError
 #: The arc radius must exceed this multiple of the RMS distance of the points from the
 #: fitted circle, otherwise the point is (nearly) on the joint axis.
 MIN_RADIUS_TO_SCATTER = 10.0
-#: Singular values of the centred arc points closer than this fraction of the largest count
-#: as equal (rank deficiency, or the plane normal undetermined): 1e-9 of a 1 m arc is 1 nm,
+#: Largest ratio of the points' spread off the fitted plane to their second in-plane spread
+#: (smallest to middle singular value): a single joint's arc is off its plane by the sensor
+#: noise only (<= 0.15 mm in the paper's study) against in-plane spreads of centimetres, a
+#: ratio below 0.01; at 1/2 the plane, and so the axis, is no longer set by the arc (at 1 it
+#: may turn freely, and the axis derivative, 1 / (s_2^2 - s_3^2), has no bound).
+MAX_OFF_PLANE = 0.5
+#: Singular values of the centred arc points below this fraction of the largest count as
+#: zero (the points coincide or are collinear): 1e-9 of a 1 m arc is 1 nm,
 #: three orders below a laser tracker's ~1 µm resolution and seven above rounding
 #: (~1e-16 of the coordinates), so only degenerate geometry, never a measured arc, trips it.
 DEGENERATE = 1e-9
@@ -52,8 +58,10 @@ def fit_circle(points, angles) -> CircleFit:
 
     Raises:
         CalibrationError: fewer than 3 points, mismatched shapes, NaN, consecutive
-            steps of π or more, collinear points, or an arc radius too small
-            relative to the scatter (the measured point is on the joint axis).
+            steps of π or more, collinear points, an arc radius too small relative
+            to the scatter (the measured point is on the joint axis), or points off
+            a plane (:data:`MAX_OFF_PLANE`: the arc's plane, and so its axis, is
+            undetermined).
     """
     p = np.asarray(points, dtype=float)
     q = np.asarray(angles, dtype=float)
@@ -85,6 +93,13 @@ def fit_circle(points, angles) -> CircleFit:
         raise CalibrationError(
             f"arc radius {radius:.3g} m is too small relative to the scatter {scatter:.3g} m: "
             "the measured point is (nearly) on the joint axis"
+        )
+    if s[2] >= MAX_OFF_PLANE * s[1]:
+        rms = s[1:] / np.sqrt(len(p)) * 1e3
+        raise CalibrationError(
+            f"the points do not lie on a plane arc: their RMS distance from the best plane ({rms[1]:.3g} mm) "
+            f"is {rms[1] / rms[0]:.2f} of their spread across the arc ({rms[0]:.3g} mm), so the axis "
+            "direction is undetermined; move only this joint, through a larger angle"
         )
     r = p - center
     turn = np.cross(r[:-1], r[1:]).sum(axis=0) @ vt[2]
@@ -132,15 +147,13 @@ def circle_axis_derivative(points, angles) -> tuple[np.ndarray, np.ndarray]:
         ∂b/∂p, (3, K, 3) [1/m]: entry [a, k, c] is ∂b_a/∂p_{kc} for ``points[k, c]``.
 
     Raises:
-        CalibrationError: as :func:`fit_circle`, or the two smallest singular
-            values are equal (the plane normal is not a smooth function of the points).
+        CalibrationError: as :func:`fit_circle` (whose plane check keeps the two
+            smallest singular values apart, so the derivative exists).
     """
     axis = circle_axis(points, angles)
     centred = np.asarray(points, dtype=float)
     centred = centred - centred.mean(axis=0)
-    _, s, vt = np.linalg.svd(centred)
-    if s[1] - s[2] <= DEGENERATE * s[0]:
-        raise CalibrationError("the arc's two smallest singular values coincide: the plane normal is undetermined")
+    _, s, vt = np.linalg.svd(centred)  # fit_circle refused s_3 >= s_2 / 2: the gaps below are >= 0.75 s_2^2
     offsets = centred @ axis  # h, (K,)
     in_plane = centred @ vt[:2].T  # x_k · v_i, (K, 2)
     gap = s[2] ** 2 - s[:2] ** 2  # s₃² − s_i², (2,)

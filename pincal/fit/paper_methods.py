@@ -154,7 +154,12 @@ def estimate_twists(
     groups = cpa_groups(cpa.q, cpa.lines)
     axes: dict[int, np.ndarray] = {}
     for joint, rows in groups.items():
-        axes[joint] = circle_axis(cpa.points[rows, 0, :], cpa.q[rows, joint])
+        try:
+            axes[joint] = circle_axis(cpa.points[rows, 0, :], cpa.q[rows, joint])
+        except CalibrationError as error:
+            lines = cpa.lines[rows]
+            raise CalibrationError(f"{cpa.source}, CPA arc of joint '{chain.joints[joint].name}' "
+                                   f"(lines {lines.min()}-{lines.max()}): {error}") from None
     for i in range(n - 1):
         if i in axes and i + 1 in axes:
             pair = twists_from_axes(np.stack([axes[i], axes[i + 1]]), nominal.alpha[i : i + 2])
