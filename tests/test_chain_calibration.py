@@ -193,3 +193,32 @@ def test_solver_linear_algebra_without_blas_threads_matches_lapack():
     singular[:, 3] = singular[:, 1]
     assert condition_number(singular) > 1e12
 
+
+
+def test_kinematics_cache_reuses_only_results_of_equal_inputs():
+    """KinematicsCache keeps its last two results (a fit's caller asks again at the solution after
+    MINPACK's rejected last step): equal x, q and tool give the stored result; any change,
+    even to q's or the tool's values in place, computes afresh."""
+    chain = _chain("tiago")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-1, 1, (5, chain.n_joints)) * 0.3
+    free = np.arange(12)
+    cache = KinematicsCache(params, free, np.zeros(params.size), q)
+    x1, x2, x3 = (rng.normal(0, 1e-3, 12) for _ in range(3))
+    first = cache.evaluate(x1)
+    second = cache.evaluate(x2)
+    assert cache.evaluate(x1.copy()) is first and cache.evaluate(x2) is second
+    assert cache.evaluate(x3) is not first  # x1 was the older of the two kept: x3 replaces it
+    assert cache.evaluate(x1) is not first
+    again = cache.evaluate(x1)
+    moved = q.copy()
+    moved[0, 0] += 1e-9
+    assert cache.evaluate(x1, moved) is not again
+    shifted = cache.evaluate(x1, moved)
+    moved[0, 0] -= 1e-9  # back to q's values, in the same array
+    assert cache.evaluate(x1, moved) is not shifted
+    assert np.array_equal(cache.evaluate(x1)[0].tool_positions, first[0].tool_positions)
+    tool = chain.tool
+    chain.set_tool(tool @ pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.01])).homogeneous)
+    assert not np.array_equal(cache.evaluate(x1)[0].tool_positions, first[0].tool_positions)

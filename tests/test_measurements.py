@@ -310,4 +310,6 @@ def test_selected_rows_equal_a_validated_set_and_stay_read_only(seed, rows, orie
             assert not mine.flags.writeable and not np.shares_memory(mine, getattr(data, name)), name
         assert np.array_equal(picked.extra["t"], validated.extra["t"]) and not picked.extra["t"].flags.writeable
         assert picked.joint_names == validated.joint_names and picked.source == validated.source
-    assert data.with_role("calibration").n_rows == int(np.sum(data.roles == "calibration"))
+    for roles in (("calibration",), ("cpa", "validation"), ROLES, ()):
+        picked = data.with_role(*roles)
+        assert picked.lines.tolist() == [line for line, role in zip(data.lines, data.roles) if role in roles]

@@ -151,16 +151,19 @@ def test_twists_come_from_cpa_and_alpha_n_is_not_claimed(kuka_urdf, noisy_large_
 
 
 def test_a_bad_cpa_arc_is_named_by_joint_and_lines(kuka_urdf, noisy_large_experiment):
-    """An arc CPA cannot use (joint 3's points pushed 2 cm off their plane, alternately up and
-    down) is refused naming the joint and the file lines, not with a bare geometry message."""
+    """An arc CPA cannot use (joint 3's points, on a ~6 cm radius, pushed 5 cm off their plane,
+    alternately up and down: another joint moved) is refused as off its plane, naming the joint
+    and the file lines."""
     data = noisy_large_experiment.calibration
     cpa = np.flatnonzero(data.roles == "cpa")
     third = cpa[cpa_groups(data.q[cpa], data.lines[cpa])[2]]  # rows of joint 3's arc
+    normal = np.linalg.svd(data.points[third, 0] - data.points[third, 0].mean(axis=0))[2][2]
     points = data.points.copy()
-    points[third, 0, :] += 0.02 * np.where(np.arange(len(third)) % 2 == 0, 1.0, -1.0)[:, None] * [0.6, 0.0, 0.8]
+    points[third, 0, :] += 0.05 * np.where(np.arange(len(third)) % 2 == 0, 1.0, -1.0)[:, None] * normal
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=noisy_large_experiment.tool)
     lines = data.lines[third]
-    expected = rf"CPA arc of joint 'lwr_joint_3' \(lines {lines.min()}-{lines.max()}\): "
+    expected = (rf"<simulation>, CPA arc of joint 'lwr_joint_3' \(lines {lines.min()}-{lines.max()}\): "
+                "the points do not lie on a plane arc")
     with pytest.raises(CalibrationError, match=expected):
         calibrate_paper(chain, dataclasses.replace(data, points=points), 2)
 

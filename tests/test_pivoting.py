@@ -115,3 +115,16 @@ def test_weakly_determined_tied_columns_are_chosen_the_same_way(weakness):
 def test_non_finite_jacobian_is_refused():
     with pytest.raises(CalibrationError, match="NaN or infinite"):
         pivoted_order(np.array([[1.0, np.nan], [0.0, 1.0]]))
+
+
+def test_the_tie_is_relative_to_the_first_pivot():
+    """When the ``always`` block explains all but 1e-3 of every kinematic column, the pivots are
+    ~1e-3: two columns 5e-11 apart (5e-8 of their length, far more than rounding) are not tied,
+    and the longer goes first, as in LAPACK's pivoted QR; an absolute 1e-10 tie took the first listed."""
+    jacobian = np.zeros((4, 3))
+    jacobian[[3, 0], 0] = 1.0, 1e-3
+    jacobian[[3, 1], 1] = 1.0, 1e-3 * (1.0 + 5e-8)
+    jacobian[3, 2] = 1.0
+    ordering = order_parameters(jacobian, np.arange(2), np.array([2]))
+    assert ordering.rank == 2
+    assert ordering.order.tolist() == [1, 0]

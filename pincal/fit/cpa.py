@@ -15,7 +15,7 @@ import numpy as np
 from pincal.errors import CalibrationError
 
 #: The arc radius must exceed this multiple of the RMS distance of the points from the
-#: fitted circle, otherwise the point is (nearly) on the joint axis.
+#: fitted circle in its plane, otherwise the point is (nearly) on the joint axis.
 MIN_RADIUS_TO_SCATTER = 10.0
 #: Largest ratio of the points' spread off the fitted plane to their second in-plane spread
 #: (smallest to middle singular value): a single joint's arc is off its plane by the sensor
@@ -58,10 +58,10 @@ def fit_circle(points, angles) -> CircleFit:
 
     Raises:
         CalibrationError: fewer than 3 points, mismatched shapes, NaN, consecutive
-            steps of π or more, collinear points, an arc radius too small relative
-            to the scatter (the measured point is on the joint axis), or points off
-            a plane (:data:`MAX_OFF_PLANE`: the arc's plane, and so its axis, is
-            undetermined).
+            steps of π or more, collinear points, points off a plane
+            (:data:`MAX_OFF_PLANE`: the arc's plane, and so its axis, is undetermined;
+            also what noise around a point on the axis looks like), or an arc radius
+            too small relative to the scatter (the measured point is on the joint axis).
     """
     p = np.asarray(points, dtype=float)
     q = np.asarray(angles, dtype=float)
@@ -81,6 +81,14 @@ def fit_circle(points, angles) -> CircleFit:
         raise CalibrationError("all points coincide: the measured point is on the joint axis (arc radius 0)")
     if s[1] <= DEGENERATE * s[0]:
         raise CalibrationError("points are collinear (rank < 2): the arc plane is undetermined")
+    if s[2] >= MAX_OFF_PLANE * s[1]:
+        rms = s[1:] / np.sqrt(len(p)) * 1e3
+        raise CalibrationError(
+            f"the points do not lie on a plane arc: their RMS distance from the best plane ({rms[1]:.3g} mm) "
+            f"is {rms[1] / rms[0]:.2f} of their spread across the arc ({rms[0]:.3g} mm), so the axis "
+            "direction is undetermined; move only this joint, through a larger angle, with the measured "
+            "point away from the joint axis"
+        )
     uv = (p - centroid) @ vt[:2].T  # in-plane coordinates
     a = np.column_stack([2.0 * uv, np.ones(len(p))])
     (cu, cv, c0), *_ = np.linalg.lstsq(a, (uv**2).sum(axis=1), rcond=None)
@@ -88,18 +96,11 @@ def fit_circle(points, angles) -> CircleFit:
     center = centroid + cu * vt[0] + cv * vt[1]
     out_of_plane = (p - centroid) @ vt[2]
     radial = np.hypot(uv[:, 0] - cu, uv[:, 1] - cv) - radius
-    scatter = float(np.sqrt(np.mean(out_of_plane**2 + radial**2)))
+    scatter = float(np.sqrt(np.mean(radial**2)))  # in the plane: the spread off it has its own check above
     if radius <= MIN_RADIUS_TO_SCATTER * scatter:
         raise CalibrationError(
             f"arc radius {radius:.3g} m is too small relative to the scatter {scatter:.3g} m: "
             "the measured point is (nearly) on the joint axis"
-        )
-    if s[2] >= MAX_OFF_PLANE * s[1]:
-        rms = s[1:] / np.sqrt(len(p)) * 1e3
-        raise CalibrationError(
-            f"the points do not lie on a plane arc: their RMS distance from the best plane ({rms[1]:.3g} mm) "
-            f"is {rms[1] / rms[0]:.2f} of their spread across the arc ({rms[0]:.3g} mm), so the axis "
-            "direction is undetermined; move only this joint, through a larger angle"
         )
     r = p - center
     turn = np.cross(r[:-1], r[1:]).sum(axis=0) @ vt[2]

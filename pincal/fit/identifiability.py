@@ -54,8 +54,10 @@ class Ordering:
         order: kinematic column indices, best determined first (all of them; the
             ``rank`` identifiable ones, then the others in their given order).
         rank: how many of them are identifiable.
-        pivots: |R_ii| of the pivoted QR, scaled units, for the ``rank`` identifiable ones;
-            the others' (below ``RANK_TOLERANCE`` of the largest) in their listed order.
+        pivots: |R_ii| of the pivoted QR, scaled units, for the ``rank`` identifiable ones
+            (each above ``RANK_TOLERANCE`` of the largest); then the others' in their listed
+            order (the first at or below it, and any after it: the identifiable ones are the
+            leading run above the threshold).
     """
 
     order: np.ndarray

@@ -157,8 +157,8 @@ def estimate_twists(
         try:
             axes[joint] = circle_axis(cpa.points[rows, 0, :], cpa.q[rows, joint])
         except CalibrationError as error:
-            lines = cpa.lines[rows]
-            raise CalibrationError(f"{cpa.source}, CPA arc of joint '{chain.joints[joint].name}' "
+            lines, files = cpa.lines[rows], " + ".join(dict.fromkeys(cpa.files[rows].tolist()))
+            raise CalibrationError(f"{files}, CPA arc of joint '{chain.joints[joint].name}' "
                                    f"(lines {lines.min()}-{lines.max()}): {error}") from None
     for i in range(n - 1):
         if i in axes and i + 1 in axes:

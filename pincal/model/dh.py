@@ -251,7 +251,7 @@ def dh_origin_rows(
     )
     ca, sa = np.cos(alpha), np.sin(alpha)
     ct, st = np.cos(theta), np.sin(theta)
-    n = max(alpha.size, a.size, theta.size, d_before.size, d_after.size)  # length-1 arrays broadcast
+    (n,) = np.broadcast_shapes(alpha.shape, a.shape, theta.shape, d_before.shape, d_after.shape)
     # the 16 entries of each matrix, row-major: an entry's n values are contiguous, cheap to fill
     entries = np.zeros((16, n))
     # rotation Rx(alpha) Rz(theta); translation (a, 0, d_before) + Rx(alpha) Rz(theta) (0, 0, d_after)
