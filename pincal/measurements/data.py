@@ -173,45 +173,31 @@ class MeasurementSet:
         index = np.asarray(mask)
         if index.dtype != bool:
             index = index.astype(np.intp)
-        if index.ndim == 1:  # rows of a valid set are a valid set: only new arrays to freeze
-            return MeasurementSet._of_rows(self, index)
-        return MeasurementSet(
-            joint_names=self.joint_names,
-            q=self.q[index],
-            points=self.points[index],
-            rotations=None if self.rotations is None else self.rotations[index],
-            roles=self.roles[index],
-            lines=self.lines[index],
-            extra={name: column[index] for name, column in self.extra.items()},
-            source=self.source,
-            sessions=self.sessions[index],
-            files=self.files[index],
-        )
-
-    @classmethod
-    def _of_rows(cls, parent: MeasurementSet, index: np.ndarray) -> MeasurementSet:
-        """The rows ``index`` (1-D mask or indices) of the validated set ``parent``, without
-        validating them again: NumPy's indexing copies each array, which is frozen in place."""
-        def frozen(array: np.ndarray) -> np.ndarray:
-            array.flags.writeable = False
-            return array
-
-        rows = object.__new__(cls)
-        values = {
-            "joint_names": parent.joint_names,
-            "q": frozen(parent.q[index]),
-            "points": frozen(parent.points[index]),
-            "rotations": None if parent.rotations is None else frozen(parent.rotations[index]),
-            "roles": frozen(parent.roles[index]),
-            "lines": frozen(parent.lines[index]),
-            "extra": MappingProxyType({name: frozen(column[index]) for name, column in parent.extra.items()}),
-            "source": parent.source,
-            "sessions": frozen(parent.sessions[index]),
-            "files": frozen(parent.files[index]),
+        rows = {
+            "joint_names": self.joint_names,
+            "q": self.q[index],
+            "points": self.points[index],
+            "rotations": None if self.rotations is None else self.rotations[index],
+            "roles": self.roles[index],
+            "lines": self.lines[index],
+            "extra": {name: column[index] for name, column in self.extra.items()},
+            "source": self.source,
+            "sessions": self.sessions[index],
+            "files": self.files[index],
         }
-        for key, value in values.items():
-            object.__setattr__(rows, key, value)
-        return rows
+        if index.ndim != 1:  # not a choice of rows: the constructor says what is wrong
+            return MeasurementSet(**rows)
+        # rows of a valid set are a valid set, not checked again: NumPy's indexing made new
+        # arrays, frozen here in place of the constructor's read-only copies
+        for array in (rows["q"], rows["points"], rows["rotations"], rows["roles"], rows["lines"],
+                      rows["sessions"], rows["files"], *rows["extra"].values()):
+            if array is not None:
+                array.flags.writeable = False
+        rows["extra"] = MappingProxyType(rows["extra"])
+        subset = object.__new__(MeasurementSet)
+        for key, value in rows.items():
+            object.__setattr__(subset, key, value)
+        return subset
 
     def with_role(self, *roles: str) -> MeasurementSet:
         """Return the rows whose role is one of ``roles``, in file order."""

@@ -74,11 +74,16 @@ def _one_blas_thread(unset: Sequence[str]) -> None:
         ThreadpoolController().select(internal_api=pools).limit(limits=1)
 
 
+def _unset_thread_variables() -> list[str]:
+    """The variables of :data:`_SINGLE_THREADED_BLAS` the user has not set."""
+    return [name for name in _SINGLE_THREADED_BLAS if name not in os.environ]
+
+
 @contextmanager
 def _single_threaded_blas():
     """Set :data:`_SINGLE_THREADED_BLAS` (unless the user set them) for the processes
     spawned inside the block; restore the environment afterwards."""
-    unset = [name for name in _SINGLE_THREADED_BLAS if name not in os.environ]
+    unset = _unset_thread_variables()
     os.environ.update({name: _SINGLE_THREADED_BLAS[name] for name in unset})
     try:
         yield
@@ -168,7 +173,7 @@ def execute(
             results.add(index, _run_task(tasks[index]))
         return results.values, results.describe("in-process")
     if fork_is_safe():
-        unset = [name for name in _SINGLE_THREADED_BLAS if name not in os.environ]  # before the block below sets them
+        unset = _unset_thread_variables()  # before the block below sets them
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                                    initializer=_one_blas_thread, initargs=(unset,))
     else:
