@@ -52,8 +52,8 @@ def urdf_of(robot: str, folder: Path) -> Path:
     return out
 
 
-def held_out(robot: str, urdf: Path, level: str, held: str) -> dict:
-    """Calibrate on the placements other than ``held``; metrics on ``held`` [mm]."""
+def held_out(robot: str, urdf: Path, level: str, held: str, selection: str = "aic") -> dict:
+    """Calibrate on the placements other than ``held`` (``selection``: ``--select``); metrics on ``held`` [mm]."""
     folder, placements, tip = ROBOTS[robot]
     fixture = read_fixture(DATA / "fixture.csv")
     chain = KinematicChain.from_urdf(urdf, tip)
@@ -61,7 +61,7 @@ def held_out(robot: str, urdf: Path, level: str, held: str) -> dict:
                               chain.joint_specs, fixture)
     test = read_fixture_data([DATA / folder / f"{held}.csv"], chain.joint_specs, fixture)
     started = time.perf_counter()
-    result = calibrate_fixture(chain, train, level)
+    result = calibrate_fixture(chain, train, level, selection=selection)
     seconds = time.perf_counter() - started
     after = fixture_metrics(chain, test, result.ball)
     before = fixture_metrics(KinematicChain.from_urdf(urdf, tip), test, result.nominal_ball)

@@ -8,6 +8,7 @@ import pytest
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from pincal.simulation.cells import INDUSTRIAL_6R_START, INDUSTRIAL_6R_TABLE
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 
@@ -46,3 +47,17 @@ def numeric_jacobian(fun, x, step=1e-6):
         dx[i] = step
         columns.append((fun(x + dx) - fun(x - dx)) / (2 * step))
     return np.stack(columns, axis=-1)
+
+
+INDUSTRIAL_ARM_TABLE = INDUSTRIAL_6R_TABLE  # the unseen-setup tests' arm (pincal.simulation.cells)
+INDUSTRIAL_ARM_START = INDUSTRIAL_6R_START
+
+
+@pytest.fixture(scope="session")
+def industrial_arm_urdf(tmp_path_factory):
+    from pincal.model.urdf_from_dh import urdf_from_dh_table
+
+    folder = tmp_path_factory.mktemp("industrial_arm")
+    (folder / "arm.csv").write_text(INDUSTRIAL_ARM_TABLE, encoding="utf-8")
+    urdf_from_dh_table(folder / "arm.csv", "modified", folder / "arm.urdf", degrees=True)
+    return folder / "arm.urdf"

@@ -1,4 +1,4 @@
-"""The ML estimator (pincal.fit.ml_estimator) and its residual (pincal.residuals.sensor.tool_pose_residual).
+"""The ML estimator (pincal.fit.ml_estimator) and its residual (pincal.residuals.tool_pose.tool_pose_residual).
 
 Jacobians against central finite differences (step 1e-6, tolerance 1e-7
 relative to the column scale, as in test_jacobians.py); noise-free data must
@@ -33,7 +33,8 @@ from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.effects import Effect, EffectInputs
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
-from pincal.residuals.sensor import SensorResidual, TargetEstimate, tool_pose_residual
+from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.tool_pose import tool_pose_residual
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 from pincal.simulation.sensor import DEFAULT_REGISTRATION

@@ -219,7 +219,7 @@ def test_cli_bad_prior_scale_is_one_line(tmp_path, capsys, scale):
     assert len(errors) == 1 and "--prior-scale" in errors[0] and "MM,DEG" in errors[0] and "Traceback" not in err
 
 
-def test_cli_prior_scale_without_select_prior_is_one_line(tmp_path, capsys):
-    code, _ = _cli(tmp_path, "--prior-scale", "1,0.5")
+def test_cli_prior_scale_with_another_select_is_one_line(tmp_path, capsys):
+    code, _ = _cli(tmp_path, "--select", "aic", "--prior-scale", "1,0.5")
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "--select prior" in err

@@ -151,10 +151,11 @@ def test_cli_prior_where_it_cannot_apply_is_refused(tmp_path, capsys, arguments)
     assert "does not apply to --level" in err and not (tmp_path / "REPORT.json").exists()
 
 
-def test_cli_prior_scale_without_any_select_says_so(tmp_path, capsys):
-    assert _cli(tmp_path, "--level", "full", "--prior-scale", "1,0.5") == 2
-    err = _one_line(capsys)
-    assert "--prior-scale needs --select prior" in err and "got --select" not in err
+def test_cli_prior_scale_without_any_select_is_the_default_prior(tmp_path):
+    """The default selection at levels offsets and full is the prior (docs/defaults.md): its scale is taken."""
+    assert _cli(tmp_path, "--level", "full", "--prior-scale", "1,0.5") == 0
+    document = json.loads((tmp_path / "REPORT.json").read_text())
+    assert document["identifiability"]["selection"]["prior_scale"] == {"translation_mm": 1.0, "rotation_deg": 0.5}
 
 
 def test_cli_prior_scale_under_level_auto_needs_no_select(tmp_path):

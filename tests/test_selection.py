@@ -79,29 +79,43 @@ def test_prefixes_past_a_dependent_column_are_not_feasible(dependent):
     assert expected == [dependent is None or j <= dependent for j in range(len(order) + 1)]
 
 
-def test_curvature_ratio_of_a_quadratic_model():
-    """f_i(x) = a_i·x + ½ xᵀ B_i x: S u = Σ e_i B_i u exactly, so the finite difference
-    of eq S3 must give ‖D⁻¹ S D⁻¹ u‖ / s² to rounding (1e-6 relative: the step is 1e-4)."""
+@pytest.mark.parametrize("always", [[], [0]], ids=["no-always-column", "one-always-column"])
+def test_curvature_ratio_of_a_quadratic_model(always):
+    """f_i(x) = a_i·x + ½ xᵀ B_i x: S u = Σ e_i B_i u exactly, so the finite difference of eq S3 must
+    give ‖Pᵀ S u‖ / s² to rounding (1e-6 relative: the step is 1e-4), u the weakest kinematic direction
+    of R's kinematic block with the always-estimated columns following it, u = [−R_AA⁻¹ R_AK w; w]."""
     rng = np.random.default_rng(3)
     m, n = 40, 4
     a_rows = rng.normal(size=(m, n)) * np.array([1.0, 0.5, 0.2, 1e-3])
     hessians = rng.normal(size=(m, n, n))
     hessians = hessians + hessians.transpose(0, 2, 1)
     residual = rng.normal(size=m)
-    fits = nested_fits(a_rows, residual, [], [0, 1, 2, 3])
+    ordered = [c for c in range(n) if c not in always]
+    fits = nested_fits(a_rows, residual, always, ordered)
+    a = len(always)
 
-    def jacobian_at(step):
-        return a_rows + np.einsum("mij,j->mi", hessians, step)
+    def jacobian_at(step):  # the columns [always | ordered], as curvature_ratios asks for them
+        columns = always + ordered
+        full_step = np.zeros(n)
+        full_step[columns] = step
+        return (a_rows + np.einsum("mij,j->mi", hessians, full_step))[:, columns]
 
-    ratios = curvature_ratios(fits, a_rows, jacobian_at, [1, 2, 3, 4])
+    columns = always + ordered
+    ratios = curvature_ratios(fits, a_rows[:, columns], jacobian_at, list(range(1, n - a + 1)))
+    assert len(ratios) == n - a
     for j, ratio in ratios.items():
-        r = fits.r[:j, :j]
-        _, singular, right = np.linalg.svd(r)
-        u = right[-1]
-        scale = fits.scale[:j]
-        error = fits.fit_residual(j)
-        exact = np.einsum("m,mij,j->i", error, hessians[:, :j, :j], u / scale) / scale
-        assert ratio == pytest.approx(np.linalg.norm(exact) / singular[-1] ** 2, rel=1e-6)
+        size = a + j
+        r = fits.r[:size, :size]
+        _, singular, right = np.linalg.svd(r[a:, a:])
+        w = right[-1]
+        u = np.concatenate([-np.linalg.solve(r[:a, :a], r[:a, a:] @ w) if a else [], w])  # scaled coordinates
+        assert np.linalg.norm(r @ u) == pytest.approx(singular[-1], rel=1e-9)
+        scale = fits.scale[:size]
+        h = hessians[:, columns[:size]][:, :, columns[:size]]
+        exact = np.einsum("m,mij,j->i", fits.fit_residual(j), h, u / scale) / scale
+        profiled = exact[a:] - (np.linalg.solve(r[:a, :a], r[:a, a:]).T @ exact[:a] if a else 0.0)  # Pᵀ S u
+        assert w @ profiled == pytest.approx(u @ exact, rel=1e-9, abs=1e-12)  # wᵀ Pᵀ S u = uᵀ S u
+        assert ratio == pytest.approx(np.linalg.norm(profiled) / singular[-1] ** 2, rel=1e-6)
 
 
 def test_refine_keeps_the_best_refitted_and_refits_few():

@@ -301,7 +301,7 @@ def test_outliers_are_reported_by_file_and_line(truth, tmp_path):
     points[5, 0, 0] += 0.02  # 20 mm off, far above the noise-free rows
     write_measurements(tmp_path / "B.csv", replace(bad, points=points))
     assert main(["calibrate", str(URDF), str(tmp_path / "A.csv"), str(tmp_path / "B.csv"), "--tip-link", TIP,
-                 "--level", "offsets", "--out", str(tmp_path / "c.urdf"), "--report", str(tmp_path / "R.json")]) == 0
+                 "--level", "offsets", "--select", "aic", "--out", str(tmp_path / "c.urdf"), "--report", str(tmp_path / "R.json")]) == 0
     report = json.loads((tmp_path / "R.json").read_text())
     assert [(o["file"], o["line"]) for o in report["outliers"]] == [(str(tmp_path / "B.csv"), 7)]
 

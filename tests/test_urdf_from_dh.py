@@ -333,7 +333,7 @@ BAD_TABLES = {
     "limit in degrees": (HEADER + "j1,0,0,0.3,0,-170,170", [], "column 'lower': -170 looks like degrees"),
     "length in mm": (HEADER + "j1,0,0,450,0,-1,1", [], "column 'd': 450 looks like millimetres"),
     "unknown type": ("joint,a,alpha,d,theta,type\nj1,0,0,0.3,0,rotary", [],
-                     "line 2 (joint 'j1'), column 'type': unknown joint type 'rotary'; use revolute or prismatic"),
+                     "line 2 (joint 'j1'), column 'type': unknown joint type 'rotary'; use revolute, prismatic or continuous"),
     "reserved name": (HEADER + "flange_joint,0,0,0.3,0,-1,1", [], "'flange_joint' is the name of the fixed joint"),
     "ragged row": (HEADER + "j1,0,0,0.3,0,-1", [], "line 2: 6 fields but the header has 7"),
     "header only": (HEADER, [], "header only, no data rows; add one row per joint"),

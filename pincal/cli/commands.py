@@ -22,6 +22,7 @@ from pincal.fit.metrics import PoseErrors
 
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
+EXIT_WARNING = 3  # --strict and a warning (pincal.fit.plausibility); the outputs are written
 
 
 def _error_columns(errors: PoseErrors) -> str:
@@ -41,6 +42,14 @@ _HEADER = (
 def _print_notes(notes: Sequence[str]) -> None:
     for note in notes:
         print(f"pincal: note: {note}", file=sys.stderr)
+
+
+def _warned(report: dict, strict: bool) -> int:
+    """Print REPORT.json's ``warnings`` on stderr; the exit code: 3 with ``strict`` and a warning, else 0."""
+    warnings = report.get("warnings") or []
+    for warning in warnings:
+        print(f"pincal: warning: {warning['message']}", file=sys.stderr)
+    return EXIT_WARNING if strict and warnings else 0
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
@@ -71,6 +80,10 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         raise PincalError("give the end of the chain: --tip-link LINK (or --tool-parent LINK)")
     if level != "dh" and args.method is not None:
         raise PincalError(f"--method applies to --level dh only (got --level {level})")
+    if level == "dh" and (args.strict or args.sigma_pos is not None):
+        flag = "--strict" if args.strict else "--sigma-pos"
+        raise PincalError(f"{flag} applies to --level registration, offsets, full or auto (the plausibility checks "
+                          "of pincal.fit.plausibility), not to the paper's methods; drop it")
     method = args.method or 2
     _check_html(args.html, *_description_inputs(args), *args.data, outputs=[args.out, args.report])
     weight = 1.0 if args.weight is None else args.weight  # None: not given (refused with --fixture)
@@ -78,7 +91,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         run = calibrate_files(args.urdf, args.data, method, weight, args.tool, args.tip_link,
                               args.out, args.report, level=level, sigma_column=args.sigma_column,
                               reject_outliers=args.reject_outliers, selection=selection_criterion(args),
-                              xacro_args=args.xacro_args, progress=progress)
+                              xacro_args=args.xacro_args, progress=progress, sigma_pos_m=_metres(args.sigma_pos))
     _print_notes(run.notes + list(run.result.notes))
     _print_level_choice(run.report)
     if level == "dh":
@@ -99,7 +112,11 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
     _write_html(args.html, run.report, args.report.parent)
-    return 0
+    return _warned(run.report, args.strict)
+
+
+def _metres(millimetres: float | None) -> float | None:
+    return None if millimetres is None else millimetres / 1000.0
 
 
 def _print_level_choice(report: dict) -> None:
@@ -232,7 +249,8 @@ def _run_diagnose(args: argparse.Namespace) -> int:
                              tool_pose=args.tool, validation_path=args.validation, sigma_column=args.sigma_column,
                              selection=selection_criterion(args), payload_kg=args.payload_kg,
                              time_column_name=args.time_column,
-                             plots_dir=plots, xacro_args=args.xacro_args, progress=progress)
+                             plots_dir=plots, xacro_args=args.xacro_args, progress=progress,
+                             sigma_pos_m=_metres(args.sigma_pos))
     _print_notes(run.notes + list(run.calibration.notes))
     _print_level_choice(run.report)
     diagnosis = run.diagnosis
@@ -266,7 +284,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(f"wrote {path}")
     print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
     _write_html(args.html, run.report, args.report.parent)
-    return 0
+    return _warned(run.report, args.strict)
 
 
 def _run_report(args: argparse.Namespace) -> int:
@@ -281,7 +299,7 @@ def _run_report(args: argparse.Namespace) -> int:
 
 
 def _run_demo(args: argparse.Namespace) -> int:
-    from pincal.cli.workflows import run_demo
+    from pincal.cli.demo import run_demo
     from pincal.simulation.paper import SimulationSettings
 
     settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=args.seed)
@@ -338,7 +356,7 @@ def _run_urdf_from_dh(args: argparse.Namespace) -> int:
                             flange=args.flange)
     _print_notes(run.notes)
     robot = run.robot
-    kinds = ", ".join(f"{robot.types.count(t)} {t}" for t in ("revolute", "prismatic") if t in robot.types)
+    kinds = ", ".join(f"{robot.types.count(t)} {t}" for t in ("revolute", "prismatic", "continuous") if t in robot.types)
     print(f"read {args.table}: {robot.n_joints} joints ({kinds}), {robot.convention} DH convention")
     print(f"wrote {args.out}: root link {DH_BASE_LINK}, joints {', '.join(robot.names)}, tip link "
           f"{DH_FLANGE_LINK} (Pinocchio FK = DH product to {run.fk_error:.1e})")

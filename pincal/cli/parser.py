@@ -76,10 +76,8 @@ def selection_criterion(args: argparse.Namespace) -> str:
         what = "fits no kinematic parameter" if level == "registration" else "runs the paper's methods, which have none"
         raise PincalError(f"{flag} does not apply to --level {level} (it {what}): use --level offsets, full or "
                           f"auto, or drop {flag}")
-    if select is None:  # the default: AIC, but the prior rule under --level auto (README, "Choosing the level")
-        select = "prior" if level == "auto" else "aic"
-        if scale is not None and select != "prior":
-            raise PincalError("--prior-scale needs --select prior (no --select was given; the default here is aic)")
+    if select is None:  # the default: the prior wherever kinematic parameters are fitted (docs/defaults.md)
+        select = "aic" if level in ("registration", "dh") else "prior"
     if select != "prior":
         if scale is not None:
             raise PincalError(f"--prior-scale applies to --select prior only (got --select {select})")
@@ -127,6 +125,14 @@ def _add_xacro_arg(parser: argparse.ArgumentParser) -> None:
 def _add_quiet(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr (default: a bar in a terminal "
                         "once the work takes over a second, a line every 10 s in logs; pincal.cli.progress)")
+
+
+def _add_plausibility(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sigma-pos", type=_positive, metavar="MM",
+                        help="the sensor's stated position noise per axis [mm]: a residual above 20x it is warned "
+                             "about (pincal.fit.plausibility); the fit's weights come from the data either way")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit 3 when any warning is given (the outputs are written all the same)")
 
 
 def joint_names(text: str) -> tuple[str, ...]:
@@ -220,12 +226,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="refit without the rows reported as outliers (> 5 robust sigma)")
     cal.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default=None,
                      help="criterion choosing how many weakly identified parameters to keep "
-                          "(default aic, prior with --level auto; computed on the calibration rows only); prior: keep every identifiable "
+                          "(default prior; computed on the calibration rows only); prior: keep every identifiable "
                           "one, each pulled towards nominal by a Gaussian prior (--prior-scale)")
     _add_prior_scale(cal)
     cal.add_argument("--fixture", type=Path, metavar="FIXTURE.csv",
                      help="socket-fixture data, no sensor: DATA names the socket of each row (point) and the "
                           "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or point_a,point_b,distance)")
+    _add_plausibility(cal)
     _add_xacro_arg(cal)
     _add_quiet(cal)
     cal.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf",
@@ -275,13 +282,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="known pose of the measured target in the tip link [m, rad] (default: estimated)")
     dia.add_argument("--sigma-column", metavar="COLUMN", help="per-row noise scale column [mm]")
     dia.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default=None,
-                     help="criterion for the geometric parameters (default aic, prior with --level auto; prior: see calibrate)")
+                     help="criterion for the geometric parameters (default prior; prior: see calibrate)")
     _add_prior_scale(dia)
     dia.add_argument("--payload-kg", type=_non_negative, default=0.0, metavar="KG",
                      help="point mass at the target for gravity torques (default 0)")
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
+    _add_plausibility(dia)
     _add_xacro_arg(dia)
     _add_quiet(dia)
     dia.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf", help="corrected URDF to write")
@@ -292,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     dh = sub.add_parser("urdf-from-dh", help="write a URDF from a DH table (CSV, standard or modified convention)")
     dh.add_argument("table", type=Path, metavar="TABLE.csv",
                     help="one row per joint: joint, a [m], alpha [rad], d [m], theta (offset) [rad]; "
-                         "optional type (revolute|prismatic), lower, upper, velocity, effort")
+                         "optional type (revolute|prismatic|continuous), lower, upper, velocity, effort")
     dh.add_argument("--convention", choices=DH_CONVENTIONS, required=True,
                     help="what a row means: standard: Rz(theta+q) Tz(d) Tx(a) Rx(alpha) (distal); modified: "
                          "Craig's Rx(alpha_i-1) Tx(a_i-1) Rz(theta_i+q) Tz(d_i)")

@@ -28,7 +28,7 @@ from pincal.cli.paths import (
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.registration import register_orientations, register_points
+from pincal.fit.plausibility import calibration_findings
 from pincal.fit.sessions import (
     check_registrable,
     session_pose_errors,
@@ -41,7 +41,7 @@ from pincal.measurements.csv_v1 import (
     write_measurements,
 )
 from pincal.measurements.data import MeasurementSet
-from pincal.model.chain import KinematicChain, pose_from_xyz_rpy, xyz_rpy_from_pose
+from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.model.corrected_urdf import write_corrected_urdf
 from pincal.model.description import xacro_arguments
 from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH
@@ -193,6 +193,7 @@ def calibrate_files(
     selection: str = "aic",
     xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
+    sigma_pos_m: float | None = None,
 ) -> CalibrationRun:
     """Calibrate ``urdf`` on ``data_path`` and write the corrected URDF and the report.
 
@@ -205,6 +206,8 @@ def calibrate_files(
     on the calibration rows supports (:func:`pincal.fit.level_choice.choose_level`).
     A ``.xacro`` ``urdf`` is expanded with ``xacro_args`` (NAME, VALUE).
     ``progress(done, total)`` counts the fits of those levels (:mod:`pincal.progress`).
+    ``sigma_pos_m``: the sensor's stated position noise per axis [m] for the plausibility
+    check (:mod:`pincal.fit.plausibility`, REPORT.json ``warnings``); None: not stated.
     """
     urdf, data_paths = Path(urdf), input_paths(data_path)
     data_label = " + ".join(str(p) for p in data_paths)
@@ -260,6 +263,7 @@ def calibrate_files(
         errors = session_pose_errors(chain, used, sessions, result.target.registrations,
                                      points=result.target.points, target_rotation=result.target.rotation)
         report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
+        report["warnings"] = [f.as_dict() for f in calibration_findings(chain, result, used, sigma_column, sigma_pos_m)]
         report["sessions"] = session_entries(result.session_names, result.target.registrations, used, sessions, errors)
         session_list = tuple(
             SessionEvaluation(entry["name"], entry["rows"], registration, registration, f"fitted on {entry['file']}",
@@ -341,66 +345,6 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
 # --- evaluate: pincal.cli.evaluation (re-exported here) ----------------------------------
 
 
-# --- demo ----------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class DemoRow:
-    """One line of the demo's comparison table."""
-
-    label: str
-    calibration: PoseErrors
-    validation: PoseErrors
-    seconds: float
-
-
-def run_demo(out_dir: str | Path, settings: SimulationSettings, deviations: str = "large") -> list[DemoRow]:
-    """Simulate → calibrate with Methods 1–3 → evaluate on held-out poses.
-
-    Writes the simulated data, one corrected URDF and report per method into
-    ``out_dir``; returns the comparison rows (nominal model first).
-    """
-    out = Path(out_dir)
-    experiment, truth = simulate_to_directory(out, deviations, settings)
-    urdf = kuka_lwr4plus_urdf()
-    tool = pose_from_xyz_rpy(truth["tool"]["xyz_m"], truth["tool"]["rpy_rad"])
-    rows = [_nominal_row(urdf, experiment, tool)]
-    for method in (1, 2, 3):
-        run = calibrate_files(
-            urdf,
-            out / "calibration.csv",
-            method,
-            1.0,
-            tool,
-            KUKA_FLANGE_LINK,
-            out / f"kuka_lwr4plus_method{method}.urdf",
-            out / f"REPORT_method{method}.json",
-        )
-        evaluation = evaluate_files(
-            out / f"kuka_lwr4plus_method{method}.urdf",
-            out / f"REPORT_method{method}.json",
-            out / "validation.csv",
-        )
-        rows.append(DemoRow(f"Method {method}", run.errors, evaluation.errors, run.seconds))
-    return rows
-
-
-def _nominal_row(urdf: Path, experiment: SimulatedExperiment, tool: np.ndarray) -> DemoRow:
-    """The uncalibrated model, registered to the data like Method 2 would."""
-    chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK, tool=tool)
-    cal = experiment.calibration.with_role("calibration")
-    poses = chain.poses(cal.q)
-    points = cal.points[:, 0, :]
-    reg1 = register_points(poses.tool_positions, points)
-    reg2 = register_orientations(poses.tool_rotations, cal.rotations, poses.tool_positions, points)
-    return DemoRow(
-        "nominal (Table 1)",
-        pose_errors(chain, cal, reg1, reg2),
-        pose_errors(chain, experiment.validation, reg1, reg2),
-        0.0,
-    )
-
-
 # --- diagnose --------------------------------------------------------------------------
 
 
@@ -433,6 +377,7 @@ def diagnose_files(
     plots_dir: str | Path | None = None,
     xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
+    sigma_pos_m: float | None = None,
 ) -> DiagnoseRun:
     """Calibrate, search the residuals for missing effects, write the corrected
     URDF, the report (with ``effects``) and the plots; a ``.xacro`` is expanded with ``xacro_args``.
@@ -495,6 +440,8 @@ def diagnose_files(
                "corrected_urdf": str(out_urdf), "validation": None if validation_path is None else str(validation_path)}
     report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
     used = data.select(calibration.used_index)
+    report["warnings"] = [f.as_dict() for f in calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                                    press_of=calibration)]
     report["sessions"] = session_entries(final.session_names, final.target.registrations, used,
                                          session_rows(used, final.session_names), diagnosis.calibration_errors)
     report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))

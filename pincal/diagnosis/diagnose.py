@@ -179,6 +179,7 @@ class _Model:
             session_names=self.calibration.session_names,
         )
         problem.prior = self.calibration.prior_sigma  # the geometry's prior, if any (class docstring)
+        problem.point_basis = self.calibration.point_basis  # a target held where the data leave it free
         problem.sigma_pos = self.sigma_pos
         problem.sigma_rot = self.sigma_rot
         return problem

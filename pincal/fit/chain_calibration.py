@@ -48,6 +48,7 @@ from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.selection import select_subset as _select
 from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
 from pincal.fit.solver import Solution, gram, solve
+from pincal.fit.target_hold import HeldDirection, held_columns, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import LEVELS, NoParameters
@@ -135,6 +136,8 @@ class ChainCalibration:
     outlier_files: tuple[str, ...] = ()
     removed_files: tuple[str, ...] = ()
     prior_sigma: np.ndarray | None = None
+    held: tuple[HeldDirection, ...] = ()
+    point_basis: np.ndarray | None = None
 
     def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
         """Linearised prediction of the RMS error of the target points at
@@ -152,6 +155,7 @@ class ChainCalibration:
             fit_points=self.fit_target,
             fit_rotation=self.fit_target,
             sessions=np.zeros(k, dtype=int),
+            point_basis=self.point_basis,
         )
         jac = objective.jacobian(self.solution)[: 3 * k * n_points]
         variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
@@ -201,6 +205,7 @@ class FitProblem:
         self.sigma_pos = START_SIGMA_POS_M
         self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
         self.prior = None  # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
+        self.point_basis = None  # the target points' free directions (pincal.fit.target_hold), None: all
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
@@ -217,6 +222,7 @@ class FitProblem:
             effects=self.effects,
             inputs=self.inputs,
             sessions=self.sessions,
+            point_basis=self.point_basis,
         )
         return objective if self.prior is None else PriorResidual(objective, self.prior[free])
 
@@ -313,6 +319,8 @@ def calibrate_chain(
             f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
             "rerun with --reject-outliers to refit without them"
         )
+    if result.held:
+        notes.append(f"target not determined: {held_reason(result.held)}")
     if result.selection is not None:
         notes.extend(result.selection.notes)
     counter.settle()
@@ -325,16 +333,22 @@ def calibrate_chain(
 
 
 def _calibrate_rows(
-    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion, counter: Counter
+    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion, counter: Counter,
+    hold: tuple[HeldDirection, ...] = (),
 ) -> tuple[ChainCalibration, np.ndarray]:
     """One calibration of ``rows``; returns the result (without the outlier
     bookkeeping) and each target point's distance from the model (K, P) [m].
-    ``counter`` counts the registration fits, each subset scored and the final fits as one each."""
+    ``counter`` counts the registration fits, each subset scored and the final fits as one each.
+    ``hold``: target directions to hold besides those the rows leave free (:mod:`pincal.fit.target_hold`);
+    a calibration whose target comes out weakly determined is done again with those held."""
     nominal = chain.placements()
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
         start = replace(start, points=np.zeros((1, 3)), rotation=np.eye(3))
     problem = FitProblem(chain, params, rows, start, fit_target=not tool_known, row_weight=row_weights(rows, sigma_column))
+    held: tuple[HeldDirection, ...] = ()
+    if not tool_known:
+        held = hold_target(problem, extra=hold)
     size = params.size if params is not None else 0
     base = np.zeros(size)
     empty = np.array([], dtype=int)
@@ -360,7 +374,11 @@ def _calibrate_rows(
         jac = full.jacobian(x_full)
         kinematic_cols = np.arange(full.blocks["kinematic"].start, full.blocks["kinematic"].stop)
         other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
-        ordering = order_parameters(jac, kinematic_cols, other_cols)
+        # a held target direction is not estimated, and neither is what only it would explain
+        # (the tip placement's translation): its columns join the always-estimated ones here
+        held_cols = held_columns(problem, held, size) if held else np.zeros((jac.shape[0], 0))
+        ordering = order_parameters(np.hstack([jac, held_cols]), kinematic_cols,
+                                    np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
         rank = ordering.rank
         prior = prior_of(criterion)
         problem.prior = None if prior is None else prior_sigmas(params, prior)
@@ -433,7 +451,14 @@ def _calibrate_rows(
         fit_target=not tool_known,
         session_names=problem.session_names,
         prior_sigma=problem.prior,
+        held=held,
+        point_basis=problem.point_basis,
     )
+    weak = () if tool_known or hold else weak_target(result, problem)
+    if weak:  # the kinematics took what the target was left to explain: again, with it held
+        chain.set_placements(nominal)
+        return _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion,
+                               counter, hold=weak)
     return result, point_errors
 
 
@@ -443,7 +468,10 @@ def _column_names(objective: SensorResidual, params, kept: np.ndarray, sessions=
         prefixes = ["registration"] if objective.n_sessions == 1 else [f"registration[{n}]" for n in sessions]
         names += [f"{prefix}.{axis}" for prefix in prefixes for axis in ("rx", "ry", "rz", "x", "y", "z")]
     pts = objective.blocks["points"]
-    names += [f"target.point{i // 3 + 1}.{'xyz'[i % 3]}" for i in range(pts.stop - pts.start)]
+    if objective.point_basis is None:
+        names += [f"target.point{i // 3 + 1}.{'xyz'[i % 3]}" for i in range(pts.stop - pts.start)]
+    else:  # the free directions of a held target (pincal.fit.target_hold)
+        names += [f"target.points.free{i + 1}" for i in range(pts.stop - pts.start)]
     rot = objective.blocks["rotation"]
     names += [f"target.r{'xyz'[i]}" for i in range(rot.stop - rot.start)]
     return names

@@ -5,7 +5,7 @@ weight w; Method 2 avoids the weight by splitting the data (orientations for
 eps, positions for r and d) and never uses the absolute poses. Here every
 measured row — the ``cpa`` rows as well as the ``calibration`` rows — enters
 one least-squares problem in which each residual is divided by the sensor's
-noise (:func:`pincal.residuals.sensor.tool_pose_residual`, a
+noise (:func:`pincal.residuals.tool_pose.tool_pose_residual`, a
 :class:`pincal.residuals.sensor.SensorResidual` of the known tool):
 
     r_k = [ (Ω t_k + τ − g_k) / σ_p ,  log(G_kᵀ Ω R_k) / σ_a ]
@@ -53,11 +53,8 @@ from pincal.model.chain import KinematicChain
 from pincal.model.dh import DHTable
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.residuals.base import KinematicsCache
-from pincal.residuals.sensor import (
-    REGISTRATION_NAMES,
-    SensorResidual,
-    tool_pose_residual,
-)
+from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual
+from pincal.residuals.tool_pose import tool_pose_residual
 
 #: Value of :attr:`PaperCalibration.method` for this estimator.
 METHOD = "ml"

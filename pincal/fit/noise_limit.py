@@ -58,7 +58,8 @@ from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.distance import DistanceResidual
 from pincal.residuals.full_pose import DEG_PER_RAD, MM_PER_M, FullPoseResidual
 from pincal.residuals.rotation import RotationResidual
-from pincal.residuals.sensor import REGISTRATION_NAMES, tool_pose_residual
+from pincal.residuals.sensor import REGISTRATION_NAMES
+from pincal.residuals.tool_pose import tool_pose_residual
 from pincal.simulation.paper import SimulatedExperiment
 from pincal.simulation.sensor import perfect_measurements
 
@@ -209,7 +210,7 @@ class _Propagation:
     ) -> tuple[np.ndarray, np.ndarray]:
         """dr/dp and per-row dr/dz of the tool pose residual of ``data`` at the noise-free solution.
 
-        The residual is :func:`pincal.residuals.sensor.tool_pose_residual` about
+        The residual is :func:`pincal.residuals.tool_pose.tool_pose_residual` about
         the registration ``which`` with every DH parameter free; ``sigma`` =
         (σ_p [m], σ_a [rad]) scales it (the ML weights), single-type stages use 1.
 

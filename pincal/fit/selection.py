@@ -21,23 +21,32 @@ slow when the weakest directions are nearly undetermined; instead:
    so the leave-one-row-out residuals (I − H_bb)⁻¹ e_b (Allen 1974) give PRESS
    for every j as well (S2). The information criteria (Akaike 1974, Schwarz
    1978) follow from RSS_j: m ln(RSS_j / m) + c (a + j), c = 2 or ln m.
-2. **Determined at all?** Along the weakest direction u_j of prefix j (the
-   right singular vector of R's leading block for its smallest singular value
-   s_j), the data's information is s_j², while the model's curvature weighted
-   by the residuals, S = Σ_i e_j,i ∇²f_i, adds S u_j to the cost's Hessian. With
+2. **Determined at all?** Along the weakest kinematic direction w_j of prefix j —
+   the right singular vector of R's kinematic block R_KK for its smallest singular value
+   s_j, whose Gram matrix is the kinematic information with the always-estimated
+   unknowns (registration, target) profiled out — the parameters move as
+   u_j = [−R_AA⁻¹ R_AK w_j; w_j] (the always-estimated part following, ‖B u_j‖ = s_j).
+   The data's information along w_j (the profile's) is s_j², while the model's curvature
+   weighted by the residuals, S = Σ_i e_j,i ∇²f_i, changes the profile's gradient by
+   Pᵀ S u_j per unit step, P = [−R_AA⁻¹ R_AK; I] (S u_j's kinematic part with its
+   always-estimated part eliminated; wᵀ Pᵀ S u_j = u_jᵀ S u_j). With
 
-       ρ_j = ‖S u_j‖ / s_j²                                           (S3)
+       ρ_j = ‖Pᵀ S u_j‖ / s_j²                                         (S3)
 
-   at least one, ‖(BᵀB)⁻¹ S‖ ≥ 1 and Gauss–Newton does not converge locally
-   (Dennis & Schnabel 1983, Theorem 10.2.1): the estimate along u_j is made
-   by the noise through the curvature, not by the data, and its linearised
-   standard deviation means nothing. Levenberg–Marquardt then crawls along the
-   curved valley for hundreds of evaluations (794 on a 2 500-row UR5 session
-   whose wrist never bends, as in scripts/benchmark.py (f) but with 1e-6 rad of
-   encoder jitter: there ρ is 0.4–7 for the subsets holding a nearly singular
-   wrist direction and below 1e-3 for the others; with (f)'s 5e-8 rad it is
-   1.1e3; TIAGo's are all below 0.12). Such a prefix, and every larger one, is
-   not a candidate.
+   at least one, ‖C⁻¹ S_p‖ ≥ 1 for the profile's information C = R_KKᵀ R_KK and
+   curvature S_p (when S_p w_j lies along w_j, exactly) and Gauss–Newton does not
+   converge locally (Dennis & Schnabel 1983, Theorem 10.2.1): the estimate along u_j
+   is made by the noise through the curvature, not by the data, and its linearised
+   standard deviation means nothing. Without always-estimated columns this is the
+   earlier ‖S u_j‖ / s_j².
+   Levenberg–Marquardt then crawls along the curved valley for hundreds of
+   evaluations (794 on a 2 500-row UR5 session whose wrist never bends, as in
+   scripts/benchmark.py (f) but with 1e-6 rad of encoder jitter). Such a prefix, and
+   every larger one, is not a candidate. Judging the kinematic directions given the
+   always-estimated unknowns matters where those are weakly determined: a target
+   whose tool hardly turns made every prefix's weakest direction the target's own
+   (tests/test_target_hold.py: 0 of 18 kept on a 0.1° raster with the whole block's
+   weakest direction and ‖S u‖, 13 or more now).
    S u_j is one finite difference of the Jacobian along u_j (:func:`curvature_ratios`).
 3. **Finalists refitted.** The linear scores ignore the curvature of the model
    (on the TIAGo data they differ from the nonlinear ones by up to ~7 units of
@@ -54,6 +63,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.linalg
 
 from pincal.errors import CalibrationError
 from pincal.fit.identifiability import LEVERAGE_FLOOR, Selection, press
@@ -245,26 +255,51 @@ def curvature_ratios(fits: NestedFits, jacobian: np.ndarray, jacobian_at: Callab
     """
     a, width = fits.n_always, fits.scale.size
     sizes = list(sizes)
-    # every prefix's weakest direction from one batched SVD: R's leading block, padded with
-    # a diagonal larger than any of its singular values (so the smallest stays the block's)
-    padded = np.zeros((len(sizes), width, width))
+    n = width - a
+    # every prefix's weakest kinematic direction given the always-estimated columns from one
+    # batched SVD: R's kinematic block R_KK (its Gram matrix is the kinematic information with
+    # A profiled out), padded with a diagonal larger than any of its singular values
+    padded = np.zeros((len(sizes), n, n))
     big = 2.0 * np.abs(fits.r).sum() + 1.0
     for i, j in enumerate(sizes):
-        padded[i, : a + j, : a + j] = fits.r[: a + j, : a + j]
-        padded[i, range(a + j, width), range(a + j, width)] = big
+        padded[i, :j, :j] = fits.r[a : a + j, a : a + j]
+        padded[i, range(j, n), range(j, n)] = big
     _, singular, right = np.linalg.svd(padded)
     out = {}
     for i, j in enumerate(sizes):
         size = a + j
-        weakest = np.zeros(width)
-        weakest[:size] = right[i, -1, :size] / fits.scale[:size]  # u_j in the parameters' own units
+        kinematic = right[i, -1, :j]
+        weakest = np.zeros(width)  # u_j: the kinematic direction, the always-estimated part following it
+        weakest[a:size] = kinematic
+        if a:
+            weakest[:a] = -_solve_upper(fits.r[:a, :a], fits.r[:a, a:size] @ kinematic)
+        weakest[:size] /= fits.scale[:size]  # in the parameters' own units
         h = CURVATURE_STEP / np.abs(weakest).max()
         change = (jacobian_at(h * weakest)[:, :size] - jacobian[:, :size]) / (h * fits.scale[:size])
         curvature = change.T @ fits.fit_residual(j)  # S u_j in scaled coordinates
-        out[j] = float(np.linalg.norm(curvature) / singular[i, -1] ** 2)
+        profiled = curvature[a:size]  # Pᵀ S u_j: the profile's curvature along w_j (A eliminated)
+        if a:
+            profiled = profiled - fits.r[:a, a:size].T @ _solve_upper_t(fits.r[:a, :a], curvature[:a])
+        out[j] = float(np.linalg.norm(profiled) / singular[i, -1] ** 2)
         if out[j] >= stop_at:
             break
     return out
+
+
+def _solve_upper_t(r: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with rᵀ x = b for the upper-triangular R_AA (a least-squares x where it is singular)."""
+    try:
+        return scipy.linalg.solve_triangular(r, b, trans="T")
+    except (np.linalg.LinAlgError, ValueError):
+        return np.linalg.lstsq(r.T, b, rcond=None)[0]
+
+
+def _solve_upper(r: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with r x = b for the upper-triangular R_AA (a least-squares x where it is singular)."""
+    try:
+        return scipy.linalg.solve_triangular(r, b)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.linalg.lstsq(r, b, rcond=None)[0]
 
 
 def refine(

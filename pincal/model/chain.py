@@ -130,14 +130,14 @@ class KinematicChain:
         chain_names = [model.names[j] for j in support]
         locked = [j for j in range(1, model.njoints) if j not in support]
         if locked:
-            model = pin.buildReducedModel(model, locked, pin.neutral(model))
+            model = _reduced(model, locked)
         self.model: pin.Model = model
         self.data: pin.Data = model.createData()
         self.source = source
         self.tip_link = tip_link
         self.joint_ids = tuple(model.getJointId(n) for n in chain_names)
         self.tip_frame_id = model.getFrameId(tip_link, body)
-        if model.nq != len(chain_names) or model.nv != len(chain_names):
+        if model.nv != len(chain_names):  # (nq may exceed it: a continuous joint takes cos, sin)
             raise ModelError(f"{source}: the chain to '{tip_link}' is not a simple serial chain")
         joints = []
         for jid, name in zip(self.joint_ids, chain_names):
@@ -283,6 +283,41 @@ class KinematicChain:
             tool_rot[row] = tool.rotation
             tool_pos[row] = tool.translation
         return ChainPoses(joint_rot, joint_pos, tool_rot, tool_pos)
+
+
+def _reduced(model: pin.Model, locked: list[int]) -> pin.Model:
+    """``model`` with the joints ``locked`` fixed at their neutral values (Pinocchio's buildReducedModel).
+
+    Pinocchio 3–4 looks frames up by name alone while reducing, so a joint named like a
+    link (allowed in URDF, e.g. anymal_c's ``LF_HAA`` or b1-z1's fixed ``gripperStator``) fails
+    it; such joints and their frames are renamed for the reduction and given their names back after it.
+    """
+    model = model.copy()
+    names = [frame.name for frame in model.frames]
+    clashing = {name for name in names if names.count(name) > 1}
+    renamed: dict[str, str] = {}  # temporary name -> the original
+    joint_frames: dict[int, str] = {}  # joint id -> its joint frame's temporary name
+    for index, frame in enumerate(model.frames):
+        if frame.name in clashing and frame.type != pin.FrameType.BODY:
+            temporary = f"{frame.name} (frame {index})"
+            renamed[temporary] = frame.name
+            if frame.type == pin.FrameType.JOINT:
+                joint_frames[frame.parentJoint] = temporary
+            frame.name = temporary
+            model.frames[index] = frame
+    for jid in range(1, model.njoints):
+        if model.names[jid] in clashing:  # named as its own joint frame, as Pinocchio names them
+            temporary = joint_frames.get(jid, f"{model.names[jid]} (joint {jid})")
+            renamed[temporary] = model.names[jid]
+            model.names[jid] = temporary
+    reduced = pin.buildReducedModel(model, locked, pin.neutral(model))
+    for jid in range(1, reduced.njoints):
+        reduced.names[jid] = renamed.get(reduced.names[jid], reduced.names[jid])
+    for index, frame in enumerate(reduced.frames):
+        if frame.name in renamed:
+            frame.name = renamed[frame.name]
+            reduced.frames[index] = frame
+    return reduced
 
 
 def points_in_base(

@@ -8,7 +8,8 @@ Columns (header names are case-insensitive, order free):
 ``alpha``             link twist [rad, or deg with ``degrees=True``]
 ``d``                 link offset [m]
 ``theta``             joint angle offset [rad, or deg]
-``type`` (optional)   ``revolute`` (default, also for an empty cell) or ``prismatic``
+``type`` (optional)   ``revolute`` (default, also for an empty cell), ``prismatic`` or
+                      ``continuous`` (a revolute joint without position limits)
 ``lower``, ``upper``  position limits [rad or deg for revolute joints, m for
 (optional)            prismatic]; default :data:`pincal.model.dh_robot.DEFAULT_LIMITS`
 ``velocity``          velocity limit [rad/s or m/s]; default
@@ -107,7 +108,7 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
         kind = table.cell(k, "type").lower() or "revolute"
         if kind not in DH_JOINT_TYPES:
             raise table.error(f"unknown joint type '{table.cell(k, 'type')}'; use "
-                              f"{' or '.join(DH_JOINT_TYPES)} (empty = revolute)", line, "type", name)
+                              f"{', '.join(DH_JOINT_TYPES[:-1])} or {DH_JOINT_TYPES[-1]} (empty = revolute)", line, "type", name)
         row: dict[str, float] = {}
         for column in ("a", "alpha", "d", "theta"):
             value = table.number(k, column, name)
@@ -117,6 +118,9 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
         angles = ["alpha", "theta"] + (["lower", "upper"] if kind == "revolute" else [])
         for column in ("lower", "upper", "velocity", "effort"):
             row[column] = table.number(k, column, name)  # None = default
+            if kind == "continuous" and column in ("lower", "upper") and row[column] is not None:
+                raise table.error("a continuous joint has no position limits; leave the cell empty, or make the "
+                                  "joint revolute", line, column, name)
         for column in angles:
             if row[column] is not None and not degrees and abs(row[column]) > MAX_ANGLE_RAD:
                 raise table.error(f"{row[column]:g} looks like degrees (more than one turn, "
@@ -137,7 +141,7 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
                 limits.append(DEFAULT_LIMITS[kind][i])
             else:
                 limits.append(to_rad(row[column]) if kind == "revolute" else row[column])
-        if row["lower"] is None or row["upper"] is None:
+        if (row["lower"] is None or row["upper"] is None) and kind != "continuous":
             defaulted_limits.append(name)
         if limits[0] > limits[1]:
             shown = [f"{row[c]:g}" if row[c] is not None else f"{v:g} (default)"

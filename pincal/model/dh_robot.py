@@ -28,11 +28,12 @@ from pincal.errors import ModelError
 from pincal.model.dh import check_convention, dh_chain_origins, rot_x, rot_z, trans
 
 #: Joint types a DH row can have.
-DH_JOINT_TYPES = ("revolute", "prismatic")
+DH_JOINT_TYPES = ("revolute", "prismatic", "continuous")
 #: Position limits used when the table gives none: one turn either way [rad] for
 #: revolute joints (every reading a single-turn encoder can give), ±1 m for
 #: prismatic joints.
-DEFAULT_LIMITS = {"revolute": (-np.pi, np.pi), "prismatic": (-1.0, 1.0)}
+DEFAULT_LIMITS = {"revolute": (-np.pi, np.pi), "prismatic": (-1.0, 1.0),
+                  "continuous": (-np.pi, np.pi)}  # a continuous joint's: where it is checked, never written
 #: Velocity limit used when the table gives none [rad/s or m/s]: a placeholder,
 #: not a property of any robot (URDF requires a value; calibration ignores it).
 DEFAULT_VELOCITY = 1.0
@@ -62,7 +63,7 @@ class DHRobot:
         theta: joint angle offsets [rad] (N,): the DH angle is ``theta + q``
             for a revolute joint.
         d: link offsets [m] (N,): the DH offset is ``d + q`` for a prismatic joint.
-        types: ``revolute`` or ``prismatic`` per joint (N,).
+        types: ``revolute``, ``prismatic`` or ``continuous`` (revolute without position limits) per joint (N,).
         lower, upper: position limits [rad or m] (N,).
         velocity: velocity limits [rad/s or m/s] (N,).
         effort: effort limits [N·m or N] (N,).
@@ -120,7 +121,7 @@ class DHRobot:
     def link_transform(self, n: int, q: float) -> np.ndarray:
         """The DH transform of row ``n`` (0-based) at joint value ``q`` [rad or m],
         multiplied out of elementary transforms (no shared code with the origins)."""
-        revolute = self.types[n] == "revolute"
+        revolute = self.types[n] != "prismatic"  # revolute or continuous: q adds to theta
         angle = self.theta[n] + (q if revolute else 0.0)
         offset = self.d[n] + (0.0 if revolute else q)
         if self.convention == "standard":

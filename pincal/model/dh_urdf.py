@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -21,7 +22,7 @@ import numpy.typing as npt
 
 from pincal.errors import ModelError, PincalError
 from pincal.model.dh import DHTable, dh_chain_from_origins
-from pincal.model.dh_robot import DHRobot
+from pincal.model.dh_robot import DEFAULT_LIMITS, DH_JOINT_TYPES, DHRobot
 from pincal.model.urdf import load_urdf, write_urdf_with_origins
 
 #: Root link of a URDF written by :func:`urdf_from_dh`: DH frame 0.
@@ -136,8 +137,8 @@ def urdf_from_dh(
                 limit=yourdfpy.Limit(
                     effort=float(robot.effort[n]),
                     velocity=float(robot.velocity[n]),
-                    lower=float(robot.lower[n]),
-                    upper=float(robot.upper[n]),
+                    lower=None if robot.types[n] == "continuous" else float(robot.lower[n]),
+                    upper=None if robot.types[n] == "continuous" else float(robot.upper[n]),
                 ),
             )
         )
@@ -278,9 +279,9 @@ def dh_robot_from_urdf(
                          f"before '{DH_FLANGE_LINK}'")
     for joint in joints:
         axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=float)
-        if joint.type not in ("revolute", "prismatic") or np.abs(axis - (0.0, 0.0, 1.0)).max() > tol:
+        if joint.type not in DH_JOINT_TYPES or np.abs(axis - (0.0, 0.0, 1.0)).max() > tol:
             raise ModelError(f"{urdf_path}: joint '{joint.name}' is {joint.type} about {axis.tolist()}; "
-                             "a DH joint is revolute or prismatic about [0, 0, 1]")
+                             "a DH joint is revolute, prismatic or continuous about [0, 0, 1]")
     origins = [np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float) for j in chain]
     if flange is not None:
         origins[-1] = origins[-1] @ np.linalg.inv(np.asarray(flange, dtype=float))
@@ -291,9 +292,14 @@ def dh_robot_from_urdf(
         raise ModelError(str(exc)) from None
     limits = [j.limit for j in joints]
     for joint, lim in zip(joints, limits):
-        if lim is None or None in (lim.lower, lim.upper, lim.velocity, lim.effort):
+        needed = (lim.velocity, lim.effort) if lim is not None and joint.type == "continuous" else (
+            None if lim is None else (lim.lower, lim.upper, lim.velocity, lim.effort))
+        if needed is None or None in needed:
             raise ModelError(f"{urdf_path}: joint '{joint.name}' has no complete <limit>; "
                              "was it written by urdf_from_dh?")
+    continuous = DEFAULT_LIMITS["continuous"]  # a continuous joint's range where it is checked, never written
+    limits = [replace(lim, lower=continuous[0], upper=continuous[1]) if joint.type == "continuous" else lim
+              for joint, lim in zip(joints, limits)]
     return DHRobot(
         convention=convention, names=tuple(j.name for j in joints), alpha=alpha, a=a, theta=theta, d=d,
         types=tuple(j.type for j in joints),

@@ -144,7 +144,8 @@ def provenance(robot: DHRobot, table_path: Path, digest: str, out_urdf: Path, na
     header = f"    {'joint':<12s} {'type':<9s} " + " ".join(f"{c:>13s}" for c in columns)
     rows = "\n".join(
         f"    {robot.names[n]:<12s} {robot.types[n]:<9s} "
-        + " ".join(f"{float(getattr(robot, c)[n]):>13.10g}" for c in columns)
+        + " ".join(f"{'none':>13s}" if c in ("lower", "upper") and robot.types[n] == "continuous"
+                   else f"{float(getattr(robot, c)[n]):>13.10g}" for c in columns)
         for n in range(robot.n_joints)
     )
     flange_text = "" if xyz_rpy is None else (
@@ -164,6 +165,6 @@ def provenance(robot: DHRobot, table_path: Path, digest: str, out_urdf: Path, na
   {DH_FLANGE_LINK} (fixed joint {DH_FLANGE_JOINT}) is DH frame {robot.n_joints}{flange_text}:
   the tip link to calibrate.
   Limits from the table; where it gives none: [{rev[0]:.6g}, {rev[1]:.6g}] rad (revolute),
-  [{pri[0]:g}, {pri[1]:g}] m (prismatic); velocity {DEFAULT_VELOCITY:g} rad/s (m/s) and effort
+  [{pri[0]:g}, {pri[1]:g}] m (prismatic), none for a continuous joint; velocity {DEFAULT_VELOCITY:g} rad/s (m/s) and effort
   {DEFAULT_EFFORT:g} N m (N) are placeholders where absent. No inertials.
 """

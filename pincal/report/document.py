@@ -44,6 +44,7 @@ import numpy as np
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
+from pincal.fit.target_hold import held_reason
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.sensor import Registration
@@ -175,7 +176,17 @@ def identifiability_report(result) -> dict[str, Any]:
             for d in result.dropped
         ],
         "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
+        "not_determined": not_determined_report(result),
     }
+
+
+def not_determined_report(result) -> list[dict[str, Any]]:
+    """REPORT.json ``identifiability.not_determined``: each direction of an always-estimated unknown
+    (the target's position) the data leave free, held at a stated value (:mod:`pincal.fit.target_hold`)."""
+    return [{"name": "target.position", "direction": [float(v) for v in h.direction],
+             "turn_deg": float(np.degrees(h.turn_rad)), "held_at_m": h.value_m,
+             "std_m_when_estimated": _number(h.std_m),
+             "reason": held_reason(h)} for h in getattr(result, "held", ())]
 
 
 def selection_report(selection) -> dict[str, Any] | None:

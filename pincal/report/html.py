@@ -49,7 +49,7 @@ KNOWN_KEYS = frozenset({
     "pincal_version", "report_version", "method", "weight_mm2_per_deg2", "model", "sources", "chain",
     "parameters", "registration", "tool", "fit", "notes", "urdf_sha256", "level", "identifiability", "noise",
     "outliers", "removed_lines", "effects", "payload_kg", "time_column", "time_reference_s",
-    "approach_context", "diagnosis", "row_errors",
+    "approach_context", "diagnosis", "row_errors", "warnings",
 })
 
 
@@ -296,6 +296,7 @@ def _identifiability(doc: dict) -> dict[str, Any] | None:
             dropped=[(d.get("name"), d.get("reason"),
                       ", ".join(f"{num(a.get('coefficient'), 3)} × {a.get('name')}" for a in d.get("absorbed_into") or [])
                       or "—") for d in ident.get("dropped") or []],
+            not_determined=[(n.get("name"), n.get("held_at_m"), n.get("reason")) for n in ident.get("not_determined") or []],
         )
     return out
 
@@ -405,6 +406,7 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "sessions": sessions if sessions and len(sessions) > 1 else None,  # one session: the registration above
         "effects": effects_section(document, kinds, base, figures.png_uri),
         "notes": [str(n) for n in document.get("notes") or []],
+        "warnings": [str(w.get("message", w)) if isinstance(w, dict) else str(w) for w in document.get("warnings") or []],
         "extra": extra,
         "version": document.get("pincal_version"),
         "report_version": document.get("report_version"),

@@ -27,7 +27,7 @@ d o/d theta = v Jlog3(E) Eᵀ G_kᵀ Omega · angular velocity;
 d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi).
 
 With the chain's tool as the measured frame (one zero target point, R_T = I,
-neither fitted: :func:`tool_pose_residual`) and w = 1/sigma_p, v = 1/sigma_a
+neither fitted: :func:`pincal.residuals.tool_pose.tool_pose_residual`) and w = 1/sigma_p, v = 1/sigma_a
 the sensor's noise (eq 20–22), the least-squares solution is the
 maximum-likelihood estimate of :mod:`pincal.fit.ml_estimator`;
 :meth:`SensorResidual.noise_jacobian` gives the derivative with respect to the
@@ -43,7 +43,6 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pincal.errors import CalibrationError
 from pincal.model.chain import points_in_base
 from pincal.model.effects import (
     JOINT_EFFECTS,
@@ -98,6 +97,9 @@ class SensorResidual(Objective):
         fit_registration / fit_points / fit_rotation: which blocks are unknown.
         sessions: (K,) each row's session, an index into ``start.registrations``;
             needed when there are several (default: every row in session 0).
+        point_basis: (3P, b) orthonormal columns: the points' unknowns are b values z with
+            m = start.points + basis z (the directions outside the basis held at the start's
+            values, :mod:`pincal.fit.target_hold`); default: the 3P coordinates themselves.
     """
 
     def __init__(
@@ -114,6 +116,7 @@ class SensorResidual(Objective):
         effects: Sequence[Effect] = (),
         inputs: EffectInputs | None = None,
         sessions: npt.ArrayLike | None = None,
+        point_basis: npt.ArrayLike | None = None,
     ) -> None:
         super().__init__(cache)
         self.effects = tuple(effects)
@@ -142,11 +145,14 @@ class SensorResidual(Objective):
         self.w = np.broadcast_to(np.asarray(position_weight, dtype=float), (k,)).copy()
         self.v = np.broadcast_to(np.asarray(rotation_weight, dtype=float), (k,)).copy()
         n_kin = len(cache.free)
+        self.point_basis = None
+        if point_basis is not None and fit_points:
+            self.point_basis = np.asarray(point_basis, dtype=float).reshape(3 * n_points, -1)
         self._effect_slices = []
         sizes = {
             "kinematic": n_kin,
             "registration": 6 * self.n_sessions if fit_registration else 0,
-            "points": 3 * n_points if fit_points else 0,
+            "points": (3 * n_points if self.point_basis is None else self.point_basis.shape[1]) if fit_points else 0,
             "rotation": 3 if (fit_rotation and self.G is not None) else 0,
             "effects": sum(e.n_values for e in self.effects),
         }
@@ -174,7 +180,7 @@ class SensorResidual(Objective):
         if reg.stop > reg.start:
             for s, registration in enumerate(self.start.registrations):
                 x[reg.start + 6 * s + 3 : reg.start + 6 * s + 6] = registration.translation
-        if pts.stop > pts.start:
+        if pts.stop > pts.start and self.point_basis is None:
             x[pts] = self.start.points.ravel()
         return x
 
@@ -190,7 +196,10 @@ class SensorResidual(Objective):
                 for s, start in enumerate(registrations)
             )
         pts = x[self.blocks["points"]]
-        points = pts.reshape(-1, 3) if pts.size else self.start.points
+        if self.point_basis is not None:  # the start's points moved within the basis's span
+            points = self.start.points + (self.point_basis @ pts).reshape(-1, 3)
+        else:
+            points = pts.reshape(-1, 3) if pts.size else self.start.points
         rot = x[self.blocks["rotation"]]
         rotation = self.start.rotation @ pin.exp3(rot) if rot.size else self.start.rotation
         return TargetEstimate(registrations[0], points, rotation, registrations)
@@ -343,7 +352,10 @@ class SensorResidual(Objective):
         if pts.stop > pts.start:
             rotated = omega @ poses.tool_rotations  # Omega R_k
             for p in range(n_points):
-                rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
+                if self.point_basis is None:
+                    rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
+                else:
+                    rows_pos[:, p, :, pts] = rotated @ self.point_basis[3 * p : 3 * p + 3]
         for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self._effect_slices):
             if effect.type != "sensor_scale":
                 rows_pos[..., sl] = self._effect_position_columns(lin, effect, j, basis)
@@ -454,60 +466,3 @@ def _point_columns(linear: np.ndarray, angular: np.ndarray, offsets: np.ndarray)
     out[:, :, 1, :] = linear[:, None, :, 1] + (a2 * o0 - a0 * o2)
     out[:, :, 2, :] = linear[:, None, :, 2] + (a0 * o1 - a1 * o0)
     return out
-
-
-def tool_pose_residual(
-    cache: KinematicsCache,
-    sensor_points: npt.ArrayLike,
-    sensor_rotations: npt.ArrayLike,
-    registration: Registration,
-    sigma_position_m: float = 1.0,
-    sigma_rotation_rad: float = 1.0,
-) -> SensorResidual:
-    """Noise-scaled pose residual of the chain's tool with the registration unknown.
-
-    The measured frame is the chain's tool (the TCP: one zero target point,
-    R_T = I, neither fitted), so row k's residual is
-
-        [ (Omega t_k + tau − g_k) / sigma_p ,  log(G_kᵀ Omega R_k) / sigma_a ]
-
-    with unknowns x = [the cache's free parameters, phi (3), tau (3)] and
-    Omega = Omega_0 exp(phi). With the sensor's noise as sigma_p, sigma_a the
-    least-squares solution is the maximum-likelihood estimate (eq 20–22);
-    ``start_vector()`` is the cache's base with Omega_0 and tau of ``registration``.
-
-    Args:
-        cache: kinematics of the K measured rows.
-        sensor_points: measured tool positions g_k [m], (K, 3) or (K, 1, 3).
-        sensor_rotations: measured tool orientations G_k, (K, 3, 3).
-        registration: sensor_T_base to start from (phi = 0).
-        sigma_position_m: sigma_p, the position noise per axis [m].
-        sigma_rotation_rad: sigma_a, the orientation noise per component [rad].
-
-    Raises:
-        CalibrationError: mismatched shapes or a non-positive sigma.
-    """
-    k = len(cache.q)
-    points = np.asarray(sensor_points, dtype=float)
-    rotations = np.asarray(sensor_rotations, dtype=float)
-    if points.shape not in ((k, 3), (k, 1, 3)) or rotations.shape != (k, 3, 3):
-        raise CalibrationError(
-            f"tool pose residual: expected points ({k}, 3) and rotations ({k}, 3, 3), "
-            f"got {points.shape} and {rotations.shape}"
-        )
-    if not (sigma_position_m > 0 and sigma_rotation_rad > 0):
-        raise CalibrationError(
-            f"noise scales must be positive, got sigma_p={sigma_position_m} m, "
-            f"sigma_a={sigma_rotation_rad} rad"
-        )
-    start = TargetEstimate(registration, np.zeros((1, 3)), np.eye(3))
-    return SensorResidual(
-        cache,
-        points.reshape(k, 1, 3),
-        rotations,
-        start,
-        position_weight=1.0 / sigma_position_m,
-        rotation_weight=1.0 / sigma_rotation_rad,
-        fit_points=False,
-        fit_rotation=False,
-    )

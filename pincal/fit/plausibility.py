@@ -1,0 +1,239 @@
+"""Whether a calibration's answer can be trusted: its residual, target, registration and
+corrections against physical scale, and its prediction of left-out rows against the nominal model's.
+
+Each check that fails gives a :class:`Finding`: a code scripts can test, and one message that
+names the likely causes and what to try. The thresholds and their sources:
+
+* **Residual** — the RMS distance between measured and predicted target points above
+  :data:`MAX_RMS_M` (5 mm: a laser tracker measures to ~0.05 mm, motion capture to ~0.5 mm, and a
+  calibrated industrial arm is accurate to ~0.1–1 mm, so 5 mm left after a calibration is a data
+  problem, not a model one), or the per-axis residual above :data:`MAX_NOISE_RATIO` × the sensor's
+  stated noise (20×: at 20 σ no kinematic error of the scale of :data:`MAX_TRANSLATION_M` hides).
+* **Target** — a target point farther from the tip link than the robot's reach (the farthest the
+  tool came from the URDF root in the rows): no tool is longer than the robot carrying it.
+* **Registration** — the sensor's origin farther than :data:`MAX_SENSOR_DISTANCE_M` from the robot
+  (100 m: a laser tracker's angular error, ±(15 µm + 6 µm/m) maximum permissible error in the
+  Leica AT960 and FARO Vantage data sheets, is 0.6 mm there — no sub-millimetre calibration is
+  measured from farther away).
+* **Corrections** — a kept kinematic parameter beyond :data:`MAX_TRANSLATION_M` (10 mm) or
+  :data:`MAX_ROTATION_RAD` (5°): ten times the physical prior scales of
+  :mod:`pincal.fit.prior` (1 mm, 0.5°), i.e. a ten-sigma deviation under them. Manufacturing and
+  mastering errors are of the prior's scale; corrections ten times larger mean the model absorbs
+  something else.
+* **Cross-validation** — the linearised leave-one-row-out prediction error (PRESS, Allen 1974) of
+  the calibrated model above the nominal model's (registration and target refitted, the same
+  weights) by more than its own noise: the RMS ratio sqrt(PRESS_cal / PRESS_nom) above
+  1 + 2/sqrt(2K) for K rows (two standard errors of an RMS over K rows, whose relative standard
+  error is 1/sqrt(2K) for Gaussian errors): the calibration made predictions of rows it did not
+  see worse (TIAGo's 37 mocap rows at level full: ×1.10, under the 1.23 bound; the issue's Kinova
+  trained on one fixture placement: ×2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pincal.fit.identifiability import LEVERAGE_FLOOR
+from pincal.fit.prior import PRIOR_STATUS
+from pincal.fit.solver import solve
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+
+#: Largest plausible RMS point residual after a calibration [m] (module docstring).
+MAX_RMS_M = 5e-3
+#: Largest plausible ratio of the per-axis residual to the sensor's stated noise.
+MAX_NOISE_RATIO = 20.0
+#: Largest plausible distance of the sensor's origin from the robot base [m].
+MAX_SENSOR_DISTANCE_M = 100.0
+#: Largest plausible kinematic correction: translation [m] and rotation [rad].
+MAX_TRANSLATION_M = 10e-3
+MAX_ROTATION_RAD = float(np.radians(5.0))
+
+#: What the residual warnings suggest: the usual ways data and model disagree.
+DATA_CAUSES = ("x, y, z columns swapped or mirrored (a left-handed sensor frame)", "lengths in mm instead of m or "
+               "angles in degrees instead of radians", "a joint read with another scale, sign or zero, or measured "
+               "from another joint (J3 reading = J3 − J2 on parallelogram arms)", "the wrong --tip-link or "
+               "joint column order", "a data file of another robot or day")
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One reason not to trust the calibration: ``code`` for scripts, ``message`` for people."""
+
+    code: str
+    message: str
+
+    def as_dict(self) -> dict[str, str]:
+        return {"code": self.code, "message": self.message}
+
+
+def reach_m(chain: KinematicChain, q: np.ndarray) -> float:
+    """The farthest the tool came from the URDF root over the rows ``q`` (K, N) [m] (at least 0.1 m)."""
+    _, positions = chain.tool_poses(q)
+    return max(float(np.max(np.linalg.norm(positions, axis=1))) if len(positions) else 0.0, 0.1)
+
+
+def check_calibration(chain: KinematicChain, result, rows: MeasurementSet,
+                      stated_sigma_pos_m: float | None = None, press: tuple[float, float] | None = None
+                      ) -> list[Finding]:
+    """The findings on a :class:`pincal.fit.chain_calibration.ChainCalibration` of ``rows``.
+
+    At level ``registration`` nothing of the geometry is fitted, so the robot's own errors stay in the
+    residual: the noise ratio is not judged there, and a large residual points to a richer level first.
+
+    Args:
+        chain: the chain; the robot's reach is that of the geometry it holds (nominal or calibrated:
+            they differ by millimetres).
+        result: the calibration.
+        rows: the rows it was fitted on.
+        stated_sigma_pos_m: the sensor's stated position noise per axis [m], or None.
+        press: (calibrated, nominal) leave-one-row-out prediction errors
+            (:func:`pincal.fit.chain_calibration.press_against_nominal`), or None.
+    """
+    findings: list[Finding] = []
+    causes = "; ".join(DATA_CAUSES)
+    rms = result.rms_m
+    geometry = result.level != "registration"
+    if rms > MAX_RMS_M and not geometry:
+        findings.append(Finding("residual", f"the nominal geometry misses the measured points by {rms * 1e3:.3g} mm "
+                                f"RMS (more than {MAX_RMS_M * 1e3:g} mm) with the registration and target fitted: "
+                                f"calibrate the geometry (--level offsets or full); if the residual stays that "
+                                f"large, check: {causes}"))
+    elif rms > MAX_RMS_M:
+        findings.append(Finding("residual", f"the calibrated model misses the measured points by {rms * 1e3:.3g} mm "
+                                f"RMS (more than {MAX_RMS_M * 1e3:g} mm): the data and the model disagree beyond "
+                                f"any kinematic error. Likely: {causes}. Check a few rows by hand against the "
+                                "nominal model (pincal evaluate URDF on the nominal file)"))
+    per_axis = rms / np.sqrt(3.0)
+    if geometry and stated_sigma_pos_m and per_axis > MAX_NOISE_RATIO * stated_sigma_pos_m:
+        findings.append(Finding("noise", f"the residual ({per_axis * 1e3:.3g} mm per axis) is "
+                                f"{per_axis / stated_sigma_pos_m:.0f}× the sensor's stated noise "
+                                f"({stated_sigma_pos_m * 1e3:g} mm; more than {MAX_NOISE_RATIO:g}×): something "
+                                f"the model lacks, or bad data. Likely: {causes}; or an effect pincal diagnose "
+                                "finds (compliance, backlash, drift)"))
+    reach = reach_m(chain, rows.q)
+    if result.fit_target:
+        distance = float(np.max(np.linalg.norm(result.target.points, axis=1)))
+        if distance > reach:
+            findings.append(Finding("target", f"the estimated target is {distance:.3g} m from {chain.tip_link}, "
+                                    f"beyond the robot's reach in these rows ({reach:.3g} m): no tool is that long. "
+                                    "The data cannot place it; give --tool X,Y,Z,R,P,Y, vary the tool's "
+                                    f"orientation, or check: {causes}"))
+    for name, registration in zip(result.session_names or ("",), result.target.registrations):
+        # the robot base's position in the sensor frame is the registration's translation
+        distance = float(np.linalg.norm(registration.translation))
+        if distance > MAX_SENSOR_DISTANCE_M:
+            which = f"session '{name}': " if len(result.target.registrations) > 1 else ""
+            findings.append(Finding("registration", f"{which}the robot base is {distance:.3g} m from the sensor's "
+                                    f"origin (more than {MAX_SENSOR_DISTANCE_M:g} m): not a sensor that measures a "
+                                    f"robot to the millimetre. Check the units of x, y, z (mm instead of m?) and "
+                                    f"that the rows are of this robot"))
+    large = _large_corrections(result)
+    if large:
+        likely = "the causes of the residual warning" if rms > MAX_RMS_M else causes
+        findings.append(Finding("corrections", f"{len(large)} correction(s) beyond physical scale "
+                                f"({MAX_TRANSLATION_M * 1e3:g} mm or {np.degrees(MAX_ROTATION_RAD):g}°): "
+                                f"{', '.join(large[:4])}{', …' if len(large) > 4 else ''}. The geometry absorbs "
+                                f"something it is not: an effect the model lacks (pincal diagnose), a weakly "
+                                f"determined combination (--select prior holds each correction to its physical "
+                                f"scale), or bad data. Likely: {likely}"))
+    if press is not None and np.isinf(press[0]) and np.isfinite(press[1]):
+        findings.append(Finding("cross_validation", "a row is fitted exactly whatever it measured (leverage 1: "
+                                "some parameter is determined by that row alone, e.g. the only row where a joint "
+                                "moved), so the calibrated model cannot be cross-validated and that parameter fits "
+                                "its noise. Add rows that move every joint, use a lower --level, or pincal plan"))
+    elif press is not None and np.isfinite(press[0]) and np.isfinite(press[1]) and press[1] > 0 and (
+            np.sqrt(press[0] / press[1]) > 1.0 + 2.0 / np.sqrt(2.0 * rows.n_rows)):
+        gain = np.sqrt(press[0] / press[1])
+        findings.append(Finding("cross_validation", f"the calibrated model predicts left-out rows worse than the "
+                                f"nominal one (leave-one-row-out RMS error ×{gain:.3g}, beyond the "
+                                f"×{1.0 + 2.0 / np.sqrt(2.0 * rows.n_rows):.3g} its noise allows over {rows.n_rows} "
+                                f"rows): the kept parameters fit noise or an effect the model lacks. "
+                                "Try a lower --level, --select prior or bic, "
+                                "more varied postures (pincal plan), or pincal diagnose"))
+    return findings
+
+
+def _large_corrections(result) -> list[str]:
+    """Names and values of kept parameters beyond :data:`MAX_TRANSLATION_M` / :data:`MAX_ROTATION_RAD`."""
+    params = result.params
+    out = []
+    for i in range(params.size if params is not None else 0):
+        if result.status[i] not in ("calibrated", PRIOR_STATUS):
+            continue
+        value, unit = float(result.vector[i]), params.info[i].unit
+        if unit == "m" and abs(value) > MAX_TRANSLATION_M:
+            out.append(f"{params.info[i].name} {value * 1e3:+.3g} mm")
+        elif unit == "rad" and abs(value) > MAX_ROTATION_RAD:
+            out.append(f"{params.info[i].name} {np.degrees(value):+.3g}°")
+    return out
+
+
+def leave_one_out(jacobian: np.ndarray, residual: np.ndarray, blocks: np.ndarray) -> float:
+    """Linearised leave-one-row-out PRESS of a fit: Σ_k |(I − H_kk)⁻¹ e_k|² over the row blocks
+    ``blocks`` (K, b) of the data residual ``residual``; ``jacobian`` may carry extra (prior) rows
+    below the data rows, which enter the hat matrix (Allen 1974). inf when a row has leverage 1."""
+    u, s, _ = np.linalg.svd(jacobian, full_matrices=False)
+    u = u[:, s > s[0] * 1e-12] if s.size else u[:, :0]
+    ub = u[blocks]  # (K, b, r)
+    complement = np.eye(blocks.shape[1]) - np.einsum("kin,kjn->kij", ub, ub)
+    if np.min(np.linalg.eigvalsh(complement), initial=1.0) < LEVERAGE_FLOOR:
+        return float("inf")
+    return float(np.sum(np.linalg.solve(complement, residual[blocks][..., None]) ** 2))
+
+
+def refit_nominal(problem):
+    """The nominal model's fit of a problem's rows (registration and target only, no prior),
+    from its start, at its current noise scales: (objective, solution)."""
+    prior, problem.prior = problem.prior, None
+    try:
+        size = problem.params.size if problem.params is not None else 0
+        objective = problem.objective(np.array([], dtype=int), np.zeros(size))
+        return objective, solve(objective, objective.start_vector(), what="nominal fit")
+    finally:
+        problem.prior = prior
+
+
+def press_against_nominal(chain: KinematicChain, result, rows: MeasurementSet,
+                          row_weight: np.ndarray | None = None) -> tuple[float, float] | None:
+    """(calibrated, nominal) leave-one-row-out PRESS of a calibration of ``rows`` (the rows it was
+    fitted on), in the final fit's weighted units; None at level ``registration`` (nothing to compare).
+
+    The nominal fit is the registration and target refitted with the nominal kinematics at the
+    final fit's noise scales and row weights ``row_weight`` (default ones), without a prior.
+    """
+    from pincal.fit.chain_calibration import FitProblem
+
+    if result.params is None or result.params.size == 0:
+        return None
+    weight = np.ones(rows.n_rows) if row_weight is None else row_weight
+    problem = FitProblem(chain, result.params, rows, result.start, fit_target=result.fit_target, row_weight=weight,
+                         session_names=result.session_names)
+    problem.point_basis = result.point_basis
+    problem.sigma_pos, problem.sigma_rot = result.sigma_pos_m, result.sigma_rot_rad
+    problem.prior = None if result.prior_sigma is None else result.prior_sigma
+    calibrated = problem.objective(result.kept, np.zeros(result.params.size))
+    blocks = _data_objective(calibrated).row_indices()
+    n_data = blocks.size
+    jac = calibrated.jacobian(result.solution)
+    residual = calibrated.residual(result.solution)[:n_data]
+    objective, solution = refit_nominal(problem)
+    return (leave_one_out(jac, residual, blocks),
+            leave_one_out(solution.jacobian, solution.residual[:n_data], blocks))
+
+
+def _data_objective(objective):
+    """The sensor objective inside a prior-wrapped one."""
+    return getattr(objective, "objective", objective)
+
+
+def calibration_findings(chain: KinematicChain, result, rows: MeasurementSet, sigma_column: str | None = None,
+                         stated_sigma_pos_m: float | None = None, press_of=None) -> list[Finding]:
+    """Every finding on a calibration of ``rows`` (the rows it was fitted on): :func:`check_calibration`
+    with the leave-one-row-out comparison of ``press_of`` (default ``result``) against nominal."""
+    from pincal.fit.chain_calibration import row_weights
+
+    press = press_against_nominal(chain, press_of or result, rows, row_weights(rows, sigma_column))
+    return check_calibration(chain, result, rows, stated_sigma_pos_m, press)

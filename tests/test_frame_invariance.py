@@ -1,0 +1,126 @@
+"""Invariances of a calibration (issue: right on setups it has never seen, item 2).
+
+Expressing the same measurements in a sensor frame moved by up to 20 m and turned
+arbitrarily is the same experiment: the registration takes the move, and nothing
+else may change — neither the parameters kept (the identifiability analysis and the
+selection), nor the corrected geometry, nor the errors. A target offset by up to 2 m from
+the flange changes the data's lever arms, not only their frame: the model stays exact on
+noise-free rows with as many parameters kept (see that test for what may differ).
+
+Tolerance 1e-9 (relative, the issue's) on the corrected placements, and 1e-9 m / 1e-9 rad on
+each row's errors (1e-9 relative on a 1 m arm): both fits stop at the solver's tolerances on
+the same cost, so they agree to its rounding (measured: 1e-16 on random postures, 3e-10 on a
+raster whose flat valley the solver leaves early); a dependence on the frame (a start, a
+scaling or a threshold taken in sensor coordinates) shows as 1e-6 or worse.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import replace
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.sessions import session_pose_errors, session_rows
+from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import PlacementErrors
+from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
+from pincal.simulation.sensor import random_configurations
+from tests.conftest import INDUSTRIAL_ARM_START
+
+RELATIVE = 1e-9
+TARGET = np.array([[0.035, -0.02, 0.21]])
+
+moves = st.tuples(
+    st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1),
+    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+    st.floats(0.0, 20.0),
+)
+
+
+def _frame(move):
+    quaternion, direction, distance = move
+    rotation = Rotation.from_quat(np.asarray(quaternion) / np.linalg.norm(quaternion)).as_matrix()
+    direction = np.asarray(direction)
+    shift = direction / max(np.linalg.norm(direction), 1e-12) * distance  # |shift| <= 20 m
+    return rotation, shift
+
+
+def _moved(data, rotation, shift):
+    """The same rows in a sensor frame moved by (rotation, shift): g' = R g + p, G' = R G."""
+    return replace(data, points=data.points @ rotation.T + shift,
+                   rotations=None if data.rotations is None else rotation @ data.rotations)
+
+
+@functools.lru_cache(maxsize=None)
+def _rows(urdf, kind, seed):
+    chain = KinematicChain.from_urdf(urdf, "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(seed)
+    truth = rng.normal(0.0, 3e-4, params.size)
+    if kind == "random":
+        q = random_configurations(chain, rng, 40)
+    else:  # a raster at constant orientation: the target is held (pincal.fit.target_hold, rule 1)
+        q = constant_orientation_path(chain, "raster", 120, np.array([1.2, 0.0, 0.5]), np.diag([-1.0, 1.0, -1.0]),
+                                      INDUSTRIAL_ARM_START)
+    data = measure_truth(params, truth, q, sensor_at(4.2), rng, 20e-6, np.radians(0.003), points=TARGET)
+    return chain, data
+
+
+def _outcome(chain, data):
+    nominal = chain.placements()
+    try:  # calibrate_chain leaves the calibrated placements in the chain: the errors are theirs
+        result = calibrate_chain(chain, data, "full")
+        errors = session_pose_errors(chain, data, session_rows(data, result.session_names),
+                                     result.target.registrations, points=result.target.points,
+                                     target_rotation=result.target.rotation)
+    finally:
+        chain.set_placements(nominal)
+    return result, np.array(result.params.placements(result.vector)), errors
+
+
+def _assert_same(a, b):
+    (ra, pa, ea), (rb, pb, eb) = a, b
+    assert ra.kept.tolist() == rb.kept.tolist()
+    assert ra.status == rb.status
+    assert [h.direction.round(6).tolist() for h in ra.held] == [h.direction.round(6).tolist() for h in rb.held]
+    assert np.abs(pa - pb).max() <= RELATIVE * max(1.0, np.abs(pa).max())
+    for x, y in ((ea.position_m, eb.position_m), (ea.rotation_rad, eb.rotation_rad)):
+        assert np.abs(x - y).max() <= RELATIVE  # 1e-9 m, 1e-9 rad: 1e-9 relative on a 1 m arm
+
+
+@settings(max_examples=3, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(move=moves)
+def test_moving_the_sensor_frame_changes_nothing(industrial_arm_urdf, move):
+    rotation, shift = _frame(move)
+    for kind, seed in (("random", 11), ("raster", 12)):
+        chain, data = _rows(industrial_arm_urdf, kind, seed)
+        _assert_same(_outcome(chain, data), _outcome(chain, _moved(data, rotation, shift)))
+
+
+@settings(max_examples=3, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(offset=st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).map(lambda v: 2.0 * np.asarray(v) / max(
+    np.linalg.norm(v), 1.0)))
+def test_a_target_offset_changes_only_the_target(industrial_arm_urdf, offset):
+    """Noise-free rows of a probe at TARGET and at TARGET + offset (|offset| <= 2 m): the same number of
+    identifiable and kept parameters, and both models exact in every row (1e-9 m, 1e-9 rad).
+
+    Which of a group of combinations equivalent up to the target is kept may differ: a 2 m lever
+    weights the wrist's rotations differently in the pivoted QR (pincal.fit.identifiability), and the
+    target then takes the rest (seen: A5.rz kept instead of A6.ry for a 2 m offset along x, the target
+    0.9 mm from TARGET + offset). The corrected flange frame is the same only up to that choice."""
+    chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(13)
+    truth = rng.normal(0.0, 3e-4, params.size)
+    q = random_configurations(chain, rng, 40)
+    rows = [measure_truth(params, truth, q, sensor_at(4.2), np.random.default_rng(0), 0.0, 0.0, points=points)
+            for points in (TARGET, TARGET + offset)]
+    near, far = (_outcome(chain, data) for data in rows)
+    assert near[0].rank == far[0].rank and near[0].kept.size == far[0].kept.size
+    for x, y in ((near[2].position_m, far[2].position_m), (near[2].rotation_rad, far[2].rotation_rad)):
+        assert np.abs(x).max() <= RELATIVE and np.abs(y).max() <= RELATIVE  # both exact, in every row
