@@ -47,6 +47,7 @@ from pincal.model.parameter_sets import NoParameters
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.so3 import log3
 
 #: Measured points whose spread about a point (or off a line) is below this [m]
 #: coincide (lie on one line) for a registration: 1 µm is below the noise of any
@@ -56,6 +57,9 @@ MIN_SPREAD_M = 1e-6
 #: ... or below this fraction of the largest spread (rounding, the test of
 #: :func:`pincal.fit.registration.register_points`).
 MIN_SPREAD_RATIO = 1e-9
+#: A tool that turns by less than this over a session's rows [rad] keeps one orientation
+#: (the test of :data:`pincal.fit.target_hold.NO_TURN_RAD`: a controller's rounding).
+MIN_TURN_RAD = 1e-6
 
 
 def where(data: MeasurementSet, name: str) -> str:
@@ -161,7 +165,7 @@ def start_registration(
         model_rotations: (K, 3, 3) the target frame in the robot base, R_k R_T.
         measured: the session's rows (their orientations G_k and points).
     """
-    if measured.rotations is None or by_points(measured):
+    if measured.rotations is None or (by_points(measured) and not _on_one_line(world.reshape(-1, 3))):
         return register_points(world.reshape(-1, 3), sensed.reshape(-1, 3))
     return register_orientations(model_rotations, measured.rotations, world.reshape(-1, 3), sensed.reshape(-1, 3))
 
@@ -184,6 +188,17 @@ def initial_target(
     index = data.session_index
     groups = [np.flatnonzero(index == s) for s in range(len(data.session_names))]
     from_points = [data.rotations is None or by_points(data.select(rows)) for rows in groups]
+    for s, (name, rows) in enumerate(zip(data.session_names, groups)):
+        if from_points[s] and fit_points and _on_one_line(t[rows]):
+            turns = np.linalg.norm(log3(rot[rows[0]].T @ rot[rows]), axis=1)  # from the first row's [rad]
+            if data.rotations is not None and turns.max() > MIN_TURN_RAD:  # register by the orientations
+                from_points[s] = False
+                continue
+            raise CalibrationError(
+                f"{where(data, name)}: the tool positions of these rows lie on one line (or at one point) in the "
+                "model, e.g. a straight-line path: the sensor's rotation about that line cannot be told from where "
+                "the target sits on the tool; add rows off the line (a second line, an arc), turn the tool along it "
+                "and measure its orientation, or give --tool")
     points = np.zeros((data.n_points, 3))
     for _ in range(iterations if fit_points else 1):
         world = points_in_base(t, rot, points)
@@ -210,6 +225,14 @@ def initial_target(
     if data.rotations is not None:
         rotation = _target_rotation(rot, data, registrations)
     return TargetEstimate(registrations[0], points, rotation, tuple(registrations))
+
+
+def _on_one_line(positions: np.ndarray) -> bool:
+    """Whether positions (n, 3) [m] lie on one line, by the test of :func:`registration_problem`."""
+    if len(positions) < 3:
+        return False
+    spread = np.linalg.svd(positions - positions.mean(axis=0), compute_uv=False) / np.sqrt(len(positions))
+    return bool(spread[1] <= max(MIN_SPREAD_M, MIN_SPREAD_RATIO * spread[0]))
 
 
 def _target_rotation(rot: np.ndarray, data: MeasurementSet, registrations) -> np.ndarray:
