@@ -12,6 +12,10 @@
     inside it, and the ratios K = 10 000 / K = 1 000.
 (d) ``pincal plan``: 100 of 10 000 sampled KUKA configurations at the full
     level, whole process and planning time, default and single-threaded BLAS.
+(g) ``--auto``: ``pincal calibrate --level auto`` against ``--level full`` on 2 500 6D rows of
+    scripts/scenarios.py's raster at constant orientation, whole processes in alternated pairs;
+    goal auto <= 3x full (the folds of --level auto are scored by one Gauss-Newton step from
+    the fit of all rows from 500 rows on: pincal.fit.fold_update). Writes scripts/benchmark_auto.json.
 (f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
     selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
     6D rows (position + orientation) taken along 6 lines and 4 planes in joint
@@ -572,8 +576,43 @@ def _print_against(results: dict) -> None:
           "calls the run made, at Pinocchio's cost per call")
 
 
+def auto_against_full(pairs: int = 3, rows: int = 2500) -> dict:
+    """(g) ``calibrate --level auto`` against ``--level full``, whole processes side by side (alternated
+    pairs, the same machine and load), on the raster scenario of scripts/scenarios.py with ``rows`` 6D rows.
+    The goal (the unseen-setups issue): auto ≤ 3× full."""
+    import importlib.util
+    from dataclasses import replace
+
+    from pincal.measurements.csv_v1 import write_measurements
+
+    spec = importlib.util.spec_from_file_location("scenarios", HERE / "scenarios.py")
+    scenarios = importlib.util.module_from_spec(spec)
+    sys.modules["scenarios"] = scenarios
+    spec.loader.exec_module(scenarios)
+    case = replace(next(c for c in scenarios.SCENARIOS if "6D, raster" in c.name), rows=rows)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        urdf, tip = scenarios.build_robots(folder)[case.robot]
+        _, calibration, _ = scenarios.simulate(case, urdf, tip)
+        write_measurements(folder / "raster.csv", calibration)
+        times: dict[str, list[float]] = {"full": [], "auto": []}
+        for _ in range(pairs):
+            for level in ("full", "auto"):
+                started = time.perf_counter()
+                subprocess.run([sys.executable, "-c", "import sys; from pincal.cli import console; sys.exit(console())",
+                                "calibrate", str(urdf), str(folder / "raster.csv"), "--tip-link", tip, "--level", level,
+                                "--quiet", "--out", str(folder / f"{level}.urdf"), "--report",
+                                str(folder / f"{level}.json")], check=True, capture_output=True)
+                times[level].append(time.perf_counter() - started)
+    ratios = [a / f for a, f in zip(times["auto"], times["full"])]
+    return {"rows": rows, "pairs": pairs, "full_s": times["full"], "auto_s": times["auto"],
+            "ratio_median": statistics.median(ratios), "goal": 3.0, "load_average": os.getloadavg()}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--auto", action="store_true", help="only (g): --level auto against --level full, "
+                        "2 500 raster rows, whole processes side by side")
     parser.add_argument("--runs", type=int, default=50, help="runs of (a) (default 50)")
     parser.add_argument("--workers", type=int, default=2, help="processes of (b) (default 2)")
     parser.add_argument("--skip-study", action="store_true", help="skip (b), the full study")
@@ -587,6 +626,16 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"benchmarks of (e) among {','.join(AGAINST)} (default {default_against})")
     parser.add_argument("--one-blas-thread", action="store_true", help="(e) with OPENBLAS_NUM_THREADS=1 for both")
     args = parser.parse_args(argv)
+    if args.auto:
+        result = auto_against_full()
+        print(f"(g) calibrate --level auto / --level full, {result['rows']} raster rows, whole process: "
+              f"{result['ratio_median']:.2f}x (median of {result['pairs']} pairs; goal <= {result['goal']:g}x); "
+              f"full {statistics.median(result['full_s']):.2f} s, auto {statistics.median(result['auto_s']):.2f} s, "
+              f"load {result['load_average'][0]:.1f}")
+        path = args.json or HERE / "benchmark_auto.json"
+        path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {path}")
+        return 0
     if args.against:
         names = [n for n in args.only.split(",") if n]
         unknown = [n for n in names if n not in AGAINST]

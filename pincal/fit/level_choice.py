@@ -40,6 +40,9 @@ level generalises is measured, not assumed:
    narrower prior (zero width on the placements it leaves out), and is chosen only
    when its CV is lower by more than the SE.
 
+From :data:`pincal.fit.fold_update.LINEARISED_FROM_ROWS` rows on (one session), each level is
+fitted once on all rows and its folds are scored by one Gauss–Newton step (eq L1 there).
+
 :func:`choose_level` (sensor data) and :func:`choose_fixture_level` return a
 :class:`LevelChoice`; the caller then calibrates all rows at the chosen level.
 """
@@ -55,8 +58,9 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
+from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, row_weights
 from pincal.fit.fixture_calibration import calibrate_fixture
+from pincal.fit.fold_update import LINEARISED_FROM_ROWS, linearised_fold_errors
 from pincal.fit.metrics import pose_errors
 from pincal.fit.sessions import register_session, where
 from pincal.measurements.data import MeasurementSet
@@ -358,12 +362,34 @@ def choose_level(
                              target_rotation=target.rotation)
         return float(np.sqrt(np.mean(errors.position_m**2))), len(result.kept)
 
-    scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress),
-                             lambda: chain.set_placements(nominal))
+    if several or reject_outliers or rows.n_rows < LINEARISED_FROM_ROWS:
+        scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress),
+                                 lambda: chain.set_placements(nominal))
+    else:  # many rows: one fit per level, each fold by one Gauss–Newton step (pincal.fit.fold_update, eq L1)
+        scores = _linearised(chain, rows, fold_list, levels, Counter(progress), nominal,
+                             dict(tool_known=tool_known, sigma_column=sigma_column, selection=selection))
+        scheme += f", scored from the fit of all {rows.n_rows} rows by one Gauss–Newton step per fold (eq L1)"
     error = ("RMS distance of the held-out rows' target points from the model's [mm], "
              + ("each held-out session through its own registration re-estimated from its rows (6 parameters)"
                 if several else "through the training fit's registration (one session)"))
     return _choice(scheme, error, fold_list, scores, selection, started)
+
+
+def _linearised(chain, rows, folds, levels, counter: Counter, nominal, options) -> list[LevelScore]:
+    """Eq L1 of :mod:`pincal.fit.fold_update` for every level: its fit of all rows, then each fold."""
+    counter.expect(len(levels))
+    scores = []
+    try:
+        for level in levels:
+            chain.set_placements(nominal)
+            result = calibrate_chain(chain, rows, level, **options)
+            errors = linearised_fold_errors(chain, result, rows, [fold.test for fold in folds],
+                                            row_weights(rows, options["sigma_column"]))
+            scores.append(_score(level, [e * 1000.0 for e in errors], [len(result.kept)] * len(folds), []))
+            counter.tick()
+    finally:
+        chain.set_placements(nominal)
+    return scores
 
 
 # --- socket fixture ----------------------------------------------------------------------------

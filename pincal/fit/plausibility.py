@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pincal.fit.chain_calibration import row_weights
+from pincal.fit.fold_update import final_problem
 from pincal.fit.identifiability import LEVERAGE_FLOOR
 from pincal.fit.prior import PRIOR_STATUS
 from pincal.fit.solver import solve
@@ -204,16 +206,9 @@ def press_against_nominal(chain: KinematicChain, result, rows: MeasurementSet,
     The nominal fit is the registration and target refitted with the nominal kinematics at the
     final fit's noise scales and row weights ``row_weight`` (default ones), without a prior.
     """
-    from pincal.fit.chain_calibration import FitProblem
-
     if result.params is None or result.params.size == 0:
         return None
-    weight = np.ones(rows.n_rows) if row_weight is None else row_weight
-    problem = FitProblem(chain, result.params, rows, result.start, fit_target=result.fit_target, row_weight=weight,
-                         session_names=result.session_names)
-    problem.point_basis = result.point_basis
-    problem.sigma_pos, problem.sigma_rot = result.sigma_pos_m, result.sigma_rot_rad
-    problem.prior = None if result.prior_sigma is None else result.prior_sigma
+    problem = final_problem(chain, result, rows, row_weight)
     calibrated = problem.objective(result.kept, np.zeros(result.params.size))
     blocks = _data_objective(calibrated).row_indices()
     n_data = blocks.size
@@ -233,7 +228,5 @@ def calibration_findings(chain: KinematicChain, result, rows: MeasurementSet, si
                          stated_sigma_pos_m: float | None = None, press_of=None) -> list[Finding]:
     """Every finding on a calibration of ``rows`` (the rows it was fitted on): :func:`check_calibration`
     with the leave-one-row-out comparison of ``press_of`` (default ``result``) against nominal."""
-    from pincal.fit.chain_calibration import row_weights
-
     press = press_against_nominal(chain, press_of or result, rows, row_weights(rows, sigma_column))
     return check_calibration(chain, result, rows, stated_sigma_pos_m, press)
