@@ -390,7 +390,8 @@ def large_calibration(per_row: dict | None = None, floor: float = 0.0) -> dict:
         data = Path(tmp) / "tracker.csv"
         session = large_session(data)
         command = [sys.executable, "-m", "pincal", "calibrate", str(urdf), str(data), "--tip-link", _UR5_TIP,
-                   "--level", "full", "--out", f"{tmp}/ur5_calibrated.urdf", "--report", f"{tmp}/REPORT.json"]
+                   "--level", "full", "--select", "aic", "--out", f"{tmp}/ur5_calibrated.urdf",
+                   "--report", f"{tmp}/REPORT.json"]
         started = time.perf_counter()
         subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         wall = time.perf_counter() - started
@@ -437,6 +438,9 @@ AGAINST = {
     # restarts) on 2 worker processes; minutes at 6975758 (use --pairs 3 or fewer)
     "study": ["study", "--out", "{out}/study", "--workers", "2"],
 }
+#: Arguments this tree needs to do the work an older revision does by default: ``--select aic`` since
+#: ``--select prior`` became the default (the revisions these ratios are quoted against know no --select).
+SAME_WORK = {name: ["--select", "aic"] for name in ("diagnose_tiago", "calibrate_tiago", "calibrate_large")}
 #: The robot (URDF in example-robot-data, tip link) of each benchmark of :data:`AGAINST`, for its lower bound.
 AGAINST_ROBOT = {"diagnose_tiago": (_TIAGO_URDF, "wrist_ft_tool_link"),
                  "calibrate_tiago": (_TIAGO_URDF, "wrist_ft_tool_link"),
@@ -497,17 +501,19 @@ def _timed_run(python: str | Path, arguments: list[str], env: dict, files: dict 
 
 
 def compare(python_old: str | Path, python_new: str | Path, arguments: list[str], pairs: int = 5,
-            env: dict | None = None, files: dict | None = None) -> dict:
+            env: dict | None = None, files: dict | None = None, new_extra: list[str] | None = None) -> dict:
     """Run the same whole-process command with two interpreters, alternately: pair i runs
-    old then new for even i, new then old for odd i. Returns the absolute times, the ratio
+    old then new for even i, new then old for odd i (the new one with ``new_extra`` arguments
+    appended: what keeps the two runs the same work). Returns the absolute times, the ratio
     old / new of each pair and their median, and the load average before and after."""
     env = env or {}
+    new_arguments = arguments + list(new_extra or [])
     load_before = os.getloadavg()
     old_times, new_times = [], []
     for i in range(pairs):
-        order = ((python_old, old_times), (python_new, new_times))
-        for python, times in order if i % 2 == 0 else order[::-1]:
-            times.append(_timed_run(python, arguments, env, files))
+        order = ((python_old, old_times, arguments), (python_new, new_times, new_arguments))
+        for python, times, command in order if i % 2 == 0 else order[::-1]:
+            times.append(_timed_run(python, command, env, files))
     ratios = [o / n for o, n in zip(old_times, new_times)]
     return {
         "pairs": pairs,
@@ -541,9 +547,10 @@ def against(revision: str, pairs: int, names: list[str], one_blas_thread: bool) 
         floor = import_floor()
         out["import_floor_s"] = floor
         for name in names:
-            out[name] = compare(python_old, sys.executable, AGAINST[name], pairs, env, files)
+            extra = SAME_WORK.get(name, [])
+            out[name] = compare(python_old, sys.executable, AGAINST[name], pairs, env, files, extra)
             with tempfile.TemporaryDirectory() as tmp:
-                counts = counted_run(_command(sys.executable, AGAINST[name], tmp, files), cwd=tmp)
+                counts = counted_run(_command(sys.executable, AGAINST[name] + extra, tmp, files), cwd=tmp)
             from pincal.robots import example_robot_data_urdf, kuka_lwr4plus_urdf
 
             urdf, tip = AGAINST_ROBOT[name]

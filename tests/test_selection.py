@@ -79,7 +79,8 @@ def test_prefixes_past_a_dependent_column_are_not_feasible(dependent):
     assert expected == [dependent is None or j <= dependent for j in range(len(order) + 1)]
 
 
-@pytest.mark.parametrize("always", [[], [0]], ids=["no-always-column", "one-always-column"])
+@pytest.mark.parametrize("always", [[], [0], [0, 1]],
+                         ids=["no-always-column", "one-always-column", "two-always-columns"])
 def test_curvature_ratio_of_a_quadratic_model(always):
     """f_i(x) = a_i·x + ½ xᵀ B_i x: S u = Σ e_i B_i u exactly, so the finite difference of eq S3 must
     give ‖Pᵀ S u‖ / s² to rounding (1e-6 relative: the step is 1e-4), u the weakest kinematic direction

@@ -15,6 +15,7 @@ noise-limited prediction. The rules' limits are :data:`pincal.fit.target_hold.NO
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import lxml.html
 import numpy as np
@@ -22,8 +23,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
+from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import calibrate_chain
-from pincal.fit.target_hold import MAX_TARGET_STD_M, NO_TURN_RAD, shift_turns
+from pincal.fit.target_hold import MAX_TARGET_STD_M, NO_TURN_RAD, principal_turns, shift_grams
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
@@ -138,7 +140,7 @@ def test_turn_is_the_rms_rotation_across_a_direction():
     rotations = Rotation.from_rotvec(np.outer(theta, [0, 0, 1])).as_matrix()  # (K, 3, 3)
     shift = rotations.reshape(-1, 3)  # d(sensed point)/d(target shift), rows of every R_k
     translation = np.tile(np.eye(3), (len(theta), 1))  # the registration's translation takes the mean
-    turns, directions = shift_turns(np.hstack([translation]), shift, np.arange(3))
+    turns, directions = principal_turns(*shift_grams(translation, shift, np.arange(3)))
     assert turns[0] < 1e-12 and abs(directions[2, 0]) == pytest.approx(1.0)
     rms = np.sqrt(np.mean(theta**2))
     assert turns[1:] == pytest.approx([rms, rms], rel=1e-3)  # 1 − cos θ is second order
@@ -155,3 +157,31 @@ def test_a_single_straight_line_is_refused_in_one_line(industrial_arm_urdf, tmp_
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "line.csv" in err and "lie on one line" in err
     assert not out.exists()
+
+
+def test_a_straight_line_with_a_turning_tool(industrial_arm_urdf):
+    """One line while the tool turns ±5°: with orientations the registration starts from them (a fit);
+    positions only, one line saying what to add (the start cannot come from collinear positions)."""
+    chain, calibration, _ = _cell(industrial_arm_urdf, "line", 40, seed=10, turn_rad=np.radians(5.0))
+    result = calibrate_chain(chain, calibration, "offsets")
+    assert result.held == () and result.rms_m < 1.0e-3
+    chain.set_placements(result.params.nominal_placements)
+    with pytest.raises(CalibrationError, match="no orientation was measured"):
+        calibrate_chain(chain, replace(calibration, rotations=None), "offsets")
+
+
+def test_the_reason_names_each_rule_for_its_own_directions():
+    """z never seen (rule 1) and x, y weakly determined (rule 2): one clause each, the turn needed only
+    for x and y, the centroid named for a target of three points, --tool offered once."""
+    from pincal.fit.target_hold import HeldDirection, held_reason
+
+    common = dict(value_m=0.0, frame="flange", points=3)
+    held = (HeldDirection(np.array([0.0, 0.0, 1.0]), 0.0, std_m=np.inf, **common),
+            HeldDirection(np.array([1.0, 0.0, 0.0]), np.radians(0.003), std_m=0.026, **common),
+            HeldDirection(np.array([0.0, 1.0, 0.0]), np.radians(0.003), std_m=0.02, **common))
+    text = held_reason(held)
+    unseen, weak = text.split("; and ")
+    assert "z of flange" in unseen and "cannot be told" in unseen and "x of flange" not in unseen
+    assert "x of flange and y of flange" in weak and "±26 mm" in weak
+    assert "the centroid of the target's 3 points" in unseen and text.count("--tool") == 1
+    assert "turn the tool about axes across it and vary the tool's orientation by ≥ 0.0078° across them" in text

@@ -24,9 +24,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pincal.fit.chain_calibration import ChainCalibration, FitProblem
+from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import ChainCalibration, FitProblem, calibrate_chain, row_weights
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.progress import Counter
 
 #: Rows from which the folds are scored by eq L1 instead of refits: each then holds 50 or
 #: more rows and a fold moves the parameters by ~1/3 of their standard deviation.
@@ -71,4 +73,33 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
         metres = predicted * (problem.sigma_pos / problem.row_weight[test])[:, None]
         distances = np.linalg.norm(metres.reshape(len(test), rows.n_points, 3), axis=2)
         out.append(float(np.sqrt(np.mean(distances**2))))
+    return out
+
+
+def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequence[np.ndarray],
+                      levels: Sequence[str], counter: Counter, nominal, options: dict
+                      ) -> list[tuple[str, list[float], list[int], list[str]]]:
+    """Every level's fit of all ``rows`` (``options``: those of :func:`calibrate_chain`), then eq L1 for
+    each fold's held-out rows ``tests``: (level, fold errors [mm], kept per fold, failures) per level.
+    As with refits, the first level must fit (else one line); a later one that cannot is no candidate
+    (NaN errors). The chain's placements are ``nominal`` again on return."""
+    out = []
+    counter.expect(len(levels))
+    try:
+        for level in levels:
+            chain.set_placements(nominal)
+            try:
+                result = calibrate_chain(chain, rows, level, **options)
+            except CalibrationError as exc:
+                if level == levels[0]:
+                    raise CalibrationError(f"--level auto: the {rows.n_rows} rows cannot be calibrated even at "
+                                           f"level {level}: {exc}") from None
+                out.append((level, [np.nan] * len(tests), [-1] * len(tests), [f"all rows: {exc}"]))
+                continue
+            finally:
+                counter.tick()
+            errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options["sigma_column"]))
+            out.append((level, [e * 1000.0 for e in errors], [len(result.kept)] * len(tests), []))
+    finally:
+        chain.set_placements(nominal)
     return out

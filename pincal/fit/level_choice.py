@@ -58,9 +58,9 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, row_weights
+from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
-from pincal.fit.fold_update import LINEARISED_FROM_ROWS, linearised_fold_errors
+from pincal.fit.fold_update import LINEARISED_FROM_ROWS, linearised_levels
 from pincal.fit.metrics import pose_errors
 from pincal.fit.sessions import register_session, where
 from pincal.measurements.data import MeasurementSet
@@ -376,20 +376,9 @@ def choose_level(
 
 
 def _linearised(chain, rows, folds, levels, counter: Counter, nominal, options) -> list[LevelScore]:
-    """Eq L1 of :mod:`pincal.fit.fold_update` for every level: its fit of all rows, then each fold."""
-    counter.expect(len(levels))
-    scores = []
-    try:
-        for level in levels:
-            chain.set_placements(nominal)
-            result = calibrate_chain(chain, rows, level, **options)
-            errors = linearised_fold_errors(chain, result, rows, [fold.test for fold in folds],
-                                            row_weights(rows, options["sigma_column"]))
-            scores.append(_score(level, [e * 1000.0 for e in errors], [len(result.kept)] * len(folds), []))
-            counter.tick()
-    finally:
-        chain.set_placements(nominal)
-    return scores
+    """Eq L1 of :mod:`pincal.fit.fold_update` for every level (its fit of all rows, then each fold)."""
+    return [_score(*entry) for entry in linearised_levels(chain, rows, [fold.test for fold in folds], levels,
+                                                          counter, nominal, options)]
 
 
 # --- socket fixture ----------------------------------------------------------------------------

@@ -26,7 +26,9 @@ names the likely causes and what to try. The thresholds and their sources:
   1 + 2/sqrt(2K) for K rows (two standard errors of an RMS over K rows, whose relative standard
   error is 1/sqrt(2K) for Gaussian errors): the calibration made predictions of rows it did not
   see worse (TIAGo's 37 mocap rows at level full: ×1.10, under the 1.23 bound; the issue's Kinova
-  trained on one fixture placement: ×2).
+  trained on one fixture placement: ×2). A heuristic bound: the two PRESS values are computed on
+  the same rows, so they are correlated, and each row has 3P (+3) coordinates — both make the
+  ratio's noise smaller than 1/sqrt(2K), so the bound errs towards silence.
 """
 
 from __future__ import annotations

@@ -33,20 +33,22 @@ slow when the weakest directions are nearly undetermined; instead:
 
        ρ_j = ‖Pᵀ S u_j‖ / s_j²                                         (S3)
 
-   at least one, ‖C⁻¹ S_p‖ ≥ 1 for the profile's information C = R_KKᵀ R_KK and
-   curvature S_p (when S_p w_j lies along w_j, exactly) and Gauss–Newton does not
-   converge locally (Dennis & Schnabel 1983, Theorem 10.2.1): the estimate along u_j
-   is made by the noise through the curvature, not by the data, and its linearised
-   standard deviation means nothing. Without always-estimated columns this is the
-   earlier ‖S u_j‖ / s_j².
+   at least one, ‖C⁻¹ S_p w_j‖ ≥ 1 for the profile's information C = R_KKᵀ R_KK and
+   curvature S_p (equal to ρ_j when S_p w_j lies along w_j): the curvature is as large
+   as the information along w_j, where Gauss–Newton's local contraction (Dennis &
+   Schnabel 1983, Theorem 10.2.1: convergence needs the spectral radius of C⁻¹ S_p
+   below one) is lost in practice, and the estimate along u_j is made by the noise
+   through the curvature, not by the data. A practical criterion, not a proof: the
+   spectral radius is at least |w_jᵀ C⁻¹ S_p w_j|, which ρ_j bounds from above.
+   Without always-estimated columns this is the earlier ‖S u_j‖ / s_j².
    Levenberg–Marquardt then crawls along the curved valley for hundreds of
    evaluations (794 on a 2 500-row UR5 session whose wrist never bends, as in
    scripts/benchmark.py (f) but with 1e-6 rad of encoder jitter). Such a prefix, and
    every larger one, is not a candidate. Judging the kinematic directions given the
    always-estimated unknowns matters where those are weakly determined: a target
    whose tool hardly turns made every prefix's weakest direction the target's own
-   (tests/test_target_hold.py: 0 of 18 kept on a 0.1° raster with the whole block's
-   weakest direction and ‖S u‖, 13 or more now).
+   (measured on tests/test_target_hold.py's raster turning 0.1° RMS, seed 8: 0 of 18 kept
+   with the whole block's weakest direction and ‖S u‖, 13 now; the test asserts half).
    S u_j is one finite difference of the Jacobian along u_j (:func:`curvature_ratios`).
 3. **Finalists refitted.** The linear scores ignore the curvature of the model
    (on the TIAGo data they differ from the nonlinear ones by up to ~7 units of

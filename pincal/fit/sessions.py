@@ -57,6 +57,10 @@ MIN_SPREAD_M = 1e-6
 #: ... or below this fraction of the largest spread (rounding, the test of
 #: :func:`pincal.fit.registration.register_points`).
 MIN_SPREAD_RATIO = 1e-9
+#: Modelled tool positions off their line by less than this fraction of their spread along it lie on
+#: it: 0.1 mm per metre, the path error of a straight-line move replayed through encoders (jitter of
+#: 1e-5 rad at a 1 m reach is 10 µm), far below any path meant to leave the line.
+LINE_RATIO = 1e-4
 #: A tool that turns by less than this over a session's rows [rad] keeps one orientation
 #: (the test of :data:`pincal.fit.target_hold.NO_TURN_RAD`: a controller's rounding).
 MIN_TURN_RAD = 1e-6
@@ -194,6 +198,11 @@ def initial_target(
             if data.rotations is not None and turns.max() > MIN_TURN_RAD:  # register by the orientations
                 from_points[s] = False
                 continue
+            if turns.max() > MIN_TURN_RAD:  # the tool turns, so the data may fix it; the start cannot
+                raise CalibrationError(
+                    f"{where(data, name)}: the tool positions of these rows lie on one line in the model (e.g. a "
+                    "straight-line path) and no orientation was measured: pincal cannot start the registration "
+                    "from them; add rows off the line, orientation columns (qx,qy,qz,qw), or give --tool")
             raise CalibrationError(
                 f"{where(data, name)}: the tool positions of these rows lie on one line (or at one point) in the "
                 "model, e.g. a straight-line path: the sensor's rotation about that line cannot be told from where "
@@ -228,11 +237,12 @@ def initial_target(
 
 
 def _on_one_line(positions: np.ndarray) -> bool:
-    """Whether positions (n, 3) [m] lie on one line, by the test of :func:`registration_problem`."""
+    """Whether modelled tool positions (n, 3) [m] lie on one line: off it by at most :data:`MIN_SPREAD_M`
+    or :data:`LINE_RATIO` of their spread along it (RMS)."""
     if len(positions) < 3:
         return False
     spread = np.linalg.svd(positions - positions.mean(axis=0), compute_uv=False) / np.sqrt(len(positions))
-    return bool(spread[1] <= max(MIN_SPREAD_M, MIN_SPREAD_RATIO * spread[0]))
+    return bool(spread[1] <= max(MIN_SPREAD_M, LINE_RATIO * spread[0]))
 
 
 def _target_rotation(rot: np.ndarray, data: MeasurementSet, registrations) -> np.ndarray:

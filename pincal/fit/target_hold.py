@@ -91,16 +91,6 @@ def shift_grams(jacobian: np.ndarray, shift_columns: np.ndarray, other_columns: 
     return rest.T @ rest, shift.T @ shift
 
 
-def shift_turns(jacobian: np.ndarray, shift_columns: np.ndarray, other_columns: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Eq T1's principal directions and turns (arguments as :func:`shift_grams`).
-
-    Returns:
-        turns (3,) ascending [rad] and their directions (3, 3), one per column, in the tool frame.
-    """
-    return principal_turns(*shift_grams(jacobian, shift_columns, other_columns))
-
-
 def principal_turns(absorbed: np.ndarray, total: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eq T1's turns (3,) ascending [rad] and principal directions (3, 3) from its Gram matrices: the
     symmetric-definite generalised eigenproblem absorbed u = turn² total u (columns normalised)."""
@@ -143,10 +133,14 @@ def held_reason(held: Sequence[HeldDirection] | HeldDirection) -> str:
     group = [held] if isinstance(held, HeldDirection) else list(held)
     unseen = [h for h in group if not np.isfinite(h.std_m)]
     weak = [h for h in group if np.isfinite(h.std_m)]
-    return "; and ".join(_reason(part) for part in (unseen, weak) if part)
+    parts = [_reason(part) for part in (unseen, weak) if part]
+    frame = group[0].frame
+    return ("; and ".join(why for why, _ in parts) + f", so it is held at {frame}'s origin and the registration "
+            "takes it; give --tool X,Y,Z,R,P,Y, or " + " and ".join(advice for _, advice in parts))
 
 
-def _reason(group: list[HeldDirection]) -> str:
+def _reason(group: list[HeldDirection]) -> tuple[str, str]:
+    """Why one rule's directions are not determined, and what would determine them."""
     frame = group[0].frame
     where = f"x, y and z of {frame}" if len(group) == 3 else " and ".join(
         describe_direction(h.direction, frame) for h in group)
@@ -162,10 +156,7 @@ def _reason(group: list[HeldDirection]) -> str:
     else:
         why = f"{what} along {them} cannot be told from the sensor's position"
         advice = f"turn the tool about axes across {them}"
-    values = sorted({h.value_m for h in group})
-    return (f"the tool's orientation turns by {shown}° RMS across {where}: {why}, so it is held at "
-            f"{', '.join(f'{v:g}' for v in values)} m ({frame}'s origin) and the registration takes it; give "
-            f"--tool X,Y,Z,R,P,Y, or {advice}")
+    return f"the tool's orientation turns by {shown}° RMS across {where}: {why}", advice
 
 
 def _start_grams(problem) -> tuple[np.ndarray, np.ndarray]:
