@@ -196,6 +196,11 @@ def evaluate_files(
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
     data, read_notes = read_measurements(data_path, chain.joint_specs)
     notes += read_notes
+    if report.not_determined:  # rows at another tool orientation meet the held target's error
+        notes.append(f"{report_path}: the calibration could not place its target ({len(report.not_determined)} "
+                     "direction(s) held at the tip link's origin, identifiability.not_determined): rows at another "
+                     "tool orientation than the calibration's carry that error; calibrate with --tool to use the "
+                     "model there")
     if data.n_points != len(report.points):
         raise PincalError(
             f"{data_path}: {data.n_points} target point(s) per row, but the report's tool has "

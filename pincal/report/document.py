@@ -231,6 +231,8 @@ class ReportModel:
             ``sigma_rot_deg``); empty if not reported.
         session_files: the file(s) each session's rows were read from, as given to
             calibrate (``sessions[].file``), in the order of ``sessions``.
+        not_determined: the reasons of ``identifiability.not_determined`` (a target held where the
+            calibration rows could not place it); empty when everything was determined.
     """
 
     tool_parent: str
@@ -243,6 +245,7 @@ class ReportModel:
     sessions: tuple[tuple[str, Registration, Registration], ...] = ()
     noise: dict = field(default_factory=dict)
     session_files: tuple[tuple[str, ...], ...] = ()
+    not_determined: tuple[str, ...] = ()
 
 
 def read_report(path: str | Path) -> ReportModel:
@@ -292,6 +295,8 @@ def read_report(path: str | Path) -> ReportModel:
                       if f is not None)
                 for entry in doc.get("sessions") or ()
             ),
+            not_determined=tuple(str(entry.get("reason", "")) for entry in
+                                 (doc.get("identifiability") or {}).get("not_determined") or ()),
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(
