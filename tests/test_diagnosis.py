@@ -233,3 +233,31 @@ def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment
     geometry = calibrate_chain(chain, data, "offsets")
     result = diagnose(chain, geometry, data, candidates=[Effect("drift")])
     assert [step.effect for step in result.steps] == []
+
+
+def test_rounding_level_effects_are_not_adopted(tmp_path, capsys):
+    """Noise-free rows of a Kinova (continuous joints) without any effect: a backlash of 1e-17 rad
+    'fits' the rounding at ΔBIC −20, and must not be adopted (unseen-setups issue: an effect changing
+    no measured coordinate by a tenth of the noise is not physically meaningful, whatever its ΔBIC)."""
+    from pincal.diagnosis.verdicts import NEGLIGIBLE
+    from pincal.measurements.csv_v1 import write_measurements
+    from pincal.model.parameter_sets import PlacementErrors
+    from pincal.robots import example_robot_data_urdf
+    from pincal.simulation.chain import simulate_chain
+    from pincal.simulation.paper import SimulationSettings
+
+    urdf = example_robot_data_urdf("kinova_description/robots/kinova.urdf")
+    chain = KinematicChain.from_urdf(urdf, "j2s6s200_end_effector")
+    params = PlacementErrors(chain)
+    truth = np.random.default_rng(1).normal(0.0, 1e-3, params.size)
+    experiment = simulate_chain(params, truth, np.array([[0.01, 0.02, 0.1]]),
+                                SimulationSettings(n_calibration=60, n_validation=50, seed=2), with_rotation=True)
+    write_measurements(tmp_path / "cal.csv", experiment.calibration)
+    write_measurements(tmp_path / "val.csv", experiment.validation)
+    code = main(["diagnose", str(urdf), str(tmp_path / "cal.csv"), "--validation", str(tmp_path / "val.csv"),
+                 "--tip-link", "j2s6s200_end_effector", "--select", "aic", "--quiet", "--out",
+                 str(tmp_path / "k.urdf"), "--report", str(tmp_path / "R.json"), "--plots", str(tmp_path / "p")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert json.loads((tmp_path / "R.json").read_text())["effects"] == []
+    assert "too small to matter" in out and f"below {NEGLIGIBLE:g}" in out

@@ -5,6 +5,8 @@ The best candidate is adopted when the evidence is very strong (ΔBIC <
 reported instead:
 
 * a value outside physical range (:data:`PLAUSIBLE`) — a stand-in for something else;
+* a largest predicted change of the measurements below :data:`NEGLIGIBLE` of their noise,
+  whatever its ΔBIC: too small to matter (a rounding-level "effect" on near noise-free data);
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
 * a close competitor (within 6 of its ΔBIC) with a strongly correlated basis: the
@@ -35,6 +37,13 @@ PLAUSIBLE = {
     "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
     "sensor_scale": (0.01, 0.01),  # relative
 }
+#: Largest change an effect must make to some measured coordinate, in units of that coordinate's
+#: noise σ (the fit's whitened residual), to be adopted: σ/10 (the unseen-setups issue's bound on
+#: "physically meaningful": below it no sensor sees it and no user needs it).
+NEGLIGIBLE = 0.1
+#: Noise no sensor of robot calibration goes below [m or rad]: 0.1 µm / 0.1 µrad (an interferometer
+#: resolves ~0.5 µm). The noise a fit estimates on noise-free rows is rounding; this stands for it.
+NOISE_FLOOR = 1e-7
 #: |mean| / RMS of a basis above which it is "nearly constant" (acts as an offset).
 OFFSET_LIKE = 0.95
 #: |correlation| of two candidates' bases above which they are hard to tell apart.
@@ -84,6 +93,20 @@ def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> boo
     limit = PLAUSIBLE[effect.type][1 if prismatic else 0]
     magnitude = np.hypot(*values) if effect.type == "cyclic" else np.max(np.abs(values))
     return bool(magnitude <= limit)
+
+
+def _largest_change(objective: SensorResidual, x: np.ndarray) -> float:
+    """The largest change the last effect of ``objective`` makes to a measured coordinate at ``x``,
+    in units of that coordinate's noise (the whitened residual's columns times the effect's values),
+    the noise taken as at least :data:`NOISE_FLOOR`."""
+    data = getattr(objective, "objective", objective)  # a prior-wrapped objective's sensor residual
+    sl = data._effect_slices[-1]
+    change = np.abs(objective.jacobian(x)[:, sl] @ x[sl])
+    k, n_points = data.g.shape[:2]
+    noise = np.concatenate([np.repeat(1.0 / data.w, 3 * n_points)] + ([np.repeat(1.0 / data.v, 3)]
+                                                                      if data.G is not None else []))
+    change = change[: noise.size] * np.minimum(1.0, noise / NOISE_FLOOR)  # the data rows (a prior's below)
+    return float(np.max(change, initial=0.0))
 
 
 def _correlation(a: np.ndarray | None, b: np.ndarray | None) -> float:
@@ -140,7 +163,7 @@ class Judge:
             if delta < EVIDENCE:
                 verdict = "significant"
                 if chosen is None:
-                    verdict = self.rejection(effect, value, delta, tried, held, compared)
+                    verdict = self.rejection(effect, value, delta, tried, held, compared, obj, sol)
                     if verdict == "adopted":
                         chosen = (delta, effect, obj, sol)
                     else:
@@ -155,12 +178,18 @@ class Judge:
             cut = max(cut, EVIDENCE)
         return ranking, chosen, rejected, cut
 
-    def rejection(self, effect, value, delta, tried, held, compared: list) -> str:
+    def rejection(self, effect, value, delta, tried, held, compared: list, objective=None, solution=None) -> str:
         """'adopted', or why the best significant candidate is only reported (``compared``
-        gains ``delta`` when the candidate was compared with its competitors)."""
+        gains ``delta`` when the candidate was compared with its competitors; ``objective`` and
+        ``solution``: the candidate's fit, for the size of what it changes)."""
         inputs, chain = self.inputs, self.chain
         if not _plausible(effect, value, chain):
             return f"its value {np.round(value, 6).tolist()} is outside the physical range (a stand-in for something else)"
+        if objective is not None:
+            largest = _largest_change(objective, solution.x)
+            if largest < NEGLIGIBLE:
+                return (f"it changes no measured coordinate by more than {largest:.2g} of its noise (below "
+                        f"{NEGLIGIBLE:g}): too small to matter, whatever its ΔBIC")
         basis = effect_basis(effect, inputs, chain)
         if _offset_like(basis):
             return "its basis barely changes over the rows, so it acts as a joint offset"
