@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from pincal.fit.chain_calibration import calibrate_chain
-from pincal.model.chain import KinematicChain, points_in_base
+from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.outputs import write_text
 from pincal.planning.candidates import sample_candidates
@@ -45,6 +45,7 @@ from pincal.planning.design import DesignProblem, continuous_design, select
 from pincal.planning.information import MeasurementModel, SensorModel
 from pincal.planning.planner import WORKSPACE_SIZE, PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from pincal.simulation.chain import truth_error_mm
 from pincal.simulation.sensor import (
     DEFAULT_REGISTRATION,
     measure,
@@ -113,15 +114,8 @@ def bound_table(chain: KinematicChain, count: int, counts, draws: int) -> dict:
 
 
 def _heldout_mm(chain, params, truth, result, q) -> float:
-    """Mean position error of the calibrated model's point at ``q`` against the noise-free truth [mm]."""
-    calibrated = chain.placements()
-    params.apply(truth)
-    poses = chain.poses(q)
-    true = DEFAULT_REGISTRATION.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, POINT))
-    chain.set_placements(calibrated)
-    poses = chain.poses(q)
-    world = points_in_base(poses.tool_positions, poses.tool_rotations, result.target.points)
-    return float(np.linalg.norm(result.target.registration.apply_points(world) - true, axis=2).mean() * 1000.0)
+    """Mean truth-referenced distance of the target at ``q`` [mm]; the chain holds the calibration."""
+    return truth_error_mm(params, truth, q, POINT, result.target.points, result.target.registration)
 
 
 def realised(chain: KinematicChain, count: int, n: int, seeds: int = 8) -> dict:

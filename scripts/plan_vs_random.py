@@ -22,13 +22,18 @@ from pathlib import Path
 import numpy as np
 
 from pincal.fit.chain_calibration import calibrate_chain
-from pincal.model.chain import KinematicChain, points_in_base
+from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.planning.candidates import sample_candidates
-from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.planning.information import SensorModel
+from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations
+from pincal.simulation.chain import truth_error_mm
+from pincal.simulation.sensor import (
+    DEFAULT_REGISTRATION,
+    measure,
+    random_configurations,
+)
 
 SELECTION = "prior"  # calibrate's default at level full (docs/defaults.md)
 TARGET = np.array([[0.045, -0.043, 0.118]])
@@ -37,14 +42,7 @@ BOUND = 0.8
 
 def heldout_mm(chain, params, truth, result, q) -> float:
     """Mean truth-referenced distance of the target at ``q`` [mm]; the chain holds the calibration."""
-    calibrated = chain.placements()
-    params.apply(truth)
-    poses = chain.poses(q)
-    true = DEFAULT_REGISTRATION.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, TARGET))
-    chain.set_placements(calibrated)
-    poses = chain.poses(q)
-    world = points_in_base(poses.tool_positions, poses.tool_rotations, result.target.points)
-    return float(np.linalg.norm(result.target.registration.apply_points(world) - true, axis=2).mean() * 1000.0)
+    return truth_error_mm(params, truth, q, TARGET, result.target.points, result.target.registration)
 
 
 def run(count: int, seeds: int) -> dict:

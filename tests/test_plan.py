@@ -26,7 +26,7 @@ from pincal.errors import PincalError
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.measurements.csv_v1 import read_measurements
-from pincal.model.chain import KinematicChain, points_in_base
+from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.collisions import check_clearance
@@ -35,6 +35,7 @@ from pincal.planning.information import MeasurementModel, SensorModel, default_t
 from pincal.planning.ordering import approach_balance, move_times, short_tour
 from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf, kuka_lwr4plus_urdf
+from pincal.simulation.chain import truth_error_mm
 from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -63,16 +64,9 @@ def _chain(robot: str) -> KinematicChain:
 
 
 def _heldout_mm(chain, params, truth, result, points, q) -> float:
-    """Mean truth-referenced position error of the calibrated model's target points at ``q`` [mm]."""
-    calibrated = chain.placements()
-    params.apply(truth)
-    poses = chain.poses(q)
-    true = DEFAULT_REGISTRATION.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, points))
-    chain.set_placements(calibrated)
-    poses = chain.poses(q)
-    world = points_in_base(poses.tool_positions, poses.tool_rotations, result.target.points)
-    predicted = result.target.registration.apply_points(world)
-    return float(np.linalg.norm(predicted - true, axis=2).mean() * 1000.0)
+    """Mean truth-referenced position error of the calibrated model's target points at ``q`` [mm]
+    (the chain holds the calibration)."""
+    return truth_error_mm(params, truth, q, points, result.target.points, result.target.registration)
 
 
 # robot, measure, target points, N: N about 1.1-1.2 x the fewest configurations that determine

@@ -163,15 +163,20 @@ def press(jacobian: np.ndarray, residual: np.ndarray, block: int) -> float:
         residual: (m,) at the fitted parameters.
         block: residuals per measurement row (rows are contiguous blocks).
     """
+    return press_of_blocks(jacobian, residual, np.arange(residual.size).reshape(-1, block))
+
+
+def press_of_blocks(jacobian: np.ndarray, residual: np.ndarray, blocks: np.ndarray) -> float:
+    """:func:`press` with each measurement row's residual entries given: ``blocks`` (K, b) indexes
+    ``residual`` and ``jacobian``'s rows; ``jacobian`` may have more rows (a prior's, below the data's),
+    which enter the hat matrix (Allen 1974). inf when a row has leverage 1."""
     u, s, _ = np.linalg.svd(jacobian, full_matrices=False)
     u = u[:, s > s[0] * 1e-12] if s.size else u[:, :0]
-    k = residual.size // block
-    ub = u.reshape(k, block, -1)
-    hat = np.einsum("kin,kjn->kij", ub, ub)  # H_kk blocks
-    complement = np.eye(block) - hat
+    ub = u[blocks]  # (K, b, r)
+    complement = np.eye(blocks.shape[1]) - np.einsum("kin,kjn->kij", ub, ub)  # I − H_kk
     if np.min(np.linalg.eigvalsh(complement), initial=1.0) < LEVERAGE_FLOOR:
         return np.inf  # a row with leverage 1: the fit reproduces it whatever it measured
-    loo = np.linalg.solve(complement, residual.reshape(k, block, 1))
+    loo = np.linalg.solve(complement, residual[blocks][..., None])
     return float(np.sum(loo**2))
 
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.fold_update import final_problem
-from pincal.fit.identifiability import LEVERAGE_FLOOR
+from pincal.fit.identifiability import press_of_blocks
 from pincal.fit.prior import PRIOR_STATUS
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
@@ -175,19 +175,6 @@ def _large_corrections(result) -> list[str]:
     return out
 
 
-def leave_one_out(jacobian: np.ndarray, residual: np.ndarray, blocks: np.ndarray) -> float:
-    """Linearised leave-one-row-out PRESS of a fit: Σ_k |(I − H_kk)⁻¹ e_k|² over the row blocks
-    ``blocks`` (K, b) of the data residual ``residual``; ``jacobian`` may carry extra (prior) rows
-    below the data rows, which enter the hat matrix (Allen 1974). inf when a row has leverage 1."""
-    u, s, _ = np.linalg.svd(jacobian, full_matrices=False)
-    u = u[:, s > s[0] * 1e-12] if s.size else u[:, :0]
-    ub = u[blocks]  # (K, b, r)
-    complement = np.eye(blocks.shape[1]) - np.einsum("kin,kjn->kij", ub, ub)
-    if np.min(np.linalg.eigvalsh(complement), initial=1.0) < LEVERAGE_FLOOR:
-        return float("inf")
-    return float(np.sum(np.linalg.solve(complement, residual[blocks][..., None]) ** 2))
-
-
 def refit_nominal(problem):
     """The nominal model's fit of a problem's rows (registration and target only, no prior),
     from its start, at its current noise scales: (objective, solution)."""
@@ -217,8 +204,8 @@ def press_against_nominal(chain: KinematicChain, result, rows: MeasurementSet,
     jac = calibrated.jacobian(result.solution)
     residual = calibrated.residual(result.solution)[:n_data]
     objective, solution = refit_nominal(problem)
-    return (leave_one_out(jac, residual, blocks),
-            leave_one_out(solution.jacobian, solution.residual[:n_data], blocks))
+    return (press_of_blocks(jac, residual, blocks),
+            press_of_blocks(solution.jacobian, solution.residual[:n_data], blocks))
 
 
 def _data_objective(objective):

@@ -99,7 +99,7 @@ def registration_problem(points: np.ndarray, n_rows: int, has_orientation: bool)
                 f"6 parameters) needs 3 or more points not on one line, or one row with an orientation; "
                 f"add rows to this session ({orientation}), or — if the sensor did not move — give the rows "
                 f"the session of others ('{SESSION_COLUMN}' column)")
-    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(n)  # RMS per axis [m]
+    spread = _spreads(points)
     if spread[0] <= MIN_SPREAD_M:
         return (f"all {n} measured points coincide (within {spread[0] * 1000:.3g} mm; rows that all measure "
                 "one fixed point, e.g. one socket of a fixture, say nothing of where the sensor is): the "
@@ -241,8 +241,13 @@ def _on_one_line(positions: np.ndarray) -> bool:
     or :data:`LINE_RATIO` of their spread along it (RMS)."""
     if len(positions) < 3:
         return False
-    spread = np.linalg.svd(positions - positions.mean(axis=0), compute_uv=False) / np.sqrt(len(positions))
+    spread = _spreads(positions)
     return bool(spread[1] <= max(MIN_SPREAD_M, LINE_RATIO * spread[0]))
+
+
+def _spreads(points: np.ndarray) -> np.ndarray:
+    """RMS spread of points (n, 3) [m] along their principal axes, largest first (3,)."""
+    return np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(len(points))
 
 
 def _target_rotation(rot: np.ndarray, data: MeasurementSet, registrations) -> np.ndarray:

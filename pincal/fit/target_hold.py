@@ -111,12 +111,8 @@ def turn_along(absorbed: np.ndarray, total: np.ndarray, direction: np.ndarray) -
 def held_basis(directions: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
     """The common shifts of ``n_points`` points along ``directions`` (3, h), and an orthonormal
     basis of the point coordinates (3P, 3P − h) that leaves them out."""
-    h = directions.shape[1]
     common = np.tile(directions, (n_points, 1)) / np.sqrt(n_points)  # (3P, h), orthonormal
-    if h == 0:
-        return common, np.eye(3 * n_points)
-    complement = scipy.linalg.null_space(common.T)
-    return common, complement
+    return common, scipy.linalg.null_space(common.T)
 
 
 def describe_direction(direction: np.ndarray, frame: str) -> str:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import points_in_base
 from pincal.model.sensor import Registration
 from pincal.simulation.paper import SimulationSettings
 from pincal.simulation.sensor import (
@@ -65,3 +66,22 @@ def simulate_chain(
     finally:
         chain.set_placements(saved)
     return ChainExperiment(cal, val, np.asarray(truth, dtype=float), registration, np.asarray(points), target_rotation)
+
+
+def truth_error_mm(params, truth: np.ndarray, q: np.ndarray, true_points: np.ndarray, points: np.ndarray,
+                   registration: Registration, true_registration: Registration = DEFAULT_REGISTRATION) -> float:
+    """Mean distance [mm] at configurations ``q`` between where the target truly is — the chain with the
+    true parameters ``truth`` (of ``params``), its points ``true_points`` (P, 3) [m], seen through
+    ``true_registration`` — and where a calibrated model puts it: the chain as it is now, the estimated
+    ``points`` and ``registration``. The chain's placements are the same on return."""
+    chain = params.chain
+    calibrated = chain.placements()
+    try:
+        params.apply(truth)
+        poses = chain.poses(q)
+        true = true_registration.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, true_points))
+    finally:
+        chain.set_placements(calibrated)
+    poses = chain.poses(q)
+    predicted = registration.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, points))
+    return float(np.linalg.norm(predicted - true, axis=2).mean() * 1000.0)
