@@ -1,12 +1,14 @@
 """How close can any N configurations get to the planned/random ratio of issue 9? The continuous bound.
 
     python scripts/plan_design_bound.py [--candidates 2000 10000] [--counts 12 20 40 100] [--draws 200]
-                                        [--realised] [--json PATH]
+                                        [--measure point|pose] [--realised] [--json PATH]
 
 Setup of the README's "Honest prediction" KUKA row (tests/test_plan.py): KUKA LWR 4+, full level,
 one point measured at (0.05, 0, 0.07) m in the flange, σ = 0.1 mm, candidates sampled uniformly
 within the joint limits (seed 0), the accuracy criterion averaged over 500 of them (seed 0) —
-exactly the problem ``pincal plan`` builds.
+exactly the problem ``pincal plan`` builds. ``--measure pose``: the setup of the unseen-setups
+issue's item 8 (scripts/plan_vs_random.py) instead — a 6D probe at (0.045, −0.043, 0.118) m, σ = 0.1 mm
+and 0.1°, and the calibration's default prior (1 mm, 0.5°) in the information (``--select prior``).
 
 For each candidate count K it prints:
 
@@ -37,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.prior import Prior
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.outputs import write_text
@@ -53,18 +56,22 @@ from pincal.simulation.sensor import (
 )
 
 POINT = np.array([[0.05, 0.0, 0.07]])  # the test's marker 1 [m]
+PROBE = np.array([[0.045, -0.043, 0.118]])  # scripts/plan_vs_random.py's 6D probe [m]
 SIGMA_POS_M = 1e-4
 SIGMA_ROT_RAD = np.radians(0.1)
 
 
-def problem_of(chain: KinematicChain, candidates: np.ndarray) -> DesignProblem:
-    """The design problem ``plan_measurements`` builds for these candidates with seed 0."""
-    model = MeasurementModel(chain, "full", SensorModel("point", 1), POINT,
+def problem_of(chain: KinematicChain, candidates: np.ndarray, measure: str = "point") -> DesignProblem:
+    """The design problem ``plan_measurements`` builds for these candidates with seed 0
+    (``measure`` ``point``: the README's row, AIC; ``pose``: item 8's, with the default prior)."""
+    pose = measure == "pose"
+    model = MeasurementModel(chain, "full", SensorModel(measure, 1), PROBE if pose else POINT,
                              sigma_pos_m=SIGMA_POS_M, sigma_rot_rad=SIGMA_ROT_RAD)
     rng = np.random.default_rng(0)  # the planner's workspace subsample (PlanSettings.seed = 0)
     workspace = candidates[rng.choice(len(candidates), WORKSPACE_SIZE, replace=False)]
     return DesignProblem(model.jacobian(candidates), model.kinematic, model.jacobian(candidates[:0]),
-                         *model.error_jacobian(workspace))
+                         *model.error_jacobian(workspace),
+                         prior_precision=model.prior_precision(Prior()) if pose else None)
 
 
 def trace(problem: DesignProblem, information: np.ndarray) -> float:
@@ -75,9 +82,9 @@ def mean_error_mm(problem: DesignProblem, information: np.ndarray) -> float:
     return float(problem.expected_errors(np.linalg.inv(information))[0].mean())
 
 
-def bound_table(chain: KinematicChain, count: int, counts, draws: int) -> dict:
+def bound_table(chain: KinematicChain, count: int, counts, draws: int, measure: str = "point") -> dict:
     candidates = sample_candidates(chain, count, seed=0)
-    problem = problem_of(chain, candidates)
+    problem = problem_of(chain, candidates, measure)
     started = time.perf_counter()
     best = continuous_design(problem, "accuracy")
     seconds = time.perf_counter() - started
@@ -149,14 +156,19 @@ def main(argv=None) -> int:
     parser.add_argument("--candidates", type=int, nargs="+", default=[2000, 10000])
     parser.add_argument("--counts", type=int, nargs="+", default=[12, 20, 40, 100])
     parser.add_argument("--draws", type=int, default=200)
+    parser.add_argument("--measure", choices=("point", "pose"), default="point",
+                        help="point: the README's row (default); pose: item 8's 6D setup with the default prior")
     parser.add_argument("--realised", action="store_true")
     parser.add_argument("--seeds", type=int, default=8, help="noise seeds of --realised (the test: 8)")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
+    if args.realised and args.measure == "pose":
+        parser.error("--realised repeats tests/test_plan.py's point experiment; for pose, "
+                     "scripts/plan_vs_random.py is the realised experiment")
     chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
     results = {"tables": []}
     for count in args.candidates:
-        table = bound_table(chain, count, args.counts, args.draws)
+        table = bound_table(chain, count, args.counts, args.draws, args.measure)
         results["tables"].append(table)
         print(f"K = {count} candidates, {table['parameters']} parameters: psi* in [{table['psi_star_lower']:.5g}, "
               f"{table['psi_star_upper']:.5g}] m^2 (certified efficiency {table['efficiency']:.4f}, "

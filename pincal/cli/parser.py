@@ -341,6 +341,10 @@ def build_parser() -> argparse.ArgumentParser:
                       f"(default: {WORKSPACE_SIZE} of the candidates)")
     plan.add_argument("--criterion", choices=("accuracy", "d", "a"), default="accuracy",
                       help="accuracy: predicted mean position error (default); d, a: D-/A-optimality")
+    plan.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default=None,
+                      help="the selection the calibration will use, as calibrate's --select (default prior at "
+                           "offsets and full, as calibrate): with prior the plan counts its information too")
+    _add_prior_scale(plan)
     plan.add_argument("--sigma-pos", type=_positive, metavar="MM", help="sensor noise per axis [mm] "
                       "(default: from --existing, else 0.055)")
     plan.add_argument("--sigma-rot", type=_positive, metavar="DEG", help="orientation noise [deg] (pose)")

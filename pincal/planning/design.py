@@ -3,9 +3,12 @@
 The parameters are those the whole candidate set can identify (pivoted QR,
 :func:`pincal.fit.identifiability.order_parameters`: the others no subset can
 determine), each scaled so that one candidate's information about it is 1 on
-average over the candidates. With M the information of the chosen rows (plus
-the rows already recorded, plus a prior ε·I, ε = :data:`PRIOR`, that only
-matters while M is singular) and P = M⁻¹:
+average over the candidates. With M the information of the chosen rows, plus
+the rows already recorded, plus the calibration's physical prior Λ =
+diag(1/σ_i²) on the kinematic parameters when it fits with one (``--select
+prior``, eq P1 of :mod:`pincal.fit.prior`: M is then the posterior precision
+the calibration will have), plus a numerical ε·I, ε = :data:`PRIOR`, that only
+matters while M is singular, and P = M⁻¹:
 
 * ``accuracy`` — minimise tr(P B), B = mean over the workspace sample and the
   target points of A_eᵀ A_e: the predicted mean *squared* position error of
@@ -16,7 +19,11 @@ matters while M is singular) and P = M⁻¹:
 
 Greedy selection adds the candidate that improves the criterion most; exchange
 passes (Fedorov 1972, sequential form) then try to replace each chosen
-configuration by the best other one until no swap helps. Adding or removing
+configuration by the best other one until no swap helps. The exchange ends in a
+local optimum that depends on where it starts (near the fewest configurations
+that determine the parameters, 7 % apart for the KUKA's 12-point plan of
+scripts/plan_design_bound.py with and without the prior), so it also starts
+from :data:`STARTS` − 1 seeded random subsets and the best end is kept. Adding or removing
 row block F_k (m × n) is a rank-m update of P (Sherman–Morrison–Woodbury):
 with S = I ± F_k P F_kᵀ, P' = P ∓ P F_kᵀ S⁻¹ F_k P, ln det changes by
 ± ln det S and tr(P B) by ∓ tr(S⁻¹ F_k P B P F_kᵀ). The quantities of every
@@ -50,6 +57,8 @@ CRITERIA = {
 PRIOR = 1e-6
 #: Exchange passes at most; each tries to replace every chosen configuration once.
 MAX_PASSES = 10
+#: Starts of the exchange: the greedy selection and STARTS − 1 random subsets (the best end is kept).
+STARTS = 4
 #: A pass improving the criterion by less than this (relative) is the last.
 PASS_TOLERANCE = 1e-3
 #: Relative improvement of the criterion below which a swap is not made.
@@ -93,9 +102,12 @@ class DesignProblem:
         existing: blocks of rows already recorded, (K0, m, n_all).
         error_position: workspace position rows [m/unit], (E, P, 3, n_all).
         error_rotation: workspace orientation rows [rad/unit], (E, 3, n_all), or None.
+        prior_precision: Λ's diagonal, 1/σ_i² [1/unit²] for each of the n_all columns (zero where
+            no prior), or None: no prior (the calibration keeps a subset, eq S1–S3).
     """
 
-    def __init__(self, blocks, kinematic, existing, error_position, error_rotation) -> None:
+    def __init__(self, blocks, kinematic, existing, error_position, error_rotation,
+                 prior_precision=None) -> None:
         n_all = blocks.shape[2]
         others = np.setdiff1d(np.arange(n_all), kinematic)
         pool = np.concatenate([blocks, existing]).reshape(-1, n_all)
@@ -113,6 +125,8 @@ class DesignProblem:
         workspace = self.position.reshape(-1, 3, self.n)
         self.workspace = np.einsum("eim,ein->mn", workspace, workspace) / len(workspace)  # B [m²]
         self.base = np.einsum("kim,kin->mn", self.existing, self.existing)
+        if prior_precision is not None:  # Λ in the scaled parameters: θ' = θ·scale
+            self.base = self.base + np.diag(np.asarray(prior_precision, dtype=float)[self.columns] / scale**2)
 
     @property
     def n(self) -> int:
@@ -123,7 +137,7 @@ class DesignProblem:
         return len(self.blocks)
 
     def information(self, chosen) -> np.ndarray:
-        """Information of the recorded rows and the candidates ``chosen`` (no prior)."""
+        """Information of the recorded rows, the prior (if any) and the candidates ``chosen`` (no ε·I)."""
         rows = self.blocks[np.asarray(chosen, dtype=int)]
         return self.base + np.einsum("kim,kin->mn", rows, rows)
 
@@ -301,9 +315,11 @@ class Selection:
 
 
 def select(problem: DesignProblem, count: int, criterion: str, allowed: np.ndarray | None = None,
-           counter: Counter | None = None) -> Selection:
+           counter: Counter | None = None, starts: int = STARTS, seed: int = 0) -> Selection:
     """Choose ``count`` candidates minimising (``d``: maximising) the criterion.
 
+    Exchange passes run from the greedy selection and from ``starts`` − 1 random
+    subsets of the allowed candidates (drawn with ``seed``); the best end is kept.
     ``counter`` counts the greedy additions, the configurations each exchange pass
     tries and the additions of :func:`priority_order` (another pass is announced
     when it starts).
@@ -318,11 +334,21 @@ def select(problem: DesignProblem, count: int, criterion: str, allowed: np.ndarr
         raise PincalError(f"--count {count} is more than the {int(allowed.sum())} usable candidates; "
                           "lower --count or give more candidates")
     counter = Counter(None) if counter is None else counter
-    counter.expect(3 * count)  # greedy, the first exchange pass, the priority order
-    search = _Search(problem.blocks, problem.base, _weight(problem, criterion), allowed)
-    search.greedy(count, counter=counter)
-    swaps = search.exchange(counter=counter)
-    chosen = np.flatnonzero(search.chosen)
+    starts = max(1, int(starts))
+    counter.expect((2 + starts) * count)  # greedy, each start's first exchange pass, the priority order
+    rng = np.random.default_rng(seed)
+    best, swaps = None, 0
+    for start in range(starts):
+        search = _Search(problem.blocks, problem.base, _weight(problem, criterion), allowed)
+        if start == 0:
+            search.greedy(count, counter=counter)
+        else:
+            search.chosen[rng.choice(np.flatnonzero(allowed), count, replace=False)] = True
+            search.refresh()
+        made = search.exchange(counter=counter)
+        if best is None or search.value < best.value:
+            best, swaps = search, made
+    chosen = np.flatnonzero(best.chosen)
     return Selection(chosen=chosen, priority=priority_order(problem, chosen, criterion, counter), swaps=swaps)
 
 

@@ -101,6 +101,7 @@ def plan_document(
             "level": settings.level,
             "measure": settings.sensor.label,
             "criterion": settings.criterion,
+            "prior_scale": None if settings.prior is None else settings.prior.as_dict(),
             "sigma_pos_mm": plan.sigma_pos_mm,
             "sigma_rot_deg": plan.sigma_rot_deg,
             "sigma_source": plan.sigma_source,
@@ -112,7 +113,9 @@ def plan_document(
         "criterion": {"name": plan.criterion, "definition": CRITERIA[plan.criterion], "value": plan.criterion_value},
         "predicted": {
             "what": "linearised noise limit of the model calibrated on these configurations (all identifiable "
-                    "parameters estimated): expected error against the truth over the workspace sample",
+                    "parameters estimated" + ("" if settings.prior is None else ", with the prior of "
+                                              "settings.prior_scale") + "): expected error against the truth "
+                    "over the workspace sample",
             "workspace_configurations": plan.workspace_size,
             "plan": _prediction(plan.prediction),
             "random": None if plan.random is None else {**plan.random.as_dict(), "draws": settings.random_draws,

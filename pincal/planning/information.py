@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import PincalError
+from pincal.fit.prior import prior_sigmas
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.parameter_sets import LEVELS, NoParameters
@@ -152,6 +153,15 @@ class MeasurementModel:
             if self.sensor.has_rotation:
                 names += [f"target.r{a}" for a in "xyz"]
         return tuple(names)
+
+    def prior_precision(self, prior) -> np.ndarray:
+        """Λ's diagonal for a calibration with ``prior`` (a :class:`pincal.fit.prior.Prior`):
+        1/σ_i² [1/m² or 1/rad²] for each kinematic column, zero for the registration and the target
+        (eq P1 of :mod:`pincal.fit.prior` penalises neither), (n,)."""
+        precision = np.zeros(len(self.names))
+        if self.params is not None:
+            precision[self.kinematic] = 1.0 / prior_sigmas(self.params, prior) ** 2
+        return precision
 
     def jacobian(self, q: npt.ArrayLike, chunk: int = 2000) -> np.ndarray:
         """Noise-weighted Jacobian blocks F_k of configurations ``q`` (K, N), (K, m, n).

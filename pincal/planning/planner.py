@@ -20,6 +20,7 @@ import numpy as np
 
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, initial_target
+from pincal.fit.prior import Prior
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.planning.candidates import WORKSPACE_SIZE
@@ -60,6 +61,10 @@ class PlanSettings:
         seed: seed of the workspace subsample, the random comparison and the order.
         workspace_size: candidates the accuracy is averaged over (when no workspace is given).
         random_draws: random N-subsets the plan is compared with.
+        prior: the physical prior of the calibration the plan is for (``calibrate --select prior``,
+            its default at ``offsets`` and ``full``; :class:`pincal.fit.prior.Prior`), or None for a
+            calibration that keeps a subset of the parameters (``--select aic`` …). With a prior, the
+            plan's information and predictions include it (eq P1).
     """
 
     count: int
@@ -74,8 +79,12 @@ class PlanSettings:
     seed: int = 0
     workspace_size: int = WORKSPACE_SIZE
     random_draws: int = RANDOM_DRAWS
+    prior: Prior | None = None
 
     def __post_init__(self) -> None:
+        if self.prior is not None and self.level not in ("offsets", "full"):
+            raise PincalError(f"a prior applies to the kinematic parameters of level offsets or full, "
+                              f"not {self.level}")
         if self.target_points is not None:
             points = np.atleast_2d(np.asarray(self.target_points, dtype=float))
             if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
@@ -203,7 +212,11 @@ def plan_measurements(
         blocks, recorded, errors, names = _session_columns(
             model, model.jacobian(candidates), model.jacobian(recorded_q), recorded_sessions,
             model.error_jacobian(workspace))
-        problem = DesignProblem(blocks, model.kinematic, recorded, *errors)
+        precision = None
+        if settings.prior is not None:
+            precision = np.zeros(blocks.shape[2])
+            precision[: len(model.names)] = model.prior_precision(settings.prior)
+        problem = DesignProblem(blocks, model.kinematic, recorded, *errors, prior_precision=precision)
     finally:
         chain.set_placements(saved)
     rows = settings.sensor.rows
@@ -215,7 +228,7 @@ def plan_measurements(
         )
     counter = Counter(progress)
     counter.expect(settings.random_draws + settings.count)  # the random draws, the additions
-    selection = select(problem, settings.count, settings.criterion, allowed, counter)
+    selection = select(problem, settings.count, settings.criterion, allowed, counter, seed=settings.seed)
     prediction = problem.predict(selection.chosen)
     random, singular = _random_baseline(problem, settings, allowed, rng, counter)
     recorded_prediction = problem.predict([]) if len(recorded) else None
@@ -285,7 +298,8 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
                               f"but --measure is {sensor.label}; plan for what the sensor sees")
         recorded_q, recorded_sessions = rows.q, rows.sessions
         if settings.level in CHAIN_LEVELS:
-            result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known)
+            result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known,
+                                     selection="aic" if settings.prior is None else settings.prior)
             target = result.target
             if sigma_pos is None:  # each sigma not given is estimated from the recorded rows
                 sigma_pos, pos_source = result.sigma_pos_m, f"estimated from {existing.source}"
