@@ -88,13 +88,12 @@ def tiago() -> str:
     choice = choose_level(chain, train, **SELECT)
     seconds = time.perf_counter() - started
     others = [choose_level(chain, train, seed=seed, **SELECT) for seed in range(1, 6)]  # other deals of the folds
-    nominal = chain.placements()
     held, held_novel, kept = {}, {}, {}
     for level in LEVELS:
-        chain.set_placements(nominal)
         result = calibrate_chain(chain, train, level, **SELECT)
         registration = result.target.registration
-        errors = pose_errors(chain, test, registration, registration, points=result.target.points)
+        with chain.placed(result.chain_placements):
+            errors = pose_errors(chain, test, registration, registration, points=result.target.points)
         marker1 = errors.position_m[:, 0] * 1000.0
         held[level] = float(np.sqrt(np.mean(marker1**2)))
         held_novel[level] = float(np.sqrt(np.mean(marker1[novel] ** 2)))
@@ -144,12 +143,11 @@ def mukca(robot: str) -> str:
                                   chain.joint_specs, fixture)
         test = read_fixture_data([data / folder / f"{held}.csv"], chain.joint_specs, fixture)
         choice = choose_fixture_level(chain, train, **SELECT)
-        nominal = chain.placements()
         metrics = {}
         for level in LEVELS:
-            chain.set_placements(nominal)
             result = calibrate_fixture(chain, train, level, **SELECT)
-            after = fixture_metrics(chain, test, result.ball)
+            with chain.placed(result.chain_placements):
+                after = fixture_metrics(chain, test, result.ball)
             metrics[level] = (after.consistency_mm, after.distortion_mm)
         metrics["auto"] = metrics[choice.chosen]
         for key, value in metrics.items():
@@ -192,14 +190,14 @@ def simulated_case(robot: str, rows: int, seed: int) -> tuple[dict[str, float], 
     common = {"points": FLANGE_POINT, "with_rotation": False, "effects": effects}
     train = measure(chain, q_train, DEFAULT_REGISTRATION, rng, SIGMA_M, 0.0, "calibration", **common)
     test = measure(chain, q_test, DEFAULT_REGISTRATION, rng, 0.0, 0.0, "calibration", **common)
-    chain.set_placements(nominal)
+    chain.set_placements(nominal)  # the nominal robot is what is calibrated
     choice = choose_level(chain, train, **SELECT)
     held = {}
     for level in LEVELS:
-        chain.set_placements(nominal)
         result = calibrate_chain(chain, train, level, **SELECT)
         registration = result.target.registration
-        errors = pose_errors(chain, test, registration, registration, points=result.target.points)
+        with chain.placed(result.chain_placements):
+            errors = pose_errors(chain, test, registration, registration, points=result.target.points)
         held[level] = float(np.sqrt(np.mean(errors.position_m**2)) * 1000.0)
     return held, choice.chosen, choice.lowest
 

@@ -63,7 +63,8 @@ def held_out(robot: str, urdf: Path, level: str, held: str, selection: str = "ai
     started = time.perf_counter()
     result = calibrate_fixture(chain, train, level, selection=selection)
     seconds = time.perf_counter() - started
-    after = fixture_metrics(chain, test, result.ball)
+    with chain.placed(result.chain_placements):
+        after = fixture_metrics(chain, test, result.ball)
     before = fixture_metrics(KinematicChain.from_urdf(urdf, tip), test, result.nominal_ball)
     return {
         "held": held,

@@ -40,7 +40,8 @@ def run_level(level: str, selection: str = "prior") -> dict:
     registration, points = result.target.registration, result.target.points
 
     def marker1_rms(data) -> float:
-        errors = pose_errors(chain, data, registration, registration, points=points)
+        with chain.placed(result.chain_placements):
+            errors = pose_errors(chain, data, registration, registration, points=points)
         return errors.point(0).rms
 
     kinematic = int(sum(s == "calibrated" for s in result.status))

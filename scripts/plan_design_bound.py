@@ -121,8 +121,9 @@ def bound_table(chain: KinematicChain, count: int, counts, draws: int, measure: 
 
 
 def _heldout_mm(chain, params, truth, result, q) -> float:
-    """Mean truth-referenced distance of the target at ``q`` [mm]; the chain holds the calibration."""
-    return truth_error_mm(params, truth, q, POINT, result.target.points, result.target.registration)
+    """Mean truth-referenced distance of the target at ``q`` [mm] of the calibration ``result``."""
+    return truth_error_mm(params, truth, q, POINT, result.target.points, result.target.registration,
+                          placements=result.chain_placements)
 
 
 def realised(chain: KinematicChain, count: int, n: int, seeds: int = 8) -> dict:

@@ -50,8 +50,9 @@ BOUND = 0.8
 
 
 def heldout_mm(chain, params, truth, result, q) -> float:
-    """Mean truth-referenced distance of the target at ``q`` [mm]; the chain holds the calibration."""
-    return truth_error_mm(params, truth, q, TARGET, result.target.points, result.target.registration)
+    """Mean truth-referenced distance of the target at ``q`` [mm] of the calibration ``result``."""
+    return truth_error_mm(params, truth, q, TARGET, result.target.points, result.target.registration,
+                          placements=result.chain_placements)
 
 
 def run(count: int, seeds: int) -> dict:

@@ -162,17 +162,14 @@ def run(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELEC
     sigma = scenario.sigma_pos_mm
     rows = []
     for level in scenario.levels:
-        nominal = chain.placements()
         started = time.perf_counter()
-        try:
-            result = calibrate_chain(chain, calibration, level, selection=selection)
-            seconds = time.perf_counter() - started
-            target = result.target
+        result = calibrate_chain(chain, calibration, level, selection=selection)
+        seconds = time.perf_counter() - started
+        target = result.target
+        with chain.placed(result.chain_placements):
             errors = pose_errors(chain, test, target.registration, target.registration, points=target.points,
                                  target_rotation=target.rotation)
-            estimation = result.predicted_point_rms(chain, test.q) * 1000.0
-        finally:
-            chain.set_placements(nominal)
+        estimation = result.predicted_point_rms(chain, test.q) * 1000.0
         held_out = float(np.sqrt(np.mean(errors.position_m**2))) * 1000.0
         predicted = float(np.sqrt(3.0 * sigma**2 + estimation**2))
         rows.append({

@@ -46,7 +46,8 @@ def _truth(params, rng, scale=1.0):
 
 def _heldout_error(chain, result, experiment):
     """Truth-referenced held-out point errors of the calibrated model [m], (J, P)."""
-    poses = chain.poses(experiment.validation.q)
+    with chain.placed(result.chain_placements):
+        poses = chain.poses(experiment.validation.q)
     world = poses.tool_positions[:, None, :] + np.einsum("kij,pj->kpi", poses.tool_rotations, result.target.points)
     predicted = result.target.registration.apply_points(world)
     return np.linalg.norm(predicted - experiment.validation.points, axis=2)

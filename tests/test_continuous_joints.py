@@ -87,8 +87,9 @@ def _calibrate(path):
     experiment = simulate_chain(params, truth, np.array([[0.02, -0.01, 0.05]]), settings, with_rotation=True)
     result = calibrate_chain(chain, experiment.calibration, "full", selection="all")
     target = result.target
-    return chain, pose_errors(chain, experiment.validation, target.registration, target.registration,
-                              points=target.points, target_rotation=target.rotation)
+    with chain.placed(result.chain_placements):
+        return chain, pose_errors(chain, experiment.validation, target.registration, target.registration,
+                                  points=target.points, target_rotation=target.rotation)
 
 
 def test_the_sweep_covers_continuous_and_prismatic_joints():

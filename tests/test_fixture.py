@@ -160,9 +160,10 @@ def _recovery(urdf, tip, level, fixture, rows_per_socket, seed):
     data = simulate_fixture(truth, fixture, POSES, ball, rows_per_socket, rng, names=("a", "b", "c"))
     chain = KinematicChain.from_urdf(urdf, tip)
     result = calibrate_fixture(chain, data.select_placements(["a", "b"]), level, selection="all")
-    held = fixture_metrics(chain, data.select_placements(["c"]), result.ball)
     q = rng.uniform(-1.0, 1.0, (100, chain.n_joints))
-    true_poses, poses = truth.poses(q), chain.poses(q)
+    with chain.placed(result.chain_placements):
+        held = fixture_metrics(chain, data.select_placements(["c"]), result.ball)
+        true_poses, poses = truth.poses(q), chain.poses(q)
     true_ball = true_poses.tool_positions + true_poses.tool_rotations @ ball
     fitted = poses.tool_positions + poses.tool_rotations @ result.ball
     # the root frame is not observable: compare up to one rigid motion

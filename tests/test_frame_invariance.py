@@ -72,15 +72,12 @@ def _rows(urdf, kind, seed):
 
 
 def _outcome(chain, data):
-    nominal = chain.placements()
-    try:  # calibrate_chain leaves the calibrated placements in the chain: the errors are theirs
-        result = calibrate_chain(chain, data, "full")
+    result = calibrate_chain(chain, data, "full")
+    with chain.placed(result.chain_placements):  # the calibrated model's errors
         errors = session_pose_errors(chain, data, session_rows(data, result.session_names),
                                      result.target.registrations, points=result.target.points,
                                      target_rotation=result.target.rotation)
-    finally:
-        chain.set_placements(nominal)
-    return result, np.array(result.params.placements(result.vector)), errors
+    return result, np.array(result.chain_placements), errors
 
 
 def _assert_same(a, b):

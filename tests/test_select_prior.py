@@ -50,7 +50,8 @@ def _rows(rows: int, seed: int, sigma_m: float, kind=PlacementErrors, error=1e-4
 
 def _heldout_m(chain, result, test) -> float:
     registration = result.target.registration
-    errors = pose_errors(chain, test, registration, registration, points=result.target.points)
+    with chain.placed(result.chain_placements):
+        errors = pose_errors(chain, test, registration, registration, points=result.target.points)
     return float(np.sqrt(np.mean(errors.position_m**2)))
 
 
@@ -150,7 +151,8 @@ def test_fixture_prior_fit_recovers_noise_free_data_and_flags_what_the_prior_dec
     data = simulate_fixture(truth, fixture, poses, np.array([0.01, -0.005, 0.12]), 8, rng)
     chain = KinematicChain.from_urdf(panda, "panda_link8")
     result = calibrate_fixture(chain, data, "full", selection="prior")
-    after = fixture_metrics(chain, data, result.ball)
+    with chain.placed(result.chain_placements):
+        after = fixture_metrics(chain, data, result.ball)
     # noise-free: the noise scale falls to rounding and the prior's weight with it (as for sensor data);
     # 1e-6 mm is far above rounding (~1e-12 m) and far below the ~1 mm placement errors
     assert after.consistency_mm < 1e-6 and after.distortion_mm < 1e-6

@@ -154,7 +154,9 @@ def test_noise_free_sessions_recover_the_truth(truth):
     assert result.rms_m < EXACT
     for name, registration in zip("ABC", result.target.registrations):
         held = _session(truth, name, 50, 10 + ord(name), "validation")
-        errors = session_pose_errors(chain, held, np.zeros(50, dtype=int), [registration], points=result.target.points)
+        with chain.placed(result.chain_placements):
+            errors = session_pose_errors(chain, held, np.zeros(50, dtype=int), [registration],
+                                         points=result.target.points)
         assert errors.position_m.max() < EXACT, name
     # the full level leaves the base placement to the registrations; between two sessions it cancels
     truths = [PLACEMENTS[n] for n in "ABC"]

@@ -98,13 +98,14 @@ def calibrate_fixture_files(
     seconds = time.perf_counter() - started
     sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
                "corrected_urdf": str(out_urdf)}
-    report = fixture_report(result, chain, data, sources, [], file_sha256(urdf))
+    with chain.placed(result.chain_placements):
+        report = fixture_report(result, chain, data, sources, [], file_sha256(urdf))
     if choice is not None:
         report["level_choice"] = choice.as_dict()
     report["xacro_args"] = dict(xacro_arguments(xacro_args))  # evaluate --fixture rebuilds the nominal with them
     names = ", ".join(p.name for p in data_paths)
     reload_error, report["urdf_sha256"] = write_checked_urdf(
-        urdf, out_urdf, chain, nominal_placements, data.q,
+        urdf, out_urdf, chain, result.chain_placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
         f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args,
     )

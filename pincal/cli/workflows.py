@@ -174,7 +174,8 @@ def calibrate_chain_dh(
 
     params = DHParameterSet(chain)
     start = time.perf_counter()
-    result = calibrate_paper(chain, data, method, weight=weight, nominal=params.nominal)
+    with chain.placed(chain.placements()):  # the paper's methods leave their table in the chain: not passed on
+        result = calibrate_paper(chain, data, method, weight=weight, nominal=params.nominal)
     return result, params, time.perf_counter() - start
 
 
@@ -236,12 +237,14 @@ def calibrate_files(
         check_registrable(data.with_role("calibration"), orientations=False)
         session_list = ()
         result, params, seconds = calibrate_chain_dh(chain, data, method, weight)
-        errors = pose_errors(
-            chain, data.with_role("calibration"), result.registration_position, result.registration_orientation
-        )
-        report = paper_report(result, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
-        report["row_errors"] = paper_row_errors(chain, nominal_placements, data.with_role("calibration"), errors,
-                                                data_label)
+        placements = tuple(params.placements(result.table.to_vector()))
+        with chain.placed(placements):
+            errors = pose_errors(
+                chain, data.with_role("calibration"), result.registration_position, result.registration_orientation
+            )
+            report = paper_report(result, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
+            report["row_errors"] = paper_row_errors(chain, nominal_placements, data.with_role("calibration"), errors,
+                                                    data_label)
         what = f"Method {method} of Franaszek & Marvel 2022"
     else:
         start = time.perf_counter()
@@ -257,28 +260,32 @@ def calibrate_files(
             reject_outliers=reject_outliers, selection=selection, progress=stages.next(),
         )
         seconds = time.perf_counter() - start
-        notes += unfitted_sessions(data, result.session_names)
-        used = data.select(result.used_index)
-        sessions = session_rows(used, result.session_names)
-        errors = session_pose_errors(chain, used, sessions, result.target.registrations,
-                                     points=result.target.points, target_rotation=result.target.rotation)
-        report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
-        report["warnings"] = [f.as_dict() for f in calibration_findings(chain, result, used, sigma_column, sigma_pos_m)]
-        report["sessions"] = session_entries(result.session_names, result.target.registrations, used, sessions, errors)
-        session_list = tuple(
-            SessionEvaluation(entry["name"], entry["rows"], registration, registration, f"fitted on {entry['file']}",
-                              session_errors(errors, sessions == s))
-            for s, (entry, registration) in enumerate(zip(report["sessions"], result.target.registrations)))
-        if len(result.session_names) > 1:
-            report["notes"].append(f"registration: of the first session, '{result.session_names[0]}'; every "
-                                   "session's registration and errors are under 'sessions'")
-        report["row_errors"] = chain_row_errors(chain, nominal_placements, used, result, errors, data_label)
+        placements = result.chain_placements
+        with chain.placed(placements):
+            notes += unfitted_sessions(data, result.session_names)
+            used = data.select(result.used_index)
+            sessions = session_rows(used, result.session_names)
+            errors = session_pose_errors(chain, used, sessions, result.target.registrations,
+                                         points=result.target.points, target_rotation=result.target.rotation)
+            report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
+            report["warnings"] = [f.as_dict()
+                                  for f in calibration_findings(chain, result, used, sigma_column, sigma_pos_m)]
+            report["sessions"] = session_entries(result.session_names, result.target.registrations, used, sessions,
+                                                 errors)
+            session_list = tuple(
+                SessionEvaluation(entry["name"], entry["rows"], registration, registration,
+                                  f"fitted on {entry['file']}", session_errors(errors, sessions == s))
+                for s, (entry, registration) in enumerate(zip(report["sessions"], result.target.registrations)))
+            if len(result.session_names) > 1:
+                report["notes"].append(f"registration: of the first session, '{result.session_names[0]}'; every "
+                                       "session's registration and errors are under 'sessions'")
+            report["row_errors"] = chain_row_errors(chain, nominal_placements, used, result, errors, data_label)
         what = f"level {level}"
         if choice is not None:
             report["level_choice"] = choice.as_dict()
             what += ", chosen by --level auto"
     reload_error, report["urdf_sha256"] = write_checked_urdf(
-        urdf, out_urdf, chain, nominal_placements, data.q,
+        urdf, out_urdf, chain, placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {', '.join(p.name for p in data_paths)}. "
         "Registration and tool: see the report.", xacro_args,
     )
@@ -303,12 +310,13 @@ def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
 
 
 def write_checked_urdf(
-    source: Path, destination: Path, chain: KinematicChain, nominal_placements, q: np.ndarray, comment: str,
-    xacro_args: Sequence[tuple[str, str]] = (),
+    source: Path, destination: Path, chain: KinematicChain, placements, nominal_placements, q: np.ndarray,
+    comment: str, xacro_args: Sequence[tuple[str, str]] = (),
 ) -> tuple[float, str]:
-    """Write the corrected URDF, checking before it replaces ``destination`` that
-    reloading it reproduces the chain's tool poses at ``q`` to :data:`RELOAD_TOLERANCE`
-    (a failed check leaves the old file); a ``.xacro`` source is expanded with ``xacro_args``.
+    """Write the URDF of ``chain`` with ``placements`` (a calibration's ``chain_placements``),
+    checking before it replaces ``destination`` that reloading it reproduces that model's tool
+    poses at ``q`` to :data:`RELOAD_TOLERANCE` (a failed check leaves the old file); a ``.xacro``
+    source is expanded with ``xacro_args``. The chain is left as it was.
 
     Returns:
         The largest difference [m, -] and the SHA-256 (hex) of the bytes written
@@ -326,8 +334,9 @@ def write_checked_urdf(
             )
         digest.append(file_sha256(written))
 
-    write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify,
-                         xacro_args=xacro_args)
+    with chain.placed(placements):
+        write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify,
+                             xacro_args=xacro_args)
     return checked[-1], digest[-1]
 
 
@@ -421,16 +430,15 @@ def diagnose_files(
     vector[calibration.kept] = x[kinematic]
     std = np.full(vector.size, np.nan)
     std[calibration.kept] = diagnosis.solution_std[kinematic]
-    if calibration.params is not None:
-        calibration.params.apply(vector)
     final = replace(  # the model with its effects: values, spreads, noise and fit of the final fit
         calibration, vector=vector, std=std, target=objective.estimate(x),
         target_std=diagnosis.solution_std[kinematic.stop : objective.blocks["effects"].start],
         sigma_pos_m=diagnosis.sigma_pos_m, sigma_rot_rad=diagnosis.sigma_rot_rad,
         rms_m=float(np.sqrt(np.mean(diagnosis.calibration_errors.position_m**2))),
+        chain_placements=diagnosis.chain_placements,
     )
     _, urdf_sha256 = write_checked_urdf(
-        urdf, out_urdf, chain, nominal_placements, data.q,
+        urdf, out_urdf, chain, final.chain_placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
         f"{', '.join(p.name for p in data_paths)}. "
         "Registration, tool and effects (which a URDF cannot carry): see the report.", xacro_args,
@@ -438,16 +446,17 @@ def diagnose_files(
     n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
     sources = {"urdf": str(urdf), "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                "corrected_urdf": str(out_urdf), "validation": None if validation_path is None else str(validation_path)}
-    report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
-    used = data.select(calibration.used_index)
-    report["warnings"] = [f.as_dict() for f in calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
-                                                                    press_of=calibration)]
-    report["sessions"] = session_entries(final.session_names, final.target.registrations, used,
-                                         session_rows(used, final.session_names), diagnosis.calibration_errors)
-    report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
-    report.update(drift_spans(diagnosis, row_time, calibration, used))  # where a drift holds (evaluate)
-    report["row_errors"] = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
-                                                (" + ".join(str(p) for p in data_paths), sources["validation"]))
+    with chain.placed(final.chain_placements):  # the report describes the final model
+        report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
+        used = data.select(calibration.used_index)
+        report["warnings"] = [f.as_dict() for f in calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                                        press_of=calibration)]
+        report["sessions"] = session_entries(final.session_names, final.target.registrations, used,
+                                             session_rows(used, final.session_names), diagnosis.calibration_errors)
+        report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
+        report.update(drift_spans(diagnosis, row_time, calibration, used))  # where a drift holds (evaluate)
+        report["row_errors"] = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
+                                                    (" + ".join(str(p) for p in data_paths), sources["validation"]))
     report["urdf_sha256"] = urdf_sha256
     report["xacro_args"] = dict(xacro_arguments(xacro_args))
     if choice is not None:

@@ -48,7 +48,6 @@ from pincal.diagnosis.screening import (
     GENERIC_NOT_RUN,
     SCREEN_CONDITION,
     SCREEN_INSEPARABLE,
-    Linearisation,
     Score,
     bic,
     may_reach,
@@ -57,6 +56,7 @@ from pincal.diagnosis.screening import (
     screen,
     testable,
 )
+from pincal.diagnosis.structure import partial_residual, remaining_structure
 from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
@@ -69,11 +69,9 @@ from pincal.model.chain import KinematicChain
 from pincal.model.effects import (
     BACKLASH_SOURCES,
     HARMONICS,
-    JOINT_EFFECTS,
     Effect,
     EffectInputs,
     effect_inputs,
-    joint_basis,
 )
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor import SensorResidual
@@ -85,9 +83,6 @@ GRAVITY_REFRESHES = 2
 #: Tolerance of a candidate's full fit (:func:`pincal.fit.solver.solve`): it ranks
 #: and is judged; an adopted effect is refitted at the solver's own tolerance.
 CANDIDATE_TOLERANCE = 1e-10
-#: Evaluations allowed to the full fit of a generic correction (an ill-posed one
-#: crawls along a valley of equivalent corrections; its linearised ΔBIC is then used).
-GENERIC_EVALUATIONS = 20
 
 
 @dataclass(frozen=True)
@@ -121,6 +116,8 @@ class Diagnosis:
         objective / solution: the final fit (for writing the URDF and report).
         inputs: effect inputs of the calibration rows; ``time_reference`` [s].
         notes: cases reported rather than adopted, and other remarks.
+        chain_placements: the final model's chain placements (the geometry refitted with the
+            effects; 4×4 each, as :meth:`pincal.model.chain.KinematicChain.placements`).
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -137,6 +134,7 @@ class Diagnosis:
     sigma_pos_m: float = float("nan")
     sigma_rot_rad: float | None = None
     notes: tuple[str, ...] = field(default=())
+    chain_placements: tuple[np.ndarray, ...] = ()
 
 
 def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
@@ -219,8 +217,11 @@ def diagnose(
 ) -> Diagnosis:
     """Search the calibrated model's residuals for missing effects (module docstring).
 
+    The chain is not changed (the search evaluates it at ``calibration.chain_placements``); the final
+    model is the result's ``chain_placements``.
+
     Args:
-        chain: the chain, holding the geometric calibration.
+        chain: the chain the calibration was made on.
         calibration: its result (:func:`calibrate_chain`).
         data: the measurement set it was calibrated on.
         heldout: held-out rows to report (and veto) on, in the registration of
@@ -233,6 +234,13 @@ def diagnose(
             one unit per candidate offered (refitted or screened out) and one for
             adopting the best; the final fit and the search for remaining structure one.
     """
+    with chain.placed(calibration.chain_placements):  # gravity torques at the calibrated geometry
+        return _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time,
+                         candidates, progress)
+
+
+def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time, candidates,
+              progress) -> Diagnosis:
     rows = data.select(calibration.used_index)
     row_time = None if time is None else time[calibration.used_index]
     if heldout is not None:  # its rows need a calibrated session's registration
@@ -330,7 +338,7 @@ def diagnose(
         delta, effect, obj, sol = chosen
         before_cal = _errors(current_objective, current_x)
         before_held = _heldout_errors(model, current_objective, current_x, heldout, held_inputs)
-        driver, driver_label, joint_residual, fitted = _partial_residual(effect, obj, sol, inputs, chain)
+        driver, driver_label, joint_residual, fitted = partial_residual(effect, obj, sol, inputs, chain)
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
         scales = model.sigma_pos, model.sigma_rot
@@ -348,14 +356,17 @@ def diagnose(
         if any(e.type == "compliance" or e.source == "gravity" for e in adopted):
             # gravity torques on the refitted geometry, not the one fitted without the effects
             for _ in range(GRAVITY_REFRESHES):
+                refitted = calibration.chain_placements
                 if calibration.params is not None:
                     vector = calibration.vector.copy()
                     vector[calibration.kept] = sol.x[obj.blocks["kinematic"]]
-                    calibration.params.apply(vector)
-                inputs = replace(inputs, gravity=effect_inputs(chain, rows, payload_kg, point).gravity)
+                    refitted = calibration.params.placements(vector)
+                with chain.placed(refitted):
+                    inputs = replace(inputs, gravity=effect_inputs(chain, rows, payload_kg, point).gravity)
+                    if heldout is not None:
+                        held_inputs = replace(held_inputs,
+                                              gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
                 model.inputs = inputs
-                if heldout is not None:
-                    held_inputs = replace(held_inputs, gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
                                      [sol.x[sl] for sl in obj._effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x
@@ -389,10 +400,15 @@ def diagnose(
         (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
     )
     freedom = residual_freedom(current_objective, final_solution)
-    unexplained = _remaining_structure(model, adopted, current_objective, final_solution, chain, freedom)
+    unexplained = remaining_structure(model, adopted, current_objective, final_solution, chain, freedom)
     if unexplained is None and not testable(freedom, 1 + 2 * len(HARMONICS), EVIDENCE):
         notes.append(GENERIC_NOT_RUN)
     counter.settle()
+    final_placements = calibration.chain_placements
+    if calibration.params is not None:
+        vector = calibration.vector.copy()
+        vector[calibration.kept] = final_solution.x[current_objective.blocks["kinematic"]]
+        final_placements = tuple(calibration.params.placements(vector))
     return Diagnosis(
         effects=effects,
         steps=tuple(steps),
@@ -408,6 +424,7 @@ def diagnose(
         sigma_pos_m=model.sigma_pos,
         sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),
+        chain_placements=final_placements,
     )
 
 
@@ -436,84 +453,3 @@ def _heldout_errors(model, objective, x, heldout, held_inputs) -> PoseErrors | N
 def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
     errors = _heldout_errors(model, objective, x, heldout, held_inputs)
     return errors.position.rms
-
-
-def _remaining_structure(model, adopted, objective, solution, chain, freedom) -> str | None:
-    """Fit a generic joint-space correction per joint; report strong evidence of structure.
-
-    Joints whose correction the fit's ``freedom`` (:func:`residual_freedom`) cannot test are
-    left out; joints whose linearised test is far from significant are not refitted; a
-    full fit stopped at :data:`GENERIC_EVALUATIONS` counts with the better of
-    its ΔBIC and the linearised one."""
-    base_bic = bic(solution.residual, solution.x.size, n_prior_rows(objective))
-    names, corrections = [], []
-    for name in chain.joint_names:
-        generic = [Effect("encoder_scale", name)] + [Effect("cyclic", name, harmonic=h) for h in HARMONICS]
-        generic = [e for e in generic if e not in adopted]
-        # a joint whose generic terms are all adopted has nothing left to test
-        if generic and testable(freedom, sum(e.n_values for e in generic), EVIDENCE):
-            names.append(name)
-            corrections.append(generic)
-    if not corrections:
-        return None
-    columns = iter(objective.effect_columns(solution.x, [e for generic in corrections for e in generic]))
-    blocks = [np.hstack([next(columns) for _ in generic]) for generic in corrections]
-    scores = Linearisation(solution, n_prior_rows(objective)).test(blocks, base_bic)
-    found = []
-    for name, generic, score in zip(names, corrections, scores):
-        if score.condition <= SCREEN_CONDITION and not may_reach(score.delta_bic, EVIDENCE):
-            continue
-        try:
-            _, sol = model.fit(adopted + generic, solution.x[: objective.blocks["effects"].start],
-                               [solution.x[sl] for sl in objective._effect_slices]
-                               + [np.zeros(e.n_values) for e in generic],
-                               max_evaluations=GENERIC_EVALUATIONS)
-        except CalibrationError:
-            continue
-        delta = bic(sol.residual, sol.x.size, n_prior_rows(objective)) - base_bic
-        if not sol.converged and score.condition <= SCREEN_CONDITION:  # the linear score is trusted there
-            delta = min(delta, score.delta_bic)
-        if delta < EVIDENCE:
-            found.append(f"{name} (ΔBIC {delta:.1f})")
-    if not found:
-        return None
-    return ("structure remains that no candidate explains: a generic correction of the joint angle "
-            f"(linear + harmonics 1, 2) still fits much better on {', '.join(found)}")
-
-
-_DRIVERS = {
-    "compliance": "gravity torque tau_j [N·m]",
-    "encoder_scale": "joint reading q_j",
-    "cyclic": "joint reading q_j",
-}
-
-
-def _partial_residual(effect, objective, solution, inputs, chain):
-    """Component-plus-residual of a joint effect: per row, the fitted shift plus the
-    remaining residual of the fit expressed as a shift of that joint (least
-    squares on the joint's Jacobian column), against the effect's driver."""
-    if effect.type not in JOINT_EFFECTS:
-        return None, "", None, None
-    j = chain.joint_names.index(effect.joint)
-    basis = joint_basis(effect, inputs, j)
-    fitted = basis @ solution.x[objective._effect_slices[-1]]
-    _, sens, target, world = objective._state(solution.x)
-    residual = objective.predicted_points(solution.x) - objective.g  # (K, P, 3)
-    omega, _ = objective.row_frames(target)  # (3, 3), or (K, 3, 3) with several sessions
-
-    def sensed(v):  # base-frame velocities (K, 3) in each row's sensor frame
-        return v @ omega.T if omega.ndim == 2 else np.einsum("kij,kj->ki", omega, v)
-
-    column = np.stack([sensed(sens.joint_point_velocity(world[:, p, :])[:, j, :])
-                       for p in range(world.shape[1])], axis=1)  # (K, P, 3)
-    a = column.reshape(len(column), -1)
-    r = residual.reshape(len(residual), -1)
-    shift = fitted - np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
-    if effect.type == "backlash":
-        driver = basis[:, 0]
-        label = "sign of gravity torque" if effect.source == "gravity" else "approach direction (flank)"
-    elif effect.type == "compliance":
-        driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
-    else:
-        driver, label = inputs.q[:, j], _DRIVERS[effect.type]
-    return driver, label, shift, fitted

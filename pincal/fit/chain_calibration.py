@@ -103,6 +103,9 @@ class ChainCalibration:
         outlier_files / removed_files: the file of each outlier / removed row.
         prior_sigma: with ``--select prior``, σ_i of every kinematic parameter of ``params`` in its
             own unit (m or rad) (:func:`pincal.fit.prior.prior_sigmas`), (n,); None without a prior.
+        chain_placements: the calibrated chain's joint and tip placements (4×4 each, as
+            :meth:`pincal.model.chain.KinematicChain.placements`): the model as a value, to evaluate
+            with ``chain.placed(result.chain_placements)``.
     """
 
     level: str
@@ -138,6 +141,7 @@ class ChainCalibration:
     prior_sigma: np.ndarray | None = None
     held: tuple[HeldDirection, ...] = ()
     point_basis: np.ndarray | None = None
+    chain_placements: tuple[np.ndarray, ...] = ()
 
     def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
         """Linearised prediction of the RMS error of the target points at
@@ -276,7 +280,8 @@ def calibrate_chain(
             prior: up to eq P2's fixed point instead, :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
         progress: ``progress(done, total)`` after the registration, each subset scored, the fit.
 
-    On return the chain holds the calibrated placements.
+    The chain is not changed: the calibrated model is the result's ``chain_placements`` (evaluate
+    it with ``chain.placed(result.chain_placements)``).
     """
     if level not in CHAIN_LEVELS:
         raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
@@ -406,9 +411,6 @@ def _calibrate_rows(
     if size:
         status[ordering.order[:rank]] = NOT_SELECTED
         status[kept] = KEPT
-        params.apply(vector)
-    else:
-        chain.set_placements(nominal)
     jac = solution.jacobian
     if not isinstance(objective, PriorResidual):
         covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
@@ -453,10 +455,10 @@ def _calibrate_rows(
         prior_sigma=problem.prior,
         held=held,
         point_basis=problem.point_basis,
+        chain_placements=tuple(params.placements(vector)) if size else tuple(nominal),
     )
     weak = () if tool_known or hold else weak_target(result, problem)
     if weak:  # the kinematics took what the target was left to explain: again, with it held
-        chain.set_placements(nominal)
         return _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion,
                                counter, hold=weak)
     return result, point_errors

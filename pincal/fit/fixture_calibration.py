@@ -119,6 +119,9 @@ class FixtureCalibration:
         fit_seconds / total_seconds: the final fit; everything, selection included [s].
         kept: indices of the kinematic parameters estimated.
         notes: things the user should know.
+        chain_placements: the calibrated chain's joint and tip placements (4×4 each, as
+            :meth:`pincal.model.chain.KinematicChain.placements`), to evaluate with
+            ``chain.placed(result.chain_placements)``.
     """
 
     level: str
@@ -145,6 +148,7 @@ class FixtureCalibration:
     total_seconds: float
     kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
     notes: tuple[str, ...] = ()
+    chain_placements: tuple[np.ndarray, ...] = ()
 
 
 def initial_fixture(chain: KinematicChain, data: FixtureData) -> tuple[FixtureEstimate, list[np.ndarray], list]:
@@ -221,8 +225,8 @@ def calibrate_fixture(
 ) -> FixtureCalibration:
     """Calibrate ``chain`` at ``level`` from the socket-fixture rows ``data``.
 
-    The chain's tool frame is the frame the ball centre is estimated in. On
-    return the chain holds the calibrated placements. ``selection`` as for
+    The chain's tool frame is the frame the ball centre is estimated in. The chain is
+    not changed: the calibrated model is the result's ``chain_placements``. ``selection`` as for
     :func:`pincal.fit.chain_calibration.calibrate_chain` (``"prior"``: the MAP fit of
     :mod:`pincal.fit.prior`, its rows weighted by the residuals' noise σ [m], eq P2).
 
@@ -278,7 +282,6 @@ def calibrate_fixture(
     if size:
         status[ordering.order[:rank]] = NOT_SELECTED
         status[kept] = KEPT
-        params.apply(vector)
     jac = solution.jacobian
     residual = solution.residual[: 3 * data.n_rows]  # without a prior's rows
     if not isinstance(objective, PriorResidual):
@@ -299,6 +302,7 @@ def calibrate_fixture(
         ball=x[objective.blocks["ball"]].copy(),
         ball_std=np.sqrt(np.diag(covariance)[objective.blocks["ball"]]),
         placements=_placements(objective, x, covariance, data, lines),
+        chain_placements=tuple(params.placements(vector)) if size else tuple(chain.placements()),
         nominal_ball=nominal.ball,
         training=metrics_of_positions(objective.ball_positions(x), data),
         nominal_training=nominal_training,

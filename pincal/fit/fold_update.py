@@ -77,29 +77,25 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
 
 
 def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequence[np.ndarray],
-                      levels: Sequence[str], counter: Counter, nominal, options: dict
+                      levels: Sequence[str], counter: Counter, options: dict
                       ) -> list[tuple[str, list[float], list[int], list[str]]]:
     """Every level's fit of all ``rows`` (``options``: those of :func:`calibrate_chain`), then eq L1 for
     each fold's held-out rows ``tests``: (level, fold errors [mm], kept per fold, failures) per level.
     As with refits, the first level must fit (else one line); a later one that cannot is no candidate
-    (NaN errors). The chain's placements are ``nominal`` again on return."""
+    (NaN errors)."""
     out = []
     counter.expect(len(levels))
-    try:
-        for level in levels:
-            chain.set_placements(nominal)
-            try:
-                result = calibrate_chain(chain, rows, level, **options)
-            except CalibrationError as exc:
-                if level == levels[0]:
-                    raise CalibrationError(f"--level auto: the {rows.n_rows} rows cannot be calibrated even at "
-                                           f"level {level}: {exc}") from None
-                out.append((level, [np.nan] * len(tests), [-1] * len(tests), [f"all rows: {exc}"]))
-                continue
-            finally:
-                counter.tick()
-            errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options["sigma_column"]))
-            out.append((level, [e * 1000.0 for e in errors], [len(result.kept)] * len(tests), []))
-    finally:
-        chain.set_placements(nominal)
+    for level in levels:
+        try:
+            result = calibrate_chain(chain, rows, level, **options)
+        except CalibrationError as exc:
+            if level == levels[0]:
+                raise CalibrationError(f"--level auto: the {rows.n_rows} rows cannot be calibrated even at "
+                                       f"level {level}: {exc}") from None
+            out.append((level, [np.nan] * len(tests), [-1] * len(tests), [f"all rows: {exc}"]))
+            continue
+        finally:
+            counter.tick()
+        errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options["sigma_column"]))
+        out.append((level, [e * 1000.0 for e in errors], [len(result.kept)] * len(tests), []))
     return out

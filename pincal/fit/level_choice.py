@@ -247,30 +247,26 @@ def _choice(scheme, error, folds, scores, selection, started) -> LevelChoice:
                        threshold, selection, time.perf_counter() - started, RULE_PRIOR if richest else RULE)
 
 
-def _cross_validate(folds, levels, fit_and_score, counter: Counter, restore) -> list[LevelScore]:
+def _cross_validate(folds, levels, fit_and_score, counter: Counter) -> list[LevelScore]:
     """e_f of every level on every fold; ``fit_and_score(level, fold)`` → (e_f [m], kept)."""
     counter.expect(len(folds) * len(levels))
     scores = []
-    try:
-        for level in levels:
-            errors, kept, failures = [], [], []
-            for fold in folds:
-                restore()
-                try:
-                    error, n_kept = fit_and_score(level, fold)
-                except CalibrationError as exc:
-                    if level == levels[0]:
-                        raise CalibrationError(f"--level auto: fold '{fold.name}' ({fold.train.size} training rows) "
-                                               f"cannot be calibrated even at level {level}: {exc}") from None
-                    error, n_kept = np.nan, -1
-                    failures.append(f"{fold.name}: {exc}")
-                finally:
-                    counter.tick()
-                errors.append(error * 1000.0)
-                kept.append(n_kept)
-            scores.append(_score(level, errors, kept, failures))
-    finally:
-        restore()
+    for level in levels:
+        errors, kept, failures = [], [], []
+        for fold in folds:
+            try:
+                error, n_kept = fit_and_score(level, fold)
+            except CalibrationError as exc:
+                if level == levels[0]:
+                    raise CalibrationError(f"--level auto: fold '{fold.name}' ({fold.train.size} training rows) "
+                                           f"cannot be calibrated even at level {level}: {exc}") from None
+                error, n_kept = np.nan, -1
+                failures.append(f"{fold.name}: {exc}")
+            finally:
+                counter.tick()
+            errors.append(error * 1000.0)
+            kept.append(n_kept)
+        scores.append(_score(level, errors, kept, failures))
     return scores
 
 
@@ -346,7 +342,6 @@ def choose_level(
     started = time.perf_counter()
     rows = data.select(np.flatnonzero(data.roles != "validation"))
     scheme, fold_list = sensor_folds(rows, folds, seed)
-    nominal = chain.placements()
     several = len(rows.session_names) > 1
 
     def fit_and_score(level: str, fold: Fold) -> tuple[float, int]:
@@ -355,18 +350,19 @@ def choose_level(
         test = rows.select(fold.test)
         target = result.target
         registration = target.registrations[0]
-        if several:  # a session the fit has not seen: its own registration from its own rows
-            registration = register_session(chain, test, target.points, target.rotation,
-                                            sigma_pos_m=result.sigma_pos_m, sigma_rot_rad=result.sigma_rot_rad or 1e-3)
-        errors = pose_errors(chain, test, registration, registration, points=target.points,
-                             target_rotation=target.rotation)
+        with chain.placed(result.chain_placements):
+            if several:  # a session the fit has not seen: its own registration from its own rows
+                registration = register_session(chain, test, target.points, target.rotation,
+                                                sigma_pos_m=result.sigma_pos_m,
+                                                sigma_rot_rad=result.sigma_rot_rad or 1e-3)
+            errors = pose_errors(chain, test, registration, registration, points=target.points,
+                                 target_rotation=target.rotation)
         return float(np.sqrt(np.mean(errors.position_m**2))), len(result.kept)
 
     if several or reject_outliers or rows.n_rows < LINEARISED_FROM_ROWS:
-        scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress),
-                                 lambda: chain.set_placements(nominal))
+        scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress))
     else:  # many rows: one fit per level, each fold by one Gauss–Newton step (pincal.fit.fold_update, eq L1)
-        scores = _linearised(chain, rows, fold_list, levels, Counter(progress), nominal,
+        scores = _linearised(chain, rows, fold_list, levels, Counter(progress),
                              dict(tool_known=tool_known, sigma_column=sigma_column, selection=selection))
         scheme += f", scored from the fit of all {rows.n_rows} rows by one Gauss–Newton step per fold (eq L1)"
     error = ("RMS distance of the held-out rows' target points from the model's [mm], "
@@ -375,10 +371,10 @@ def choose_level(
     return _choice(scheme, error, fold_list, scores, selection, started)
 
 
-def _linearised(chain, rows, folds, levels, counter: Counter, nominal, options) -> list[LevelScore]:
+def _linearised(chain, rows, folds, levels, counter: Counter, options) -> list[LevelScore]:
     """Eq L1 of :mod:`pincal.fit.fold_update` for every level (its fit of all rows, then each fold)."""
     return [_score(*entry) for entry in linearised_levels(chain, rows, [fold.test for fold in folds], levels,
-                                                          counter, nominal, options)]
+                                                          counter, options)]
 
 
 # --- socket fixture ----------------------------------------------------------------------------
@@ -475,7 +471,6 @@ def choose_fixture_level(
     """
     started = time.perf_counter()
     scheme, fold_list = fixture_folds(data, folds, seed)
-    nominal = chain.placements()
     several = len(data.placements) > 1
 
     def fit_and_score(level: str, fold: Fold) -> tuple[float, int]:
@@ -484,18 +479,19 @@ def choose_fixture_level(
             train = data.select_placements([n for s, n in enumerate(data.placements) if s != held])
             result = calibrate_fixture(chain, train, level, selection=selection)
             test = data.select_placements([data.placements[held]])
-            return float(fixture_heldout_error(chain, test, result.ball)[0]), len(result.kept)
+            with chain.placed(result.chain_placements):
+                return float(fixture_heldout_error(chain, test, result.ball)[0]), len(result.kept)
         result = calibrate_fixture(chain, fixture_rows(data, fold.train), level, selection=selection)
         test = fixture_rows(data, fold.test)
         placement = result.placements[0]
         centres = dict(zip(placement.sockets, placement.socket_positions))
-        poses = chain.poses(test.q)
+        with chain.placed(result.chain_placements):
+            poses = chain.poses(test.q)
         p = poses.tool_positions + poses.tool_rotations @ result.ball
         c = np.array([centres[data.fixture.names[i]] for i in test.socket])
         return float(np.sqrt(np.mean(np.sum((p - c) ** 2, axis=1)))), len(result.kept)
 
-    scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress),
-                             lambda: chain.set_placements(nominal))
+    scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress))
     error = ("RMS of eq F1 on the held-out placement [mm], its own fixture pose fitted to its rows with the "
              "model and the ball centre fixed (consistency and distortion in one number)" if several else
              "RMS distance of the held-out rows' ball centre from its socket's fitted centre [mm]")

@@ -13,6 +13,8 @@ URDF-root coordinates. Units: metres and radians.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
@@ -217,6 +219,18 @@ class KinematicChain:
         self.model.frames[self.tip_frame_id].placement = pin.SE3(
             np.asarray(placements[-1], dtype=float)
         )
+
+    @contextmanager
+    def placed(self, placements: Sequence[np.ndarray]) -> Iterator[KinematicChain]:
+        """The chain with ``placements`` (see :meth:`placements`) inside a ``with`` block, its own
+        placements back on leaving it, also on an error: how code outside ``model/`` evaluates a
+        calibrated model (a calibration's ``placements``) without changing the chain it was given."""
+        saved = self.placements()
+        self.set_placements(placements)
+        try:
+            yield self
+        finally:
+            self.set_placements(saved)
 
     # --- kinematics -----------------------------------------------------
 

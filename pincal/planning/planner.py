@@ -174,7 +174,7 @@ def plan_measurements(
     """Choose ``settings.count`` of the ``candidates`` (K, n_joints) and order them.
 
     Args:
-        chain: the chain, its tool set when ``settings.tool_known``; its placements are restored on return.
+        chain: the chain, its tool set when ``settings.tool_known`` (not changed).
         existing: measurements already recorded (their calibration is the linearisation point).
         workspace: configurations where accuracy matters (default: a subsample of the candidates).
         allowed: candidates that may be chosen (default all; e.g. collision-free ones).
@@ -203,22 +203,18 @@ def plan_measurements(
         raise PincalError(f"--count {settings.count} is more than the {int(allowed.sum())} usable candidates"
                           + (f" ({refused} refused)" if refused else "") + "; lower --count or give more candidates")
     rng = np.random.default_rng(settings.seed)
-    saved = chain.placements()
-    try:
-        model, sigma_source, recorded_q, recorded_sessions = _measurement_model(chain, settings, existing)
-        if workspace is None:
-            pool = np.flatnonzero(allowed)
-            workspace = candidates[rng.choice(pool, min(len(pool), settings.workspace_size), replace=False)]
-        blocks, recorded, errors, names = _session_columns(
-            model, model.jacobian(candidates), model.jacobian(recorded_q), recorded_sessions,
-            model.error_jacobian(workspace))
-        precision = None
-        if settings.prior is not None:
-            precision = np.zeros(blocks.shape[2])
-            precision[: len(model.names)] = model.prior_precision(settings.prior)
-        problem = DesignProblem(blocks, model.kinematic, recorded, *errors, prior_precision=precision)
-    finally:
-        chain.set_placements(saved)
+    model, sigma_source, recorded_q, recorded_sessions = _measurement_model(chain, settings, existing)
+    if workspace is None:
+        pool = np.flatnonzero(allowed)
+        workspace = candidates[rng.choice(pool, min(len(pool), settings.workspace_size), replace=False)]
+    blocks, recorded, errors, names = _session_columns(
+        model, model.jacobian(candidates), model.jacobian(recorded_q), recorded_sessions,
+        model.error_jacobian(workspace))
+    precision = None
+    if settings.prior is not None:
+        precision = np.zeros(blocks.shape[2])
+        precision[: len(model.names)] = model.prior_precision(settings.prior)
+    problem = DesignProblem(blocks, model.kinematic, recorded, *errors, prior_precision=precision)
     rows = settings.sensor.rows
     needed = int(np.ceil((problem.n - rows * len(recorded)) / rows))
     if settings.count < needed:
@@ -278,7 +274,8 @@ def _joint_columns(chain: KinematicChain, names) -> np.ndarray:
 
 
 def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: MeasurementSet | None):
-    """The measurement model, where its noise comes from, and the recorded rows' configurations and sessions."""
+    """The measurement model — linearised at the recorded rows' calibration, else at the chain as it
+    is —, where its noise comes from, and the recorded rows' configurations and sessions."""
     sensor = settings.sensor
     if settings.tool_known and sensor.n_points != 1:
         raise PincalError(f"--measure {sensor.label} with --tool: a known tool is one point; "
@@ -290,6 +287,7 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
     rot_source = "given" if sigma_rot is not None else "default"
     recorded_q = np.zeros((0, chain.n_joints))
     recorded_sessions = np.zeros(0, dtype=object)
+    linearised = tuple(chain.placements())
     if existing is not None:
         rows = existing.select(existing.roles != "validation")
         if rows.n_points != sensor.n_points or rows.has_orientation != sensor.has_rotation:
@@ -300,7 +298,7 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
         if settings.level in CHAIN_LEVELS:
             result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known,
                                      selection="aic" if settings.prior is None else settings.prior)
-            target = result.target
+            target, linearised = result.target, result.chain_placements
             if sigma_pos is None:  # each sigma not given is estimated from the recorded rows
                 sigma_pos, pos_source = result.sigma_pos_m, f"estimated from {existing.source}"
             if sigma_rot is None and result.sigma_rot_rad is not None:
@@ -315,8 +313,9 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
         points = default_target_points(sensor.n_points)
     sigma_pos = DEFAULT_SIGMA_POS_MM / 1000.0 if sigma_pos is None else sigma_pos
     sigma_rot = np.radians(DEFAULT_SIGMA_ROT_DEG) if sigma_rot is None else sigma_rot
-    model = MeasurementModel(chain, settings.level, sensor, points, tool_known=settings.tool_known,
-                             sigma_pos_m=sigma_pos, sigma_rot_rad=sigma_rot)
+    with chain.placed(linearised):  # its parameters are errors about these placements
+        model = MeasurementModel(chain, settings.level, sensor, points, tool_known=settings.tool_known,
+                                 sigma_pos_m=sigma_pos, sigma_rot_rad=sigma_rot)
     source = pos_source if pos_source == rot_source or not sensor.has_rotation else (
         f"position {pos_source}, orientation {rot_source}")
     return model, source, recorded_q, recorded_sessions

@@ -79,13 +79,9 @@ def row_error_set(
 
 
 def _with_placements(chain: KinematicChain, placements, compute):
-    """``compute()`` with the chain set to ``placements``, then the chain's own placements restored."""
-    current = chain.placements()
-    chain.set_placements(placements)
-    try:
+    """``compute()`` with the chain at ``placements`` (:meth:`KinematicChain.placed`: restored after)."""
+    with chain.placed(placements):
         return compute()
-    finally:
-        chain.set_placements(current)
 
 
 def chain_row_errors(

@@ -139,9 +139,5 @@ def measure_truth(params, truth: np.ndarray, q: np.ndarray, registration, rng: n
     parameter set ``params``): :func:`pincal.simulation.sensor.measure` with the chain's placements set to
     the truth and restored after (``options``: points, target_rotation, with_rotation, effects, time)."""
     chain = params.chain
-    saved = chain.placements()
-    try:
-        params.apply(np.asarray(truth, dtype=float))
+    with chain.placed(params.placements(np.asarray(truth, dtype=float))):
         return measure(chain, q, registration, rng, sigma_pos_m, sigma_rot_rad, role, **options)
-    finally:
-        chain.set_placements(saved)

@@ -52,36 +52,31 @@ def simulate_chain(
     chain = params.chain
     rng = np.random.default_rng(settings.seed)
     target_rotation = np.eye(3) if target_rotation is None else target_rotation
-    saved = chain.placements()
     sigma_p = settings.sigma_pos_mm / 1000.0
     sigma_a = np.radians(settings.sigma_rot_deg)
-    try:
-        params.apply(truth)
+    with chain.placed(params.placements(truth)):
         q_cal = random_configurations(chain, rng, settings.n_calibration)
         q_val = random_configurations(chain, rng, settings.n_validation)
         common = dict(points=points, target_rotation=target_rotation, with_rotation=with_rotation)
         cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration", **common)
         scale = 1.0 if settings.validation_noise else 0.0
         val = measure(chain, q_val, registration, rng, sigma_p * scale, sigma_a * scale, "validation", **common)
-    finally:
-        chain.set_placements(saved)
     return ChainExperiment(cal, val, np.asarray(truth, dtype=float), registration, np.asarray(points), target_rotation)
 
 
 def truth_error_mm(params, truth: np.ndarray, q: np.ndarray, true_points: np.ndarray, points: np.ndarray,
-                   registration: Registration, true_registration: Registration = DEFAULT_REGISTRATION) -> float:
+                   registration: Registration, true_registration: Registration = DEFAULT_REGISTRATION,
+                   placements=None) -> float:
     """Mean distance [mm] at configurations ``q`` between where the target truly is — the chain with the
     true parameters ``truth`` (of ``params``), its points ``true_points`` (P, 3) [m], seen through
-    ``true_registration`` — and where a calibrated model puts it: the chain as it is now, the estimated
-    ``points`` and ``registration``. The chain's placements are the same on return."""
+    ``true_registration`` — and where a calibrated model puts it: the chain with ``placements`` (a
+    calibration's ``chain_placements``; None: the chain as it is), the estimated ``points`` and
+    ``registration``. The chain is not changed."""
     chain = params.chain
-    calibrated = chain.placements()
-    try:
-        params.apply(truth)
+    with chain.placed(params.placements(truth)):
         poses = chain.poses(q)
         true = true_registration.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, true_points))
-    finally:
-        chain.set_placements(calibrated)
-    poses = chain.poses(q)
+    with chain.placed(chain.placements() if placements is None else placements):
+        poses = chain.poses(q)
     predicted = registration.apply_points(points_in_base(poses.tool_positions, poses.tool_rotations, points))
     return float(np.linalg.norm(predicted - true, axis=2).mean() * 1000.0)
