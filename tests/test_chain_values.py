@@ -22,26 +22,31 @@ from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.level_choice import choose_level
 from pincal.fit.metrics import pose_errors
+from pincal.fit.ml_estimator import calibrate_ml
+from pincal.fit.paper_methods import calibrate_paper
 from pincal.fit.prior import Prior
 from pincal.measurements.fixture import Fixture
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
+from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH
 from pincal.model.effects import Effect
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.planner import PlanSettings, plan_measurements
-from pincal.robots import example_robot_data_urdf
+from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf, kuka_lwr4plus_urdf
 from pincal.simulation.chain import SimulationSettings, simulate_chain
 from pincal.simulation.fixture import simulate_fixture
+from pincal.simulation.paper import SimulationSettings as PaperSettings
+from pincal.simulation.paper import simulate_experiment
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 PANDA = example_robot_data_urdf("panda_description/urdf/panda.urdf")
 POINTS = np.array([[0.03, -0.02, 0.08], [-0.04, 0.05, 0.06]])
 #: Modules that must not change a chain except through ``KinematicChain.placed``: the layers above
-#: the fits, and the fits of any chain (the paper's pipeline and the study come next).
+#: the fits, and the fits (the noise limit, the paper's simulator and the study come next).
 GUARDED = ("report", "cli", "diagnosis", "planning", "fit/chain_calibration.py", "fit/fixture_calibration.py",
            "fit/fold_update.py", "fit/level_choice.py", "fit/plausibility.py", "fit/sessions.py",
-           "simulation/chain.py", "simulation/cells.py")
+           "fit/paper_methods.py", "fit/ml_estimator.py", "simulation/chain.py", "simulation/cells.py")
 #: Calls that change a chain in place.
 MUTATORS = ("set_placements", "set_tool")
 
@@ -120,6 +125,16 @@ def test_a_fixture_calibration_leaves_the_chain():
     result = calibrate_fixture(chain, data, "full", selection="prior")
     assert _same(chain.placements(), before)
     assert _same(result.chain_placements, result.params.placements(result.vector))
+
+
+def test_the_paper_methods_leave_the_chain():
+    chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
+    experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS["small"], PaperSettings(seed=2))
+    chain.set_tool(experiment.tool)
+    before = chain.placements()
+    for result in (calibrate_paper(chain, experiment.calibration, 2), calibrate_ml(chain, experiment.calibration)):
+        assert _same(chain.placements(), before)
+        assert _same(result.chain_placements, result.table.joint_origins())
 
 
 def test_a_plan_on_recorded_rows_leaves_the_chain(experiment):

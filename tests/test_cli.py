@@ -310,9 +310,10 @@ def test_demo_runs_and_prints_the_comparison(tmp_path, capsys):
     for method in (1, 2, 3):
         chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK, tool=tool)
         result = calibrate_paper(chain, data, method)
-        expected[f"Method {method}"] = row(
-            pose_errors(chain, validation, result.registration_position, result.registration_orientation)
-        )
+        with chain.placed(result.chain_placements):
+            expected[f"Method {method}"] = row(
+                pose_errors(chain, validation, result.registration_position, result.registration_orientation)
+            )
     for label, values in expected.items():
         shown = _printed_row(printed, label)
         assert np.abs(shown - values).max() <= PRINTED, f"{label}: printed {shown}, computed {values}"

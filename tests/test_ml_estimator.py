@@ -145,7 +145,9 @@ def test_tool_pose_residual_is_row_by_row_pose_error(kuka_chain):
 def _run(urdf, experiment, **kwargs):
     chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     result = calibrate_ml(chain, experiment.calibration, nominal=KUKA_LWR4_DH, **kwargs)
-    errors = pose_errors(chain, experiment.validation, result.registration_position, result.registration_orientation)
+    with chain.placed(result.chain_placements):
+        errors = pose_errors(chain, experiment.validation, result.registration_position,
+                             result.registration_orientation)
     return result, errors, chain
 
 
@@ -213,9 +215,10 @@ def test_ml_beats_method2_at_the_paper_noise(kuka_urdf, paper_noise_experiments)
     for seed, experiment in enumerate(paper_noise_experiments):
         result, errors, chain = _run(kuka_urdf, experiment)
         method2 = calibrate_paper(chain, experiment.calibration, 2, nominal=KUKA_LWR4_DH)
-        errors2 = pose_errors(
-            chain, experiment.validation, method2.registration_position, method2.registration_orientation
-        )
+        with chain.placed(method2.chain_placements):
+            errors2 = pose_errors(
+                chain, experiment.validation, method2.registration_position, method2.registration_orientation
+            )
         means["ml"].append((errors.position.mean, errors.rotation.mean))
         means[2].append((errors2.position.mean, errors2.rotation.mean))
         assert errors.position.mean < errors2.position.mean, f"seed {seed}: position"

@@ -277,9 +277,10 @@ def test_monte_carlo_errors_match_the_prediction(kuka_urdf, kuka_chain, method, 
     for _ in range(draws):
         data = _add_noise(experiment.calibration, 0.05, 0.05, rng)
         result = _calibrate(chain, data, method, sigma=(0.05, 0.05), nominal=KUKA_LWR4_DH)
-        held_out = pose_errors(
-            chain, experiment.validation, result.registration_position, result.registration_orientation
-        )
+        with chain.placed(result.chain_placements):
+            held_out = pose_errors(
+                chain, experiment.validation, result.registration_position, result.registration_orientation
+            )
         errors.append((held_out.position.mean, held_out.rotation.mean))
     position, rotation = np.mean(errors, axis=0)
     assert abs(position / prediction.position_mm - 1) < 0.15, (position, prediction.position_mm)

@@ -41,7 +41,8 @@ def _calibrate(urdf, experiment, method, weight=1.0, also=None):
     result = calibrate_paper(chain, experiment.calibration, method, weight=weight)
 
     def errors(rows):
-        return pose_errors(chain, rows, result.registration_position, result.registration_orientation)
+        with chain.placed(result.chain_placements):
+            return pose_errors(chain, rows, result.registration_position, result.registration_orientation)
 
     if also is not None:
         return result, errors(experiment.validation), errors(also)

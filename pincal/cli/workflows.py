@@ -174,8 +174,7 @@ def calibrate_chain_dh(
 
     params = DHParameterSet(chain)
     start = time.perf_counter()
-    with chain.placed(chain.placements()):  # the paper's methods leave their table in the chain: not passed on
-        result = calibrate_paper(chain, data, method, weight=weight, nominal=params.nominal)
+    result = calibrate_paper(chain, data, method, weight=weight, nominal=params.nominal)
     return result, params, time.perf_counter() - start
 
 
@@ -237,7 +236,7 @@ def calibrate_files(
         check_registrable(data.with_role("calibration"), orientations=False)
         session_list = ()
         result, params, seconds = calibrate_chain_dh(chain, data, method, weight)
-        placements = tuple(params.placements(result.table.to_vector()))
+        placements = result.chain_placements
         with chain.placed(placements):
             errors = pose_errors(
                 chain, data.with_role("calibration"), result.registration_position, result.registration_orientation

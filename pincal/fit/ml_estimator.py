@@ -138,8 +138,8 @@ def calibrate_ml(
     """Maximum-likelihood calibration on the ``cpa`` and ``calibration`` rows of ``data``.
 
     Args:
-        chain: the chain; its tool must be the measured target (the TCP). On
-            return its placements hold the calibrated table.
+        chain: the chain; its tool must be the measured target (the TCP). It is not
+            changed: the calibrated table is the result's (``chain_placements`` in the chain's terms).
         data: full-pose measurements, one target point per row.
         sigma_pos_mm: σ_p, position noise per axis [mm]; estimated if None.
         sigma_rot_deg: σ_a, orientation noise per component [deg]; estimated if None.
@@ -226,7 +226,6 @@ def calibrate_ml(
     x, model = solution.x, objective.blocks["kinematic"]
 
     vector = cache.full_vector(x[model])
-    params.apply(vector)
     registration = objective.estimate(x).registration
     std = np.full(params.size, np.nan)
     std[free] = solution.std[model]

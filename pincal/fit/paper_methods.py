@@ -82,6 +82,9 @@ class PaperCalibration:
         registration_orientation: Registration 2 (Methods 2, 3); Registration 1 for Method 1.
         stages: the fits that were run, in order.
         notes: things the user should know.
+        chain_placements: the chain placements realising ``table`` (4×4 each, N joints + tip, as
+            :meth:`pincal.model.chain.KinematicChain.placements`), to evaluate with
+            ``chain.placed(result.chain_placements)``.
     """
 
     method: int | str
@@ -94,6 +97,10 @@ class PaperCalibration:
     registration_orientation: Registration
     stages: tuple[Stage, ...]
     notes: tuple[str, ...] = field(default=())
+
+    @property
+    def chain_placements(self) -> tuple[np.ndarray, ...]:
+        return tuple(self.table.joint_origins())
 
 
 def cpa_groups(q: np.ndarray, lines: np.ndarray | None = None) -> dict[int, np.ndarray]:
@@ -184,8 +191,8 @@ def calibrate_paper(
     """Run Method 1, 2 or 3 on the ``cpa`` and ``calibration`` rows of ``data``.
 
     Args:
-        chain: the chain; its tool must be the measured target (the TCP). On
-            return its placements hold the calibrated table.
+        chain: the chain; its tool must be the measured target (the TCP). It is not
+            changed: the calibrated table is the result's (``chain_placements`` in the chain's terms).
         data: measurements (``cpa`` rows optional, ``calibration`` rows used).
         method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.fit.ml_estimator`).
         weight: w of Method 3 [mm²/deg²].
@@ -270,7 +277,6 @@ def calibrate_paper(
         stages.append(fit(objective, cache, "Err_full", "mm | sqrt(w) deg"))
         vector = cache.base
 
-    params.apply(vector)
     poses, _ = cache.evaluate(vector[cache.free])  # tool poses at the solution
     registration_position = register_points(poses.tool_positions, points)
     if method in (2, 3):

@@ -133,8 +133,8 @@ def ml_without_cpa_orientations(
     positions only, as in the paper. ``withhold=()`` is the ML estimator itself.
 
     Args:
-        chain: the chain with the TCP as its tool; on return its placements
-            hold the calibrated table.
+        chain: the chain with the TCP as its tool; set to ``nominal`` (the fit does not
+            change it: the calibrated table is returned).
         data: the rows (full poses).
         sigma_pos_mm, sigma_rot_deg: σ_p [mm] and σ_a [deg], both positive.
         nominal: the default table; eps_1 and d_1 keep its values.
