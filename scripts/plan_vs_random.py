@@ -43,8 +43,7 @@ from pincal.simulation.sensor import (
     random_configurations,
 )
 
-SELECTION = "prior"  # calibrate's default at level full (docs/defaults.md)
-PLAN_PRIOR = Prior()  # ... and what plan's default assumes there
+SELECTION = "prior"  # calibrate's default at level full (docs/defaults.md), and plan's there
 TARGET = np.array([[0.045, -0.043, 0.118]])
 BOUND = 0.8
 
@@ -60,7 +59,7 @@ def run(count: int, seeds: int) -> dict:
     params = PlacementErrors(chain)
     candidates = sample_candidates(chain, 2000, seed=0)
     settings = PlanSettings(count=count, level="full", sensor=SensorModel("pose", 1), sigma_pos_mm=0.1,
-                            sigma_rot_deg=0.1, target_points=TARGET, prior=PLAN_PRIOR)
+                            sigma_rot_deg=0.1, target_points=TARGET, selection=Prior())
     plan = plan_measurements(chain, candidates, settings)
     heldout = random_configurations(chain, np.random.default_rng(123), 300)
     nominal = chain.placements()

@@ -11,6 +11,7 @@ a parameter vector on a chain themselves (read from the source with :mod:`ast`).
 from __future__ import annotations
 
 import ast
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,10 +34,12 @@ from pincal.model.parameter_sets import PlacementErrors
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf, kuka_lwr4plus_urdf
+from pincal.simulation.cells import measure_truth
 from pincal.simulation.chain import SimulationSettings, simulate_chain
 from pincal.simulation.fixture import simulate_fixture
 from pincal.simulation.paper import SimulationSettings as PaperSettings
 from pincal.simulation.paper import simulate_experiment
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, random_configurations
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
@@ -60,16 +63,26 @@ def experiment():
     return simulate_chain(params, truth, POINTS, settings)
 
 
+@pytest.fixture(scope="module")
+def with_outliers(experiment):
+    """The calibration rows with two rows 10 mm off: ``reject_outliers`` fits twice."""
+    points = experiment.calibration.points.copy()
+    points[[5, 17]] += 0.01
+    return replace(experiment.calibration, points=points)
+
+
 def _same(a, b) -> bool:
     return len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))
 
 
 @pytest.mark.parametrize("level, selection", [("registration", "aic"), ("offsets", "aic"), ("full", "aic"),
                                               ("full", Prior()), ("full", "all")])
-def test_a_calibration_leaves_the_chain_and_returns_its_model(experiment, level, selection):
+def test_a_calibration_leaves_the_chain_and_returns_its_model(experiment, with_outliers, level, selection):
     chain = KinematicChain.from_urdf(UR5, "tool0")
     before = chain.placements()
-    result = calibrate_chain(chain, experiment.calibration, level, selection=selection, reject_outliers=True)
+    refit = calibrate_chain(chain, with_outliers, level, selection=selection, reject_outliers=True)
+    assert len(refit.removed_lines) == 2 and _same(chain.placements(), before)  # the second fit starts at nominal
+    result = calibrate_chain(chain, experiment.calibration, level, selection=selection)
     assert _same(chain.placements(), before)
     expected = before if result.params is None else result.params.placements(result.vector)
     assert _same(result.chain_placements, expected)
@@ -87,12 +100,24 @@ def test_the_level_choice_and_diagnose_leave_the_chain(experiment):
     before = chain.placements()
     choose_level(chain, experiment.calibration, folds=4)
     assert _same(chain.placements(), before)
-    calibration = calibrate_chain(chain, experiment.calibration, "full")
-    diagnosis = diagnose(chain, calibration, experiment.calibration, heldout=experiment.validation,
-                         candidates=[Effect("compliance", "elbow_joint"), Effect("encoder_scale", "wrist_1_joint")])
+    # a hidden encoder scale on the elbow: diagnose adopts it and refits the geometry with it
+    params = PlacementErrors(chain)
+    truth = np.random.default_rng(3).normal(0.0, 1e-3, params.size)
+    rng = np.random.default_rng(6)
+    scale = [(Effect("encoder_scale", "elbow_joint"), np.array([2e-3]))]
+    rows = measure_truth(params, truth, random_configurations(chain, rng, 40), DEFAULT_REGISTRATION, rng, 2e-5,
+                         0.0, points=POINTS, with_rotation=False, effects=scale)
+    calibration = calibrate_chain(chain, rows, "full")
+    diagnosis = diagnose(chain, calibration, rows, candidates=[Effect("encoder_scale", "elbow_joint"),
+                                                                Effect("compliance", "shoulder_lift_joint")])
     assert _same(chain.placements(), before)
-    assert len(diagnosis.chain_placements) == chain.n_joints + 1
+    assert [e.label for e, _, _ in diagnosis.effects] == [Effect("encoder_scale", "elbow_joint").label]
+    assert not _same(diagnosis.chain_placements, calibration.chain_placements)  # the refitted geometry
+    refit = calibration.vector.copy()
+    refit[calibration.kept] = diagnosis.solution_x[diagnosis.objective.blocks["kinematic"]]
+    assert _same(diagnosis.chain_placements, calibration.params.placements(refit))
     # an error inside diagnose (held-out rows measuring another target: one point) leaves the chain too
+    calibration = calibrate_chain(chain, experiment.calibration, "full")
     one_point = simulate_chain(PlacementErrors(chain), np.zeros(PlacementErrors(chain).size), POINTS[:1],
                                SimulationSettings(n_calibration=5, n_validation=5, seed=5))
     with pytest.raises(CalibrationError, match="same target"):
@@ -109,6 +134,13 @@ def test_placed_restores_on_an_error():
         with chain.placed(moved):
             assert _same(chain.placements(), moved)
             raise RuntimeError("inside the block")
+    assert _same(chain.placements(), before)
+    # a malformed entry fails after the joints before it were set: they are put back too
+    broken = [p.copy() for p in moved]
+    broken[3] = np.eye(3)
+    with pytest.raises(Exception):
+        with chain.placed(broken):
+            pass
     assert _same(chain.placements(), before)
 
 

@@ -368,13 +368,12 @@ def _run_urdf_from_dh(args: argparse.Namespace) -> int:
 def _run_plan(args: argparse.Namespace) -> int:
     from pincal.cli.preparation import plan_files
     from pincal.cli.progress import progress_bar
-    from pincal.fit.prior import prior_of
     from pincal.planning.planner import PlanSettings
 
     settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
                             sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,
                             tool_known=args.tool is not None, seed=args.seed, alternate=args.alternate,
-                            prior=prior_of(selection_criterion(args)))
+                            selection=selection_criterion(args))
     with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
         run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
                          candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,

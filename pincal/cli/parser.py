@@ -73,7 +73,8 @@ def selection_criterion(args: argparse.Namespace) -> str:
     level = getattr(args, "level", None) or ("dh" if getattr(args, "method", None) is not None else None)
     if level in ("registration", "dh") and (select == "prior" or scale is not None):
         flag = "--select prior" if select == "prior" else "--prior-scale"
-        what = "fits no kinematic parameter" if level == "registration" else "runs the paper's methods, which have none"
+        what = ("fits no kinematic parameter" if level == "registration"
+                else "estimates the paper's DH parameters, which take no prior")
         raise PincalError(f"{flag} does not apply to --level {level} (it {what}): use --level offsets, full or "
                           f"auto, or drop {flag}")
     if select is None:  # the default: the prior wherever kinematic parameters are fitted (docs/defaults.md)

@@ -226,8 +226,8 @@ class KinematicChain:
         placements back on leaving it, also on an error: how code outside ``model/`` evaluates a
         calibrated model (a calibration's ``placements``) without changing the chain it was given."""
         saved = self.placements()
-        self.set_placements(placements)
         try:
+            self.set_placements(placements)  # inside: a malformed entry may fail after moving some joints
             yield self
         finally:
             self.set_placements(saved)

@@ -101,6 +101,7 @@ def plan_document(
             "level": settings.level,
             "measure": settings.sensor.label,
             "criterion": settings.criterion,
+            "select": str(settings.selection),
             "prior_scale": None if settings.prior is None else settings.prior.as_dict(),
             "sigma_pos_mm": plan.sigma_pos_mm,
             "sigma_rot_deg": plan.sigma_rot_deg,

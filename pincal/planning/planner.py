@@ -20,7 +20,8 @@ import numpy as np
 
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, initial_target
-from pincal.fit.prior import Prior
+from pincal.fit.prior import Prior, prior_of
+from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.planning.candidates import WORKSPACE_SIZE
@@ -58,13 +59,15 @@ class PlanSettings:
             recorded data's estimate, or :func:`default_target_points`.
         tool_known: the chain's tool is the measured point (not estimated).
         alternate: joints whose approach direction the order balances.
-        seed: seed of the workspace subsample, the random comparison and the order.
+        seed: seed of the workspace subsample, the exchange's random starts, the random comparison
+            and the order.
         workspace_size: candidates the accuracy is averaged over (when no workspace is given).
         random_draws: random N-subsets the plan is compared with.
-        prior: the physical prior of the calibration the plan is for (``calibrate --select prior``,
-            its default at ``offsets`` and ``full``; :class:`pincal.fit.prior.Prior`), or None for a
-            calibration that keeps a subset of the parameters (``--select aic`` …). With a prior, the
-            plan's information and predictions include it (eq P1).
+        selection: the selection of the calibration the plan is for, as ``calibrate --select``
+            (``aic``, ``bic``, ``press``, ``all``, or ``prior`` — a :class:`pincal.fit.prior.Prior`
+            with its scales —, the command's default at ``offsets`` and ``full``). With a prior the
+            plan's information and predictions include it (eq P1); recorded rows (``existing``) are
+            calibrated with it.
     """
 
     count: int
@@ -79,9 +82,16 @@ class PlanSettings:
     seed: int = 0
     workspace_size: int = WORKSPACE_SIZE
     random_draws: int = RANDOM_DRAWS
-    prior: Prior | None = None
+    selection: str = "aic"
+
+    @property
+    def prior(self) -> Prior | None:
+        """The selection's prior, or None (:func:`pincal.fit.prior.prior_of`)."""
+        return prior_of(self.selection)
 
     def __post_init__(self) -> None:
+        if self.selection not in SELECTION_CRITERIA:
+            raise PincalError(f"selection must be one of {', '.join(SELECTION_CRITERIA)}, got '{self.selection}'")
         if self.prior is not None and self.level not in ("offsets", "full"):
             raise PincalError(f"a prior applies to the kinematic parameters of level offsets or full, "
                               f"not {self.level}")
@@ -130,7 +140,8 @@ class Plan:
         sigma_pos_mm / sigma_rot_deg / sigma_source: the noise assumed and where it comes from.
         target_points: target points in the tool frame [m], (P, 3).
         workspace_size: configurations the accuracy is averaged over.
-        swaps: configurations the exchange passes replaced.
+        swaps: configurations the exchange passes replaced, from the start that won
+            (:func:`pincal.planning.design.select`).
         seconds: planning time [s].
         settings: the settings, with the sensor resolved.
         notes: what the user should know.
@@ -297,7 +308,7 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
         recorded_q, recorded_sessions = rows.q, rows.sessions
         if settings.level in CHAIN_LEVELS:
             result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known,
-                                     selection="aic" if settings.prior is None else settings.prior)
+                                     selection=settings.selection)
             target, linearised = result.target, result.chain_placements
             if sigma_pos is None:  # each sigma not given is estimated from the recorded rows
                 sigma_pos, pos_source = result.sigma_pos_m, f"estimated from {existing.source}"
