@@ -222,13 +222,14 @@ def test_evaluate_refuses_a_urdf_the_report_does_not_describe(tmp_path, simulate
 
 
 def test_reloaded_corrected_urdf_reproduces_calibrated_fk(tmp_path, simulated, kuka_urdf):
+    from pincal.cli.settings import CalibrateSettings
     from pincal.cli.workflows import calibrate_files
     from pincal.measurements.csv_v1 import read_measurements
 
     tool = json.loads((simulated / "truth.json").read_text())["tool"]
     pose = pose_from_xyz_rpy(tool["xyz_m"], tool["rpy_rad"])
-    run = calibrate_files(kuka_urdf, simulated / "calibration.csv", 2, 1.0, pose, KUKA_FLANGE_LINK,
-                          tmp_path / "c.urdf", tmp_path / "r.json")
+    run = calibrate_files(kuka_urdf, simulated / "calibration.csv", tmp_path / "c.urdf", tmp_path / "r.json",
+                          CalibrateSettings(KUKA_FLANGE_LINK, level="dh", method=2, tool_pose=pose))
     assert run.reload_error < 1e-9  # the README's promise: reloading reproduces the TCP to 1e-9 m
     chain = KinematicChain.from_urdf(tmp_path / "c.urdf", KUKA_FLANGE_LINK, tool=pose)
     direct = DHTable.from_joint_origins(chain.placements())

@@ -11,7 +11,7 @@ import argparse
 import gc
 import json
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -69,6 +69,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
 def _run_calibrate(args: argparse.Namespace) -> int:
     from pincal.cli.progress import progress_bar
+    from pincal.cli.settings import CalibrateSettings
     from pincal.cli.workflows import calibrate_files
 
     if args.fixture is not None:  # socket-fixture data, no sensor
@@ -78,20 +79,18 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     level = args.level or ("dh" if args.method is not None else "full")
     if args.tip_link is None:
         raise PincalError("give the end of the chain: --tip-link LINK (or --tool-parent LINK)")
-    if level != "dh" and args.method is not None:
-        raise PincalError(f"--method applies to --level dh only (got --level {level})")
-    if level == "dh" and (args.strict or args.sigma_pos is not None):
-        flag = "--strict" if args.strict else "--sigma-pos"
-        raise PincalError(f"{flag} applies to --level registration, offsets, full or auto (the plausibility checks "
+    if level == "dh" and args.strict:
+        raise PincalError("--strict applies to --level registration, offsets, full or auto (the plausibility checks "
                           "of pincal.fit.plausibility), not to the paper's methods; drop it")
-    method = args.method or 2
+    settings = CalibrateSettings(
+        tip_link=args.tip_link, level=level, method=args.method,
+        weight=1.0 if args.weight is None else args.weight,  # None: not given (refused with --fixture)
+        tool_pose=args.tool, sigma_column=args.sigma_column, reject_outliers=args.reject_outliers,
+        selection=selection_criterion(args), sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args)
+    method = settings.paper_method
     _check_html(args.html, *_description_inputs(args), *args.data, outputs=[args.out, args.report])
-    weight = 1.0 if args.weight is None else args.weight  # None: not given (refused with --fixture)
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
-        run = calibrate_files(args.urdf, args.data, method, weight, args.tool, args.tip_link,
-                              args.out, args.report, level=level, sigma_column=args.sigma_column,
-                              reject_outliers=args.reject_outliers, selection=selection_criterion(args),
-                              xacro_args=args.xacro_args, progress=progress, sigma_pos_m=_metres(args.sigma_pos))
+        run = calibrate_files(args.urdf, args.data, args.out, args.report, settings, progress=progress)
     _print_notes(run.notes + list(run.result.notes))
     _print_level_choice(run.report)
     if level == "dh":
@@ -113,10 +112,6 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote {args.report}")
     _write_html(args.html, run.report, args.report.parent)
     return _warned(run.report, args.strict)
-
-
-def _metres(millimetres: float | None) -> float | None:
-    return None if millimetres is None else millimetres / 1000.0
 
 
 def _print_level_choice(report: dict) -> None:
@@ -182,6 +177,7 @@ def _print_chain_summary(run) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
+    from pincal.cli.settings import EvaluateSettings
     from pincal.cli.workflows import evaluate_files
 
     if args.fixture is not None:
@@ -191,9 +187,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.nominal is not None:
         raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
     _check_html(args.html, *_description_inputs(args), args.report, args.data, outputs=[args.json])
-    evaluation = evaluate_files(args.urdf, args.report, args.data, allow_other_urdf=args.allow_other_urdf,
-                                xacro_args=args.xacro_args, fixed_registration=args.fixed_registration,
-                                new_session=args.new_session)
+    settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
+                                fixed_registration=args.fixed_registration, new_session=args.new_session)
+    evaluation = evaluate_files(args.urdf, args.report, args.data, settings)
     thresholds = [flag for flag, value in (("--max-pos-mm", args.max_pos_mm), ("--max-rot-deg", args.max_rot_deg))
                   if value is not None]
     if thresholds and evaluation.threshold_problem():
@@ -240,17 +236,18 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 def _run_diagnose(args: argparse.Namespace) -> int:
     from pincal.cli.progress import progress_bar
+    from pincal.cli.settings import DiagnoseSettings
     from pincal.cli.workflows import diagnose_files
 
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
+    settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
+                                sigma_column=args.sigma_column, selection=selection_criterion(args),
+                                payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
+                                xacro_args=args.xacro_args)
     _check_html(args.html, *_description_inputs(args), *args.data, args.validation, outputs=[args.out, args.report])
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
-        run = diagnose_files(args.urdf, args.data, args.out, args.report, args.tip_link, level=args.level,
-                             tool_pose=args.tool, validation_path=args.validation, sigma_column=args.sigma_column,
-                             selection=selection_criterion(args), payload_kg=args.payload_kg,
-                             time_column_name=args.time_column,
-                             plots_dir=plots, xacro_args=args.xacro_args, progress=progress,
-                             sigma_pos_m=_metres(args.sigma_pos))
+        run = diagnose_files(args.urdf, args.data, args.out, args.report, settings, validation_path=args.validation,
+                             plots_dir=plots, progress=progress)
     _print_notes(run.notes + list(run.calibration.notes))
     _print_level_choice(run.report)
     diagnosis = run.diagnosis
@@ -321,8 +318,8 @@ def _run_demo(args: argparse.Namespace) -> int:
 
 
 def _run_study(args: argparse.Namespace) -> int:
-    from pincal.cli.progress import progress_bar
     from pincal.cli.paths import ensure_directory
+    from pincal.cli.progress import progress_bar
     from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
     from pincal.study.run import StudyConfig, run_study, write_study
 
@@ -356,7 +353,8 @@ def _run_urdf_from_dh(args: argparse.Namespace) -> int:
                             flange=args.flange)
     _print_notes(run.notes)
     robot = run.robot
-    kinds = ", ".join(f"{robot.types.count(t)} {t}" for t in ("revolute", "prismatic", "continuous") if t in robot.types)
+    kinds = ", ".join(f"{robot.types.count(t)} {t}" for t in ("revolute", "prismatic", "continuous")
+                      if t in robot.types)
     print(f"read {args.table}: {robot.n_joints} joints ({kinds}), {robot.convention} DH convention")
     print(f"wrote {args.out}: root link {DH_BASE_LINK}, joints {', '.join(robot.names)}, tip link "
           f"{DH_FLANGE_LINK} (Pinocchio FK = DH product to {run.fk_error:.1e})")

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pincal.cli.evaluation import evaluate_files
+from pincal.cli.settings import CalibrateSettings
 from pincal.cli.workflows import calibrate_files, simulate_to_directory
 from pincal.fit.metrics import PoseErrors, pose_errors
 from pincal.fit.registration import register_orientations, register_points
@@ -44,12 +45,9 @@ def run_demo(out_dir: str | Path, settings: SimulationSettings, deviations: str 
         run = calibrate_files(
             urdf,
             out / "calibration.csv",
-            method,
-            1.0,
-            tool,
-            KUKA_FLANGE_LINK,
             out / f"kuka_lwr4plus_method{method}.urdf",
             out / f"REPORT_method{method}.json",
+            CalibrateSettings(KUKA_FLANGE_LINK, level="dh", method=method, tool_pose=tool),
         )
         evaluation = evaluate_files(
             out / f"kuka_lwr4plus_method{method}.urdf",

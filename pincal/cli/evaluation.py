@@ -40,13 +40,13 @@ refused when a re-estimated session has fewer than :data:`MIN_THRESHOLD_DOF`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pincal.cli.settings import EvaluateSettings
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.sessions import register_session, session_pose_errors
@@ -83,7 +83,8 @@ THE_REGISTRATION = ""
 #: How rows outside the fitted time spans are evaluated (``drift.held_rule`` in ``--json``).
 HELD_DRIFT = ("drift not extrapolated: a row outside the time span it was fitted on in its registration's session "
               "uses the drift at that session's mean time (no drift term for a one-session fit); a re-estimated "
-              "registration, at the nearer end of the span nearest its session's median time; without time_spans_s (older reports) every row "
+              "registration, at the nearer end of the span nearest its session's median time; without time_spans_s "
+              "(older reports) every row "
               "uses offset 0")
 
 
@@ -165,24 +166,20 @@ class Evaluation:
 
 
 def evaluate_files(
-    urdf: str | Path, report_path: str | Path, data_path: str | Path, allow_other_urdf: bool = False,
-    xacro_args: Sequence[tuple[str, str]] = (), fixed_registration: str | None = None, new_session: bool = False,
+    urdf: str | Path, report_path: str | Path, data_path: str | Path, settings: EvaluateSettings | None = None,
 ) -> Evaluation:
     """Eq 24 on every non-CPA row of ``data_path`` with the model of a report, each
-    session through the registration the module's rule gives it.
+    session through the registration the module's rule gives it (``settings``:
+    :class:`pincal.cli.settings.EvaluateSettings`; None: its defaults).
 
     When the report records the SHA-256 of the URDF written with it
     (``urdf_sha256``), ``urdf`` must be that file — a run killed between
     writing the URDF and the report, or a report of another run, is refused —
-    unless ``allow_other_urdf`` (the URDF was edited on purpose; a note says so).
-
-    Args:
-        fixed_registration: a reported session's name, or ``""`` for the only/first
-            one, whose registration every row uses (``--fixed-registration``).
-        new_session: re-estimate the registration of every session of the data.
+    unless ``settings.allow_other_urdf`` (the URDF was edited on purpose; a note says so).
     """
-    if fixed_registration is not None and new_session:
-        raise PincalError("--fixed-registration and --new-session exclude each other; give one")
+    settings = EvaluateSettings() if settings is None else settings
+    allow_other_urdf, xacro_args = settings.allow_other_urdf, settings.xacro_args
+    fixed_registration, new_session = settings.fixed_registration, settings.new_session
     report = read_report(report_path)
     chain = KinematicChain.from_urdf(urdf, report.tool_parent, xacro_args=xacro_args)
     notes: list[str] = []
@@ -224,7 +221,7 @@ def evaluate_files(
         notes.append(_drift_note(data_path, drift_use))
     index = np.empty(data.n_rows, dtype=np.intp)
     positions, orientations, sources = [], [], []
-    for s, (name, members, reported) in enumerate(plan):
+    for s, (_, members, reported) in enumerate(plan):
         index[members] = s
         if reported is None:
             q, drift = corrections.get("q"), corrections.get("drift")

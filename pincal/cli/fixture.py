@@ -26,6 +26,7 @@ from pincal._version import __version__
 from pincal.cli.level_table import level_choice_lines
 from pincal.cli.parser import selection_criterion
 from pincal.cli.paths import description_inputs, refuse_overwrite
+from pincal.cli.settings import CalibrateSettings
 from pincal.errors import PincalError
 from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
 from pincal.fit.level_choice import choose_fixture_level
@@ -68,17 +69,28 @@ def calibrate_fixture_files(
     urdf: str | Path,
     data_paths: Sequence[str | Path],
     fixture_path: str | Path,
-    tip_link: str,
     out_urdf: str | Path,
     report_path: str | Path,
-    level: str = "full",
-    selection: str = "aic",
-    xacro_args: Sequence[tuple[str, str]] = (),
+    settings: CalibrateSettings,
 ) -> FixtureRun:
-    """Calibrate ``urdf`` on socket-fixture data; write the corrected URDF and the report.
-    ``level`` ``auto``: the level cross-validation over the placements supports
-    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``)."""
+    """Calibrate ``urdf`` on socket-fixture data as ``settings`` say (its tip link carries the
+    ball; level, selection and xacro arguments; nothing of a sensor); write the corrected URDF
+    and the report. Level ``auto``: the level cross-validation over the placements supports
+    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``).
+
+    Raises:
+        PincalError: settings of a sensor (a tool, method, row weights, outlier rejection, a
+            stated noise) or level ``dh``.
+    """
     from pincal.cli.workflows import write_checked_urdf
+
+    sensor = [name for name, value in (("tool_pose", settings.tool_pose), ("method", settings.method),
+                                       ("sigma_column", settings.sigma_column),
+                                       ("sigma_pos_mm", settings.sigma_pos_mm)) if value is not None]
+    sensor += ["reject_outliers"] if settings.reject_outliers else []
+    if sensor or settings.level == "dh":
+        raise PincalError(f"socket-fixture data have no sensor: {', '.join(sensor) or 'level dh'} do(es) not apply")
+    tip_link, level, selection, xacro_args = settings.tip_link, settings.level, settings.selection, settings.xacro_args
 
     urdf, fixture_path, out_urdf, report_path = Path(urdf), Path(fixture_path), Path(out_urdf), Path(report_path)
     data_paths = _paths(data_paths)
@@ -142,7 +154,8 @@ def _read_report(report_path: Path) -> tuple[dict[str, Any], tuple]:
                           "pass the REPORT.json written by 'pincal calibrate --fixture'") from None
 
 
-def _reported_nominal(document: dict[str, Any], report_path: Path, sha: str | None) -> tuple[Path | None, list[Path], str]:
+def _reported_nominal(document: dict[str, Any], report_path: Path,
+                      sha: str | None) -> tuple[Path | None, list[Path], str]:
     """The report's ``sources.urdf`` as written, else beside the report: the file with the recorded SHA-256.
 
     ``sources.urdf`` is the path calibrate was given, relative to where it ran; so it
@@ -293,8 +306,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.html is not None:  # before the fit, as every other output
         refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *_paths(args.data),
                          outputs=[args.out, args.report])
-    run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.tip_link, args.out, args.report,
-                                  level=level, selection=selection_criterion(args), xacro_args=xacro_args)
+    settings = CalibrateSettings(args.tip_link, level=level, selection=selection_criterion(args), xacro_args=xacro_args)
+    run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.out, args.report, settings)
     result, report = run.result, run.report
     level = result.level
     for note in report["notes"]:

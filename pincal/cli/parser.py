@@ -72,11 +72,9 @@ def selection_criterion(args: argparse.Namespace) -> str:
     select = args.select
     level = getattr(args, "level", None) or ("dh" if getattr(args, "method", None) is not None else None)
     if level in ("registration", "dh") and (select == "prior" or scale is not None):
-        flag = "--select prior" if select == "prior" else "--prior-scale"
-        what = ("fits no kinematic parameter" if level == "registration"
-                else "estimates the paper's DH parameters, which take no prior")
-        raise PincalError(f"{flag} does not apply to --level {level} (it {what}): use --level offsets, full or "
-                          f"auto, or drop {flag}")
+        from pincal.cli.settings import no_prior
+
+        raise no_prior("--select prior" if select == "prior" else "--prior-scale", level)
     if select is None:  # the default: the prior wherever kinematic parameters are fitted (docs/defaults.md)
         select = "aic" if level in ("registration", "dh") else "prior"
     if select != "prior":
@@ -232,7 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_prior_scale(cal)
     cal.add_argument("--fixture", type=Path, metavar="FIXTURE.csv",
                      help="socket-fixture data, no sensor: DATA names the socket of each row (point) and the "
-                          "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or point_a,point_b,distance)")
+                          "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or "
+                          "point_a,point_b,distance)")
     _add_plausibility(cal)
     _add_xacro_arg(cal)
     _add_quiet(cal)
@@ -273,7 +272,8 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("data", type=Path, nargs="+", metavar="DATA",
                      help="measurement CSV(s) (format v1): each file (or 'session' value) a session")
     dia.add_argument("--validation", type=Path, metavar="DATA2",
-                     help="held-out measurements: errors reported before/after, effects that make them worse are refused")
+                     help="held-out measurements: errors reported before/after, effects that make them worse "
+                          "are refused")
     dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
                      help="link at the end of the calibrated chain, carrying the target")
     dia.add_argument("--level", choices=("registration", "offsets", "full", "auto"), default="full",

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from pincal.cli.paths import (
     refuse_overwrite,
     refuse_overwrite_matching,
 )
+from pincal.cli.settings import CalibrateSettings, DiagnoseSettings
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
@@ -181,45 +183,31 @@ def calibrate_chain_dh(
 def calibrate_files(
     urdf: str | Path,
     data_path: str | Path | Sequence[str | Path],
-    method: int,
-    weight: float,
-    tool_pose: np.ndarray | None,
-    tool_parent: str,
     out_urdf: str | Path,
     report_path: str | Path,
-    level: str = "dh",
-    sigma_column: str | None = None,
-    reject_outliers: bool = False,
-    selection: str = "aic",
-    xacro_args: Sequence[tuple[str, str]] = (),
+    settings: CalibrateSettings,
     progress: Progress | None = None,
-    sigma_pos_m: float | None = None,
 ) -> CalibrationRun:
-    """Calibrate ``urdf`` on ``data_path`` and write the corrected URDF and the report.
+    """Calibrate ``urdf`` on ``data_path`` as ``settings`` say; write the corrected URDF and the report.
 
     ``data_path`` may be several files: each is a session with its own registration
     (:func:`pincal.measurements.csv_v1.read_sessions`; levels other than dh).
-    ``level`` ``dh`` runs the paper's Method ``method`` (needs ``tool_pose``);
+    Level ``dh`` runs the paper's Method ``settings.paper_method`` (the tool known);
     ``registration``, ``offsets`` and ``full`` calibrate any chain
     (:func:`pincal.fit.chain_calibration.calibrate_chain`), estimating the target
-    unless ``tool_pose`` is given; ``auto`` is the one of those three that cross-validation
+    unless ``settings.tool_pose`` is given; ``auto`` is the one of those three that cross-validation
     on the calibration rows supports (:func:`pincal.fit.level_choice.choose_level`).
-    A ``.xacro`` ``urdf`` is expanded with ``xacro_args`` (NAME, VALUE).
     ``progress(done, total)`` counts the fits of those levels (:mod:`pincal.progress`).
-    ``sigma_pos_m``: the sensor's stated position noise per axis [m] for the plausibility
-    check (:mod:`pincal.fit.plausibility`, REPORT.json ``warnings``); None: not stated.
     """
+    level, tool_pose, xacro_args = settings.level, settings.tool_pose, settings.xacro_args
+    sigma_column, reject_outliers, selection = settings.sigma_column, settings.reject_outliers, settings.selection
+    tool_parent, method = settings.tip_link, settings.paper_method
     urdf, data_paths = Path(urdf), input_paths(data_path)
     data_label = " + ".join(str(p) for p in data_paths)
     out_urdf, report_path = Path(out_urdf), Path(report_path)
     inputs = [*description_inputs(urdf, xacro_args), *data_paths]  # a xacro's included files too
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
-    if level == "dh" and tool_pose is None:
-        raise PincalError(
-            "the paper's methods (--level dh) need the tool: --tool X,Y,Z,ROLL,PITCH,YAW; "
-            "or use --level registration|offsets|full to estimate the target"
-        )
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     data, notes = read_sessions(data_paths, chain.joint_specs)
     nominal_placements = chain.placements()
@@ -235,7 +223,7 @@ def calibrate_files(
                 "registration|offsets|full")
         check_registrable(data.with_role("calibration"), orientations=False)
         session_list = ()
-        result, params, seconds = calibrate_chain_dh(chain, data, method, weight)
+        result, params, seconds = calibrate_chain_dh(chain, data, method, settings.weight)
         placements = result.chain_placements
         with chain.placed(placements):
             errors = pose_errors(
@@ -268,7 +256,8 @@ def calibrate_files(
                                          points=result.target.points, target_rotation=result.target.rotation)
             report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
             report["warnings"] = [f.as_dict()
-                                  for f in calibration_findings(chain, result, used, sigma_column, sigma_pos_m)]
+                                  for f in calibration_findings(chain, result, used, sigma_column,
+                                                                     settings.sigma_pos_m)]
             report["sessions"] = session_entries(result.session_names, result.target.registrations, used, sessions,
                                                  errors)
             session_list = tuple(
@@ -374,23 +363,19 @@ def diagnose_files(
     data_path: str | Path | Sequence[str | Path],
     out_urdf: str | Path,
     report_path: str | Path,
-    tip_link: str,
-    level: str = "full",
-    tool_pose: np.ndarray | None = None,
+    settings: DiagnoseSettings,
     validation_path: str | Path | None = None,
-    sigma_column: str | None = None,
-    selection: str = "aic",
-    payload_kg: float = 0.0,
-    time_column_name: str | None = None,
     plots_dir: str | Path | None = None,
-    xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
-    sigma_pos_m: float | None = None,
 ) -> DiagnoseRun:
-    """Calibrate, search the residuals for missing effects, write the corrected
-    URDF, the report (with ``effects``) and the plots; a ``.xacro`` is expanded with ``xacro_args``.
+    """Calibrate as ``settings`` say, search the residuals for missing effects, write the corrected
+    URDF, the report (with ``effects``) and the plots (into ``plots_dir``; None: none); held-out
+    rows from ``validation_path``.
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
+    tip_link, level, tool_pose, xacro_args = settings.tip_link, settings.level, settings.tool_pose, settings.xacro_args
+    sigma_column, selection, payload_kg = settings.sigma_column, settings.selection, settings.payload_kg
+    time_column_name, sigma_pos_m = settings.time_column, settings.sigma_pos_m
     from pincal.diagnosis.diagnose import diagnose
     from pincal.fit.level_choice import choose_level
 

@@ -1,0 +1,189 @@
+"""What ``calibrate``, ``diagnose`` and ``evaluate`` are asked to do, as frozen values checked once.
+
+The command line builds one of these from its flags (:mod:`pincal.cli.commands`); a script may
+build one directly. Every check of the flags' meaning together — a level and a method, a prior
+at a level without kinematic parameters, a stated noise — is made here, when the object is
+made, with the one-line message the command prints; the workflows of
+:mod:`pincal.cli.workflows` take the object and the paths and check nothing of it again.
+``plan`` has its own (:class:`pincal.planning.planner.PlanSettings`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pincal.errors import PincalError
+from pincal.fit.chain_calibration import CHAIN_LEVELS
+from pincal.fit.selection import SELECTION_CRITERIA
+
+#: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
+#: (the paper's Methods 1–3 on a DH-described chain).
+CALIBRATE_LEVELS = (*CHAIN_LEVELS, "auto", "dh")
+#: ``diagnose --level``: the geometry under the effects.
+DIAGNOSE_LEVELS = (*CHAIN_LEVELS, "auto")
+#: The paper's methods (``--method``); 2 when ``--level dh`` names none.
+METHODS = (1, 2, 3)
+
+
+def no_prior(flag: str, level: str) -> PincalError:
+    """The error for a prior (``flag``: ``--select prior`` or ``--prior-scale``) at ``level``
+    ``registration`` or ``dh``, which fit no kinematic parameter a prior could hold."""
+    what = ("fits no kinematic parameter" if level == "registration"
+            else "estimates the paper's DH parameters, which take no prior")
+    return PincalError(f"{flag} does not apply to --level {level} (it {what}): use --level offsets, full or "
+                       f"auto, or drop {flag}")
+
+
+def _selection(selection: str, level: str) -> None:
+    if selection not in SELECTION_CRITERIA:
+        raise PincalError(f"--select must be one of {', '.join(SELECTION_CRITERIA)}, got '{selection}'")
+    if selection == "prior" and level in ("registration", "dh"):
+        raise no_prior("--select prior", level)
+
+
+def _tool(tool_pose) -> np.ndarray | None:
+    if tool_pose is None:
+        return None
+    pose = np.asarray(tool_pose, dtype=float)
+    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+        raise PincalError(f"--tool must be a finite 4x4 pose of the target in the tip link, got shape {pose.shape}")
+    return pose
+
+
+def _positive(flag: str, value: float | None) -> None:
+    if value is not None and not (np.isfinite(value) and value > 0):
+        raise PincalError(f"{flag} must be a positive number, got {value}")
+
+
+@dataclass(frozen=True)
+class CalibrateSettings:
+    """``pincal calibrate`` without its paths.
+
+    Attributes:
+        tip_link: the end of the chain (``--tip-link``, ``--tool-parent``).
+        level: one of :data:`CALIBRATE_LEVELS`.
+        method: the paper's method at level ``dh`` (None: Method 2); None at any other level.
+        weight: w of Method 3 [mm²/deg²].
+        tool_pose: the known target pose in the tip link (4, 4), or None: estimated.
+        sigma_column: extra column of per-row noise scales [mm] (row weights).
+        reject_outliers: refit without the rows flagged as outliers.
+        selection: the parameter selection (:data:`pincal.fit.selection.SELECTION_CRITERIA`; a
+            :class:`pincal.fit.prior.Prior` for ``prior``).
+        sigma_pos_mm: the sensor's stated position noise per axis [mm] (plausibility checks), or None.
+        xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
+
+    Raises:
+        PincalError: an unknown level, method or selection; a method outside level ``dh``, or
+            level ``dh`` without the tool; a prior where no kinematic parameter is fitted; the
+            stated noise with the paper's methods; a weight or noise that is not positive; a tool
+            that is not a 4×4 pose.
+    """
+
+    tip_link: str
+    level: str = "full"
+    method: int | None = None
+    weight: float = 1.0
+    tool_pose: np.ndarray | None = None
+    sigma_column: str | None = None
+    reject_outliers: bool = False
+    selection: str = "aic"
+    sigma_pos_mm: float | None = None
+    xacro_args: tuple[tuple[str, str], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.level not in CALIBRATE_LEVELS:
+            raise PincalError(f"--level must be one of {', '.join(CALIBRATE_LEVELS)}, got '{self.level}'")
+        if self.level != "dh" and self.method is not None:
+            raise PincalError(f"--method applies to --level dh only (got --level {self.level})")
+        if self.method is not None and self.method not in METHODS:
+            raise PincalError(f"--method must be 1, 2 or 3, got {self.method}")
+        if self.level == "dh" and self.tool_pose is None:
+            raise PincalError("the paper's methods (--level dh) need the tool: --tool X,Y,Z,ROLL,PITCH,YAW; "
+                              "or use --level registration|offsets|full to estimate the target")
+        if self.level == "dh" and self.sigma_pos_mm is not None:
+            raise PincalError("--sigma-pos applies to --level registration, offsets, full or auto (the plausibility "
+                              "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
+        _selection(self.selection, self.level)
+        _positive("--weight", self.weight)
+        _positive("--sigma-pos", self.sigma_pos_mm)
+        object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
+        object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
+
+    @property
+    def paper_method(self) -> int:
+        """The paper's method run at level ``dh``: ``method``, or 2."""
+        return self.method if self.method is not None else 2
+
+    @property
+    def sigma_pos_m(self) -> float | None:
+        return None if self.sigma_pos_mm is None else self.sigma_pos_mm / 1000.0
+
+
+@dataclass(frozen=True)
+class DiagnoseSettings:
+    """``pincal diagnose`` without its paths.
+
+    Attributes:
+        tip_link, tool_pose, sigma_column, selection, sigma_pos_mm, xacro_args: as for
+            :class:`CalibrateSettings`.
+        level: the geometry under the effects, one of :data:`DIAGNOSE_LEVELS`.
+        payload_kg: a point mass at the target for the gravity torques [kg].
+        time_column: the column of row times [s] (None: the first of
+            :data:`pincal.model.effects.TIME_COLUMNS` present).
+
+    Raises:
+        PincalError: an unknown level or selection, a prior at level registration, a negative
+            payload, a noise that is not positive, a tool that is not a 4×4 pose.
+    """
+
+    tip_link: str
+    level: str = "full"
+    tool_pose: np.ndarray | None = None
+    sigma_column: str | None = None
+    selection: str = "aic"
+    payload_kg: float = 0.0
+    time_column: str | None = None
+    sigma_pos_mm: float | None = None
+    xacro_args: tuple[tuple[str, str], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.level not in DIAGNOSE_LEVELS:
+            raise PincalError(f"--level must be one of {', '.join(DIAGNOSE_LEVELS)}, got '{self.level}'")
+        _selection(self.selection, self.level)
+        if not (np.isfinite(self.payload_kg) and self.payload_kg >= 0):
+            raise PincalError(f"--payload-kg must be a non-negative number, got {self.payload_kg}")
+        _positive("--sigma-pos", self.sigma_pos_mm)
+        object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
+        object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
+
+    @property
+    def sigma_pos_m(self) -> float | None:
+        return None if self.sigma_pos_mm is None else self.sigma_pos_mm / 1000.0
+
+
+@dataclass(frozen=True)
+class EvaluateSettings:
+    """``pincal evaluate`` (sensor data) without its paths.
+
+    Attributes:
+        allow_other_urdf: accept a URDF other than the one written with the report.
+        xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
+        fixed_registration: a reported session's name, or ``""`` for the only/first one, whose
+            registration every row uses (``--fixed-registration``); None: the module's rule.
+        new_session: re-estimate the registration of every session of the data.
+
+    Raises:
+        PincalError: ``fixed_registration`` and ``new_session`` together.
+    """
+
+    allow_other_urdf: bool = False
+    xacro_args: tuple[tuple[str, str], ...] = ()
+    fixed_registration: str | None = None
+    new_session: bool = False
+
+    def __post_init__(self) -> None:
+        if self.fixed_registration is not None and self.new_session:
+            raise PincalError("--fixed-registration and --new-session exclude each other; give one")
+        object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
