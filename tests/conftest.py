@@ -61,3 +61,69 @@ def industrial_arm_urdf(tmp_path_factory):
     (folder / "arm.csv").write_text(INDUSTRIAL_ARM_TABLE, encoding="utf-8")
     urdf_from_dh_table(folder / "arm.csv", "modified", folder / "arm.urdf", degrees=True)
     return folder / "arm.urdf"
+
+
+#: The inner loop leaves these out (``pytest -m "not slow"``, about a minute on two cores): tests that
+#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27), and whole files
+#: that start processes, a Dask cluster or a browser. The full suite (CI, the README's command) runs them.
+SLOW_FILES = (
+    "tests/test_drift_span.py",
+    "tests/test_html_report.py",
+    "tests/test_study_dask_faults.py",
+    "tests/test_study_processes.py",
+)
+SLOW_TESTS = (
+    "tests/test_docs.py::test_mkdocs_build_strict",
+    "tests/test_study.py::test_findings_the_paper_states_hold",
+    "tests/test_study.py::test_noise_free_level_is_exact",
+    "tests/test_chain_calibration.py::test_noisy_heldout_error_matches_noise_limited_prediction",
+    "tests/test_chain_values.py::test_the_level_choice_and_diagnose_leave_the_chain",
+    "tests/test_continuous_joints.py::test_every_serial_chain_of_example_robot_data_is_recovered",
+    "tests/test_continuous_joints.py::test_kinova_calibrate_diagnose_plan",
+    "tests/test_diagnosis.py::test_diagnose_command_writes_effects_that_evaluate_applies",
+    "tests/test_diagnosis.py::test_rounding_level_effects_are_not_adopted",
+    "tests/test_diagnosis.py::test_screening_refits_every_candidate_that_matters",
+    "tests/test_diagnosis.py::test_tiago_diagnose_beats_the_geometric_calibration",
+    "tests/test_fold_update.py::test_linearised_folds_agree_with_refits",
+    "tests/test_frame_invariance.py::test_a_target_offset_changes_only_the_target",
+    "tests/test_frame_invariance.py::test_moving_the_sensor_frame_changes_nothing",
+    "tests/test_fuzz_readers.py::test_cli_subprocess_broken_urdf_one_line_no_traceback",
+    "tests/test_level_choice.py::test_cli_calibrate_level_auto_reports_and_prints_the_choice",
+    "tests/test_level_choice.py::test_cli_diagnose_level_auto",
+    "tests/test_level_choice.py::test_cli_level_auto_with_an_explicit_select_keeps_it",
+    "tests/test_level_choice.py::test_noise_free_full_level_deviations_choose_full",
+    "tests/test_level_choice.py::test_sparse_noisy_data_from_offset_errors_choose_offsets",
+    "tests/test_level_choice.py::test_tiago_level_auto_under_the_prior_is_within_ten_percent_of_the_best_fixed_level",
+    "tests/test_ml_estimator.py::test_ml_beats_method2_at_the_paper_noise",
+    "tests/test_ml_estimator.py::test_only_the_sigma_ratio_changes_the_estimate",
+    "tests/test_noise_limit.py::test_monte_carlo_errors_match_the_prediction",
+    "tests/test_outputs.py::test_every_write_of_pincal_goes_through_outputs",
+    "tests/test_outputs.py::test_killed_calibrate_leaves_old_or_whole_outputs",
+    "tests/test_outputs.py::test_killed_study_leaves_old_or_whole_outputs",
+    "tests/test_plan.py::test_alternate_order_balances_the_approach_directions",
+    "tests/test_plan.py::test_cli_plans_writes_the_plan_and_its_prediction",
+    "tests/test_plan.py::test_min_distance_refuses_configurations_closer_than_the_clearance",
+    "tests/test_plan.py::test_planned_configurations_calibrate_as_predicted_and_beat_random",
+    "tests/test_plan.py::test_recorded_data_choose_additions_with_decreasing_predicted_error",
+    "tests/test_plan.py::test_the_best_of_several_exchange_starts_is_kept",
+    "tests/test_plan.py::test_tiago_planned_subset_is_in_the_best_quarter_of_random_subsets",
+    "tests/test_plausibility.py::test_bad_data_warns_and_strict_exits_3_with_the_outputs_written",
+    "tests/test_prior_downstream.py::test_cli_prior_scale_under_level_auto_needs_no_select",
+    "tests/test_progress.py::test_commands_report_progress_on_stderr_and_quiet_silences_it",
+    "tests/test_scenarios.py::test_scenario_reaches_its_noise_floor",
+    "tests/test_study.py::test_cli_study",
+    "tests/test_study.py::test_in_process_local_processes_and_dask_give_identical_results",
+    "tests/test_study.py::test_monte_carlo_errors_agree_with_the_noise_limit",
+    "tests/test_study.py::test_tiny_study_writes_tables_with_expected_rows",
+    "tests/test_study_reference.py::test_study_rows_equal_those_of_6975758",
+    "tests/test_target_hold.py::test_raster_at_constant_orientation_holds_the_target_and_reaches_the_noise_floor",
+    "tests/test_urdf_elements.py::test_calibrate_imports_neither_yourdfpy_nor_plots_nor_other_commands",
+    "tests/test_xacro.py::test_calibrate_xacro_end_to_end",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        path, _, name = item.nodeid.partition("::")
+        if path in SLOW_FILES or f"{path}::{name.split('[')[0]}" in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)

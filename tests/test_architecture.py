@@ -165,7 +165,7 @@ def test_the_checks_catch_what_they_guard():
 
 @pytest.mark.parametrize("name", sorted(MODULES))
 def test_modules_stay_small(name):
-    """STYLE.md: one concept per module; issue 8 caps a module at about 500 lines."""
+    """One concept per module (docs/architecture.md); issue 8 caps a module at about 500 lines."""
     lines = len(MODULES[name].read_text(encoding="utf-8").splitlines())
     assert lines <= 520, f"{name} has {lines} lines: split it by concept"
 

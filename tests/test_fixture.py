@@ -286,14 +286,14 @@ def test_iiwa_dh_table_is_the_data_urdf_but_two_offsets(tmp_path):
 
 
 def test_example_reproduces_the_readme_iiwa_rows(tmp_path):
-    """examples/mukca.py, iiwa 14 (data's URDF), levels offsets and full (6 fits, ~2 s): the README's
-    table rows, character for character (3 decimals, kept counts, means)."""
+    """examples/mukca.py, iiwa 14 (data's URDF), levels offsets and full (6 fits, ~2 s): the table rows of
+    docs/fixture.md, character for character (3 decimals, kept counts, means)."""
     spec = importlib.util.spec_from_file_location("mukca", ROOT / "examples" / "mukca.py")
     example = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(example)
     rows = example.robot_rows("iiwa14", example.urdf_of("iiwa14", tmp_path), ("offsets", "full"))
     printed = example.table("iiwa14", rows).splitlines()[2:]  # below the header, which the README words its own way
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    readme = (ROOT / "docs" / "fixture.md").read_text(encoding="utf-8")  # the docs' socket-fixture page
     table = readme.split("KUKA LBR iiwa 14, the data's URDF", 1)[1].split("\n\n", 2)[1]
     assert table.splitlines()[2:] == printed
 

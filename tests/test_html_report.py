@@ -3,13 +3,15 @@
 The README's TIAGo diagnose run (real data) is rendered with ``--html`` and
 ``evaluate --html``; the paper's Method 2 report of ``pincal demo`` with
 ``pincal report``. Chromium is Debian's ``chromium`` package (``.ci/run``
-installs it): a missing browser fails the test, it never skips.
+installs it). Without it the browser tests skip with one line saying how to install it,
+except under ``CI=true`` (CI, where ``.ci/run`` installed it): there a missing browser fails.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import shutil
 from pathlib import Path
@@ -37,11 +39,21 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backg
 VIEWPORT = {"width": 1280, "height": 1600}
 
 
+#: Why a browser test cannot run here, and what to do.
+NO_BROWSER = "Chromium is not installed: apt-get install -y chromium (.ci/run does this)"
+
+
+def _missing(reason: str) -> None:
+    """Skip in one line, or fail under ``CI=true``: CI must run every browser test."""
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"{reason}; CI=true: the browser tests must run")
+    pytest.skip(reason)
+
+
 def _chromium() -> str:
     path = shutil.which("chromium") or (CHROMIUM if Path(CHROMIUM).exists() else None)
     if path is None:
-        pytest.fail("Chromium is not installed: the HTML report test needs a real browser. "
-                    "Install Debian's package (apt-get install -y chromium; .ci/run does this).")
+        _missing(NO_BROWSER)
     return path
 
 
@@ -64,7 +76,7 @@ def browser():
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
-        pytest.fail("playwright is not installed: pip install '.[test]'")
+        _missing("playwright is not installed: pip install '.[test]'")
     with sync_playwright() as playwright:
         instance = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
         yield instance
@@ -423,3 +435,14 @@ def test_report_command_names_the_file_of_a_malformed_report(tmp_path, capsys):
     assert main(["report", str(source), "--out", str(tmp_path / "odd.html")]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"pincal: error: {source}: the report has an unexpected form") and err.count("\n") == 1
+
+
+def test_a_missing_browser_skips_in_one_line_and_fails_under_ci(monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    monkeypatch.setattr(Path, "exists", lambda self: False)
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="apt-get install -y chromium"):
+        _chromium()
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI=true: the browser tests must run"):
+        _chromium()

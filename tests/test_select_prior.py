@@ -33,15 +33,17 @@ POINT = np.array([[0.02, 0.01, 0.05]])
 SIGMA_M = 0.05e-3  # a laser tracker's noise per axis (as examples/level_auto.py)
 
 
-def _rows(rows: int, seed: int, sigma_m: float, kind=PlacementErrors, error=1e-4, with_rotation=False):
-    """UR5 rows whose ``kind`` parameters are off by N(0, error) [m or rad]; the chain back at nominal."""
+def _rows(rows: int, seed: int, sigma_m: float, kind=PlacementErrors, error=1e-4, with_rotation=False, effects=()):
+    """UR5 rows whose ``kind`` parameters are off by N(0, error) [m or rad] (the training rows with
+    ``effects`` too: (Effect, values) pairs); the chain back at nominal."""
     chain = KinematicChain.from_urdf(UR5, "tool0")
     nominal = chain.placements()
     rng = np.random.default_rng(seed)
     params = kind(chain)
     params.apply(rng.normal(0.0, error, params.size))
     train = measure(chain, random_configurations(chain, rng, rows), DEFAULT_REGISTRATION, rng, sigma_m,
-                    1e-4 if with_rotation else 0.0, "calibration", points=POINT, with_rotation=with_rotation)
+                    1e-4 if with_rotation else 0.0, "calibration", points=POINT, with_rotation=with_rotation,
+                    effects=effects)
     test = measure(chain, random_configurations(chain, rng, 50), DEFAULT_REGISTRATION, rng, 0.0, 0.0,
                    "calibration", points=POINT, with_rotation=False)
     chain.set_placements(nominal)

@@ -19,6 +19,7 @@ from pincal.fit.prior import PRIOR_STATUS, SCALE_RANGE, Prior, prior_sigmas
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.measurements.fixture import Fixture
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
+from pincal.model.effects import Effect
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.fixture import simulate_fixture
@@ -170,10 +171,25 @@ def test_diagnose_bic_counts_the_data_rows_not_the_prior_rows():
     m_all/m_data and adopted encoder_scale:wrist_2_joint (ΔBIC −11.9 against the −10 cut) on these 25
     effect-free rows (seed 3); with m the data rows it is −9.0 and nothing is adopted."""
 
+    from pincal.diagnosis.screening import bic
+
+    # the criterion itself: m is the data rows; prior rows add their squares to the RSS, not to m
+    data, prior = np.random.default_rng(0).normal(size=60), np.zeros(20)
+    assert bic(np.concatenate([data, prior]), 7, n_prior=20) == pytest.approx(
+        60 * np.log(data @ data / 60) + 7 * np.log(60), rel=1e-12)
+    assert bic(np.concatenate([data, prior]), 7, n_prior=20) != bic(np.concatenate([data, prior]), 7)
+    # and in diagnose: on these effect-free rows nothing is adopted (ΔBIC −9.0 > −10) ...
     chain, train, _ = _rows(25, seed=3, sigma_m=SIGMA_M)
     calibration = calibrate_chain(chain, train, "full", selection="prior")
-    diagnosis = diagnose(chain, calibration, train)
+    candidates = [Effect("encoder_scale", "wrist_2_joint")]
+    diagnosis = diagnose(chain, calibration, train, candidates=candidates)
     assert [step.effect.label for step in diagnosis.steps] == []
+    # ... while the same rows with that effect hidden in them (2e-3, ~20 sigma at the tool) adopt it:
+    # the search can adopt here, so "nothing" above is the criterion's verdict
+    chain, hidden, _ = _rows(25, seed=3, sigma_m=SIGMA_M, effects=[(candidates[0], np.array([2e-3]))])
+    calibration = calibrate_chain(chain, hidden, "full", selection="prior")
+    diagnosis = diagnose(chain, calibration, hidden, candidates=candidates)
+    assert [step.effect.label for step in diagnosis.steps] == [candidates[0].label]
 
 
 def test_diagnose_does_not_test_effects_the_residual_freedom_cannot_carry():

@@ -72,7 +72,7 @@ def test_local_workers_are_forked_with_one_blas_thread(tmp_path, user_setting):
     """Also when the user set one of the variables (here MKL's, which OpenBLAS ignores): the
     pools whose variables are unset still get one thread."""
     script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
-              f"import test_study_tail as t; print(json.dumps(t._forked_rows({str(tmp_path)!r})))")
+              f"import test_study_processes as t; print(json.dumps(t._forked_rows({str(tmp_path)!r})))")
     environment = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                                      "MKL_NUM_THREADS")}
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
@@ -176,7 +176,7 @@ def _figure_pids(folder: str) -> dict:
 @pytest.mark.skipif(not _ON_LINUX, reason="figures are drawn by forked processes on Linux only")
 def test_figures_are_drawn_by_forked_processes(tmp_path):
     script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
-              f"import test_study_tail as t; print(json.dumps(t._figure_pids({str(tmp_path)!r})))")
+              f"import test_study_processes as t; print(json.dumps(t._figure_pids({str(tmp_path)!r})))")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True)
     out = json.loads(done.stdout.strip().splitlines()[-1])
     drawn_by = {int(p.read_text()) for p in tmp_path.glob("*.pid")}
