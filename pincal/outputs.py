@@ -112,7 +112,7 @@ def replacing(
     except OSError as exc:
         raise _naming(exc, path) from None
     try:
-        text = {"encoding": encoding, "newline": newline} if "b" not in mode else {}
+        text: dict[str, Any] = {"encoding": encoding, "newline": newline} if "b" not in mode else {}
         try:
             handle = os.fdopen(fd, mode, **text)
         except BaseException:

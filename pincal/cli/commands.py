@@ -94,6 +94,9 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     _print_notes(run.notes + list(run.result.notes))
     _print_level_choice(run.report)
     if level == "dh":
+        from pincal.fit.paper_methods import PaperCalibration  # loaded by the run
+
+        assert isinstance(run.result, PaperCalibration)  # level dh runs the paper's methods
         for stage in run.result.stages:
             print(f"{stage.name}: {len(stage.parameters)} parameters, RMS residual {stage.rms:.4g} "
                   f"{stage.unit}, {stage.n_evaluations} evaluations")
@@ -259,7 +262,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std))
         line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
                 f"{step.calibration_before.position.rms:7.3f} -> {step.calibration_after.position.rms:6.3f}")
-        if held:
+        if step.heldout_before is not None and step.heldout_after is not None:  # with --validation
             line += f" {step.heldout_before.position.rms:8.3f} -> {step.heldout_after.position.rms:6.3f}"
         print(line)
     if not diagnosis.steps:
@@ -275,7 +278,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")
     print(_HEADER)
     print(f"{'calibration rows':24s} {_error_columns(diagnosis.calibration_errors)}")
-    if held:
+    if diagnosis.heldout_errors is not None:
         print(f"{'held-out rows':24s} {_error_columns(diagnosis.heldout_errors)}")
     for path in run.plots:
         print(f"wrote {path}")

@@ -123,7 +123,7 @@ class SessionEvaluation:
         """sqrt((N − 6) / N): about how much smaller than the true error its errors are (re-estimated only)."""
         if not self.reestimated or self.residuals <= 0:
             return None
-        return float(np.sqrt(max(self.dof, 0) / self.residuals))
+        return float(np.sqrt(max(self.residuals - REGISTRATION_PARAMETERS, 0) / self.residuals))
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "rows": self.rows, "registration_source": self.source,
@@ -154,7 +154,7 @@ class Evaluation:
         """Why a threshold cannot judge these errors (a re-estimated session with fewer than
         :data:`MIN_THRESHOLD_DOF` degrees of freedom left), with what to do; None if it can."""
         for session in self.sessions:
-            if session.reestimated and session.dof < MIN_THRESHOLD_DOF:
+            if session.dof is not None and session.dof < MIN_THRESHOLD_DOF:  # re-estimated only
                 per_row = session.residuals // max(session.rows, 1)
                 needed = -(-(REGISTRATION_PARAMETERS + MIN_THRESHOLD_DOF) // max(per_row, 1))
                 return (f"session '{session.name}': its registration is re-estimated from its own "
@@ -315,6 +315,7 @@ def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarr
     prefixes = {stem} | {f for n in here for f in files[n]}  # how calibrate named this file's sessions
     plan = []
     for name, members in groups:
+        known: tuple[str, Registration, Registration, str] | None
         if labelled[members].any() and name in reported:
             known = reported[name]
         else:  # rows of the file a session was read from: its own name for it (STEM, STEM:VALUE or VALUE)
@@ -369,7 +370,8 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
                 raise PincalError(f"{report_path}: a drift's value is [vx, vy, vz] in m/s; it has {value.size} "
                                   "number(s)")
             time = np.full(data.n_rows, np.nan) if row_time is None else row_time  # None: no spans, offset 0
-            offsets = drift_offsets(time, value, reference, spans, held[0], held[1])
+            assert reference is not None  # has_drift: checked to be a finite number above
+            offsets = drift_offsets(time, value, float(reference), spans, held[0], held[1])
             out["drift"] = offsets.offsets
             outside = ~offsets.inside
             drift = {"velocity_m_per_s": value.tolist(), "time_column": effects.get("time_column"),

@@ -339,8 +339,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def _print_metrics(title: str, before: FixtureMetrics | None, after: FixtureMetrics) -> None:
     print(f"{title:24s} {'consistency [mm]':>22s} {'distortion [mm]':>22s}")
-    rows = [(p.placement, b, p) for p, b in zip(after.placements, before.placements if before else
-                                               [None] * len(after.placements))]
+    rows: list[tuple[str, Any, Any]] = [  # per placement (PlacementMetrics), then all (FixtureMetrics)
+        (p.placement, b, p) for p, b in zip(after.placements, before.placements if before else
+                                           [None] * len(after.placements))]
     rows.append(("all", before, after))
     for name, b, a in rows:
         cons = f"{a.consistency_mm:8.3f}" if b is None else f"{b.consistency_mm:8.3f} -> {a.consistency_mm:7.3f}"

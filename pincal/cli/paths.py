@@ -9,9 +9,9 @@ all do). Every refusal is one line naming the path and what to do.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from fnmatch import fnmatch
 from pathlib import Path
-from typing import Sequence
 
 from pincal.errors import PincalError
 from pincal.model.description import is_xacro, read_description

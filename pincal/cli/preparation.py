@@ -7,9 +7,9 @@ what happened; :mod:`pincal.cli.commands` prints it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

@@ -222,16 +222,18 @@ def calibrate_files(
                 "methods (--level dh) take one registration: calibrate several sessions with --level "
                 "registration|offsets|full")
         check_registrable(data.with_role("calibration"), orientations=False)
-        session_list = ()
-        result, params, seconds = calibrate_chain_dh(chain, data, method, settings.weight)
-        placements = result.chain_placements
+        session_list: tuple[SessionEvaluation, ...] = ()
+        paper, params, seconds = calibrate_chain_dh(chain, data, method, settings.weight)
+        placements = paper.chain_placements
         with chain.placed(placements):
             errors = pose_errors(
-                chain, data.with_role("calibration"), result.registration_position, result.registration_orientation
+                chain, data.with_role("calibration"), paper.registration_position, paper.registration_orientation
             )
-            report = paper_report(result, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
+            assert tool_pose is not None  # CalibrateSettings: level dh needs the tool
+            report = paper_report(paper, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
             report["row_errors"] = paper_row_errors(chain, nominal_placements, data.with_role("calibration"), errors,
                                                     data_label)
+        result: PaperCalibration | ChainCalibration = paper
         what = f"Method {method} of Franaszek & Marvel 2022"
     else:
         start = time.perf_counter()
@@ -242,32 +244,33 @@ def calibrate_files(
             choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
                                   reject_outliers=reject_outliers, selection=selection, progress=stages.next())
             level = choice.chosen
-        result = calibrate_chain(
+        fitted = calibrate_chain(
             chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
             reject_outliers=reject_outliers, selection=selection, progress=stages.next(),
         )
         seconds = time.perf_counter() - start
-        placements = result.chain_placements
+        placements = fitted.chain_placements
         with chain.placed(placements):
-            notes += unfitted_sessions(data, result.session_names)
-            used = data.select(result.used_index)
-            sessions = session_rows(used, result.session_names)
-            errors = session_pose_errors(chain, used, sessions, result.target.registrations,
-                                         points=result.target.points, target_rotation=result.target.rotation)
-            report = chain_report(result, chain, tool_parent, errors, n_rows, sources, notes)
+            notes += unfitted_sessions(data, fitted.session_names)
+            used = data.select(fitted.used_index)
+            sessions = session_rows(used, fitted.session_names)
+            errors = session_pose_errors(chain, used, sessions, fitted.target.registrations,
+                                         points=fitted.target.points, target_rotation=fitted.target.rotation)
+            report = chain_report(fitted, chain, tool_parent, errors, n_rows, sources, notes)
             report["warnings"] = [f.as_dict()
-                                  for f in calibration_findings(chain, result, used, sigma_column,
+                                  for f in calibration_findings(chain, fitted, used, sigma_column,
                                                                      settings.sigma_pos_m)]
-            report["sessions"] = session_entries(result.session_names, result.target.registrations, used, sessions,
+            report["sessions"] = session_entries(fitted.session_names, fitted.target.registrations, used, sessions,
                                                  errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
                                   f"fitted on {entry['file']}", session_errors(errors, sessions == s))
-                for s, (entry, registration) in enumerate(zip(report["sessions"], result.target.registrations)))
-            if len(result.session_names) > 1:
-                report["notes"].append(f"registration: of the first session, '{result.session_names[0]}'; every "
+                for s, (entry, registration) in enumerate(zip(report["sessions"], fitted.target.registrations)))
+            if len(fitted.session_names) > 1:
+                report["notes"].append(f"registration: of the first session, '{fitted.session_names[0]}'; every "
                                        "session's registration and errors are under 'sessions'")
-            report["row_errors"] = chain_row_errors(chain, nominal_placements, used, result, errors, data_label)
+            report["row_errors"] = chain_row_errors(chain, nominal_placements, used, fitted, errors, data_label)
+        result = fitted
         what = f"level {level}"
         if choice is not None:
             report["level_choice"] = choice.as_dict()
@@ -440,7 +443,8 @@ def diagnose_files(
         report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
         report.update(drift_spans(diagnosis, row_time, calibration, used))  # where a drift holds (evaluate)
         report["row_errors"] = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
-                                                    (" + ".join(str(p) for p in data_paths), sources["validation"]))
+                                                    (" + ".join(str(p) for p in data_paths),
+                                                     None if validation_path is None else str(validation_path)))
     report["urdf_sha256"] = urdf_sha256
     report["xacro_args"] = dict(xacro_arguments(xacro_args))
     if choice is not None:

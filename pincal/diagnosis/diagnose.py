@@ -61,7 +61,7 @@ from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import standard_deviations
+from pincal.fit.prior import PriorResidual, standard_deviations
 from pincal.fit.sessions import session_rows
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
@@ -170,6 +170,7 @@ class _Model:
     def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
         data = self.rows if data is None else data
         weight = self.row_weight if data is self.rows else np.ones(data.n_rows)
+        assert self.calibration.start is not None  # calibrate_chain always sets it
         problem = FitProblem(
             self.chain, self.calibration.params, data, self.calibration.start,
             fit_target=self.calibration.fit_target, row_weight=weight,
@@ -364,6 +365,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                 with chain.placed(refitted):
                     inputs = replace(inputs, gravity=effect_inputs(chain, rows, payload_kg, point).gravity)
                     if heldout is not None:
+                        assert held_inputs is not None  # set with the held-out rows
                         held_inputs = replace(held_inputs,
                                               gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
                 model.inputs = inputs
@@ -428,7 +430,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
     )
 
 
-def _errors(objective: SensorResidual, x: np.ndarray) -> PoseErrors:
+def _errors(objective: SensorResidual | PriorResidual, x: np.ndarray) -> PoseErrors:
     """Point errors (and orientation errors with 6D data) of a fit on its own rows (eq 24)."""
     position = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
     rotation = None
@@ -439,7 +441,8 @@ def _errors(objective: SensorResidual, x: np.ndarray) -> PoseErrors:
     return PoseErrors(position_m=position, rotation_rad=rotation)
 
 
-def _heldout_objective(model: _Model, objective: SensorResidual, heldout, held_inputs) -> SensorResidual:
+def _heldout_objective(model: _Model, objective: SensorResidual, heldout,
+                       held_inputs) -> SensorResidual | PriorResidual:
     problem = model.problem(objective.effects, heldout, held_inputs)
     return problem.objective(model.calibration.kept, model.calibration.vector)
 
@@ -452,4 +455,5 @@ def _heldout_errors(model, objective, x, heldout, held_inputs) -> PoseErrors | N
 
 def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
     errors = _heldout_errors(model, objective, x, heldout, held_inputs)
+    assert errors is not None  # a judge gets this only with held-out rows
     return errors.position.rms

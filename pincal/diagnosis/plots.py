@@ -26,6 +26,8 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
     for number, step in enumerate(diagnosis.steps, start=1):
         if step.driver is None:
             continue
+        # set together with the driver (pincal.diagnosis.structure.partial_residual)
+        assert step.joint_residual is not None and step.fitted_shift is not None
         fig = Figure(figsize=(6.4, 4.2), layout="tight")
         ax = fig.subplots()
         order = np.argsort(step.driver, kind="stable")
@@ -50,8 +52,9 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
     panels = [("calibration rows", first.calibration_before if first else diagnosis.calibration_errors,
                diagnosis.calibration_errors)]
     if diagnosis.heldout_errors is not None:
-        panels.append(("held-out rows", first.heldout_before if first else diagnosis.heldout_errors,
-                       diagnosis.heldout_errors))
+        held_before = first.heldout_before if first else diagnosis.heldout_errors
+        assert held_before is not None  # every step has held-out errors when the diagnosis has
+        panels.append(("held-out rows", held_before, diagnosis.heldout_errors))
     fig = Figure(figsize=(6.0 * len(panels), 4.0), layout="tight")
     axes = fig.subplots(1, len(panels), squeeze=False)
     for ax, (title, before, after) in zip(axes[0], panels):

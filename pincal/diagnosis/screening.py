@@ -13,7 +13,8 @@ few columns and an SVD of an (n + e)² triangle.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -110,7 +111,8 @@ def n_prior_rows(objective) -> int:
     return int(getattr(objective, "n_prior", 0))
 
 
-#: Note when too few residual degrees of freedom are left to test a generic correction (:func:`testable`; ``pincal diagnose``).
+#: Note when too few residual degrees of freedom are left to test a generic correction
+#: (:func:`testable`; ``pincal diagnose``).
 GENERIC_NOT_RUN = ("the generic joint-angle check (linear + harmonics per joint) was not run: the fit leaves too few "
                    "residual degrees of freedom to test it; add rows")
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -76,7 +77,8 @@ class Candidate:
 def effect_basis(effect: Effect, inputs: EffectInputs, chain: KinematicChain) -> np.ndarray | None:
     """The basis of an effect over the rows (K, n_values): the joint shift's, drift's time, or None."""
     if effect.type not in JOINT_EFFECTS:
-        return inputs.time[:, None] if effect.type == "drift" else None
+        # drift is a candidate only with a time column (pincal.diagnosis.diagnose.candidate_effects)
+        return cast(np.ndarray, inputs.time)[:, None] if effect.type == "drift" else None
     return joint_basis(effect, inputs, chain.joint_names.index(effect.joint))
 
 
@@ -144,6 +146,7 @@ class Judge:
         return self._held[effect]
 
     def held_before(self) -> float:
+        assert self._held_rms is not None  # called only with held-out rows (rejection)
         if self._before is None:
             self._before = self._held_rms(self.current_objective, self.current_x)
         return self._before
@@ -167,7 +170,8 @@ class Judge:
                     if verdict == "adopted":
                         chosen = (delta, effect, obj, sol)
                     else:
-                        rejected[effect.label] = f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted"
+                        rejected[effect.label] = (
+                            f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted")
             ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
         # what is shown (the first eight), the competitors a check compared (within 6 of
         # the candidate checked) and, when nothing is adopted, every significant candidate
@@ -184,7 +188,8 @@ class Judge:
         ``solution``: the candidate's fit, for the size of what it changes)."""
         inputs, chain = self.inputs, self.chain
         if not _plausible(effect, value, chain):
-            return f"its value {np.round(value, 6).tolist()} is outside the physical range (a stand-in for something else)"
+            return (f"its value {np.round(value, 6).tolist()} is outside the physical range "
+                    "(a stand-in for something else)")
         if objective is not None:
             largest = _largest_change(objective, solution.x)
             if largest < NEGLIGIBLE:
@@ -199,7 +204,8 @@ class Judge:
                 continue
             if abs(_correlation(basis, effect_basis(other, inputs, chain))) > AMBIGUOUS:
                 return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
-                        f"{_correlation(basis, effect_basis(other, inputs, chain)):+.2f}: the data cannot tell them apart")
+                        f"{_correlation(basis, effect_basis(other, inputs, chain)):+.2f}: "
+                        "the data cannot tell them apart")
         if self._held_rms is not None and held is not None:
             before = self.held_before()
             if held > before * 1.02:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from pincal.fit.outliers import find_outliers
 from pincal.fit.prior import (
     MAX_SCALE_ITERATIONS,
     PRIOR_STATUS,
+    Prior,
     PriorResidual,
     data_rows,
     map_outcome,
@@ -51,7 +53,7 @@ from pincal.fit.solver import Solution, gram, solve
 from pincal.fit.target_hold import HeldDirection, held_columns, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import LEVELS, NoParameters
+from pincal.model.parameter_sets import LEVELS, NoParameters, _ChainParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
@@ -109,7 +111,7 @@ class ChainCalibration:
     """
 
     level: str
-    params: object | None
+    params: _ChainParameters | None
     vector: np.ndarray
     std: np.ndarray
     status: tuple[str, ...]
@@ -151,6 +153,7 @@ class ChainCalibration:
         params = self.params if self.params is not None else NoParameters(chain)
         k, n_points = len(q), len(self.target.points)
         cache = KinematicsCache(params, self.kept, self.vector, q)
+        assert self.start is not None  # calibrate_chain always sets it
         objective = SensorResidual(
             cache,
             np.zeros((k, n_points, 3)),
@@ -208,10 +211,12 @@ class FitProblem:
         self.models = {} if models is None else models
         self.sigma_pos = START_SIGMA_POS_M
         self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
-        self.prior = None  # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
-        self.point_basis = None  # the target points' free directions (pincal.fit.target_hold), None: all
+        # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
+        self.prior: np.ndarray | None = None
+        # the target points' free directions (pincal.fit.target_hold), None: all
+        self.point_basis: np.ndarray | None = None
 
-    def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual:
+    def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.data.q, self.models)
         objective = SensorResidual(
@@ -330,7 +335,7 @@ def calibrate_chain(
         notes.extend(result.selection.notes)
     counter.settle()
     return replace(
-        result, rows_used=tuple(int(l) for l in rows.lines), used_index=index,
+        result, rows_used=tuple(int(line) for line in rows.lines), used_index=index,
         total_seconds=time.perf_counter() - started, notes=tuple(notes),
         outliers=tuple((int(data.lines[k]), score) for k, score in outliers), outlier_files=tuple(data.files[flagged]),
         removed_lines=tuple(int(data.lines[k]) for k in removed), removed_files=tuple(data.files[removed]),
@@ -350,7 +355,8 @@ def _calibrate_rows(
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
         start = replace(start, points=np.zeros((1, 3)), rotation=np.eye(3))
-    problem = FitProblem(chain, params, rows, start, fit_target=not tool_known, row_weight=row_weights(rows, sigma_column))
+    problem = FitProblem(chain, params, rows, start, fit_target=not tool_known,
+                         row_weight=row_weights(rows, sigma_column))
     held: tuple[HeldDirection, ...] = ()
     if not tool_known:
         held = hold_target(problem, extra=hold)
@@ -371,6 +377,7 @@ def _calibrate_rows(
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
     counter.tick()
     problem.start = objective.estimate(solution.x)
+    dropped: tuple[Dropped, ...]
     selection, dropped, rank, kept = None, (), 0, empty
     if size:
         everything = np.arange(size)
@@ -415,15 +422,18 @@ def _calibrate_rows(
     if not isinstance(objective, PriorResidual):
         covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
     else:  # the posterior, and what the prior determines (pincal.fit.prior)
-        covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept, problem.prior, selection,
-                                                  params, prior_of(criterion))
+        # a PriorResidual is fitted only with a prior: problem.prior and prior_of(criterion) are set
+        covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept,
+                                                  cast(np.ndarray, problem.prior), selection,
+                                                  params, cast(Prior, prior_of(criterion)))
         std_all = np.sqrt(np.diag(covariance))
         std[kept] = std_all[objective.blocks["kinematic"]]
         status[weak] = PRIOR_STATUS
     names = _column_names(objective, params, kept, problem.session_names)
     correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
     k, p = rows.n_rows, rows.n_points
-    point_residual = solution.residual[: 3 * k * p].reshape(k, p, 3) * problem.sigma_pos / problem.row_weight[:, None, None]
+    point_residual = (solution.residual[: 3 * k * p].reshape(k, p, 3) * problem.sigma_pos
+                      / problem.row_weight[:, None, None])
     point_errors = np.linalg.norm(point_residual, axis=2)
     result = ChainCalibration(
         level=level,
@@ -442,7 +452,7 @@ def _calibrate_rows(
         correlated=correlated,
         outliers=(),
         removed_lines=(),
-        rows_used=tuple(int(l) for l in rows.lines),
+        rows_used=tuple(int(line) for line in rows.lines),
         fit_seconds=fit_seconds,
         total_seconds=0.0,
         rms_m=float(np.sqrt(np.mean(np.sum(point_residual**2, axis=2)))),
@@ -464,7 +474,7 @@ def _calibrate_rows(
     return result, point_errors
 
 
-def _column_names(objective: SensorResidual, params, kept: np.ndarray, sessions=()) -> list[str]:
+def _column_names(objective: SensorResidual | PriorResidual, params, kept: np.ndarray, sessions=()) -> list[str]:
     names = [params.info[i].name for i in kept] if params is not None else []
     if objective.blocks["registration"].stop > objective.blocks["registration"].start:
         prefixes = ["registration"] if objective.n_sessions == 1 else [f"registration[{n}]" for n in sessions]
@@ -479,7 +489,8 @@ def _column_names(objective: SensorResidual, params, kept: np.ndarray, sessions=
     return names
 
 
-def _dropped(jac, ordering, kept, other_cols, full: SensorResidual, params, sessions=()) -> tuple[Dropped, ...]:
+def _dropped(jac, ordering, kept, other_cols, full: SensorResidual | PriorResidual, params,
+             sessions=()) -> tuple[Dropped, ...]:
     """Each parameter not kept, with the kept parameters that absorb it."""
     kin_start = full.blocks["kinematic"].start
     kept_cols = np.concatenate([kin_start + kept, other_cols]).astype(int)

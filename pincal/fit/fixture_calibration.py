@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -47,6 +48,7 @@ from pincal.fit.outliers import find_outliers
 from pincal.fit.prior import (
     MAX_SCALE_ITERATIONS,
     PRIOR_STATUS,
+    Prior,
     PriorResidual,
     data_rows,
     effective_scale,
@@ -63,7 +65,7 @@ from pincal.fit.solver import gram, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import LEVELS, NoParameters
+from pincal.model.parameter_sets import LEVELS, NoParameters, _ChainParameters
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.fixture import FixtureEstimate, FixtureResidual, rotation_basis
 
@@ -125,7 +127,7 @@ class FixtureCalibration:
     """
 
     level: str
-    params: object | None
+    params: _ChainParameters | None
     vector: np.ndarray
     std: np.ndarray
     status: tuple[str, ...]
@@ -198,10 +200,11 @@ class FixtureProblem:
         self.chain, self.params, self.data = chain, params, data
         self.start, self.bases = start, bases
         self.models: dict = {}
-        self.prior = None  # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
+        # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
+        self.prior: np.ndarray | None = None
         self.noise = 1.0  # with a prior: the residuals' noise scale σ [m] weighting its rows
 
-    def objective(self, free: np.ndarray, base: np.ndarray) -> FixtureResidual:
+    def objective(self, free: np.ndarray, base: np.ndarray) -> FixtureResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.data.q, self.models)
         objective = FixtureResidual(cache, self.data.placement, self.data.socket_points, self.bases, self.start)
@@ -249,6 +252,7 @@ def calibrate_fixture(
     nominal_rms = solution.rms
     nominal_training = metrics_of_positions(objective.ball_positions(solution.x), data)
     problem.start = nominal
+    dropped: tuple[Dropped, ...]
     chosen, dropped, rank, kept = None, (), 0, empty
     if size:
         full = problem.objective(np.arange(size), base)
@@ -287,8 +291,9 @@ def calibrate_fixture(
     if not isinstance(objective, PriorResidual):
         covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
     else:  # the posterior, and what the prior determines (pincal.fit.prior)
-        covariance, weak, chosen = map_outcome(jac, solution.residual, objective, kept, problem.prior, chosen,
-                                               params, prior)
+        # a PriorResidual is fitted only with a prior: problem.prior and prior are set
+        covariance, weak, chosen = map_outcome(jac, solution.residual, objective, kept,
+                                               cast(np.ndarray, problem.prior), chosen, params, cast(Prior, prior))
         std[kept] = np.sqrt(np.diag(covariance))[objective.blocks["kinematic"]]
         status[weak] = PRIOR_STATUS
     names = column_names(objective, params, kept, data)
@@ -302,7 +307,9 @@ def calibrate_fixture(
         ball=x[objective.blocks["ball"]].copy(),
         ball_std=np.sqrt(np.diag(covariance)[objective.blocks["ball"]]),
         placements=_placements(objective, x, covariance, data, lines),
-        chain_placements=tuple(params.placements(vector)) if size else tuple(chain.placements()),
+        # size > 0 only with a parameter set
+        chain_placements=(tuple(cast(_ChainParameters, params).placements(vector)) if size
+                          else tuple(chain.placements())),
         nominal_ball=nominal.ball,
         training=metrics_of_positions(objective.ball_positions(x), data),
         nominal_training=nominal_training,
@@ -323,7 +330,7 @@ def calibrate_fixture(
     )
 
 
-def _identifiability_jacobian(full: FixtureResidual) -> tuple[np.ndarray, int]:
+def _identifiability_jacobian(full: FixtureResidual | PriorResidual) -> tuple[np.ndarray, int]:
     """The Jacobian at the start, with the turn of the root frame appended to the
     always-estimated columns (:meth:`FixtureResidual.root_rotation_columns`), unless
     the placements already absorb it column for column (sockets spanning a plane
@@ -376,7 +383,7 @@ def _placements(objective: FixtureResidual, x: np.ndarray, covariance: np.ndarra
     return tuple(out)
 
 
-def column_names(objective: FixtureResidual, params, kept: np.ndarray, data: FixtureData) -> list[str]:
+def column_names(objective: FixtureResidual | PriorResidual, params, kept: np.ndarray, data: FixtureData) -> list[str]:
     """Names of the objective's columns: kinematic, ``ball.x`` …, ``placement[P].x`` …, ``placement[P].turn1`` …"""
     names = [params.info[i].name for i in kept] if params is not None else []
     names += [f"ball.{a}" for a in "xyz"]

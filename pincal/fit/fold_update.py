@@ -41,6 +41,7 @@ def final_problem(chain: KinematicChain, result: ChainCalibration, rows: Measure
     scales, weights ``row_weight`` — default ones — and prior): ``problem.objective(result.kept, zeros)``
     at ``result.solution`` is that fit's objective at its solution."""
     weight = np.ones(rows.n_rows) if row_weight is None else row_weight
+    assert result.start is not None  # calibrate_chain always sets it
     problem = FitProblem(chain, result.params, rows, result.start, fit_target=result.fit_target, row_weight=weight,
                          session_names=result.session_names)
     problem.point_basis = result.point_basis

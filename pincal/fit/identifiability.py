@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 import scipy.linalg
@@ -122,10 +123,11 @@ def pivoted_order(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     work = np.array(a, dtype=float)
     if not np.all(np.isfinite(work)):
-        raise CalibrationError("the measurement Jacobian has NaN or infinite entries; check the data for extreme values")
+        raise CalibrationError(
+            "the measurement Jacobian has NaN or infinite entries; check the data for extreme values")
     m, n = work.shape
     if m > n:
-        work = np.linalg.qr(work, mode="r")
+        work = cast(np.ndarray, np.linalg.qr(work, mode="r"))  # R alone (NumPy's stubs say QRResult)
     basis = np.empty((work.shape[0], 0))
     order: list[int] = []
     pivots: list[float] = []

@@ -199,12 +199,12 @@ def one_standard_error(errors: npt.ArrayLike, standard_errors: npt.ArrayLike,
         CalibrationError: no candidate has a finite error.
     """
     errors = np.asarray(errors, dtype=float)
-    standard_errors = np.nan_to_num(np.asarray(standard_errors, dtype=float), nan=0.0)
+    spreads = np.nan_to_num(np.asarray(standard_errors, dtype=float), nan=0.0)
     finite = np.isfinite(errors)
     if not finite.any():
         raise CalibrationError("no level could be fitted on every fold of the cross-validation")
     lowest = int(np.argmin(np.where(finite, errors, np.inf)))
-    threshold = float(errors[lowest] + standard_errors[lowest])
+    threshold = float(errors[lowest] + spreads[lowest])
     chosen = int(np.flatnonzero(finite & (errors <= threshold))[-1 if richest else 0])
     return lowest, chosen, threshold
 
@@ -217,7 +217,7 @@ def row_folds(keys: np.ndarray, strata: np.ndarray | None = None, folds: int = D
     rng = np.random.default_rng(seed)
     strata = np.zeros(len(keys), dtype=int) if strata is None else np.asarray(strata)
     group = np.ravel(np.unique(keys, axis=0, return_inverse=True)[1])
-    out = [[] for _ in range(folds)]
+    out: list[list[np.ndarray]] = [[] for _ in range(folds)]
     for stratum in dict.fromkeys(strata.tolist()):
         mine = rng.permutation(np.unique(group[strata == stratum]))
         for f, block in enumerate(np.array_split(mine, folds)):

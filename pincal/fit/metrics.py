@@ -32,7 +32,7 @@ class ErrorSummary:
     unit: str
 
     @classmethod
-    def of(cls, values: np.ndarray, unit: str) -> "ErrorSummary":
+    def of(cls, values: np.ndarray, unit: str) -> ErrorSummary:
         values = np.asarray(values, dtype=float).ravel()
         return cls(
             mean=float(values.mean()),

@@ -189,6 +189,7 @@ def calibrate_ml(
     free = ml_parameter_indices(params, fit_alpha_n)
     cache = KinematicsCache(params, free, start.table.to_vector(), rows.q, models)
     points, rotations = rows.points[:, :1, :], rows.rotations
+    assert rotations is not None  # has_orientation checked above
     reference = start.registration_position
 
     def pose_residual(*sigma: float) -> SensorResidual:

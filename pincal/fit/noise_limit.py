@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -206,7 +207,7 @@ class _Propagation:
         self.d[columns[is_free]] = (solve @ jac[:, ~is_free]) @ self.d[columns[~is_free]] + (noise.T @ solve.T).T
 
     def pose_jacobians(
-        self, data: MeasurementSet, which: str, sigma: tuple[float, float] = (1.0, 1.0)
+        self, data: MeasurementSet, which: str, sigma: tuple[float, float] | np.ndarray = (1.0, 1.0)
     ) -> tuple[np.ndarray, np.ndarray]:
         """dr/dp and per-row dr/dz of the tool pose residual of ``data`` at the noise-free solution.
 
@@ -221,6 +222,7 @@ class _Propagation:
             so dr/dφ = dr/dφ_r Ω₀ᵀ at φ = 0. And dr/dz per row, (R, 6, 6).
         """
         registration = getattr(self.result, f"registration_{which}")
+        assert data.rotations is not None  # noise-free simulated rows: they have orientations
         cache = KinematicsCache(self.params, np.arange(self.n_dh), self.vector, data.q, self.models)
         objective = tool_pose_residual(cache, data.points[:, :1], data.rotations, registration, *sigma)
         x = objective.start_vector()
@@ -254,6 +256,7 @@ class _Propagation:
         """Err_pos (eq 10–11), Err_rot (eq 14–17) or Err_full (eq 18) on the calibration rows."""
         rows = self.rows["calibration"]
         cache = self.cache(rows)
+        assert self.data.rotations is not None  # noise-free simulated rows: they have orientations
         points, rotations = self.data.points[rows, 0], self.data.rotations[rows]
         objective: Objective
         if name == "Err_pos":
@@ -288,6 +291,7 @@ class _Propagation:
         """dr/dz of eq 14: D_k = G_k R_kᵀ R_k' G_k'ᵀ and G → exp(ξ) G give
         d log D_k = Jlog3(D_k) (D_kᵀ ξ_k − ξ_k')."""
         first, second = objective.first, objective.second
+        assert self.data.rotations is not None  # noise-free simulated rows: they have orientations
         g = self.data.rotations[rows]
         r = objective.cache.evaluate(self.vector)[0].tool_rotations
         relative = g[first] @ r[first].transpose(0, 2, 1) @ r[second] @ g[second].transpose(0, 2, 1)
@@ -357,12 +361,15 @@ def _sensitivity(
     data = _noise_free(chain, experiment.truth, experiment.registration, experiment.calibration)
     validation = _noise_free(chain, experiment.truth, experiment.registration, experiment.validation)
     models: dict = {}  # Pinocchio sensitivity models by their slots, built once for the fit and the stages
+    result: PaperCalibration
     if method == ML:
         result = calibrate_ml(
             chain, data, ml_sigma[0] * 1000.0, np.degrees(ml_sigma[1]), nominal=experiment.truth, models=models
         )
     else:
-        result = calibrate_paper(chain, data, method, weight=weight, nominal=experiment.truth, models=models)
+        # a paper method's number here (ML is the only name)
+        result = calibrate_paper(chain, data, cast(int, method), weight=weight, nominal=experiment.truth,
+                                 models=models)
     propagation = _Propagation(DHParameterSet(chain, result.nominal), result, data, models)
     if method == ML:
         propagation.maximum_likelihood(result.stages[-1].parameters, ml_sigma)

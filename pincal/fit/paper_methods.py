@@ -266,12 +266,14 @@ def calibrate_paper(
         stages.append(fit(DistanceResidual(cache, points), cache, "Err_pos", "m"))
         vector = cache.base
     elif method == 2:
+        assert rotations is not None  # has_orientation checked above
         cache = KinematicsCache(params, offsets, vector, q, models)
         stages.append(fit(RotationResidual(cache, rotations), cache, "Err_rot", "rad"))
         cache = KinematicsCache(params, lengths, cache.base, q, models)
         stages.append(fit(DistanceResidual(cache, points), cache, "Err_pos", "m"))
         vector = cache.base
     else:
+        assert rotations is not None  # has_orientation checked above
         cache = KinematicsCache(params, np.concatenate([offsets, lengths]), vector, q, models)
         objective = FullPoseResidual(cache, points, rotations, weight)
         stages.append(fit(objective, cache, "Err_full", "mm | sqrt(w) deg"))

@@ -63,6 +63,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 import scipy.linalg
@@ -333,12 +334,12 @@ def refine(
         if not fitted:  # every fit so far failed: try the next best linear candidate
             pending = {min(untried, key=lambda s: linear[s])} if untried else set()
             continue
-        best = min(fitted, key=fitted.get)
+        best = min(fitted, key=fitted.__getitem__)
         error = max(abs(v - linear[s]) for s, v in fitted.items())
         pending = {s for s in untried if linear[s] - safety * error <= fitted[best]}
         pending |= {s for s in (best - 1, best + 1) if s in untried}
     fitted = {s: v for s, v in exact.items() if v is not None}
-    return (min(fitted, key=fitted.get) if fitted else None), exact
+    return (min(fitted, key=fitted.__getitem__) if fitted else None), exact
 
 
 def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str,
@@ -417,7 +418,8 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
     selection = Selection(
         criterion=SELECTION_CRITERIA[criterion],
         sizes=tuple(sizes),
-        scores=tuple(float(exact[n]) if n in exact else float(linear[n]) for n in sizes),
+        # sizes holds only the exact scores that are not None
+        scores=tuple(float(cast(float, exact[n])) if n in exact else float(linear[n]) for n in sizes),
         chosen=chosen,
         notes=tuple(notes),
         refitted=tuple(sorted(n for n in exact if exact[n] is not None)),

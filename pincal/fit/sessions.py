@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -223,7 +224,8 @@ def initial_target(
         if not fit_points:
             break
         local = np.empty_like(data.points)
-        for rows, registration in zip(groups, registrations):  # Ωᵀ(g − τ)
+        # every session is registered by now (by its points or its orientations)
+        for rows, registration in zip(groups, cast("list[Registration]", registrations)):  # Ωᵀ(g − τ)
             local[rows] = (data.points[rows] - registration.translation) @ registration.rotation
         target = np.einsum("kji,kpj->kpi", rot, local - t[:, None, :])
         if all(from_points) or not any(from_points):
@@ -233,7 +235,8 @@ def initial_target(
     rotation = np.eye(3)
     if data.rotations is not None:
         rotation = _target_rotation(rot, data, registrations)
-    return TargetEstimate(registrations[0], points, rotation, tuple(registrations))
+    registered = cast("list[Registration]", registrations)  # every session's, as above
+    return TargetEstimate(registered[0], points, rotation, tuple(registered))
 
 
 def _on_one_line(positions: np.ndarray) -> bool:
@@ -252,6 +255,8 @@ def _spreads(points: np.ndarray) -> np.ndarray:
 
 def _target_rotation(rot: np.ndarray, data: MeasurementSet, registrations) -> np.ndarray:
     """R_T: the mean of R_kᵀ Omega_sᵀ G_k over the rows of the sessions registered so far (Moakher)."""
+    assert data.rotations is not None  # called only for rows with orientations
+    rows: slice | np.ndarray
     if len(registrations) == 1:
         omega, rows = registrations[0].rotation, slice(None)
     else:
@@ -333,7 +338,7 @@ def session_pose_errors(
         points, target_rotation, q, sensor_scale, drift: as :func:`pincal.fit.metrics.pose_errors`.
     """
     orientations = positions if orientations is None else orientations
-    options = {"points": points, "target_rotation": target_rotation, "sensor_scale": sensor_scale}
+    options: dict[str, Any] = {"points": points, "target_rotation": target_rotation, "sensor_scale": sensor_scale}
     if len(positions) == 1:
         return pose_errors(chain, data, positions[0], orientations[0], q=q, drift=drift, **options)
     sessions = np.asarray(sessions, dtype=np.intp)

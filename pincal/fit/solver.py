@@ -21,13 +21,13 @@ the work itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from pincal.errors import CalibrationError
-from pincal.residuals.base import Objective
 
 #: Termination tolerances of least_squares: relative step, relative cost
 #: change, and scaled gradient. Tight enough that noise-free data is fitted to
@@ -41,6 +41,15 @@ GRAM_CONDITION = 1e5
 #: Largest condition number of the Jacobian at a solution (beyond it a
 #: parameter is not determined).
 MAX_CONDITION = 1e12
+
+
+class Fittable(Protocol):
+    """What :func:`solve` fits: an :class:`pincal.residuals.base.Objective`, or a wrapper
+    with its interface (:class:`pincal.fit.prior.PriorResidual`)."""
+
+    def residual(self, x: np.ndarray) -> np.ndarray: ...
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -66,11 +75,11 @@ class Solution:
     n_evaluations: int
     condition: float
     status: str
-    jacobian: np.ndarray | None = None
+    jacobian: np.ndarray
     converged: bool = True
 
 
-def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit", max_evaluations: int | None = None,
+def solve(objective: Fittable, x0: npt.ArrayLike, what: str = "fit", max_evaluations: int | None = None,
           tolerance: float | None = None) -> Solution:
     """Minimise ``‖objective.residual(x)‖²`` from ``x0``.
 
@@ -96,7 +105,7 @@ def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit", max_evalua
     known = [r0]  # the start's residual, for least_squares' first call
     jacobians: dict[bytes, np.ndarray] = {}  # the last two, by x: scipy asks again for the final x
 
-    def residual(x: np.ndarray) -> np.ndarray:
+    def residual_at(x: np.ndarray) -> np.ndarray:
         start = known.pop() if known else None
         return start if start is not None and np.array_equal(x, x0) else objective.residual(x)
 
@@ -110,7 +119,7 @@ def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit", max_evalua
 
     try:
         result = least_squares(
-            residual,
+            residual_at,
             x0,
             jac=jacobian,
             method="lm",
@@ -121,7 +130,8 @@ def solve(objective: Objective, x0: npt.ArrayLike, what: str = "fit", max_evalua
             max_nfev=max_evaluations,
         )
     except ValueError as exc:  # non-finite residuals or Jacobian
-        raise CalibrationError(f"{what}: the fit failed ({exc}); check the data and the tool for extreme values") from None
+        raise CalibrationError(
+            f"{what}: the fit failed ({exc}); check the data and the tool for extreme values") from None
     jac = np.asarray(result.jac, dtype=float)  # scipy's Jacobian at result.x
     normal = gram(jac)
     condition = condition_number(jac, normal)

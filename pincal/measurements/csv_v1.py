@@ -33,18 +33,19 @@ from __future__ import annotations
 import csv
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal, Sequence
+from typing import Literal, cast
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.data import (
-    POSITION_COLUMN_RE,
     DEFAULT_ROLE,
     JOINT_SANITY,
+    POSITION_COLUMN_RE,
     QUAT_COLUMNS,
     ROLE_COLUMN,
     ROLES,
@@ -275,8 +276,9 @@ def _point_columns(table: CsvTable, joint_names: Sequence[str]) -> list[tuple[st
                               f"each point needs x{suffix},y{suffix},z{suffix}")
     if None in axes:
         return [("x", "y", "z")]
-    if sorted(axes) != list(range(1, len(axes) + 1)):
-        raise table.error(f"point columns numbered {sorted(axes)}; number them 1..P without gaps")
+    numbered = cast("dict[int, set[str]]", axes)  # no None key: returned above
+    if sorted(numbered) != list(range(1, len(axes) + 1)):
+        raise table.error(f"point columns numbered {sorted(numbered)}; number them 1..P without gaps")
     return [(f"x{i}", f"y{i}", f"z{i}") for i in range(1, len(axes) + 1)]
 
 
@@ -400,18 +402,18 @@ def read_sessions(
         MeasurementError: a file given twice, files that measure differently
             (:func:`pincal.measurements.data.join_sets`), or any problem of one file.
     """
-    paths = [Path(p) for p in paths]
-    if len(paths) == 1:
-        return read_measurements(paths[0], joints)
+    files = [Path(p) for p in paths]
+    if len(files) == 1:
+        return read_measurements(files[0], joints)
     seen: dict[str, Path] = {}
-    for path in paths:
+    for path in files:
         key = os.path.normcase(os.path.abspath(path))
         if key in seen:
             raise MeasurementError(f"{path}: given twice (also as {seen[key]}); give each session's file once")
         seen[key] = path
-    stems = [p.stem for p in paths]
+    stems = [p.stem for p in files]
     sets, notes = [], []
-    for path, stem in zip(paths, stems):
+    for path, stem in zip(files, stems):
         data, file_notes = read_measurements(path, joints)
         notes += file_notes
         name = stem if stems.count(stem) == 1 else str(path)

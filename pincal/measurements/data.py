@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import PurePath
 from types import MappingProxyType
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -100,8 +100,9 @@ class MeasurementSet:
     lines: np.ndarray
     extra: Mapping[str, np.ndarray] = field(default_factory=dict)
     source: str = "<memory>"
-    sessions: np.ndarray | None = None
-    files: np.ndarray | None = None
+    # None (the default) is replaced by the default labels in __post_init__: arrays once constructed
+    sessions: np.ndarray = None  # type: ignore[assignment]  # None: replaced in __post_init__
+    files: np.ndarray = None  # type: ignore[assignment]  # None: replaced in __post_init__
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)

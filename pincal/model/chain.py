@@ -13,11 +13,10 @@ URDF-root coordinates. Units: metres and radians.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import os
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -155,11 +154,11 @@ class KinematicChain:
     @classmethod
     def from_urdf(
         cls,
-        urdf_path: str | Path,
+        urdf_path: str | os.PathLike[str],
         tip_link: str,
         tool: npt.ArrayLike | None = None,
         xacro_args: Mapping[str, str] | Iterable[tuple[str, str]] | None = None,
-    ) -> "KinematicChain":
+    ) -> KinematicChain:
         """Load ``urdf_path`` with Pinocchio and take the chain from its root to ``tip_link``.
 
         A ``*.xacro`` file is expanded in memory with ``xacro_args``

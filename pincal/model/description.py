@@ -23,9 +23,9 @@ import math
 import os
 import re
 import threading
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping
 
 from lxml import etree
 
@@ -256,7 +256,7 @@ def _stamps(files: Iterable[str]) -> tuple:
     Contents, not modification times: a file rewritten within the clock's resolution
     still counts as changed; reading a description's few files costs far less than xacro.
     """
-    out = []
+    out: list[tuple[str, str | None]] = []
     for name in sorted(set(files)):
         try:
             out.append((name, hashlib.sha256(Path(name).read_bytes()).hexdigest()))

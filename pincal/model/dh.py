@@ -28,8 +28,8 @@ and millimetres; the constants below convert).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -103,7 +103,7 @@ class DHTable:
         epsilon_deg: Sequence[float],
         r_mm: Sequence[float],
         d_mm: Sequence[float],
-    ) -> "DHTable":
+    ) -> DHTable:
         """Build a table from the paper's units (degrees, millimetres)."""
         return cls(
             alpha=np.radians(alpha_deg),
@@ -117,12 +117,12 @@ class DHTable:
         return np.concatenate([getattr(self, name) for name in DH_FIELDS])
 
     @classmethod
-    def from_vector(cls, vector: npt.ArrayLike) -> "DHTable":
+    def from_vector(cls, vector: npt.ArrayLike) -> DHTable:
         """Inverse of :meth:`to_vector`."""
         v = np.asarray(vector, dtype=float).reshape(4, -1)
         return cls(alpha=v[0], epsilon=v[1], r=v[2], d=v[3])
 
-    def __add__(self, other: "DHTable") -> "DHTable":
+    def __add__(self, other: DHTable) -> DHTable:
         if not isinstance(other, DHTable):
             return NotImplemented
         if other.n_joints != self.n_joints:
@@ -131,7 +131,7 @@ class DHTable:
             )
         return DHTable.from_vector(self.to_vector() + other.to_vector())
 
-    def __sub__(self, other: "DHTable") -> "DHTable":
+    def __sub__(self, other: DHTable) -> DHTable:
         if not isinstance(other, DHTable):
             return NotImplemented
         return DHTable.from_vector(self.to_vector() - other.to_vector())
@@ -161,7 +161,7 @@ class DHTable:
         origins: Sequence[npt.ArrayLike],
         tol: float = 1e-9,
         names: Sequence[str] | None = None,
-    ) -> "DHTable":
+    ) -> DHTable:
         """Inverse of :meth:`joint_origins`: read a table back from N + 1 origins.
 
         Args:

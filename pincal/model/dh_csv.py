@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import os
+from typing import Any
 
 from pincal.errors import ModelError
 from pincal.measurements.csv_v1 import MAX_POSITION, CsvTable, read_table
@@ -93,7 +94,9 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
     to_rad = math.radians if degrees else float
     columns: dict[str, list] = {c: [] for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS}
     seen: dict[str, int] = {}
-    defaulted_limits, defaulted_velocity, defaulted_effort = [], [], []
+    defaulted_limits: list[str] = []
+    defaulted_velocity: list[str] = []
+    defaulted_effort: list[str] = []
     for k, line in enumerate(table.lines):
         name = table.cell(k, "joint")
         if not name:
@@ -108,8 +111,9 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
         kind = table.cell(k, "type").lower() or "revolute"
         if kind not in DH_JOINT_TYPES:
             raise table.error(f"unknown joint type '{table.cell(k, 'type')}'; use "
-                              f"{', '.join(DH_JOINT_TYPES[:-1])} or {DH_JOINT_TYPES[-1]} (empty = revolute)", line, "type", name)
-        row: dict[str, float] = {}
+                              f"{', '.join(DH_JOINT_TYPES[:-1])} or {DH_JOINT_TYPES[-1]} (empty = revolute)",
+                              line, "type", name)
+        row: dict[str, Any] = {}  # a float, or None for an empty limit cell
         for column in ("a", "alpha", "d", "theta"):
             value = table.number(k, column, name)
             if value is None:

@@ -20,6 +20,7 @@ For a prismatic joint q adds to d instead of theta.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -80,6 +81,12 @@ class DHRobot:
     upper: np.ndarray
     velocity: np.ndarray
     effort: np.ndarray
+
+    if TYPE_CHECKING:  # for type checkers only: the constructor takes array-likes (__post_init__ converts them)
+
+        def __init__(self, convention: str, names: tuple[str, ...], alpha: npt.ArrayLike, a: npt.ArrayLike,
+                     theta: npt.ArrayLike, d: npt.ArrayLike, types: tuple[str, ...], lower: npt.ArrayLike,
+                     upper: npt.ArrayLike, velocity: npt.ArrayLike, effort: npt.ArrayLike) -> None: ...
 
     def __post_init__(self) -> None:
         check_convention(self.convention)

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -266,7 +266,8 @@ def dh_robot_from_urdf(
     """
     urdf = load_urdf(urdf_path)
     by_child = {joint.child: joint for joint in urdf.robot.joints}
-    chain, link = [], DH_FLANGE_LINK
+    chain: list = []  # yourdfpy joints, flange first
+    link = DH_FLANGE_LINK
     while link != DH_BASE_LINK:
         if link not in by_child:
             raise ModelError(f"{urdf_path}: no chain from '{DH_BASE_LINK}' to '{DH_FLANGE_LINK}' "

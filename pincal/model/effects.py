@@ -32,10 +32,11 @@ basis (see :mod:`pincal.residuals.sensor`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import PincalError
@@ -188,6 +189,7 @@ def effect_inputs(
     drift_time = centred
     if with_context and held_sessions is not None:
         own, fitted = (np.asarray(sessions).astype(str) for sessions in held_sessions)
+        assert context_time is not None and time is not None  # with_context
         spans = time_spans(context_time, fitted)
         drift_time = held_times(time, spans, own.tolist(), own)[0] - time_reference
     return EffectInputs(
@@ -216,7 +218,7 @@ def approach_flank(q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_
 
 
 def sensed_points(
-    registration: Registration, world: np.ndarray, scale: float = 0.0, drift: np.ndarray | None = None
+    registration: Registration, world: np.ndarray, scale: float = 0.0, drift: npt.ArrayLike | None = None
 ) -> np.ndarray:
     """Where the sensor sees points given in the base frame: (1 + s)(Omega y + tau + drift_k).
 
@@ -261,8 +263,10 @@ def joint_shifts(
         if effect.type in JOINT_EFFECTS:
             if effect.joint not in joint_names:
                 raise PincalError(
-                    f"effect '{effect.label}': no joint '{effect.joint}' on the chain; joints are: {', '.join(joint_names)}"
+                    f"effect '{effect.label}': no joint '{effect.joint}' on the chain; "
+                    f"joints are: {', '.join(joint_names)}"
                 )
+            assert effect.joint is not None  # None is not among the joint names: raised above
             j = list(joint_names).index(effect.joint)
             shifts[:, j] += joint_basis(effect, inputs, j) @ np.atleast_1d(value)
     return shifts
@@ -275,7 +279,8 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     try:
         kind = parts[0]
         if kind == "cyclic":
-            effect, values = Effect(kind, parts[1], harmonic=int(parts[2])), np.array([float(parts[3]), float(parts[4])])
+            effect, values = (Effect(kind, parts[1], harmonic=int(parts[2])),
+                              np.array([float(parts[3]), float(parts[4])]))
         elif kind == "backlash":
             source = parts[3] if len(parts) > 3 else "gravity"
             effect, values = Effect(kind, parts[1], source=source), np.array([float(parts[2])])
@@ -346,7 +351,7 @@ class TimeSpan:
         return {"session": self.session, "first": self.first, "last": self.last, "mean": self.mean}
 
 
-def time_spans(time: np.ndarray, sessions: Sequence[str]) -> tuple[TimeSpan, ...]:
+def time_spans(time: npt.ArrayLike, sessions: npt.ArrayLike) -> tuple[TimeSpan, ...]:
     """The span of the row times ``time`` (K,) [s] of each session (``sessions`` (K,)
     each row's name), in the order of their first row."""
     time, sessions = np.asarray(time, dtype=float), np.asarray(sessions, dtype=object)
@@ -395,7 +400,8 @@ class DriftOffsets:
 
 
 def held_times(
-    time: np.ndarray, spans: Sequence[TimeSpan], held_session: Sequence[str | None], group: np.ndarray | None = None,
+    time: np.ndarray, spans: Sequence[TimeSpan], held_session: Sequence[str | None] | np.ndarray,
+    group: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The time [s] a drift is taken at for rows of times ``time`` (K,), and each
     row's distance from its span [s] (0 inside), (K,) each (:func:`drift_offsets`)."""
@@ -417,7 +423,7 @@ def held_times(
 
 def drift_offsets(
     time: np.ndarray, velocity: np.ndarray, reference: float, spans: Sequence[TimeSpan] | None,
-    held_session: Sequence[str | None], group: np.ndarray | None = None,
+    held_session: Sequence[str | None] | np.ndarray, group: np.ndarray | None = None,
 ) -> DriftOffsets:
     """The drift's offsets at rows of times ``time`` (K,) [s], never extrapolated.
 

@@ -20,6 +20,8 @@ slot twists; identity where the parameters are the slot coordinates).
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 import pinocchio as pin
 
@@ -90,7 +92,7 @@ class JointOffsets(_ChainParameters):
                 joint=i,
                 after_motion=True,
                 kind="prismatic" if j.kind == "prismatic" else "revolute",
-                axis=tuple(float(a) for a in j.axis),
+                axis=cast("tuple[float, float, float]", tuple(float(a) for a in j.axis)),  # (3,)
             )
             for i, j in enumerate(chain.joints)
         )
@@ -120,7 +122,7 @@ class PlacementErrors(_ChainParameters):
         for i, owner, after in owners:
             for kind, prefix, unit in (("prismatic", "t", "m"), ("revolute", "r", "rad")):
                 for a, name in enumerate(_AXES):
-                    axis = tuple(float(v) for v in np.eye(3)[a])
+                    axis = cast("tuple[float, float, float]", tuple(float(v) for v in np.eye(3)[a]))  # (3,)
                     info.append(ParameterInfo(f"{owner}.{prefix}{name}", owner, unit))
                     slots.append(ParameterSlot(joint=i, after_motion=after, kind=kind, axis=axis))
         self.info, self.slots = tuple(info), tuple(slots)

@@ -21,8 +21,8 @@ cost function, only its placements are updated.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -94,6 +94,7 @@ class Sensitivity:
     def joint_point_velocity(self, points: npt.ArrayLike) -> np.ndarray:
         """d(point)/d(joint value) of the chain's joints, (K, 3) → (K, N, 3)."""
         offset = np.asarray(points, dtype=float) - self.origin
+        assert self.joint_angular is not None and self.joint_linear is not None  # SensitivityModel sets them
         return self.joint_linear + np.cross(self.joint_angular, offset[:, None, :])
 
 
@@ -133,7 +134,8 @@ class SensitivityModel:
                     self._order.append(("joint", i))
                 for s, slot in enumerate(self.slots):
                     if slot.joint == i and slot.after_motion == after:
-                        parent = model.addJoint(parent, _sensitivity_joint(slot), pin.SE3.Identity(), f"pincal_slot_{s}")
+                        parent = model.addJoint(
+                            parent, _sensitivity_joint(slot), pin.SE3.Identity(), f"pincal_slot_{s}")
                         self._slot_ids[s] = parent
                         self._order.append(("slot", s))
         self._tool_frame = model.addFrame(

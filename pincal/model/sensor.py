@@ -58,7 +58,7 @@ class Registration:
         return {"rotation_xyzw": [float(v) for v in quat], "translation_m": [float(v) for v in self.translation]}
 
     @classmethod
-    def from_dict(cls, d) -> "Registration":
+    def from_dict(cls, d) -> Registration:
         """Inverse of :meth:`as_dict`."""
         try:
             quat = np.asarray(d["rotation_xyzw"], dtype=float)

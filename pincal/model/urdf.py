@@ -41,8 +41,9 @@ from __future__ import annotations
 import copy
 import io
 import os
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -190,7 +191,8 @@ def check_rigid_transform(matrix: npt.ArrayLike, what: str) -> np.ndarray:
     R = T[:3, :3]
     ortho = float(np.max(np.abs(R.T @ R - np.eye(3))))
     if ortho > RIGID_TOLERANCE:
-        raise ModelError(f"{what} is not a rigid transform: rotation block is not orthonormal (|R^T R - I| = {ortho:.3g})")
+        raise ModelError(
+            f"{what} is not a rigid transform: rotation block is not orthonormal (|R^T R - I| = {ortho:.3g})")
     if np.linalg.det(R) < 0.0:
         raise ModelError(f"{what} is not a proper rigid transform: rotation block is a reflection (det = -1)")
     return T

@@ -18,7 +18,6 @@ import numpy as np
 
 from pincal._version import __version__
 from pincal.errors import ModelError
-from pincal.outputs import file_sha256
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.model.dh_csv import read_dh_csv
 from pincal.model.dh_robot import (
@@ -33,6 +32,7 @@ from pincal.model.dh_urdf import (
     DH_FLANGE_LINK,
     urdf_from_dh,
 )
+from pincal.outputs import file_sha256
 
 #: Seeded configurations at which the written URDF is compared with the DH product.
 CHECK_CONFIGURATIONS = 20
@@ -165,6 +165,7 @@ def provenance(robot: DHRobot, table_path: Path, digest: str, out_urdf: Path, na
   {DH_FLANGE_LINK} (fixed joint {DH_FLANGE_JOINT}) is DH frame {robot.n_joints}{flange_text}:
   the tip link to calibrate.
   Limits from the table; where it gives none: [{rev[0]:.6g}, {rev[1]:.6g}] rad (revolute),
-  [{pri[0]:g}, {pri[1]:g}] m (prismatic), none for a continuous joint; velocity {DEFAULT_VELOCITY:g} rad/s (m/s) and effort
+  [{pri[0]:g}, {pri[1]:g}] m (prismatic), none for a continuous joint; velocity {DEFAULT_VELOCITY:g} rad/s (m/s) \
+and effort
   {DEFAULT_EFFORT:g} N m (N) are placeholders where absent. No inertials.
 """

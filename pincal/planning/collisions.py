@@ -12,9 +12,9 @@ clearance (coal's collision test with a security margin: distance < margin).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import pinocchio as pin

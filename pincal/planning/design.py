@@ -39,6 +39,7 @@ equivalence theorem (scripts/plan_design_bound.py compares plans with it).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -152,7 +153,7 @@ class DesignProblem:
             return float("inf")
         if criterion == "a":
             return float(np.trace(np.linalg.inv(info)))
-        return self.predict(chosen).mean_position_mm
+        return cast(Prediction, self.predict(chosen)).mean_position_mm  # not singular: checked above
 
     def predict(self, chosen, condition: bool = True) -> Prediction | None:
         """Expected errors of the model calibrated on the recorded rows and ``chosen``; None if singular.
@@ -225,7 +226,7 @@ class _Search:
         T = self.T if T is None else T
         return -sign * np.trace(np.linalg.solve(S, T[index]), axis1=-2, axis2=-1)
 
-    def _step(self, k: int, sign: float):
+    def _step(self, k: int | np.integer, sign: float):
         """The rank-m terms of adding (+1) or removing (−1) candidate ``k``: P' = P − sign Z Zᵀ,
         and every candidate's F Z, Q' and T' (``T'`` None for ``d``)."""
         K, m, n = self.F.shape
@@ -241,7 +242,7 @@ class _Search:
             T = self.T - sign * (cross + cross.transpose(0, 2, 1)) + FZ @ (Z.T @ self.B @ Z) @ FZt
         return Z, FZ, Q, T
 
-    def update(self, k: int, sign: float, step=None) -> None:
+    def update(self, k: int | np.integer, sign: float, step=None) -> None:
         """Add (+1) or remove (−1) candidate ``k``: rank-m Woodbury updates."""
         K, m, n = self.F.shape
         Z, FZ, self.Q, T = self._step(k, sign) if step is None else step
@@ -349,6 +350,7 @@ def select(problem: DesignProblem, count: int, criterion: str, allowed: np.ndarr
         made = search.exchange(counter=counter)
         if best is None or search.value < best.value:
             best, swaps = search, made
+    assert best is not None  # starts >= 1
     chosen = np.flatnonzero(best.chosen)
     return Selection(chosen=chosen, priority=priority_order(problem, chosen, criterion, counter), swaps=swaps)
 

@@ -90,6 +90,7 @@ def plan_document(
         xyz, rpy = xyz_rpy_from_pose(tool_pose)
         tool = {"xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()}
     kinematic = len(plan.identifiable)
+    assert settings.sensor is not None  # a plan's settings name the sensor (pincal.planning.planner.plan)
     return {
         "pincal_version": __version__,
         "plan_version": PLAN_VERSION,

@@ -137,7 +137,8 @@ class MeasurementModel:
         self.sigma_pos_m, self.sigma_rot_rad = float(sigma_pos_m), float(sigma_rot_rad)
         self._size = self.params.size if self.params is not None else 0
         # the parameter vector of the model as it is: zero for offsets and placement errors, the table for DH
-        self._base = self.params.nominal.to_vector() if isinstance(self.params, DHParameterSet) else np.zeros(self._size)
+        self._base = (self.params.nominal.to_vector() if isinstance(self.params, DHParameterSet)
+                      else np.zeros(self._size))
         self.names = self._names()
 
     @property

@@ -40,14 +40,14 @@ def short_tour(q: np.ndarray, velocity: np.ndarray, start: np.ndarray) -> np.nda
     k = len(q)
     cost = np.max(np.abs(q[:, None, :] - q[None, :, :]) / velocity, axis=2)  # (K, K) [s]
     from_start = np.max(np.abs(q - start) / velocity, axis=1)
-    order = [int(np.argmin(from_start))]
+    path = [int(np.argmin(from_start))]
     left = np.ones(k, dtype=bool)
-    left[order[0]] = False
+    left[path[0]] = False
     while left.any():
-        row = np.where(left, cost[order[-1]], np.inf)
-        order.append(int(np.argmin(row)))
-        left[order[-1]] = False
-    order = np.array(order)
+        row = np.where(left, cost[path[-1]], np.inf)
+        path.append(int(np.argmin(row)))
+        left[path[-1]] = False
+    order = np.array(path)
     improved = True
     while improved:  # 2-opt on the open path: reverse order[i:j+1]
         improved = False

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -204,6 +205,7 @@ def plan_measurements(
             sensor = (SensorModel("pose", 1) if existing.has_orientation
                       else SensorModel("points", existing.n_points) if existing.n_points > 1 else sensor)
         settings = replace(settings, sensor=sensor)
+    assert settings.sensor is not None  # set above when not given
     candidates = np.atleast_2d(np.asarray(candidates, dtype=float))
     allowed = np.ones(len(candidates), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
     alternate = _joint_columns(chain, settings.alternate)
@@ -288,6 +290,7 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
     """The measurement model — linearised at the recorded rows' calibration, else at the chain as it
     is —, where its noise comes from, and the recorded rows' configurations and sessions."""
     sensor = settings.sensor
+    assert sensor is not None  # plan() sets it
     if settings.tool_known and sensor.n_points != 1:
         raise PincalError(f"--measure {sensor.label} with --tool: a known tool is one point; "
                           "leave out --tool to estimate the target's points")
@@ -332,7 +335,9 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
     return model, source, recorded_q, recorded_sessions
 
 
-def _session_columns(model: MeasurementModel, blocks, recorded, sessions, errors):
+def _session_columns(
+    model: MeasurementModel, blocks, recorded, sessions, errors
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray | None], tuple[str, ...]]:
     """Registration columns of several recorded sessions.
 
     The planned rows continue the session of the last recorded row (the sensor
@@ -374,7 +379,7 @@ def _random_baseline(problem: DesignProblem, settings: PlanSettings, allowed: np
     singular = len(draws) - len(good)
     if len(good) <= len(draws) // 2:
         return None, singular
-    median = {}
+    median: dict[str, Any] = {}  # float, or None for orientation errors without orientations
     for key in ("mean_position_mm", "max_position_mm", "mean_rotation_deg", "max_rotation_deg", "condition"):
         values = [getattr(d, key) for d in good]
         # the singular draws count as infinitely bad
@@ -386,9 +391,9 @@ def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Predictio
                counter: Counter) -> tuple[Addition, ...]:
     """Predicted mean error after each prefix of the priority order, and each one's gain."""
     out, previous = [], None if recorded is None else recorded.mean_position_mm
-    rows, recorded = problem.blocks.shape[1], len(problem.existing)
+    rows, n_recorded = problem.blocks.shape[1], len(problem.existing)
     for k in range(1, len(priority) + 1):
-        enough = (k + recorded) * rows >= problem.n
+        enough = (k + n_recorded) * rows >= problem.n
         prediction = problem.predict(priority[:k], condition=False) if enough else None
         value = None if prediction is None else prediction.mean_position_mm
         gain = None if value is None or previous is None else previous - value

@@ -35,6 +35,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -71,7 +72,7 @@ def paper_report(
     tool_pose: np.ndarray,
     calibration_errors: PoseErrors,
     n_rows: dict[str, int],
-    sources: dict[str, str],
+    sources: Mapping[str, str | list[str] | None],
     notes: list[str],
 ) -> dict[str, Any]:
     """Build the REPORT.json document of a paper-method calibration."""
@@ -291,7 +292,8 @@ def read_report(path: str | Path) -> ReportModel:
             ),
             noise=dict(doc.get("noise") or {}),
             session_files=tuple(
-                tuple(str(f) for f in (entry.get("file") if isinstance(entry.get("file"), list) else [entry.get("file")])
+                tuple(str(f)
+                      for f in (entry.get("file") if isinstance(entry.get("file"), list) else [entry.get("file")])
                       if f is not None)
                 for entry in doc.get("sessions") or ()
             ),
@@ -306,12 +308,12 @@ def read_report(path: str | Path) -> ReportModel:
 
 
 def chain_report(
-    result: "ChainCalibration",
-    chain: "KinematicChain",
+    result: ChainCalibration,
+    chain: KinematicChain,
     tool_parent: str,
     calibration_errors: PoseErrors,
     n_rows: dict[str, int],
-    sources: dict[str, str],
+    sources: Mapping[str, str | list[str] | None],
     notes: list[str],
 ) -> dict[str, Any]:
     """Build the REPORT.json document of a calibration at level registration/offsets/full."""
@@ -362,7 +364,7 @@ def chain_report(
     }
 
 
-def diagnosis_report(diagnosis: "Diagnosis", payload_kg: float, time_column: str | None) -> dict[str, Any]:
+def diagnosis_report(diagnosis: Diagnosis, payload_kg: float, time_column: str | None) -> dict[str, Any]:
     """The ``effects`` list and the ``diagnosis`` section of a REPORT.json."""
     from pincal.model.effects import effect_to_dict
 

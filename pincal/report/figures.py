@@ -12,7 +12,7 @@ import base64
 import io
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib import rc_context
@@ -22,12 +22,15 @@ from matplotlib.patches import Patch
 
 from pincal.fit.outliers import OUTLIER_THRESHOLD
 
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType  # matplotlib >= 3.9
+
 #: Model colours, nominal first, the reported model last (the page's CSS uses the same).
 NOMINAL_COLOUR = "#9aa5b1"
 MIDDLE_COLOUR = "#e0a23b"
 FINAL_COLOUR = "#2563eb"
 FLAG_COLOUR = "#d1342f"
-_STYLE = {
+_STYLE: dict[RcKeyType, Any] = {
     "svg.fonttype": "none",
     "svg.hashsalt": "pincal-report",
     "font.family": "sans-serif",
@@ -169,15 +172,15 @@ def row_errors_figure(entry: dict[str, Any], flagged: Sequence[int]) -> str:
             ax.set_ylabel("position error [mm]\n(RMS over the target's points)" if key == "position_mm"
                           else "orientation error [deg]")
             ax.set_ylim(0, 1.15 * top if top > 0 else None)
-        files = list(dict.fromkeys(files)) if several else entry.get("file") or "the data file"
-        names = ", ".join(Path(str(f)).name for f in (files if isinstance(files, list) else [files]))
+        shown = list(dict.fromkeys(files)) if several else entry.get("file") or "the data file"
+        names = ", ".join(Path(str(f)).name for f in (shown if isinstance(shown, list) else [shown]))
         axes[-1].set_xlabel(f"row of {names}, in file and line order" if several else f"line in {names}")
         handles, labels = axes[0].get_legend_handles_labels()  # earlier models, then the threshold line
         bars = [Patch(color=colours[-1], label=models[-1]["model"])]
         if flagged_set:
             bars.append(Patch(color=FLAG_COLOUR, label="flagged rows"))
-        threshold = [h for h, label in zip(handles, labels) if label.startswith("median")]
-        handles = [h for h, label in zip(handles, labels) if not label.startswith("median")] + bars + threshold
+        threshold_line = [h for h, label in zip(handles, labels) if label.startswith("median")]
+        handles = [h for h, label in zip(handles, labels) if not label.startswith("median")] + bars + threshold_line
         fig.legend(handles=handles, loc="outside upper left", ncols=len(handles), fontsize=8)
         return _svg_uri(fig)
 

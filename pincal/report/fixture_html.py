@@ -95,15 +95,15 @@ def fixture_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = Non
         seen = tuple(measured.get("not_held_out") or ())
         label = "evaluated placements" + (" (not held out: used in the calibration)" if seen else " (held out)")
         sets.append(_metric_set(label, measured.get("before"), measured.get("after"), seen))
-    sets = [s for s in sets if s is not None]
+    shown = [s for s in sets if s is not None]
     nominal = block.get("nominal") or {}
     ball, std = block.get("ball_centre_m"), block.get("ball_centre_std_m")
     return {
         "file": block.get("file"),
         "tip_link": (doc.get("tool") or {}).get("parent_link"),
-        "sets": sets,
+        "sets": shown,
         "cards": [{"label": s["label"], "consistency": s["all"]["consistency"], "distortion": s["all"]["distortion"],
-                   "has_before": s["has_before"]} for s in sets],
+                   "has_before": s["has_before"]} for s in shown],
         "ball": [{"axis": axis, "value": _mm(v), "std": _mm(s)}
                  for axis, v, s in zip("xyz", ball or [None] * 3, std or [None] * 3)],
         "nominal_ball": ", ".join(_vector_mm(nominal.get("ball_centre_m"))),

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from jinja2 import (
     Environment,
@@ -136,11 +136,11 @@ def _summary(doc: dict, evaluation: dict | None) -> dict[str, Any]:
                               "final_rot": row["rot"][1] if row["rot"] else None, "steps": [], "colours": [],
                               "change": None,
                               "notes": _registration_notes(evaluation) if row["set"] == "evaluated" else []})
-    table = [row for row in table if row is not None]
-    points = max((len(row["points"]) for row in table), default=0)
-    for row in table:
+    kept = [row for row in table if row is not None]
+    points = max((len(row["points"]) for row in kept), default=0)
+    for row in kept:
         row["points"] += [""] * (points - len(row["points"]))
-    return {"cards": cards, "errors": table, "points": points, "has_rotation": any(r["rot"] for r in table),
+    return {"cards": cards, "errors": kept, "points": points, "has_rotation": any(r["rot"] for r in kept),
             "figure": figures.overview_figure(stages), "facts": _facts(doc, evaluation)}
 
 
@@ -176,6 +176,7 @@ def _registration_notes(evaluation: dict | None) -> list[str]:
              f"{s['dof']} degrees of freedom left: errors about {s['shrink']} × the true error"
              for s in sessions if s["reestimated"]]
     if isinstance(held, int) and held > 0:  # where evaluate held it (pincal.model.effects.drift_offsets)
+        assert drift is not None  # held comes from it
         kinds = {s["reestimated"] for s in sessions}
         at = ("at zero offset (no span recorded)" if not drift.get("time_spans_s")
               else "held at the nearer end of the span (registration re-estimated)" if kinds == {True}
@@ -260,7 +261,7 @@ def _rows(doc: dict, evaluation: dict | None) -> list[dict[str, Any]]:
             if "session" in texts:
                 text.append(sessions[i] + (" (registration re-estimated)"
                                            if entry["set"] == "evaluated" and sessions[i] in reestimated else ""))
-            cells = [(int(line), str(line))]
+            cells: list[tuple[Any, str]] = [(int(line), str(line))]  # (sort value, text)
             cells += [(m["position_mm"][i], num(m["position_mm"][i], 4)) for m in models]
             if rotation is not None:
                 cells.append((rotation[i], num(rotation[i], 4)))
@@ -292,11 +293,14 @@ def _identifiability(doc: dict) -> dict[str, Any] | None:
             criterion=selection.get("criterion"), kept=selection.get("kept"), value=num(selection.get("value"), 5),
             candidates=[(c.get("kept"), num(c.get("value"), 5), c.get("kept") == selection.get("kept"))
                         for c in selection.get("candidates") or []],
-            pairs=[(p.get("a"), p.get("b"), num(p.get("correlation"), 3)) for p in ident.get("correlated_pairs") or []],
+            pairs=[(p.get("a"), p.get("b"), num(p.get("correlation"), 3))
+                   for p in ident.get("correlated_pairs") or []],
             dropped=[(d.get("name"), d.get("reason"),
-                      ", ".join(f"{num(a.get('coefficient'), 3)} × {a.get('name')}" for a in d.get("absorbed_into") or [])
+                      ", ".join(f"{num(a.get('coefficient'), 3)} × {a.get('name')}"
+                                for a in d.get("absorbed_into") or [])
                       or "—") for d in ident.get("dropped") or []],
-            not_determined=[(n.get("name"), n.get("held_at_m"), n.get("reason")) for n in ident.get("not_determined") or []],
+            not_determined=[(n.get("name"), n.get("held_at_m"), n.get("reason"))
+                            for n in ident.get("not_determined") or []],
         )
     return out
 
@@ -304,8 +308,10 @@ def _identifiability(doc: dict) -> dict[str, Any] | None:
 def orientations_measured(doc: dict) -> bool | None:
     """Whether the report's rows had orientations: an eq 24 summary with a ``position`` and
     no ``orientation`` says they had not; None when the report has no summary."""
-    summaries = [(doc.get("fit") or {}).get("calibration_errors"), (doc.get("diagnosis") or {}).get("calibration_errors")]
-    summaries += [(e.get("models") or [{}])[-1].get("errors") for e in doc.get("row_errors") or [] if isinstance(e, dict)]
+    summaries = [(doc.get("fit") or {}).get("calibration_errors"),
+                 (doc.get("diagnosis") or {}).get("calibration_errors")]
+    summaries += [(e.get("models") or [{}])[-1].get("errors")
+                  for e in doc.get("row_errors") or [] if isinstance(e, dict)]
     known = [s for s in summaries if isinstance(s, dict) and "position" in s]
     return any(s.get("orientation") is not None for s in known) if known else None
 
@@ -317,7 +323,7 @@ def _registration(doc: dict) -> dict[str, Any] | None:
     measured = orientations_measured(doc)
     entries = []
     position, orientation = registration.get("position"), registration.get("orientation")
-    sessions = doc.get("sessions") if isinstance(doc.get("sessions"), list) else []
+    sessions = cast(list, doc.get("sessions")) if isinstance(doc.get("sessions"), list) else []
     whose = ""
     if len(sessions) > 1 and isinstance(sessions[0], dict):  # the top-level registration is the first session's
         whose = f"session '{sessions[0].get('name')}' (the first of {len(sessions)}; each one's below): "
@@ -406,7 +412,8 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "sessions": sessions if sessions and len(sessions) > 1 else None,  # one session: the registration above
         "effects": effects_section(document, kinds, base, figures.png_uri),
         "notes": [str(n) for n in document.get("notes") or []],
-        "warnings": [str(w.get("message", w)) if isinstance(w, dict) else str(w) for w in document.get("warnings") or []],
+        "warnings": [str(w.get("message", w)) if isinstance(w, dict) else str(w)
+                     for w in document.get("warnings") or []],
         "extra": extra,
         "version": document.get("pincal_version"),
         "report_version": document.get("report_version"),

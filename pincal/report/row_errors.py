@@ -30,7 +30,7 @@ calibration starts from.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -57,8 +57,8 @@ def _model(name: str, errors: PoseErrors) -> dict[str, Any]:
 
 
 def row_error_set(
-    name: str, source: str, lines: Sequence[int], models: Sequence[tuple[str, PoseErrors]],
-    files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
+    name: str, source: str, lines: Sequence[int] | np.ndarray, models: Sequence[tuple[str, PoseErrors]],
+    files: Sequence[str] | np.ndarray | None = None, sessions: Sequence[str] | np.ndarray | None = None,
 ) -> dict[str, Any]:
     """One ``row_errors`` entry: ``models`` as (name, errors of every row), the reported model last;
     ``files`` / ``sessions``: each row's file and session (default: ``source`` and its stem)."""
@@ -157,7 +157,9 @@ def diagnosis_row_errors(
         models.append((CALIBRATED, geometric if geometric is not None else final))
         if geometric is not None:
             models.append((WITH_EFFECTS, final))
-        sets.append(row_error_set(name, source, measured.lines, models, measured.files, measured.sessions))
+        # the held-out rows come with their file's name (sources[1])
+        sets.append(row_error_set(name, cast(str, source), measured.lines, models, measured.files,
+                                  measured.sessions))
     return sets
 
 

@@ -65,7 +65,7 @@ def parameter_section(doc: dict, figure: Callable) -> dict[str, Any] | None:
 
 def _effect_value(entry: dict, prismatic: bool) -> tuple[str, str]:
     """(value ± std with its unit, |value|/std) of one ``effects`` entry."""
-    kind = entry.get("type")
+    kind: Any = entry.get("type")  # a JSON value: a string, or None when absent
     length = prismatic
 
     def pm(value, std, scale, unit):
@@ -112,7 +112,7 @@ def _rms(errors: dict | None) -> str:
     return num(((errors or {}).get("position") or {}).get("rms_mm"), 4)
 
 
-def effects_section(doc: dict, kinds: dict[str, str], base: Path, png: Callable) -> dict[str, Any] | None:
+def effects_section(doc: dict, kinds: dict[Any, str], base: Path, png: Callable) -> dict[str, Any] | None:
     """Adopted effects, each step's ΔBIC and errors before → after, the candidates
     reported but not adopted, the remaining structure, and the plots of ``diagnose``."""
     diagnosis = doc.get("diagnosis")
@@ -141,7 +141,8 @@ def effects_section(doc: dict, kinds: dict[str, str], base: Path, png: Callable)
         "delta_bic_value": _finite(c.get("delta_bic")) or 0.0, "heldout": num(c.get("heldout_rms_mm"), 4),
         "verdict": c.get("verdict"),
     } for c in diagnosis.get("last_candidates") or []]
-    plots, missing = [], []
+    plots: list = []  # (name, data URI) of each plot found
+    missing: list = []  # the paths of those not found
     for text in diagnosis.get("plots") or []:
         path = Path(str(text))
         tried = [path, base / path, base / path.name, base / path.parent.name / path.name]

@@ -54,7 +54,7 @@ class KinematicsCache:
 
     def __init__(
         self,
-        params: "ParameterSet",
+        params: ParameterSet,
         free: npt.ArrayLike,
         base: npt.ArrayLike,
         q: npt.ArrayLike,
@@ -96,8 +96,9 @@ class KinematicsCache:
         tool = self.params.chain.tool
         key = (x.tobytes(), q.shape, q.tobytes(), tool.tobytes())
         recent = self._recent
-        for index, (inputs, result) in enumerate(recent):
-            if inputs == key:  # computed already: `result`
+        for index, (inputs, cached) in enumerate(recent):
+            if inputs == key:  # computed already: `cached`
+                result = cached
                 del recent[index]
                 break
         else:  # not among the recent results: compute it

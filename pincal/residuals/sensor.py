@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -125,8 +126,8 @@ class SensorResidual(Objective):
             raise ValueError("effects need their inputs (gravity torques, time)")
         joint_names = list(cache.params.chain.joint_names)
         self._effect_joint = [joint_names.index(e.joint) if e.joint else -1 for e in self.effects]
-        self._effect_basis = [
-            joint_basis(e, inputs, j) if e.type in JOINT_EFFECTS else None
+        self._effect_basis = [  # effects have their inputs (raised above otherwise)
+            joint_basis(e, cast(EffectInputs, inputs), j) if e.type in JOINT_EFFECTS else None
             for e, j in zip(self.effects, self._effect_joint)
         ]
         if any(e.type == "drift" for e in self.effects) and (inputs is None or inputs.time is None):
@@ -162,11 +163,12 @@ class SensorResidual(Objective):
             self.blocks[name] = slice(offset, offset + size)
             offset += size
         self.n_params = offset
-        start = self.blocks["effects"].start
+        first = self.blocks["effects"].start
         for effect in self.effects:
-            self._effect_slices.append(slice(start, start + effect.n_values))
-            start += effect.n_values
-        self._memo = None
+            self._effect_slices.append(slice(first, first + effect.n_values))
+            first += effect.n_values
+        # the last state computed: (x, the kinematics it came from, the state)
+        self._memo: tuple[np.ndarray, tuple, tuple] | None = None
 
     @property
     def n_free(self) -> int:
@@ -238,6 +240,7 @@ class SensorResidual(Objective):
             if effect.type == "sensor_scale":
                 scale = float(x[sl][0])
             elif effect.type == "drift":
+                assert self.inputs is not None and self.inputs.time is not None  # checked in __init__
                 drift = self.inputs.time[:, None] * x[sl]
         return scale, drift
 
@@ -247,6 +250,7 @@ class SensorResidual(Objective):
         x = np.asarray(x, dtype=float)
         q = None
         if self.effects:
+            assert self.inputs is not None  # effects need their inputs (__init__)
             shifts = np.zeros_like(self.inputs.q)
             for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
                 if basis is not None:
@@ -329,6 +333,7 @@ class SensorResidual(Objective):
     def _orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
         """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
         omega, _ = self.row_frames(target)
+        assert self.G is not None  # called only with orientations
         return self.G.transpose(0, 2, 1) @ omega @ poses.tool_rotations @ target.rotation
 
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
@@ -381,7 +386,8 @@ class SensorResidual(Objective):
         out = []
         for effect in effects:
             j = joint_names.index(effect.joint) if effect.joint else -1
-            basis = joint_basis(effect, self.inputs, j) if effect.type in JOINT_EFFECTS else None
+            # a joint effect's columns need the effect inputs: the caller gives them
+            basis = joint_basis(effect, cast(EffectInputs, self.inputs), j) if effect.type in JOINT_EFFECTS else None
             if effect.type == "sensor_scale":
                 position = lin["sensed"][..., None]
             else:
@@ -429,6 +435,7 @@ class SensorResidual(Objective):
         if basis is not None:  # joint shift: the joint's column times the basis
             return lin["joint_points"][:, :, :, j, None] * basis[:, None, None, :]
         if effect.type == "drift":
+            assert self.inputs is not None and self.inputs.time is not None  # drift is offered only with a time column
             return np.broadcast_to(self.inputs.time[:, None, None, None] * np.eye(3), (k, n_points, 3, 3))
         return np.zeros((k, n_points, 3, effect.n_values))
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +16,9 @@ from pincal.simulation.sensor import (
     measure,
     random_configurations,
 )
+
+#: The default settings of :func:`simulate_chain` (frozen, so one shared instance is safe).
+DEFAULT_SIMULATION_SETTINGS = SimulationSettings()
 
 
 @dataclass(frozen=True)
@@ -41,7 +45,7 @@ def simulate_chain(
     params,
     truth: np.ndarray,
     points: np.ndarray,
-    settings: SimulationSettings = SimulationSettings(),
+    settings: SimulationSettings = DEFAULT_SIMULATION_SETTINGS,
     with_rotation: bool = False,
     target_rotation: np.ndarray | None = None,
     registration: Registration = DEFAULT_REGISTRATION,
@@ -57,7 +61,7 @@ def simulate_chain(
     with chain.placed(params.placements(truth)):
         q_cal = random_configurations(chain, rng, settings.n_calibration)
         q_val = random_configurations(chain, rng, settings.n_validation)
-        common = dict(points=points, target_rotation=target_rotation, with_rotation=with_rotation)
+        common: dict[str, Any] = dict(points=points, target_rotation=target_rotation, with_rotation=with_rotation)
         cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration", **common)
         scale = 1.0 if settings.validation_noise else 0.0
         val = measure(chain, q_val, registration, rng, sigma_p * scale, sigma_a * scale, "validation", **common)

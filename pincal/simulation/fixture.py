@@ -93,16 +93,17 @@ def simulate_fixture(
         joint_noise_rad: standard deviation of noise added to every joint reading.
     """
     names = tuple(names) if names is not None else tuple(f"p{s}" for s in range(len(poses)))
-    q, socket, placement = [], [], []
+    reached, socket, placement = [], [], []
     for s, pose in enumerate(poses):
         pose = np.asarray(pose, dtype=float)
         for i, point in enumerate(fixture.points):
             target = pose[:3, :3] @ point + pose[:3, 3]
             for _ in range(rows_per_socket):
-                q.append(reach(chain, target, ball, rng))
+                reached.append(reach(chain, target, ball, rng))
                 socket.append(i)
                 placement.append(s)
-    q = np.array(q) + rng.normal(0.0, joint_noise_rad, (len(q), chain.n_joints)) if joint_noise_rad else np.array(q)
+    q = (np.array(reached) + rng.normal(0.0, joint_noise_rad, (len(reached), chain.n_joints)) if joint_noise_rad
+         else np.array(reached))
     k = len(q)
     data = FixtureData(chain.joint_names, q, np.array(socket), np.array(placement), names, fixture,
                        np.arange(2, k + 2), np.zeros(k, dtype=int), ("<simulated>",))

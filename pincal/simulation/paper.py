@@ -14,8 +14,8 @@ numpy Generator, so a seed reproduces the data exactly.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -128,6 +128,7 @@ def simulate_experiment(
     finally:
         chain.set_placements(saved_placements)
         chain.set_tool(saved_tool)
+    assert cpa.rotations is not None and cal.rotations is not None  # measured with orientations (measure's default)
     calibration = MeasurementSet(
         joint_names=cpa.joint_names,
         q=np.vstack([cpa.q, cal.q]),
@@ -151,7 +152,8 @@ def _row_times(effects, n_cpa: int, n_calibration: int, n_validation: int) -> np
     if not effects:
         return None
     slots = np.arange(n_calibration + n_validation)
-    validation = np.round(np.linspace(0, len(slots) - 1, n_validation + 2)[1:-1]).astype(int) if n_validation else []
+    validation: np.ndarray | list[int] = (
+        np.round(np.linspace(0, len(slots) - 1, n_validation + 2)[1:-1]).astype(int) if n_validation else [])
     is_validation = np.isin(slots, validation)
     late = n_cpa + slots
     return SECONDS_PER_ROW * np.concatenate([np.arange(n_cpa), late[~is_validation], late[is_validation]]).astype(float)

@@ -20,10 +20,11 @@ import multiprocessing
 import os
 import sys
 import threading
+from collections.abc import Sequence
 from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager, nullcontext
-from typing import Any, Sequence
+from typing import Any
 
 from pincal.errors import PincalError
 from pincal.progress import Progress  # called after each finished task

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,13 +27,13 @@ from pincal.study.protocol import (
     SAME_SOLUTION_DEG,
     SAME_SOLUTION_MM,
 )
-from pincal.study.tasks import ABLATION_REPEATS, ABLATION_SUFFIX, ablation_levels
 from pincal.study.tables import (
     RESTART_COLUMNS,
     STUDY_COLUMNS,
     SUMMARY_COLUMNS,
     limit_table,
 )
+from pincal.study.tasks import ABLATION_REPEATS, ABLATION_SUFFIX, ablation_levels
 
 if TYPE_CHECKING:
     from pincal.study.result import StudyResult
@@ -261,13 +262,13 @@ def findings_markdown(result: StudyResult) -> str:
               f"{r['failed']} | {_fmt(r['max_deps_deg'], 2)} | {_fmt(r['max_dlength_mm'], 2)} |"
               for r in result.restart_summary),
         ]
-    deviations = next(f for f in result.findings if f["finding"] == "largest_parameter_deviations")
+    largest = next(f for f in result.findings if f["finding"] == "largest_parameter_deviations")
     lines += [
         "", "## Largest parameter deviations from the ground truth", "",
         "| estimator | δα [deg] | δε [deg] | δr [mm] | δd [mm] |", "|---|---|---|---|---|",
         "| paper (Section 8) | " + " | ".join(f"{v:g}" for v in PAPER_MAX_DEVIATIONS.values()) + " |",
         *(f"| {label} | " + " | ".join(_fmt(values[c], 3) for c in PAPER_MAX_DEVIATIONS) + " |"
-          for label, values in deviations["values"]["by_estimator"].items()),
+          for label, values in largest["values"]["by_estimator"].items()),
         "",
     ]
     return "\n".join(lines)

@@ -14,7 +14,8 @@ dict with the paper's claim, whether it holds here and the numbers behind it.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -319,7 +320,10 @@ def _four_sigma_finding(curves: _Curves) -> dict[str, Any]:
     slopes = {}
     for d in curves.deviations:
         sigma = curves.get(d, METHOD_2, 1, "sigma_pos_mm")
-        slope = (lambda y: float(sigma @ y / (sigma @ sigma)) if sigma.size else math.nan)
+
+        def slope(y):
+            return float(sigma @ y / (sigma @ sigma)) if sigma.size else math.nan
+
         slopes[d] = {"pos_mm_per_mm": slope(curves.get(d, METHOD_2, 1, "pos_mean_mm")),
                      "rot_deg_per_deg": slope(curves.get(d, METHOD_2, 2, "rot_mean_deg"))}
     values = [v for s in slopes.values() for v in s.values()]

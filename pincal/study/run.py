@@ -81,6 +81,9 @@ __all__ = [
 
 _RESTART_CHUNK = 50  # restarts per task
 
+#: The default protocol of :func:`run_study`: the paper's (frozen, so one shared instance is safe).
+DEFAULT_STUDY_CONFIG = StudyConfig()
+
 
 def restart_cases(config: StudyConfig) -> list[tuple[str, int, int]]:
     """The (deviation set, level index, repeat) trials of the restart test.
@@ -127,7 +130,7 @@ def study_tasks(config: StudyConfig) -> list:
 
 
 def run_study(
-    config: StudyConfig = StudyConfig(),
+    config: StudyConfig = DEFAULT_STUDY_CONFIG,
     workers: int | None = None,
     scheduler: Any = None,
     progress: Progress | None = None,

@@ -10,7 +10,8 @@ side, :func:`summarize_restarts` counts the restarts reaching the solution.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -61,9 +62,9 @@ def summarize(rows: Sequence[dict[str, Any]], limits: Sequence[dict[str, Any]]) 
     (1 = at the limit); NaN where the limit does not apply.
     """
     unit: dict[tuple, list] = {}
-    for limit in limits:
-        key = (limit["deviations"], limit["method"], limit["weight"])
-        unit.setdefault(key, []).append((limit["pos_mm_per_unit_sigma"], limit["rot_deg_per_unit_sigma"]))
+    for entry in limits:
+        key = (entry["deviations"], entry["method"], entry["weight"])
+        unit.setdefault(key, []).append((entry["pos_mm_per_unit_sigma"], entry["rot_deg_per_unit_sigma"]))
     summary = []
     for key, members in _grouped(rows, _GROUP).items():
         out = dict(zip(_GROUP, key))

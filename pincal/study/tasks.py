@@ -21,13 +21,13 @@ import math
 import threading
 import time
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from pincal.errors import CalibrationError
-from pincal.fit.metrics import pose_errors
-from pincal.fit.paper_methods import estimate_twists
+from pincal.fit.metrics import ErrorSummary, pose_errors
+from pincal.fit.paper_methods import PaperCalibration, estimate_twists
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH, DHTable
@@ -178,7 +178,8 @@ class TrialTask:
     def run(self) -> list[dict[str, Any]]:
         chain, experiment = _simulate(self.config, self.deviations, self.sigma, self.seed)
         test_sets = {"": experiment.validation, "_truth": noise_free_test_set(chain, experiment)}
-        rows, results = [], {}
+        rows: list[dict[str, Any]] = []
+        results: dict[Any, PaperCalibration] = {}
         twists = _twists(chain, experiment)  # CPA once; ML starts from this trial's Method 2
         for estimator in self.config.estimators:
             started = time.perf_counter()
@@ -200,7 +201,8 @@ class TrialTask:
                     errors = pose_errors(chain, data, registrations[index], registrations[index],
                                          tool_poses=tool[suffix])
                     row[f"pos{suffix}_mean_mm"] = errors.position.mean
-                    row[f"rot{suffix}_mean_deg"] = errors.rotation.mean
+                    # the study's rows have orientations
+                    row[f"rot{suffix}_mean_deg"] = cast(ErrorSummary, errors.rotation).mean
                 rows.append({**row, "fit_ms": fit_ms, **deviations})
         if ablation_trial(self.config, self.level, self.repeat):
             # same data, the CPA rows as positions only (the paper's CPA); on the ML rows, kept out of study.csv
@@ -212,7 +214,8 @@ class TrialTask:
             for suffix, data in test_sets.items():
                 errors = pose_errors(chain, data, registration, registration)
                 ablation[f"pos{suffix}_mean_mm{ABLATION_SUFFIX}"] = errors.position.mean
-                ablation[f"rot{suffix}_mean_deg{ABLATION_SUFFIX}"] = errors.rotation.mean
+                # the study's rows have orientations
+                ablation[f"rot{suffix}_mean_deg{ABLATION_SUFFIX}"] = cast(ErrorSummary, errors.rotation).mean
             for row in rows:
                 if row["method"] == str(ML_ESTIMATOR.method):
                     row.update(ablation)
@@ -291,6 +294,7 @@ class Figure2Task:
             errors = pose_errors(
                 chain, experiment.validation, result.registration_position, result.registration_orientation
             )
+            assert errors.rotation_rad is not None  # the study's rows have orientations
             out.append({
                 "method": str(estimator.method), "deviations": self.deviations,
                 "sigma_pos_mm": FIGURE2_SIGMA, "sigma_rot_deg": FIGURE2_SIGMA,
