@@ -6,6 +6,9 @@ prints its message on one line and exits non-zero, never with a traceback.
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class PincalError(Exception):
     """Root of all errors pincal raises on bad input or impossible requests."""
@@ -21,3 +24,21 @@ class ModelError(PincalError):
 
 class CalibrationError(PincalError):
     """The data cannot determine what was asked for, or the fit failed."""
+
+
+#: Names a message lists at most before "… and N more".
+LISTED = 12
+
+
+def did_you_mean(name: str, choices: Iterable[str], what: str) -> str:
+    """The end of a "no such name" message: the closest of ``choices`` (difflib's ratio ≥ 0.6, at most
+    three) as "did you mean 'x'?", then ``what`` with at most :data:`LISTED` of them.
+
+    Example: ``f"no link named 'tol0'; {did_you_mean('tol0', links, 'links')}"`` →
+    ``"no link named 'tol0'; did you mean 'tool0'? links: base_link, …, tool0"``.
+    """
+    choices = list(choices)
+    close = difflib.get_close_matches(name, choices, n=3)
+    shown = ", ".join(choices[:LISTED]) + (f", … and {len(choices) - LISTED} more" if len(choices) > LISTED else "")
+    guess = ("did you mean " + " or ".join(f"'{c}'" for c in close) + "? ") if close else ""
+    return f"{guess}{what}: {shown or 'none'}"

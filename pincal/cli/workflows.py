@@ -27,7 +27,7 @@ from pincal.cli.paths import (
     refuse_overwrite_matching,
 )
 from pincal.cli.settings import CalibrateSettings, DiagnoseSettings
-from pincal.errors import CalibrationError, PincalError
+from pincal.errors import CalibrationError, PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
 from pincal.fit.plausibility import calibration_findings
@@ -101,8 +101,8 @@ def simulate_to_directory(
     injected = [parse_effect(text) for text in effects]
     for effect, _ in injected:
         if effect.joint is not None and effect.joint not in chain.joint_names:
-            raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}'; joints are: "
-                              f"{', '.join(chain.joint_names)}")
+            raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}'; "
+                              f"{did_you_mean(effect.joint, chain.joint_names, 'joints')}")
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings, effects=injected)
     out = ensure_directory(out_dir)
     write_measurements(out / "calibration.csv", experiment.calibration)

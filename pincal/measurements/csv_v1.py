@@ -31,6 +31,7 @@ are skipped.
 from __future__ import annotations
 
 import csv
+import difflib
 import math
 import os
 from collections.abc import Sequence
@@ -226,7 +227,10 @@ def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec]) -> np.ndarray:
     missing = [n for n in joint_names if n not in table.names]
     if missing:
         hint = "; is the file comma-separated?" if len(table.names) == 1 else ""
-        raise table.error(f"missing joint column(s) {', '.join(missing)}; the URDF expects "
+        extra = [n for n in table.names if n not in joint_names]  # a misspelt joint column is among these
+        close = [f"'{c[0]}' to '{m}'" for m in missing if (c := difflib.get_close_matches(m, extra, n=1))]
+        guess = f" (rename the file's column {', '.join(close)}?)" if close else ""
+        raise table.error(f"missing joint column(s) {', '.join(missing)}{guess}; the URDF expects "
                           f"{', '.join(joint_names)}{hint}")
     q = table.matrix(joint_names)
     for n, joint in enumerate(joints):

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pincal.errors import ModelError
+from pincal.errors import ModelError, did_you_mean
 from pincal.measurements.data import JointSpec
 from pincal.model.description import read_description
 
@@ -112,9 +112,7 @@ class KinematicChain:
         body = pin.FrameType.BODY
         if not model.existFrame(tip_link, body):
             links = sorted(f.name for f in model.frames if f.type == body)
-            raise ModelError(
-                f"{source}: no link named '{tip_link}'; links are: {', '.join(links)}"
-            )
+            raise ModelError(f"{source}: no link named '{tip_link}'; {did_you_mean(tip_link, links, 'links')}")
         full_tip = model.frames[model.getFrameId(tip_link, body)]
         support = [j for j in model.supports[full_tip.parentJoint] if j != 0]
         if not support:

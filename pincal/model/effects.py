@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pincal.errors import PincalError
+from pincal.errors import PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
@@ -145,10 +145,8 @@ def time_column(data: MeasurementSet, name: str | None = None) -> np.ndarray | N
     """The rows' time [s] from ``name`` or the first of :data:`TIME_COLUMNS` present."""
     names = [name] if name else [n for n in TIME_COLUMNS if n in data.extra]
     if name and name not in data.extra:
-        raise PincalError(
-            f"{data.source}: no time column '{name}'; numeric extra columns are: "
-            f"{', '.join(data.extra) or 'none'}"
-        )
+        raise PincalError(f"{data.source}: no time column '{name}'; "
+                          f"{did_you_mean(name, data.extra, 'numeric extra columns')}")
     if not names:
         return None
     time = np.asarray(data.extra[names[0]], dtype=float)
@@ -262,10 +260,8 @@ def joint_shifts(
     for effect, value in zip(effects, values):
         if effect.type in JOINT_EFFECTS:
             if effect.joint not in joint_names:
-                raise PincalError(
-                    f"effect '{effect.label}': no joint '{effect.joint}' on the chain; "
-                    f"joints are: {', '.join(joint_names)}"
-                )
+                raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}' on the chain; "
+                                  f"{did_you_mean(str(effect.joint), joint_names, 'joints')}")
             assert effect.joint is not None  # None is not among the joint names: raised above
             j = list(joint_names).index(effect.joint)
             shifts[:, j] += joint_basis(effect, inputs, j) @ np.atleast_1d(value)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from pincal.errors import PincalError
+from pincal.errors import PincalError, did_you_mean
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, initial_target
 from pincal.fit.prior import Prior, prior_of
 from pincal.fit.selection import SELECTION_CRITERIA
@@ -282,7 +282,7 @@ def _joint_columns(chain: KinematicChain, names) -> np.ndarray:
     unknown = [n for n in names if n not in chain.joint_names]
     if unknown:
         raise PincalError(f"--alternate: no joint {', '.join(repr(n) for n in unknown)} on the chain; "
-                          f"its joints are {', '.join(chain.joint_names)}")
+                          f"{did_you_mean(unknown[0], chain.joint_names, 'its joints')}")
     return np.array([chain.joint_names.index(n) for n in names], dtype=int)
 
 
