@@ -31,14 +31,14 @@ LISTED = 12
 
 
 def did_you_mean(name: str, choices: Iterable[str], what: str) -> str:
-    """The end of a "no such name" message: the closest of ``choices`` (difflib's ratio ≥ 0.6, at most
-    three) as "did you mean 'x'?", then ``what`` with at most :data:`LISTED` of them.
+    """The end of a "no such name" message: the closest of ``choices`` (difflib's ratio ≥ 0.6) as
+    "did you mean 'x'?", then ``what`` with at most :data:`LISTED` of them.
 
     Example: ``f"no link named 'tol0'; {did_you_mean('tol0', links, 'links')}"`` →
     ``"no link named 'tol0'; did you mean 'tool0'? links: base_link, …, tool0"``.
     """
     choices = list(choices)
-    close = difflib.get_close_matches(name, choices, n=3)
+    close = difflib.get_close_matches(name, choices, n=1)
     shown = ", ".join(choices[:LISTED]) + (f", … and {len(choices) - LISTED} more" if len(choices) > LISTED else "")
     guess = ("did you mean " + " or ".join(f"'{c}'" for c in close) + "? ") if close else ""
     return f"{guess}{what}: {shown or 'none'}"

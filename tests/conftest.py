@@ -64,18 +64,22 @@ def industrial_arm_urdf(tmp_path_factory):
 
 
 #: The inner loop leaves these out (``pytest -m "not slow"``, about a minute on two cores): tests that
-#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27), and whole files
-#: that start processes, a Dask cluster or a browser. The full suite (CI, the README's command) runs them.
+#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27), the heaviest
+#: parametrised ones, and whole files that run studies or start processes, a Dask cluster or a browser.
+#: The full suite (CI, the README's command) runs them.
 SLOW_FILES = (
+    "tests/test_study.py",
     "tests/test_drift_span.py",
     "tests/test_html_report.py",
     "tests/test_study_dask_faults.py",
     "tests/test_study_processes.py",
 )
 SLOW_TESTS = (
+    "tests/test_diagnosis.py::test_undeclared_effect_is_found_measured_and_removed",
+    "tests/test_selection.py::test_tiago_selection_is_that_of_refitting_every_subset",
+    "tests/test_fixture.py::test_noise_free_data_recover_the_robot",
+    "tests/test_fixture.py::test_example_reproduces_the_readme_iiwa_rows",
     "tests/test_docs.py::test_mkdocs_build_strict",
-    "tests/test_study.py::test_findings_the_paper_states_hold",
-    "tests/test_study.py::test_noise_free_level_is_exact",
     "tests/test_chain_calibration.py::test_noisy_heldout_error_matches_noise_limited_prediction",
     "tests/test_chain_values.py::test_the_level_choice_and_diagnose_leave_the_chain",
     "tests/test_continuous_joints.py::test_every_serial_chain_of_example_robot_data_is_recovered",
@@ -111,10 +115,6 @@ SLOW_TESTS = (
     "tests/test_prior_downstream.py::test_cli_prior_scale_under_level_auto_needs_no_select",
     "tests/test_progress.py::test_commands_report_progress_on_stderr_and_quiet_silences_it",
     "tests/test_scenarios.py::test_scenario_reaches_its_noise_floor",
-    "tests/test_study.py::test_cli_study",
-    "tests/test_study.py::test_in_process_local_processes_and_dask_give_identical_results",
-    "tests/test_study.py::test_monte_carlo_errors_agree_with_the_noise_limit",
-    "tests/test_study.py::test_tiny_study_writes_tables_with_expected_rows",
     "tests/test_study_reference.py::test_study_rows_equal_those_of_6975758",
     "tests/test_target_hold.py::test_raster_at_constant_orientation_holds_the_target_and_reaches_the_noise_floor",
     "tests/test_urdf_elements.py::test_calibrate_imports_neither_yourdfpy_nor_plots_nor_other_commands",

@@ -61,6 +61,26 @@ def test_settings_are_frozen_values_with_the_commands_defaults():
         settings.level = "full"  # type: ignore[misc]
     assert CalibrateSettings("tip", sigma_pos_mm=0.05).sigma_pos_m == pytest.approx(5e-5)
     assert DiagnoseSettings("tip").level == "full" and EvaluateSettings().fixed_registration is None
+    # the commands' default selection (docs/defaults.md): the prior where kinematics are fitted, else AIC
+    assert CalibrateSettings("tip").criterion == "prior" and DiagnoseSettings("tip", level="auto").criterion == "prior"
+    assert CalibrateSettings("tip", level="registration").criterion == "aic"
+    assert CalibrateSettings("tip", level="dh", tool_pose=TOOL).criterion == "aic"
+    # the tool is the settings' own read-only copy; settings with equal values are equal and hash alike
+    pose = np.eye(4)
+    held = CalibrateSettings("tip", tool_pose=pose)
+    pose[0, 3] = np.nan
+    assert np.isfinite(held.tool_pose).all() and not held.tool_pose.flags.writeable
+    assert held == CalibrateSettings("tip", tool_pose=np.eye(4)) and hash(held) == hash(CalibrateSettings("tip"))
+
+
+def test_a_call_of_the_former_signature_is_refused_by_name(tmp_path):
+    from pincal.cli.evaluation import evaluate_files
+    from pincal.cli.workflows import calibrate_files
+
+    with pytest.raises(TypeError, match="calibrate_files\\(\\) takes a pincal.cli.settings.CalibrateSettings"):
+        calibrate_files("a.urdf", "d.csv", "o.urdf", "r.json", "tip")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="EvaluateSettings after the paths, got bool"):
+        evaluate_files("a.urdf", "r.json", "d.csv", True)  # type: ignore[arg-type]
 
 
 def test_the_command_prints_the_settings_message(tmp_path, capsys):

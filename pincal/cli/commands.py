@@ -77,8 +77,6 @@ def _run_calibrate(args: argparse.Namespace) -> int:
 
         return run_calibrate(args)
     level = args.level or ("dh" if args.method is not None else "full")
-    if args.tip_link is None:
-        raise PincalError("give the end of the chain: --tip-link LINK (or --tool-parent LINK)")
     if level == "dh" and args.strict:
         raise PincalError("--strict applies to --level registration, offsets, full or auto (the plausibility checks "
                           "of pincal.fit.plausibility), not to the paper's methods; drop it")

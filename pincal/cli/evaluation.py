@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from pincal.cli.settings import EvaluateSettings
+from pincal.cli.settings import EvaluateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.sessions import register_session, session_pose_errors
@@ -178,6 +178,7 @@ def evaluate_files(
     unless ``settings.allow_other_urdf`` (the URDF was edited on purpose; a note says so).
     """
     settings = EvaluateSettings() if settings is None else settings
+    expect(settings, EvaluateSettings, "evaluate_files")
     allow_other_urdf, xacro_args = settings.allow_other_urdf, settings.xacro_args
     fixed_registration, new_session = settings.fixed_registration, settings.new_session
     report = read_report(report_path)

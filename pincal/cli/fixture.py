@@ -26,7 +26,7 @@ from pincal._version import __version__
 from pincal.cli.level_table import level_choice_lines
 from pincal.cli.parser import selection_criterion
 from pincal.cli.paths import description_inputs, refuse_overwrite
-from pincal.cli.settings import CalibrateSettings
+from pincal.cli.settings import CalibrateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
 from pincal.fit.level_choice import choose_fixture_level
@@ -84,13 +84,14 @@ def calibrate_fixture_files(
     """
     from pincal.cli.workflows import write_checked_urdf
 
+    expect(settings, CalibrateSettings, "calibrate_fixture_files")
     sensor = [name for name, value in (("tool_pose", settings.tool_pose), ("method", settings.method),
                                        ("sigma_column", settings.sigma_column),
                                        ("sigma_pos_mm", settings.sigma_pos_mm)) if value is not None]
     sensor += ["reject_outliers"] if settings.reject_outliers else []
     if sensor or settings.level == "dh":
         raise PincalError(f"socket-fixture data have no sensor: {', '.join(sensor) or 'level dh'} do(es) not apply")
-    tip_link, level, selection, xacro_args = settings.tip_link, settings.level, settings.selection, settings.xacro_args
+    tip_link, level, selection, xacro_args = settings.tip_link, settings.level, settings.criterion, settings.xacro_args
 
     urdf, fixture_path, out_urdf, report_path = Path(urdf), Path(fixture_path), Path(out_urdf), Path(report_path)
     data_paths = _paths(data_paths)
@@ -300,8 +301,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if level == "dh":
         raise PincalError("--level dh (the paper's methods) needs a sensor; use registration, offsets or full "
                           "with --fixture")
-    if args.tip_link is None:
-        raise PincalError("give the link carrying the ball: --tip-link LINK")
     xacro_args = getattr(args, "xacro_args", ()) or ()
     if args.html is not None:  # before the fit, as every other output
         refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *_paths(args.data),

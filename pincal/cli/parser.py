@@ -76,7 +76,9 @@ def selection_criterion(args: argparse.Namespace) -> str:
 
         raise no_prior("--select prior" if select == "prior" else "--prior-scale", level)
     if select is None:  # the default: the prior wherever kinematic parameters are fitted (docs/defaults.md)
-        select = "aic" if level in ("registration", "dh") else "prior"
+        from pincal.cli.settings import default_selection
+
+        select = str(default_selection(level))
     if select != "prior":
         if scale is not None:
             raise PincalError(f"--prior-scale applies to --select prior only (got --select {select})")
@@ -217,8 +219,9 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
                      help="known pose of the measured target in the tip link [m, rad]; "
                           "without it (levels other than dh) the target is estimated")
-    cal.add_argument("--tool-parent", "--tip-link", dest="tip_link", metavar="LINK",
-                     help="link at the end of the calibrated chain, carrying the target")
+    cal.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK",
+                     help="link at the end of the calibrated chain, carrying the target (or the ball, with "
+                          "--fixture)")
     cal.add_argument("--sigma-column", metavar="COLUMN",
                      help="extra data column with a per-row noise scale [mm]: rows are weighted by it")
     cal.add_argument("--reject-outliers", action="store_true",

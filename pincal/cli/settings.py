@@ -10,12 +10,14 @@ made, with the one-line message the command prints; the workflows of
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import CHAIN_LEVELS
+from pincal.fit.prior import Prior
 from pincal.fit.selection import SELECTION_CRITERIA
 
 #: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
@@ -25,6 +27,14 @@ CALIBRATE_LEVELS = (*CHAIN_LEVELS, "auto", "dh")
 DIAGNOSE_LEVELS = (*CHAIN_LEVELS, "auto")
 #: The paper's methods (``--method``); 2 when ``--level dh`` names none.
 METHODS = (1, 2, 3)
+
+
+def expect(settings, kind: type, function: str) -> None:
+    """Refuse, with a TypeError naming the class, a workflow call whose ``settings`` is not a ``kind``
+    (a script written for the former signature, which took each setting as its own argument)."""
+    if not isinstance(settings, kind):
+        raise TypeError(f"{function}() takes a pincal.cli.settings.{kind.__name__} after the paths, got "
+                        f"{type(settings).__name__} (changed in this version: build the settings object)")
 
 
 def no_prior(flag: str, level: str) -> PincalError:
@@ -44,12 +54,20 @@ def _selection(selection: str, level: str) -> None:
 
 
 def _tool(tool_pose) -> np.ndarray | None:
+    """A read-only copy of the pose (the caller's array may change; these settings may not)."""
     if tool_pose is None:
         return None
-    pose = np.asarray(tool_pose, dtype=float)
+    pose = np.array(tool_pose, dtype=float)
     if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
         raise PincalError(f"--tool must be a finite 4x4 pose of the target in the tip link, got shape {pose.shape}")
+    pose.setflags(write=False)
     return pose
+
+
+def default_selection(level: str | None) -> str:
+    """The commands' default ``--select``: the prior wherever kinematic parameters are fitted
+    (offsets, full, auto; docs/defaults.md), AIC at registration and dh."""
+    return "aic" if level in ("registration", "dh") else Prior()
 
 
 def _positive(flag: str, value: float | None) -> None:
@@ -70,7 +88,8 @@ class CalibrateSettings:
         sigma_column: extra column of per-row noise scales [mm] (row weights).
         reject_outliers: refit without the rows flagged as outliers.
         selection: the parameter selection (:data:`pincal.fit.selection.SELECTION_CRITERIA`; a
-            :class:`pincal.fit.prior.Prior` for ``prior``).
+            :class:`pincal.fit.prior.Prior` for ``prior``); None: the command's default
+            (:func:`default_selection`).
         sigma_pos_mm: the sensor's stated position noise per axis [mm] (plausibility checks), or None.
         xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
 
@@ -85,10 +104,10 @@ class CalibrateSettings:
     level: str = "full"
     method: int | None = None
     weight: float = 1.0
-    tool_pose: np.ndarray | None = None
+    tool_pose: np.ndarray | None = field(default=None, compare=False)
     sigma_column: str | None = None
     reject_outliers: bool = False
-    selection: str = "aic"
+    selection: str | None = None
     sigma_pos_mm: float | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
 
@@ -105,11 +124,18 @@ class CalibrateSettings:
         if self.level == "dh" and self.sigma_pos_mm is not None:
             raise PincalError("--sigma-pos applies to --level registration, offsets, full or auto (the plausibility "
                               "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
-        _selection(self.selection, self.level)
+        if self.selection is None:
+            object.__setattr__(self, "selection", default_selection(self.level))
+        _selection(self.criterion, self.level)
         _positive("--weight", self.weight)
         _positive("--sigma-pos", self.sigma_pos_mm)
         object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
         object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
+
+    @property
+    def criterion(self) -> str:
+        """``selection`` as the fits take it: resolved when the settings are made, never None."""
+        return cast(str, self.selection)
 
     @property
     def paper_method(self) -> int:
@@ -127,7 +153,7 @@ class DiagnoseSettings:
 
     Attributes:
         tip_link, tool_pose, sigma_column, selection, sigma_pos_mm, xacro_args: as for
-            :class:`CalibrateSettings`.
+            :class:`CalibrateSettings` (``selection`` None: :func:`default_selection`).
         level: the geometry under the effects, one of :data:`DIAGNOSE_LEVELS`.
         payload_kg: a point mass at the target for the gravity torques [kg].
         time_column: the column of row times [s] (None: the first of
@@ -140,9 +166,9 @@ class DiagnoseSettings:
 
     tip_link: str
     level: str = "full"
-    tool_pose: np.ndarray | None = None
+    tool_pose: np.ndarray | None = field(default=None, compare=False)
     sigma_column: str | None = None
-    selection: str = "aic"
+    selection: str | None = None
     payload_kg: float = 0.0
     time_column: str | None = None
     sigma_pos_mm: float | None = None
@@ -151,12 +177,19 @@ class DiagnoseSettings:
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:
             raise PincalError(f"--level must be one of {', '.join(DIAGNOSE_LEVELS)}, got '{self.level}'")
-        _selection(self.selection, self.level)
+        if self.selection is None:
+            object.__setattr__(self, "selection", default_selection(self.level))
+        _selection(self.criterion, self.level)
         if not (np.isfinite(self.payload_kg) and self.payload_kg >= 0):
             raise PincalError(f"--payload-kg must be a non-negative number, got {self.payload_kg}")
         _positive("--sigma-pos", self.sigma_pos_mm)
         object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
         object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
+
+    @property
+    def criterion(self) -> str:
+        """``selection`` as the fits take it: resolved when the settings are made, never None."""
+        return cast(str, self.selection)
 
     @property
     def sigma_pos_m(self) -> float | None:

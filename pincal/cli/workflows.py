@@ -26,7 +26,7 @@ from pincal.cli.paths import (
     refuse_overwrite,
     refuse_overwrite_matching,
 )
-from pincal.cli.settings import CalibrateSettings, DiagnoseSettings
+from pincal.cli.settings import CalibrateSettings, DiagnoseSettings, expect
 from pincal.errors import CalibrationError, PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
@@ -199,8 +199,9 @@ def calibrate_files(
     on the calibration rows supports (:func:`pincal.fit.level_choice.choose_level`).
     ``progress(done, total)`` counts the fits of those levels (:mod:`pincal.progress`).
     """
+    expect(settings, CalibrateSettings, "calibrate_files")
     level, tool_pose, xacro_args = settings.level, settings.tool_pose, settings.xacro_args
-    sigma_column, reject_outliers, selection = settings.sigma_column, settings.reject_outliers, settings.selection
+    sigma_column, reject_outliers, selection = settings.sigma_column, settings.reject_outliers, settings.criterion
     tool_parent, method = settings.tip_link, settings.paper_method
     urdf, data_paths = Path(urdf), input_paths(data_path)
     data_label = " + ".join(str(p) for p in data_paths)
@@ -376,8 +377,9 @@ def diagnose_files(
     rows from ``validation_path``.
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
+    expect(settings, DiagnoseSettings, "diagnose_files")
     tip_link, level, tool_pose, xacro_args = settings.tip_link, settings.level, settings.tool_pose, settings.xacro_args
-    sigma_column, selection, payload_kg = settings.sigma_column, settings.selection, settings.payload_kg
+    sigma_column, selection, payload_kg = settings.sigma_column, settings.criterion, settings.payload_kg
     time_column_name, sigma_pos_m = settings.time_column, settings.sigma_pos_m
     from pincal.diagnosis.diagnose import diagnose
     from pincal.fit.level_choice import choose_level
