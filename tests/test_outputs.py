@@ -471,7 +471,9 @@ def _reference_run(argv: list[str], cwd: Path, folder: Path) -> tuple[float, flo
     return first, time.monotonic() - start
 
 
-def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: bool, delay_s: float) -> int:
+def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: bool, delay_s: float) -> tuple[int, bool]:
+    """Kill ``pincal ARGV`` after ``delay_s`` (from its first write, or from its start); returns its exit
+    code (-SIGKILL, or 0 if it finished first) and whether it had changed ``folder`` by then."""
     before = _snapshot(folder)
     proc = _start(argv, cwd)
     try:
@@ -485,7 +487,7 @@ def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: boo
             proc.kill()
             proc.wait()
     assert proc.returncode in (0, -signal.SIGKILL), _stderr(cwd)
-    return proc.returncode
+    return proc.returncode, _snapshot(folder) != before
 
 
 def whole_file(path: Path) -> tuple:
@@ -538,11 +540,16 @@ def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: 
     rng = np.random.default_rng(seed)
     kinds = rng.permutation([True] * in_writes + [False] * anywhere)
     write_span_s = max(total_s - first_write_s, 0.05)
+    landed = 0
     for number, after_first_write in enumerate(kinds):
         delay = rng.uniform(0.0, 1.2 * write_span_s) if after_first_write else rng.uniform(0.0, total_s)
         what = f"kill {number} ({'after the first write + ' if after_first_write else 'after '}{delay:.3f} s)"
-        _killed_run(argv, cwd, folder, bool(after_first_write), delay)
+        code, wrote = _killed_run(argv, cwd, folder, bool(after_first_write), delay)
+        landed += code == -signal.SIGKILL and wrote
         _check_outputs(folder, reference, what)
+    # at least one kill cut a run that had begun writing (else the round tested only whole runs); the
+    # kills aimed inside the writes miss all together with probability (0.2/1.2)^in_writes (< 1e-3 at 4)
+    assert landed >= 1, f"no kill landed after a write began ({len(kinds)} tried)"
 
 
 @pytest.fixture(scope="module")
@@ -567,4 +574,4 @@ def test_killed_study_leaves_old_or_whole_outputs(tmp_path):
     out.mkdir()
     argv = ["study", "--reps", "1", "--levels", "2", "--restarts", "2", "--workers", "1",
             "--out", str(out)]
-    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=2, anywhere=1)
+    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=4, anywhere=1)
