@@ -183,7 +183,7 @@ def test_readme_is_a_front_door_that_keeps_the_ci_test_command():
 def test_every_flag_shown_is_one_the_command_accepts():
     accepted = _subcommands()
     assert {"simulate", "calibrate", "evaluate", "diagnose", "plan", "report", "demo", "study",
-            "urdf-from-dh"} <= set(accepted)
+            "urdf-from-dh", "example"} <= set(accepted)
     seen, unknown = 0, []
     for page in PAGES:
         text = page.read_text(encoding="utf-8")

@@ -296,6 +296,17 @@ def _run_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_example(args: argparse.Namespace) -> int:
+    from pincal.cli.example import EXAMPLES, copy_example
+
+    target, files = copy_example(args.name, args.out)
+    print(f"wrote {target}: {EXAMPLES[args.name]}")
+    for path in files:
+        print(f"  {target / path}")
+    print(f"provenance and licence: {target / 'README.md'}")
+    return 0
+
+
 def _run_demo(args: argparse.Namespace) -> int:
     from pincal.cli.demo import run_demo
     from pincal.simulation.paper import SimulationSettings
@@ -438,6 +449,7 @@ _COMMANDS = {
     "evaluate": _run_evaluate,
     "diagnose": _run_diagnose,
     "demo": _run_demo,
+    "example": _run_example,
     "plan": _run_plan,
     "urdf-from-dh": _run_urdf_from_dh,
     "study": _run_study,

@@ -364,6 +364,13 @@ def build_parser() -> argparse.ArgumentParser:
     html.add_argument("--out", required=True, type=Path, metavar="REPORT.html",
                       help="HTML page to write: self-contained, figures embedded, no network")
 
+    example = sub.add_parser("example", help="copy a measurement set shipped with pincal (TIAGo mocap, MUKCa) "
+                                             "to DIR/NAME, for the docs' commands outside a clone")
+    example.add_argument("name", choices=("tiago_mocap", "mukca"), metavar="NAME",
+                         help="tiago_mocap or mukca")
+    example.add_argument("--out", type=Path, default=Path("data"),
+                         help="folder to put NAME in (default: ./data, where the docs' commands look)")
+
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
                       help="output directory (default: ./pincal-demo)")

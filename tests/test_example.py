@@ -1,0 +1,64 @@
+"""``pincal example NAME --out DIR``: the shipped measurement sets, outside a clone.
+
+Each set is copied byte for byte (README and licence with it), never over an existing folder, and
+the docs' commands then run as written from the folder it was copied into. Every file of
+``pincal/datasets/`` matches a package-data pattern of pyproject.toml, so the wheel carries it.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from pincal.cli.commands import main
+from pincal.cli.example import EXAMPLES, dataset_folder
+from pincal.robots import example_robot_data_urdf
+
+ROOT = Path(__file__).resolve().parent.parent
+DATASETS = ROOT / "pincal" / "datasets"
+
+
+@pytest.mark.parametrize("name", sorted(EXAMPLES))
+def test_a_set_is_copied_whole_and_never_over_an_existing_one(name, tmp_path, capsys):
+    assert main(["example", name, "--out", str(tmp_path / "data")]) == 0
+    copied = tmp_path / "data" / name
+    shipped = sorted(p.relative_to(DATASETS / name) for p in (DATASETS / name).rglob("*") if p.is_file())
+    assert sorted(p.relative_to(copied) for p in copied.rglob("*") if p.is_file()) == shipped
+    assert all((copied / p).read_bytes() == (DATASETS / name / p).read_bytes() for p in shipped)
+    assert Path("README.md") in shipped and f"wrote {copied}" in capsys.readouterr().out
+    assert [p.name for p in (tmp_path / "data").iterdir()] == [name]  # no staging folder left
+    (copied / "README.md").write_text("edited", encoding="utf-8")
+    assert main(["example", name, "--out", str(tmp_path / "data")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "exists; refusing to overwrite it" in err and len(err.splitlines()) == 1
+    assert (copied / "README.md").read_text(encoding="utf-8") == "edited"
+
+
+def test_the_docs_commands_run_on_a_copied_set(tmp_path, monkeypatch, capsys):
+    """docs/getting-started.md's calibrate and evaluate, run in a folder that is not a clone."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["example", "tiago_mocap"]) == 0
+    urdf = str(example_robot_data_urdf("tiago_description/robots/tiago.urdf"))
+    assert main(["calibrate", urdf, "data/tiago_mocap/qualisys_2021-11-30_static_postures.csv", "--tip-link",
+                 "wrist_ft_tool_link", "--level", "full", "--out", "tiago_calibrated.urdf", "--report", "REPORT.json",
+                 "--quiet"]) == 0
+    assert main(["evaluate", "tiago_calibrated.urdf", "REPORT.json",
+                 "data/tiago_mocap/qualisys_2021-11-26_static_postures.csv"]) == 0
+
+
+def test_every_shipped_file_is_package_data_and_the_clone_links_to_it():
+    patterns = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))[
+        "tool"]["setuptools"]["package-data"]["pincal.datasets"]
+    files = {p for p in DATASETS.rglob("*") if p.is_file() and p.suffix != ".py" and "__pycache__" not in p.parts}
+    shipped = {p for pattern in patterns for p in DATASETS.glob(pattern)}  # globbed as setuptools does
+    assert files and not sorted(files - shipped), "add a package-data pattern for these"
+    assert (ROOT / "data").resolve() == DATASETS.resolve()  # the docs' data/ paths, in a clone
+    assert dataset_folder("mukca").resolve() == (DATASETS / "mukca").resolve()
+
+
+def test_an_unknown_set_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as caught:
+        main(["example", "ur5"])
+    assert caught.value.code == 2 and "invalid choice: 'ur5'" in capsys.readouterr().err
