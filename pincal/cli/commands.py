@@ -388,6 +388,7 @@ def _run_plan(args: argparse.Namespace) -> int:
         run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
                          candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
                          workspace_path=args.workspace, min_distance=args.min_distance, xacro_args=args.xacro_args,
+                         package_dirs=dict(args.package_dir),
                          progress=progress)
     _print_notes(run.notes)
     _print_plan_summary(run)

@@ -86,6 +86,16 @@ def selection_criterion(args: argparse.Namespace) -> str:
     return Prior(*scale) if scale is not None else Prior()
 
 
+def package_dir(text: str) -> tuple[str, Path]:
+    """argparse type of ``--package-dir``: ``NAME=DIR``, DIR an existing folder (the package itself)."""
+    name, sep, folder = text.partition("=")
+    if not sep or not name or not folder:
+        raise argparse.ArgumentTypeError(f"'{text}' is not NAME=DIR (a ROS package's name and its folder)")
+    if not Path(folder).is_dir():
+        raise argparse.ArgumentTypeError(f"'{folder}' is not a folder (--package-dir {name}=DIR)")
+    return name, Path(folder)
+
+
 def measure(text: str) -> SensorModel:
     """argparse type of ``--measure``: ``point``, ``points:M`` (M >= 2) or ``pose``."""
     if text in ("point", "pose"):
@@ -354,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--sigma-rot", type=_positive, metavar="DEG", help="orientation noise [deg] (pose)")
     plan.add_argument("--min-distance", type=_non_negative, metavar="M",
                       help="refuse candidates in self-collision or with links closer than M metres")
+    plan.add_argument("--package-dir", type=package_dir, action="append", default=[], metavar="NAME=DIR",
+                      help="folder of ROS package NAME for package://NAME/... meshes of --min-distance (repeat for "
+                           "several; else ROS_PACKAGE_PATH, the ament index, the folders above the URDF)")
     _add_xacro_arg(plan)
     _add_quiet(plan)
     plan.add_argument("--alternate", type=joint_names, default=(), metavar="JOINT[,JOINT...]",

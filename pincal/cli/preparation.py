@@ -7,7 +7,7 @@ what happened; :mod:`pincal.cli.commands` prints it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,12 +74,14 @@ def plan_files(
     min_distance: float | None = None,
     xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
+    package_dirs: Mapping[str, Path] | None = None,
 ) -> PlanRun:
     """Plan ``settings.count`` measurements of the chain ``urdf`` → ``tip_link``; write PLAN.csv and PLAN.json.
 
     ``settings.tool_known`` must say whether ``tool_pose`` is given. Level ``dh``
     plans for the paper's DH parameters with the target known, so it needs
-    ``tool_pose``. A ``.xacro`` ``urdf`` is expanded in memory with ``xacro_args``.
+    ``tool_pose``. A ``.xacro`` ``urdf`` is expanded in memory with ``xacro_args``. ``package_dirs``
+    (NAME → folder, ``--package-dir``) locates ``package://`` collision meshes (:mod:`pincal.model.packages`).
     ``progress(done, total)`` counts the clearance checks, then the search's steps
     (:func:`pincal.planning.planner.plan_measurements`).
 
@@ -111,7 +113,8 @@ def plan_files(
         notes += read_notes
     workspace = read_candidates(workspace_path, chain)[0] if workspace_path is not None else None
     stages = Stages(progress)
-    clearance = (check_clearance(urdf, chain, candidates, min_distance, xacro_args=xacro_args, progress=stages.next())
+    clearance = (check_clearance(urdf, chain, candidates, min_distance, xacro_args=xacro_args, progress=stages.next(),
+                                 package_dirs=package_dirs)
                  if min_distance is not None else None)
     plan = plan_measurements(chain, candidates, settings, existing=existing, workspace=workspace,
                              allowed=None if clearance is None else clearance.allowed, progress=stages.next())

@@ -12,7 +12,7 @@ clearance (coal's collision test with a security margin: distance < margin).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +21,8 @@ import pinocchio as pin
 
 from pincal.errors import ModelError
 from pincal.model.chain import KinematicChain
-from pincal.model.description import is_xacro, read_description
+from pincal.model.description import read_description
+from pincal.model.packages import with_resolved_meshes
 from pincal.progress import Counter, Progress
 
 
@@ -56,18 +57,14 @@ class Clearance:
         }
 
 
-def _geometry(urdf: Path, chain: KinematicChain, xacro_args: Sequence[tuple[str, str]] = ()):
-    """Chain model and collision geometry reduced like :class:`KinematicChain` does
-    (a ``.xacro`` is expanded in memory with ``xacro_args``)."""
-    package_dirs = [str(p) for p in urdf.resolve().parents]
+def _geometry(urdf: Path, chain: KinematicChain, xacro_args: Sequence[tuple[str, str]] = (),
+              package_dirs: Mapping[str, Path] | None = None):
+    """Chain model and collision geometry reduced like :class:`KinematicChain` does (a ``.xacro`` is
+    expanded in memory with ``xacro_args``; ``package://`` meshes found as :mod:`pincal.model.packages` says)."""
+    text = with_resolved_meshes(read_description(urdf, xacro_args).text, urdf, package_dirs)
     try:
-        if is_xacro(urdf):
-            text = read_description(urdf, xacro_args).text
-            model = pin.buildModelFromXML(text)
-            geometry = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.COLLISION, package_dirs=package_dirs)
-        else:
-            model = pin.buildModelFromUrdf(str(urdf))
-            geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=package_dirs)
+        model = pin.buildModelFromXML(text)
+        geometry = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.COLLISION)
     except (RuntimeError, ValueError) as exc:
         raise ModelError(f"{urdf}: cannot load the collision geometry for --min-distance ({exc})") from None
     if geometry.ngeoms == 0:
@@ -84,11 +81,13 @@ def check_clearance(
     urdf: str | Path, chain: KinematicChain, q: np.ndarray, min_distance: float,
     xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
+    package_dirs: Mapping[str, Path] | None = None,
 ) -> Clearance:
     """Which configurations ``q`` (K, N) keep every moving pair of links at least ``min_distance`` [m] apart.
 
-    ``progress(done, total)`` counts the configurations checked (those too close twice: then for contact)."""
-    model, geometry = _geometry(Path(urdf), chain, xacro_args)
+    ``progress(done, total)`` counts the configurations checked (those too close twice: then for contact).
+    ``package_dirs``: NAME → the folder of package NAME, searched first for ``package://NAME/...`` meshes."""
+    model, geometry = _geometry(Path(urdf), chain, xacro_args, package_dirs)
     geometry.addAllCollisionPairs()  # pairs on different joints only
     data, geometry_data = model.createData(), geometry.createData()
     zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])

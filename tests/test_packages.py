@@ -1,0 +1,72 @@
+"""``package://`` collision meshes (``plan --min-distance``): found through ``--package-dir``,
+``ROS_PACKAGE_PATH`` or the ament index when the URDF is not inside its package, and a missing one
+named exactly, with where it was looked for and what to give. Each route gives the plan the URDF
+in its own package gives (the same candidates refused)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pincal.cli.commands import main
+from pincal.robots import example_robot_data_urdf
+
+UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
+PACKAGE = "example-robot-data"
+PACKAGE_DIR = next(p for p in UR5.parents if p.name == PACKAGE)  # the URDF sits inside its package
+MESH = f"package://{PACKAGE}/robots/ur_description/meshes/ur5/collision/base.stl"
+
+
+def _refused(tmp_path, urdf, *flags) -> tuple[int, str, int | None]:
+    out = tmp_path / f"run{len(list(tmp_path.glob('run*')))}"
+    code = main(["plan", str(urdf), "--tip-link", "tool0", "--count", "8", "--sample", "120", "--measure", "pose",
+                 "--min-distance", "0.01", "--quiet", "--out", str(out / "PLAN.csv"), "--report", str(out / "P.json"),
+                 *flags])
+    refused = json.loads((out / "P.json").read_text())["candidates"]["clearance"]["refused"] if code == 0 else None
+    return code, "", refused
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """Candidates refused with the URDF where example-robot-data keeps it (its package around it)."""
+    return _refused(tmp_path_factory.mktemp("ref"), UR5)[2]
+
+
+@pytest.fixture
+def copied(tmp_path, monkeypatch):
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    urdf = tmp_path / "ur5.urdf"
+    shutil.copy(UR5, urdf)
+    return urdf
+
+
+def test_a_missing_mesh_is_named_with_what_to_give(copied, tmp_path, capsys):
+    code, _, _ = _refused(tmp_path, copied)
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert f"collision mesh '{MESH}' not found" in err and f"--package-dir {PACKAGE}=DIR" in err
+
+
+def test_package_dir_ros_package_path_and_the_ament_index_find_the_package(copied, tmp_path, reference,
+                                                                           monkeypatch):
+    assert reference is not None and reference > 0
+    assert _refused(tmp_path, copied, "--package-dir", f"{PACKAGE}={PACKAGE_DIR}")[2] == reference
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(PACKAGE_DIR.parent))
+    assert _refused(tmp_path, copied)[2] == reference
+    monkeypatch.delenv("ROS_PACKAGE_PATH")
+    prefix = tmp_path / "install"
+    (prefix / "share" / "ament_index" / "resource_index" / "packages").mkdir(parents=True)
+    (prefix / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE).touch()
+    (prefix / "share" / PACKAGE).symlink_to(PACKAGE_DIR)
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(prefix))
+    assert _refused(tmp_path, copied)[2] == reference
+
+
+def test_a_package_dir_that_is_not_a_folder_is_a_usage_error(copied, tmp_path, capsys):
+    with pytest.raises(SystemExit) as caught:
+        _refused(tmp_path, copied, "--package-dir", f"{PACKAGE}={tmp_path / 'nowhere'}")
+    assert caught.value.code == 2 and "is not a folder" in capsys.readouterr().err
