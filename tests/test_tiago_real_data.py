@@ -88,9 +88,18 @@ def test_calibrate_full_level_as_a_new_user(tmp_path, capsys):
     out, report = tmp_path / "tiago_calibrated.urdf", tmp_path / "REPORT.json"
     code = main(["calibrate", str(urdf), str(TRAIN), "--tip-link", "wrist_ft_tool_link", "--level", "full",
                  "--out", str(out), "--report", str(report)])
-    assert code == 0, capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
     doc = json.loads(report.read_text())
     assert doc["level"] == "full" and len(doc["tool"]["points_m"]) == 4
+    # the console says before -> after on the calibration rows, all markers and marker 1 (the docs' metric),
+    # the numbers of REPORT.json's row_errors (nominal model registered to the rows, then calibrated)
+    models = {m["model"]: m["errors"] for m in doc["row_errors"][0]["models"]}
+    nominal, calibrated = models["nominal geometry"], models["calibrated geometry"]
+    assert (f"RMS position: {nominal['position']['rms_mm']:.3f} -> {calibrated['position']['rms_mm']:.3f} mm "
+            f"(all 4 points); point 1: {nominal['position_per_point'][0]['rms_mm']:.3f} -> "
+            f"{calibrated['position_per_point'][0]['rms_mm']:.3f} mm") in printed.out
+    assert calibrated["position"]["rms_mm"] < nominal["position"]["rms_mm"]
     assert doc["tool"]["parent_link"] == "wrist_ft_tool_link"
     assert set(doc["registration"]["position"]) == {"rotation_xyzw", "translation_m"}
     ident = doc["identifiability"]

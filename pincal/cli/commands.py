@@ -107,12 +107,33 @@ def _run_calibrate(args: argparse.Namespace) -> int:
               f"registration {_registration_text(session.registration)}")
     print(_HEADER)
     print(f"{'calibration rows':24s} {_error_columns(run.errors)}")
+    before_after = _before_after(run.report)
+    if before_after:
+        print(before_after)
     for session in several:
         print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
     _write_html(args.html, run.report, args.report.parent)
     return _warned(run.report, args.strict)
+
+
+def _before_after(report: dict) -> str | None:
+    """One line: the calibration rows' RMS position error of the nominal model (registered to them)
+    and of the calibrated one [mm], over all target points and, with several, for point 1 — the
+    metric the docs quote for TIAGo (REPORT.json ``row_errors``); None without both models."""
+    rows = next((s for s in report.get("row_errors", []) if s.get("set") == "calibration"), None)
+    models = {m["model"]: m["errors"] for m in rows["models"]} if rows else {}
+    before, after = (models.get(name) for name in ("nominal geometry", "calibrated geometry"))
+    if before is None or after is None:
+        return None
+    text = (f"before -> after, calibration rows, RMS position: {before['position']['rms_mm']:.3f} -> "
+            f"{after['position']['rms_mm']:.3f} mm")
+    points = after.get("position_per_point") or []
+    if len(points) > 1:
+        first = before["position_per_point"][0]["rms_mm"], points[0]["rms_mm"]
+        text += f" (all {len(points)} points); point 1: {first[0]:.3f} -> {first[1]:.3f} mm"
+    return text + " (before: the nominal model, registered to these rows)"
 
 
 def _print_level_choice(report: dict) -> None:
