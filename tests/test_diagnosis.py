@@ -103,10 +103,12 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     out, report = tmp_path / "k.urdf", tmp_path / "REPORT.json"
     code = main(["diagnose", str(kuka_urdf), str(sim / "calibration.csv"), "--validation", str(sim / "validation.csv"),
                  "--tip-link", KUKA_FLANGE_LINK, "--tool", tool, "--out", str(out), "--report", str(report)])
-    assert code == 0, capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
     doc = json.loads(report.read_text())
     (found,) = doc["effects"]
     assert (found["type"], found["joint"]) == ("encoder_scale", "lwr_joint_4")
+    assert "final model: encoder_scale:lwr_joint_4 = " in printed.out and " (relative)\n" in printed.out
     assert abs(found["value"] - 0.003) <= 3 * found["std"], found  # within three reported sd
     assert all(p.endswith(".png") for p in doc["diagnosis"]["plots"]) and len(doc["diagnosis"]["plots"]) == 2
     metrics = tmp_path / "m.json"

@@ -145,3 +145,14 @@ def test_effect_columns_are_the_jacobian_columns_an_added_effect_brings(kuka_cha
         full = extended.jacobian(np.concatenate([x, np.zeros(effect.n_values)]))
         assert_close(block, full[:, extended._effect_slices[-1]], 1e-12, effect.label)
 
+
+
+def test_each_effect_states_its_unit():
+    """The units of the module docstring of pincal.model.effects, for revolute and prismatic joints."""
+    from pincal.model.effects import Effect
+
+    assert Effect("compliance", "j").unit() == "rad/(N·m)" and Effect("compliance", "j").unit(True) == "m/N"
+    assert Effect("backlash", "j", source="approach").unit() == "rad"
+    assert Effect("cyclic", "j", harmonic=1).unit(prismatic=True) == "m"
+    assert Effect("encoder_scale", "j").unit() == Effect("sensor_scale").unit() == "(relative)"
+    assert Effect("drift").unit() == "m/s"

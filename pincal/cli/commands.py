@@ -277,8 +277,13 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     print(f"geometric calibration ({run.calibration.level}), then {len(diagnosis.steps)} effect(s) adopted:")
     header = f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
     print(header + (f" {'held-out RMS [mm]':>19s}" if held else ""))
+    kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))
+
+    def unit(effect) -> str:
+        return effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")
+
     for step in diagnosis.steps:
-        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std))
+        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std)) + f" {unit(step.effect)}"
         line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
                 f"{step.calibration_before.position.rms:7.3f} -> {step.calibration_after.position.rms:6.3f}")
         if step.heldout_before is not None and step.heldout_after is not None:  # with --validation
@@ -288,7 +293,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print("  nothing significant: no effect is claimed")
     for effect, values, std in diagnosis.effects:  # refitted together: what evaluate applies
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))
-        print(f"final model: {effect.label} = {value}")
+        print(f"final model: {effect.label} = {value} {unit(effect)}")
     for note in diagnosis.notes:
         print(f"reported, not adopted: {note}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run

@@ -86,6 +86,14 @@ class Effect:
     def n_values(self) -> int:
         return {"cyclic": 2, "drift": 3}.get(self.type, 1)
 
+    def unit(self, prismatic: bool = False) -> str:
+        """The unit of the effect's values (module docstring), for a joint that is ``prismatic`` or not."""
+        if self.type == "compliance":
+            return "m/N" if prismatic else "rad/(N·m)"
+        if self.type in ("cyclic", "backlash"):
+            return "m" if prismatic else "rad"
+        return "m/s" if self.type == "drift" else "(relative)"  # encoder_scale, sensor_scale
+
     @property
     def label(self) -> str:
         parts = [self.type]
