@@ -16,9 +16,8 @@ from typing import cast
 import numpy as np
 
 from pincal.errors import PincalError
-from pincal.fit.chain_calibration import CHAIN_LEVELS
 from pincal.fit.prior import Prior
-from pincal.fit.selection import SELECTION_CRITERIA
+from pincal.model.parameter_sets import CHAIN_LEVELS  # not from fit/: evaluate's settings need no fit module
 
 #: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
 #: (the paper's Methods 1–3 on a DH-described chain).
@@ -47,6 +46,8 @@ def no_prior(flag: str, level: str) -> PincalError:
 
 
 def _selection(selection: str, level: str) -> None:
+    from pincal.fit.selection import SELECTION_CRITERIA  # here: evaluate's settings need no fit module
+
     if selection not in SELECTION_CRITERIA:
         raise PincalError(f"--select must be one of {', '.join(SELECTION_CRITERIA)}, got '{selection}'")
     if selection == "prior" and level in ("registration", "dh"):
@@ -70,13 +71,46 @@ def default_selection(level: str | None) -> str:
     return "aic" if level in ("registration", "dh") else Prior()
 
 
+def _xacro(args) -> tuple[tuple[str, str], ...]:
+    return tuple((str(k), str(v)) for k, v in args)
+
+
+class _FitSettings:
+    """What calibrate's and diagnose's settings share: the selection, the stated noise, the tool
+    and the xacro arguments, resolved and checked the same way (attributes of the dataclasses)."""
+
+    level: str
+    selection: str | None
+    sigma_pos_mm: float | None
+    tool_pose: np.ndarray | None
+    xacro_args: tuple[tuple[str, str], ...]
+
+    def _resolve(self) -> None:
+        """From ``__post_init__``, after the level is checked: the default selection, then the checks."""
+        if self.selection is None:
+            object.__setattr__(self, "selection", default_selection(self.level))
+        _selection(self.criterion, self.level)
+        _positive("--sigma-pos", self.sigma_pos_mm)
+        object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
+        object.__setattr__(self, "xacro_args", _xacro(self.xacro_args))
+
+    @property
+    def criterion(self) -> str:
+        """``selection`` as the fits take it: resolved when the settings are made, never None."""
+        return cast(str, self.selection)
+
+    @property
+    def sigma_pos_m(self) -> float | None:
+        return None if self.sigma_pos_mm is None else self.sigma_pos_mm / 1000.0
+
+
 def _positive(flag: str, value: float | None) -> None:
     if value is not None and not (np.isfinite(value) and value > 0):
         raise PincalError(f"{flag} must be a positive number, got {value}")
 
 
 @dataclass(frozen=True)
-class CalibrateSettings:
+class CalibrateSettings(_FitSettings):
     """``pincal calibrate`` without its paths.
 
     Attributes:
@@ -124,31 +158,17 @@ class CalibrateSettings:
         if self.level == "dh" and self.sigma_pos_mm is not None:
             raise PincalError("--sigma-pos applies to --level registration, offsets, full or auto (the plausibility "
                               "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
-        if self.selection is None:
-            object.__setattr__(self, "selection", default_selection(self.level))
-        _selection(self.criterion, self.level)
         _positive("--weight", self.weight)
-        _positive("--sigma-pos", self.sigma_pos_mm)
-        object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
-        object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
-
-    @property
-    def criterion(self) -> str:
-        """``selection`` as the fits take it: resolved when the settings are made, never None."""
-        return cast(str, self.selection)
+        self._resolve()
 
     @property
     def paper_method(self) -> int:
         """The paper's method run at level ``dh``: ``method``, or 2."""
         return self.method if self.method is not None else 2
 
-    @property
-    def sigma_pos_m(self) -> float | None:
-        return None if self.sigma_pos_mm is None else self.sigma_pos_mm / 1000.0
-
 
 @dataclass(frozen=True)
-class DiagnoseSettings:
+class DiagnoseSettings(_FitSettings):
     """``pincal diagnose`` without its paths.
 
     Attributes:
@@ -177,23 +197,9 @@ class DiagnoseSettings:
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:
             raise PincalError(f"--level must be one of {', '.join(DIAGNOSE_LEVELS)}, got '{self.level}'")
-        if self.selection is None:
-            object.__setattr__(self, "selection", default_selection(self.level))
-        _selection(self.criterion, self.level)
         if not (np.isfinite(self.payload_kg) and self.payload_kg >= 0):
             raise PincalError(f"--payload-kg must be a non-negative number, got {self.payload_kg}")
-        _positive("--sigma-pos", self.sigma_pos_mm)
-        object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
-        object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
-
-    @property
-    def criterion(self) -> str:
-        """``selection`` as the fits take it: resolved when the settings are made, never None."""
-        return cast(str, self.selection)
-
-    @property
-    def sigma_pos_m(self) -> float | None:
-        return None if self.sigma_pos_mm is None else self.sigma_pos_mm / 1000.0
+        self._resolve()
 
 
 @dataclass(frozen=True)
@@ -219,4 +225,4 @@ class EvaluateSettings:
     def __post_init__(self) -> None:
         if self.fixed_registration is not None and self.new_session:
             raise PincalError("--fixed-registration and --new-session exclude each other; give one")
-        object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
+        object.__setattr__(self, "xacro_args", _xacro(self.xacro_args))

@@ -53,12 +53,10 @@ from pincal.fit.solver import Solution, gram, solve
 from pincal.fit.target_hold import HeldDirection, held_columns, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import LEVELS, NoParameters, _ChainParameters
+from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, NoParameters, _ChainParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
-
-CHAIN_LEVELS = ("registration", "offsets", "full")
 
 #: Starting noise scales for weighting positions against orientations; both
 #: are re-estimated from the residuals (maximum likelihood with unknown variances).

@@ -160,3 +160,6 @@ class NoParameters(_ChainParameters):
 
 
 LEVELS = {"offsets": JointOffsets, "full": PlacementErrors}
+#: The levels of a calibration of any chain: the registration alone (nothing of the URDF fitted), then
+#: the parameter sets of :data:`LEVELS`.
+CHAIN_LEVELS = ("registration", *LEVELS)
