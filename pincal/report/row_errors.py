@@ -78,12 +78,6 @@ def row_error_set(
     }
 
 
-def _with_placements(chain: KinematicChain, placements, compute):
-    """``compute()`` with the chain at ``placements`` (:meth:`KinematicChain.placed`: restored after)."""
-    with chain.placed(placements):
-        return compute()
-
-
 def chain_row_errors(
     chain: KinematicChain,
     nominal_placements,
@@ -105,8 +99,9 @@ def _nominal_chain_errors(chain, nominal_placements, rows, calibration) -> PoseE
     if start is None:
         return None
     sessions = session_rows(rows, calibration.session_names)  # each row in its session's registration
-    return _with_placements(chain, nominal_placements, lambda: session_pose_errors(
-        chain, rows, sessions, start.registrations, points=start.points, target_rotation=start.rotation))
+    with chain.placed(nominal_placements):
+        return session_pose_errors(chain, rows, sessions, start.registrations, points=start.points,
+                                   target_rotation=start.rotation)
 
 
 def paper_row_errors(
@@ -116,16 +111,14 @@ def paper_row_errors(
     registered to them (Registrations 1 and 2, as the paper's methods register) against
     the calibrated model's ``errors``."""
 
-    def nominal() -> PoseErrors:
+    with chain.placed(nominal_placements):
         poses = chain.poses(rows.q)
         measured = rows.points[:, 0, :]
         registration = register_points(poses.tool_positions, measured)
         orientation = registration
         if rows.rotations is not None:
             orientation = register_orientations(poses.tool_rotations, rows.rotations, poses.tool_positions, measured)
-        return pose_errors(chain, rows, registration, orientation)
-
-    before = _with_placements(chain, nominal_placements, nominal)
+        before = pose_errors(chain, rows, registration, orientation)
     return [row_error_set("calibration", source, rows.lines, [(NOMINAL, before), (CALIBRATED, errors)],
                           rows.files, rows.sessions)]
 
