@@ -8,7 +8,7 @@ import pickle
 
 import numpy as np
 import pytest
-from test_select_prior import SIGMA_M, UR5, _heldout_m, _rows
+from test_select_prior import SIGMA_M, UR5, _fixture_data, _heldout_m, _rows
 
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import diagnose
@@ -17,12 +17,9 @@ from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.prior import PRIOR_STATUS, SCALE_RANGE, Prior, prior_sigmas
 from pincal.measurements.csv_v1 import write_measurements
-from pincal.measurements.fixture import Fixture
-from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
+from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect
 from pincal.model.parameter_sets import PlacementErrors
-from pincal.robots import example_robot_data_urdf
-from pincal.simulation.fixture import simulate_fixture
 
 
 def test_diagnose_keeps_the_prior_of_the_calibration():
@@ -66,18 +63,6 @@ def test_diagnose_report_gives_the_posterior_std(tmp_path):
         if a["std"] is not None:
             assert b["std"] == pytest.approx(a["std"], rel=1e-3)
             assert abs(b["calibrated"] - a["calibrated"]) < 1e-3 * a["std"]
-
-
-def _fixture_data():
-    """The data of tests/test_select_prior.py's fixture test (Panda, 8 rows per placement)."""
-    panda = example_robot_data_urdf("panda_description/urdf/panda.urdf")
-    truth = KinematicChain.from_urdf(panda, "panda_link8")
-    rng = np.random.default_rng(7)
-    PlacementErrors(truth).apply(rng.normal(0.0, 1e-3, PlacementErrors(truth).size))
-    fixture = Fixture(("hole_0", "hole_1"), np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0]]))
-    poses = (pose_from_xyz_rpy([0.5, 0.1, 0.05], [0.0, 0.0, 0.3]), pose_from_xyz_rpy([0.4, -0.3, 0.2], [0.1, 0.0, -0.5]))
-    data = simulate_fixture(truth, fixture, poses, np.array([0.01, -0.005, 0.12]), 8, rng)
-    return KinematicChain.from_urdf(panda, "panda_link8"), data
 
 
 def test_fixture_prior_notes_are_reported():

@@ -143,15 +143,22 @@ def test_prior_refuses_bad_scales():
 # --- socket fixture and --level auto --------------------------------------------------------------
 
 
-def test_fixture_prior_fit_recovers_noise_free_data_and_flags_what_the_prior_decides():
+def _fixture_data():
+    """Noise-free socket-fixture rows of a Panda ~1 mm / 1 mrad off its URDF (two sockets, two
+    placements, 8 rows per socket), and a chain of the nominal Panda to calibrate."""
     panda = example_robot_data_urdf("panda_description/urdf/panda.urdf")
     truth = KinematicChain.from_urdf(panda, "panda_link8")
     rng = np.random.default_rng(7)
     PlacementErrors(truth).apply(rng.normal(0.0, 1e-3, PlacementErrors(truth).size))
     fixture = Fixture(("hole_0", "hole_1"), np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0]]))
-    poses = (pose_from_xyz_rpy([0.5, 0.1, 0.05], [0.0, 0.0, 0.3]), pose_from_xyz_rpy([0.4, -0.3, 0.2], [0.1, 0.0, -0.5]))
+    poses = (pose_from_xyz_rpy([0.5, 0.1, 0.05], [0.0, 0.0, 0.3]),
+             pose_from_xyz_rpy([0.4, -0.3, 0.2], [0.1, 0.0, -0.5]))
     data = simulate_fixture(truth, fixture, poses, np.array([0.01, -0.005, 0.12]), 8, rng)
-    chain = KinematicChain.from_urdf(panda, "panda_link8")
+    return KinematicChain.from_urdf(panda, "panda_link8"), data
+
+
+def test_fixture_prior_fit_recovers_noise_free_data_and_flags_what_the_prior_decides():
+    chain, data = _fixture_data()
     result = calibrate_fixture(chain, data, "full", selection="prior")
     with chain.placed(result.chain_placements):
         after = fixture_metrics(chain, data, result.ball)
@@ -159,7 +166,6 @@ def test_fixture_prior_fit_recovers_noise_free_data_and_flags_what_the_prior_dec
     # 1e-6 mm is far above rounding (~1e-12 m) and far below the ~1 mm placement errors
     assert after.consistency_mm < 1e-6 and after.distortion_mm < 1e-6
     assert result.selection.prior_scale == {"translation_mm": 1.0, "rotation_deg": 0.5}
-    chain = KinematicChain.from_urdf(panda, "panda_link8")
     tight = calibrate_fixture(chain, data, "full", selection=Prior(1e-6, 1e-6))  # 1 nm, 1e-6 °: the prior decides
     assert tight.status.count(PRIOR_STATUS) == len(tight.kept) > 0
 
