@@ -50,7 +50,7 @@ from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.selection import select_subset as _select
 from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
 from pincal.fit.solver import Solution, gram, solve
-from pincal.fit.target_hold import HeldDirection, held_columns, held_reason, hold_target, weak_target
+from pincal.fit.target_hold import HeldDirection, analysis_jacobian, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, NoParameters, _ChainParameters
@@ -380,13 +380,11 @@ def _calibrate_rows(
     if size:
         everything = np.arange(size)
         full = problem.objective(everything, base)
-        x_full = full.start_vector()
-        jac = full.jacobian(x_full)
         kinematic_cols = np.arange(full.blocks["kinematic"].start, full.blocks["kinematic"].stop)
         other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
         # a held target direction is not estimated, and neither is what only it would explain
         # (the tip placement's translation): its columns join the always-estimated ones here
-        held_cols = held_columns(problem, held, size) if held else np.zeros((jac.shape[0], 0))
+        jac, held_cols = analysis_jacobian(problem, held, size)
         ordering = order_parameters(np.hstack([jac, held_cols]), kinematic_cols,
                                     np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
         rank = ordering.rank

@@ -198,6 +198,30 @@ def hold_target(problem, extra: Sequence[HeldDirection] = ()) -> tuple[HeldDirec
     return tuple(held)
 
 
+def analysis_jacobian(problem, held: Sequence[HeldDirection], size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobian the identifiability analysis orders (:func:`pincal.fit.identifiability.order_parameters`)
+    with all ``size`` kinematic parameters free, at ``problem``'s start, and the held directions' columns
+    (:func:`held_columns`; (m, 0) without).
+
+    With orientations measured, both are taken with the target points at the tip link's origin. A
+    point at m moves by dt + dθ × R m: its lever only mixes in rotations the same rows measure, and the
+    estimated target absorbs the difference, so what the data determine does not depend on m. Its
+    column lengths do: a 2 m probe lengthens a wrist rotation's position rows 2 m/rad, and the pivoted
+    QR then keeps another member of a group of parameters equivalent up to the target (a different
+    corrected URDF for the same robot; tests/test_frame_invariance.py). Positions alone are analysed
+    where they were measured: without orientations, the lever is what lets them see a rotation.
+    """
+    start = problem.start
+    if problem.data.rotations is not None:
+        problem.start = replace(start, points=np.zeros_like(start.points))
+    try:
+        objective = problem.objective(np.arange(size), np.zeros(size))
+        jacobian = objective.jacobian(objective.start_vector())
+        return jacobian, held_columns(problem, held, size) if held else np.zeros((jacobian.shape[0], 0))
+    finally:
+        problem.start = start
+
+
 def held_columns(problem, held: Sequence[HeldDirection], size: int) -> np.ndarray:
     """The residual's change per unit common shift of the target points along each held direction (m, h),
     at ``problem``'s start with all ``size`` kinematic parameters free."""
