@@ -176,3 +176,38 @@ def test_no_module_repeats_its_folder_name():
         parts = name.split(".")
         if len(parts) == 3:
             assert not parts[2].startswith(parts[1].rstrip("s")), name
+
+
+#: The steps of a calibration (pincal.fit.pipeline): only the pipeline calls them, so a kind of
+#: measurement brings its residual and nothing else (issue: one calibration pipeline). The planner
+#: orders candidate poses (pincal.planning.design) without calibrating.
+PIPELINE_STEPS = {"order_parameters": {"pincal.fit.pipeline", "pincal.planning.design"},
+                  "select_subset": {"pincal.fit.pipeline"}, "map_outcome": {"pincal.fit.pipeline"}}
+
+
+def step_callers(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """Which modules call each of :data:`PIPELINE_STEPS` (as ``f(...)``, ``m.f(...)`` or under an
+    imported alias)."""
+    callers: dict[str, set[str]] = {step: set() for step in PIPELINE_STEPS}
+    for name, path in modules.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        aliases = {a.asname: a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                   for a in node.names if a.asname}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call):
+                called = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
+                called = aliases.get(called, called)
+                if called in callers:
+                    callers[called].add(name)
+    return callers
+
+
+def test_one_calibration_pipeline(tmp_path):
+    outside = {step: callers - PIPELINE_STEPS[step] for step, callers in step_callers(MODULES).items()}
+    assert outside == {step: set() for step in PIPELINE_STEPS}  # modules that run a step themselves
+    twice = tmp_path / "fixture_calibration.py"  # a kind that selects on its own is caught
+    for call in ("from pincal.fit.selection import select_subset as pick\nchosen = pick(1, 2)\n",
+                 "from pincal.fit import selection\nchosen = selection.map_outcome(3)\n"):
+        twice.write_text(call, encoding="utf-8")
+        assert set().union(*step_callers({"pincal.fit.fixture_calibration": twice}).values()) == {
+            "pincal.fit.fixture_calibration"}

@@ -10,11 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import assert_close, numeric_jacobian
 from scipy.stats import chi2
 from scipy.stats import t as student_t
-from conftest import assert_close, numeric_jacobian
 
-from pincal.fit.chain_calibration import NOT_IDENTIFIABLE, calibrate_chain
+from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.pipeline import NOT_IDENTIFIABLE
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.sensor import Registration

@@ -9,10 +9,11 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import KEPT, FitProblem, calibrate_chain
+from pincal.fit.chain_calibration import FitProblem, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.level_choice import RULE, RULE_PRIOR, choose_level, one_standard_error
 from pincal.fit.metrics import pose_errors
+from pincal.fit.pipeline import KEPT
 from pincal.fit.prior import PRIOR_STATUS, Prior, PriorResidual, prior_sigmas
 from pincal.fit.sessions import initial_target
 from pincal.fit.socket_metrics import fixture_metrics

@@ -14,7 +14,10 @@ number of weakly determined combinations kept is chosen by an information
 criterion (AIC by default; BIC or leave-one-row-out cross-validation on
 request) computed on the calibration rows only — never on validation data.
 Rows whose residual is far outside the others (robust scale) are reported and,
-only when asked, removed before a refit.
+only when asked, removed before a refit. After the registration, the steps are the one
+pipeline of :mod:`pincal.fit.pipeline`, shared with socket-fixture rows; what is particular
+to sensor rows is the residual (:mod:`pincal.residuals.sensor`), its noise scales per kind
+(positions, orientations) and the target directions the data cannot place.
 """
 
 from __future__ import annotations
@@ -26,30 +29,13 @@ from typing import cast
 import numpy as np
 
 from pincal.errors import CalibrationError
-from pincal.fit.identifiability import (
-    Selection,
-    absorbed_into,
-    condition_number,
-    correlated_pairs,
-    order_parameters,
-)
+from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
-from pincal.fit.prior import (
-    MAX_SCALE_ITERATIONS,
-    PRIOR_STATUS,
-    Prior,
-    PriorResidual,
-    data_rows,
-    map_outcome,
-    prior_of,
-    prior_sigmas,
-    reestimated_scales,
-    settled,
-)
+from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
+from pincal.fit.prior import PriorResidual, data_rows, reestimated_scales
 from pincal.fit.selection import SELECTION_CRITERIA
-from pincal.fit.selection import select_subset as _select
 from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
-from pincal.fit.solver import Solution, gram, solve
+from pincal.fit.solver import Solution, solve
 from pincal.fit.target_hold import HeldDirection, analysis_jacobian, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
@@ -63,19 +49,6 @@ from pincal.residuals.sensor import SensorResidual, TargetEstimate
 START_SIGMA_POS_M = 1e-3
 START_SIGMA_ROT_RAD = 1e-3
 
-KEPT = "calibrated"
-NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
-NOT_SELECTED = "not determined: weakly identified, left out by the selection criterion"
-
-
-@dataclass(frozen=True)
-class Dropped:
-    """A parameter not estimated, and what absorbs it."""
-
-    index: int
-    reason: str
-    absorbed_into: tuple[tuple[str, float], ...]
-
 
 @dataclass(frozen=True)
 class ChainCalibration:
@@ -86,7 +59,7 @@ class ChainCalibration:
         params: the kinematic parameter set (None at level ``registration``).
         vector: calibrated kinematic parameters (zero = nominal), (n,).
         std: their standard deviations, NaN where not estimated, (n,).
-        status: per kinematic parameter, :data:`KEPT` or a reason it is not.
+        status: per kinematic parameter, :data:`pincal.fit.pipeline.KEPT` or a reason it is not.
         target: registration(s) (one per session), target points and rotation.
         target_std: standard deviations of the registrations (6 per session) and target parameters.
         sigma_pos_m / sigma_rot_rad: noise scales estimated from the residuals.
@@ -239,6 +212,14 @@ class FitProblem:
         solution = solve(objective, x0, what=what)
         return objective, solution
 
+    def scales(self) -> tuple[float, float | None]:
+        """The noise scales weighting the rows now: positions [m], orientations [rad] (None without)."""
+        return self.sigma_pos, self.sigma_rot
+
+    def rescale(self, objective: SensorResidual, solution: Solution) -> None:
+        """:meth:`reestimate_sigmas` (the pipeline's name, :mod:`pincal.fit.pipeline`)."""
+        self.reestimate_sigmas(objective, solution)
+
     def reestimate_sigmas(self, objective: SensorResidual, solution: Solution) -> None:
         """Maximum likelihood with unknown variances: sigma² = mean squared residual per kind;
         with a prior, eq P2 of :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
@@ -375,56 +356,23 @@ def _calibrate_rows(
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
     counter.tick()
     problem.start = objective.estimate(solution.x)
-    dropped: tuple[Dropped, ...]
-    selection, dropped, rank, kept = None, (), 0, empty
+    analysis: Analysis | None = None
+    dropped: tuple[Dropped, ...] = ()
     if size:
-        everything = np.arange(size)
-        full = problem.objective(everything, base)
+        full = problem.objective(np.arange(size), base)
         kinematic_cols = np.arange(full.blocks["kinematic"].start, full.blocks["kinematic"].stop)
         other_cols = np.setdiff1d(np.arange(full.n_params), kinematic_cols)
         # a held target direction is not estimated, and neither is what only it would explain
         # (the tip placement's translation): its columns join the always-estimated ones here
         jac, held_cols = analysis_jacobian(problem, held, size)
-        ordering = order_parameters(np.hstack([jac, held_cols]), kinematic_cols,
-                                    np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
-        rank = ordering.rank
-        prior = prior_of(criterion)
-        problem.prior = None if prior is None else prior_sigmas(params, prior)
-        selection, kept = _select(problem, ordering, base, rows, criterion, counter)
-        dropped = _dropped(jac, ordering, kept, other_cols, full, params, problem.session_names)
-    fit_started = time.perf_counter()
-    # from the selected subset's solution (the selection fitted it at SELECTION_TOLERANCE)
-    x0 = None if selection is None else selection.solution
-    objective, solution = problem.fit(kept, base, x0, what=f"{level} fit")
-    fit_seconds = time.perf_counter() - fit_started
-    for _ in range((sigma_iterations if problem.prior is None else MAX_SCALE_ITERATIONS) if size else 0):
-        before = problem.sigma_pos, problem.sigma_rot
-        problem.reestimate_sigmas(objective, solution)
-        if problem.prior is not None and settled(before, (problem.sigma_pos, problem.sigma_rot)):
-            break  # a prior's fixed point of eq P2 (pincal.fit.prior)
-        objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
-    counter.tick()
+        analysis = Analysis(np.hstack([jac, held_cols]), kinematic_cols,
+                            np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
+    fit = fit_kinematics(problem, analysis, size, rows, criterion, level, sigma_iterations, counter)
+    if analysis is not None:
+        dropped = dropped_parameters(jac, cast(Ordering, fit.ordering), fit.kept, other_cols,
+                                     _column_names(full, params, np.arange(size), problem.session_names))
+    objective, solution, kept, covariance = fit.objective, fit.solution, fit.kept, fit.covariance
     x = solution.x
-    vector = base.copy()
-    vector[kept] = x[objective.blocks["kinematic"]]
-    std_all = solution.std
-    std = np.full(size, np.nan)
-    std[kept] = std_all[objective.blocks["kinematic"]]
-    status = np.array([NOT_IDENTIFIABLE] * size, dtype=object)
-    if size:
-        status[ordering.order[:rank]] = NOT_SELECTED
-        status[kept] = KEPT
-    jac = solution.jacobian
-    if not isinstance(objective, PriorResidual):
-        covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
-    else:  # the posterior, and what the prior determines (pincal.fit.prior)
-        # a PriorResidual is fitted only with a prior: problem.prior and prior_of(criterion) are set
-        covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept,
-                                                  cast(np.ndarray, problem.prior), selection,
-                                                  params, cast(Prior, prior_of(criterion)))
-        std_all = np.sqrt(np.diag(covariance))
-        std[kept] = std_all[objective.blocks["kinematic"]]
-        status[weak] = PRIOR_STATUS
     names = _column_names(objective, params, kept, problem.session_names)
     correlated = tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance))
     k, p = rows.n_rows, rows.n_points
@@ -434,22 +382,22 @@ def _calibrate_rows(
     result = ChainCalibration(
         level=level,
         params=params,
-        vector=vector,
-        std=std,
-        status=tuple(status),
+        vector=fit.vector,
+        std=fit.std,
+        status=fit.status,
         target=objective.estimate(x),
-        target_std=std_all[len(kept):],
+        target_std=fit.std_all[len(kept):],
         sigma_pos_m=problem.sigma_pos,
         sigma_rot_rad=problem.sigma_rot,
-        rank=rank,
-        condition=condition_number(data_rows(jac, objective)),  # the data's, not the prior rows'
-        selection=selection,
+        rank=fit.rank,
+        condition=condition_number(data_rows(solution.jacobian, objective)),  # the data's, not the prior rows'
+        selection=fit.selection,
         dropped=dropped,
         correlated=correlated,
         outliers=(),
         removed_lines=(),
         rows_used=tuple(int(line) for line in rows.lines),
-        fit_seconds=fit_seconds,
+        fit_seconds=fit.fit_seconds,
         total_seconds=0.0,
         rms_m=float(np.sqrt(np.mean(np.sum(point_residual**2, axis=2)))),
         kept=kept,
@@ -461,7 +409,7 @@ def _calibrate_rows(
         prior_sigma=problem.prior,
         held=held,
         point_basis=problem.point_basis,
-        chain_placements=tuple(params.placements(vector)) if size else tuple(nominal),
+        chain_placements=tuple(params.placements(fit.vector)) if size else tuple(nominal),
     )
     weak = () if tool_known or hold else weak_target(result, problem)
     if weak:  # the kinematics took what the target was left to explain: again, with it held
@@ -483,23 +431,3 @@ def _column_names(objective: SensorResidual | PriorResidual, params, kept: np.nd
     rot = objective.blocks["rotation"]
     names += [f"target.r{'xyz'[i]}" for i in range(rot.stop - rot.start)]
     return names
-
-
-def _dropped(jac, ordering, kept, other_cols, full: SensorResidual | PriorResidual, params,
-             sessions=()) -> tuple[Dropped, ...]:
-    """Each parameter not kept, with the kept parameters that absorb it."""
-    kin_start = full.blocks["kinematic"].start
-    kept_cols = np.concatenate([kin_start + kept, other_cols]).astype(int)
-    names = _column_names(full, params, np.arange(params.size), sessions)
-    kept_set = set(kept.tolist())
-    dropped = [(position, int(column)) for position, column in enumerate(ordering.order)
-               if int(column - kin_start) not in kept_set]
-    absorbers = absorbed_into(jac, [column for _, column in dropped], kept_cols)
-    return tuple(
-        Dropped(
-            index=column - kin_start,
-            reason=NOT_SELECTED if position < ordering.rank else NOT_IDENTIFIABLE,
-            absorbed_into=tuple((names[c], coef) for c, coef in absorbing),
-        )
-        for (position, column), absorbing in zip(dropped, absorbers)
-    )

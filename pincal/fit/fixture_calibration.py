@@ -13,10 +13,10 @@ centres p_si (pivot calibration); each placement's pose then maps the
 fixture's sockets onto its p_si (Arun et al. 1987 for sockets spanning a plane,
 the shortest turn of the socket line onto the measured one for collinear
 sockets). The fit with the nominal kinematics (level ``registration``) is the
-"before" of a calibration. Which kinematic parameters the data determine, and
-how many weak ones to keep (AIC by default), is decided exactly as for sensor
-data (:func:`pincal.fit.identifiability.order_parameters`, the selection of
-:mod:`pincal.fit.chain_calibration`), on the calibration placements only.
+"before" of a calibration. From there the calibration is the one pipeline of
+:mod:`pincal.fit.pipeline`, as for sensor data: which kinematic parameters the data
+determine, how many weak ones to keep (AIC by default), the fit and its covariance, on
+the calibration placements only.
 """
 
 from __future__ import annotations
@@ -29,43 +29,23 @@ import numpy as np
 import pinocchio as pin
 
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import (
-    CHAIN_LEVELS,
-    KEPT,
-    NOT_IDENTIFIABLE,
-    NOT_SELECTED,
-    SELECTION_CRITERIA,
-    Dropped,
-)
-from pincal.fit.identifiability import (
-    Selection,
-    absorbed_into,
-    condition_number,
-    correlated_pairs,
-    order_parameters,
-)
+from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
+from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import (
-    MAX_SCALE_ITERATIONS,
-    PRIOR_STATUS,
-    Prior,
     PriorResidual,
     data_rows,
     effective_scale,
     hat_diagonal,
-    map_outcome,
-    prior_of,
-    prior_sigmas,
-    settled,
 )
 from pincal.fit.registration import register_points
-from pincal.fit.selection import select_subset
+from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.socket_metrics import FixtureMetrics, metrics_of_positions
-from pincal.fit.solver import gram, solve
+from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import LEVELS, NoParameters, _ChainParameters
+from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, NoParameters, _ChainParameters
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.fixture import FixtureEstimate, FixtureResidual, rotation_basis
 
@@ -215,6 +195,17 @@ class FixtureProblem:
         solution = solve(objective, objective.start_vector() if x0 is None else x0, what=what)
         return objective, solution
 
+    def scales(self) -> tuple[float]:
+        """The noise scale σ [m] weighting a prior's rows (:mod:`pincal.fit.pipeline`)."""
+        return (self.noise,)
+
+    def rescale(self, objective: FixtureResidual | PriorResidual, solution) -> None:
+        """With a prior, σ of eq P2 from ``solution``'s data rows; without, nothing to re-estimate
+        (the residual is in metres and unweighted)."""
+        if isinstance(objective, PriorResidual):
+            self.noise = effective_scale(solution.residual[: -objective.n_prior],
+                                         hat_diagonal(solution.jacobian, objective.n_prior)) or self.noise
+
     def rows_view(self) -> MeasurementSet:
         """The rows as one-point measurements (the socket in its fixture frame), for the selection's bookkeeping."""
         data = self.data
@@ -252,70 +243,42 @@ def calibrate_fixture(
     nominal_rms = solution.rms
     nominal_training = metrics_of_positions(objective.ball_positions(solution.x), data)
     problem.start = nominal
-    dropped: tuple[Dropped, ...]
-    chosen, dropped, rank, kept = None, (), 0, empty
+    problem.noise = nominal_rms  # with a prior, its rows weighted by the nominal fit's noise at first (eq P1, P2)
+    analysis: Analysis | None = None
+    dropped: tuple[Dropped, ...] = ()
+    turn = 0
     if size:
         full = problem.objective(np.arange(size), base)
         jac, turn = _identifiability_jacobian(full)
-        kinematic = np.arange(size)
-        others = np.arange(size, jac.shape[1])
-        ordering = order_parameters(jac, kinematic, others)
-        rank = ordering.rank
-        prior = prior_of(selection)
-        if prior is not None:  # its rows weighted by the noise of the nominal fit at first (eq P1, P2)
-            problem.prior, problem.noise = prior_sigmas(params, prior), nominal_rms
-        chosen, kept = select_subset(problem, ordering, base, problem.rows_view(), selection)
+        analysis = Analysis(jac, np.arange(size), np.arange(size, jac.shape[1]))
+    fit = fit_kinematics(problem, analysis, size, problem.rows_view(), selection, level, refits=0,
+                         from_selection=False)
+    if analysis is not None:
         names = column_names(full, params, np.arange(size), data) + [f"root_frame.r{a}" for a in "xyz"][:turn]
-        dropped = _dropped(jac, ordering, kept, others, names)
-    fit_started = time.perf_counter()
-    objective, solution = problem.fit(kept, base, what=f"{level} fit")
-    for _ in range(MAX_SCALE_ITERATIONS if isinstance(objective, PriorResidual) else 0):  # eq P2's fixed point
-        before = problem.noise
-        problem.noise = effective_scale(solution.residual[: -objective.n_prior],
-                                        hat_diagonal(solution.jacobian, objective.n_prior)) or before
-        if settled((before,), (problem.noise,)):
-            break
-        objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
-    fit_seconds = time.perf_counter() - fit_started
+        dropped = dropped_parameters(analysis.jacobian, cast(Ordering, fit.ordering), fit.kept, analysis.always, names)
+    objective, solution, kept, covariance = fit.objective, fit.solution, fit.kept, fit.covariance
     x = solution.x
-    vector = base.copy()
-    vector[kept] = x[objective.blocks["kinematic"]]
-    std = np.full(size, np.nan)
-    std[kept] = solution.std[objective.blocks["kinematic"]]
-    status = np.array([NOT_IDENTIFIABLE] * size, dtype=object)
-    if size:
-        status[ordering.order[:rank]] = NOT_SELECTED
-        status[kept] = KEPT
-    jac = solution.jacobian
     residual = solution.residual[: 3 * data.n_rows]  # without a prior's rows
-    if not isinstance(objective, PriorResidual):
-        covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
-    else:  # the posterior, and what the prior determines (pincal.fit.prior)
-        # a PriorResidual is fitted only with a prior: problem.prior and prior are set
-        covariance, weak, chosen = map_outcome(jac, solution.residual, objective, kept,
-                                               cast(np.ndarray, problem.prior), chosen, params, cast(Prior, prior))
-        std[kept] = np.sqrt(np.diag(covariance))[objective.blocks["kinematic"]]
-        status[weak] = PRIOR_STATUS
     names = column_names(objective, params, kept, data)
     errors = np.linalg.norm(residual.reshape(-1, 3), axis=1)
     return FixtureCalibration(
         level=level,
         params=params,
-        vector=vector,
-        std=std,
-        status=tuple(status),
+        vector=fit.vector,
+        std=fit.std,
+        status=fit.status,
         ball=x[objective.blocks["ball"]].copy(),
         ball_std=np.sqrt(np.diag(covariance)[objective.blocks["ball"]]),
         placements=_placements(objective, x, covariance, data, lines),
         # size > 0 only with a parameter set
-        chain_placements=(tuple(cast(_ChainParameters, params).placements(vector)) if size
+        chain_placements=(tuple(cast(_ChainParameters, params).placements(fit.vector)) if size
                           else tuple(chain.placements())),
         nominal_ball=nominal.ball,
         training=metrics_of_positions(objective.ball_positions(x), data),
         nominal_training=nominal_training,
-        rank=rank,
-        condition=condition_number(data_rows(jac, objective)),  # the data's, not the prior rows'
-        selection=chosen,
+        rank=fit.rank,
+        condition=condition_number(data_rows(solution.jacobian, objective)),  # the data's, not the prior rows'
+        selection=fit.selection,
         dropped=dropped,
         correlated=tuple((names[a], names[b], c) for a, b, c in correlated_pairs(covariance)),
         rms_m=float(np.sqrt(np.mean(residual**2))),
@@ -323,10 +286,10 @@ def calibrate_fixture(
         outliers=tuple((data.sources[data.files[k]], int(data.lines[k]), score)
                        for k, score in find_outliers(errors[:, None], np.arange(data.n_rows))),
         n_rows=data.n_rows,
-        fit_seconds=fit_seconds,
+        fit_seconds=fit.fit_seconds,
         total_seconds=time.perf_counter() - started,
         kept=kept,
-        notes=() if chosen is None else tuple(chosen.notes),  # the selection's (and a prior's) notes
+        notes=() if fit.selection is None else tuple(fit.selection.notes),  # the selection's (and a prior's) notes
     )
 
 
@@ -392,16 +355,3 @@ def column_names(objective: FixtureResidual | PriorResidual, params, kept: np.nd
         sl = objective.rotation_slices[s]
         names += [f"placement[{name}].turn{j + 1}" for j in range(sl.stop - sl.start)]
     return names
-
-
-def _dropped(jac: np.ndarray, ordering, kept: np.ndarray, others: np.ndarray, names: list[str]) -> tuple[Dropped, ...]:
-    """Each kinematic parameter not kept, with the kept columns that absorb it."""
-    kept_cols = np.concatenate([kept, others]).astype(int)
-    kept_set = set(kept.tolist())
-    dropped = [(position, int(c)) for position, c in enumerate(ordering.order) if int(c) not in kept_set]
-    absorbers = absorbed_into(jac, [c for _, c in dropped], kept_cols)
-    return tuple(
-        Dropped(index=c, reason=NOT_SELECTED if position < ordering.rank else NOT_IDENTIFIABLE,
-                absorbed_into=tuple((names[a], coef) for a, coef in absorbing))
-        for (position, c), absorbing in zip(dropped, absorbers)
-    )

@@ -1,0 +1,210 @@
+"""One calibration pipeline for every kind of measurement: order, select, fit, rescale, judge.
+
+A kind of measurement differs from another only in its residual: sensor rows
+(:mod:`pincal.fit.chain_calibration`: points and orientations in a sensor frame, a
+registration per session, a target) and socket-fixture rows
+(:mod:`pincal.fit.fixture_calibration`: the ball in a socket, a ball centre, a pose per
+placement). Each gives a *problem* — its residual over any subset of the kinematic
+parameters, with the always-estimated part (registration, target; ball, placements) free —
+already fitted with the nominal kinematics, and the Jacobian its identifiability is judged on.
+From there the steps are the same, and :func:`fit_kinematics` runs them:
+
+1. order the kinematic parameters by how well the data determine them, given the
+   always-estimated part (pivoted QR, :func:`pincal.fit.identifiability.order_parameters`);
+2. keep the subset the criterion chooses (:func:`pincal.fit.selection.select_subset`; with
+   ``prior``, every identifiable one in a MAP fit, :mod:`pincal.fit.prior` eq P1);
+3. fit the kept parameters, then re-estimate the residual's noise scale and refit (without a
+   prior a given number of times, maximum likelihood with unknown variances; with one, up to
+   eq P2's fixed point);
+4. the covariance (the fit's, scaled by the residual; with a prior, the posterior) and each
+   parameter's status: kept, not selected, not identifiable, or determined by the prior only.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Generic, Protocol, TypeVar, cast
+
+import numpy as np
+
+from pincal.fit.identifiability import Ordering, Selection, absorbed_into, order_parameters
+from pincal.fit.prior import (
+    MAX_SCALE_ITERATIONS,
+    PRIOR_STATUS,
+    Prior,
+    PriorResidual,
+    map_outcome,
+    prior_of,
+    prior_sigmas,
+    settled,
+)
+from pincal.fit.selection import select_subset
+from pincal.fit.solver import Solution, gram
+from pincal.measurements.data import MeasurementSet
+from pincal.progress import Counter
+
+KEPT = "calibrated"
+NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
+NOT_SELECTED = "not determined: weakly identified, left out by the selection criterion"
+
+
+@dataclass(frozen=True)
+class Dropped:
+    """A parameter not estimated, and what absorbs it."""
+
+    index: int
+    reason: str
+    absorbed_into: tuple[tuple[str, float], ...]
+
+
+class _Blocks(Protocol):
+    blocks: dict[str, slice]  # the unknowns' blocks; "kinematic": the free kinematic parameters
+
+
+#: A kind's objective: its residual over the free kinematic parameters and the always-estimated part
+#: (with a prior, :class:`pincal.fit.prior.PriorResidual` wrapping it).
+ObjectiveT = TypeVar("ObjectiveT", bound=_Blocks)
+
+
+class KindProblem(Protocol[ObjectiveT]):
+    """What a kind of measurement gives the pipeline (and :func:`select_subset`)."""
+
+    params: Any  # the parameter set, None at level registration
+    prior: np.ndarray | None  # σ_i of every kinematic parameter with a prior (eq P1), set by the pipeline
+
+    def objective(self, free: np.ndarray, base: np.ndarray) -> ObjectiveT: ...
+
+    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,
+            what: str = "fit") -> tuple[ObjectiveT, Solution]: ...
+
+    def scales(self) -> tuple:
+        """The residual's noise scales now (each [m] or [rad]; None where a kind is not measured)."""
+        ...
+
+    def rescale(self, objective: ObjectiveT, solution: Solution) -> None:
+        """Re-estimate the noise scales from ``solution``'s residual (with a prior: eq P2)."""
+        ...
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """The Jacobian identifiability is judged on, at the problem's start, with every kinematic
+    parameter free: which of its columns are kinematic, and which are always estimated (they
+    may include columns the problem holds, e.g. a target direction the data cannot place)."""
+
+    jacobian: np.ndarray
+    kinematic: np.ndarray
+    always: np.ndarray
+
+
+@dataclass(frozen=True)
+class KinematicFit(Generic[ObjectiveT]):
+    """The outcome of :func:`fit_kinematics`.
+
+    Attributes:
+        ordering: the identifiability ordering (None at level registration).
+        selection: the criterion's choice and its notes (None at level registration).
+        kept: indices of the kinematic parameters estimated, sorted.
+        objective, solution: the final fit (the objective carries a prior's rows with one).
+        vector: (n,) every kinematic parameter's value, zero where not kept [m, rad].
+        std: (n,) its standard deviation, NaN where not kept.
+        std_all: standard deviation of every column of ``objective`` (kept kinematics first).
+        status: (n,) ``kept``, ``not selected``, ``not identifiable`` or the prior's status.
+        covariance: of the columns of ``objective`` (with a prior: the posterior).
+        fit_seconds: the final fit and its refits [s].
+    """
+
+    ordering: Ordering | None
+    selection: Selection | None
+    kept: np.ndarray
+    objective: ObjectiveT
+    solution: Solution
+    vector: np.ndarray
+    std: np.ndarray
+    std_all: np.ndarray
+    status: tuple[str, ...]
+    covariance: np.ndarray
+    fit_seconds: float
+
+    @property
+    def rank(self) -> int:
+        """How many kinematic parameters are identifiable."""
+        return 0 if self.ordering is None else self.ordering.rank
+
+
+def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, size: int, rows: MeasurementSet,
+                   criterion: str, level: str, refits: int, counter: Counter | None = None,
+                   from_selection: bool = True) -> KinematicFit[ObjectiveT]:
+    """Steps 1–4 of the module docstring on ``problem`` (its start: the nominal kinematics' fit).
+
+    Args:
+        analysis: the Jacobian to order on (None when there are no kinematic parameters).
+        size: how many kinematic parameters the level has.
+        rows: the problem's rows as measurements (the selection's bookkeeping).
+        criterion: the selection criterion (:data:`pincal.fit.selection.SELECTION_CRITERIA`)
+            or a :class:`pincal.fit.prior.Prior`.
+        refits: re-estimations of the noise scale after the fit without a prior (with one: up to
+            :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`, stopping at eq P2's fixed point).
+        counter: ticks once per subset the selection fits, and once for the final fit.
+        from_selection: start the final fit from the selected subset's solution (fitted at the
+            selection's looser tolerance) rather than from the problem's start.
+    """
+    counter = Counter(None) if counter is None else counter
+    base, kept = np.zeros(size), np.array([], dtype=int)
+    ordering, selection = None, None
+    prior = prior_of(criterion)
+    if analysis is not None and size:
+        ordering = order_parameters(analysis.jacobian, analysis.kinematic, analysis.always)
+        problem.prior = None if prior is None else prior_sigmas(problem.params, prior)
+        selection, kept = select_subset(problem, ordering, base, rows, criterion, counter)
+    started = time.perf_counter()
+    x0 = selection.solution if (from_selection and selection is not None) else None
+    objective, solution = problem.fit(kept, base, x0, what=f"{level} fit")
+    for _ in range((refits if problem.prior is None else MAX_SCALE_ITERATIONS) if size else 0):
+        before = problem.scales()
+        problem.rescale(objective, solution)
+        if problem.prior is not None and settled(before, problem.scales()):
+            break  # a prior's fixed point of eq P2 (pincal.fit.prior)
+        objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
+    fit_seconds = time.perf_counter() - started
+    counter.tick()
+    kinematic = objective.blocks["kinematic"]
+    vector = base.copy()
+    vector[kept] = solution.x[kinematic]
+    std_all = solution.std
+    status = np.array([NOT_IDENTIFIABLE] * size, dtype=object)
+    if ordering is not None:
+        status[ordering.order[: ordering.rank]] = NOT_SELECTED
+        status[kept] = KEPT
+    jac = solution.jacobian
+    if not isinstance(objective, PriorResidual):
+        covariance = np.linalg.pinv(gram(jac)) * (solution.rms**2 * jac.shape[0] / max(jac.shape[0] - jac.shape[1], 1))
+    else:  # the posterior, and what the prior determines (pincal.fit.prior)
+        # a PriorResidual is fitted only with a prior: problem.prior and prior are set
+        covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept,
+                                                  cast(np.ndarray, problem.prior), selection,
+                                                  problem.params, cast(Prior, prior))
+        std_all = np.sqrt(np.diag(covariance))
+        status[weak] = PRIOR_STATUS
+    std = np.full(size, np.nan)
+    std[kept] = std_all[kinematic]
+    return KinematicFit(ordering=ordering, selection=selection, kept=kept, objective=objective, solution=solution,
+                        vector=vector, std=std, std_all=std_all, status=tuple(status), covariance=covariance,
+                        fit_seconds=fit_seconds)
+
+
+def dropped_parameters(jacobian: np.ndarray, ordering: Ordering, kept: np.ndarray, always: np.ndarray,
+                       names: list[str]) -> tuple[Dropped, ...]:
+    """Each kinematic parameter not kept (not selected, or not identifiable), with the kept and
+    always-estimated columns of ``jacobian`` that absorb it (:func:`pincal.fit.identifiability.absorbed_into`);
+    ``names``: of every column of ``jacobian``, the kinematic parameters' first."""
+    kept_set = set(kept.tolist())
+    dropped = [(position, int(column)) for position, column in enumerate(ordering.order) if int(column) not in kept_set]
+    absorbers = absorbed_into(jacobian, [column for _, column in dropped],
+                              np.concatenate([kept, always]).astype(int))
+    return tuple(
+        Dropped(index=column, reason=NOT_SELECTED if position < ordering.rank else NOT_IDENTIFIABLE,
+                absorbed_into=tuple((names[c], coef) for c, coef in absorbing))
+        for (position, column), absorbing in zip(dropped, absorbers)
+    )
