@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from pincal.cli.commands import main
 from pincal.measurements.bags import POINT, TF, TRANSFORM, read_bag, write_bag
 from pincal.measurements.csv_v1 import write_measurements
-from pincal.measurements.plateaus import PlateauSettings, extract_postures, still_stretches
+from pincal.measurements.plateaus import extract_postures, still_stretches
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
@@ -70,6 +70,7 @@ def _bag(tmp_path, recording, storage="ros1", measurements=None, **options):
 def test_a_bag_reads_back_what_was_written(storage, awkward, tmp_path):
     """Joints named in a shuffled order per message come back by name; stamps to the nanosecond."""
     path = _bag(tmp_path, awkward, storage, shuffle_seed=1, compress=storage != "sqlite3")
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # written in a staging folder, renamed into place
     paths = [path, path / "session.mcap"] if storage == "mcap" else [path]  # a lone .mcap file reads too
     for given in paths:
         joints, (pose,) = read_bag(given, "/joint_states", ["/tracker/pose"], pose=True)
@@ -82,6 +83,39 @@ def test_a_bag_reads_back_what_was_written(storage, awkward, tmp_path):
         assert np.abs(pose.received - written_pose.received).max() < 1e-6
         assert np.array_equal(pose.positions, written_pose.positions) and pose.frame == "tracker"
         assert np.allclose(pose.quaternions, written_pose.quaternions, rtol=0, atol=1e-15)
+
+
+def test_joints_from_several_publishers_on_one_topic_are_held_until_their_next_message(tmp_path):
+    """An arm (two joints) and a gripper publish on /joint_states in turn; a message whose names and
+    positions differ in length is skipped; a PointStamped topic beside them loses its NaN samples."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    types = store.types
+
+    def header(k: int):
+        stamp = types["builtin_interfaces/msg/Time"](sec=100, nanosec=k * 10**7)
+        return types["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id="tracker")
+
+    with Writer(tmp_path / "split.bag") as writer:
+        joints = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+        point = writer.add_connection("/marker", POINT, typestore=store)
+        for k in range(6):
+            names, values = (["arm_2", "arm_1"], [0.2 + k, 0.1 + k]) if k % 2 == 0 else (["finger"], [0.01 * k])
+            if k == 3:
+                values = []  # an effort-only message
+            message = types["sensor_msgs/msg/JointState"](header=header(k), name=names, position=np.array(values),
+                                                          velocity=np.zeros(0), effort=np.zeros(0))
+            writer.write(joints, 10**11 + k * 10**7, store.serialize_ros1(message, "sensor_msgs/msg/JointState"))
+            marker = types[POINT](header=header(k), point=types["geometry_msgs/msg/Point"](
+                x=k, y=0.0, z=np.nan if k % 2 else 0.0))
+            writer.write(point, 10**11 + k * 10**7, store.serialize_ros1(marker, POINT))
+    joints, (marker,) = read_bag(tmp_path / "split.bag", "/joint_states", ["/marker"], pose=False)
+    assert joints.names == ("arm_2", "arm_1", "finger") and joints.skipped == 2  # before the finger was read; k = 3
+    assert np.allclose(joints.positions, [[0.2, 0.1, 0.01], [2.2, 2.1, 0.01], [4.2, 4.1, 0.01], [4.2, 4.1, 0.05]])
+    assert np.allclose(joints.stamps, 100 + np.array([1, 2, 4, 5]) * 0.01)
+    assert marker.dropped == 3 and np.array_equal(marker.positions[:, 0], [0, 2, 4]) and marker.frame == "tracker"
 
 
 def test_static_postures_offset_and_refusals_are_recovered(awkward, tmp_path):
@@ -223,6 +257,8 @@ def small_bag(chain, tmp_path_factory):
     (["--joints", "/joint_states", "--pose", "/tracker/pose", "--min-still", "10"], "no static posture left"),
     (["--joints", "/joint_states", "--pose", "/tracker/pose", "--max-offset", "0.001"], "edge of the search range"),
     (["--joints", "/joint_states", "--point", "/tracker/point", "--point", "/tracker/point"], "given twice"),
+    (["--joints", "/joint_states", "--pose", "/tf"], "message type tf2_msgs/msg/TFMessage; --pose reads PoseStamped, "
+                                                     "TransformStamped or tf:CHILD (a tf topic: name a frame of it"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(small_bag, tmp_path, capsys, arguments, message):
     out = tmp_path / "d.csv"

@@ -24,6 +24,8 @@ resolution at Unix epoch values).
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,8 +40,9 @@ POSE = "geometry_msgs/msg/PoseStamped"
 TRANSFORM = "geometry_msgs/msg/TransformStamped"
 POINT = "geometry_msgs/msg/PointStamped"
 TF = "tf2_msgs/msg/TFMessage"
-#: Message types of a measurement that carry an orientation (``--pose``); ``--point`` also reads POINT.
-POSE_TYPES = (POSE, TRANSFORM, TF)
+#: Topic types of a measurement that carry an orientation (``--pose``); ``--point`` also reads POINT.
+#: A TF topic is read through ``tf:CHILD`` only (it carries many frames).
+POSE_TYPES = (POSE, TRANSFORM)
 #: ``--pose tf:CHILD`` / ``--point tf:CHILD``: a frame of the tf tree instead of a topic.
 TF_PREFIX = "tf:"
 #: tf topics not read for ``tf:CHILD``: static transforms do not move.
@@ -54,8 +57,8 @@ class JointStream:
 
     Messages may name the joints in any order and each a subset (several publishers on one topic):
     every joint keeps its last value until its next message (zero-order hold); rows before every
-    joint was seen once are dropped, and so is a message whose ``position`` and ``name`` differ in
-    length.
+    joint was seen once are dropped, of rows with one stamp only the last is kept, and a message
+    whose ``position`` and ``name`` differ in length is skipped.
 
     Attributes:
         topic: the topic read.
@@ -64,7 +67,8 @@ class JointStream:
         positions: (N, J) readings [rad; m for prismatic joints].
         received: (N,) the recorder's receive times [s].
         clock: ``"header"`` (header.stamp) or ``"receive"``.
-        skipped: messages left out (position and name of different length, no joint kept).
+        skipped: messages that gave no row (position and name of different length, before every
+            joint was read, or stamped as the next message).
     """
 
     topic: str
@@ -82,7 +86,7 @@ class MeasurementStream:
 
     Attributes:
         topic: the topic read, or ``tf:CHILD``.
-        msgtype: its message type (one of :data:`POSE_TYPES` or :data:`POINT`).
+        msgtype: its message type (one of :data:`POSE_TYPES`, :data:`POINT`, or :data:`TF` for ``tf:CHILD``).
         stamps: (M,) sample times [s]; received: (M,) the recorder's receive times [s].
         positions: (M, 3) position in the frame ``frame`` [m].
         quaternions: (M, 4) orientation ``x, y, z, w``, or None (a point).
@@ -154,8 +158,10 @@ def _connections(reader, path: Path, spec: str, flag: str, accepted: Sequence[st
     if spec not in topics:
         raise MeasurementError(f"{path}: {flag} {spec}: no such topic; {did_you_mean(spec, sorted(topics), 'topics')}")
     if topics[spec] not in accepted:
-        raise MeasurementError(f"{path}: {flag} {spec}: message type {topics[spec]}; {flag} reads "
-                               f"{', '.join(t.rsplit('/', 1)[1] for t in accepted if t != TF)}")
+        names = ", ".join(t.rsplit("/", 1)[1] for t in accepted)
+        hint = " (a tf topic: name a frame of it, tf:CHILD)" if topics[spec] == TF else ""
+        raise MeasurementError(f"{path}: {flag} {spec}: message type {topics[spec]}; {flag} reads {names}"
+                               + (" or tf:CHILD" if flag != "--joints" else "") + hint)
     return [c for c in reader.connections if c.topic == spec]
 
 
@@ -300,9 +306,11 @@ def _joint_stream(path: Path, topic: str, s: _Samples, wanted: Sequence[str] | N
         raise MeasurementError(f"{path}: --joints {topic}: no message gives a finite position of every joint kept")
     stamps, clock = _clock(s)
     received = np.asarray(s.received, dtype=float)
-    order = np.argsort(stamps[complete], kind="stable")
-    return JointStream(topic, names, stamps[complete][order], filled[complete][order], received[complete][order],
-                       clock, skips + int(np.sum(~complete)))
+    order = np.flatnonzero(complete)[np.argsort(stamps[complete], kind="stable")]
+    last = np.append(np.diff(stamps[order]) > 0, True)  # of messages with one stamp, the last (it holds the others)
+    order = order[last]
+    return JointStream(topic, names, stamps[order], filled[order], received[order], clock,
+                       skips + len(stamps) - len(order))
 
 
 def _measurement_stream(path: Path, spec: str, msgtype: str, s: _Samples, pose: bool, flag: str) -> MeasurementStream:
@@ -342,7 +350,8 @@ def write_bag(
     receive times from ``received`` (of each stream, to the nanosecond).
 
     Args:
-        path: a new rosbag2 folder (``sqlite3``, ``mcap``) or ``.bag`` file (``ros1``); never overwritten.
+        path: a new rosbag2 folder (``sqlite3``, ``mcap``) or ``.bag`` file (``ros1``); never
+            overwritten. Written in a hidden sibling folder and renamed into place: whole or not at all.
         joints: written as JointState messages on ``joints.topic``.
         measurements: each as its ``msgtype`` on its topic; a ``tf:CHILD`` stream as ``/tf``
             TFMessages from its ``frame`` to CHILD. Non-finite values are written as they are.
@@ -352,6 +361,7 @@ def write_bag(
 
     Raises:
         MeasurementError: an unknown storage, or ``path`` exists.
+        OSError: the folder of ``path`` does not exist or cannot be written.
     """
     from rosbags.typesys import Stores, get_typestore
 
@@ -399,13 +409,18 @@ def write_bag(
         topic = "/tf" if stream.msgtype == TF else stream.topic
         messages += [(stream.received[k], i + 1, topic, stream.msgtype, k) for k in range(len(stream.stamps))]
     messages.sort(key=lambda m: (m[0], m[1]))
-    with _writer(path, storage, compress) as writer:
-        connections: dict[str, Any] = {}
-        for received, source, topic, msgtype, k in messages:
-            if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
-            message = joint_state(k) if source == 0 else measurement(measurements[source - 1], k)
-            writer.write(connections[topic], int(round(received * 1e9)), serialize(message, msgtype))
+    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))  # whole or not at all
+    try:
+        with _writer(staging / path.name, storage, compress) as writer:
+            connections: dict[str, Any] = {}
+            for received, source, topic, msgtype, k in messages:
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+                message = joint_state(k) if source == 0 else measurement(measurements[source - 1], k)
+                writer.write(connections[topic], int(round(received * 1e9)), serialize(message, msgtype))
+        os.rename(staging / path.name, path)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _writer(path: Path, storage: str, compress: bool):
