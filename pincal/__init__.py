@@ -24,6 +24,8 @@ _DEFINED_IN = {
     "pincal.fit.paper_methods": ("PaperCalibration", "calibrate_paper"),
     "pincal.fit.registration": ("register_orientations", "register_points"),
     "pincal.measurements.csv_v1": ("read_measurements", "read_sessions", "write_measurements"),
+    "pincal.measurements.bags": ("read_bag",),
+    "pincal.measurements.plateaus": ("PlateauSettings", "extract_postures"),
     "pincal.measurements.fixture": ("Fixture", "FixtureData", "read_fixture", "read_fixture_data"),
     "pincal.measurements.data": ("JointSpec", "MeasurementSet"),
     "pincal.model.chain": ("ChainPoses", "KinematicChain", "pose_from_xyz_rpy", "xyz_rpy_from_pose"),
@@ -46,6 +48,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
     from pincal.fit.registration import register_orientations, register_points
     from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
+    from pincal.measurements.bags import read_bag
     from pincal.measurements.csv_v1 import (
         read_measurements,
         read_sessions,
@@ -58,6 +61,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         read_fixture,
         read_fixture_data,
     )
+    from pincal.measurements.plateaus import PlateauSettings, extract_postures
     from pincal.model.chain import (
         ChainPoses,
         KinematicChain,
@@ -139,6 +143,9 @@ __all__ = [
     "simulate_experiment",
     "write_measurements",
     "xyz_rpy_from_pose",
+    "read_bag",
+    "extract_postures",
+    "PlateauSettings",
 ]
 
 _DEFINED_IN.update({"pincal.model.dh_urdf": ("dh_robot_from_urdf", "urdf_from_dh"),

@@ -119,6 +119,10 @@ SLOW_TESTS = (
     "tests/test_target_hold.py::test_raster_at_constant_orientation_holds_the_target_and_reaches_the_noise_floor",
     "tests/test_urdf_elements.py::test_calibrate_imports_neither_yourdfpy_nor_plots_nor_other_commands",
     "tests/test_xacro.py::test_calibrate_xacro_end_to_end",
+    "tests/test_extract.py::test_a_bag_reads_back_what_was_written",
+    "tests/test_extract.py::test_static_postures_offset_and_refusals_are_recovered",
+    "tests/test_extract.py::test_markers_as_points_topics_and_tf_frames_in_the_order_given",
+    "tests/test_extract.py::test_bag_to_calibrate_to_evaluate_matches_the_csv_it_was_made_from",
 )
 
 

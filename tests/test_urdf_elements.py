@@ -131,8 +131,8 @@ def test_description_is_parsed_and_checked_once_per_content(tmp_path, monkeypatc
 
 #: Modules the calibrate path must not import: yourdfpy and what it pulls in (the corrected URDF is
 #: written with lxml), the plots and the HTML report (only with --html), the study's executors, xacro
-#: (only for a .xacro), and pincal's own modules of other commands.
-NOT_ON_CALIBRATE_PATH = ("yourdfpy", "trimesh", "networkx", "matplotlib", "jinja2", "dask", "xacro",
+#: (only for a .xacro), rosbags (pincal extract), and pincal's own modules of other commands.
+NOT_ON_CALIBRATE_PATH = ("yourdfpy", "trimesh", "networkx", "matplotlib", "jinja2", "dask", "xacro", "rosbags",
                          "pincal.diagnosis", "pincal.planning.planner", "pincal.fit.level_choice",
                          "pincal.fit.paper_methods", "pincal.simulation.paper", "pincal.study", "pincal.report.html")
 

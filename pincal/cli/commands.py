@@ -470,17 +470,16 @@ def _print_plan_summary(run) -> None:
                   f"flank-position correlation {corr}")
 
 
+def _run_extract(args: argparse.Namespace) -> int:
+    from pincal.cli.extract import run_extract  # rosbags is loaded by this command only
+
+    return run_extract(args)
+
+
 _COMMANDS = {
-    "simulate": _run_simulate,
-    "calibrate": _run_calibrate,
-    "evaluate": _run_evaluate,
-    "diagnose": _run_diagnose,
-    "demo": _run_demo,
-    "example": _run_example,
-    "plan": _run_plan,
-    "urdf-from-dh": _run_urdf_from_dh,
-    "study": _run_study,
-    "report": _run_report,
+    "simulate": _run_simulate, "calibrate": _run_calibrate, "evaluate": _run_evaluate, "diagnose": _run_diagnose,
+    "demo": _run_demo, "example": _run_example, "plan": _run_plan, "urdf-from-dh": _run_urdf_from_dh,
+    "study": _run_study, "report": _run_report, "extract": _run_extract,
 }
 
 

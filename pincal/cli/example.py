@@ -1,6 +1,6 @@
 """``pincal example NAME --out DIR``: copy a measurement set shipped with pincal out of the installed package.
 
-The docs' commands read ``data/tiago_mocap/…`` and ``data/mukca/…``; in a clone ``data/`` is
+The docs' commands read ``data/tiago_mocap/…``, ``data/mukca/…`` and ``data/lwr_bag/…``; in a clone ``data/`` is
 there, after ``pip install`` it is not: ``pincal example tiago_mocap --out data`` puts the set (its
 CSV files, README with the provenance, licence) at the same relative path, so those commands run
 as written. The set is copied into a temporary sibling folder and renamed into place: it appears
@@ -21,6 +21,7 @@ from pincal.errors import PincalError
 EXAMPLES = {
     "tiago_mocap": "TIAGo arm, two Qualisys motion-capture sessions (4 markers): calibrate, evaluate, diagnose, plan",
     "mukca": "KUKA LBR iiwa 14 and Franka Panda on a socket fixture (MUKCa): calibrate --fixture, evaluate --fixture",
+    "lwr_bag": "KUKA LWR 4+ simulated session as a ROS 2 bag (MCAP) and held-out rows: extract, calibrate, evaluate",
 }
 
 

@@ -17,6 +17,14 @@ from pincal.fit.prior import (
     SCALE_RANGE,
     Prior,
 )
+from pincal.measurements.plateaus import (
+    MAX_OFFSET_S,
+    MAX_SPREAD_MM,
+    MIN_SAMPLES,
+    MIN_STILL_S,
+    STILL_TOL,
+    TRIM_S,
+)
 from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.description import parse_xacro_arg
 from pincal.model.dh import DH_CONVENTIONS
@@ -172,6 +180,50 @@ def _number(kind: type, minimum: float, what: str):
 _non_negative = _number(float, 0.0, "number")
 _count_or_zero = _number(int, 0, "integer")
 _count = _number(int, 1, "integer")
+
+
+def _seconds(text: str) -> float:
+    """argparse type of ``--clock-offset``: a finite number of seconds, of either sign."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a finite number of seconds")
+    return value
+
+
+def _add_extract(sub) -> None:
+    ext = sub.add_parser("extract", help="cut the static postures of a ROS bag into measurement rows (CSV v1)")
+    ext.add_argument("bag", type=Path, metavar="BAG",
+                     help="ROS 1 .bag, rosbag2 folder (sqlite3 or MCAP), or one .mcap/.db3 file")
+    ext.add_argument("--joints", required=True, metavar="TOPIC",
+                     help="sensor_msgs/JointState topic: its joint names are the joint columns")
+    measured = ext.add_mutually_exclusive_group(required=True)
+    measured.add_argument("--pose", metavar="TOPIC", help="PoseStamped or TransformStamped topic, or tf:CHILD_FRAME "
+                          "(a frame of /tf): columns x,y,z,qx,qy,qz,qw")
+    measured.add_argument("--point", action="append", metavar="TOPIC",
+                          help="PointStamped (or a pose topic, position only) or tf:CHILD_FRAME, repeatable: one gives "
+                               "x,y,z, several x1,y1,z1,x2,... in the order given (points of one rigid target)")
+    ext.add_argument("--joint-names", type=joint_names, metavar="JOINT[,JOINT...]",
+                     help="keep these joints only, judged still and written (default: every joint of the topic)")
+    ext.add_argument("--still-tol", type=_positive, default=STILL_TOL, metavar="RAD",
+                     help=f"still: every joint within this (max - min) [rad; m for prismatic] (default {STILL_TOL:g})")
+    ext.add_argument("--min-still", type=_positive, default=MIN_STILL_S, metavar="S",
+                     help=f"for at least this long [s] (default {MIN_STILL_S:g})")
+    ext.add_argument("--trim", type=_non_negative, default=TRIM_S, metavar="S",
+                     help=f"cut from both ends of a still stretch before averaging [s] (default {TRIM_S:g})")
+    ext.add_argument("--min-samples", type=_count, default=MIN_SAMPLES, metavar="N",
+                     help=f"refuse a stop with fewer samples of a measured topic in its window (default {MIN_SAMPLES})")
+    ext.add_argument("--max-spread", type=_positive, default=MAX_SPREAD_MM, metavar="MM",
+                     help="refuse a stop whose measured positions spread more (RMS about their mean) [mm] "
+                          f"(default {MAX_SPREAD_MM:g})")
+    ext.add_argument("--max-offset", type=_positive, default=MAX_OFFSET_S, metavar="S",
+                     help="search the clock offset this far either side of the receive times' estimate [s] "
+                          f"(default {MAX_OFFSET_S:g})")
+    ext.add_argument("--clock-offset", type=_seconds, metavar="S",
+                     help="measurement stamp minus joint stamp of one instant [s], instead of estimating it")
+    ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv", help="measurement CSV (v1) to write")
 
 
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
@@ -377,12 +429,14 @@ def build_parser() -> argparse.ArgumentParser:
     html.add_argument("--out", required=True, type=Path, metavar="REPORT.html",
                       help="HTML page to write: self-contained, figures embedded, no network")
 
-    example = sub.add_parser("example", help="copy a measurement set shipped with pincal (TIAGo mocap, MUKCa) "
-                                             "to DIR/NAME, for the docs' commands outside a clone")
-    example.add_argument("name", choices=("tiago_mocap", "mukca"), metavar="NAME",
-                         help="tiago_mocap or mukca")
+    example = sub.add_parser("example", help="copy a measurement set shipped with pincal (TIAGo mocap, MUKCa, "
+                                             "a ROS 2 bag) to DIR/NAME, for the docs' commands outside a clone")
+    example.add_argument("name", choices=("tiago_mocap", "mukca", "lwr_bag"), metavar="NAME",
+                         help="tiago_mocap, mukca or lwr_bag")
     example.add_argument("--out", type=Path, default=Path("data"),
                          help="folder to put NAME in (default: ./data, where the docs' commands look)")
+
+    _add_extract(sub)
 
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
