@@ -32,7 +32,7 @@ from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
-from pincal.fit.prior import PriorResidual, data_rows, reestimated_scales
+from pincal.fit.prior import PriorResidual, data_rows, log_evidence, reestimated_scales
 from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
 from pincal.fit.solver import Solution, solve
@@ -219,6 +219,18 @@ class FitProblem:
     def rescale(self, objective: SensorResidual, solution: Solution) -> None:
         """:meth:`reestimate_sigmas` (the pipeline's name, :mod:`pincal.fit.pipeline`)."""
         self.reestimate_sigmas(objective, solution)
+
+    def set_scales(self, scales: tuple[float, float | None]) -> None:
+        self.sigma_pos, self.sigma_rot = scales
+
+    def log_evidence(self, objective: PriorResidual, solution: Solution) -> float:
+        """Eq P3 (:func:`pincal.fit.prior.log_evidence`): rows already whitened by w_k = 1/σ_pos and
+        v_k = 1/σ_rot (times each row's weight, the same for every scale)."""
+        data = objective.objective
+        log_variances = -2.0 * 3 * data.g.shape[1] * np.sum(np.log(data.w))
+        if data.G is not None:
+            log_variances -= 2.0 * 3 * np.sum(np.log(data.v))
+        return log_evidence(solution.jacobian, solution.residual, float(log_variances))
 
     def reestimate_sigmas(self, objective: SensorResidual, solution: Solution) -> None:
         """Maximum likelihood with unknown variances: sigma² = mean squared residual per kind;

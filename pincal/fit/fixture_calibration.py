@@ -32,12 +32,7 @@ from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
-from pincal.fit.prior import (
-    PriorResidual,
-    data_rows,
-    effective_scale,
-    hat_diagonal,
-)
+from pincal.fit.prior import PriorResidual, data_rows, effective_scale, hat_diagonal, log_evidence
 from pincal.fit.registration import register_points
 from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.socket_metrics import FixtureMetrics, metrics_of_positions
@@ -200,11 +195,22 @@ class FixtureProblem:
         return (self.noise,)
 
     def rescale(self, objective: FixtureResidual | PriorResidual, solution) -> None:
-        """With a prior, σ of eq P2 from ``solution``'s data rows; without, nothing to re-estimate
-        (the residual is in metres and unweighted)."""
+        """σ [m]: with a prior, eq P2 from ``solution``'s data rows; without, their RMS (the residual
+        is in metres and unweighted, σ weights only a prior's rows)."""
         if isinstance(objective, PriorResidual):
             self.noise = effective_scale(solution.residual[: -objective.n_prior],
                                          hat_diagonal(solution.jacobian, objective.n_prior)) or self.noise
+        else:  # maximum likelihood: the residual's RMS
+            self.noise = float(np.sqrt(np.mean(solution.residual**2))) or self.noise
+
+    def set_scales(self, scales: tuple[float]) -> None:
+        (self.noise,) = scales
+
+    def log_evidence(self, objective: PriorResidual, solution) -> float:
+        """Eq P3 (:func:`pincal.fit.prior.log_evidence`) with the rows [m] divided by σ."""
+        rows = solution.residual.size - objective.n_prior
+        return log_evidence(solution.jacobian / objective.noise, solution.residual / objective.noise,
+                            rows * 2.0 * np.log(objective.noise))
 
     def rows_view(self) -> MeasurementSet:
         """The rows as one-point measurements (the socket in its fixture frame), for the selection's bookkeeping."""

@@ -23,13 +23,16 @@ From there the steps are the same, and :func:`fit_kinematics` runs them:
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Generic, Protocol, TypeVar, cast
 
 import numpy as np
 
+from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Ordering, Selection, absorbed_into, order_parameters
 from pincal.fit.prior import (
+    DATA_SCALE_GAP,
+    DECISIVE_LOG_EVIDENCE,
     MAX_SCALE_ITERATIONS,
     PRIOR_STATUS,
     Prior,
@@ -84,6 +87,14 @@ class KindProblem(Protocol[ObjectiveT]):
 
     def rescale(self, objective: ObjectiveT, solution: Solution) -> None:
         """Re-estimate the noise scales from ``solution``'s residual (with a prior: eq P2)."""
+        ...
+
+    def set_scales(self, scales: tuple) -> None:
+        """Weight the rows by ``scales`` (as :meth:`scales` gives them) from the next objective on."""
+        ...
+
+    def log_evidence(self, objective: ObjectiveT, solution: Solution) -> float:
+        """Eq P3 of :mod:`pincal.fit.prior` for a MAP fit of this problem."""
         ...
 
 
@@ -160,13 +171,13 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
         selection, kept = select_subset(problem, ordering, base, rows, criterion, counter)
     started = time.perf_counter()
     x0 = selection.solution if (from_selection and selection is not None) else None
-    objective, solution = problem.fit(kept, base, x0, what=f"{level} fit")
-    for _ in range((refits if problem.prior is None else MAX_SCALE_ITERATIONS) if size else 0):
-        before = problem.scales()
-        problem.rescale(objective, solution)
-        if problem.prior is not None and settled(before, problem.scales()):
-            break  # a prior's fixed point of eq P2 (pincal.fit.prior)
-        objective, solution = problem.fit(kept, base, solution.x, what=f"{level} fit")
+    what = f"{level} fit"
+    objective, solution = problem.fit(kept, base, x0, what=what)
+    if size:
+        objective, solution = _settle(problem, objective, solution, kept, base, what, refits)
+    closer = None  # the unregularised fit's position scale, where the evidence kept the prior's fixed point
+    if problem.prior is not None and kept.size:
+        objective, solution, closer = _from_the_data_scale(problem, objective, solution, kept, base, what)
     fit_seconds = time.perf_counter() - started
     counter.tick()
     kinematic = objective.blocks["kinematic"]
@@ -187,11 +198,74 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
                                                   problem.params, cast(Prior, prior))
         std_all = np.sqrt(np.diag(covariance))
         status[weak] = PRIOR_STATUS
+        if closer is not None:
+            selection = replace(selection, notes=selection.notes + (_prior_too_narrow(
+                kept.size, closer, problem.scales()[0], cast(Prior, prior)),))
     std = np.full(size, np.nan)
     std[kept] = std_all[kinematic]
     return KinematicFit(ordering=ordering, selection=selection, kept=kept, objective=objective, solution=solution,
                         vector=vector, std=std, std_all=std_all, status=tuple(status), covariance=covariance,
                         fit_seconds=fit_seconds)
+
+
+def _settle(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
+            base: np.ndarray, what: str, refits: int) -> tuple[ObjectiveT, Solution]:
+    """Step 3's refits: the noise scales re-estimated and the fit repeated, ``refits`` times without a
+    prior; with one, up to eq P2's fixed point (at most :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`)."""
+    for _ in range(refits if problem.prior is None else MAX_SCALE_ITERATIONS):
+        before = problem.scales()
+        problem.rescale(objective, solution)
+        if problem.prior is not None and settled(before, problem.scales()):
+            break  # a prior's fixed point of eq P2 (pincal.fit.prior)
+        objective, solution = problem.fit(kept, base, solution.x, what=what)
+    return objective, solution
+
+
+def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution,
+                         kept: np.ndarray, base: np.ndarray, what: str
+                         ) -> tuple[ObjectiveT, Solution, float | None]:
+    """Eq P2 from the data's own noise scale, kept if the evidence (eq P3) decisively prefers it.
+
+    Started from the registration's scale (the nominal model's misfit), eq P2 can settle where the
+    prior explains the misfit as noise: with deviations far beyond the prior's scale and few rows
+    (the paper's large KUKA deviations, 10–14 6D rows) every parameter stayed prior-dominated and the
+    model missed by 40 mm where the data determine it to 0.02 mm. The unregularised fit of the same
+    parameters gives the data's scale; when it is below :data:`pincal.fit.prior.DATA_SCALE_GAP` of
+    the fixed point's, eq P2 is iterated from it too, and the fixed point with the larger evidence by
+    more than :data:`pincal.fit.prior.DECISIVE_LOG_EVIDENCE` is the answer. Otherwise the prior's
+    fixed point stands — under the prior the closer fit is the less probable one: deviations of
+    10 mm against its 1 mm — and the third value returned is the closer fit's position scale [m]
+    (None when it was not tried or was taken), for a note that the prior may be too narrow.
+    """
+    first, first_evidence = problem.scales(), problem.log_evidence(objective, solution)
+    prior, problem.prior = problem.prior, None
+    try:
+        plain, unregularised = problem.fit(kept, base, solution.x, what=what)
+        problem.rescale(plain, unregularised)  # the data's scale: maximum likelihood
+    except CalibrationError:  # not determined without the prior: the first fixed point stands
+        problem.set_scales(first)
+        return objective, solution, None
+    finally:
+        problem.prior = prior
+    if not any(data is not None and data < DATA_SCALE_GAP * scale for data, scale in zip(problem.scales(), first)):
+        problem.set_scales(first)  # one basin: the fixed point already lies near the data's scale
+        return objective, solution, None
+    closer = problem.scales()[0]
+    second, second_solution = problem.fit(kept, base, unregularised.x, what=what)
+    second, second_solution = _settle(problem, second, second_solution, kept, base, what, 0)
+    if problem.log_evidence(second, second_solution) > first_evidence + DECISIVE_LOG_EVIDENCE:
+        return second, second_solution, None
+    problem.set_scales(first)
+    return objective, solution, closer
+
+
+def _prior_too_narrow(n_kept: int, closer_m: float, scale_m: float, prior: Prior) -> str:
+    """The note of a prior whose fixed point the evidence kept against a much closer fit."""
+    return (f"without the prior the same {n_kept} parameters fit these rows to a noise scale of "
+            f"{closer_m * 1e3:.3g} mm, against {scale_m * 1e3:.3g} mm with it; the prior of "
+            f"{prior.translation_mm:g} mm / {prior.rotation_deg:g} deg finds the closer fit less probable "
+            "(its deviations are large on that scale): if this robot's are, rerun with a wider "
+            "--prior-scale MM,DEG or with --select aic")
 
 
 def dropped_parameters(jacobian: np.ndarray, ordering: Ordering, kept: np.ndarray, always: np.ndarray,

@@ -32,6 +32,12 @@ likelihood's mean square ‖e_k‖²/m_k would shrink σ as the parameters absor
 noise, which weakens the prior and lets them absorb more — on sparse data the
 scale collapses.
 
+**Fixed points.** Eq P2 can have more than one: from the nominal model's misfit it may settle
+where the prior explains that misfit as noise. :func:`pincal.fit.pipeline.fit_kinematics` then
+also iterates it from the unregularised fit's scale and keeps the fixed point with the larger
+evidence (:func:`log_evidence`, eq P3), the new one only by a Bayes factor of
+:data:`DECISIVE_LOG_EVIDENCE`.
+
 **Posterior.** The covariance of the unknowns is (WᵀW/s² + Λ)⁻¹ with
 s² = ‖W-row residual‖² / (m − tr H) from the final fit (eq P2 over all data
 rows; with a prior far wider than the data's information it is the usual
@@ -66,6 +72,13 @@ MAX_SCALE_ITERATIONS = 20
 #: Relative change of every noise scale below which eq P2 has reached its fixed point: the prior's
 #: relative weight then moves by 2e-3 (it scales as 1/σ²).
 SCALE_TOLERANCE = 1e-3
+#: Eq P2 is also iterated from the unregularised fit's noise scales when they are below this fraction
+#: of the fixed point's (:func:`pincal.fit.pipeline.fit_kinematics`): the prior, not the data, then
+#: set the scale, and a fit the data dominate may be a second fixed point.
+DATA_SCALE_GAP = 0.5
+#: ln of the Bayes factor above which that second fixed point replaces the first (eq P3): 100,
+#: "decisive" on Jeffreys' scale (Jeffreys 1961, Appendix B); nearer ones are the same answer.
+DECISIVE_LOG_EVIDENCE = math.log(100.0)
 #: Accepted range of each prior scale, inclusive (mm for translations, degrees for rotations): 1 nm to
 #: 1 km and 1e-6° to 1e6°. Beyond it the prior rows outweigh the data by ~1e12 or more (σ_data² / σ²)
 #: and the normal equations lose every digit (1e-300 ends in a singular-matrix error), or the
@@ -201,6 +214,21 @@ def posterior(jacobian: np.ndarray, residual: np.ndarray, n_prior: int, noise: f
     data, prior = jacobian[:m], jacobian[m:]
     s2 = effective_scale(residual[:m], hat_diagonal(jacobian, n_prior)) ** 2
     return np.linalg.pinv(gram(data) / s2 + gram(prior) / noise**2), s2
+
+
+def log_evidence(jacobian: np.ndarray, residual: np.ndarray, log_variances: float) -> float:
+    """ln p(data | noise scales) of a MAP fit, linearised at its solution, up to a constant that is the
+    same for every scale (the evidence of Bishop 2006, eq 3.86; MacKay 1992):
+
+        −½ (Σ_rows ln σ_row² + ‖ẽ‖² + ln det(J̃ᵀJ̃))                        (P3)
+
+    with ẽ and J̃ the residual and Jacobian with data rows divided by their noise scales and the
+    prior rows θ_i/σ_i last (so ‖ẽ‖² = ‖r/σ‖² + θᵀΛθ and J̃ᵀJ̃ = WᵀW + Λ), and ``log_variances`` =
+    Σ_rows ln σ_row² [ln m², ln rad²]. Unpenalised unknowns (registration, target) have a flat prior:
+    its width is the same constant for every scale. Eq P2's fixed points are stationary points of
+    P3 in the scales; where there are several, the larger P3 is the one the data support."""
+    _, logdet = np.linalg.slogdet(gram(jacobian))
+    return float(-0.5 * (log_variances + residual @ residual + logdet))
 
 
 def standard_deviations(objective, solution: Solution) -> np.ndarray:
