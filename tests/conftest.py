@@ -1,7 +1,13 @@
-"""Shared fixtures: the packaged KUKA LWR 4+ and simulated experiments (seeded)."""
+"""Shared fixtures: the packaged KUKA LWR 4+ and simulated experiments (seeded); every JSON
+document pincal writes in a test is validated against ``docs/report.schema.json``."""
 
 from __future__ import annotations
 
+import importlib
+import json
+from pathlib import Path
+
+import jsonschema
 import numpy as np
 import pytest
 
@@ -27,6 +33,63 @@ def noisy_large_experiment(kuka_urdf):
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
     settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=3)
     return simulate_experiment(chain, KUKA_LWR4_DH, TABLE2_LARGE, settings)
+
+
+SCHEMA_PATH = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json"
+#: The modules that write pincal's JSON documents, through their ``write_text``: REPORT.json and
+#: evaluate --json (pincal.report.document), PLAN.json (pincal.planning.files).
+DOCUMENT_WRITERS = ("pincal.report.document", "pincal.planning.files")
+#: A document's kind in the schema (None: a REPORT.json, its top level) by a key only that kind has.
+DOCUMENT_KINDS = {"report_version": None, "plan_version": "PlanJson", "not_held_out": "FixtureEvaluationJson",
+                  "skipped_cpa_rows": "EvaluationJson"}
+_validators: dict[str | None, jsonschema.protocols.Validator] = {}
+
+
+def validate_document(document, kind: str | None = None) -> None:
+    """Raise ``jsonschema.ValidationError`` unless ``document`` is a REPORT.json (``kind`` None)
+    or the document ``kind`` names in the schema's ``$defs`` (``EvaluationJson``, ``PlanJson`` …)."""
+    # a REPORT.json against its own kind first: the error names the key, not a branch of oneOf
+    kinds = [kind] if kind is not None else [report_kind(document), None]
+    for name in kinds:
+        if name not in _validators:
+            schema = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+            if name is not None:
+                schema = {"$ref": f"#/$defs/{name}", "$defs": schema["$defs"]}
+            _validators[name] = jsonschema.Draft202012Validator(schema)
+        error = jsonschema.exceptions.best_match(_validators[name].iter_errors(document))
+        if error is not None:
+            raise error
+
+
+def report_kind(document) -> str:
+    """The kind of a REPORT.json, by its keys (the schema accepts exactly one)."""
+    if "fixture" in document:
+        return "FixtureReport"
+    if "diagnosis" in document:
+        return "DiagnosisReport"
+    return "PaperReport" if document.get("model") == "dh" else "CalibrationReport"
+
+
+def document_kind(document) -> str | None:
+    """The kind of a document pincal wrote (:data:`DOCUMENT_KINDS`); AssertionError if none."""
+    kinds = [kind for key, kind in DOCUMENT_KINDS.items() if isinstance(document, dict) and key in document]
+    assert len(kinds) == 1, f"not a document of docs/report.schema.json: keys {list(document)[:8]}"
+    return kinds[0]
+
+
+@pytest.fixture(autouse=True)
+def _validate_written_documents(monkeypatch):
+    """Every ``.json`` file the modules of :data:`DOCUMENT_WRITERS` write is validated as it is written."""
+    for name in DOCUMENT_WRITERS:
+        module = importlib.import_module(name)
+
+        def checked(path, text, *args, _write=module.write_text, **kwargs):
+            if str(path).endswith(".json"):
+                document = json.loads(text)
+                validate_document(document, document_kind(document))
+            return _write(path, text, *args, **kwargs)
+
+        monkeypatch.setattr(module, "write_text", checked)
 
 
 def assert_close(actual, expected, atol, what=""):

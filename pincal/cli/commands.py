@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -44,7 +44,7 @@ def _print_notes(notes: Sequence[str]) -> None:
         print(f"pincal: note: {note}", file=sys.stderr)
 
 
-def _warned(report: dict, strict: bool) -> int:
+def _warned(report: Mapping[str, Any], strict: bool) -> int:
     """Print REPORT.json's ``warnings`` on stderr; the exit code: 3 with ``strict`` and a warning, else 0."""
     warnings = report.get("warnings") or []
     for warning in warnings:
@@ -118,7 +118,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     return _warned(run.report, args.strict)
 
 
-def _before_after(report: dict) -> str | None:
+def _before_after(report: Mapping[str, Any]) -> str | None:
     """One line: the calibration rows' RMS position error of the nominal model (registered to them)
     and of the calibrated one [mm], over all target points and, with several, for point 1 — the
     metric the docs quote for TIAGo (REPORT.json ``row_errors``); None without both models."""
@@ -136,7 +136,7 @@ def _before_after(report: dict) -> str | None:
     return text + " (before: the nominal model, registered to these rows)"
 
 
-def _print_level_choice(report: dict) -> None:
+def _print_level_choice(report: Mapping[str, Any]) -> None:
     """The table of ``--level auto`` (REPORT.json's ``level_choice``), when the level was chosen."""
     if "level_choice" in report:
         from pincal.cli.level_table import level_choice_lines
@@ -168,7 +168,7 @@ def _check_html(html, *inputs, outputs=()) -> None:
         refuse_overwrite(html, *[i for i in inputs if i is not None], outputs=[o for o in outputs if o is not None])
 
 
-def _write_html(html, document: dict, base, evaluation: dict | None = None, source=None) -> None:
+def _write_html(html, document: Mapping[str, Any], base, evaluation: dict | None = None, source=None) -> None:
     """Write the HTML page of ``document`` (``--html``); ``base``: the report's folder;
     ``source``: the report file read (named in errors)."""
     if html is not None:
@@ -230,10 +230,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
     if args.json:
         from pincal.cli.paths import refuse_overwrite
-        from pincal.outputs import write_text
+        from pincal.report.document import write_evaluation
 
         refuse_overwrite(args.json, *_description_inputs(args), args.report, args.data)
-        write_text(args.json, json.dumps(evaluation.as_dict(), indent=2) + "\n")
+        write_evaluation(args.json, evaluation.as_dict())
         print(f"wrote {args.json}")
     if args.html is not None:
         from pincal.report.html import load_document

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import cast
 
 import numpy as np
 
@@ -68,6 +68,14 @@ from pincal.model.effects import (
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
+from pincal.report.model import (
+    DriftUse,
+    EvaluatedSession,
+    EvaluationJson,
+    TimeSpanJson,
+    errors_json,
+    registration_pair,
+)
 from pincal.report.sessions import session_errors
 
 REESTIMATED = "re-estimated on these rows (6 parameters; model and target fixed)"
@@ -125,12 +133,12 @@ class SessionEvaluation:
             return None
         return float(np.sqrt(max(self.residuals - REGISTRATION_PARAMETERS, 0) / self.residuals))
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> EvaluatedSession:
         return {"name": self.name, "rows": self.rows, "registration_source": self.source,
                 "registration_reestimated": self.reestimated,
                 "residuals": self.residuals, "registration_dof": self.dof,
-                "registration": {"position": self.registration.as_dict(), "orientation": self.orientation.as_dict()},
-                "errors": self.errors.as_dict()}
+                "registration": registration_pair(self.registration, self.orientation),
+                "errors": errors_json(self.errors)}
 
 
 @dataclass(frozen=True)
@@ -144,10 +152,11 @@ class Evaluation:
     sessions: tuple[SessionEvaluation, ...] = ()
     files: tuple[str, ...] = ()  # the file of each evaluated row
     row_sessions: tuple[str, ...] = ()  # the session (in DATA) of each evaluated row
-    drift: dict[str, Any] | None = None  # how the report's drift was applied (_effect_corrections); None without
+    drift: DriftUse | None = None  # how the report's drift was applied (_effect_corrections); None without
 
-    def as_dict(self) -> dict[str, Any]:
-        return {**self.errors.as_dict(), "skipped_cpa_rows": self.n_skipped_cpa,
+    def as_dict(self) -> EvaluationJson:
+        """``pincal evaluate --json``."""
+        return {**errors_json(self.errors), "skipped_cpa_rows": self.n_skipped_cpa,
                 "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift}
 
     def threshold_problem(self) -> str | None:
@@ -327,7 +336,7 @@ def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarr
 
 
 def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray,
-                        held: tuple[np.ndarray, np.ndarray], report_path) -> tuple[dict, dict | None]:
+                        held: tuple[np.ndarray, np.ndarray], report_path) -> tuple[dict, DriftUse | None]:
     """Joint readings corrected by the report's effects, and its sensor terms; with a
     drift, how it was applied (``rows_applied`` inside the fitted span of the session
     ``held`` = (names (K,), evaluated sessions (K,)) gives each row
@@ -362,7 +371,7 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
                            context_q=context_q, context_time=context_time)
     q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
     out: dict = {"q": q}
-    drift = None
+    drift: DriftUse | None = None
     for effect, value in parsed:
         if effect.type == "sensor_scale":
             out["sensor_scale"] = float(value[0])
@@ -377,7 +386,7 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
             outside = ~offsets.inside
             drift = {"velocity_m_per_s": value.tolist(), "time_column": effects.get("time_column"),
                      "time_reference_s": reference,
-                     "time_spans_s": None if spans is None else [span.as_dict() for span in spans],
+                     "time_spans_s": None if spans is None else [cast(TimeSpanJson, s.as_dict()) for s in spans],
                      "rows_applied": int(np.sum(offsets.inside)), "rows_held": int(np.sum(outside)),
                      "max_gap_s": float(np.max(offsets.gap[outside])) if outside.any() and spans else None,
                      "held_rule": HELD_DRIFT}
@@ -392,7 +401,7 @@ def _duration(seconds: float) -> str:
     return f"{seconds:.3g} s"
 
 
-def _drift_note(data_path, drift: dict) -> str:
+def _drift_note(data_path, drift: DriftUse) -> str:
     """The one note on rows a drift was not extrapolated to (``drift`` from :func:`_effect_corrections`)."""
     held = drift["rows_held"]
     total = held + drift["rows_applied"]
@@ -402,8 +411,9 @@ def _drift_note(data_path, drift: dict) -> str:
                  "time_spans_s; rerun diagnose to record it), so no row is known to lie inside it")
     else:
         ranges = ", ".join(f"{span['first']:.10g}–{span['last']:.10g} s" for span in spans)
+        gap = cast(float, drift["max_gap_s"])  # a float when rows lie outside the spans
         where = (f"{held} of {total} row(s) lie outside the time span of the rows it was fitted on "
-                 f"({ranges} in column '{drift['time_column'] or 'time'}'), up to {_duration(drift['max_gap_s'])} away")
+                 f"({ranges} in column '{drift['time_column'] or 'time'}'), up to {_duration(gap)} away")
     held_at = ("its session's mean time (no drift term for a one-session fit; a re-estimated registration: the "
                "nearer end of the span)" if spans is not None else "zero offset (its time_reference_s)")
     return (f"{data_path}: the report's drift is not extrapolated: {where}; those rows are evaluated with the "

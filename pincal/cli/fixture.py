@@ -17,7 +17,7 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,9 +34,11 @@ from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
 from pincal.measurements.fixture import Fixture, read_fixture, read_fixture_data
 from pincal.model.chain import KinematicChain
 from pincal.model.description import is_xacro, xacro_arguments
-from pincal.outputs import file_sha256, write_text
-from pincal.report.document import write_report
+from pincal.outputs import file_sha256
+from pincal.report.document import write_evaluation, write_report
 from pincal.report.fixture import fixture_report, read_fixture_block
+from pincal.report.model import Sources, level_choice_part
+from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport, fixture_metrics_json
 
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
@@ -60,7 +62,7 @@ class FixtureRun:
     """Outcome of :func:`calibrate_fixture_files`."""
 
     result: FixtureCalibration
-    report: dict[str, Any]
+    report: FixtureReport
     seconds: float
     reload_error: float
 
@@ -109,19 +111,18 @@ def calibrate_fixture_files(
         level = choice.chosen
     result = calibrate_fixture(chain, data, level, selection=selection)
     seconds = time.perf_counter() - started
-    sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
-               "corrected_urdf": str(out_urdf)}
-    with chain.placed(result.chain_placements):
-        report = fixture_report(result, chain, data, sources, [], file_sha256(urdf))
-    if choice is not None:
-        report["level_choice"] = choice.as_dict()
-    report["xacro_args"] = dict(xacro_arguments(xacro_args))  # evaluate --fixture rebuilds the nominal with them
+    sources: Sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
+                        "corrected_urdf": str(out_urdf)}
     names = ", ".join(p.name for p in data_paths)
-    reload_error, report["urdf_sha256"] = write_checked_urdf(
+    reload_error, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, result.chain_placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
         f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args,
     )
+    with chain.placed(result.chain_placements):
+        report = fixture_report(result, chain, data, sources, [], file_sha256(urdf),
+                                level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256,
+                                xacro_args=dict(xacro_arguments(xacro_args)))  # evaluate --fixture rebuilds with them
     write_report(report_path, report)
     return FixtureRun(result, report, seconds, reload_error)
 
@@ -139,8 +140,10 @@ class FixtureEvaluation:
     notes: list[str]
     not_held_out: tuple[str, ...] = ()
 
-    def as_dict(self) -> dict[str, Any]:
-        return {"after": self.after.as_dict(), "before": None if self.before is None else self.before.as_dict(),
+    def as_dict(self) -> FixtureEvaluationJson:
+        """``pincal evaluate --fixture --json``."""
+        return {"after": fixture_metrics_json(self.after),
+                "before": None if self.before is None else fixture_metrics_json(self.before),
                 "not_held_out": list(self.not_held_out), "notes": list(self.notes)}
 
 
@@ -286,7 +289,7 @@ def _refuse(args: argparse.Namespace, flags: dict[str, str]) -> None:
                           "ball centre is estimated); drop " + ("it" if len(given) == 1 else "them"))
 
 
-def _write_html(html: Path | None, document: dict[str, Any], base: Path, evaluation: dict | None = None) -> None:
+def _write_html(html: Path | None, document: Mapping[str, Any], base: Path, evaluation: dict | None = None) -> None:
     if html is not None:
         from pincal.report.html import write_html
 
@@ -361,7 +364,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     _print_metrics("evaluated placements" + (" (not held out)" if evaluation.not_held_out else ""),
                    evaluation.before, evaluation.after)
     if args.json:
-        write_text(args.json, json.dumps(evaluation.as_dict(), indent=2) + "\n")
+        write_evaluation(args.json, evaluation.as_dict())
         print(f"wrote {args.json}")
     if args.html is not None:
         from pincal.report.html import load_document

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 
-def level_choice_lines(choice: dict[str, Any]) -> list[str]:
+def level_choice_lines(choice: Mapping[str, Any]) -> list[str]:
     """The table of REPORT.json's ``level_choice`` (:meth:`pincal.fit.level_choice.LevelChoice.as_dict`)."""
     folds = choice["folds"]
     lines = [(f"level auto: {choice['scheme']}, {len(folds)} folds ({choice['seconds']:.1f} s); "

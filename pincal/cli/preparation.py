@@ -21,7 +21,7 @@ from pincal.model.description import xacro_arguments
 from pincal.model.urdf_from_dh import DHUrdf, urdf_from_dh_table
 from pincal.planning.candidates import DEFAULT_SAMPLE, read_candidates, sample_candidates
 from pincal.planning.collisions import Clearance, check_clearance
-from pincal.planning.files import plan_document, write_plan_csv, write_plan_json
+from pincal.planning.files import PlanJson, PlanSources, plan_document, write_plan_csv, write_plan_json
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
 from pincal.progress import Progress, Stages
 
@@ -54,7 +54,7 @@ class PlanRun:
     """Outcome of :func:`plan_files`: the plan, the PLAN.json document, the clearance check and notes."""
 
     plan: Plan
-    document: dict
+    document: PlanJson
     clearance: Clearance | None
     n_candidates: int
     notes: list[str]
@@ -118,8 +118,9 @@ def plan_files(
                  if min_distance is not None else None)
     plan = plan_measurements(chain, candidates, settings, existing=existing, workspace=workspace,
                              allowed=None if clearance is None else clearance.allowed, progress=stages.next())
-    sources = {"urdf": str(urdf), "candidates": _text(candidates_path), "existing": _existing_source(existing_paths),
-               "workspace": _text(workspace_path), "xacro_args": dict(xacro_arguments(xacro_args))}
+    sources: PlanSources = {"urdf": str(urdf), "candidates": _text(candidates_path),
+                            "existing": _existing_source(existing_paths), "workspace": _text(workspace_path),
+                            "xacro_args": dict(xacro_arguments(xacro_args))}
     digest = write_plan_csv(out_csv, plan, chain, labels)
     document = plan_document(plan, chain, plan.settings, sources, labels, len(candidates), clearance, tool_pose,
                              sample if candidates_path is None else None, plan_csv_sha256=digest)

@@ -56,12 +56,22 @@ from pincal.model.effects import (
 )
 from pincal.outputs import file_sha256, write_text
 from pincal.progress import Progress, Stages
+from pincal.report.diagnosis import diagnosis_report
 from pincal.report.document import (
+    chain_head,
     chain_report,
-    diagnosis_report,
+    fit_rows,
     paper_report,
     write_report,
 )
+from pincal.report.model import (
+    CalibrationReport,
+    PaperReport,
+    Sources,
+    findings_json,
+    level_choice_part,
+)
+from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.row_errors import (
     chain_row_errors,
     diagnosis_row_errors,
@@ -149,7 +159,7 @@ class CalibrationRun:
 
     Attributes:
         result: the paper method's or the chain calibration's result.
-        report: the REPORT.json document written.
+        report: the REPORT.json document written (:mod:`pincal.report.model`).
         errors: eq 24 errors on the calibration rows.
         notes: reader and method notes for the user.
         seconds: wall time of the calibration itself [s].
@@ -159,7 +169,7 @@ class CalibrationRun:
     """
 
     result: PaperCalibration | ChainCalibration
-    report: dict[str, Any]
+    report: PaperReport | CalibrationReport
     errors: PoseErrors
     notes: list[str]
     seconds: float
@@ -212,10 +222,12 @@ def calibrate_files(
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     data, notes = read_sessions(data_paths, chain.joint_specs)
     nominal_placements = chain.placements()
-    n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
-    sources = {"urdf": str(urdf), "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
-               "corrected_urdf": str(out_urdf)}
+    n_rows = fit_rows(data.roles)
+    sources: Sources = {"urdf": str(urdf),
+                        "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
+                        "corrected_urdf": str(out_urdf)}
     choice = None
+    paper: PaperCalibration | None = None
     if level == "dh":
         if len(data.session_names) > 1:
             raise PincalError(
@@ -230,10 +242,7 @@ def calibrate_files(
             errors = pose_errors(
                 chain, data.with_role("calibration"), paper.registration_position, paper.registration_orientation
             )
-            assert tool_pose is not None  # CalibrateSettings: level dh needs the tool
-            report = paper_report(paper, params, tool_parent, tool_pose, errors, n_rows, sources, notes)
-            report["row_errors"] = paper_row_errors(chain, nominal_placements, data.with_role("calibration"), errors,
-                                                    data_label)
+            row_errors = paper_row_errors(chain, nominal_placements, data.with_role("calibration"), errors, data_label)
         result: PaperCalibration | ChainCalibration = paper
         what = f"Method {method} of Franaszek & Marvel 2022"
     else:
@@ -257,31 +266,37 @@ def calibrate_files(
             sessions = session_rows(used, fitted.session_names)
             errors = session_pose_errors(chain, used, sessions, fitted.target.registrations,
                                          points=fitted.target.points, target_rotation=fitted.target.rotation)
-            report = chain_report(fitted, chain, tool_parent, errors, n_rows, sources, notes)
-            report["warnings"] = [f.as_dict()
-                                  for f in calibration_findings(chain, fitted, used, sigma_column,
-                                                                     settings.sigma_pos_m)]
-            report["sessions"] = session_entries(fitted.session_names, fitted.target.registrations, used, sessions,
-                                                 errors)
+            warnings = findings_json(calibration_findings(chain, fitted, used, sigma_column, settings.sigma_pos_m))
+            entries = session_entries(fitted.session_names, fitted.target.registrations, used, sessions, errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
                                   f"fitted on {entry['file']}", session_errors(errors, sessions == s))
-                for s, (entry, registration) in enumerate(zip(report["sessions"], fitted.target.registrations)))
+                for s, (entry, registration) in enumerate(zip(entries, fitted.target.registrations)))
+            report_notes = list(notes)
             if len(fitted.session_names) > 1:
-                report["notes"].append(f"registration: of the first session, '{fitted.session_names[0]}'; every "
-                                       "session's registration and errors are under 'sessions'")
-            report["row_errors"] = chain_row_errors(chain, nominal_placements, used, fitted, errors, data_label)
+                report_notes.append(f"registration: of the first session, '{fitted.session_names[0]}'; every "
+                                    "session's registration and errors are under 'sessions'")
+            row_errors = chain_row_errors(chain, nominal_placements, used, fitted, errors, data_label)
         result = fitted
         what = f"level {level}"
         if choice is not None:
-            report["level_choice"] = choice.as_dict()
             what += ", chosen by --level auto"
-    reload_error, report["urdf_sha256"] = write_checked_urdf(
+    reload_error, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {', '.join(p.name for p in data_paths)}. "
         "Registration and tool: see the report.", xacro_args,
     )
-    report["xacro_args"] = dict(xacro_arguments(xacro_args))
+    xacro = dict(xacro_arguments(xacro_args))
+    report: PaperReport | CalibrationReport
+    if paper is not None:
+        assert tool_pose is not None  # CalibrateSettings: level dh needs the tool
+        report = paper_report(paper, params, tool_parent, tool_pose, errors, n_rows, sources, notes,
+                              row_errors=row_errors, urdf_sha256=urdf_sha256, xacro_args=xacro)
+    else:
+        with chain.placed(placements):  # the report describes the calibrated model
+            report = chain_report(chain_head(fitted, chain, tool_parent, errors, n_rows, sources, report_notes),
+                                  warnings=warnings, sessions=entries, row_errors=row_errors,
+                                  level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro)
     write_report(report_path, report)
     return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice)
 
@@ -355,7 +370,7 @@ class DiagnoseRun:
 
     calibration: ChainCalibration
     diagnosis: Diagnosis
-    report: dict[str, Any]
+    report: DiagnosisReport
     notes: list[str]
     plots: list[Path]
     seconds: float
@@ -432,31 +447,31 @@ def diagnose_files(
         f"{', '.join(p.name for p in data_paths)}. "
         "Registration, tool and effects (which a URDF cannot carry): see the report.", xacro_args,
     )
-    n_rows = {role: int(np.sum(data.roles == role)) for role in ("cpa", "calibration", "validation")}
-    sources = {"urdf": str(urdf), "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
-               "corrected_urdf": str(out_urdf), "validation": None if validation_path is None else str(validation_path)}
-    with chain.placed(final.chain_placements):  # the report describes the final model
-        report = chain_report(final, chain, tip_link, diagnosis.calibration_errors, n_rows, sources, notes)
-        used = data.select(calibration.used_index)
-        report["warnings"] = [f.as_dict() for f in calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
-                                                                        press_of=calibration)]
-        report["sessions"] = session_entries(final.session_names, final.target.registrations, used,
-                                             session_rows(used, final.session_names), diagnosis.calibration_errors)
-        report.update(diagnosis_report(diagnosis, payload_kg, time_column_name or _time_name(data)))
-        report.update(drift_spans(diagnosis, row_time, calibration, used))  # where a drift holds (evaluate)
-        report["row_errors"] = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
-                                                    (" + ".join(str(p) for p in data_paths),
-                                                     None if validation_path is None else str(validation_path)))
-    report["urdf_sha256"] = urdf_sha256
-    report["xacro_args"] = dict(xacro_arguments(xacro_args))
-    if choice is not None:
-        report["level_choice"] = choice.as_dict()
+    sources: Sources = {"urdf": str(urdf),
+                        "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
+                        "corrected_urdf": str(out_urdf),
+                        "validation": None if validation_path is None else str(validation_path)}
     plots = []
     if plots_dir is not None:
         from pincal.diagnosis.plots import plot_diagnosis  # matplotlib only when drawing
 
         plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
-    report["diagnosis"]["plots"] = [str(p) for p in plots]
+    with chain.placed(final.chain_placements):  # the report describes the final model
+        used = data.select(calibration.used_index)
+        head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
+        report = diagnosis_report(
+            head, diagnosis, payload_kg, time_column_name or _time_name(data),
+            warnings=findings_json(calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                        press_of=calibration)),
+            sessions=session_entries(final.session_names, final.target.registrations, used,
+                                     session_rows(used, final.session_names), diagnosis.calibration_errors),
+            time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)
+            row_errors=diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
+                                            (" + ".join(str(p) for p in data_paths),
+                                             None if validation_path is None else str(validation_path))),
+            urdf_sha256=urdf_sha256, xacro_args=dict(xacro_arguments(xacro_args)),
+            level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
+        )
     write_report(report_path, report)
     return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
-from typing import Any
+from typing import Annotated, TypedDict, cast
 
 import numpy as np
 
@@ -26,6 +26,158 @@ from pincal.planning.design import CRITERIA
 from pincal.planning.planner import Plan, PlanSettings
 
 PLAN_VERSION = 1
+
+
+# PLAN.json's typed model (its JSON Schema: pincal.report.schema, in docs/report.schema.json);
+# non-finite numbers are written as null, so a computed number may be null.
+_Vector3 = Annotated[list[float], ("minItems", 3), ("maxItems", 3)]  # keywords of the schema
+
+
+class PlanSources(TypedDict):
+    """The files the plan was made from (null: not given)."""
+
+    urdf: str
+    candidates: str | None
+    existing: str | list[str] | None
+    workspace: str | None
+    xacro_args: dict[str, str]
+
+
+class PlanChain(TypedDict):
+    root_link: str
+    tip_link: str
+    joints: list[str]
+
+
+class PlanPriorScale(TypedDict):
+    translation_mm: float
+    rotation_deg: float
+
+
+class PlanTool(TypedDict):
+    xyz_m: _Vector3
+    rpy_rad: _Vector3
+
+
+class PlanSettingsJson(TypedDict):
+    """The settings the plan was made with."""
+
+    count: int
+    level: str
+    measure: str
+    criterion: str
+    select: str
+    prior_scale: PlanPriorScale | None
+    sigma_pos_mm: float | None
+    sigma_rot_deg: float | None
+    sigma_source: str
+    tool: PlanTool | None
+    target_points_m: list[_Vector3]
+    seed: int | None
+    sample: int | None
+
+
+class PlanCriterion(TypedDict):
+    name: str
+    definition: str
+    value: float | None
+
+
+class PredictionJson(TypedDict):
+    """Expected errors against the truth over the workspace sample (:class:`pincal.planning.design.Prediction`)."""
+
+    mean_position_mm: float | None
+    max_position_mm: float | None
+    mean_rotation_deg: float | None
+    max_rotation_deg: float | None
+    condition: float | None
+
+
+class RandomPrediction(PredictionJson):
+    """The same for random choices: the median over ``draws``."""
+
+    draws: int
+    singular_draws: int
+    statistic: str
+
+
+class PlanPredicted(TypedDict):
+    what: str
+    workspace_configurations: int
+    plan: PredictionJson | None
+    random: RandomPrediction | None
+    plan_over_random_mean_position: float | None
+    recorded_only: PredictionJson | None
+
+
+class PlanIdentifiability(TypedDict):
+    identifiable: list[str]
+    not_identifiable: list[str]
+    estimated_parameters: int
+    kinematic_parameters: int
+    condition_number: float | None
+
+
+class ClearanceJson(TypedDict):
+    """The collision check of the candidates (:class:`pincal.planning.collisions.Clearance`)."""
+
+    min_distance_m: float
+    refused: int
+    refused_in_collision: int
+    refused_too_close: int
+    pairs_checked: int
+    pairs_ignored_at_zero: list[str]
+
+
+class PlanCandidates(TypedDict):
+    count: int
+    usable: int
+    clearance: ClearanceJson | None
+
+
+class BalanceJson(TypedDict):
+    """Approach directions of one joint over the plan (:class:`pincal.planning.ordering.Balance`)."""
+
+    joint: str
+    from_below: int
+    from_above: int
+    kept: int
+    balance: float | None
+    correlation: float | None
+
+
+class PlanOrder(TypedDict):
+    method: str
+    alternate: list[str]
+    travel_s: float | None
+    approach_balance: list[BalanceJson]
+
+
+class Addition(TypedDict):
+    priority: int
+    candidate: int
+    predicted_mean_mm: float | None
+    gain_mm: float | None
+
+
+class PlanJson(TypedDict):
+    """PLAN.json, written by ``pincal plan`` beside PLAN.csv."""
+
+    pincal_version: str
+    plan_version: int
+    sources: PlanSources
+    plan_csv_sha256: str | None
+    chain: PlanChain
+    settings: PlanSettingsJson
+    criterion: PlanCriterion
+    predicted: PlanPredicted
+    identifiability: PlanIdentifiability
+    candidates: PlanCandidates
+    order: PlanOrder
+    additions: list[Addition]
+    exchange_swaps: int
+    seconds: float
+    notes: list[str]
 
 
 def _finite(value):
@@ -57,7 +209,7 @@ def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: 
     return digest[-1]
 
 
-def write_plan_json(path: str | Path, document: dict[str, Any]) -> None:
+def write_plan_json(path: str | Path, document: PlanJson) -> None:
     """PLAN.json: ``document`` as strict JSON (non-finite numbers as null)."""
     try:
         write_text(path, json.dumps(_finite(document), indent=2) + "\n")
@@ -65,27 +217,27 @@ def write_plan_json(path: str | Path, document: dict[str, Any]) -> None:
         raise PincalError(f"{path}: cannot write the plan report ({exc.strerror or exc})") from None
 
 
-def _prediction(prediction) -> dict | None:
-    return None if prediction is None else prediction.as_dict()
+def _prediction(prediction) -> PredictionJson | None:
+    return None if prediction is None else cast(PredictionJson, prediction.as_dict())
 
 
 def plan_document(
     plan: Plan,
     chain: KinematicChain,
     settings: PlanSettings,
-    sources: dict,
+    sources: PlanSources,
     labels: np.ndarray,
     n_candidates: int,
     clearance: Clearance | None,
     tool_pose: np.ndarray | None,
     sample: int | None,
     plan_csv_sha256: str | None = None,
-) -> dict[str, Any]:
+) -> PlanJson:
     """The PLAN.json document; ``plan_csv_sha256`` names the PLAN.csv it describes (its bytes' SHA-256)."""
     ratio = None
     if plan.prediction is not None and plan.random is not None and np.isfinite(plan.random.mean_position_mm):
         ratio = plan.prediction.mean_position_mm / plan.random.mean_position_mm
-    tool = None
+    tool: PlanTool | None = None
     if tool_pose is not None:
         xyz, rpy = xyz_rpy_from_pose(tool_pose)
         tool = {"xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()}
@@ -103,7 +255,7 @@ def plan_document(
             "measure": settings.sensor.label,
             "criterion": settings.criterion,
             "select": str(settings.selection),
-            "prior_scale": None if settings.prior is None else settings.prior.as_dict(),
+            "prior_scale": None if settings.prior is None else cast(PlanPriorScale, settings.prior.as_dict()),
             "sigma_pos_mm": plan.sigma_pos_mm,
             "sigma_rot_deg": plan.sigma_rot_deg,
             "sigma_source": plan.sigma_source,
@@ -120,7 +272,8 @@ def plan_document(
                     "over the workspace sample",
             "workspace_configurations": plan.workspace_size,
             "plan": _prediction(plan.prediction),
-            "random": None if plan.random is None else {**plan.random.as_dict(), "draws": settings.random_draws,
+            "random": None if plan.random is None else {**cast(PredictionJson, plan.random.as_dict()),
+                                                        "draws": settings.random_draws,
                                                         "singular_draws": plan.random_singular,
                                                         "statistic": "median over draws"},
             "plan_over_random_mean_position": ratio,
@@ -136,13 +289,13 @@ def plan_document(
         "candidates": {
             "count": n_candidates,
             "usable": n_candidates if clearance is None else int(clearance.allowed.sum()),
-            "clearance": None if clearance is None else clearance.as_dict(),
+            "clearance": None if clearance is None else cast(ClearanceJson, clearance.as_dict()),
         },
         "order": {
             "method": "balanced approach directions" if settings.alternate else "short travel",
             "alternate": list(settings.alternate),
             "travel_s": plan.travel_s,
-            "approach_balance": [b.as_dict() for b in plan.balance],
+            "approach_balance": [cast(BalanceJson, b.as_dict()) for b in plan.balance],
         },
         "additions": [
             {"priority": i + 1, "candidate": int(labels[a.candidate]),

@@ -1,5 +1,8 @@
 """REPORT.json: what a calibration found, in a form scripts can rely on.
 
+The builders here return the typed model of :mod:`pincal.report.model` (its JSON
+Schema: ``docs/report.schema.json``, :mod:`pincal.report.schema`).
+
 Keys promised to users (never renamed, only extended):
 
 * ``method``; ``parameters``: list of {name, joint, unit, nominal, calibrated,
@@ -35,10 +38,9 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,9 +52,30 @@ from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.sensor import Registration
 from pincal.outputs import write_text
+from pincal.report.model import (
+    CalibrationReport,
+    ChainHead,
+    ChainJson,
+    EvaluationJson,
+    Finding,
+    FitRows,
+    Identifiability,
+    LevelChoicePart,
+    NotDetermined,
+    PaperReport,
+    Parameter,
+    PriorScale,
+    RowErrorSet,
+    SelectionJson,
+    SessionEntry,
+    Sources,
+    errors_json,
+    registration_pair,
+)
+from pincal.report.model_diagnosis import DiagnosisReport
+from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 
 if TYPE_CHECKING:
-    from pincal.diagnosis.diagnose import Diagnosis
     from pincal.fit.chain_calibration import ChainCalibration
     from pincal.fit.paper_methods import PaperCalibration
     from pincal.model.chain import KinematicChain
@@ -71,17 +94,21 @@ def paper_report(
     tool_parent: str,
     tool_pose: np.ndarray,
     calibration_errors: PoseErrors,
-    n_rows: dict[str, int],
-    sources: Mapping[str, str | list[str] | None],
+    n_rows: FitRows,
+    sources: Sources,
     notes: list[str],
-) -> dict[str, Any]:
+    *,
+    row_errors: list[RowErrorSet],
+    urdf_sha256: str,
+    xacro_args: dict[str, str],
+) -> PaperReport:
     """Build the REPORT.json document of a paper-method calibration."""
     # imported here: `pincal calibrate --level full` does not load the paper's methods
     from pincal.fit.paper_methods import CALIBRATED, FROM_CPA
 
     nominal = result.nominal.to_vector()
     calibrated = result.table.to_vector()
-    parameters = []
+    parameters: list[Parameter] = []
     for i, info in enumerate(params.info):
         determined = result.status[i] in (CALIBRATED, FROM_CPA)
         parameters.append(
@@ -99,7 +126,7 @@ def paper_report(
     return {
         "pincal_version": __version__,
         "report_version": REPORT_VERSION,
-        "method": result.method,
+        "method": int(result.method),  # calibrate runs Methods 1-3 (the study alone runs "ml")
         "weight_mm2_per_deg2": result.weight,
         "model": "dh",
         "sources": sources,
@@ -109,10 +136,7 @@ def paper_report(
             "joints": list(params.chain.joint_names),
         },
         "parameters": parameters,
-        "registration": {
-            "position": result.registration_position.as_dict(),
-            "orientation": result.registration_orientation.as_dict(),
-        },
+        "registration": registration_pair(result.registration_position, result.registration_orientation),
         "tool": {"parent_link": tool_parent, "xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()},
         "fit": {
             "rows": n_rows,
@@ -127,23 +151,32 @@ def paper_report(
                 }
                 for stage in result.stages
             ],
-            "calibration_errors": calibration_errors.as_dict(),
+            "calibration_errors": errors_json(calibration_errors),
         },
         "notes": list(result.notes) + list(notes),
+        "row_errors": row_errors,
+        "urdf_sha256": urdf_sha256,
+        "xacro_args": xacro_args,
     }
 
 
-def chain_summary(chain: KinematicChain) -> dict[str, Any]:
+def fit_rows(roles: np.ndarray) -> FitRows:
+    """REPORT.json ``fit.rows``: the rows of each role (``roles``: each row's)."""
+    return {"cpa": int(np.sum(roles == "cpa")), "calibration": int(np.sum(roles == "calibration")),
+            "validation": int(np.sum(roles == "validation"))}
+
+
+def chain_summary(chain: KinematicChain) -> ChainJson:
     """REPORT.json ``chain``: root and tip links, the joints and their kinds."""
     return {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
             "joint_kinds": [spec.kind for spec in chain.joint_specs]}
 
 
-def parameters_report(result) -> list[dict[str, Any]]:
+def parameters_report(result) -> list[Parameter]:
     """REPORT.json ``parameters`` of a placement-level fit (sensor or fixture): each parameter's
     nominal (0) and calibrated value and std in its unit, None where the data cannot determine it."""
     params = result.params
-    out = []
+    out: list[Parameter] = []
     for i in range(params.size if params is not None else 0):
         info = params.info[i]
         determined = result.status[i] == "calibrated"
@@ -159,7 +192,7 @@ def parameters_report(result) -> list[dict[str, Any]]:
     return out
 
 
-def identifiability_report(result) -> dict[str, Any]:
+def identifiability_report(result) -> Identifiability:
     """REPORT.json ``identifiability`` of a placement-level fit: rank, condition number, selection,
     the dropped parameters with what absorbs them, and the strongly correlated pairs."""
     params = result.params
@@ -181,7 +214,7 @@ def identifiability_report(result) -> dict[str, Any]:
     }
 
 
-def not_determined_report(result) -> list[dict[str, Any]]:
+def not_determined_report(result) -> list[NotDetermined]:
     """REPORT.json ``identifiability.not_determined``: each direction of an always-estimated unknown
     (the target's position) the data leave free, held at a stated value (:mod:`pincal.fit.target_hold`)."""
     return [{"name": "target.position", "direction": [float(v) for v in h.direction],
@@ -190,25 +223,33 @@ def not_determined_report(result) -> list[dict[str, Any]]:
              "reason": held_reason(h)} for h in getattr(result, "held", ())]
 
 
-def selection_report(selection) -> dict[str, Any] | None:
+def selection_report(selection) -> SelectionJson | None:
     """REPORT.json ``identifiability.selection`` of a :class:`pincal.fit.identifiability.Selection`
     (None without one); a criterion value that is undefined (e.g. PRESS with a row of leverage 1) is null."""
     if selection is None:
         return None
-    return {
+    prior_scale: PriorScale | None = getattr(selection, "prior_scale", None) or None
+    out: SelectionJson = {
         "criterion": selection.criterion,
         "kept": selection.chosen,
         "value": _number(selection.scores[selection.sizes.index(selection.chosen)]),
         "candidates": [{"kept": n, "value": _number(v)} for n, v in zip(selection.sizes, selection.scores)],
         # the candidates fitted nonlinearly; the others' values are linearised (pincal/fit/selection.py)
         "refitted": list(selection.refitted),
-        **({"prior_scale": selection.prior_scale} if getattr(selection, "prior_scale", None) else {}),
     }
+    if prior_scale:
+        out["prior_scale"] = prior_scale
+    return out
 
 
-def write_report(path: str | Path, report: dict[str, Any]) -> None:
+def write_report(path: str | Path, report: CalibrationReport | DiagnosisReport | PaperReport | FixtureReport) -> None:
     """Write ``report`` as indented JSON."""
     write_text(path, json.dumps(report, indent=2) + "\n")
+
+
+def write_evaluation(path: str | Path, document: EvaluationJson | FixtureEvaluationJson) -> None:
+    """Write ``pincal evaluate --json``'s document as indented JSON."""
+    write_text(path, json.dumps(document, indent=2) + "\n")
 
 
 @dataclass(frozen=True)
@@ -307,16 +348,17 @@ def read_report(path: str | Path) -> ReportModel:
         ) from None
 
 
-def chain_report(
+def chain_head(
     result: ChainCalibration,
     chain: KinematicChain,
     tool_parent: str,
     calibration_errors: PoseErrors,
-    n_rows: dict[str, int],
-    sources: Mapping[str, str | list[str] | None],
+    n_rows: FitRows,
+    sources: Sources,
     notes: list[str],
-) -> dict[str, Any]:
-    """Build the REPORT.json document of a calibration at level registration/offsets/full."""
+) -> ChainHead:
+    """The keys a calibration at level registration/offsets/full and a diagnosis share, up to ``notes``
+    (``chain`` placed as calibrated)."""
     tool = chain.tool
     points = result.target.points @ tool[:3, :3].T + tool[:3, 3]  # in the parent link frame
     rotation = tool[:3, :3] @ result.target.rotation
@@ -333,10 +375,7 @@ def chain_report(
         "chain": chain_summary(chain),
         "parameters": parameters_report(result),
         "identifiability": identifiability_report(result),
-        "registration": {
-            "position": result.target.registration.as_dict(),
-            "orientation": result.target.registration.as_dict(),
-        },
+        "registration": registration_pair(result.target.registration, result.target.registration),
         "tool": {
             "parent_link": tool_parent,
             "points_m": points.tolist(),
@@ -358,60 +397,30 @@ def chain_report(
             "rms_point_error_mm": result.rms_m * 1000.0,
             "fit_seconds": result.fit_seconds,
             "total_seconds": result.total_seconds,
-            "calibration_errors": calibration_errors.as_dict(),
+            "calibration_errors": errors_json(calibration_errors),
         },
         "notes": list(result.notes) + list(notes),
     }
 
 
-def diagnosis_report(diagnosis: Diagnosis, payload_kg: float, time_column: str | None) -> dict[str, Any]:
-    """The ``effects`` list and the ``diagnosis`` section of a REPORT.json."""
-    from pincal.model.effects import effect_to_dict
-
-    def errors(e):
-        return None if e is None else e.as_dict()
-
-    approach = any(e.source == "approach" for e, _, _ in diagnosis.effects)
-    context = None
-    if approach and diagnosis.inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
-        context = {
-            "time_s": (diagnosis.inputs.time + diagnosis.time_reference).tolist(),
-            "q": diagnosis.inputs.q.tolist(),
-        }
+def chain_report(
+    head: ChainHead,
+    *,
+    warnings: list[Finding],
+    sessions: list[SessionEntry],
+    row_errors: list[RowErrorSet],
+    level_choice: LevelChoicePart,
+    urdf_sha256: str,
+    xacro_args: dict[str, str],
+) -> CalibrationReport:
+    """Build the REPORT.json document of a calibration at level registration/offsets/full from its
+    :func:`chain_head`; ``level_choice``: :func:`pincal.report.model.level_choice_part`."""
     return {
-        "effects": [effect_to_dict(e, v, s) for e, v, s in diagnosis.effects],
-        "payload_kg": payload_kg,
-        "time_column": time_column,
-        "time_reference_s": diagnosis.time_reference,
-        "approach_context": context,
-        "diagnosis": {
-            "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
-                         "not offset-like, not ambiguous, not worse on held-out rows",
-            "steps": [
-                {
-                    "effect": effect_to_dict(step.effect, step.values, step.std),
-                    "delta_bic": step.delta_bic,
-                    "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
-                    "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
-                    "candidates": [_candidate(c) for c in step.candidates],
-                }
-                for step in diagnosis.steps
-            ],
-            "last_candidates": [_candidate(c) for c in diagnosis.last_candidates],
-            "unexplained": diagnosis.unexplained,
-            "calibration_errors": errors(diagnosis.calibration_errors),
-            "heldout_errors": errors(diagnosis.heldout_errors),
-            "notes": list(diagnosis.notes),
-        },
-    }
-
-
-def _candidate(candidate) -> dict[str, Any]:
-    from pincal.model.effects import effect_to_dict
-
-    return {
-        **effect_to_dict(candidate.effect, candidate.values, candidate.std),
-        "delta_bic": candidate.delta_bic,
-        "heldout_rms_mm": candidate.heldout_rms_mm,
-        "verdict": candidate.verdict,
+        **head,
+        "warnings": warnings,
+        "sessions": sessions,
+        "row_errors": row_errors,
+        **level_choice,
+        "urdf_sha256": urdf_sha256,
+        "xacro_args": xacro_args,
     }

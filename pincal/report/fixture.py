@@ -35,6 +35,8 @@ from pincal.fit.fixture_calibration import FixtureCalibration
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
 from pincal.report.document import REPORT_VERSION, chain_summary, identifiability_report, parameters_report
+from pincal.report.model import LevelChoicePart, Sources
+from pincal.report.model_fixture import FixturePlacement, FixtureReport, fixture_metrics_json
 
 #: What the report says of a collinear placement's rotation.
 TURN_NOT_DETERMINED = "the turn about the socket line: the sockets are collinear"
@@ -44,11 +46,16 @@ def fixture_report(
     result: FixtureCalibration,
     chain: KinematicChain,
     data: FixtureData,
-    sources: dict[str, Any],
+    sources: Sources,
     notes: list[str],
     nominal_urdf_sha256: str,
-) -> dict[str, Any]:
-    """Build the REPORT.json document of a socket-fixture calibration."""
+    *,
+    level_choice: LevelChoicePart,
+    xacro_args: dict[str, str],
+    urdf_sha256: str,
+) -> FixtureReport:
+    """Build the REPORT.json document of a socket-fixture calibration (``chain`` placed as calibrated);
+    ``level_choice``: :func:`pincal.report.model.level_choice_part`."""
     fixture = data.fixture
     ball = result.ball.tolist()
     return {
@@ -83,15 +90,19 @@ def fixture_report(
             "ball_centre_m": ball,
             "ball_centre_std_m": result.ball_std.tolist(),
             "placements": [_placement(p) for p in result.placements],
-            "training": {"before": result.nominal_training.as_dict(), "after": result.training.as_dict()},
+            "training": {"before": fixture_metrics_json(result.nominal_training),
+                         "after": fixture_metrics_json(result.training)},
             "nominal": {"urdf_sha256": nominal_urdf_sha256, "ball_centre_m": result.nominal_ball.tolist(),
                         "rms_point_error_mm": result.nominal_rms_m * math.sqrt(3.0) * 1000.0},
         },
         "notes": list(result.notes) + list(notes),
+        **level_choice,
+        "xacro_args": xacro_args,
+        "urdf_sha256": urdf_sha256,
     }
 
 
-def _placement(placement) -> dict[str, Any]:
+def _placement(placement) -> FixturePlacement:
     collinear = placement.line_direction is not None
     return {
         "name": placement.name,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, cast
 
@@ -441,8 +442,8 @@ def _environment() -> Environment:
     return env
 
 
-def write_html(path: str | Path, document: dict[str, Any], evaluation: dict[str, Any] | None = None,
+def write_html(path: str | Path, document: Mapping[str, Any], evaluation: dict[str, Any] | None = None,
                base: str | Path | None = None, source: str | Path | None = None) -> None:
     """Render ``document`` (read from ``source``) and write it to ``path`` atomically
     (:func:`pincal.outputs.write_text`)."""
-    write_text(path, render_html(document, evaluation, base, source))
+    write_text(path, render_html(dict(document), evaluation, base, source))

@@ -39,6 +39,7 @@ from pincal.fit.outliers import robust_scores
 from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.measurements.data import MeasurementSet, default_session_name
+from pincal.report.model import DriftUse, EvaluatedSession, RowErrorModel, RowErrorSet, errors_json
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
@@ -50,16 +51,16 @@ CALIBRATED = "calibrated geometry"
 WITH_EFFECTS = "geometry and effects"
 
 
-def _model(name: str, errors: PoseErrors) -> dict[str, Any]:
+def _model(name: str, errors: PoseErrors) -> RowErrorModel:
     per_row = np.sqrt(np.mean(errors.position_m**2, axis=1)) * 1000.0
     rotation = None if errors.rotation_rad is None else np.degrees(errors.rotation_rad).tolist()
-    return {"model": name, "errors": errors.as_dict(), "position_mm": per_row.tolist(), "orientation_deg": rotation}
+    return {"model": name, "errors": errors_json(errors), "position_mm": per_row.tolist(), "orientation_deg": rotation}
 
 
 def row_error_set(
     name: str, source: str, lines: Sequence[int] | np.ndarray, models: Sequence[tuple[str, PoseErrors]],
     files: Sequence[str] | np.ndarray | None = None, sessions: Sequence[str] | np.ndarray | None = None,
-) -> dict[str, Any]:
+) -> RowErrorSet:
     """One ``row_errors`` entry: ``models`` as (name, errors of every row), the reported model last;
     ``files`` / ``sessions``: each row's file and session (default: ``source`` and its stem)."""
     final = models[-1][1]
@@ -85,7 +86,7 @@ def chain_row_errors(
     calibration: ChainCalibration,
     errors: PoseErrors,
     source: str,
-) -> list[dict[str, Any]]:
+) -> list[RowErrorSet]:
     """``row_errors`` of ``calibrate --level registration|offsets|full``: the rows used in the
     fit, nominal geometry (with the registration and target of the fit's first stage,
     ``calibration.start``) against the calibrated model's ``errors``."""
@@ -106,7 +107,7 @@ def _nominal_chain_errors(chain, nominal_placements, rows, calibration) -> PoseE
 
 def paper_row_errors(
     chain: KinematicChain, nominal_placements, rows: MeasurementSet, errors: PoseErrors, source: str
-) -> list[dict[str, Any]]:
+) -> list[RowErrorSet]:
     """``row_errors`` of the paper's methods: the calibration rows, the nominal DH model
     registered to them (Registrations 1 and 2, as the paper's methods register) against
     the calibrated model's ``errors``."""
@@ -131,12 +132,12 @@ def diagnosis_row_errors(
     calibration: ChainCalibration,
     diagnosis: Diagnosis,
     sources: tuple[str, str | None],
-) -> list[dict[str, Any]]:
+) -> list[RowErrorSet]:
     """``row_errors`` of ``diagnose``: calibration (and held-out) rows under the nominal
     geometry, the geometric calibration and the final model with its effects."""
     rows = data.select(calibration.used_index)
     first = diagnosis.steps[0] if diagnosis.steps else None
-    sets = []
+    sets: list[RowErrorSet] = []
     for name, measured, geometric, final, source in (
         ("calibration", rows, first.calibration_before if first else None, diagnosis.calibration_errors, sources[0]),
         ("held-out", heldout, first.heldout_before if first else None, diagnosis.heldout_errors, sources[1]),
@@ -159,7 +160,7 @@ def diagnosis_row_errors(
 def evaluation_document(
     urdf: str, data: str, errors: PoseErrors, lines: Sequence[int], skipped_cpa: int = 0,
     files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
-    registrations: Sequence[dict[str, Any]] = (), drift: dict[str, Any] | None = None,
+    registrations: Sequence[EvaluatedSession] = (), drift: DriftUse | None = None,
 ) -> dict[str, Any]:
     """What ``evaluate --html`` shows beside the report: the evaluated files, the eq 24
     summary (as ``evaluate --json`` writes it), the evaluated rows by file line (and

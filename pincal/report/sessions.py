@@ -18,7 +18,7 @@ session's.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import cast
 
 import numpy as np
 
@@ -27,6 +27,8 @@ from pincal.fit.sessions import session_rows
 from pincal.measurements.data import MeasurementSet
 from pincal.model.effects import time_spans
 from pincal.model.sensor import Registration
+from pincal.report.model import SessionEntry, TimeSpanJson, errors_json, registration_pair
+from pincal.report.model_diagnosis import TimeSpansPart
 
 
 def session_errors(errors: PoseErrors, rows: np.ndarray) -> PoseErrors:
@@ -41,7 +43,7 @@ def session_entries(
     data: MeasurementSet,
     sessions: np.ndarray,
     errors: PoseErrors,
-) -> list[dict[str, Any]]:
+) -> list[SessionEntry]:
     """The ``sessions`` list of a report.
 
     Args:
@@ -49,7 +51,7 @@ def session_entries(
         data: the rows in the fit; ``sessions`` (K,) each one's index into ``names``.
         errors: eq 24 errors of those rows (in the same order).
     """
-    entries = []
+    entries: list[SessionEntry] = []
     for s, (name, registration) in enumerate(zip(names, registrations)):
         rows = np.flatnonzero(np.asarray(sessions) == s)
         files = list(dict.fromkeys(data.files[rows].tolist()))
@@ -57,13 +59,13 @@ def session_entries(
             "name": name,
             "file": files[0] if len(files) == 1 else files,
             "rows": int(rows.size),
-            "registration": {"position": registration.as_dict(), "orientation": registration.as_dict()},
-            "calibration_errors": session_errors(errors, rows).as_dict() if rows.size else None,
+            "registration": registration_pair(registration, registration),
+            "calibration_errors": errors_json(session_errors(errors, rows)) if rows.size else None,
         })
     return entries
 
 
-def drift_spans(diagnosis, time: np.ndarray | None, calibration, used: MeasurementSet) -> dict[str, Any]:
+def drift_spans(diagnosis, time: np.ndarray | None, calibration, used: MeasurementSet) -> TimeSpansPart:
     """REPORT.json ``time_spans_s`` when ``diagnosis`` adopted a drift: the time span
     (first, last, mean [s]) of the rows it was fitted on, per calibrated session —
     where ``evaluate`` applies it (:func:`pincal.model.effects.drift_offsets`); {} without a drift.
@@ -78,4 +80,4 @@ def drift_spans(diagnosis, time: np.ndarray | None, calibration, used: Measureme
         return {}
     names = np.asarray(calibration.session_names, dtype=object)[session_rows(used, calibration.session_names)]
     spans = time_spans(np.asarray(time, dtype=float)[calibration.used_index], names)
-    return {"time_spans_s": [span.as_dict() for span in spans]}
+    return {"time_spans_s": [cast(TimeSpanJson, span.as_dict()) for span in spans]}

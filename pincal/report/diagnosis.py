@@ -1,0 +1,107 @@
+"""REPORT.json of ``diagnose``: a calibration's report of the final model, with the effects and the
+diagnosis (:class:`pincal.report.model_diagnosis.DiagnosisReport`)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, cast
+
+from pincal.report.model import (
+    ChainHead,
+    Finding,
+    LevelChoicePart,
+    PoseErrorsJson,
+    RowErrorSet,
+    SessionEntry,
+    errors_json,
+)
+from pincal.report.model_diagnosis import (
+    ApproachContext,
+    CandidateJson,
+    DiagnosisJson,
+    DiagnosisReport,
+    EffectJson,
+    TimeSpansPart,
+)
+
+if TYPE_CHECKING:
+    from pincal.diagnosis.diagnose import Diagnosis
+
+
+def diagnosis_report(
+    head: ChainHead,
+    diagnosis: Diagnosis,
+    payload_kg: float,
+    time_column: str | None,
+    *,
+    warnings: list[Finding],
+    sessions: list[SessionEntry],
+    time_spans: TimeSpansPart,
+    row_errors: list[RowErrorSet],
+    urdf_sha256: str,
+    xacro_args: dict[str, str],
+    level_choice: LevelChoicePart,
+    plots: list[str],
+) -> DiagnosisReport:
+    """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
+    (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
+    ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
+    from pincal.model.effects import effect_to_dict
+
+    def errors(e) -> PoseErrorsJson | None:
+        return None if e is None else errors_json(e)
+
+    approach = any(e.source == "approach" for e, _, _ in diagnosis.effects)
+    context: ApproachContext | None = None
+    if approach and diagnosis.inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+        context = {
+            "time_s": (diagnosis.inputs.time + diagnosis.time_reference).tolist(),
+            "q": diagnosis.inputs.q.tolist(),
+        }
+    section: DiagnosisJson = {
+        "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
+                     "not offset-like, not ambiguous, not worse on held-out rows",
+        "steps": [
+            {
+                "effect": cast(EffectJson, effect_to_dict(step.effect, step.values, step.std)),
+                "delta_bic": step.delta_bic,
+                "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
+                "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
+                "candidates": [_candidate(c) for c in step.candidates],
+            }
+            for step in diagnosis.steps
+        ],
+        "last_candidates": [_candidate(c) for c in diagnosis.last_candidates],
+        "unexplained": diagnosis.unexplained,
+        "calibration_errors": errors(diagnosis.calibration_errors),
+        "heldout_errors": errors(diagnosis.heldout_errors),
+        "notes": list(diagnosis.notes),
+        "plots": plots,
+    }
+    effects = [cast(EffectJson, effect_to_dict(e, v, s)) for e, v, s in diagnosis.effects]
+    return {
+        **head,
+        "warnings": warnings,
+        "sessions": sessions,
+        "effects": effects,
+        "payload_kg": payload_kg,
+        "time_column": time_column,
+        "time_reference_s": diagnosis.time_reference,
+        "approach_context": context,
+        "diagnosis": section,
+        **time_spans,
+        "row_errors": row_errors,
+        "urdf_sha256": urdf_sha256,
+        "xacro_args": xacro_args,
+        **level_choice,
+    }
+
+
+def _candidate(candidate) -> CandidateJson:
+    from pincal.model.effects import effect_to_dict
+
+    return {
+        **cast(EffectJson, effect_to_dict(candidate.effect, candidate.values, candidate.std)),
+        "delta_bic": candidate.delta_bic,
+        "heldout_rms_mm": candidate.heldout_rms_mm,
+        "verdict": candidate.verdict,
+    }

@@ -1,0 +1,485 @@
+"""The typed model of REPORT.json and of ``pincal evaluate --json``: one TypedDict per object.
+
+A REPORT.json is one of four kinds, told apart by its keys: :class:`CalibrationReport`
+(``calibrate --level registration|offsets|full|auto``), :class:`PaperReport`
+(``calibrate --level dh``, the paper's Methods 1–3),
+:class:`~pincal.report.model_diagnosis.DiagnosisReport` (``diagnose``: the calibration's
+keys and the effects) and :class:`~pincal.report.model_fixture.FixtureReport`
+(``calibrate --fixture``). The builders of :mod:`pincal.report.document` and
+:mod:`pincal.report.fixture` return them, so mypy checks every key they write;
+:mod:`pincal.report.schema` turns these classes (and PLAN.json's,
+:mod:`pincal.planning.files`) into ``docs/report.schema.json``, which the tests
+validate every document they write against.
+
+The keys and their values are promises to users' scripts: never renamed, only
+extended. A class's keys are required unless it lists them in a ``total=False``
+subclass (present only in some reports). Types are those of JSON: ``float`` is any
+number, ``X | None`` may be null. ``Vector3``/``Quaternion`` are lists of 3/4 numbers.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
+
+if TYPE_CHECKING:
+    from pincal.fit.level_choice import LevelChoice
+    from pincal.fit.metrics import PoseErrors
+    from pincal.fit.plausibility import Finding as PlausibilityFinding
+    from pincal.model.sensor import Registration
+
+# Annotated's (keyword, value) pairs are JSON Schema keywords of the type (pincal.report.schema)
+Vector3 = Annotated[list[float], ("minItems", 3), ("maxItems", 3)]
+Quaternion = Annotated[list[float], ("minItems", 4), ("maxItems", 4)]
+Sha256 = Annotated[str, ("pattern", "^[0-9a-f]{64}$")]
+# str in Python (the fits hold them as str), an enum in the schema
+ChainLevel = Annotated[str, ("enum", ("registration", "offsets", "full"))]
+PaperMethod = Annotated[int, ("enum", (1, 2, 3))]
+JointKind = Annotated[str, ("enum", ("revolute", "continuous", "prismatic"))]
+
+
+# --- errors (eq 24) and registrations -----------------------------------------------------------
+
+
+class PositionStats(TypedDict):
+    """Mean, RMS and maximum of position errors [mm]."""
+
+    mean_mm: float
+    rms_mm: float
+    max_mm: float
+
+
+class OrientationStats(TypedDict):
+    """Mean, RMS and maximum of orientation errors [deg]."""
+
+    mean_deg: float
+    rms_deg: float
+    max_deg: float
+
+
+class _PoseErrorsKeys(TypedDict):
+    rows: int
+    position: PositionStats
+
+
+class PoseErrorsJson(_PoseErrorsKeys, total=False):
+    """Eq 24 on a set of rows (:meth:`pincal.fit.metrics.PoseErrors.as_dict`): ``position_per_point``
+    with several target points, ``orientation`` with 6D data."""
+
+    position_per_point: list[PositionStats]
+    orientation: OrientationStats
+
+
+class RegistrationJson(TypedDict):
+    """A registration sensor_T_base: g ≈ Omega t + tau (:meth:`pincal.model.sensor.Registration.as_dict`)."""
+
+    rotation_xyzw: Quaternion
+    translation_m: Vector3
+
+
+class RegistrationPair(TypedDict):
+    """Registration 1 (``position``) and Registration 2 (``orientation``)."""
+
+    position: RegistrationJson
+    orientation: RegistrationJson
+
+
+# --- the sections of a report ---------------------------------------------------------------------
+
+
+class _SourcesKeys(TypedDict):
+    urdf: str
+    data: str | list[str]
+    corrected_urdf: str
+
+
+class Sources(_SourcesKeys, total=False):
+    """The files the report was made from: ``validation`` (diagnose), ``fixture`` (socket fixture)."""
+
+    validation: str | None
+    fixture: str
+
+
+class _ChainKeys(TypedDict):
+    root_link: str
+    tip_link: str
+    joints: list[str]
+
+
+class PaperChain(_ChainKeys):
+    """The calibrated chain: root and tip links and its joints."""
+
+
+class ChainJson(_ChainKeys):
+    """The calibrated chain: root and tip links, its joints and their kinds."""
+
+    joint_kinds: list[JointKind]
+
+
+class Parameter(TypedDict):
+    """One kinematic parameter; ``calibrated`` and ``std`` are null where the data cannot determine it
+    (``status`` says why)."""
+
+    name: str
+    joint: str
+    unit: str
+    nominal: float
+    calibrated: float | None
+    std: float | None
+    status: str
+
+
+class PriorScale(TypedDict):
+    """The prior of ``--select prior``: σ of a translation [mm] and of a rotation [deg]."""
+
+    translation_mm: float
+    rotation_deg: float
+
+
+class SelectionCandidate(TypedDict):
+    kept: int
+    value: float | None
+
+
+class _SelectionKeys(TypedDict):
+    criterion: str
+    kept: int
+    value: float | None
+    candidates: list[SelectionCandidate]
+    refitted: list[int]
+
+
+class SelectionJson(_SelectionKeys, total=False):
+    """How many parameters were kept and by which criterion (``prior_scale`` with ``--select prior``)."""
+
+    prior_scale: PriorScale
+
+
+class Absorption(TypedDict):
+    name: str
+    coefficient: float
+
+
+class Dropped(TypedDict):
+    """A parameter the data cannot determine, and the kept ones that absorb it."""
+
+    name: str
+    reason: str
+    absorbed_into: list[Absorption]
+
+
+class CorrelatedPair(TypedDict):
+    a: str
+    b: str
+    correlation: float
+
+
+class NotDetermined(TypedDict):
+    """A direction of the target's position the data leave free, held at a stated value."""
+
+    name: str
+    direction: Vector3
+    turn_deg: float
+    held_at_m: float
+    std_m_when_estimated: float | None
+    reason: str
+
+
+class Identifiability(TypedDict):
+    """Rank, condition number, selection, dropped parameters, correlated pairs, held directions."""
+
+    rank: int
+    jacobian_condition: float
+    selection: SelectionJson | None
+    dropped: list[Dropped]
+    correlated_pairs: list[CorrelatedPair]
+    not_determined: list[NotDetermined]
+
+
+class PaperTool(TypedDict):
+    """The known tool: its parent link and pose in it."""
+
+    parent_link: str
+    xyz_m: Vector3
+    rpy_rad: Vector3
+
+
+class Tool(TypedDict):
+    """The estimated target: its points in the parent link frame (marker-column order) and the pose
+    of its frame."""
+
+    parent_link: str
+    points_m: list[Vector3]
+    xyz_m: Vector3
+    rpy_rad: Vector3
+
+
+class Noise(TypedDict):
+    """The noise scales the fit estimated (``sigma_rot_deg`` null without orientation data)."""
+
+    sigma_pos_mm: float
+    sigma_rot_deg: float | None
+
+
+class Outlier(TypedDict):
+    """A row flagged as an outlier, by file and line."""
+
+    line: int
+    robust_score: float
+    file: str | None
+
+
+class _FitRowsKeys(TypedDict):
+    calibration: int
+
+
+class FitRows(_FitRowsKeys, total=False):
+    """Rows of each role read."""
+
+    cpa: int
+    validation: int
+
+
+class Stage(TypedDict):
+    """One least-squares stage of a paper method."""
+
+    error_function: str
+    parameters: list[str]
+    rms: float
+    unit: str
+    evaluations: int
+    jacobian_condition: float
+
+
+class PaperFit(TypedDict):
+    """Row counts, the stages and eq 24 on the calibration rows."""
+
+    rows: FitRows
+    stages: list[Stage]
+    calibration_errors: PoseErrorsJson
+
+
+class FixtureFit(TypedDict):
+    """Row counts, RMS point error and timings of a fixture fit."""
+
+    rows: FitRows
+    rows_used: int
+    rms_point_error_mm: float
+    fit_seconds: float
+    total_seconds: float
+
+
+class ChainFit(FixtureFit):
+    """Row counts, RMS point error, timings and eq 24 on the calibration rows."""
+
+    calibration_errors: PoseErrorsJson
+
+
+class Finding(TypedDict):
+    """A plausibility warning (:mod:`pincal.fit.plausibility`)."""
+
+    code: str
+    message: str
+
+
+class SessionEntry(TypedDict):
+    """One session: its file(s), rows, registration and errors (:mod:`pincal.report.sessions`)."""
+
+    name: str
+    file: str | list[str]
+    rows: int
+    registration: RegistrationPair
+    calibration_errors: PoseErrorsJson | None
+
+
+class RowErrorModel(TypedDict):
+    """One model's errors on a set of rows: eq 24 summary, each row's ``position_mm`` and ``orientation_deg``."""
+
+    model: str
+    errors: PoseErrorsJson
+    position_mm: list[float]
+    orientation_deg: list[float] | None
+
+
+class RowErrorSet(TypedDict):
+    """The error of every row of a set by file line (:mod:`pincal.report.row_errors`)."""
+
+    set: str
+    file: str
+    lines: list[int]
+    files: list[str]
+    sessions: list[str]
+    models: list[RowErrorModel]
+    point_position_mm: list[list[float]] | None
+    robust_score: list[float]
+
+
+class Fold(TypedDict):
+    name: str
+    held_out_rows: int
+    training_rows: int
+
+
+class LevelScore(TypedDict):
+    """One level's cross-validation error (null where its fits failed)."""
+
+    level: str
+    cv_error_mm: float | None
+    standard_error_mm: float | None
+    fold_errors_mm: list[float | None]
+    kept_parameters: list[int | None]
+    failures: list[str]
+
+
+class LevelChoiceJson(TypedDict):
+    """How ``--level auto`` chose the level (:meth:`pincal.fit.level_choice.LevelChoice.as_dict`)."""
+
+    rule: str
+    scheme: str
+    error: str
+    selection: str
+    folds: list[Fold]
+    levels: list[LevelScore]
+    lowest: str
+    threshold_mm: float
+    chosen: str
+    seconds: float
+
+
+class TimeSpanJson(TypedDict):
+    """The times [s] of one session's rows a drift was fitted on."""
+
+    session: str
+    first: float
+    last: float
+    mean: float
+
+
+# --- the four kinds of REPORT.json ----------------------------------------------------------------
+
+
+class ChainHead(TypedDict):
+    pincal_version: str
+    report_version: int
+    method: None
+    level: ChainLevel
+    model: Literal["joint placements"]
+    sources: Sources
+    chain: ChainJson
+    parameters: list[Parameter]
+    identifiability: Identifiability
+    registration: RegistrationPair
+    tool: Tool
+    noise: Noise
+    outliers: list[Outlier]
+    removed_lines: list[int]
+    removed_files: list[str | None]
+    fit: ChainFit
+    notes: list[str]
+
+
+class _CalibrationKeys(ChainHead):
+    warnings: list[Finding]
+    sessions: list[SessionEntry]
+    row_errors: list[RowErrorSet]
+    urdf_sha256: Sha256
+    xacro_args: dict[str, str]
+
+
+class CalibrationReport(_CalibrationKeys, total=False):
+    """REPORT.json of ``calibrate --level registration|offsets|full|auto`` (``level_choice``: auto)."""
+
+    level_choice: LevelChoiceJson
+
+
+class PaperReport(TypedDict):
+    """REPORT.json of ``calibrate --level dh``: Method 1, 2 or 3 of Franaszek & Marvel (2022)."""
+
+    pincal_version: str
+    report_version: int
+    method: PaperMethod
+    weight_mm2_per_deg2: float | None
+    model: Literal["dh"]
+    sources: Sources
+    chain: PaperChain
+    parameters: list[Parameter]
+    registration: RegistrationPair
+    tool: PaperTool
+    fit: PaperFit
+    notes: list[str]
+    row_errors: list[RowErrorSet]
+    urdf_sha256: Sha256
+    xacro_args: dict[str, str]
+
+
+# --- pincal evaluate --json -----------------------------------------------------------------------
+
+
+class EvaluatedSession(TypedDict):
+    """One evaluated session: where its registration came from and its errors."""
+
+    name: str
+    rows: int
+    registration_source: str
+    registration_reestimated: bool
+    residuals: int
+    registration_dof: int | None
+    registration: RegistrationPair
+    errors: PoseErrorsJson
+
+
+class DriftUse(TypedDict):
+    """How the report's drift was applied to the evaluated rows."""
+
+    velocity_m_per_s: Vector3
+    time_column: str | None
+    time_reference_s: float
+    time_spans_s: list[TimeSpanJson] | None
+    rows_applied: int
+    rows_held: int
+    max_gap_s: float | None
+    held_rule: str
+
+
+class _EvaluationKeys(PoseErrorsJson):
+    skipped_cpa_rows: int
+    sessions: list[EvaluatedSession]
+    drift: DriftUse | None
+
+
+class EvaluationJson(_EvaluationKeys):
+    """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use."""
+
+
+class LevelChoicePart(TypedDict, total=False):
+    """``level_choice`` where a report has it (``--level auto``), to unpack into a report."""
+
+    level_choice: LevelChoiceJson
+
+
+# The lower layers' ``as_dict()`` forms, as the model's types: their keys are the model's
+# (the tests validate every document written against the schema).
+
+
+def errors_json(errors: PoseErrors) -> PoseErrorsJson:
+    """Eq 24's summary of ``errors``."""
+    return cast(PoseErrorsJson, errors.as_dict())
+
+
+def registration_json(registration: Registration) -> RegistrationJson:
+    """``rotation_xyzw`` and ``translation_m`` of ``registration``."""
+    return cast(RegistrationJson, registration.as_dict())
+
+
+def registration_pair(position: Registration, orientation: Registration) -> RegistrationPair:
+    """Registrations 1 and 2 (one estimate serves both outside the paper's methods)."""
+    return {"position": registration_json(position), "orientation": registration_json(orientation)}
+
+
+def level_choice_part(choice: LevelChoice | None) -> LevelChoicePart:
+    """``{"level_choice": ...}`` of ``--level auto``, ``{}`` for a level given."""
+    return {} if choice is None else {"level_choice": cast(LevelChoiceJson, choice.as_dict())}
+
+
+def findings_json(findings: list[PlausibilityFinding]) -> list[Finding]:
+    """``warnings``: the plausibility findings."""
+    return [cast(Finding, f.as_dict()) for f in findings]

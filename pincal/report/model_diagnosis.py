@@ -1,0 +1,93 @@
+"""The typed model of ``diagnose``'s REPORT.json: the effects and the diagnosis (:mod:`pincal.report.model`)."""
+
+from __future__ import annotations
+
+from typing import Literal, TypedDict
+
+from pincal.report.model import LevelChoiceJson, PoseErrorsJson, TimeSpanJson, Vector3, _CalibrationKeys
+
+
+class _EffectKeys(TypedDict):
+    type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "drift", "sensor_scale"]
+    joint: str | None
+
+
+class EffectJson(_EffectKeys, total=False):
+    """An effect (:func:`pincal.model.effects.effect_to_dict`): ``cyclic`` has ``harmonic``, ``sin``,
+    ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``*std``
+    when estimated."""
+
+    harmonic: int
+    sin: float
+    cos: float
+    sin_std: float
+    cos_std: float
+    value: float | Vector3
+    std: float | Vector3
+    source: str | None
+
+
+class CandidateJson(EffectJson, total=False):
+    """A candidate effect of a diagnosis step: the effect's keys and its evidence."""
+
+    delta_bic: float
+    heldout_rms_mm: float | None
+    verdict: str
+
+
+class BeforeAfter(TypedDict):
+    before: PoseErrorsJson | None
+    after: PoseErrorsJson | None
+
+
+class DiagnosisStep(TypedDict):
+    """An adopted effect, its ΔBIC, the errors before and after, and the candidates of the step."""
+
+    effect: EffectJson
+    delta_bic: float
+    calibration: BeforeAfter
+    heldout: BeforeAfter
+    candidates: list[CandidateJson]
+
+
+class DiagnosisJson(TypedDict):
+    """The diagnosis: the rule, the steps, what was left unexplained, the final errors, the plots."""
+
+    criterion: str
+    steps: list[DiagnosisStep]
+    last_candidates: list[CandidateJson]
+    unexplained: str | None
+    calibration_errors: PoseErrorsJson | None
+    heldout_errors: PoseErrorsJson | None
+    notes: list[str]
+    plots: list[str]
+
+
+class ApproachContext(TypedDict):
+    """The session's motion (time and joint readings), for the flanks of interleaved rows."""
+
+    time_s: list[float]
+    q: list[list[float]]
+
+
+class _DiagnosisKeys(_CalibrationKeys):
+    effects: list[EffectJson]
+    payload_kg: float
+    time_column: str | None
+    time_reference_s: float | None
+    approach_context: ApproachContext | None
+    diagnosis: DiagnosisJson
+
+
+class DiagnosisReport(_DiagnosisKeys, total=False):
+    """REPORT.json of ``diagnose``: the calibration's keys, the effects and the diagnosis
+    (``time_spans_s``: with an adopted drift; ``level_choice``: ``--level auto``)."""
+
+    time_spans_s: list[TimeSpanJson]
+    level_choice: LevelChoiceJson
+
+
+class TimeSpansPart(TypedDict, total=False):
+    """``time_spans_s`` where a diagnosis report has it (an adopted drift), to unpack into it."""
+
+    time_spans_s: list[TimeSpanJson]
