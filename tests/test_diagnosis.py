@@ -8,12 +8,13 @@ Table 2 (so the ``offsets`` level is exact), 6D measurements with 0.02 mm /
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from pincal.cli.commands import main
-from pincal.diagnosis.diagnose import diagnose
+from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
@@ -38,8 +39,10 @@ def _run(kuka_urdf, effect_text, seed=3):
                                      effects=effects)
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     calibration = calibrate_chain(chain, experiment.calibration, "offsets", tool_known=True)
+    time = time_column(experiment.calibration)
+    candidates = candidate_effects(chain, time is not None) + [e for e, _ in effects if e.type == "coupling"]
     result = diagnose(chain, calibration, experiment.calibration, heldout=experiment.validation,
-                      time=time_column(experiment.calibration), heldout_time=time_column(experiment.validation))
+                      time=time, heldout_time=time_column(experiment.validation), candidates=candidates)
     return result, effects
 
 
@@ -63,6 +66,9 @@ def test_clean_data_claims_nothing(effect_free):
         "cyclic:lwr_joint_3:2:0.002:-0.001",
         "backlash:lwr_joint_4:0.004:gravity",
         "backlash:lwr_joint_2:0.003:approach",
+        # the KUKA's neighbouring axes are not parallel: the catalogue offers no coupling, the test adds it
+        "coupling:lwr_joint_3:lwr_joint_2:0.002",  # a transmission's cross-coupling
+        "coupling:lwr_joint_3:lwr_joint_2:-1.0",  # J3 read as J3 + J2: 300 mm before
         "drift:1e-7:-2e-7:1e-7",
         "sensor_scale:0.0005",
     ],
@@ -230,7 +236,7 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
 def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment):
     """A candidate list that is empty after filtering (a drift without a time column)
     ends the search with nothing adopted, not with an error (review finding)."""
-    from pincal.diagnosis.diagnose import diagnose
+    from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
     from pincal.fit.chain_calibration import calibrate_chain
     from pincal.model.chain import KinematicChain
     from pincal.model.effects import Effect
@@ -269,3 +275,46 @@ def test_rounding_level_effects_are_not_adopted(tmp_path, capsys):
     assert code == 0
     assert json.loads((tmp_path / "R.json").read_text())["effects"] == []
     assert "too small to matter" in out and f"below {NEGLIGIBLE:g}" in out
+
+
+def test_a_joint_read_against_another_is_named_and_corrected_in_the_data(kuka_urdf, effect_free, capsys):
+    """J3 read from the horizontal (the reading is J3 − J2, shift +1 × J2): the coupling is adopted first,
+    at +1; the geometry was selected on the wrong readings (AIC left J2's zero out), so the advice is to
+    correct the data and calibrate again — which is then back at the effect-free calibration's held-out
+    error within the bound of test_undeclared_effect_is_found_measured_and_removed (one value fewer)."""
+    from pincal.diagnosis.verdicts import coupling_advice
+
+    result, [(truth, _)] = _run(kuka_urdf, "coupling:lwr_joint_3:lwr_joint_2:1.0")
+    effect, found, _ = result.effects[0]
+    assert effect == truth and abs(found[0] - 1.0) < 1e-2
+    advice = coupling_advice(effect, float(found[0]))
+    assert f"includes {-found[0]:+.3f} x lwr_joint_2's (the controller measures it from lwr_joint_2" in advice
+    assert "horizontal" in advice and "add +1 x lwr_joint_2 to lwr_joint_3 in the data and calibrate again" in advice
+    from pincal.simulation.paper import SimulationSettings, simulate_experiment
+
+    chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
+    experiment = simulate_experiment(chain, KUKA_LWR4_DH, OFFSETS_ONLY, SimulationSettings(seed=3, **SETTINGS),
+                                     effects=[parse_effect("coupling:lwr_joint_3:lwr_joint_2:1.0")])
+    j2, j3 = chain.joint_names.index("lwr_joint_2"), chain.joint_names.index("lwr_joint_3")
+    corrected = []
+    for rows in (experiment.calibration, experiment.validation):
+        q = rows.q.copy()
+        q[:, j3] += 1.0 * q[:, j2]  # the advice, applied: "add +1 x lwr_joint_2 to lwr_joint_3"
+        corrected.append(replace(rows, q=q))
+    chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
+    calibration = calibrate_chain(chain, corrected[0], "offsets", tool_known=True)
+    again = diagnose(chain, calibration, corrected[0], heldout=corrected[1],  # the default catalogue
+                     time=time_column(corrected[0]), heldout_time=time_column(corrected[1]))
+    bound = 1 + 3 * np.sqrt(1 / effect_free.objective.n_free)
+    assert again.heldout_errors.position.rms <= bound * effect_free.heldout_errors.position.rms
+
+
+def test_couplings_are_offered_between_parallel_neighbours(kuka_urdf, industrial_arm_urdf):
+    """A joint read against its neighbour needs parallel axes (J3 from the horizontal: J2 ∥ J3): the
+    industrial arm's A2–A3 gets both couplings, the KUKA (every neighbour perpendicular) none."""
+    arm = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    assert parallel_neighbours(arm) == {(1, 2)}
+    assert [e.label for e in candidate_effects(arm, False) if e.type == "coupling"] == [
+        "coupling:A2:A3", "coupling:A3:A2"]
+    kuka = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
+    assert not [e for e in candidate_effects(kuka, False) if e.type == "coupling"]

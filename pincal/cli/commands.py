@@ -275,13 +275,10 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     diagnosis = run.diagnosis
     held = diagnosis.heldout_errors is not None
     print(f"geometric calibration ({run.calibration.level}), then {len(diagnosis.steps)} effect(s) adopted:")
-    header = f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
-    print(header + (f" {'held-out RMS [mm]':>19s}" if held else ""))
+    print(f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
+          + (f" {'held-out RMS [mm]':>19s}" if held else ""))
     kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))
-
-    def unit(effect) -> str:
-        return effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")
-
+    unit = lambda effect: effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")  # noqa: E731
     for step in diagnosis.steps:
         value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std)) + f" {unit(step.effect)}"
         line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
@@ -291,9 +288,12 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(line)
     if not diagnosis.steps:
         print("  nothing significant: no effect is claimed")
+    from pincal.diagnosis import verdicts  # loaded already by the run
     for effect, values, std in diagnosis.effects:  # refitted together: what evaluate applies
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))
         print(f"final model: {effect.label} = {value} {unit(effect)}")
+        if effect.type == "coupling":  # a reading taken against another joint: fix the data, not the model
+            print(f"  {verdicts.coupling_advice(effect, float(values[0]))}")
     for note in diagnosis.notes:
         print(f"reported, not adopted: {note}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run

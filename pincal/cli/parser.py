@@ -260,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
                      help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
+                          "coupling:J:DRIVER:REL (J's actual angle adds REL x DRIVER's reading), "
                           "drift:VX:VY:VZ (m/s), sensor_scale:REL")
 
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")

@@ -42,6 +42,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from pincal.diagnosis.screening import (
@@ -83,6 +84,8 @@ GRAVITY_REFRESHES = 2
 #: Tolerance of a candidate's full fit (:func:`pincal.fit.solver.solve`): it ranks
 #: and is judged; an adopted effect is refitted at the solver's own tolerance.
 CANDIDATE_TOLERANCE = 1e-10
+#: Angle between two joint axes below which they count as parallel [rad] (1e-6: a URDF's rounding).
+PARALLEL_AXES_RAD = 1e-6
 
 
 @dataclass(frozen=True)
@@ -137,14 +140,33 @@ class Diagnosis:
     chain_placements: tuple[np.ndarray, ...] = ()
 
 
+def parallel_neighbours(chain: KinematicChain) -> set[tuple[int, int]]:
+    """Neighbouring revolute joints (i, i + 1) whose axes are parallel at the neutral configuration
+    (within :data:`PARALLEL_AXES_RAD`): where a controller may read one joint against the other (a
+    parallelogram arm's J3 from the horizontal, J2 ∥ J3), the couplings the catalogue offers."""
+    model = chain.model
+    data = model.createData()
+    jacobian = pin.computeJointJacobians(model, data, pin.neutral(model))
+    axes = [jacobian[3:, model.joints[i].idx_v] for i in chain.joint_ids]
+    kinds = [spec.kind for spec in chain.joint_specs]
+    return {(i, i + 1) for i in range(len(axes) - 1)
+            if "prismatic" not in (kinds[i], kinds[i + 1])
+            and np.linalg.norm(np.cross(axes[i], axes[i + 1])) < PARALLEL_AXES_RAD}
+
+
 def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
-    """Every candidate on every joint of the chain, plus the sensor's."""
+    """Every candidate on every joint of the chain, plus the sensor's; couplings between the
+    :func:`parallel_neighbours` only."""
     out: list[Effect] = []
-    for joint in chain.joint_names:
+    names = list(chain.joint_names)
+    parallel = parallel_neighbours(chain)
+    for j, joint in enumerate(names):
         out.append(Effect("compliance", joint))
         out.append(Effect("encoder_scale", joint))
         out += [Effect("cyclic", joint, harmonic=h) for h in HARMONICS]
         out += [Effect("backlash", joint, source=s) for s in BACKLASH_SOURCES]
+        out += [Effect("coupling", joint, driver=names[i]) for i in (j - 1, j + 1)
+                if (min(i, j), max(i, j)) in parallel]
     if has_time:
         out.append(Effect("drift"))
     out.append(Effect("sensor_scale"))

@@ -99,6 +99,8 @@ def partial_residual(effect, objective, solution, inputs, chain):
         label = "sign of gravity torque" if effect.source == "gravity" else "approach direction (flank)"
     elif effect.type == "compliance":
         driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
+    elif effect.type == "coupling":
+        driver, label = basis[:, 0], f"reading of {effect.driver} [rad or m]"
     else:
         driver, label = inputs.q[:, j], _DRIVERS[effect.type]
     return driver, label, shift, fitted

@@ -35,6 +35,9 @@ PLAUSIBLE = {
     "encoder_scale": (0.02, 0.02),  # relative
     "cyclic": (0.02, 0.005),  # rad, m
     "backlash": (0.1, 0.01),  # rad, m
+    # relative: a joint read against another (1 on parallelogram arms whose controller reads J3 − J2),
+    # a differential wrist's ratio below it
+    "coupling": (1.5, 1.5),
     "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
     "sensor_scale": (0.01, 0.01),  # relative
 }
@@ -211,3 +214,19 @@ class Judge:
             if held > before * 1.02:
                 return f"it makes the held-out rows worse ({before:.3f} → {held:.3f} mm RMS)"
         return "adopted"
+
+
+#: |c| within this of 1: a joint read against its driver (J3 from the horizontal), not a transmission's ratio.
+READ_AGAINST = 0.01
+
+
+def coupling_advice(effect: Effect, value: float) -> str:
+    """What an adopted coupling means and what to do (a reading taken against another joint is
+    corrected in the data: the geometry should then be selected on the corrected readings)."""
+    read_against = abs(abs(value) - 1.0) < READ_AGAINST
+    why = (f"the controller measures it from {effect.driver}, as parallelogram arms read J3 from the horizontal"
+           if read_against else "a transmission coupling")
+    factor = f"{np.sign(value):+.0f}" if read_against else f"{value:.4g}"  # a convention is exact: ±1
+    return (f"{effect.joint}'s reading includes {-value:+.3f} x {effect.driver}'s ({why}): add {factor} x "
+            f"{effect.driver} to {effect.joint} in the data and calibrate again, so that the geometry is "
+            "chosen on the corrected readings")

@@ -7,6 +7,10 @@ Each joint effect shifts the reading of one joint: actual = q_j + shift, with
   URDF's inertias, plus an optional payload mass at the target;
 * ``encoder_scale``  shift = s · q_j             s relative (gear-ratio error);
 * ``cyclic``         shift = a · sin(h q_j) + b · cos(h q_j), harmonic h = 1, 2 [rad];
+* ``coupling``       shift = c · q_i             c relative: joint j's reading includes −c × joint
+  i's (the ``driver``), as a controller that measures J3 from the horizontal on a parallelogram
+  arm reads J3 − J2 (c = 1 corrects it); a mechanical cross-coupling of the transmissions gives a
+  small c;
 * ``backlash``       lost motion between gear flanks [rad or m], two forms:
   ``gravity``: shift = value · sign(tau_j(q)) (a static pose rests on the flank
   gravity pushes it to); ``approach``: shift = value · sign(q_j[k] − q_j[k−1])
@@ -44,7 +48,7 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
 
-JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash")
+JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash", "coupling")
 SENSOR_EFFECTS = ("drift", "sensor_scale")
 EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS
 BACKLASH_SOURCES = ("gravity", "approach")
@@ -65,12 +69,14 @@ class Effect:
         joint: URDF joint name for joint effects, None for sensor effects.
         harmonic: h of a ``cyclic`` effect.
         source: ``gravity`` or ``approach`` for ``backlash``.
+        driver: for ``coupling``, the joint whose reading drives this joint's shift.
     """
 
     type: str
     joint: str | None = None
     harmonic: int | None = None
     source: str | None = None
+    driver: str | None = None
 
     def __post_init__(self) -> None:
         if self.type not in EFFECT_TYPES:
@@ -81,6 +87,9 @@ class Effect:
             raise PincalError(f"cyclic effect harmonic must be one of {HARMONICS}, got {self.harmonic}")
         if self.type == "backlash" and self.source not in BACKLASH_SOURCES:
             raise PincalError(f"backlash source must be one of {BACKLASH_SOURCES}, got {self.source}")
+        if (self.type == "coupling") != bool(self.driver) or (self.driver and self.driver == self.joint):
+            raise PincalError(f"effect '{self.type}': a coupling, and only a coupling, names a driving joint "
+                              f"other than its own (got joint '{self.joint}', driver '{self.driver}')")
 
     @property
     def n_values(self) -> int:
@@ -103,6 +112,8 @@ class Effect:
             parts.append(f"h{self.harmonic}")
         if self.source:
             parts.append(self.source)
+        if self.driver:
+            parts.append(self.driver)
         return ":".join(parts)
 
 
@@ -122,6 +133,7 @@ class EffectInputs:
         flank_time: the rows' own time relative to the mean (K,) [s] when ``time``
             is the drift's, held outside a fitted span (:func:`effect_inputs`
             ``held_sessions``), for the approach flanks; None otherwise.
+        joint_names: the names of the columns of ``q`` (a coupling's driver is found by name).
     """
 
     q: np.ndarray
@@ -131,6 +143,7 @@ class EffectInputs:
     context_q: np.ndarray | None = None
     context_time: np.ndarray | None = None
     flank_time: np.ndarray | None = None
+    joint_names: tuple[str, ...] = ()
 
 
 def gravity_torques(
@@ -206,6 +219,7 @@ def effect_inputs(
         context_q=np.asarray(context_q, dtype=float) if with_context else None,
         context_time=np.asarray(context_time, dtype=float) - time_reference if with_context else None,
         flank_time=centred if drift_time is not centred else None,
+        joint_names=tuple(chain.joint_names),
     )
 
 
@@ -247,6 +261,11 @@ def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
         return inputs.gravity[:, joint : joint + 1]
     if effect.type == "encoder_scale":
         return q[:, None]
+    if effect.type == "coupling":
+        if effect.driver not in inputs.joint_names:
+            raise PincalError(f"effect '{effect.label}': no joint '{effect.driver}' on the chain; "
+                              f"{did_you_mean(str(effect.driver), inputs.joint_names, 'joints')}")
+        return inputs.q[:, inputs.joint_names.index(str(effect.driver)), None]
     if effect.type == "cyclic":
         h = effect.harmonic
         return np.column_stack([np.sin(h * q), np.cos(h * q)])
@@ -278,7 +297,7 @@ def joint_shifts(
 
 def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     """``TYPE:JOINT:VALUE`` (``cyclic:JOINT:H:SIN:COS``, ``backlash:JOINT:VALUE[:SOURCE]``,
-    ``drift:VX:VY:VZ`` [m/s], ``sensor_scale:VALUE``) → effect and values."""
+    ``coupling:JOINT:DRIVER:VALUE``, ``drift:VX:VY:VZ`` [m/s], ``sensor_scale:VALUE``) → effect and values."""
     parts = text.split(":")
     try:
         kind = parts[0]
@@ -292,6 +311,8 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
             effect, values = Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
         elif kind == "sensor_scale":
             effect, values = Effect(kind), np.array([float(parts[1])])
+        elif kind == "coupling":
+            effect, values = Effect(kind, parts[1], driver=parts[2]), np.array([float(parts[3])])
         else:
             effect, values = Effect(kind, parts[1]), np.array([float(parts[2])])
         if not np.all(np.isfinite(values)) or (kind == "sensor_scale" and values[0] <= -1.0):
@@ -300,13 +321,14 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     except (IndexError, ValueError):
         raise PincalError(
             f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "
-            "backlash:JOINT:VALUE[:gravity|approach], drift:VX:VY:VZ or sensor_scale:VALUE"
+            "backlash:JOINT:VALUE[:gravity|approach], coupling:JOINT:DRIVER:VALUE, drift:VX:VY:VZ or "
+            "sensor_scale:VALUE"
         ) from None
 
 
 def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict:
     """REPORT.json form: {"type", "joint", "value"}; cyclic gives harmonic, sin, cos;
-    backlash adds source; drift's value is [vx, vy, vz] in m/s."""
+    backlash adds source, coupling its driver; drift's value is [vx, vy, vz] in m/s."""
     values = np.atleast_1d(np.asarray(values, dtype=float))
     std = None if std is None else np.atleast_1d(np.asarray(std, dtype=float))
     out: dict = {"type": effect.type, "joint": effect.joint}
@@ -320,6 +342,8 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
         out["std"] = std.tolist() if effect.type == "drift" else float(std[0])
     if effect.type == "backlash":
         out["source"] = effect.source
+    if effect.type == "coupling":
+        out["driver"] = effect.driver
     return out
 
 
@@ -331,7 +355,7 @@ def effect_from_dict(entry: dict) -> tuple[Effect, np.ndarray]:
             return Effect(kind, entry["joint"], harmonic=int(entry["harmonic"])), np.array(
                 [float(entry["sin"]), float(entry["cos"])]
             )
-        effect = Effect(kind, entry.get("joint"), source=entry.get("source"))
+        effect = Effect(kind, entry.get("joint"), source=entry.get("source"), driver=entry.get("driver"))
         return effect, np.atleast_1d(np.asarray(entry["value"], dtype=float))
     except (KeyError, TypeError, ValueError) as exc:
         raise PincalError(f"bad effect entry {entry} in the report ({exc})") from None

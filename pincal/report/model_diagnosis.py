@@ -8,14 +8,14 @@ from pincal.report.model import LevelChoiceJson, PoseErrorsJson, TimeSpanJson, V
 
 
 class _EffectKeys(TypedDict):
-    type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "drift", "sensor_scale"]
+    type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "coupling", "drift", "sensor_scale"]
     joint: str | None
 
 
 class EffectJson(_EffectKeys, total=False):
     """An effect (:func:`pincal.model.effects.effect_to_dict`): ``cyclic`` has ``harmonic``, ``sin``,
-    ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``*std``
-    when estimated."""
+    ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``coupling``
+    its ``driver`` (the joint whose reading it adds, × value); ``*std`` when estimated."""
 
     harmonic: int
     sin: float
@@ -25,6 +25,7 @@ class EffectJson(_EffectKeys, total=False):
     value: float | Vector3
     std: float | Vector3
     source: str | None
+    driver: str
 
 
 class CandidateJson(EffectJson, total=False):

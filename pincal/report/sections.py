@@ -89,6 +89,7 @@ def _effect_value(entry: dict, prismatic: bool) -> tuple[str, str]:
     scale, unit = {
         "compliance": (1000.0, "mm/N" if length else "mrad/(N·m)"),
         "encoder_scale": (100.0, "%"),
+        "coupling": (1.0, f"× {entry.get('driver')}'s reading"),
         "sensor_scale": (100.0, "%"),
         "backlash": (1000.0, "mm per flank" if length else "mrad per flank"),
     }.get(kind, (1.0, ""))
@@ -103,6 +104,8 @@ def effect_label(entry: dict) -> str:
     text = f"{name} of {joint}" if joint else f"{name} of the sensor" if kind == "sensor_scale" else str(name)
     if kind == "cyclic":
         text += f" (harmonic {entry.get('harmonic')})"
+    if kind == "coupling":
+        text = f"coupling of {joint} to {entry.get('driver')}'s reading"
     if kind == "backlash" and entry.get("source"):
         text += f" ({entry['source']} flank)" if entry["source"] == "approach" else f" ({entry['source']})"
     return text

@@ -113,6 +113,7 @@ def simulated_shifts(
         gravity=gravity_torques(chain, q),
         time=time,
         order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
+        joint_names=tuple(chain.joint_names),
     )
     return joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
 
