@@ -380,8 +380,9 @@ def _calibrate_rows(
         analysis = Analysis(np.hstack([jac, held_cols]), kinematic_cols,
                             np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
     fit = fit_kinematics(problem, analysis, size, rows, criterion, level, sigma_iterations, counter)
-    if analysis is not None:
-        dropped = dropped_parameters(jac, cast(Ordering, fit.ordering), fit.kept, other_cols,
+    if analysis is not None:  # what absorbs a dropped parameter: the model as it is, the target where it is
+        real = jac if rows.rotations is None else full.jacobian(full.start_vector())
+        dropped = dropped_parameters(real, cast(Ordering, fit.ordering), fit.kept, other_cols,
                                      _column_names(full, params, np.arange(size), problem.session_names))
     objective, solution, kept, covariance = fit.objective, fit.solution, fit.kept, fit.covariance
     x = solution.x

@@ -230,9 +230,10 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
     prior explains the misfit as noise: with deviations far beyond the prior's scale and few rows
     (the paper's large KUKA deviations, 10–14 6D rows) every parameter stayed prior-dominated and the
     model missed by 40 mm where the data determine it to 0.02 mm. The unregularised fit of the same
-    parameters gives the data's scale; when it is below :data:`pincal.fit.prior.DATA_SCALE_GAP` of
-    the fixed point's, eq P2 is iterated from it too, and the fixed point with the larger evidence by
-    more than :data:`pincal.fit.prior.DECISIVE_LOG_EVIDENCE` is the answer. Otherwise the prior's
+    parameters gives the data's scale (corrected for its degrees of freedom, ‖r‖²/(m − n)); when it
+    is below :data:`pincal.fit.prior.DATA_SCALE_GAP` of the fixed point's, eq P2 is iterated from it
+    too, and the fixed point with the larger evidence by more than
+    :data:`pincal.fit.prior.DECISIVE_LOG_EVIDENCE` is the answer. Otherwise the prior's
     fixed point stands — under the prior the closer fit is the less probable one: deviations of
     10 mm against its 1 mm — and the third value returned is the closer fit's position scale [m]
     (None when it was not tried or was taken), for a note that the prior may be too narrow.
@@ -247,16 +248,22 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
         return objective, solution, None
     finally:
         problem.prior = prior
-    if not any(data is not None and data < DATA_SCALE_GAP * scale for data, scale in zip(problem.scales(), first)):
+    # the maximum-likelihood scale is biased low by the m − n degrees of freedom: compared unbiased
+    m, n = unregularised.residual.size, unregularised.x.size
+    unbiased = [None if data is None else data * np.sqrt(m / max(m - n, 1)) for data in problem.scales()]
+    if not any(data is not None and data < DATA_SCALE_GAP * scale for data, scale in zip(unbiased, first)):
         problem.set_scales(first)  # one basin: the fixed point already lies near the data's scale
         return objective, solution, None
-    closer = problem.scales()[0]
-    second, second_solution = problem.fit(kept, base, unregularised.x, what=what)
-    second, second_solution = _settle(problem, second, second_solution, kept, base, what, 0)
-    if problem.log_evidence(second, second_solution) > first_evidence + DECISIVE_LOG_EVIDENCE:
+    try:
+        second, second_solution = problem.fit(kept, base, unregularised.x, what=what)
+        second, second_solution = _settle(problem, second, second_solution, kept, base, what, 0)
+        better = problem.log_evidence(second, second_solution) > first_evidence + DECISIVE_LOG_EVIDENCE
+    except CalibrationError:  # a scale near rounding level makes the prior fit singular
+        better = False
+    if better:
         return second, second_solution, None
     problem.set_scales(first)
-    return objective, solution, closer
+    return objective, solution, cast(float, unbiased[0])
 
 
 def _prior_too_narrow(n_kept: int, closer_m: float, scale_m: float, prior: Prior) -> str:

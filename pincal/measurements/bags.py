@@ -239,8 +239,11 @@ def read_bag(
         with reader:
             joints_samples, samples, tf_frames, joint_skips, msgtypes = _read_messages(
                 reader, path, joints_topic, measurements, flag, accepted)
-    except errors as exc:
-        raise MeasurementError(f"{path}: not a readable ROS bag ({exc})") from None
+    except MeasurementError:
+        raise
+    except Exception as exc:  # rosbags' own errors, and a corrupt chunk's (zstd, struct, overflow) while decoding
+        detail = " ".join(str(exc).split())  # one line
+        raise MeasurementError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {detail})") from None
     joints = _joint_stream(path, joints_topic, joints_samples, joint_names, joint_skips)
     out = []
     for spec in measurements:

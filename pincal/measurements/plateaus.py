@@ -251,6 +251,10 @@ def _correlated_offset(joints: JointStream, measurements: Sequence[MeasurementSt
     prior = float(np.median(measurements[0].stamps - measurements[0].received)
                   - np.median(joints.stamps - joints.received))
     stamps = [joints.stamps, *(s.stamps for s in measurements)]
+    span = max(t[-1] for t in stamps) - min(t[0] for t in stamps)
+    if max_offset > span:
+        raise MeasurementError(f"--max-offset {max_offset:g} s: longer than the recording ({span:.3g} s); "
+                               "give at most the recording's length, or --clock-offset if it is known")
     periods = [np.median(np.diff(t)) for t in stamps if len(t) > 1]
     step = float(np.clip(min(periods, default=GRID_STEP_RANGE[1]), *GRID_STEP_RANGE))
     origin = joints.stamps[0]
