@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
 #: Bottom to top; the rooms of one layer are peers and never import each other.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("_version", "errors", "outputs", "progress"),
+    ("_version", "errors", "outputs", "progress", "palette"),
     ("measurements", "robots", "datasets"),
     ("model",),
     ("simulation",),

@@ -103,6 +103,14 @@ def diagnosis_page(browser, tiago):
     opened.page.close()
 
 
+def _determined_by_unit(report: dict) -> list[str]:
+    """The determined parameters as the page lists them: one table per unit (lengths, angles),
+    each in the report's order."""
+    determined = [p for p in report["parameters"] if p["calibrated"] is not None]
+    units = list(dict.fromkeys(p["unit"] for p in determined))
+    return [p["name"] for unit in units for p in determined if p["unit"] == unit]
+
+
 def _report(folder: Path) -> dict:
     return json.loads((folder / "REPORT.json").read_text(encoding="utf-8"))
 
@@ -146,7 +154,7 @@ def test_summary_shows_the_numbers_of_the_report(diagnosis_page, tiago):
 def test_parameters_identifiability_registration_and_effects(diagnosis_page, tiago):
     report, page = _report(tiago), diagnosis_page.page
     shown = page.locator("#parameters-table tbody tr td:first-child").all_inner_texts()
-    assert shown == [p["name"] for p in report["parameters"] if p["calibrated"] is not None]
+    assert shown == _determined_by_unit(report)
     undetermined = page.locator("#undetermined-table tbody tr td:first-child").all_inner_texts()
     assert undetermined == [p["name"] for p in report["parameters"] if p["calibrated"] is None]
     ident = page.locator("section#identifiability").inner_text()
@@ -271,7 +279,7 @@ def test_report_command_renders_a_paper_report_and_unknown_keys(browser, tmp_pat
         more = page.locator("section#more").inner_text()
         assert "instrument" in more and "LT-4711" in more and "21.5" in more
         shown = page.locator("#parameters-table tbody tr td:first-child").all_inner_texts()
-        assert shown == [p["name"] for p in report["parameters"] if p["calibrated"] is not None]
+        assert shown == _determined_by_unit(report)
     finally:
         opened.page.close()
 

@@ -425,8 +425,10 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--alternate", type=joint_names, default=(), metavar="JOINT[,JOINT...]",
                       help="order so that these joints reach their positions from both directions equally")
 
-    html = sub.add_parser("report", help="write the HTML page of an existing REPORT.json (or evaluate --json file)")
-    html.add_argument("document", type=Path, metavar="REPORT.json", help="report written by calibrate or diagnose")
+    html = sub.add_parser("report", help="write the HTML page of an existing REPORT.json (or evaluate --json file, "
+                                               "or PLAN.json of plan: the plan's page)")
+    html.add_argument("document", type=Path, metavar="REPORT.json",
+                      help="report written by calibrate or diagnose (or PLAN.json)")
     html.add_argument("--out", required=True, type=Path, metavar="REPORT.html",
                       help="HTML page to write: self-contained, figures embedded, no network")
 

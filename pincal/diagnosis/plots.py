@@ -1,6 +1,14 @@
 """PNG figures of a diagnosis: each adopted effect against its driver, and the
 error distributions before and after (matplotlib's object API on the Agg
-canvas: no pyplot, no global figure state, no GUI backend)."""
+canvas: no pyplot, no global figure state, no GUI backend).
+
+An effect is drawn as its function — evaluated by :func:`effect_curve` on
+:data:`GRID_POINTS` values over its driver's range in the data (the joint
+reading for ``cyclic`` and ``encoder_scale``, the gravity torque for
+``compliance`` and a gravity backlash, the approach flank −1/+1 for an approach
+backlash) — so a backlash is a step at the flank change and a cyclic error a
+smooth curve, with each row's partial residual over it. Colours are
+:mod:`pincal.palette`'s, as on the HTML report."""
 
 from __future__ import annotations
 
@@ -11,7 +19,40 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from pincal.diagnosis.diagnose import Diagnosis
+from pincal.model.effects import Effect
 from pincal.outputs import replacing
+from pincal.palette import CALIBRATED, WITH_EFFECTS
+
+#: The rows' partial residuals: data, not a model.
+DATA_COLOUR = "#33404d"
+
+#: Values of the driver an effect's function is evaluated at, over its range in the data.
+GRID_POINTS = 400
+
+
+def _basis(effect: Effect, driver: np.ndarray) -> np.ndarray:
+    """The effect's basis as a function of its driver (:func:`pincal.model.effects.joint_basis`
+    with the driver of :func:`pincal.diagnosis.structure.partial_residual`), (n, n_values)."""
+    if effect.type == "cyclic":
+        return np.column_stack([np.sin(effect.harmonic * driver), np.cos(effect.harmonic * driver)])
+    if effect.type == "backlash":
+        return np.sign(driver)[:, None]
+    return np.asarray(driver, dtype=float)[:, None]  # compliance, encoder_scale: linear in the driver
+
+
+def effect_curve(effect: Effect, driver: np.ndarray, fitted: np.ndarray,
+                 points: int = GRID_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """The adopted effect's shift as a function of its driver on ``points`` values spanning
+    the driver's range in the data (5 % beyond each end; an approach flank: −1.25 … 1.25),
+    with the values that give the rows' ``fitted`` shifts."""
+    driver = np.asarray(driver, dtype=float)
+    low, high = float(np.min(driver)), float(np.max(driver))
+    pad = 0.25 if effect.type == "backlash" and effect.source == "approach" else 0.05 * max(high - low, 1e-9)
+    if effect.type == "backlash":  # the step sits at 0: the grid always spans it
+        low, high = min(low, -pad), max(high, pad)
+    grid = np.linspace(low - pad, high + pad, points)
+    values = np.linalg.lstsq(_basis(effect, driver), np.asarray(fitted, dtype=float), rcond=None)[0]
+    return grid, _basis(effect, grid) @ values
 
 
 def _joint_unit(label: str) -> str:
@@ -30,11 +71,11 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
         assert step.joint_residual is not None and step.fitted_shift is not None
         fig = Figure(figsize=(6.4, 4.2), layout="tight")
         ax = fig.subplots()
-        order = np.argsort(step.driver, kind="stable")
         unit = _joint_unit(step.effect.joint or "")
-        ax.plot(step.driver, step.joint_residual * 1000.0, "o", ms=4, alpha=0.7,
+        grid, curve = effect_curve(step.effect, step.driver, step.fitted_shift)
+        ax.plot(step.driver, step.joint_residual * 1000.0, "o", ms=4, alpha=0.6, color=DATA_COLOUR,
                 label="fitted shift + remaining residual, per row")
-        ax.plot(step.driver[order], step.fitted_shift[order] * 1000.0, "-", lw=2, label=f"fitted {step.effect.type}")
+        ax.plot(grid, curve * 1000.0, "-", lw=2, color=WITH_EFFECTS, label=f"fitted {step.effect.type}")
         ax.set_xlabel(step.driver_label)
         ax.set_ylabel(f"joint shift of {step.effect.joint} [m{unit}]")
         ax.set_title(f"step {number}: {step.effect.label} (ΔBIC {step.delta_bic:.0f})")
@@ -60,8 +101,8 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
     for ax, (title, before, after) in zip(axes[0], panels):
         b, a = before.position_m.ravel() * 1000.0, after.position_m.ravel() * 1000.0
         bins = np.linspace(0.0, max(b.max(), a.max()) * 1.05, 30)
-        ax.hist(b, bins=bins, alpha=0.5, label=f"geometry only (RMS {before.position.rms:.3f} mm)")
-        ax.hist(a, bins=bins, alpha=0.5, label=f"with effects (RMS {after.position.rms:.3f} mm)")
+        ax.hist(b, bins=bins, alpha=0.5, color=CALIBRATED, label=f"geometry only (RMS {before.position.rms:.3f} mm)")
+        ax.hist(a, bins=bins, alpha=0.5, color=WITH_EFFECTS, label=f"with effects (RMS {after.position.rms:.3f} mm)")
         ax.set_xlabel("point position error [mm]")
         ax.set_ylabel("count")
         ax.set_title(title)

@@ -94,9 +94,10 @@ def partial_residual(effect, objective, solution, inputs, chain):
     a = column.reshape(len(column), -1)
     r = residual.reshape(len(residual), -1)
     shift = fitted - np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
-    if effect.type == "backlash":
-        driver = basis[:, 0]
-        label = "sign of gravity torque" if effect.source == "gravity" else "approach direction (flank)"
+    if effect.type == "backlash" and effect.source == "gravity":  # shift = value · sign(tau_j): a step at 0
+        driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
+    elif effect.type == "backlash":
+        driver, label = basis[:, 0], "approach direction (flank: −1 from above, +1 from below)"
     elif effect.type == "compliance":
         driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
     elif effect.type == "coupling":

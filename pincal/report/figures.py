@@ -21,15 +21,14 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from pincal.fit.outliers import OUTLIER_THRESHOLD
+from pincal.palette import CALIBRATED, FLAG, NOMINAL, model_colour
 
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType  # matplotlib >= 3.9
 
-#: Model colours, nominal first, the reported model last (the page's CSS uses the same).
-NOMINAL_COLOUR = "#9aa5b1"
-MIDDLE_COLOUR = "#e0a23b"
-FINAL_COLOUR = "#2563eb"
-FLAG_COLOUR = "#d1342f"
+#: Model colours: :mod:`pincal.palette` (the page's CSS and legend use the same).
+NOMINAL_COLOUR = NOMINAL
+FLAG_COLOUR = FLAG
 _STYLE: dict[RcKeyType, Any] = {
     "svg.fonttype": "none",
     "svg.hashsalt": "pincal-report",
@@ -48,11 +47,10 @@ _STYLE: dict[RcKeyType, Any] = {
 }
 
 
-def model_colours(count: int) -> list[str]:
-    """Colours of ``count`` models, nominal first and the reported model last."""
-    if count == 1:
-        return [FINAL_COLOUR]
-    return [NOMINAL_COLOUR] + [MIDDLE_COLOUR] * (count - 2) + [FINAL_COLOUR]
+def model_colours(names: Sequence[str]) -> list[str]:
+    """The colour of each model of ``names`` (:func:`pincal.palette.model_colour`): a model
+    has one colour on the whole page, wherever it stands in a set's chain."""
+    return [model_colour(name) for name in names]
 
 
 def _svg_uri(fig: Figure) -> str:
@@ -90,7 +88,7 @@ def overview_figure(stages: Sequence[dict[str, Any]]) -> str | None:
             labels, values, colours, y = [], [], [], 0.0
             ticks = []
             for stage in stages:
-                for (model, *rms), colour in zip(stage["models"], model_colours(len(stage["models"]))):
+                for (model, *rms), colour in zip(stage["models"], model_colours([m[0] for m in stage["models"]])):
                     value = rms[column - 1]
                     labels.append(f"{stage['set']}: {model}")
                     values.append(np.nan if value is None else value)
@@ -134,12 +132,15 @@ def row_errors_figure(entry: dict[str, Any], flagged: Sequence[int]) -> str:
         [str(int(n)) for n in entry["lines"]]
     models = entry["models"]
     has_rotation = models[-1].get("orientation_deg") is not None
-    colours = model_colours(len(models))
+    colours = model_colours([m["model"] for m in models])
     flagged_set = {int(f) for f in flagged}
     width = 0.8 * (float(np.min(np.diff(np.sort(lines)))) if lines.size > 1 else 1.0)
     with rc_context(_STYLE):
-        fig = Figure(figsize=(11.0, 3.0 + (2.4 if has_rotation else 0.0)), layout="constrained")
-        axes = fig.subplots(2 if has_rotation else 1, 1, squeeze=False, sharex=True)[:, 0]
+        height = 3.0 + (2.4 if has_rotation else 0.0)
+        fig = Figure(figsize=(11.0, height))  # fixed margins [in]: a layout engine would draw it twice
+        axes = fig.subplots(2 if has_rotation else 1, 1, squeeze=False, sharex=True,
+                            gridspec_kw={"left": 0.8 / 11.0, "right": 1.0 - 0.15 / 11.0, "bottom": 0.5 / height,
+                                         "top": 1.0 - 0.4 / height, "hspace": 0.12})[:, 0]
         for ax, key, unit in zip(axes, ("position_mm", "orientation_deg"), ("mm", "deg")):
             final = np.asarray(models[-1][key], dtype=float)
             bar_colours = [FLAG_COLOUR if k in flagged_set else colours[-1] for k in range(len(lines))]
@@ -181,7 +182,8 @@ def row_errors_figure(entry: dict[str, Any], flagged: Sequence[int]) -> str:
             bars.append(Patch(color=FLAG_COLOUR, label="flagged rows"))
         threshold_line = [h for h, label in zip(handles, labels) if label.startswith("median")]
         handles = [h for h, label in zip(handles, labels) if not label.startswith("median")] + bars + threshold_line
-        fig.legend(handles=handles, loc="outside upper left", ncols=len(handles), fontsize=8)
+        fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.7 / 11.0, 1.0), ncols=len(handles),
+                   fontsize=8)
         return _svg_uri(fig)
 
 
@@ -205,10 +207,71 @@ def parameter_figure(rows: Sequence[dict[str, Any]]) -> str | None:
             change = np.array([r["change"] for r in chosen], dtype=float)
             spread = np.array([np.nan if r["std"] is None else 2.0 * r["std"] for r in chosen], dtype=float)
             ax.errorbar(change, y, xerr=np.where(np.isfinite(spread), spread, 0.0), fmt="o", ms=3.5,
-                        color=FINAL_COLOUR, ecolor="#93b4f5", elinewidth=2, capsize=0)
+                        color=CALIBRATED, ecolor="#93b4f5", elinewidth=2, capsize=0)
             ax.axvline(0.0, color="#52606d", lw=0.8)
             ax.set_yticks(y, [r["name"] for r in chosen], fontsize=7.5)
             ax.invert_yaxis()
             ax.set_xlabel(f"change from nominal [{unit}] (bars: ± 2 standard deviations)")
             ax.grid(axis="y", visible=False)
+        return _svg_uri(fig)
+
+
+#: The plan page: the plan's calibrated model in the calibrated colour, random choices grey.
+PLAN_COLOURS = {"plan": CALIBRATED, "random": NOMINAL, "recorded_only": "#7b8794"}
+
+
+def prediction_figure(rows: Sequence[dict[str, Any]]) -> str | None:
+    """Predicted mean and max position error of the plan and of random choices (PLAN.json
+    ``predicted``), as bars. ``rows``: ``{"key", "label", "mean_value", "max_value"}``."""
+    rows = [r for r in rows if isinstance(r.get("mean_value"), (int, float))]
+    if not rows:
+        return None
+    with rc_context(_STYLE):
+        fig = Figure(figsize=(5.6, 0.9 + 0.55 * len(rows)))
+        ax = fig.add_axes((0.2, 0.3, 0.76, 0.62))
+        y = np.arange(len(rows), dtype=float)
+        for stat, offset, alpha in (("mean_value", -0.18, 1.0), ("max_value", 0.18, 0.45)):
+            values = [float(r[stat]) if isinstance(r.get(stat), (int, float)) else np.nan for r in rows]
+            ax.barh(y + offset, values, height=0.34, alpha=alpha,
+                    color=[PLAN_COLOURS.get(r["key"], CALIBRATED) for r in rows])
+            for tick, value in zip(y + offset, values):
+                if np.isfinite(value):
+                    ax.text(value, tick, f" {value:#.3g} ({stat[:-6]})", va="center", fontsize=7.5, color="#33404d")
+        short = {"plan": "this plan", "random": "random (median)", "recorded_only": "recorded rows"}
+        ax.set_yticks(y, [short.get(r["key"], r["key"]) for r in rows], fontsize=8)
+        ax.invert_yaxis()
+        ax.set_xlim(0, 1.45 * max(float(r["max_value"] or r["mean_value"]) for r in rows))
+        ax.set_xlabel("predicted position error [mm] (solid: mean, light: max)")
+        ax.grid(axis="y", visible=False)
+        return _svg_uri(fig)
+
+
+def coverage_figure(coverage: Sequence[dict[str, Any]]) -> str | None:
+    """Per joint: its URDF range (grey bar, scaled to 0 … 1) and the plan's poses in it (ticks).
+
+    Args:
+        coverage: ``{"joint", "values", "lower", "upper", "percent"}`` in display units.
+    """
+    if not coverage:
+        return None
+    with rc_context(_STYLE):
+        fig = Figure(figsize=(7.2, 0.7 + 0.32 * len(coverage)))
+        ax = fig.add_axes((0.2, 0.6 / (0.7 + 0.32 * len(coverage)), 0.66, 1 - 0.75 / (0.7 + 0.32 * len(coverage))))
+        for row, entry in enumerate(coverage):
+            lower, upper, values = entry["lower"], entry["upper"], np.asarray(entry["values"], dtype=float)
+            if lower is None or upper is None or upper <= lower:  # no limits: the poses' own span
+                lower, upper = (float(values.min()), float(values.max())) if values.size else (0.0, 1.0)
+                upper = upper if upper > lower else lower + 1.0
+            ax.barh(row, 1.0, left=0.0, height=0.6, color="#e4e8ec")
+            scaled = (values - lower) / (upper - lower)
+            if scaled.size:
+                ax.barh(row, scaled.max() - scaled.min(), left=scaled.min(), height=0.6, color=CALIBRATED, alpha=0.35)
+                ax.vlines(scaled, row - 0.3, row + 0.3, color=CALIBRATED, lw=1.2)
+            ax.text(1.02, row, entry["percent"], va="center", fontsize=8, color="#33404d")
+        ax.set_yticks(range(len(coverage)), [e["joint"] for e in coverage], fontsize=8)
+        ax.set_ylim(len(coverage) - 0.5, -0.5)
+        ax.set_xlim(0, 1)
+        ax.set_xticks([0, 0.5, 1], ["lower limit", "middle", "upper limit"])
+        ax.set_xlabel("each joint's range in the URDF (ticks: the plan's poses; right: share of the range spanned)")
+        ax.grid(False)
         return _svg_uri(fig)

@@ -30,9 +30,12 @@ from jinja2 import (
 from pincal.errors import PincalError
 from pincal.fit.outliers import OUTLIER_THRESHOLD
 from pincal.outputs import write_text
+from pincal.palette import CALIBRATED, FLAG, LEGEND, NOMINAL, model_colour
 from pincal.report import figures
 from pincal.report.fixture_html import fixture_section
+from pincal.report.plan_html import is_plan, plan_context
 from pincal.report.sections import (
+    change_text,
     effects_section,
     fixed,
     generic,
@@ -43,6 +46,7 @@ from pincal.report.sections import (
 )
 
 TEMPLATE = "report.html.j2"
+PLAN_TEMPLATE = "plan.html.j2"
 
 #: Top-level REPORT.json keys the page lays out itself; any other key (for example
 #: ``sessions``) is shown as it is, under "More in this report".
@@ -65,9 +69,11 @@ def load_document(path: str | Path) -> dict[str, Any]:
         raise PincalError(f"{path}: is a directory; give the REPORT.json file") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise PincalError(f"{path}: not a readable JSON report ({exc})") from None
-    if not isinstance(document, dict) or not ("parameters" in document or "position" in document):
+    if not isinstance(document, dict) or not ("parameters" in document or "position" in document
+                                              or is_plan(document)):
         raise PincalError(f"{path}: not a pincal report (no 'parameters', nor the 'position' errors of "
-                          "'pincal evaluate --json'); pass the REPORT.json of calibrate or diagnose")
+                          "'pincal evaluate --json', nor a PLAN.json's 'plan_version'); pass the REPORT.json "
+                          "of calibrate or diagnose, or the PLAN.json of plan")
     return document
 
 
@@ -112,14 +118,13 @@ def _summary(doc: dict, evaluation: dict | None) -> dict[str, Any]:
                   (m["errors"].get("orientation") or {}).get("rms_deg")) for m in models]
         stages.append({"set": entry["set"], "models": chain})
         first, last = chain[0][1], chain[-1][1]
-        change = None
-        if len(chain) > 1 and isinstance(first, (int, float)) and isinstance(last, (int, float)) and first > 0:
-            change = f"{100.0 * (last - first) / first:+.0f} % from {chain[0][0]}".replace("-", "−")
+        change = change_text(first, last) if len(chain) > 1 else None
         cards.append({
             "set": entry["set"], "file": _text(entry.get("file")), "rows": len(entry.get("lines") or []),
             "final": headline(last), "final_rot": headline(chain[-1][2]) if chain[-1][2] is not None else None,
             "steps": [{"model": name, "value": headline(rms)} for name, rms, _ in chain],
-            "colours": figures.model_colours(len(chain)), "change": change,
+            "colours": figures.model_colours([name for name, _, _ in chain]),
+            "colour": model_colour(chain[-1][0]), "change": change and f"{change} from {chain[0][0]}",
             "notes": _registration_notes(evaluation) if entry.get("set") == "evaluated" else [],
         })
         for m in models:
@@ -135,7 +140,7 @@ def _summary(doc: dict, evaluation: dict | None) -> dict[str, Any]:
             if row is not None:
                 cards.append({"set": row["set"], "file": None, "rows": row["rows"], "final": row["pos"][1],
                               "final_rot": row["rot"][1] if row["rot"] else None, "steps": [], "colours": [],
-                              "change": None,
+                              "colour": model_colour(row["model"]), "change": None,
                               "notes": _registration_notes(evaluation) if row["set"] == "evaluated" else []})
     kept = [row for row in table if row is not None]
     points = max((len(row["points"]) for row in kept), default=0)
@@ -366,6 +371,10 @@ def render_html(document: dict[str, Any], evaluation: dict[str, Any] | None = No
         source: the file ``document`` was read from, named in the error of a malformed one.
     """
     try:
+        if is_plan(document):  # a PLAN.json: its own page, the same look
+            context = plan_context(document, Path(base) if base is not None else Path.cwd(), figures)
+            context["colours"] = {"nominal": NOMINAL, "calibrated": CALIBRATED, "flag": FLAG}
+            return _environment().get_template(PLAN_TEMPLATE).render(**context)
         return _render(document, evaluation, base)
     except (LookupError, TypeError, ValueError, AttributeError, UndefinedError) as exc:
         where = f"{source}: " if source is not None else ""
@@ -421,10 +430,18 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "urdf_sha256": document.get("urdf_sha256"),
         "evaluation": evaluation,
         "evaluated_sessions": evaluated_sessions(evaluation),
-        "colours": {"nominal": figures.NOMINAL_COLOUR, "middle": figures.MIDDLE_COLOUR,
-                    "final": figures.FINAL_COLOUR, "flag": figures.FLAG_COLOUR},
+        "colours": {"nominal": NOMINAL, "calibrated": CALIBRATED, "flag": FLAG},
+        "legend": _legend(document, evaluation),
     }
     return _environment().get_template(TEMPLATE).render(**context)
+
+
+def _legend(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
+    """The page's one colour key (:data:`pincal.palette.LEGEND`): the models this report shows."""
+    sets = list(doc.get("row_errors") or []) + list((evaluation or {}).get("row_errors") or [])
+    names = {str(m.get("model")) for e in sets for m in e.get("models") or [] if isinstance(m, dict)}
+    names = names or {"calibrated geometry"}
+    return [(label, colour) for label, colour in LEGEND if any(model_colour(n) == colour for n in names)]
 
 
 def _chain(chain: Any) -> dict[str, Any] | None:

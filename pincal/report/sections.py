@@ -12,8 +12,13 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-#: Display unit of a REPORT.json unit: changes and spreads are shown in mm and mrad.
-DISPLAY = {"m": (1000.0, "mm"), "rad": (1000.0, "mrad")}
+#: Display units of a REPORT.json unit: (title, value scale and unit — nominal and
+#: calibrated —, change scale and unit — change and standard deviation). Lengths in
+#: mm throughout; angles in deg (values) and mrad (changes, spreads).
+DISPLAY = {
+    "m": ("Lengths", 1000.0, "mm", 1000.0, "mm"),
+    "rad": ("Angles", 180.0 / math.pi, "deg", 1000.0, "mrad"),
+}
 
 
 def num(value: Any, digits: int = 4) -> str:
@@ -23,6 +28,33 @@ def num(value: Any, digits: int = 4) -> str:
     return f"{value + 0.0:.{digits}g}"  # + 0.0: no negative zero
 
 
+def change_text(before: Any, after: Any) -> str | None:
+    """A change of a non-negative error from ``before`` to ``after``, as the page shows it.
+
+    (after − before) / before in % while ``after`` is between half and twice ``before``
+    (``−23 %``, ``+8.4 %``); beyond, the ratio (``4210× smaller``, ``3.2× larger``),
+    so an error that falls 4000-fold does not read −100 %: −100 % only when ``after``
+    is exactly 0. None when ``before`` is not a positive number (no relative change).
+    """
+    a, b = _finite(before), _finite(after)
+    if a is None or b is None or a <= 0.0 or b < 0.0:
+        return None
+    if b == 0.0:
+        return "−100 %"
+    ratio = b / a
+
+    def factor(value: float) -> str:
+        return f"{value:,.0f}" if value >= 1000.0 else f"{value:#.3g}".rstrip(".")
+
+    if ratio < 0.5:
+        return factor(1.0 / ratio) + "× smaller"
+    if ratio > 2.0:
+        return factor(ratio) + "× larger"
+    percent = 100.0 * (ratio - 1.0)
+    text = f"{percent:+.0f} %" if abs(percent) >= 9.5 else f"{percent:+.1f} %"
+    return text.replace("-", "−")
+
+
 def _finite(value: Any) -> float | None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         return None
@@ -30,15 +62,18 @@ def _finite(value: Any) -> float | None:
 
 
 def parameter_section(doc: dict, figure: Callable) -> dict[str, Any] | None:
-    """Determined parameters (nominal, calibrated, change, std, |change|/std) and the others, with why."""
+    """Determined parameters (nominal, calibrated, change, std, |change|/std), one table per
+    unit (:data:`DISPLAY`: each column in one unit, named in its header), and the others, with why."""
     parameters = doc.get("parameters")
     if not isinstance(parameters, list):
         return None
     dropped = {d.get("name"): d for d in (doc.get("identifiability") or {}).get("dropped") or []}
-    determined, undetermined, plotted = [], [], []
+    groups: dict[str, dict[str, Any]] = {}
+    undetermined, plotted = [], []
     for p in parameters:
         unit = str(p.get("unit", ""))
-        scale, shown = DISPLAY.get(unit, (1.0, unit))
+        title, value_scale, value_unit, scale, shown = DISPLAY.get(unit, (f"In {unit or 'no unit'}", 1.0, unit,
+                                                                          1.0, unit))
         calibrated, nominal, std = _finite(p.get("calibrated")), _finite(p.get("nominal")), _finite(p.get("std"))
         if calibrated is None:
             absorbed = (dropped.get(p.get("name")) or {}).get("absorbed_into") or []
@@ -50,17 +85,31 @@ def parameter_section(doc: dict, figure: Callable) -> dict[str, Any] | None:
         change = None if nominal is None else (calibrated - nominal) * scale
         std_shown = None if std is None else std * scale
         ratio = None if change is None or not std_shown else abs(change) / std_shown
-        determined.append({
-            "name": p.get("name"), "joint": p.get("joint"), "unit": unit, "shown": shown,
-            "nominal": num(nominal, 7), "calibrated": num(calibrated, 7),
+        group = groups.setdefault(unit, {"title": title, "unit": unit, "value_unit": value_unit,
+                                         "change_unit": shown, "rows": []})
+        group["rows"].append({
+            "name": p.get("name"), "joint": p.get("joint"),
+            "nominal": _decimals(nominal, value_scale, value_unit),
+            "calibrated": _decimals(calibrated, value_scale, value_unit),
+            "nominal_value": (nominal or 0.0) * value_scale, "calibrated_value": calibrated * value_scale,
             "change": num(change, 4), "change_value": change if change is not None else 0.0,
             "std": num(std_shown, 2), "std_value": std_shown if std_shown is not None else -1.0,
             "ratio": num(ratio, 3), "ratio_value": ratio if ratio is not None else -1.0,
             "status": p.get("status"),
         })
         plotted.append({"name": p.get("name"), "change": change, "std": std_shown, "unit": shown})
-    return {"determined": determined, "undetermined": undetermined, "total": len(parameters),
-            "figure": figure(plotted)}
+    return {"groups": list(groups.values()), "determined": [r for g in groups.values() for r in g["rows"]],
+            "undetermined": undetermined, "total": len(parameters), "figure": figure(plotted)}
+
+
+def _decimals(value: float | None, scale: float, unit: str) -> str:
+    """A nominal or calibrated value in its column's unit: 4 decimals in mm and deg (0.1 µm,
+    2 µrad), 7 significant digits otherwise."""
+    if value is None:
+        return "—"
+    if unit in ("mm", "deg"):
+        return f"{round(value * scale, 4) + 0.0:.4f}"
+    return num(value * scale, 7)
 
 
 def _effect_value(entry: dict, prismatic: bool) -> tuple[str, str]:
