@@ -1,24 +1,26 @@
 #!/usr/bin/env python3
 """Make the shipped example bag ``pincal/datasets/lwr_bag/`` (seeded: the same files every run).
 
-    python scripts/make_example_bag.py                    # writes pincal/datasets/lwr_bag/session/ and validation.csv
+    python scripts/make_example_bag.py                    # rewrites pincal/datasets/lwr_bag/session/ and validation.csv
     python scripts/make_example_bag.py --out /tmp/lwr_bag  # elsewhere (the folder must not exist)
 
-A KUKA LWR 4+ whose geometry is the paper's Table 1 plus its large deviations (Table 2, as
-``pincal simulate`` makes it) visits 16 random postures, holding each 3 s, moving between them in
-1.2 s (:mod:`pincal.simulation.recording`); one stop lasts only 1 s, and during another the
-motion-capture body is shaken (a 2 Hz, 2.5 mm wobble) while the joints hold. The streams are those
-of a real cell: ``/joint_states`` at 100 Hz from 20-bit encoders (readings rounded to 2π/2^20 rad,
-noise 1e-5 rad), ``/mocap/tool/pose`` (PoseStamped) at 100 Hz with 0.05 mm and 0.006° of noise,
-float32 values as motion-capture systems send them, stamped on the tracker's own clock 0.180 s
-ahead of the robot's, and received 2 ms (joints) and 12 ms (tracker) later with jitter. Written as
-a rosbag2 folder with MCAP storage and zstd chunks. ``validation.csv`` holds 20 other postures
+A KUKA LWR 4+ whose geometry is the paper's Table 1 plus its small deviations (Table 2, as
+``pincal simulate --deviations small`` makes it) visits 12 random postures, holding each 2.4 s,
+moving between them in 0.9 s (:mod:`pincal.simulation.recording`); one stop lasts only 1 s, and
+during another the motion-capture body is shaken (a 2 Hz, 2.5 mm wobble) while the joints hold.
+The streams are those of a real cell, thinned to 50 Hz to keep the file under 200 kB:
+``/joint_states`` from 20-bit encoders (readings rounded to 2π/2^20 rad, noise 3e-6 rad),
+``/mocap/tool/pose`` (PoseStamped) with 0.05 mm and 0.006° of noise, float32 values as
+motion-capture systems send them, stamped on the tracker's own clock 0.180 s ahead of the robot's,
+and received 2 ms (joints) and 12 ms (tracker) later with jitter. Written as a rosbag2 folder with
+MCAP storage and zstd chunks. ``validation.csv`` holds 20 other postures
 as static rows (CSV v1, the same tracker noise averaged over 150 samples) for ``pincal evaluate``.
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -65,6 +67,10 @@ def main() -> None:
     pose = replace(pose, positions=pose.positions.astype(np.float32).astype(float),
                    quaternions=pose.quaternions.astype(np.float32).astype(float), frame="mocap")
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.out == parser.get_default("out"):  # the shipped set is rewritten, byte for byte
+        shutil.rmtree(args.out / "session", ignore_errors=True)
+    elif (args.out / "session").exists():
+        parser.error(f"{args.out / 'session'} exists; give a new --out")
     write_bag(args.out / "session", joints, [pose], "mcap", compress=True)
     write_measurements(args.out / "validation.csv", validation)
     size = sum(p.stat().st_size for p in (args.out / "session").iterdir())

@@ -259,6 +259,9 @@ def small_bag(chain, tmp_path_factory):
     (["--joints", "/joint_states", "--pose", "/tracker/pose", "--min-still", "10"], "no static posture left"),
     (["--joints", "/joint_states", "--pose", "/tracker/pose", "--max-offset", "0.001"], "edge of the search range"),
     (["--joints", "/joint_states", "--point", "/tracker/point", "--point", "/tracker/point"], "given twice"),
+    (["--joints", "/joint_states", "--pose", "/tracker/pose", "--joint-names", "lwr_joint_1,lwr_joint_1"],
+     "'lwr_joint_1' named twice"),
+    (["--joints", "/joint_states", "--pose", "/tracker/pose", "--max-offset", "1e9"], "longer than the recording"),
     (["--joints", "/joint_states", "--pose", "/tf"], "message type tf2_msgs/msg/TFMessage; --pose reads PoseStamped, "
                                                      "TransformStamped or tf:CHILD (a tf topic: name a frame of it"),
 ])
@@ -299,3 +302,25 @@ def test_the_shipped_bag_gives_what_its_readme_states(tmp_path, capsys):
     assert main(["evaluate", str(urdf), str(report), str(DATA / "lwr_bag" / "validation.csv"), "--json",
                  str(tmp_path / "e.json")]) == 0
     assert json.loads((tmp_path / "e.json").read_text(encoding="utf-8"))["position"]["rms_mm"] < 0.02
+
+
+@pytest.mark.parametrize("where", [0.4, 0.6])  # seen: ZstdError at 0.4, OverflowError at 0.6
+def test_a_corrupt_bag_is_one_line(tmp_path, capsys, where):
+    """Two bytes of the shipped MCAP flipped part-way: decoding fails inside rosbags or zstd (ZstdError,
+    struct.error, OverflowError), reported as an unreadable bag, not a traceback."""
+    import shutil
+
+    folder = tmp_path / "session"
+    shutil.copytree(DATA / "lwr_bag" / "session", folder)
+    mcap = folder / "session.mcap"
+    raw = bytearray(mcap.read_bytes())
+    at = int(where * len(raw))
+    raw[at] ^= 0xFF
+    raw[at + 1] ^= 0xFF
+    mcap.write_bytes(bytes(raw))
+    code = main(["extract", str(folder), "--joints", "/joint_states", "--pose", "/mocap/tool/pose",
+                 "--out", str(tmp_path / "d.csv")])
+    captured = capsys.readouterr()
+    errors = [line for line in captured.err.splitlines() if line.startswith("pincal: error: ")]
+    assert code == 2 and "Traceback" not in captured.err
+    assert len(errors) == 1 and "not a readable ROS bag" in errors[0], captured.err

@@ -218,10 +218,11 @@ def _add_extract(sub) -> None:
     ext.add_argument("--max-spread", type=_positive, default=MAX_SPREAD_MM, metavar="MM",
                      help="refuse a stop whose measured positions spread more (RMS about their mean) [mm] "
                           f"(default {MAX_SPREAD_MM:g})")
-    ext.add_argument("--max-offset", type=_positive, default=MAX_OFFSET_S, metavar="S",
+    offset = ext.add_mutually_exclusive_group()  # a given offset is not searched for
+    offset.add_argument("--max-offset", type=_positive, default=MAX_OFFSET_S, metavar="S",
                      help="search the clock offset this far either side of the receive times' estimate [s] "
                           f"(default {MAX_OFFSET_S:g})")
-    ext.add_argument("--clock-offset", type=_seconds, metavar="S",
+    offset.add_argument("--clock-offset", type=_seconds, metavar="S",
                      help="measurement stamp minus joint stamp of one instant [s], instead of estimating it")
     ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv", help="measurement CSV (v1) to write")
 

@@ -140,7 +140,7 @@ def _reader(path: Path):
     try:  # bags without embedded definitions (sqlite3 before Iron) are read with the standard types
         return AnyReader([path], default_typestore=get_typestore(Stores.LATEST)), errors
     except errors as exc:
-        raise MeasurementError(f"{path}: not a readable ROS bag ({exc})") from None
+        raise MeasurementError(f"{path}: not a readable ROS bag ({' '.join(str(exc).split())})") from None
 
 
 def _tf_child(spec: str) -> str | None:
@@ -184,6 +184,9 @@ def _joint_arrays(samples: _Samples, path: Path, topic: str, wanted: Sequence[st
         for name in names:
             seen.setdefault(name, len(seen))
     if wanted:
+        twice = sorted({n for n in wanted if list(wanted).count(n) > 1})
+        if twice:
+            raise MeasurementError(f"{path}: --joint-names: '{twice[0]}' named twice; name each joint once")
         for name in wanted:
             if name not in seen:
                 raise MeasurementError(f"{path}: --joint-names: no joint '{name}' on {topic}; "

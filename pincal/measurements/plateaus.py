@@ -36,7 +36,7 @@ from scipy.spatial.transform import Rotation
 
 from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.bags import JointStream, MeasurementStream
-from pincal.measurements.data import MeasurementSet
+from pincal.measurements.data import MeasurementSet, is_reserved
 
 #: Default joint tolerance of a still stretch, max − min over the window [rad, or m for prismatic
 #: joints]: the tolerance the shipped TIAGo sessions were cut with (data/tiago_mocap/README.md, "all
@@ -139,6 +139,10 @@ class Refusal:
     end: float
     reason: str
     detail: str
+
+
+#: The extra columns of the rows written (:class:`Extraction`).
+EXTRA_COLUMNS = ("spread_mm", "spread_deg", "samples", "t_start_robot", "t_end_robot")
 
 
 @dataclass(frozen=True)
@@ -359,8 +363,14 @@ def extract_postures(joints: JointStream, measurements: Sequence[MeasurementStre
         source: the bag's path, named in errors and as the rows' source.
 
     Raises:
-        MeasurementError: the clock offset cannot be estimated.
+        MeasurementError: a joint named as a column the rows are written with, or the clock offset
+            cannot be estimated.
     """
+    clash = [n for n in joints.names if is_reserved(n, ()) or n in EXTRA_COLUMNS]
+    if clash:
+        raise MeasurementError(f"{source}: joint '{clash[0]}' has the name of a column of the CSV written "
+                               f"({', '.join(('x, y, z, qx … qw, x1 …, role, session',) + EXTRA_COLUMNS)}); "
+                               "rename it in the URDF and the bag, or leave it out with --joint-names")
     if settings.clock_offset is not None:
         offset = ClockOffset(settings.clock_offset, False)
     else:
