@@ -324,3 +324,16 @@ def test_a_corrupt_bag_is_one_line(tmp_path, capsys, where):
     errors = [line for line in captured.err.splitlines() if line.startswith("pincal: error: ")]
     assert code == 2 and "Traceback" not in captured.err
     assert len(errors) == 1 and "not a readable ROS bag" in errors[0], captured.err
+
+
+@pytest.mark.parametrize("name", ["x", "role", "spread_mm"])
+def test_a_joint_named_as_a_column_is_refused(chain, tmp_path, capsys, name):
+    """A JointState joint called like a column the rows are written with would write a CSV with two
+    columns of that name (seen: exit 0): refused, naming the joint and --joint-names."""
+    recording = _record(chain, random_configurations(chain, np.random.default_rng(6), 4), pose=True)
+    names = (name, *recording.joints.names[1:])
+    bag = _bag(tmp_path, replace(recording, joints=replace(recording.joints, names=names)), "sqlite3")
+    out = tmp_path / "d.csv"
+    assert main(["extract", str(bag), "--joints", "/joint_states", "--pose", recording.measurements[0].topic,
+                 "--out", str(out)]) == 2
+    assert f"joint '{name}' has the name of a column" in _only_line(capsys) and not out.exists()
