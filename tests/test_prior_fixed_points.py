@@ -102,3 +102,19 @@ def test_a_failing_second_start_keeps_the_first_fixed_point(industrial_arm_urdf,
     chain, data = _rows(industrial_arm_urdf, 3e-3)
     result = calibrate_chain(chain, data, "full", selection="prior")
     assert len(calls) == 2 and result.rms_m > 10 * FLOOR_M  # the trapped fixed point, kept
+
+
+def test_rows_fitted_to_rounding_leave_the_prior_its_weight(industrial_arm_urdf):
+    """Six 6D rows, 36 coordinates for 30 unknowns: eq P2's scale fell to rounding (4e-16 m), the data
+    rows outweighed the prior's by 1e16 and the MAP fit was singular ("the data do not determine all 30
+    parameters", seeds 3 and 7 of 8). The scale stops at pincal.fit.prior.SCALE_FLOOR (0.1 µm)."""
+    from pincal.fit.prior import SCALE_FLOOR
+
+    chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(3)
+    truth = rng.normal(0.0, 3e-4, params.size)
+    data = measure_truth(params, truth, random_configurations(chain, rng, 6), sensor_at(3.0), rng, NOISE_M,
+                         np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]))
+    result = calibrate_chain(chain, data, "full", selection="prior")
+    assert result.sigma_pos_m == SCALE_FLOOR and result.rms_m < FLOOR_M

@@ -32,7 +32,7 @@ from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
-from pincal.fit.prior import PriorResidual, data_rows, effective_scale, hat_diagonal, log_evidence
+from pincal.fit.prior import SCALE_FLOOR, PriorResidual, data_rows, effective_scale, hat_diagonal, log_evidence
 from pincal.fit.registration import register_points
 from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.socket_metrics import FixtureMetrics, metrics_of_positions
@@ -198,8 +198,8 @@ class FixtureProblem:
         """σ [m]: with a prior, eq P2 from ``solution``'s data rows; without, their RMS (the residual
         is in metres and unweighted, σ weights only a prior's rows)."""
         if isinstance(objective, PriorResidual):
-            self.noise = effective_scale(solution.residual[: -objective.n_prior],
-                                         hat_diagonal(solution.jacobian, objective.n_prior)) or self.noise
+            self.noise = max(effective_scale(solution.residual[: -objective.n_prior],
+                                             hat_diagonal(solution.jacobian, objective.n_prior)), SCALE_FLOOR)
         else:  # maximum likelihood: the residual's RMS
             self.noise = float(np.sqrt(np.mean(solution.residual**2))) or self.noise
 

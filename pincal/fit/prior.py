@@ -72,6 +72,11 @@ MAX_SCALE_ITERATIONS = 20
 #: Relative change of every noise scale below which eq P2 has reached its fixed point: the prior's
 #: relative weight then moves by 2e-3 (it scales as 1/σ²).
 SCALE_TOLERANCE = 1e-3
+#: Lowest noise scale eq P2 gives [m or rad]: 0.1 µm / 0.1 µrad, below any sensor of robot calibration
+#: (an interferometer resolves ~0.5 µm). Rows a fit reproduces to rounding (as many unknowns as
+#: coordinates, or noise-free rows) would otherwise weigh 1e16 against the prior's and leave the MAP
+#: fit singular: 6 6D rows of a 6-axis arm failed so ("the data do not determine all 30 parameters").
+SCALE_FLOOR = 1e-7
 #: Eq P2 is also iterated from the unregularised fit's noise scales when they are below this fraction
 #: of the fixed point's (:func:`pincal.fit.pipeline.fit_kinematics`): the prior, not the data, then
 #: set the scale, and a fit the data dominate may be a second fixed point.
@@ -256,10 +261,10 @@ def reestimated_scales(solution: Solution, n_prior: int, n_pos: int, sigma_pos: 
     ``sigma_pos`` (the first ``n_pos``) and ``sigma_rot`` (the rest), prior rows last."""
     hat = hat_diagonal(solution.jacobian, n_prior)
     data = solution.residual[: hat.size]
-    out_pos = effective_scale(data[:n_pos] * sigma_pos, hat[:n_pos]) or sigma_pos
+    out_pos = max(effective_scale(data[:n_pos] * sigma_pos, hat[:n_pos]), SCALE_FLOOR)
     if sigma_rot is None:
         return out_pos, None
-    return out_pos, effective_scale(data[n_pos:] * sigma_rot, hat[n_pos:]) or sigma_rot
+    return out_pos, max(effective_scale(data[n_pos:] * sigma_rot, hat[n_pos:]), SCALE_FLOOR)
 
 
 def map_outcome(jacobian: np.ndarray, residual: np.ndarray, objective: PriorResidual, kept: np.ndarray,
