@@ -43,6 +43,18 @@ def test_a_mistyped_joint_column(tmp_path, capsys):
     assert "missing joint column(s) lwr_joint_3 (rename the file's column 'lwr_jiont_3' to 'lwr_joint_3'?)" in err
 
 
+def test_a_mistyped_sigma_column(tmp_path, capsys):
+    """extract writes spread_mm; --sigma-column spred_mm names it."""
+    header = ",".join(f"lwr_joint_{i}" for i in range(1, 8)) + ",x,y,z,spread_mm"
+    rows = "\n".join(",".join([f"{0.1 * (k + i):.2f}" for i in range(7)]
+                              + [f"{0.5 + 0.01 * k}", f"{0.1 + 0.002 * k * k}", f"{0.2 + 0.03 * (k % 3)}", "0.08"])
+                     for k in range(12))
+    code, err = _run(tmp_path, capsys, kuka_lwr4plus_urdf(), header + "\n" + rows + "\n",
+                     "--tip-link", KUKA_FLANGE_LINK, "--sigma-column", "spred_mm")
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "no column 'spred_mm' for --sigma-column; did you mean 'spread_mm'?" in err
+
+
 @pytest.mark.parametrize("flag, value, expected", [("--effect", "compliance:lwr_jiont_2:2e-4", "lwr_joint_2")])
 def test_a_mistyped_joint_in_an_effect(tmp_path, capsys, flag, value, expected):
     code = main(["simulate", "--out", str(tmp_path / "sim"), flag, value])

@@ -28,7 +28,7 @@ from typing import cast
 
 import numpy as np
 
-from pincal.errors import CalibrationError
+from pincal.errors import CalibrationError, did_you_mean
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
@@ -147,7 +147,7 @@ def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
     if sigma_column not in data.extra:
         raise CalibrationError(
             f"{data.source}: no column '{sigma_column}' for --sigma-column; "
-            f"numeric extra columns are: {', '.join(data.extra) or 'none'}"
+            f"{did_you_mean(sigma_column, data.extra, 'numeric extra columns')}"
         )
     sigma = np.asarray(data.extra[sigma_column], dtype=float)
     bad = ~(np.isfinite(sigma) & (sigma > 0))
