@@ -12,6 +12,9 @@ packaged KUKA LWR 4+), a sensor and a way the robot was moved, simulated with a 
   the nominal — model (:mod:`pincal.simulation.cells`): the target cannot be estimated, and must be
   reported as held;
 * motion-capture markers (three points on a rigid plate, 0.3 mm noise) 1.5 m away;
+* a socket fixture (no external sensor): a ball on the flange seated in 9 sockets of a plate in
+  three placements, the joint readings noisy (20 µrad); held out on other configurations in the
+  same sockets and placements, predicted as sqrt(joint noise's share² + e²) (below);
 * revolute, prismatic and continuous joints; 6- and 7-axis arms in standard and modified DH.
 
 The true geometry has every joint placement off by ~0.3 mm / 0.3 mrad (level full). Every level
@@ -42,7 +45,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
+from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.metrics import pose_errors
+from pincal.measurements.fixture import Fixture
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.urdf_from_dh import urdf_from_dh_table
@@ -54,6 +59,7 @@ from pincal.simulation.cells import (
     measure_truth,
     sensor_at,
 )
+from pincal.simulation.fixture import ball_and_jacobian, simulate_fixture
 from pincal.simulation.sensor import random_configurations
 
 #: The bound of the issue: held-out within 1.3× the noise-limited prediction (level full).
@@ -101,6 +107,7 @@ class Scenario:
     points: tuple[tuple[float, float, float], ...] = ((0.035, -0.02, 0.21),)
     notes: str = ""
     seed: int = 0
+    joint_noise_rad: float = 2e-5  # socket fixture: the joint readings' noise
     levels: tuple[str, ...] = field(default=CHAIN_LEVELS)
 
 
@@ -121,7 +128,13 @@ SCENARIOS = (
     Scenario("tracker 4 m, 6D, 7-axis, standard DH, continuous J7", "7R standard", rows=50, seed=11),
     Scenario("tracker 4 m, 6D, prismatic + continuous joints", "RPRRR standard", rows=40, seed=12),
     Scenario("tracker 3 m, 6D, KUKA LWR 4+ (7 axes)", "KUKA LWR 4+", distance_m=3.0, rows=50, seed=13),
+    Scenario("socket fixture, 9 sockets x 3 placements", "6R modified", motion="fixture", rows=3, seed=14),
 )
+#: The socket fixture's plate: a 3 x 3 grid, 120 mm pitch [m]; its placements (base_T_fixture: where,
+#: and a tilt about x then y [deg]) in front of the 6R arm; the ball's centre on the flange [m].
+PLATE = np.array([[x, y, 0.0] for x in (-0.12, 0.0, 0.12) for y in (-0.12, 0.0, 0.12)])
+PLACEMENTS = (((0.9, -0.35, 0.25), (0, 0)), ((1.0, 0.3, 0.45), (20, -15)), ((0.75, 0.05, 0.7), (-10, 25)))
+BALL = np.array([0.01, -0.02, 0.12])
 
 
 def build_robots(folder: Path) -> dict[str, tuple[Path, str]]:
@@ -157,7 +170,51 @@ def simulate(scenario: Scenario, urdf: Path, tip: str):
     return chain, calibration, test
 
 
+def run_fixture(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELECTION) -> dict:
+    """A socket-fixture cell: calibrate_fixture at every level; held out on ``rows`` other
+    configurations per socket of the same placements (their fitted poses), against the prediction
+    sqrt(n² + e²): n² the joint noise's mean share, σ_q² ‖J_ball‖²_F per row, e the estimation's
+    (:meth:`pincal.fit.fixture_calibration.FixtureCalibration.predicted_ball_rms`)."""
+    chain = KinematicChain.from_urdf(urdf, tip)
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(scenario.seed)
+    truth = rng.normal(0.0, 3e-4, params.size)
+    fixture = Fixture(tuple(f"s{i}" for i in range(len(PLATE))), PLATE)
+    poses = []
+    for where, (tilt_x, tilt_y) in PLACEMENTS:
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = Rotation.from_euler("xy", [tilt_x, tilt_y], degrees=True).as_matrix(), where
+        poses.append(pose)
+    sigma_q = scenario.joint_noise_rad
+    with chain.placed(params.placements(truth)):
+        calibration = simulate_fixture(chain, fixture, poses, BALL, scenario.rows, rng, joint_noise_rad=sigma_q)
+        test = simulate_fixture(chain, fixture, poses, BALL, scenario.rows, rng, joint_noise_rad=sigma_q)
+        jacobians = np.array([ball_and_jacobian(chain, q, BALL)[1] for q in test.q])
+    noise = sigma_q * float(np.sqrt(np.mean(np.sum(jacobians**2, axis=(1, 2)))))  # [m]
+    rows = []
+    for level in scenario.levels:
+        started = time.perf_counter()
+        result = calibrate_fixture(chain, calibration, level, selection=selection)
+        seconds = time.perf_counter() - started
+        with chain.placed(result.chain_placements):
+            tool = chain.poses(test.q)
+        balls = np.einsum("kij,j->ki", tool.tool_rotations, result.ball) + tool.tool_positions
+        sockets = np.array([result.placements[s].socket_positions[result.placements[s].sockets.index(
+            fixture.names[i])] for s, i in zip(test.placement, test.socket)])
+        held_out = float(np.sqrt(np.mean(np.sum((balls - sockets) ** 2, axis=1)))) * 1000.0
+        predicted = float(np.hypot(noise, result.predicted_ball_rms(chain, test))) * 1000.0
+        rows.append({
+            "level": level, "kept": int(result.kept.size), "identifiable": int(result.rank),
+            "held_out_mm": held_out, "predicted_mm": predicted, "ratio": held_out / predicted,
+            "not_determined": 0, "seconds": seconds,
+        })
+    return {"scenario": scenario.name, "robot": scenario.robot, "rows": calibration.n_rows,
+            "sigma_pos_mm": noise * 1000.0, "levels": rows}
+
+
 def run(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELECTION) -> dict:
+    if scenario.motion == "fixture":
+        return run_fixture(scenario, urdf, tip, selection)
     chain, calibration, test = simulate(scenario, urdf, tip)
     sigma = scenario.sigma_pos_mm
     rows = []

@@ -8,7 +8,6 @@ Table 2 (so the ``offsets`` level is exact), 6D measurements with 0.02 mm /
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ import pytest
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
 from pincal.fit.chain_calibration import calibrate_chain
+from pincal.measurements.couplings import apply_couplings, parse_coupling
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.model.dh import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
@@ -182,7 +182,7 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
     from pathlib import Path
 
     import pincal.diagnosis.diagnose as module
-    from pincal.diagnosis.screening import SCREEN_MARGIN, SCREEN_INSEPARABLE
+    from pincal.diagnosis.screening import SCREEN_INSEPARABLE, SCREEN_MARGIN
     from pincal.robots import example_robot_data_urdf
 
     data = Path(__file__).resolve().parent.parent / "data" / "tiago_mocap"
@@ -236,7 +236,7 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
 def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment):
     """A candidate list that is empty after filtering (a drift without a time column)
     ends the search with nothing adopted, not with an error (review finding)."""
-    from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
+    from pincal.diagnosis.diagnose import diagnose
     from pincal.fit.chain_calibration import calibrate_chain
     from pincal.model.chain import KinematicChain
     from pincal.model.effects import Effect
@@ -289,18 +289,14 @@ def test_a_joint_read_against_another_is_named_and_corrected_in_the_data(kuka_ur
     assert effect == truth and abs(found[0] - 1.0) < 1e-2
     advice = coupling_advice(effect, float(found[0]))
     assert f"includes {-found[0]:+.3f} x lwr_joint_2's (the controller measures it from lwr_joint_2" in advice
-    assert "horizontal" in advice and "add +1 x lwr_joint_2 to lwr_joint_3 in the data and calibrate again" in advice
+    assert "horizontal" in advice and "run again with --coupling lwr_joint_3=-1*lwr_joint_2" in advice
     from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, OFFSETS_ONLY, SimulationSettings(seed=3, **SETTINGS),
                                      effects=[parse_effect("coupling:lwr_joint_3:lwr_joint_2:1.0")])
-    j2, j3 = chain.joint_names.index("lwr_joint_2"), chain.joint_names.index("lwr_joint_3")
-    corrected = []
-    for rows in (experiment.calibration, experiment.validation):
-        q = rows.q.copy()
-        q[:, j3] += 1.0 * q[:, j2]  # the advice, applied: "add +1 x lwr_joint_2 to lwr_joint_3"
-        corrected.append(replace(rows, q=q))
+    advised = parse_coupling("lwr_joint_3=-1*lwr_joint_2")  # the advice, as --coupling applies it
+    corrected = [apply_couplings(rows, [advised]) for rows in (experiment.calibration, experiment.validation)]
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     calibration = calibrate_chain(chain, corrected[0], "offsets", tool_known=True)
     again = diagnose(chain, calibration, corrected[0], heldout=corrected[1],  # the default catalogue

@@ -169,3 +169,15 @@ def test_plan_page_without_its_csv_lists_the_additions(plan, tmp_path):
     (tmp_path / "PLAN.json").write_bytes((plan / "PLAN.json").read_bytes())  # no PLAN.csv beside it
     page = render_html(json.loads((tmp_path / "PLAN.json").read_text(encoding="utf-8")), base=tmp_path)
     assert 'id="poses-table"' not in page and page.count("</tr>") > 12 and "No PLAN.csv with SHA-256" in page
+
+
+def test_joint_limits_are_the_robots_not_a_transmissions():
+    """TIAGo's URDF names each joint again inside <transmission>, without a type or limits: the plan page
+    read those, showed the prismatic torso in degrees and every limit as "—"."""
+    from pincal.report.plan_html import joint_limits
+    from pincal.robots import example_robot_data_urdf
+
+    limits = joint_limits(example_robot_data_urdf("tiago_description/robots/tiago.urdf"),
+                          ["torso_lift_joint", "arm_1_joint"])
+    assert limits["torso_lift_joint"][0] == "prismatic" and None not in limits["torso_lift_joint"][1:]
+    assert limits["arm_1_joint"][0] == "revolute" and None not in limits["arm_1_joint"][1:]

@@ -84,7 +84,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         tip_link=args.tip_link, level=level, method=args.method,
         weight=1.0 if args.weight is None else args.weight,  # None: not given (refused with --fixture)
         tool_pose=args.tool, sigma_column=args.sigma_column, reject_outliers=args.reject_outliers,
-        selection=selection_criterion(args), sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args)
+        selection=selection_criterion(args), sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args,
+        couplings=args.coupling or ())
     method = settings.paper_method
     _check_html(args.html, *_description_inputs(args), *args.data, outputs=[args.out, args.report])
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
@@ -265,7 +266,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),
                                 payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
-                                xacro_args=args.xacro_args)
+                                xacro_args=args.xacro_args, couplings=args.coupling or ())
     _check_html(args.html, *_description_inputs(args), *args.data, args.validation, outputs=[args.out, args.report])
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         run = diagnose_files(args.urdf, args.data, args.out, args.report, settings, validation_path=args.validation,

@@ -135,6 +135,23 @@ def xacro_arg(text: str) -> tuple[str, str]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def coupling_arg(text: str):
+    """argparse type of ``--coupling``: ``JOINT=FACTOR*DRIVER`` (:mod:`pincal.measurements.couplings`)."""
+    from pincal.measurements.couplings import parse_coupling
+
+    try:
+        return parse_coupling(text)
+    except PincalError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--coupling '{text}': ")) from None
+
+
+def _add_coupling(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--coupling", type=coupling_arg, action="append", metavar="JOINT=FACTOR*DRIVER",
+                        help="JOINT's reading includes FACTOR x DRIVER's (repeatable): corrected in every row read, "
+                             "recorded in REPORT.json and applied by evaluate; e.g. A3=-1*A2 where the controller "
+                             "reads J3 from the horizontal (pincal diagnose names it)")
+
+
 def _add_xacro_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--xacro-arg", dest="xacro_args", type=xacro_arg, action="append", default=[],
                         metavar="NAME:=VALUE", help="argument of a .xacro robot description (repeatable); "
@@ -300,6 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or "
                           "point_a,point_b,distance)")
     _add_plausibility(cal)
+    _add_coupling(cal)
     _add_xacro_arg(cal)
     _add_quiet(cal)
     cal.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf",
@@ -358,6 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
     _add_plausibility(dia)
+    _add_coupling(dia)
     _add_xacro_arg(dia)
     _add_quiet(dia)
     dia.add_argument("--out", required=True, type=Path, metavar="CORRECTED.urdf", help="corrected URDF to write")

@@ -17,6 +17,7 @@ import numpy as np
 
 from pincal.errors import PincalError
 from pincal.fit.prior import Prior
+from pincal.measurements.couplings import ReadingCoupling
 from pincal.model.parameter_sets import CHAIN_LEVELS  # not from fit/: evaluate's settings need no fit module
 
 #: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
@@ -84,6 +85,7 @@ class _FitSettings:
     sigma_pos_mm: float | None
     tool_pose: np.ndarray | None
     xacro_args: tuple[tuple[str, str], ...]
+    couplings: tuple[ReadingCoupling, ...]
 
     def _resolve(self) -> None:
         """From ``__post_init__``, after the level is checked: the default selection, then the checks."""
@@ -93,6 +95,7 @@ class _FitSettings:
         _positive("--sigma-pos", self.sigma_pos_mm)
         object.__setattr__(self, "tool_pose", _tool(self.tool_pose))
         object.__setattr__(self, "xacro_args", _xacro(self.xacro_args))
+        object.__setattr__(self, "couplings", tuple(self.couplings))
 
     @property
     def criterion(self) -> str:
@@ -126,6 +129,8 @@ class CalibrateSettings(_FitSettings):
             (:func:`default_selection`).
         sigma_pos_mm: the sensor's stated position noise per axis [mm] (plausibility checks), or None.
         xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
+        couplings: joint readings taken against another joint (``--coupling``), corrected in every
+            row read (:mod:`pincal.measurements.couplings`, eq C1).
 
     Raises:
         PincalError: an unknown level, method or selection; a method outside level ``dh``, or
@@ -144,6 +149,7 @@ class CalibrateSettings(_FitSettings):
     selection: str | None = None
     sigma_pos_mm: float | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
+    couplings: tuple[ReadingCoupling, ...] = ()
 
     def __post_init__(self) -> None:
         if self.level not in CALIBRATE_LEVELS:
@@ -155,6 +161,9 @@ class CalibrateSettings(_FitSettings):
         if self.level == "dh" and self.tool_pose is None:
             raise PincalError("the paper's methods (--level dh) need the tool: --tool X,Y,Z,ROLL,PITCH,YAW; "
                               "or use --level registration|offsets|full to estimate the target")
+        if self.level == "dh" and self.couplings:
+            raise PincalError("--coupling applies to --level registration, offsets, full or auto, not to the paper's "
+                              "methods; correct the readings in the data for those")
         if self.level == "dh" and self.sigma_pos_mm is not None:
             raise PincalError("--sigma-pos applies to --level registration, offsets, full or auto (the plausibility "
                               "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
@@ -172,7 +181,7 @@ class DiagnoseSettings(_FitSettings):
     """``pincal diagnose`` without its paths.
 
     Attributes:
-        tip_link, tool_pose, sigma_column, selection, sigma_pos_mm, xacro_args: as for
+        tip_link, tool_pose, sigma_column, selection, sigma_pos_mm, xacro_args, couplings: as for
             :class:`CalibrateSettings` (``selection`` None: :func:`default_selection`).
         level: the geometry under the effects, one of :data:`DIAGNOSE_LEVELS`.
         payload_kg: a point mass at the target for the gravity torques [kg].
@@ -193,6 +202,7 @@ class DiagnoseSettings(_FitSettings):
     time_column: str | None = None
     sigma_pos_mm: float | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
+    couplings: tuple[ReadingCoupling, ...] = ()
 
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:

@@ -37,6 +37,7 @@ from pincal.fit.sessions import (
     session_rows,
     where,
 )
+from pincal.measurements.couplings import apply_couplings
 from pincal.measurements.csv_v1 import (
     read_measurements,
     read_sessions,
@@ -68,6 +69,7 @@ from pincal.report.model import (
     CalibrationReport,
     PaperReport,
     Sources,
+    couplings_part,
     findings_json,
     level_choice_part,
 )
@@ -221,6 +223,7 @@ def calibrate_files(
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     data, notes = read_sessions(data_paths, chain.joint_specs)
+    data = apply_couplings(data, settings.couplings)  # readings taken against another joint (eq C1)
     nominal_placements = chain.placements()
     n_rows = fit_rows(data.roles)
     sources: Sources = {"urdf": str(urdf),
@@ -296,7 +299,8 @@ def calibrate_files(
         with chain.placed(placements):  # the report describes the calibrated model
             report = chain_report(chain_head(fitted, chain, tool_parent, errors, n_rows, sources, report_notes),
                                   warnings=warnings, sessions=entries, row_errors=row_errors,
-                                  level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro)
+                                  level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro,
+                                  couplings=couplings_part(settings.couplings))
     write_report(report_path, report)
     return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice)
 
@@ -410,9 +414,11 @@ def diagnose_files(
     started = time.perf_counter()
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
     data, notes = read_sessions(data_paths, chain.joint_specs)
+    data = apply_couplings(data, settings.couplings)  # readings taken against another joint (eq C1)
     heldout = held_time = None
     if validation_path:
         heldout, held_notes = read_measurements(validation_path, chain.joint_specs)
+        heldout = apply_couplings(heldout, settings.couplings)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
     nominal_placements = chain.placements()
@@ -471,6 +477,7 @@ def diagnose_files(
                                              None if validation_path is None else str(validation_path))),
             urdf_sha256=urdf_sha256, xacro_args=dict(xacro_arguments(xacro_args)),
             level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
+            couplings=couplings_part(settings.couplings),
         )
     write_report(report_path, report)
     return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice)

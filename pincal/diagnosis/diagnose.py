@@ -84,8 +84,9 @@ GRAVITY_REFRESHES = 2
 #: Tolerance of a candidate's full fit (:func:`pincal.fit.solver.solve`): it ranks
 #: and is judged; an adopted effect is refitted at the solver's own tolerance.
 CANDIDATE_TOLERANCE = 1e-10
-#: Angle between two joint axes below which they count as parallel [rad] (1e-6: a URDF's rounding).
-PARALLEL_AXES_RAD = 1e-6
+#: Angle between two joint axes below which they count as parallel [rad]: 0.6°, so that a URDF pincal
+#: calibrated (its axes turned by ~1e-4 rad) still qualifies.
+PARALLEL_AXES_RAD = 1e-2
 
 
 @dataclass(frozen=True)
@@ -257,6 +258,8 @@ def diagnose(
             one unit per candidate offered (refitted or screened out) and one for
             adopting the best; the final fit and the search for remaining structure one.
     """
+    if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
+        candidates = candidate_effects(chain, True)
     with chain.placed(calibration.chain_placements):  # gravity torques at the calibrated geometry
         return _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time,
                          candidates, progress)

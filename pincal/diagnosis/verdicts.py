@@ -199,7 +199,8 @@ class Judge:
                 return (f"it changes no measured coordinate by more than {largest:.2g} of its noise (below "
                         f"{NEGLIGIBLE:g}): too small to matter, whatever its ΔBIC")
         basis = effect_basis(effect, inputs, chain)
-        if _offset_like(basis):
+        # a coupling's mean part is the joint offset the geometry has: its ΔBIC and change (above) are its variation's
+        if effect.type != "coupling" and _offset_like(basis):
             return "its basis barely changes over the rows, so it acts as a joint offset"
         compared.append(delta)
         for other_delta, other, _, _ in tried:
@@ -221,12 +222,13 @@ READ_AGAINST = 0.01
 
 
 def coupling_advice(effect: Effect, value: float) -> str:
-    """What an adopted coupling means and what to do (a reading taken against another joint is
-    corrected in the data: the geometry should then be selected on the corrected readings)."""
-    read_against = abs(abs(value) - 1.0) < READ_AGAINST
-    why = (f"the controller measures it from {effect.driver}, as parallelogram arms read J3 from the horizontal"
-           if read_against else "a transmission coupling")
-    factor = f"{np.sign(value):+.0f}" if read_against else f"{value:.4g}"  # a convention is exact: ±1
-    return (f"{effect.joint}'s reading includes {-value:+.3f} x {effect.driver}'s ({why}): add {factor} x "
-            f"{effect.driver} to {effect.joint} in the data and calibrate again, so that the geometry is "
-            "chosen on the corrected readings")
+    """What an adopted coupling means and what to do: a reading taken against another joint (±1) is
+    corrected in the data, so that the geometry is selected on the corrected readings; a small value
+    (a transmission's) stays in the model."""
+    if abs(abs(value) - 1.0) >= READ_AGAINST:
+        return (f"{effect.joint}'s reading includes {-value:+.4g} x {effect.driver}'s (a transmission coupling): "
+                "it stays in the model, and evaluate applies it")
+    return (f"{effect.joint}'s reading includes {-value:+.3f} x {effect.driver}'s (the controller measures it from "
+            f"{effect.driver}, as parallelogram arms read J3 from the horizontal): run again with --coupling "
+            f"{effect.joint}={-np.sign(value):.0f}*{effect.driver} (a convention is exact), so that the geometry is "
+            "chosen on the corrected readings; evaluate then corrects its rows the same way")

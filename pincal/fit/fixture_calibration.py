@@ -99,6 +99,9 @@ class FixtureCalibration:
         chain_placements: the calibrated chain's joint and tip placements (4×4 each, as
             :meth:`pincal.model.chain.KinematicChain.placements`), to evaluate with
             ``chain.placed(result.chain_placements)``.
+        solution / covariance: the final fit's unknowns (kept kinematics, ball, placement poses)
+            and their covariance (the posterior with a prior); ``start`` and ``bases`` define
+            them (:class:`pincal.residuals.fixture.FixtureResidual`).
     """
 
     level: str
@@ -126,6 +129,22 @@ class FixtureCalibration:
     kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
     notes: tuple[str, ...] = ()
     chain_placements: tuple[np.ndarray, ...] = ()
+    solution: np.ndarray = field(default_factory=lambda: np.array([]))
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    start: FixtureEstimate | None = None
+    bases: tuple[np.ndarray, ...] = ()
+
+    def predicted_ball_rms(self, chain: KinematicChain, data: FixtureData) -> float:
+        """Linearised prediction of the RMS distance between ball and socket on rows ``data`` of
+        the calibrated placements due to the estimation noise alone [m] (the fit's covariance
+        propagated through eq F1's Jacobian at those rows; the rows' own noise adds to it)."""
+        params = self.params if self.params is not None else NoParameters(chain)
+        cache = KinematicsCache(params, self.kept, self.vector, data.q)
+        assert self.start is not None  # calibrate_fixture always sets it
+        objective = FixtureResidual(cache, data.placement, data.socket_points, list(self.bases), self.start)
+        jac = objective.jacobian(self.solution)[: 3 * data.n_rows]
+        variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
+        return float(np.sqrt(variance.sum() / data.n_rows))
 
 
 def initial_fixture(chain: KinematicChain, data: FixtureData) -> tuple[FixtureEstimate, list[np.ndarray], list]:
@@ -296,6 +315,7 @@ def calibrate_fixture(
         total_seconds=time.perf_counter() - started,
         kept=kept,
         notes=() if fit.selection is None else tuple(fit.selection.notes),  # the selection's (and a prior's) notes
+        solution=x.copy(), covariance=covariance, start=problem.start, bases=tuple(bases),
     )
 
 

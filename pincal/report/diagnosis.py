@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, cast
 
 from pincal.report.model import (
     ChainHead,
+    CouplingsPart,
     Finding,
     LevelChoicePart,
     PoseErrorsJson,
@@ -41,6 +42,7 @@ def diagnosis_report(
     xacro_args: dict[str, str],
     level_choice: LevelChoicePart,
     plots: list[str],
+    couplings: CouplingsPart | None = None,
 ) -> DiagnosisReport:
     """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
@@ -93,6 +95,7 @@ def diagnosis_report(
         "urdf_sha256": urdf_sha256,
         "xacro_args": xacro_args,
         **level_choice,
+        **(couplings or {}),
     }
 
 

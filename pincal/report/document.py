@@ -48,6 +48,7 @@ from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.target_hold import held_reason
+from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.sensor import Registration
@@ -56,6 +57,7 @@ from pincal.report.model import (
     CalibrationReport,
     ChainHead,
     ChainJson,
+    CouplingsPart,
     EvaluationJson,
     Finding,
     FitRows,
@@ -275,6 +277,8 @@ class ReportModel:
             calibrate (``sessions[].file``), in the order of ``sessions``.
         not_determined: the reasons of ``identifiability.not_determined`` (a target held where the
             calibration rows could not place it); empty when everything was determined.
+        couplings: joint readings taken against another joint (REPORT.json ``couplings``,
+            :mod:`pincal.measurements.couplings`), corrected in every row evaluated.
     """
 
     tool_parent: str
@@ -288,6 +292,7 @@ class ReportModel:
     noise: dict = field(default_factory=dict)
     session_files: tuple[tuple[str, ...], ...] = ()
     not_determined: tuple[str, ...] = ()
+    couplings: tuple[ReadingCoupling, ...] = ()
 
 
 def read_report(path: str | Path) -> ReportModel:
@@ -340,6 +345,7 @@ def read_report(path: str | Path) -> ReportModel:
             ),
             not_determined=tuple(str(entry.get("reason", "")) for entry in
                                  (doc.get("identifiability") or {}).get("not_determined") or ()),
+            couplings=couplings_from_report(doc.get("couplings"), str(path)),
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(
@@ -412,6 +418,7 @@ def chain_report(
     level_choice: LevelChoicePart,
     urdf_sha256: str,
     xacro_args: dict[str, str],
+    couplings: CouplingsPart | None = None,
 ) -> CalibrationReport:
     """Build the REPORT.json document of a calibration at level registration/offsets/full from its
     :func:`chain_head`; ``level_choice``: :func:`pincal.report.model.level_choice_part`."""
@@ -423,4 +430,5 @@ def chain_report(
         **level_choice,
         "urdf_sha256": urdf_sha256,
         "xacro_args": xacro_args,
+        **(couplings or {}),
     }

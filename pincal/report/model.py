@@ -22,9 +22,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from pincal.fit.level_choice import LevelChoice
     from pincal.fit.metrics import PoseErrors
     from pincal.fit.plausibility import Finding as PlausibilityFinding
+    from pincal.measurements.couplings import ReadingCoupling
     from pincal.model.sensor import Registration
 
 # Annotated's (keyword, value) pairs are JSON Schema keywords of the type (pincal.report.schema)
@@ -386,9 +389,11 @@ class _CalibrationKeys(ChainHead):
 
 
 class CalibrationReport(_CalibrationKeys, total=False):
-    """REPORT.json of ``calibrate --level registration|offsets|full|auto`` (``level_choice``: auto)."""
+    """REPORT.json of ``calibrate --level registration|offsets|full|auto`` (``level_choice``: auto;
+    ``couplings``: ``--coupling`` given)."""
 
     level_choice: LevelChoiceJson
+    couplings: list[CouplingJson]
 
 
 class PaperReport(TypedDict):
@@ -456,6 +461,21 @@ class LevelChoicePart(TypedDict, total=False):
     level_choice: LevelChoiceJson
 
 
+class CouplingJson(TypedDict):
+    """A joint reading taken against another (``--coupling JOINT=FACTOR*DRIVER``,
+    :mod:`pincal.measurements.couplings`): ``joint``'s reading includes ``factor`` × ``driver``'s."""
+
+    joint: str
+    factor: float
+    driver: str
+
+
+class CouplingsPart(TypedDict, total=False):
+    """``couplings`` where a report has them (``--coupling`` given), to unpack into a report."""
+
+    couplings: list[CouplingJson]
+
+
 # The lower layers' ``as_dict()`` forms, as the model's types: their keys are the model's
 # (the tests validate every document written against the schema).
 
@@ -478,6 +498,11 @@ def registration_pair(position: Registration, orientation: Registration) -> Regi
 def level_choice_part(choice: LevelChoice | None) -> LevelChoicePart:
     """``{"level_choice": ...}`` of ``--level auto``, ``{}`` for a level given."""
     return {} if choice is None else {"level_choice": cast(LevelChoiceJson, choice.as_dict())}
+
+
+def couplings_part(couplings: Sequence[ReadingCoupling]) -> CouplingsPart:
+    """``{"couplings": [...]}`` of ``--coupling``, ``{}`` without (the report as before)."""
+    return {"couplings": [cast(CouplingJson, c.as_dict()) for c in couplings]} if couplings else {}
 
 
 def findings_json(findings: list[PlausibilityFinding]) -> list[Finding]:

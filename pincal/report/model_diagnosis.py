@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal, TypedDict
 
-from pincal.report.model import LevelChoiceJson, PoseErrorsJson, TimeSpanJson, Vector3, _CalibrationKeys
+from pincal.report.model import CouplingJson, LevelChoiceJson, PoseErrorsJson, TimeSpanJson, Vector3, _CalibrationKeys
 
 
 class _EffectKeys(TypedDict):
@@ -82,10 +82,11 @@ class _DiagnosisKeys(_CalibrationKeys):
 
 class DiagnosisReport(_DiagnosisKeys, total=False):
     """REPORT.json of ``diagnose``: the calibration's keys, the effects and the diagnosis
-    (``time_spans_s``: with an adopted drift; ``level_choice``: ``--level auto``)."""
+    (``time_spans_s``: with an adopted drift; ``level_choice``: ``--level auto``; ``couplings``: ``--coupling``)."""
 
     time_spans_s: list[TimeSpanJson]
     level_choice: LevelChoiceJson
+    couplings: list[CouplingJson]
 
 
 class TimeSpansPart(TypedDict, total=False):

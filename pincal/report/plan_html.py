@@ -51,7 +51,7 @@ def joint_limits(urdf: Any, joints: list[str]) -> dict[str, tuple[str, float | N
         root = ElementTree.parse(str(urdf)).getroot()
     except (OSError, ElementTree.ParseError, TypeError):
         return out
-    for joint in root.iter("joint"):
+    for joint in root.findall("joint"):  # the robot's joints, not a <transmission>'s <joint name=…>
         name = joint.get("name")
         if name not in joints:
             continue
@@ -134,7 +134,10 @@ def plan_context(document: dict[str, Any], base: Path, figures) -> dict[str, Any
     chain = document.get("chain") or {}
     joints = [str(j) for j in chain.get("joints") or []]
     sources = document.get("sources") or {}
-    limits = joint_limits(sources.get("urdf"), joints)
+    urdf = sources.get("urdf")
+    if urdf and not Path(str(urdf)).is_absolute() and not Path(str(urdf)).exists():
+        urdf = base / str(urdf)  # a path as plan was given it: relative to where it ran, or to PLAN.json
+    limits = joint_limits(urdf, joints)
     kinds = {j: limits[j][0] for j in limits}
     csv_path = find_plan_csv(document, base)
     poses, values = _poses(csv_path, joints, kinds)

@@ -30,7 +30,7 @@ IK_ATTEMPTS = 50
 IK_EVALUATIONS = 30
 
 
-def _ball_and_jacobian(chain: KinematicChain, q: np.ndarray, ball: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def ball_and_jacobian(chain: KinematicChain, q: np.ndarray, ball: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The ball centre [m] (3,) and its derivative by the joints (3, N) at one configuration ``q``."""
     model, data = chain.model, chain.data
     config = chain.configurations(q[None])[0]
@@ -55,9 +55,9 @@ def reach(chain: KinematicChain, target: npt.ArrayLike, ball: npt.ArrayLike, rng
     for _ in range(IK_ATTEMPTS):
         start = rng.uniform(lower + margin, upper - margin)
         result = least_squares(
-            lambda q: _ball_and_jacobian(chain, q, ball)[0] - target,
+            lambda q: ball_and_jacobian(chain, q, ball)[0] - target,
             start,
-            jac=lambda q: _ball_and_jacobian(chain, q, ball)[1],
+            jac=lambda q: ball_and_jacobian(chain, q, ball)[1],
             bounds=(lower, upper),
             method="dogbox",
             xtol=1e-14,

@@ -1,0 +1,108 @@
+"""Joint readings taken against another joint: ``--coupling J=C*I``.
+
+Some controllers report a joint's angle measured from another link rather than from its own
+joint: on parallelogram arms (FANUC, ABB and KUKA heavy arms) J3 is read from the horizontal, so
+the reading of J3 is J3 − J2. ``--coupling A3=-1*A2`` states it: joint J's reading includes
+C × joint I's reading, and the actual angle is
+
+    q_J = reading_J − C · reading_I                                               (C1)
+
+applied to every row read (calibration, validation and evaluated rows) before anything else
+sees them; REPORT.json records it (``couplings``), and ``pincal evaluate`` applies it to the rows
+it evaluates. ``pincal diagnose`` finds such a coupling (the ``coupling`` effect of
+:mod:`pincal.model.effects`, value −C) and names this flag. Every driver is taken as read, before
+any correction, so the order of several couplings does not matter.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+
+from pincal.errors import MeasurementError, PincalError, did_you_mean
+from pincal.measurements.data import MeasurementSet
+
+_FORM = re.compile(r"^\s*([^=\s]+)\s*=\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*([^=*\s]+)\s*$")
+
+
+@dataclass(frozen=True)
+class ReadingCoupling:
+    """Joint ``joint``'s reading includes ``factor`` × joint ``driver``'s reading (eq C1)."""
+
+    joint: str
+    factor: float
+    driver: str
+
+    @property
+    def label(self) -> str:
+        """The flag's form: ``A3=-1*A2``."""
+        return f"{self.joint}={self.factor:g}*{self.driver}"
+
+    def as_dict(self) -> dict:
+        """REPORT.json ``couplings`` entry."""
+        return {"joint": self.joint, "factor": self.factor, "driver": self.driver}
+
+
+def parse_coupling(text: str) -> ReadingCoupling:
+    """``J=C*I`` → :class:`ReadingCoupling`.
+
+    Raises:
+        PincalError: another form, a factor that is not a finite non-zero number, or J = I.
+    """
+    match = _FORM.match(text)
+    factor = float(match.group(2)) if match else math.nan
+    if not match or not math.isfinite(factor) or factor == 0.0 or match.group(1) == match.group(3):
+        raise PincalError(f"--coupling '{text}': use JOINT=FACTOR*DRIVER with two different joints and a non-zero "
+                          "factor, e.g. A3=-1*A2 (A3's reading includes -1 x A2's: J3 read from the horizontal)")
+    return ReadingCoupling(match.group(1), factor, match.group(3))
+
+
+def couplings_from_report(entries: object, where: str) -> tuple[ReadingCoupling, ...]:
+    """REPORT.json ``couplings`` back (absent: none).
+
+    Raises:
+        PincalError: a malformed entry (``where`` names the report).
+    """
+    if entries is None:
+        return ()
+    try:
+        assert isinstance(entries, list)
+        out = tuple(ReadingCoupling(str(e["joint"]), float(e["factor"]), str(e["driver"])) for e in entries
+                    if isinstance(e, Mapping))
+        assert len(out) == len(entries) and all(math.isfinite(c.factor) for c in out)
+    except (AssertionError, KeyError, TypeError, ValueError):
+        raise PincalError(f"{where}: couplings must be a list of {{joint, factor, driver}}; rewrite it with "
+                          "pincal calibrate or diagnose") from None
+    return out
+
+
+def check_couplings(couplings: Sequence[ReadingCoupling], joint_names: Iterable[str]) -> None:
+    """Every joint named is on the chain, and no joint is coupled twice.
+
+    Raises:
+        MeasurementError: a joint not on the chain (did you mean), or one corrected twice.
+    """
+    names = list(joint_names)
+    for coupling in couplings:
+        for name in (coupling.joint, coupling.driver):
+            if name not in names:
+                raise MeasurementError(f"--coupling {coupling.label}: no joint '{name}' on the chain; "
+                                       f"{did_you_mean(name, names, 'joints')}")
+    joints = [c.joint for c in couplings]
+    twice = sorted({j for j in joints if joints.count(j) > 1})
+    if twice:
+        raise MeasurementError(f"--coupling: joint '{twice[0]}' is given twice; give one factor per joint")
+
+
+def apply_couplings(data: MeasurementSet, couplings: Sequence[ReadingCoupling]) -> MeasurementSet:
+    """The rows of ``data`` with eq C1 applied to their joint readings (``data`` itself unchanged)."""
+    if not couplings:
+        return data
+    check_couplings(couplings, data.joint_names)
+    names = list(data.joint_names)
+    q = data.q.copy()
+    for c in couplings:
+        q[:, names.index(c.joint)] -= c.factor * data.q[:, names.index(c.driver)]
+    return replace(data, q=q)

@@ -1,0 +1,107 @@
+"""--coupling JOINT=FACTOR*DRIVER: readings taken against another joint (pincal.measurements.couplings, eq C1).
+
+The cell: the 6-axis arm of tests/conftest.py (A2 ∥ A3) whose controller reads A3 from the horizontal —
+the reading is A3 − A2 — measured by a laser tracker 3 m away in 6D (20 µm, 0.003°), 150 calibration
+and 60 held-out postures. Noise floor of the held-out RMS point distance: √3 · 20 µm = 35 µm; bound
+1.3× it (the scenario suite's, scripts/scenarios.py), the estimation error of 27 unknowns from 900
+coordinates adding ~10 %.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pincal.cli.commands import main
+from pincal.errors import MeasurementError, PincalError
+from pincal.measurements.couplings import ReadingCoupling, apply_couplings, check_couplings, parse_coupling
+from pincal.measurements.csv_v1 import write_measurements
+from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import PlacementErrors
+from pincal.simulation.cells import measure_truth, sensor_at
+from pincal.simulation.sensor import random_configurations
+
+NOISE_M = 20e-6
+BOUND_MM = 1.3 * np.sqrt(3) * NOISE_M * 1000.0
+
+
+def test_the_flag_reads_joint_factor_and_driver():
+    assert parse_coupling("A3=-1*A2") == ReadingCoupling("A3", -1.0, "A2")
+    assert parse_coupling(" joint_3 = 0.5e-2 * joint_2 ") == ReadingCoupling("joint_3", 0.005, "joint_2")
+    for bad in ("A3=-1", "A3=A2", "A3=0*A2", "A3=-1*A3", "A3=x*A2", "=-1*A2", "A3=nan*A2"):
+        with pytest.raises(PincalError, match="JOINT=FACTOR\\*DRIVER"):
+            parse_coupling(bad)
+
+
+def test_eq_c1_takes_every_driver_as_read(industrial_arm_urdf):
+    chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    data = measure_truth(PlacementErrors(chain), np.zeros(PlacementErrors(chain).size),
+                         np.arange(12.0).reshape(2, 6) / 10, sensor_at(3.0), np.random.default_rng(0), 0.0, 0.0)
+    couplings = [parse_coupling("A3=-1*A2"), parse_coupling("A2=0.5*A3")]  # each from the readings, in any order
+    for order in (couplings, couplings[::-1]):
+        q = apply_couplings(data, order).q
+        assert np.allclose(q[:, 2], data.q[:, 2] + data.q[:, 1]) and np.allclose(q[:, 1], data.q[:, 1] - 0.5 * data.q[:, 2])
+    assert apply_couplings(data, []) is data and np.array_equal(data.q, np.arange(12.0).reshape(2, 6) / 10)
+    with pytest.raises(MeasurementError, match="no joint 'A7' on the chain; joints: A1, A2"):
+        check_couplings([parse_coupling("A3=-1*A7")], chain.joint_names)
+    with pytest.raises(MeasurementError, match="joint 'A3' is given twice"):
+        check_couplings([parse_coupling("A3=-1*A2"), parse_coupling("A3=0.1*A4")], chain.joint_names)
+
+
+@pytest.fixture(scope="module")
+def horizontal_j3(industrial_arm_urdf, tmp_path_factory):
+    """CSV files of the cell of the module docstring: calibration and held-out rows."""
+    chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(21)
+    truth = rng.normal(0.0, 3e-4, params.size)
+    folder = tmp_path_factory.mktemp("horizontal_j3")
+    paths = []
+    for count, role, name in ((150, "calibration", "cal.csv"), (60, "validation", "val.csv")):
+        read = random_configurations(chain, rng, count)
+        actual = read.copy()
+        actual[:, 2] += read[:, 1]  # the reading of A3 is A3 - A2
+        rows = measure_truth(params, truth, actual, sensor_at(3.0), rng, NOISE_M, np.radians(0.003), role,
+                             points=np.array([[0.03, 0.0, 0.1]]))
+        write_measurements(folder / name, replace(rows, q=read))
+        paths.append(folder / name)
+    return industrial_arm_urdf, *paths
+
+
+def _held_out_mm(tmp_path, urdf, report, validation) -> float:
+    out = tmp_path / "e.json"
+    assert main(["evaluate", str(urdf), str(report), str(validation), "--json", str(out)]) == 0
+    return json.loads(out.read_text(encoding="utf-8"))["position"]["rms_mm"]
+
+
+def test_diagnose_names_it_and_the_flag_brings_the_model_to_the_noise(horizontal_j3, tmp_path, capsys):
+    urdf, calibration, validation = horizontal_j3
+    common = ["--tip-link", "flange", "--quiet"]
+    assert main(["diagnose", str(urdf), str(calibration), "--validation", str(validation), *common,
+                 "--out", str(tmp_path / "d.urdf"), "--report", str(tmp_path / "d" / "REPORT.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "final model: coupling:A3:A2 = " in printed and "run again with --coupling A3=-1*A2" in printed
+    for flags, name in (([], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
+        assert main(["calibrate", str(urdf), str(calibration), *common, *flags, "--out", str(tmp_path / f"{name}.urdf"),
+                     "--report", str(tmp_path / f"{name}.json")]) in (0, 3)
+    report = json.loads((tmp_path / "coupled.json").read_text(encoding="utf-8"))
+    assert report["couplings"] == [{"joint": "A3", "factor": -1.0, "driver": "A2"}]
+    assert "couplings" not in json.loads((tmp_path / "plain.json").read_text(encoding="utf-8"))
+    capsys.readouterr()
+    assert _held_out_mm(tmp_path, tmp_path / "coupled.urdf", tmp_path / "coupled.json", validation) < BOUND_MM
+    assert _held_out_mm(tmp_path, tmp_path / "plain.urdf", tmp_path / "plain.json", validation) > 10.0  # mm
+
+
+def test_the_flag_is_refused_where_it_does_not_apply(horizontal_j3, tmp_path, capsys):
+    urdf, calibration, _ = horizontal_j3
+    assert main(["calibrate", str(urdf), str(calibration), "--tip-link", "flange", "--coupling", "A3=-1*A9",
+                 "--out", str(tmp_path / "o.urdf"), "--report", str(tmp_path / "r.json")]) == 2
+    assert "--coupling A3=-1*A9: no joint 'A9' on the chain" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # argparse's usage error
+        main(["calibrate", str(urdf), str(calibration), "--tip-link", "flange", "--coupling", "A3=-1",
+              "--out", str(tmp_path / "o.urdf"), "--report", str(tmp_path / "r.json")])
+    assert usage.value.code == 2 and "argument --coupling: use JOINT=FACTOR*DRIVER" in capsys.readouterr().err
+    assert not (tmp_path / "o.urdf").exists()
