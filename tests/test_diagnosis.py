@@ -114,7 +114,7 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     doc = json.loads(report.read_text())
     (found,) = doc["effects"]
     assert (found["type"], found["joint"]) == ("encoder_scale", "lwr_joint_4")
-    assert "final model: encoder_scale:lwr_joint_4 = " in printed.out and " (relative)\n" in printed.out
+    assert "final model: encoder_scale:lwr_joint_4 = " in printed.out and " (relative): moves the target " in printed.out
     assert abs(found["value"] - 0.003) <= 3 * found["std"], found  # within three reported sd
     assert all(p.endswith(".png") for p in doc["diagnosis"]["plots"]) and len(doc["diagnosis"]["plots"]) == 2
     metrics = tmp_path / "m.json"
@@ -314,3 +314,19 @@ def test_couplings_are_offered_between_parallel_neighbours(kuka_urdf, industrial
         "coupling:A2:A3", "coupling:A3:A2"]
     kuka = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
     assert not [e for e in candidate_effects(kuka, False) if e.type == "coupling"]
+
+
+def test_each_effect_says_how_far_it_moves_the_target(kuka_urdf):
+    """target_change of the final model's effect is the distance its values move each target point
+    (first order: against the points predicted with the effect's values zeroed, to 1 %), and the
+    angle they turn the 6D target."""
+    result, _ = _run(kuka_urdf, "encoder_scale:lwr_joint_4:0.003")
+    (change,) = result.target_changes
+    x = result.solution_x
+    zeroed = x.copy()
+    zeroed[result.objective._effect_slices[0]] = 0.0
+    moved = np.linalg.norm(result.objective.predicted_points(x) - result.objective.predicted_points(zeroed), axis=2)
+    assert change.rms_m == pytest.approx(np.sqrt(np.mean(moved**2)), rel=0.01)
+    assert change.max_m == pytest.approx(moved.max(), rel=0.01)
+    assert change.rms_rad is not None and change.rms_rad > 0
+    assert change.describe().startswith(f"moves the target {1e3 * change.rms_m:.3g} mm RMS")

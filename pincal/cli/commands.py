@@ -290,9 +290,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     if not diagnosis.steps:
         print("  nothing significant: no effect is claimed")
     from pincal.diagnosis import verdicts  # loaded already by the run
-    for effect, values, std in diagnosis.effects:  # refitted together: what evaluate applies
+    for (effect, values, std), change in zip(diagnosis.effects, diagnosis.target_changes):  # what evaluate applies
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))
-        print(f"final model: {effect.label} = {value} {unit(effect)}")
+        print(f"final model: {effect.label} = {value} {unit(effect)}: {change.describe()}")
         if effect.type == "coupling":  # a reading taken against another joint: fix the data, not the model
             print(f"  {verdicts.coupling_advice(effect, float(values[0]))}")
     for note in diagnosis.notes:

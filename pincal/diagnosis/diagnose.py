@@ -58,7 +58,7 @@ from pincal.diagnosis.screening import (
     testable,
 )
 from pincal.diagnosis.structure import partial_residual, remaining_structure
-from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge
+from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge, TargetChange, target_changes
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
 from pincal.fit.metrics import PoseErrors
@@ -122,6 +122,7 @@ class Diagnosis:
         notes: cases reported rather than adopted, and other remarks.
         chain_placements: the final model's chain placements (the geometry refitted with the
             effects; 4×4 each, as :meth:`pincal.model.chain.KinematicChain.placements`).
+        target_changes: how far each of ``effects`` moves the target over the calibration rows.
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -139,6 +140,7 @@ class Diagnosis:
     sigma_rot_rad: float | None = None
     notes: tuple[str, ...] = field(default=())
     chain_placements: tuple[np.ndarray, ...] = ()
+    target_changes: tuple[TargetChange, ...] = ()
 
 
 def parallel_neighbours(chain: KinematicChain) -> set[tuple[int, int]]:
@@ -452,6 +454,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),
         chain_placements=final_placements,
+        target_changes=tuple(target_changes(current_objective, final_solution.x)),
     )
 
 

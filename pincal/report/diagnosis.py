@@ -21,6 +21,7 @@ from pincal.report.model_diagnosis import (
     DiagnosisJson,
     DiagnosisReport,
     EffectJson,
+    TargetChangeJson,
     TimeSpansPart,
 )
 
@@ -80,6 +81,8 @@ def diagnosis_report(
         "plots": plots,
     }
     effects = [cast(EffectJson, effect_to_dict(e, v, s)) for e, v, s in diagnosis.effects]
+    for entry, change in zip(effects, diagnosis.target_changes):  # how far each moves the target (mm, mrad)
+        entry["target_change"] = cast(TargetChangeJson, change.as_dict())
     return {
         **head,
         "warnings": warnings,

@@ -12,10 +12,24 @@ class _EffectKeys(TypedDict):
     joint: str | None
 
 
+class _TargetChangeKeys(TypedDict):
+    rms_mm: float
+    max_mm: float
+
+
+class TargetChangeJson(_TargetChangeKeys, total=False):
+    """How far an effect moves the target over the calibration rows (:class:`pincal.diagnosis.verdicts.TargetChange`):
+    each point's distance [mm], and the target's turn [mrad] with 6D rows."""
+
+    rms_mrad: float
+    max_mrad: float
+
+
 class EffectJson(_EffectKeys, total=False):
     """An effect (:func:`pincal.model.effects.effect_to_dict`): ``cyclic`` has ``harmonic``, ``sin``,
     ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``coupling``
-    its ``driver`` (the joint whose reading it adds, × value); ``*std`` when estimated."""
+    its ``driver`` (the joint whose reading it adds, × value); ``*std`` when estimated; ``target_change``
+    in the final model's ``effects``."""
 
     harmonic: int
     sin: float
@@ -26,6 +40,7 @@ class EffectJson(_EffectKeys, total=False):
     std: float | Vector3
     source: str | None
     driver: str
+    target_change: TargetChangeJson
 
 
 class CandidateJson(EffectJson, total=False):
