@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -340,9 +341,10 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                 return
             fits[effect] = (bic(sol.residual, sol.x.size, n_prior_rows(obj)) - current_bic, effect, obj, sol)
 
-        held_rms = None if heldout is None else (
-            lambda objective, x, held_inputs=held_inputs: _heldout_rms(model, objective, x, heldout, held_inputs))
-        judge = Judge(inputs, chain, held_rms, current_objective, current_x)
+        held_errors = None if heldout is None else (
+            lambda objective, x, held_inputs=held_inputs: cast(PoseErrors, _heldout_errors(
+                model, objective, x, heldout, held_inputs)))
+        judge = Judge(inputs, chain, held_errors, current_objective, current_x, (model.sigma_pos, model.sigma_rot))
         if not steps:  # name every candidate the geometry absorbs
             for effect, score in screened:
                 if score.condition > SCREEN_CONDITION:
@@ -480,8 +482,3 @@ def _heldout_errors(model, objective, x, heldout, held_inputs) -> PoseErrors | N
         return None
     return _errors(_heldout_objective(model, objective, heldout, held_inputs), x)
 
-
-def _heldout_rms(model, objective, x, heldout, held_inputs) -> float:
-    errors = _heldout_errors(model, objective, x, heldout, held_inputs)
-    assert errors is not None  # a judge gets this only with held-out rows
-    return errors.position.rms

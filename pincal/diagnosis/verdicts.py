@@ -22,6 +22,7 @@ from typing import cast
 
 import numpy as np
 
+from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import standard_deviations
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
@@ -52,6 +53,9 @@ NOISE_FLOOR = 1e-7
 OFFSET_LIKE = 0.95
 #: |correlation| of two candidates' bases above which they are hard to tell apart.
 AMBIGUOUS = 0.8
+#: Standard errors of the paired per-row change of held-out error an effect must improve by (and must not
+#: worsen by) to be adopted: 2, a one-sided test at 98 % (:func:`held_out_verdict`).
+HELD_OUT_Z = 2.0
 #: Candidates shown per step.
 SHOWN = 8
 
@@ -174,28 +178,31 @@ class Judge:
         held_rms: held-out RMS point error [mm] of an objective at x, or None
             without held-out rows.
         current_objective / current_x: the fit the candidates would extend.
+        noise: the noise scales of positions [m] and orientations [rad] (None: positions only) the
+            held-out errors are judged in (:func:`held_out_verdict`).
     """
 
     def __init__(self, inputs: EffectInputs, chain: KinematicChain,
-                 held_rms: Callable[[SensorResidual, np.ndarray], float] | None,
-                 current_objective: SensorResidual, current_x: np.ndarray) -> None:
-        self.inputs, self.chain, self._held_rms = inputs, chain, held_rms
+                 held_errors: Callable[[SensorResidual, np.ndarray], PoseErrors] | None,
+                 current_objective: SensorResidual, current_x: np.ndarray,
+                 noise: tuple[float, float | None] = (1.0, None)) -> None:
+        self.inputs, self.chain, self._held_errors, self.noise = inputs, chain, held_errors, noise
         self.current_objective, self.current_x = current_objective, current_x
-        self._held: dict[Effect, float] = {}
-        self._before: float | None = None
+        self._held: dict[Effect, PoseErrors] = {}
+        self._before: PoseErrors | None = None
 
     def held(self, effect: Effect, objective: SensorResidual, x: np.ndarray) -> float | None:
-        """Held-out RMS [mm] of a candidate's fit (computed once per candidate)."""
-        if self._held_rms is None:
+        """Held-out RMS [mm] of a candidate's fit (its errors computed once per candidate)."""
+        if self._held_errors is None:
             return None
         if effect not in self._held:
-            self._held[effect] = self._held_rms(objective, x)
-        return self._held[effect]
+            self._held[effect] = self._held_errors(objective, x)
+        return self._held[effect].position.rms
 
-    def held_before(self) -> float:
-        assert self._held_rms is not None  # called only with held-out rows (rejection)
+    def held_before(self) -> PoseErrors:
+        assert self._held_errors is not None  # called only with held-out rows (rejection)
         if self._before is None:
-            self._before = self._held_rms(self.current_objective, self.current_x)
+            self._before = self._held_errors(self.current_objective, self.current_x)
         return self._before
 
     def rank(self, tried):
@@ -254,11 +261,41 @@ class Judge:
                 return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
                         f"{_correlation(basis, effect_basis(other, inputs, chain)):+.2f}: "
                         "the data cannot tell them apart")
-        if self._held_rms is not None and held is not None:
-            before = self.held_before()
-            if held > before * 1.02:
-                return f"it makes the held-out rows worse ({before:.3f} → {held:.3f} mm RMS)"
+        if self._held_errors is not None and effect in self._held:
+            return held_out_verdict(self.held_before(), self._held[effect], *self.noise)
         return "adopted"
+
+
+def paired_change(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
+    """Mean and standard error of the per-row change of squared held-out error, ``after`` − ``before``
+    (K,) each: the paired comparison of two models on the same rows (their common noise cancels)."""
+    change = np.asarray(after, dtype=float) - np.asarray(before, dtype=float)
+    return float(change.mean()), float(change.std(ddof=1) / np.sqrt(change.size)) if change.size > 1 else np.inf
+
+
+def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, sigma_rot_rad: float | None) -> str:
+    """``adopted`` when the held-out rows fit better beyond their noise, else why not (issue: judged on
+    held-out poses in position and orientation).
+
+    Per held-out row k, the change of its squared errors in units of the noise,
+    d_k = Σ_p (|e'_kp|² − |e_kp|²) / σ_pos² + (η'_k² − η_k²) / σ_rot² (the orientation term with 6D rows):
+    −2 × the change of the row's Gaussian log-likelihood, so a trade of a little orientation for much
+    position counts as what it is. Adopted when mean(d) is below zero by more than :data:`HELD_OUT_Z`
+    standard errors of the d_k (a paired test: the rows' own noise cancels); refused as worse when it is
+    above zero by as much, as not beyond the noise otherwise."""
+    change = (np.sum(after.position_m**2, axis=1) - np.sum(before.position_m**2, axis=1)) / sigma_pos_m**2
+    shown = [f"position {before.position.rms:.3f} → {after.position.rms:.3f} mm RMS"]
+    if before.rotation_rad is not None and after.rotation_rad is not None and sigma_rot_rad:
+        change = change + (after.rotation_rad**2 - before.rotation_rad**2) / sigma_rot_rad**2
+        shown.append(f"orientation {1e3 * np.sqrt(np.mean(before.rotation_rad**2)):.3g} → "
+                     f"{1e3 * np.sqrt(np.mean(after.rotation_rad**2)):.3g} mrad RMS")
+    mean, error = paired_change(np.zeros_like(change), change)
+    text = f"{', '.join(shown)}; paired over {before.n_rows} rows: {mean:+.3g} ± {error:.2g} noise² per row"
+    if mean - HELD_OUT_Z * error > 0:
+        return f"it makes the held-out rows worse ({text})"
+    if mean + HELD_OUT_Z * error >= 0:
+        return f"it does not improve the held-out rows beyond their noise ({text})"
+    return "adopted"
 
 
 #: |c| within this of 1: a joint read against its driver (J3 from the horizontal), not a transmission's ratio.
