@@ -330,3 +330,22 @@ def test_each_effect_says_how_far_it_moves_the_target(kuka_urdf):
     assert change.max_m == pytest.approx(moved.max(), rel=0.01)
     assert change.rms_rad is not None and change.rms_rad > 0
     assert change.describe().startswith(f"moves the target {1e3 * change.rms_m:.3g} mm RMS")
+
+
+def test_effects_that_need_gravity_are_named_untestable_without_inertias(industrial_arm_urdf):
+    """A URDF from a DH table has no inertias: no gravity torque, so compliance and gravity-flank backlash
+    cannot be tested on any joint — said so, instead of "absorbed by the geometry"."""
+    from pincal.model.parameter_sets import PlacementErrors
+    from pincal.simulation.cells import measure_truth, sensor_at
+    from pincal.simulation.sensor import random_configurations
+
+    chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(3)
+    rows = measure_truth(params, rng.normal(0.0, 3e-4, params.size), random_configurations(chain, rng, 40),
+                         sensor_at(3.0), rng, 20e-6, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]))
+    result = diagnose(chain, calibrate_chain(chain, rows, "full", selection="prior"), rows)
+    (note,) = [n for n in result.notes if n.startswith("cannot be tested")]
+    assert note.startswith("cannot be tested, 12 candidate(s): no gravity torque") and "--payload-kg" in note
+    assert "compliance:A2" in note and "backlash:A6:gravity" in note
+    assert not any("compliance" in n for n in result.notes if n.startswith("not separable"))

@@ -85,6 +85,9 @@ GRAVITY_REFRESHES = 2
 #: Tolerance of a candidate's full fit (:func:`pincal.fit.solver.solve`): it ranks
 #: and is judged; an adopted effect is refitted at the solver's own tolerance.
 CANDIDATE_TOLERANCE = 1e-10
+#: Largest |gravity torque| [N·m or N] of a joint over the rows below which it has none: compliance and
+#: gravity-flank backlash cannot be tested there (rounding of Pinocchio's RNEA is ~1e-12).
+NO_TORQUE = 1e-9
 #: Angle between two joint axes below which they count as parallel [rad]: 0.6°, so that a URDF pincal
 #: calibrated (its axes turned by ~1e-4 rad) still qualifies.
 PARALLEL_AXES_RAD = 1e-2
@@ -294,6 +297,10 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
+    # a joint no gravity torque acts on in any row (a vertical axis; a URDF without inertias): nothing to test
+    weightless = {name for j, name in enumerate(chain.joint_names) if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
+    untestable = [e for e in pool if e.joint in weightless and (e.type == "compliance" or e.source == "gravity")]
+    pool = [e for e in pool if e not in untestable]
 
     adopted: list[Effect] = []
     objective, solution = model.fit([], calibration.solution, [])
@@ -413,6 +420,10 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
+    if untestable:
+        notes.append(f"cannot be tested, {len(untestable)} candidate(s): no gravity torque acts on their joints in "
+                     "any row (an axis along gravity, or no mass beyond the joint in the URDF: give the links' "
+                     f"inertias, or --payload-kg KG for the tool): {', '.join(e.label for e in untestable)}")
     untested = {label: d for label, d in untested.items()
                 if label not in rejected and label not in {e.label for e in adopted}}
     if untested:
