@@ -84,6 +84,8 @@ def test_diagnose_names_it_and_the_flag_brings_the_model_to_the_noise(horizontal
                  "--out", str(tmp_path / "d.urdf"), "--report", str(tmp_path / "d" / "REPORT.json")]) == 0
     printed = capsys.readouterr().out
     assert "final model: coupling:A3:A2 = " in printed and "run again with --coupling A3=-1*A2" in printed
+    (effect,) = json.loads((tmp_path / "d" / "REPORT.json").read_text(encoding="utf-8"))["effects"]
+    assert effect["driver"] == "A2" and "run again with --coupling A3=-1*A2" in effect["advice"]
     for flags, name in (([], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
         assert main(["calibrate", str(urdf), str(calibration), *common, *flags, "--out", str(tmp_path / f"{name}.urdf"),
                      "--report", str(tmp_path / f"{name}.json")]) in (0, 3)

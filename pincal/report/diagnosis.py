@@ -48,6 +48,7 @@ def diagnosis_report(
     """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
+    from pincal.diagnosis.verdicts import coupling_advice
     from pincal.model.effects import effect_to_dict
 
     def errors(e) -> PoseErrorsJson | None:
@@ -83,6 +84,9 @@ def diagnosis_report(
     effects = [cast(EffectJson, effect_to_dict(e, v, s)) for e, v, s in diagnosis.effects]
     for entry, change in zip(effects, diagnosis.target_changes):  # how far each moves the target (mm, mrad)
         entry["target_change"] = cast(TargetChangeJson, change.as_dict())
+    for entry, (effect, values, _) in zip(effects, diagnosis.effects):
+        if effect.type == "coupling":  # what to do: correct the readings (±1), or keep it in the model
+            entry["advice"] = coupling_advice(effect, float(values[0]))
     return {
         **head,
         "warnings": warnings,

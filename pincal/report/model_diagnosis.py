@@ -28,8 +28,8 @@ class TargetChangeJson(_TargetChangeKeys, total=False):
 class EffectJson(_EffectKeys, total=False):
     """An effect (:func:`pincal.model.effects.effect_to_dict`): ``cyclic`` has ``harmonic``, ``sin``,
     ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``coupling``
-    its ``driver`` (the joint whose reading it adds, × value); ``*std`` when estimated; ``target_change``
-    in the final model's ``effects``."""
+    its ``driver`` (the joint whose reading it adds, × value) and, in the final model's ``effects``, the
+    ``advice`` diagnose prints; ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
 
     harmonic: int
     sin: float
@@ -41,6 +41,7 @@ class EffectJson(_EffectKeys, total=False):
     source: str | None
     driver: str
     target_change: TargetChangeJson
+    advice: str
 
 
 class CandidateJson(EffectJson, total=False):
