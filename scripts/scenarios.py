@@ -44,8 +44,8 @@ from scipy.spatial.transform import Rotation
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.model.chain import KinematicChain
+from pincal.model.dh.conversion import urdf_from_dh_table
 from pincal.model.parameter_sets import PlacementErrors
-from pincal.model.urdf_from_dh import urdf_from_dh_table
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.cells import (
     INDUSTRIAL_6R_START,

@@ -12,7 +12,7 @@ placements and says where each parameter acts, so that
   ``xi_j = (v, w)`` (m, rad; Pinocchio's ``exp6``). Six per joint; the joint
   offset is the rotation (or translation) about the joint axis among them.
 
-Both share the interface of :class:`pincal.model.dh_parameters.DHParameterSet`:
+Both share the interface of :class:`pincal.model.dh.parameters.DHParameterSet`:
 ``info``, ``size``, ``slots``, ``placements(vector)``, ``slot_points(vector)``,
 ``apply(vector)`` and ``slot_jacobian(vector)`` (the map from parameter steps to
 slot twists; identity where the parameters are the slot coordinates).
@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from pincal.model.chain import KinematicChain
-from pincal.model.dh_parameters import ParameterInfo
+from pincal.model.dh.parameters import ParameterInfo
 from pincal.model.sensitivity import ParameterSlot
 
 _AXES = ("x", "y", "z")

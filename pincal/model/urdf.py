@@ -205,7 +205,7 @@ XacroArgs = Mapping[str, str] | Iterable[tuple[str, str]] | None
 
 
 def load_urdf(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs = None) -> yourdfpy.URDF:
-    """Load a URDF with yourdfpy without touching meshes (for :mod:`pincal.model.dh_urdf`;
+    """Load a URDF with yourdfpy without touching meshes (for :mod:`pincal.model.dh.urdf`;
     yourdfpy, trimesh and networkx are imported on the first call).
 
     No scene graph is built and no mesh is loaded; mesh file names (including

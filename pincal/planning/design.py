@@ -44,8 +44,8 @@ from typing import cast
 import numpy as np
 
 from pincal.errors import PincalError
+from pincal.fit.gaussian_norm import mean_norm
 from pincal.fit.identifiability import condition_number, order_parameters
-from pincal.fit.noise_limit import mean_norm
 from pincal.progress import Counter
 
 CRITERIA = {
@@ -65,7 +65,7 @@ STARTS = 4
 PASS_TOLERANCE = 1e-3
 #: Relative improvement of the criterion below which a swap is not made.
 SWAP_TOLERANCE = 1e-9
-#: Sphere quadrature of the expected error norm (:func:`pincal.fit.noise_limit.mean_norm`):
+#: Sphere quadrature of the expected error norm (:func:`pincal.fit.gaussian_norm.mean_norm`):
 #: 12 Gauss–Legendre × 24 trapezoid nodes, within 0.3 % of its 24 × 48 default for error
 #: covariances with axis ratios up to 20 and 16 times faster.
 QUADRATURE = (12, 24)

@@ -29,9 +29,9 @@ d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi
 With the chain's tool as the measured frame (one zero target point, R_T = I,
 neither fitted: :func:`pincal.residuals.tool_pose.tool_pose_residual`) and w = 1/sigma_p, v = 1/sigma_a
 the sensor's noise (eq 20–22), the least-squares solution is the
-maximum-likelihood estimate of :mod:`pincal.fit.ml_estimator`;
+maximum-likelihood estimate of :mod:`pincal.paper.ml_estimator`;
 :meth:`SensorResidual.noise_jacobian` gives the derivative with respect to the
-sensor noise that :mod:`pincal.fit.noise_limit` propagates.
+sensor noise that :mod:`pincal.paper.noise_limit` propagates.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ import numpy as np
 
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
-from pincal.model.dh import DHDeviations, DHTable
+from pincal.model.dh.table import DHDeviations, DHTable
 from pincal.model.effects import (
     Effect,
 )

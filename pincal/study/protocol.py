@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pincal.errors import PincalError
-from pincal.model.dh import DEVIATION_SETS
+from pincal.model.dh.table import DEVIATION_SETS
 from pincal.simulation.paper import SimulationSettings
 from pincal.study.estimators import ESTIMATORS, Estimator
 
@@ -108,7 +108,7 @@ def _seed(entropy: int, *spawn_key: int) -> int:
 
 
 def deviation_index(deviations: str) -> int:
-    """Position of a Table 2 deviation set among :data:`pincal.model.dh.DEVIATION_SETS`."""
+    """Position of a Table 2 deviation set among :data:`pincal.model.dh.table.DEVIATION_SETS`."""
     return list(DEVIATION_SETS).index(deviations)
 
 
