@@ -20,6 +20,8 @@ from pincal.cli.parser import build_parser, selection_criterion
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 
+__all__ = ["EXIT_THRESHOLD", "EXIT_USAGE", "EXIT_WARNING", "main", "console"]
+
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
 EXIT_WARNING = 3  # --strict and a warning (pincal.fit.plausibility); the outputs are written

@@ -31,6 +31,11 @@ from pincal.model.dh.table import DH_CONVENTIONS
 from pincal.planning.candidates import DEFAULT_SAMPLE, WORKSPACE_SIZE
 from pincal.planning.information import PLAN_LEVELS, SensorModel
 
+__all__ = [
+    "tool_pose", "prior_scale", "selection_criterion", "package_dir", "measure", "target_points", "xacro_arg",
+    "joint_names", "build_parser",
+]
+
 
 def tool_pose(text: str) -> np.ndarray:
     """argparse type of ``--tool`` and ``--flange``: ``X,Y,Z,ROLL,PITCH,YAW`` (metres, then URDF

@@ -25,6 +25,8 @@ from pincal.planning.files import PlanJson, PlanSources, plan_document, write_pl
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
 from pincal.progress import Progress, Stages
 
+__all__ = ["urdf_from_dh_file", "PlanRun", "plan_files"]
+
 # --- urdf-from-dh ------------------------------------------------------------------------
 
 

@@ -86,6 +86,11 @@ if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of th
     from pincal.paper.methods import PaperCalibration
     from pincal.simulation.paper import SimulatedExperiment, SimulationSettings
 
+__all__ = [
+    "RELOAD_TOLERANCE", "simulate_to_directory", "CalibrationRun", "calibrate_chain_dh", "calibrate_files",
+    "unfitted_sessions", "write_checked_urdf", "DiagnoseRun", "diagnose_files",
+]
+
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
 

@@ -13,6 +13,8 @@ import functools
 
 import numpy as np
 
+__all__ = ["mean_norm"]
+
 _CHI3_MEAN = 2.0 * np.sqrt(2.0 / np.pi)  # E‖u‖ for u ~ N(0, I₃)
 
 

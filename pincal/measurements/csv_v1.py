@@ -59,6 +59,11 @@ from pincal.measurements.data import (
 )
 from pincal.outputs import replacing
 
+__all__ = [
+    "JointKind", "QUAT_NORM_TOL", "MAX_POSITION", "CsvTable", "read_table", "read_joint_columns", "read_measurements",
+    "read_sessions", "write_measurements",
+]
+
 JointKind = Literal["revolute", "continuous", "prismatic"]
 
 

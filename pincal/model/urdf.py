@@ -57,6 +57,11 @@ from pincal.outputs import replacing
 if TYPE_CHECKING:
     import yourdfpy
 
+__all__ = [
+    "RIGID_TOLERANCE", "format_floats", "rpy_matrix", "rpy_from_matrix", "origin_attributes", "check_rigid_transform",
+    "XacroArgs", "load_urdf", "read_joint_origins", "same_file", "write_urdf_with_origins",
+]
+
 #: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
 #: proper rigid transform.
 RIGID_TOLERANCE = 1e-9

@@ -36,6 +36,11 @@ from pincal.residuals.distance import DistanceResidual
 from pincal.residuals.full_pose import FullPoseResidual
 from pincal.residuals.rotation import RotationResidual
 
+__all__ = [
+    "METHODS", "CALIBRATED", "FROM_CPA", "ABSORBED", "NOT_BY_CPA", "NO_CPA_DATA", "Stage", "PaperCalibration",
+    "cpa_groups", "estimate_twists", "calibrate_paper",
+]
+
 METHODS = (1, 2, 3)
 
 #: Status of a DH parameter after calibration.

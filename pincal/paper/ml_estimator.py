@@ -56,6 +56,11 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual
 from pincal.residuals.tool_pose import tool_pose_residual
 
+__all__ = [
+    "METHOD", "KEPT_NOMINAL", "SIGMA_FLOOR", "MAX_ITERATIONS", "RATIO_TOLERANCE", "MLCalibration",
+    "ml_parameter_indices", "variance_components", "calibrate_ml",
+]
+
 #: Value of :attr:`PaperCalibration.method` for this estimator.
 METHOD = "ml"
 

@@ -64,6 +64,8 @@ from pincal.residuals.tool_pose import tool_pose_residual
 from pincal.simulation.paper import SimulatedExperiment
 from pincal.simulation.sensor import perfect_measurements
 
+__all__ = ["METHODS", "PredictedErrors", "predicted_errors"]
+
 METHODS = (1, 2, 3, ML)
 
 @dataclass(frozen=True)

@@ -48,6 +48,12 @@ from pincal.fit.gaussian_norm import mean_norm
 from pincal.fit.identifiability import condition_number, order_parameters
 from pincal.progress import Counter
 
+__all__ = [
+    "CRITERIA", "PRIOR", "MAX_PASSES", "STARTS", "PASS_TOLERANCE", "SWAP_TOLERANCE", "QUADRATURE", "SINGULAR",
+    "Prediction", "DesignProblem", "Selection", "select", "priority_order", "ContinuousDesign", "CONTINUOUS_ITERATIONS",
+    "CONTINUOUS_EFFICIENCY", "continuous_design",
+]
+
 CRITERIA = {
     "accuracy": "predicted mean squared position error of the calibrated model over the workspace sample "
                 "(I-optimality), reported as the expected mean error [mm]",

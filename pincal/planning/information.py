@@ -36,6 +36,11 @@ from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual, TargetEstimate
 
+__all__ = [
+    "PLAN_LEVELS", "DEFAULT_TARGET_CENTRE_M", "DEFAULT_TARGET_RADIUS_M", "SensorModel", "default_target_points",
+    "plan_parameters", "MeasurementModel",
+]
+
 PLAN_LEVELS = ("registration", "offsets", "full", "dh")
 
 #: Corners of a cube, the default directions of the target's points (unit vectors).

@@ -80,6 +80,12 @@ if TYPE_CHECKING:
     from pincal.model.chain import KinematicChain
     from pincal.paper.methods import PaperCalibration
 
+__all__ = [
+    "REPORT_VERSION", "paper_report", "fit_rows", "chain_summary", "parameters_report", "identifiability_report",
+    "not_determined_report", "selection_report", "write_report", "write_evaluation", "ReportModel", "read_report",
+    "chain_head", "chain_report",
+]
+
 
 REPORT_VERSION = 1
 

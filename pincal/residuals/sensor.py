@@ -56,6 +56,8 @@ from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.so3 import jlog3, log3, skew
 
+__all__ = ["REGISTRATION_NAMES", "TargetEstimate", "SensorResidual"]
+
 #: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
 

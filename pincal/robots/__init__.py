@@ -16,6 +16,11 @@ from pathlib import Path, PurePosixPath
 
 from pincal.errors import ModelError
 
+__all__ = [
+    "KUKA_JOINTS", "KUKA_FLANGE_JOINT", "KUKA_BASE_LINK", "KUKA_FLANGE_LINK", "KUKA_LINKS", "kuka_lwr4plus_urdf",
+    "example_robot_data_dir", "example_robot_data_urdf",
+]
+
 #: The seven revolute joints of the KUKA LWR 4+ URDF, in chain order.
 KUKA_JOINTS: tuple[str, ...] = tuple(f"lwr_joint_{n}" for n in range(1, 8))
 #: The fixed joint carrying DH row 7 (lwr_link_7 -> lwr_flange).

@@ -34,6 +34,11 @@ from pincal.simulation.sensor import (
     simulated_shifts,
 )
 
+__all__ = [
+    "DEFAULT_TOOL_XYZ", "DEFAULT_TOOL_RPY", "SimulationSettings", "SimulatedExperiment", "simulate_experiment",
+    "SECONDS_PER_ROW",
+]
+
 #: The arbitrary tool F_T (flange_T_tool): TCP 62 mm off the last axis.
 DEFAULT_TOOL_XYZ = (0.045, -0.043, 0.118)
 DEFAULT_TOOL_RPY = (0.12, -0.25, 0.4)

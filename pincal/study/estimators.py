@@ -25,6 +25,11 @@ from pincal.paper.ml_estimator import calibrate_ml
 from pincal.paper.noise_limit import PredictedErrors, predicted_errors
 from pincal.simulation.paper import SimulatedExperiment
 
+__all__ = [
+    "SECOND_WEIGHT", "Estimator", "METHOD_1", "METHOD_2", "METHOD_3", "ML_ESTIMATOR", "ESTIMATORS",
+    "RESTART_ESTIMATORS", "ml_without_cpa_orientations",
+]
+
 #: Method 3's second weight w [mm²/deg²]: orientations dominate Err_full (eq 18).
 SECOND_WEIGHT = 100.0
 

@@ -20,6 +20,12 @@ from pincal.model.dh.table import DEVIATION_SETS
 from pincal.simulation.paper import SimulationSettings
 from pincal.study.estimators import ESTIMATORS, Estimator
 
+__all__ = [
+    "STUDY_ENTROPY", "RESTART_SPREAD_DEG", "RESTART_SPREAD_MM", "SAME_SOLUTION_DEG", "SAME_SOLUTION_MM",
+    "FIGURE2_SIGMA", "FIGURE2_REPEAT", "StudyConfig", "deviation_index", "task_seed", "restart_start_seed",
+    "figure2_seed",
+]
+
 #: Root entropy of every seed of the study (the paper's article number).
 STUDY_ENTROPY = 3680
 #: Half-width of the uniform random starts of the restart test: eps [deg], r and d [mm].

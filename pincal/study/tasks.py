@@ -53,6 +53,12 @@ from pincal.study.protocol import (
     restart_start_seed,
 )
 
+__all__ = [
+    "worker_chain", "worker_models", "ABLATION_REPEATS", "ABLATION_SUFFIX", "ablation_levels", "ablation_trial",
+    "noise_free_test_set", "parameter_deviations", "random_start", "TrialTask", "RestartTask", "Figure2Task",
+    "LimitTask",
+]
+
 # First entry of a task's sort key: its kind.
 _TRIALS, _RESTARTS, _FIGURE2_ERRORS, _LIMITS = 0, 1, 2, 3
 

@@ -34,6 +34,10 @@ from pincal.model.dh.urdf import (
 )
 from pincal.outputs import file_sha256
 
+__all__ = [
+    "CHECK_CONFIGURATIONS", "CHECK_SEED", "FK_TOLERANCE", "DHUrdf", "urdf_from_dh_table", "fk_error", "provenance",
+]
+
 #: Seeded configurations at which the written URDF is compared with the DH product.
 CHECK_CONFIGURATIONS = 20
 #: Seed of those configurations.

@@ -45,6 +45,11 @@ from pincal.model.dh.robot import (
 from pincal.model.dh.table import check_convention
 from pincal.model.dh.urdf import DH_FLANGE_JOINT
 
+__all__ = [
+    "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "RESERVED_JOINT_NAMES", "MAX_ANGLE_RAD", "MAX_LENGTH_M", "MAX_PRISMATIC_M",
+    "read_dh_csv",
+]
+
 #: Columns every DH table must have.
 REQUIRED_COLUMNS = ("joint", "a", "alpha", "d", "theta")
 #: Columns a DH table may have.

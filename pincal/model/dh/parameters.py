@@ -22,6 +22,8 @@ from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import DH_FIELDS, DHTable, dh_joint_origins
 from pincal.model.sensitivity import ParameterSlot
 
+__all__ = ["ParameterInfo", "DHParameterSet"]
+
 _UNITS = {"alpha": "rad", "epsilon": "rad", "r": "m", "d": "m"}
 
 

@@ -28,6 +28,8 @@ import numpy.typing as npt
 from pincal.errors import ModelError
 from pincal.model.dh.table import check_convention, dh_chain_origins, rot_x, rot_z, trans
 
+__all__ = ["DH_JOINT_TYPES", "DEFAULT_LIMITS", "DEFAULT_VELOCITY", "DEFAULT_EFFORT", "DHRobot"]
+
 #: Joint types a DH row can have.
 DH_JOINT_TYPES = ("revolute", "prismatic", "continuous")
 #: Position limits used when the table gives none: one turn either way [rad] for

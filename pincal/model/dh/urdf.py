@@ -25,6 +25,11 @@ from pincal.model.dh.robot import DEFAULT_LIMITS, DH_JOINT_TYPES, DHRobot
 from pincal.model.dh.table import DHTable, dh_chain_from_origins
 from pincal.model.urdf import load_urdf, write_urdf_with_origins
 
+__all__ = [
+    "DH_BASE_LINK", "DH_FLANGE_LINK", "DH_FLANGE_JOINT", "dh_link_name", "DH_SHAPE_TOLERANCE", "apply_dh_table",
+    "urdf_from_dh", "dh_table_from_urdf", "dh_robot_from_urdf",
+]
+
 #: Root link of a URDF written by :func:`urdf_from_dh`: DH frame 0.
 DH_BASE_LINK = "base_link"
 #: Tip link of a URDF written by :func:`urdf_from_dh`: the last DH frame (times
