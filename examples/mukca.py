@@ -31,7 +31,7 @@ from pincal import (
     read_fixture,
     read_fixture_data,
 )
-from pincal.model.urdf_from_dh import urdf_from_dh_table
+from pincal.model.dh.conversion import urdf_from_dh_table
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "mukca"
 LEVELS = ("offsets", "full")

@@ -19,9 +19,9 @@ _DEFINED_IN = {
     "pincal.fit.level_choice": ("LevelChoice", "choose_fixture_level", "choose_level"),
     "pincal.fit.socket_metrics": ("FixtureMetrics", "fixture_metrics"),
     "pincal.fit.metrics": ("ErrorSummary", "PoseErrors", "pose_errors"),
-    "pincal.fit.ml_estimator": ("MLCalibration", "calibrate_ml"),
-    "pincal.fit.noise_limit": ("PredictedErrors", "predicted_errors"),
-    "pincal.fit.paper_methods": ("PaperCalibration", "calibrate_paper"),
+    "pincal.paper.ml_estimator": ("MLCalibration", "calibrate_ml"),
+    "pincal.paper.noise_limit": ("PredictedErrors", "predicted_errors"),
+    "pincal.paper.methods": ("PaperCalibration", "calibrate_paper"),
     "pincal.fit.registration": ("register_orientations", "register_points"),
     "pincal.measurements.csv_v1": ("read_measurements", "read_sessions", "write_measurements"),
     "pincal.measurements.bags": ("read_bag",),
@@ -29,10 +29,10 @@ _DEFINED_IN = {
     "pincal.measurements.fixture": ("Fixture", "FixtureData", "read_fixture", "read_fixture_data"),
     "pincal.measurements.data": ("JointSpec", "MeasurementSet"),
     "pincal.model.chain": ("ChainPoses", "KinematicChain", "pose_from_xyz_rpy", "xyz_rpy_from_pose"),
-    "pincal.model.dh": ("KUKA_LWR4_DH", "TABLE2_LARGE", "TABLE2_SMALL", "DHDeviations", "DHTable"),
-    "pincal.model.dh_csv": ("read_dh_csv",),
-    "pincal.model.dh_parameters": ("DHParameterSet",),
-    "pincal.model.dh_robot": ("DHRobot",),
+    "pincal.model.dh.table": ("KUKA_LWR4_DH", "TABLE2_LARGE", "TABLE2_SMALL", "DHDeviations", "DHTable"),
+    "pincal.model.dh.files": ("read_dh_csv",),
+    "pincal.model.dh.parameters": ("DHParameterSet",),
+    "pincal.model.dh.robot": ("DHRobot",),
     "pincal.model.parameter_sets": ("JointOffsets", "PlacementErrors"),
     "pincal.model.sensor": ("Registration",),
     "pincal.simulation.paper": ("SimulatedExperiment", "SimulationSettings", "simulate_experiment"),
@@ -43,9 +43,6 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
     from pincal.fit.level_choice import LevelChoice, choose_fixture_level, choose_level
     from pincal.fit.metrics import ErrorSummary, PoseErrors, pose_errors
-    from pincal.fit.ml_estimator import MLCalibration, calibrate_ml
-    from pincal.fit.noise_limit import PredictedErrors, predicted_errors
-    from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
     from pincal.fit.registration import register_orientations, register_points
     from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
     from pincal.measurements.bags import read_bag
@@ -68,18 +65,21 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         pose_from_xyz_rpy,
         xyz_rpy_from_pose,
     )
-    from pincal.model.dh import (
+    from pincal.model.dh.files import read_dh_csv
+    from pincal.model.dh.parameters import DHParameterSet
+    from pincal.model.dh.robot import DHRobot
+    from pincal.model.dh.table import (
         KUKA_LWR4_DH,
         TABLE2_LARGE,
         TABLE2_SMALL,
         DHDeviations,
         DHTable,
     )
-    from pincal.model.dh_csv import read_dh_csv
-    from pincal.model.dh_parameters import DHParameterSet
-    from pincal.model.dh_robot import DHRobot
     from pincal.model.parameter_sets import JointOffsets, PlacementErrors
     from pincal.model.sensor import Registration
+    from pincal.paper.methods import PaperCalibration, calibrate_paper
+    from pincal.paper.ml_estimator import MLCalibration, calibrate_ml
+    from pincal.paper.noise_limit import PredictedErrors, predicted_errors
     from pincal.simulation.paper import (
         SimulatedExperiment,
         SimulationSettings,
@@ -148,7 +148,7 @@ __all__ = [
     "PlateauSettings",
 ]
 
-_DEFINED_IN.update({"pincal.model.dh_urdf": ("dh_robot_from_urdf", "urdf_from_dh"),
+_DEFINED_IN.update({"pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),
                     "pincal.report.html": ("render_html", "write_html")})  # yourdfpy; jinja2, matplotlib
 _ON_FIRST_USE = {name: module for module, names in _DEFINED_IN.items() for name in names}
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
+__all__ = ["PincalError", "MeasurementError", "ModelError", "CalibrationError", "LISTED", "did_you_mean"]
+
 
 class PincalError(Exception):
     """Root of all errors pincal raises on bad input or impossible requests."""

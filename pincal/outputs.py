@@ -33,6 +33,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
+__all__ = ["TEMP_SUFFIX", "is_temporary", "replacing", "write_text", "write_bytes", "file_sha256"]
+
 #: Every temporary file ends with this (and starts with a dot): ``.REPORT.json.1a2b3c4d.pincal-tmp``.
 TEMP_SUFFIX = ".pincal-tmp"
 

@@ -11,6 +11,8 @@ rows red.
 
 from __future__ import annotations
 
+__all__ = ["NOMINAL", "CALIBRATED", "WITH_EFFECTS", "EVALUATED", "FLAG", "MODEL_COLOURS", "LEGEND", "model_colour"]
+
 NOMINAL = "#9aa5b1"
 CALIBRATED = "#2563eb"
 WITH_EFFECTS = "#d97706"

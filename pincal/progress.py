@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+__all__ = ["Progress", "Counter", "Stages"]
+
 #: ``progress(done, total)``: units of work done so far, of ``total`` known so far.
 Progress = Callable[[int, int], None]
 

@@ -73,8 +73,8 @@ _SCALING_PROGRAM = """
 import json, sys, time
 started = time.perf_counter()
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
-from pincal.fit.paper_methods import calibrate_paper
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.paper.methods import calibrate_paper
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 imported = time.perf_counter()
@@ -92,9 +92,9 @@ print(json.dumps({"import_s": imported - started, "simulate_s": simulated - impo
 
 def method2_calibration(runs: int) -> dict:
     """(a): median wall time of one Method-2 calibration [ms], from the nominal every time."""
-    from pincal.fit.paper_methods import calibrate_paper
     from pincal.model.chain import KinematicChain
-    from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
+    from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
+    from pincal.paper.methods import calibrate_paper
     from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
     from pincal.simulation.paper import SimulationSettings, simulate_experiment
 

@@ -9,14 +9,14 @@ Writes ``urdf/kuka_lwr4plus.urdf`` (the user-facing file) and
 
 How the file is made: a *template* URDF (links, joints, limits, inertials; every
 joint origin the identity) is built programmatically with yourdfpy, then
-:func:`pincal.model.dh_urdf.apply_dh_table` — the package's DH → URDF adapter — writes
-the joint origins realising ``pincal.model.dh.KUKA_LWR4_DH`` (Table 1).
+:func:`pincal.model.dh.urdf.apply_dh_table` — the package's DH → URDF adapter — writes
+the joint origins realising ``pincal.model.dh.table.KUKA_LWR4_DH`` (Table 1).
 
 The joint origins come from the one DH-row → joint-origin core,
-:func:`pincal.model.dh.dh_origin_rows` (through ``DHTable.joint_origins`` and
-:func:`pincal.model.dh.dh_chain_origins`), which ``pincal urdf-from-dh`` uses too.
+:func:`pincal.model.dh.table.dh_origin_rows` (through ``DHTable.joint_origins`` and
+:func:`pincal.model.dh.table.dh_chain_origins`), which ``pincal urdf-from-dh`` uses too.
 
-Kinematics (see ``pincal/model/dh.py``): distal DH,
+Kinematics (see ``pincal/model/dh/table.py``): distal DH,
 ``F_n = Rz(theta_n + eps_n) Tz(d_n) Tx(r_n) Rx(alpha_n)``. The value of joint
 ``lwr_joint_n`` is the paper's encoder angle theta_n; ``lwr_base_link`` is DH
 frame 0 and ``lwr_flange`` DH frame 7. The URDF child link of joint n,
@@ -68,8 +68,8 @@ from typing import Sequence
 import numpy as np
 import yourdfpy
 
-from pincal.model.dh import KUKA_LWR4_DH, DHTable, rot_x, trans
-from pincal.model.dh_urdf import apply_dh_table
+from pincal.model.dh.table import KUKA_LWR4_DH, DHTable, rot_x, trans
+from pincal.model.dh.urdf import apply_dh_table
 from pincal.model.urdf import format_floats
 from pincal.robots import (
     KUKA_BASE_LINK,

@@ -29,7 +29,7 @@ import numpy as np
 from pincal.measurements.bags import write_bag
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_SMALL
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import DEFAULT_TOOL_RPY, DEFAULT_TOOL_XYZ
 from pincal.simulation.recording import RecordingSettings, simulate_recording

@@ -49,8 +49,8 @@ from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.metrics import pose_errors
 from pincal.measurements.fixture import Fixture
 from pincal.model.chain import KinematicChain
+from pincal.model.dh.conversion import urdf_from_dh_table
 from pincal.model.parameter_sets import PlacementErrors
-from pincal.model.urdf_from_dh import urdf_from_dh_table
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.cells import (
     INDUSTRIAL_6R_START,

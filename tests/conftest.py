@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.cells import INDUSTRIAL_6R_START, INDUSTRIAL_6R_TABLE
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
@@ -118,7 +118,7 @@ INDUSTRIAL_ARM_START = INDUSTRIAL_6R_START
 
 @pytest.fixture(scope="session")
 def industrial_arm_urdf(tmp_path_factory):
-    from pincal.model.urdf_from_dh import urdf_from_dh_table
+    from pincal.model.dh.conversion import urdf_from_dh_table
 
     folder = tmp_path_factory.mktemp("industrial_arm")
     (folder / "arm.csv").write_text(INDUSTRIAL_ARM_TABLE, encoding="utf-8")

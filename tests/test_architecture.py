@@ -25,7 +25,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("simulation",),
     ("residuals",),
     ("fit",),
-    ("diagnosis", "study", "planning"),
+    ("paper", "diagnosis", "planning"),
+    ("study",),
     ("report",),
     ("cli",),
 )
@@ -159,7 +160,7 @@ def test_the_checks_catch_what_they_guard():
     graph = {name: set(deps) for name, deps in import_graph().items()}
     assert cycles({**graph, "pincal.model.chain": graph["pincal.model.chain"] | {"pincal.model.effects"}})
     assert any("climbs" in v for v in layering_violations({"pincal.model.chain": {"pincal.fit.solver"}}))
-    assert any("peer" in v for v in layering_violations({"pincal.study.run": {"pincal.diagnosis.diagnose"}}))
+    assert any("peer" in v for v in layering_violations({"pincal.planning.planner": {"pincal.diagnosis.diagnose"}}))
     assert any("root" in v for v in layering_violations({"pincal.fit.solver": {"pincal"}}))
 
 
@@ -171,11 +172,11 @@ def test_modules_stay_small(name):
 
 
 def test_no_module_repeats_its_folder_name():
-    """``study/tasks.py``, not ``study/study_tasks.py``."""
+    """``study/tasks.py``, not ``study/study_tasks.py``; ``model/dh/robot.py``, not ``model/dh/dh_robot.py``."""
     for name in MODULES:
         parts = name.split(".")
-        if len(parts) == 3:
-            assert not parts[2].startswith(parts[1].rstrip("s")), name
+        if len(parts) >= 3 and MODULES[name].name != "__init__.py":
+            assert not parts[-1].startswith(parts[-2].rstrip("s")), name
 
 
 #: The steps of a calibration (pincal.fit.pipeline): only the pipeline calls them, so a kind of
@@ -211,3 +212,96 @@ def test_one_calibration_pipeline(tmp_path):
         twice.write_text(call, encoding="utf-8")
         assert set().union(*step_callers({"pincal.fit.fixture_calibration": twice}).values()) == {
             "pincal.fit.fixture_calibration"}
+
+
+def declared_all(path: Path) -> list[str] | None:
+    """The names of the module's ``__all__ = [...]`` (a literal list or tuple of strings), or None."""
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            return [ast.literal_eval(element) for element in node.value.elts]  # type: ignore[attr-defined]
+    return None
+
+
+def top_level_names(tree: ast.Module) -> tuple[set[str], set[str]]:
+    """The names a module binds at top level (also inside ``if``/``try``): defined, and imported."""
+    defined: set[str] = set()
+    imported: set[str] = set()
+    body = list(tree.body)
+    while body:
+        node = body.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            defined.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            defined.update(n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name))
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            imported.update((a.asname or a.name).split(".")[0] for a in node.names)
+        elif isinstance(node, (ast.If, ast.Try)):
+            body.extend(node.body + node.orelse + getattr(node, "finalbody", []))
+            body.extend(stmt for handler in getattr(node, "handlers", []) for stmt in handler.body)
+    return defined, imported
+
+
+def names_imported_across_rooms(modules: dict[str, Path]) -> list[tuple[str, str, str]]:
+    """(importer, module, name) of every ``from pincal.<room>... import name`` whose module is in
+    another room than the importer's (the package root counts as a room of its own), anywhere in its body."""
+    found = []
+    for importer, path in modules.items():
+        package = importer if path.name == "__init__.py" else importer.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            base = package.split(".")[: len(package.split(".")) - (node.level - 1)] if node.level else []
+            module = ".".join(base + [node.module]) if node.level else node.module or ""
+            if module in MODULES and (room(module) != room(importer) or importer in ENTRY_POINTS):
+                found.extend((importer, module, a.name) for a in node.names if f"{module}.{a.name}" not in MODULES)
+    return found
+
+
+def private_imports(modules: dict[str, Path]) -> list[str]:
+    """Names imported from another room that the defining module does not list in its ``__all__``."""
+    bad = []
+    for importer, module, name in names_imported_across_rooms(modules):
+        exported = declared_all(MODULES[module]) or []
+        if name not in exported:
+            bad.append(f"{importer} imports {name} from {module}, whose __all__ does not list it")
+    return bad
+
+
+def _lazy_exports() -> dict[str, tuple[str, ...]]:
+    """``pincal``'s public names by defining module (imported on first use, so no import statement)."""
+    import pincal
+
+    return pincal._DEFINED_IN
+
+
+def test_every_module_states_its_public_names():
+    """A module that binds a public name (no leading underscore) at top level declares ``__all__``:
+    what other rooms, the tests and the users may import from it. Every listed name exists."""
+    for name, path in MODULES.items():
+        defined, imported = top_level_names(ast.parse(path.read_text(encoding="utf-8")))
+        exported = declared_all(path)
+        public = {n for n in defined if not n.startswith("_")}
+        if path.name == "__init__.py" and name != "pincal" and not public:
+            continue  # a subpackage's docstring
+        assert exported is not None or not public, f"{name} binds {sorted(public)} but declares no __all__"
+        lazy = {n for names in _lazy_exports().values() for n in names} if name == "pincal" else set()
+        missing = set(exported or ()) - defined - imported - lazy
+        assert not missing, f"{name}'s __all__ lists names it does not bind: {sorted(missing)}"
+
+
+def test_rooms_import_only_public_names():
+    """Across rooms, a module imports only what the defining module lists in ``__all__`` (a room's
+    modules may share the rest among themselves). The lazy exports of ``pincal`` count as imports."""
+    assert private_imports(MODULES) == []
+    lazy = [(module, name) for module, names in _lazy_exports().items() for name in names]
+    assert [(m, n) for m, n in lazy if n not in (declared_all(MODULES[m]) or [])] == []
+
+
+def test_the_public_name_check_catches_a_private_import(tmp_path):
+    """Importing a room's underscore helper, or a name a module only imported, from another room fails."""
+    planted = tmp_path / "planner.py"
+    planted.write_text("from pincal.fit.solver import _cost_summary\nfrom pincal.fit.solver import np\n"
+                       "from pincal.planning.design import QUADRATURE\n", encoding="utf-8")
+    bad = private_imports({"pincal.planning.planner": planted})
+    assert len(bad) == 2 and all("pincal.fit.solver" in line for line in bad)

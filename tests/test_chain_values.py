@@ -24,13 +24,13 @@ from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.level_choice import choose_level
 from pincal.fit.metrics import pose_errors
-from pincal.fit.ml_estimator import calibrate_ml
-from pincal.fit.paper_methods import calibrate_paper
 from pincal.fit.prior import Prior
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH
+from pincal.model.dh.table import DEVIATION_SETS, KUKA_LWR4_DH
 from pincal.model.effects import Effect
 from pincal.model.parameter_sets import PlacementErrors
+from pincal.paper.methods import calibrate_paper
+from pincal.paper.ml_estimator import calibrate_ml
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf, kuka_lwr4plus_urdf
@@ -48,7 +48,7 @@ POINTS = np.array([[0.03, -0.02, 0.08], [-0.04, 0.05, 0.06]])
 #: the fits, and the fits (the noise limit, the paper's simulator and the study come next).
 GUARDED = ("report", "cli", "diagnosis", "planning", "fit/chain_calibration.py", "fit/fixture_calibration.py",
            "fit/fold_update.py", "fit/level_choice.py", "fit/plausibility.py", "fit/sessions.py",
-           "fit/paper_methods.py", "fit/ml_estimator.py", "simulation/chain.py", "simulation/cells.py")
+           "paper/methods.py", "paper/ml_estimator.py", "simulation/chain.py", "simulation/cells.py")
 #: Calls that change a chain in place.
 MUTATORS = ("set_placements", "set_tool")
 

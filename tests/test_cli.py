@@ -12,12 +12,12 @@ from scipy.stats import chi2
 
 from pincal.cli.commands import main
 from pincal.fit.metrics import pose_errors
-from pincal.fit.paper_methods import calibrate_paper
 from pincal.fit.registration import register_orientations, register_points
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
-from pincal.model.dh import DHTable
+from pincal.model.dh.table import DHTable
 from pincal.model.urdf import read_joint_origins
+from pincal.paper.methods import calibrate_paper
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 
 #: Sensor noise of ``pincal simulate`` and ``pincal demo`` (the paper's Figure 2): sigma_p [mm], sigma_a [deg].

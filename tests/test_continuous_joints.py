@@ -21,7 +21,7 @@ from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
-from pincal.model.dh_urdf import dh_robot_from_urdf
+from pincal.model.dh.urdf import dh_robot_from_urdf
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.robots import example_robot_data_dir, example_robot_data_urdf
 from pincal.simulation.chain import simulate_chain

@@ -1,4 +1,4 @@
-"""Tests of pincal.fit.cpa (circle point analysis, eq 9)."""
+"""Tests of pincal.paper.cpa (circle point analysis, eq 9)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pincal.errors import CalibrationError
-from pincal.fit.cpa import circle_axis, fit_circle, twists_from_axes
+from pincal.paper.cpa import circle_axis, fit_circle, twists_from_axes
 
 SETTINGS = settings(max_examples=40, deadline=None, derandomize=True)
 seeds = st.integers(0, 2**32 - 1)

@@ -1,5 +1,5 @@
-"""The analytic CPA derivatives (pincal.fit.cpa.circle_axis_derivative, twist_gradients)
-against the central finite differences that pincal.fit.noise_limit used before them.
+"""The analytic CPA derivatives (pincal.paper.cpa.circle_axis_derivative, twist_gradients)
+against the central finite differences that pincal.paper.noise_limit used before them.
 
 Until issue 10 the noise limit differentiated the plane normal of every joint's arc by
 central differences of :func:`circle_axis` with a step h = 1e-6 m on each point coordinate
@@ -26,16 +26,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pincal.errors import CalibrationError
-from pincal.fit.cpa import (
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.paper.cpa import (
     circle_axis,
     circle_axis_derivative,
     twist_gradients,
     twists_from_axes,
 )
-from pincal.fit.noise_limit import predicted_errors
-from pincal.fit.paper_methods import FROM_CPA, calibrate_paper, cpa_groups
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
-from pincal.model.dh_parameters import DHParameterSet
+from pincal.paper.methods import FROM_CPA, calibrate_paper, cpa_groups
+from pincal.paper.noise_limit import predicted_errors
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 STEP = 1e-6  # the finite-difference step noise_limit used [m] (axes: [1])

@@ -22,7 +22,7 @@ from pincal.measurements.bags import POINT, TF, TRANSFORM, read_bag, write_bag
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.measurements.plateaus import extract_postures, still_stretches
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.recording import RecordingSettings, simulate_recording
 from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations

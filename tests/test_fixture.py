@@ -272,7 +272,7 @@ def test_evaluate_without_fixture_says_what_to_add(tmp_path, capsys):
 def test_iiwa_dh_table_is_the_data_urdf_but_two_offsets(tmp_path):
     """data/mukca/iiwa14_dh.csv through urdf-from-dh equals the data's URDF once its ±0.436 mm
     x offsets of joint_a2 and joint_a4 are zeroed (rounding: ~1e-15 m); with them, they differ."""
-    from pincal.model.urdf_from_dh import urdf_from_dh_table
+    from pincal.model.dh.conversion import urdf_from_dh_table
 
     urdf_from_dh_table(MUKCA / "iiwa14_dh.csv", "standard", tmp_path / "dh.urdf")
     text = IIWA.read_text().replace('xyz="-0.00043624 0 0.36"', 'xyz="0 0 0.36"')

@@ -34,7 +34,7 @@ from pincal.measurements.csv_v1 import read_joint_columns, read_measurements
 from pincal.measurements.data import JointSpec
 from pincal.model.chain import KinematicChain
 from pincal.model.description import read_description
-from pincal.model.dh_csv import read_dh_csv
+from pincal.model.dh.files import read_dh_csv
 from pincal.model.urdf import load_urdf
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 

@@ -12,8 +12,8 @@ import pinocchio as pin
 import pytest
 from conftest import assert_close, numeric_jacobian
 
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
-from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.distance import DistanceResidual
 from pincal.residuals.full_pose import FullPoseResidual

@@ -1,4 +1,4 @@
-"""The ML estimator (pincal.fit.ml_estimator) and its residual (pincal.residuals.tool_pose.tool_pose_residual).
+"""The ML estimator (pincal.paper.ml_estimator) and its residual (pincal.residuals.tool_pose.tool_pose_residual).
 
 Jacobians against central finite differences (step 1e-6, tolerance 1e-7
 relative to the column scale, as in test_jacobians.py); noise-free data must
@@ -19,19 +19,19 @@ from conftest import assert_close, numeric_jacobian
 
 from pincal.errors import CalibrationError
 from pincal.fit.metrics import pose_errors
-from pincal.fit.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
-from pincal.fit.paper_methods import ABSORBED, CALIBRATED, calibrate_paper
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import (
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import (
     KUKA_LWR4_DH,
     TABLE2_LARGE,
     TABLE2_SMALL,
     DHDeviations,
     DHTable,
 )
-from pincal.model.dh_parameters import DHParameterSet
 from pincal.model.effects import Effect, EffectInputs
 from pincal.model.sensor import Registration
+from pincal.paper.methods import ABSORBED, CALIBRATED, calibrate_paper
+from pincal.paper.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.tool_pose import tool_pose_residual

@@ -1,4 +1,4 @@
-"""Linearised (Cramér–Rao) predictions of pincal.fit.noise_limit.
+"""Linearised (Cramér–Rao) predictions of pincal.paper.noise_limit.
 
 The linearisation is checked against finite differences of the whole
 estimator (every stage re-run on perturbed data) and against the estimator's
@@ -19,12 +19,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
+from pincal.fit.gaussian_norm import mean_norm
 from pincal.fit.metrics import pose_errors
-from pincal.fit.ml_estimator import calibrate_ml
-from pincal.fit.noise_limit import mean_norm, predicted_errors
-from pincal.fit.paper_methods import calibrate_paper
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL
+from pincal.paper.methods import calibrate_paper
+from pincal.paper.ml_estimator import calibrate_ml
+from pincal.paper.noise_limit import predicted_errors
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 

@@ -14,20 +14,20 @@ from scipy.stats import f as f_distribution
 
 from pincal.errors import CalibrationError
 from pincal.fit.metrics import pose_errors
-from pincal.fit.paper_methods import (
+from pincal.model.chain import KinematicChain
+from pincal.model.dh.table import (
+    KUKA_LWR4_DH,
+    TABLE2_LARGE,
+    TABLE2_SMALL,
+    random_deviations_like,
+)
+from pincal.paper.methods import (
     ABSORBED,
     CALIBRATED,
     FROM_CPA,
     NOT_BY_CPA,
     calibrate_paper,
     cpa_groups,
-)
-from pincal.model.chain import KinematicChain
-from pincal.model.dh import (
-    KUKA_LWR4_DH,
-    TABLE2_LARGE,
-    TABLE2_SMALL,
-    random_deviations_like,
 )
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation.paper import SimulationSettings, simulate_experiment

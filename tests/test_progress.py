@@ -21,7 +21,7 @@ from pincal.cli.progress import LOG_INTERVAL_S, TERMINAL_DELAY_S, progress_bar
 from pincal.diagnosis.diagnose import MAX_EFFECTS, candidate_effects, diagnose
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
+from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
 from pincal.model.effects import parse_effect, time_column
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.design import STARTS

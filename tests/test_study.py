@@ -13,7 +13,7 @@ from distributed import Client, LocalCluster
 from pincal.cli.commands import main
 from pincal.fit.metrics import pose_errors
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH, TABLE2_LARGE
+from pincal.model.dh.table import DEVIATION_SETS, KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 from pincal.study.estimators import ML_ESTIMATOR, ml_without_cpa_orientations

@@ -134,7 +134,7 @@ def test_description_is_parsed_and_checked_once_per_content(tmp_path, monkeypatc
 #: (only for a .xacro), rosbags (pincal extract), and pincal's own modules of other commands.
 NOT_ON_CALIBRATE_PATH = ("yourdfpy", "trimesh", "networkx", "matplotlib", "jinja2", "dask", "xacro", "rosbags",
                          "pincal.diagnosis", "pincal.planning.planner", "pincal.fit.level_choice",
-                         "pincal.fit.paper_methods", "pincal.simulation.paper", "pincal.study", "pincal.report.html")
+                         "pincal.paper.methods", "pincal.simulation.paper", "pincal.study", "pincal.report.html")
 
 
 def test_calibrate_imports_neither_yourdfpy_nor_plots_nor_other_commands(tmp_path):

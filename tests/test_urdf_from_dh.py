@@ -21,7 +21,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pincal.cli.commands import main
-from pincal.model.dh import (
+from pincal.model.dh.files import read_dh_csv
+from pincal.model.dh.robot import DEFAULT_LIMITS, DHRobot
+from pincal.model.dh.table import (
     KUKA_LWR4_DH,
     dh_chain_origins,
     dh_origin_rows,
@@ -29,9 +31,7 @@ from pincal.model.dh import (
     rot_z,
     trans,
 )
-from pincal.model.dh_csv import read_dh_csv
-from pincal.model.dh_robot import DEFAULT_LIMITS, DHRobot
-from pincal.model.dh_urdf import (
+from pincal.model.dh.urdf import (
     DH_FLANGE_JOINT,
     DH_FLANGE_LINK,
     dh_robot_from_urdf,
@@ -203,7 +203,7 @@ def test_kuka_generator_and_urdf_from_dh_write_the_same_origins(tmp_path):
 
 def test_fk_check_measures_a_wrong_urdf(tmp_path):
     """The command's bug guard (urdf_from_dh.fk_error) sees a URDF that is not the table's."""
-    from pincal.model.urdf_from_dh import fk_error
+    from pincal.model.dh.conversion import fk_error
 
     rng = np.random.default_rng(8)
     robot, other = random_robot(rng, "modified"), random_robot(rng, "modified")
@@ -260,7 +260,7 @@ def test_modified_read_back_rejects_non_dh_origin(tmp_path):
     origins = dh_chain_origins("modified", [0.1, 0.3, -0.7], [0.2, 0.0, 0.4], [0.0, 0.4, 1.1], [0.3, 0.1, 0.0])
     origins[2] = origins[2] @ trans(y=0.01)  # Craig's rows have no y translation in the child frame
     from pincal.errors import PincalError
-    from pincal.model.dh import dh_chain_from_origins
+    from pincal.model.dh.table import dh_chain_from_origins
 
     with pytest.raises(PincalError, match="origin 2: not of the modified DH shape"):
         dh_chain_from_origins("modified", origins)

@@ -16,14 +16,14 @@ from hypothesis import strategies as st
 from lxml import etree
 
 from pincal.errors import ModelError
-from pincal.model.dh import (
+from pincal.model.dh.table import (
     KUKA_LWR4_DH,
     TABLE2_LARGE,
     TABLE2_SMALL,
     DHTable,
     random_deviations_like,
 )
-from pincal.model.dh_urdf import apply_dh_table, dh_table_from_urdf
+from pincal.model.dh.urdf import apply_dh_table, dh_table_from_urdf
 from pincal.model.urdf import (
     read_joint_origins,
     rpy_from_matrix,

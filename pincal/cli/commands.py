@@ -20,6 +20,8 @@ from pincal.cli.parser import build_parser, selection_criterion
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 
+__all__ = ["EXIT_THRESHOLD", "EXIT_USAGE", "EXIT_WARNING", "main", "console"]
+
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
 EXIT_WARNING = 3  # --strict and a warning (pincal.fit.plausibility); the outputs are written
@@ -93,7 +95,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     _print_notes(run.notes + list(run.result.notes))
     _print_level_choice(run.report)
     if level == "dh":
-        from pincal.fit.paper_methods import PaperCalibration  # loaded by the run
+        from pincal.paper.methods import PaperCalibration  # loaded by the run
 
         assert isinstance(run.result, PaperCalibration)  # level dh runs the paper's methods
         for stage in run.result.stages:
@@ -386,7 +388,7 @@ def _run_study(args: argparse.Namespace) -> int:
 
 def _run_urdf_from_dh(args: argparse.Namespace) -> int:
     from pincal.cli.preparation import urdf_from_dh_file
-    from pincal.model.dh_urdf import DH_BASE_LINK, DH_FLANGE_LINK
+    from pincal.model.dh.urdf import DH_BASE_LINK, DH_FLANGE_LINK
 
     run = urdf_from_dh_file(args.table, args.convention, args.out, name=args.name, degrees=args.degrees,
                             flange=args.flange)

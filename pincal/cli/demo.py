@@ -19,6 +19,8 @@ from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 if TYPE_CHECKING:
     from pincal.simulation.paper import SimulatedExperiment, SimulationSettings
 
+__all__ = ["DemoRow", "run_demo"]
+
 
 @dataclass(frozen=True)
 class DemoRow:

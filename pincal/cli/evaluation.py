@@ -79,6 +79,11 @@ from pincal.report.model import (
 )
 from pincal.report.sessions import session_errors
 
+__all__ = [
+    "REESTIMATED", "REGISTRATION_PARAMETERS", "MIN_THRESHOLD_DOF", "THE_REGISTRATION", "HELD_DRIFT",
+    "SessionEvaluation", "Evaluation", "evaluate_files",
+]
+
 REESTIMATED = "re-estimated on these rows (6 parameters; model and target fixed)"
 #: Registration parameters a re-estimated session fits to its own rows.
 REGISTRATION_PARAMETERS = 6

@@ -17,6 +17,8 @@ from pathlib import Path
 
 from pincal.errors import PincalError
 
+__all__ = ["EXAMPLES", "dataset_folder", "copy_example"]
+
 #: The shipped sets and what each holds.
 EXAMPLES = {
     "tiago_mocap": "TIAGo arm, two Qualisys motion-capture sessions (4 markers): calibrate, evaluate, diagnose, plan",

@@ -16,6 +16,8 @@ import numpy as np
 
 from pincal.errors import MeasurementError
 
+__all__ = ["run_extract"]
+
 
 def _rate(stamps: np.ndarray) -> str:
     return f"{1 / np.median(np.diff(stamps)):.0f} Hz" if len(stamps) > 1 else "one sample"

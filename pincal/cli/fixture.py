@@ -40,6 +40,11 @@ from pincal.report.fixture import fixture_report, read_fixture_block
 from pincal.report.model import Sources, level_choice_part
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport, fixture_metrics_json
 
+__all__ = [
+    "CALIBRATE_SENSOR_ONLY", "EVALUATE_SENSOR_ONLY", "SAME_FIXTURE_M", "FixtureRun", "calibrate_fixture_files",
+    "FixtureEvaluation", "evaluate_fixture_files", "run_calibrate", "run_evaluate",
+]
+
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
                          "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+__all__ = ["level_choice_lines"]
+
 
 def level_choice_lines(choice: Mapping[str, Any]) -> list[str]:
     """The table of REPORT.json's ``level_choice`` (:meth:`pincal.fit.level_choice.LevelChoice.as_dict`)."""

@@ -27,9 +27,14 @@ from pincal.measurements.plateaus import (
 )
 from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.description import parse_xacro_arg
-from pincal.model.dh import DH_CONVENTIONS
+from pincal.model.dh.table import DH_CONVENTIONS
 from pincal.planning.candidates import DEFAULT_SAMPLE, WORKSPACE_SIZE
 from pincal.planning.information import PLAN_LEVELS, SensorModel
+
+__all__ = [
+    "tool_pose", "prior_scale", "selection_criterion", "package_dir", "measure", "target_points", "xacro_arg",
+    "joint_names", "build_parser",
+]
 
 
 def tool_pose(text: str) -> np.ndarray:
@@ -44,7 +49,7 @@ def tool_pose(text: str) -> np.ndarray:
             f"'{text}' is not X,Y,Z,ROLL,PITCH,YAW (six numbers: metres, then radians)"
         )
     # imported here: `pincal calibrate` without --tool does not load the DH table reader
-    from pincal.model.dh_csv import MAX_ANGLE_RAD
+    from pincal.model.dh.files import MAX_ANGLE_RAD
 
     if max(abs(v) for v in values[3:]) > MAX_ANGLE_RAD:
         raise argparse.ArgumentTypeError(

@@ -17,6 +17,8 @@ from pincal.errors import PincalError
 from pincal.model.description import is_xacro, read_description
 from pincal.model.urdf import same_file
 
+__all__ = ["ensure_directory", "input_paths", "description_inputs", "refuse_overwrite", "refuse_overwrite_matching"]
+
 
 def ensure_directory(path: str | Path) -> Path:
     """Create the output folder ``path`` (and its parents); one clear error if impossible."""

@@ -18,12 +18,14 @@ from pincal.errors import PincalError
 from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
-from pincal.model.urdf_from_dh import DHUrdf, urdf_from_dh_table
+from pincal.model.dh.conversion import DHUrdf, urdf_from_dh_table
 from pincal.planning.candidates import DEFAULT_SAMPLE, read_candidates, sample_candidates
 from pincal.planning.collisions import Clearance, check_clearance
 from pincal.planning.files import PlanJson, PlanSources, plan_document, write_plan_csv, write_plan_json
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
 from pincal.progress import Progress, Stages
+
+__all__ = ["urdf_from_dh_file", "PlanRun", "plan_files"]
 
 # --- urdf-from-dh ------------------------------------------------------------------------
 
@@ -36,9 +38,9 @@ def urdf_from_dh_file(
     degrees: bool = False,
     flange: np.ndarray | None = None,
 ) -> DHUrdf:
-    """Write the URDF of a DH table (:func:`pincal.model.urdf_from_dh.urdf_from_dh_table`) after
+    """Write the URDF of a DH table (:func:`pincal.model.dh.conversion.urdf_from_dh_table`) after
     checking the output path (never the table; its folder is created if missing); the URDF is written
-    only if its kinematics equal the DH product (:data:`pincal.model.urdf_from_dh.FK_TOLERANCE`).
+    only if its kinematics equal the DH product (:data:`pincal.model.dh.conversion.FK_TOLERANCE`).
 
     ``flange`` is the pose (4, 4) [m] of the flange in the last DH frame (identity if None).
     """

@@ -21,6 +21,8 @@ from typing import TextIO
 
 from tqdm import tqdm
 
+__all__ = ["LOG_INTERVAL_S", "TERMINAL_DELAY_S", "progress_bar"]
+
 #: Seconds between two progress lines when stderr is not a terminal (and before the first).
 LOG_INTERVAL_S = 10.0
 #: Seconds of work before a terminal shows the bar.

@@ -20,6 +20,11 @@ from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.model.parameter_sets import CHAIN_LEVELS  # not from fit/: evaluate's settings need no fit module
 
+__all__ = [
+    "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "METHODS", "expect", "no_prior", "default_selection", "CalibrateSettings",
+    "DiagnoseSettings", "EvaluateSettings",
+]
+
 #: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
 #: (the paper's Methods 1–3 on a DH-described chain).
 CALIBRATE_LEVELS = (*CHAIN_LEVELS, "auto", "dh")

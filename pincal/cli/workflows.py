@@ -47,8 +47,8 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.model.corrected_urdf import write_corrected_urdf
 from pincal.model.description import xacro_arguments
-from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH
-from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import DEVIATION_SETS, KUKA_LWR4_DH
 from pincal.model.effects import (
     TIME_COLUMNS,
     effect_to_dict,
@@ -85,8 +85,13 @@ from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
     from pincal.diagnosis.diagnose import Diagnosis
     from pincal.fit.level_choice import LevelChoice
-    from pincal.fit.paper_methods import PaperCalibration
+    from pincal.paper.methods import PaperCalibration
     from pincal.simulation.paper import SimulatedExperiment, SimulationSettings
+
+__all__ = [
+    "RELOAD_TOLERANCE", "simulate_to_directory", "CalibrationRun", "calibrate_chain_dh", "calibrate_files",
+    "unfitted_sessions", "write_checked_urdf", "DiagnoseRun", "diagnose_files",
+]
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
@@ -184,7 +189,7 @@ def calibrate_chain_dh(
     chain: KinematicChain, data: MeasurementSet, method: int, weight: float
 ) -> tuple[PaperCalibration, DHParameterSet, float]:
     """Run a paper method on a loaded chain; returns the result, the parameter set and the time [s]."""
-    from pincal.fit.paper_methods import calibrate_paper
+    from pincal.paper.methods import calibrate_paper
 
     params = DHParameterSet(chain)
     start = time.perf_counter()

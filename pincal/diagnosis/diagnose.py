@@ -78,6 +78,11 @@ from pincal.model.effects import (
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor import SensorResidual
 
+__all__ = [
+    "MAX_EFFECTS", "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "PARALLEL_AXES_RAD", "Step", "Diagnosis",
+    "parallel_neighbours", "candidate_effects", "diagnose",
+]
+
 #: Most effects adopted.
 MAX_EFFECTS = 4
 #: Refits with gravity torques recomputed on the refitted geometry.

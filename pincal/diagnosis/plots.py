@@ -23,6 +23,8 @@ from pincal.model.effects import Effect
 from pincal.outputs import replacing
 from pincal.palette import CALIBRATED, WITH_EFFECTS
 
+__all__ = ["DATA_COLOUR", "GRID_POINTS", "effect_curve", "plot_diagnosis"]
+
 #: The rows' partial residuals: data, not a model.
 DATA_COLOUR = "#33404d"
 

@@ -25,6 +25,11 @@ from pincal.fit.solver import Solution, gram, thin_qr
 from pincal.model.effects import Effect
 from pincal.residuals.sensor import SensorResidual
 
+__all__ = [
+    "SCREEN_MARGIN", "SCREEN_CONDITION", "SCREEN_INSEPARABLE", "Score", "Linearisation", "screen", "may_reach",
+    "n_prior_rows", "GENERIC_NOT_RUN", "residual_freedom", "testable", "bic",
+]
+
 #: A screened candidate may reach a cut unless its linearised ΔBIC is worse by more
 #: than SCREEN_MARGIN[0] + SCREEN_MARGIN[1] · |ΔBIC| (the linearisation error, with room).
 SCREEN_MARGIN = (1.5, 0.06)

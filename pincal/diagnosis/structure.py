@@ -17,6 +17,8 @@ from pincal.diagnosis.verdicts import EVIDENCE
 from pincal.errors import CalibrationError
 from pincal.model.effects import HARMONICS, JOINT_EFFECTS, Effect, joint_basis
 
+__all__ = ["GENERIC_EVALUATIONS", "remaining_structure", "partial_residual"]
+
 #: Evaluations allowed to the full fit of a generic correction (an ill-posed one
 #: crawls along a valley of equivalent corrections; its linearised ΔBIC is then used).
 GENERIC_EVALUATIONS = 20

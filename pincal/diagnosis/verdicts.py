@@ -28,6 +28,11 @@ from pincal.model.chain import KinematicChain
 from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 from pincal.residuals.sensor import SensorResidual
 
+__all__ = [
+    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
+    "effect_basis", "Judge", "READ_AGAINST", "coupling_advice",
+]
+
 #: ΔBIC below which the evidence for an effect is "very strong".
 EVIDENCE = -10.0
 #: Largest plausible magnitude of each effect's value(s), by type (revolute, prismatic).

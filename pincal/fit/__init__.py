@@ -1,6 +1,8 @@
-"""The fit: solver, registrations, CPA, identifiability, outliers, the paper's three
-methods, the maximum-likelihood estimator, any-chain calibration, the linearised
-noise limit and the error metrics of eq 24.
+"""The fit of any chain: solver, registrations, identifiability, how many parameters to keep,
+outliers, one calibration pipeline for sensor and socket-fixture rows, several sessions, the
+level the data support, the MAP fit with priors, plausibility and the error metrics of eq 24.
+The paper's own pipeline (CPA, Methods 1–3, the ML estimator, the noise limit) is
+:mod:`pincal.paper`, built on this one.
 
 Imports residuals, simulation, the model and below.
 """

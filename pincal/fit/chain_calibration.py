@@ -39,10 +39,14 @@ from pincal.fit.solver import Solution, solve
 from pincal.fit.target_hold import HeldDirection, analysis_jacobian, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, NoParameters, _ChainParameters
+from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainParameters, NoParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+
+__all__ = [
+    "START_SIGMA_POS_M", "START_SIGMA_ROT_RAD", "ChainCalibration", "row_weights", "FitProblem", "calibrate_chain",
+]
 
 #: Starting noise scales for weighting positions against orientations; both
 #: are re-estimated from the residuals (maximum likelihood with unknown variances).
@@ -82,7 +86,7 @@ class ChainCalibration:
     """
 
     level: str
-    params: _ChainParameters | None
+    params: ChainParameters | None
     vector: np.ndarray
     std: np.ndarray
     status: tuple[str, ...]

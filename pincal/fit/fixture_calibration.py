@@ -40,9 +40,14 @@ from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, NoParameters, _ChainParameters
+from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainParameters, NoParameters
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.fixture import FixtureEstimate, FixtureResidual, rotation_basis
+
+__all__ = [
+    "DEPENDENT_COLUMNS", "PlacementEstimate", "FixtureCalibration", "initial_fixture", "FixtureProblem",
+    "calibrate_fixture", "column_names",
+]
 
 #: Columns whose smallest singular value (unit columns) is below this fraction of the largest are dependent.
 DEPENDENT_COLUMNS = 1e-8
@@ -105,7 +110,7 @@ class FixtureCalibration:
     """
 
     level: str
-    params: _ChainParameters | None
+    params: ChainParameters | None
     vector: np.ndarray
     std: np.ndarray
     status: tuple[str, ...]
@@ -296,7 +301,7 @@ def calibrate_fixture(
         ball_std=np.sqrt(np.diag(covariance)[objective.blocks["ball"]]),
         placements=_placements(objective, x, covariance, data, lines),
         # size > 0 only with a parameter set
-        chain_placements=(tuple(cast(_ChainParameters, params).placements(fit.vector)) if size
+        chain_placements=(tuple(cast(ChainParameters, params).placements(fit.vector)) if size
                           else tuple(chain.placements())),
         nominal_ball=nominal.ball,
         training=metrics_of_positions(objective.ball_positions(x), data),

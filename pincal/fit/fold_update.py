@@ -30,6 +30,8 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.progress import Counter
 
+__all__ = ["LINEARISED_FROM_ROWS", "final_problem", "linearised_fold_errors", "linearised_levels"]
+
 #: Rows from which the folds are scored by eq L1 instead of refits: each then holds 50 or
 #: more rows and a fold moves the parameters by ~1/3 of their standard deviation.
 LINEARISED_FROM_ROWS = 500

@@ -30,6 +30,12 @@ from pincal.errors import CalibrationError
 from pincal.fit.solver import condition_number as matrix_condition
 from pincal.fit.solver import triangular_factor
 
+__all__ = [
+    "RANK_TOLERANCE", "PIVOT_TIE", "CORRELATION_THRESHOLD", "LEVERAGE_FLOOR", "ABSORB_THRESHOLD", "Ordering",
+    "order_parameters", "pivoted_order", "press", "press_of_blocks", "absorbed_into", "condition_number",
+    "correlated_pairs", "Selection",
+]
+
 #: Pivots below this fraction of the largest mean "not identifiable".
 RANK_TOLERANCE = 1e-8
 #: Pivot candidates within this much of the longest tie (:func:`pivoted_order`), as a fraction

@@ -68,6 +68,13 @@ from pincal.measurements.fixture import MIN_ROWS_PER_SOCKET, FixtureData
 from pincal.model.chain import KinematicChain
 from pincal.progress import Counter, Progress
 
+__all__ = [
+    "DEFAULT_FOLDS", "SEED", "SAME_CONFIGURATION_RAD", "MIN_TRAINING_ROWS", "MIN_CONFIGURATIONS",
+    "MIN_HELD_OUT_COORDINATES", "RULE", "RULE_PRIOR", "Fold", "LevelScore", "LevelChoice", "one_standard_error",
+    "row_folds", "configuration_keys", "sensor_folds", "choose_level", "fixture_heldout_error", "fixture_rows",
+    "fixture_folds", "choose_fixture_level",
+]
+
 #: Folds over rows when there is one session or placement (Hastie et al. 2009, §7.10: K = 5 or 10).
 DEFAULT_FOLDS = 10
 #: Seed of the random order in which configurations are dealt to the folds (fixed: a rerun

@@ -21,6 +21,8 @@ from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.effects import sensed_points
 from pincal.model.sensor import Registration
 
+__all__ = ["ErrorSummary", "PoseErrors", "pose_errors"]
+
 
 @dataclass(frozen=True)
 class ErrorSummary:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["OUTLIER_THRESHOLD", "MAD_TO_SIGMA", "OUTLIER_FLOOR_M", "robust_scores", "find_outliers"]
+
 #: Robust z-score above which a row is reported.
 OUTLIER_THRESHOLD = 5.0
 MAD_TO_SIGMA = 1.4826

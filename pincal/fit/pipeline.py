@@ -47,6 +47,11 @@ from pincal.fit.solver import Solution, gram
 from pincal.measurements.data import MeasurementSet
 from pincal.progress import Counter
 
+__all__ = [
+    "KEPT", "NOT_IDENTIFIABLE", "NOT_SELECTED", "Dropped", "ObjectiveT", "KindProblem", "Analysis", "KinematicFit",
+    "fit_kinematics", "dropped_parameters",
+]
+
 KEPT = "calibrated"
 NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
 NOT_SELECTED = "not determined: weakly identified, left out by the selection criterion"

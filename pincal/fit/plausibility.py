@@ -45,6 +45,11 @@ from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 
+__all__ = [
+    "MAX_RMS_M", "MAX_NOISE_RATIO", "MAX_SENSOR_DISTANCE_M", "MAX_TRANSLATION_M", "MAX_ROTATION_RAD", "DATA_CAUSES",
+    "Finding", "reach_m", "check_calibration", "refit_nominal", "press_against_nominal", "calibration_findings",
+]
+
 #: Largest plausible RMS point residual after a calibration [m] (module docstring).
 MAX_RMS_M = 5e-3
 #: Largest plausible ratio of the per-axis residual to the sensor's stated noise.

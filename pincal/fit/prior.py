@@ -59,6 +59,13 @@ from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Selection
 from pincal.fit.solver import Solution, gram
 
+__all__ = [
+    "DEFAULT_TRANSLATION_MM", "DEFAULT_ROTATION_DEG", "PRIOR_DOMINATED", "MAX_SCALE_ITERATIONS", "SCALE_TOLERANCE",
+    "SCALE_FLOOR", "DATA_SCALE_GAP", "DECISIVE_LOG_EVIDENCE", "SCALE_RANGE", "PRIOR_STATUS", "Prior", "prior_of",
+    "prior_sigmas", "PriorResidual", "settled", "hat_diagonal", "effective_scale", "posterior", "log_evidence",
+    "standard_deviations", "data_rows", "dominated", "reestimated_scales", "map_outcome",
+]
+
 #: Prior standard deviation of a translation, or of a prismatic joint's zero [mm].
 DEFAULT_TRANSLATION_MM = 1.0
 #: Prior standard deviation of a rotation, or of a revolute joint's zero [deg].

@@ -16,6 +16,8 @@ from scipy.spatial.transform import Rotation
 from pincal.errors import CalibrationError
 from pincal.model.sensor import Registration, checked_array, checked_rotations
 
+__all__ = ["register_points", "mean_rotation", "register_orientations"]
+
 
 def _weights(weights, k: int) -> np.ndarray:
     if weights is None:

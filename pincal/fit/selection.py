@@ -74,6 +74,11 @@ from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.progress import Counter
 
+__all__ = [
+    "SELECTION_CRITERIA", "SELECTION_TOLERANCE", "SAFETY", "MAX_CONDITION", "MAX_CURVATURE_RATIO", "CURVATURE_STEP",
+    "NestedFits", "information_criterion", "nested_fits", "curvature_ratios", "refine", "select_subset",
+]
+
 #: How the number of identifiable kinematic parameters kept is chosen.
 SELECTION_CRITERIA = {
     "aic": "Akaike information criterion m ln(RSS/m) + 2n on the calibration rows",

@@ -50,6 +50,12 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.so3 import log3
 
+__all__ = [
+    "MIN_SPREAD_M", "MIN_SPREAD_RATIO", "LINE_RATIO", "MIN_TURN_RAD", "where", "rows_at", "registration_problem",
+    "check_registrable", "session_rows", "by_points", "start_registration", "initial_target", "register_session",
+    "session_pose_errors",
+]
+
 #: Measured points whose spread about a point (or off a line) is below this [m]
 #: coincide (lie on one line) for a registration: 1 µm is below the noise of any
 #: sensor pincal is used with (a laser tracker's ~10 µm; ``simulate``'s default 55 µm),

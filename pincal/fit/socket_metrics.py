@@ -23,6 +23,8 @@ import numpy.typing as npt
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
 
+__all__ = ["PlacementMetrics", "FixtureMetrics", "metrics_of_positions", "fixture_metrics"]
+
 
 @dataclass(frozen=True)
 class PlacementMetrics:

@@ -29,6 +29,11 @@ from scipy.optimize import least_squares
 
 from pincal.errors import CalibrationError
 
+__all__ = [
+    "XTOL", "FTOL", "GTOL", "GRAM_CONDITION", "MAX_CONDITION", "Fittable", "Solution", "solve", "gram",
+    "condition_number", "thin_qr", "triangular_factor",
+]
+
 #: Termination tolerances of least_squares: relative step, relative cost
 #: change, and scaled gradient. Tight enough that noise-free data is fitted to
 #: ~1e-13 relative, loose enough not to spend evaluations on rounding noise.

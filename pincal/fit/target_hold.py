@@ -42,6 +42,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.linalg
 
+__all__ = [
+    "NO_TURN_RAD", "MAX_TARGET_STD_M", "HeldDirection", "shift_grams", "principal_turns", "turn_along", "held_basis",
+    "describe_direction", "held_reason", "hold_target", "analysis_jacobian", "held_columns", "weak_target",
+]
+
 #: Turn (eq T1) below which a direction of the target is not seen at all [rad] (rule 1).
 NO_TURN_RAD = 1e-6
 #: Largest standard deviation of an estimated target direction [m] (rule 2): ten times the

@@ -35,6 +35,11 @@ import numpy as np
 
 from pincal.errors import MeasurementError, did_you_mean
 
+__all__ = [
+    "JOINT_STATE", "POSE", "TRANSFORM", "POINT", "TF", "POSE_TYPES", "TF_PREFIX", "TF_STATIC", "STORAGES",
+    "JointStream", "MeasurementStream", "read_bag", "write_bag",
+]
+
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE = "geometry_msgs/msg/PoseStamped"
 TRANSFORM = "geometry_msgs/msg/TransformStamped"

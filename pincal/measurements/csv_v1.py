@@ -24,7 +24,7 @@ this module never prints.
 :func:`read_table` is the one CSV table reader of pincal (:class:`CsvTable`:
 cells, line numbers, one-line errors of the caller's kind): measurement files,
 candidate configurations (:func:`read_joint_columns`) and DH tables
-(:mod:`pincal.model.dh_csv`) all go through it. Rows whose cells are all blank
+(:mod:`pincal.model.dh.files`) all go through it. Rows whose cells are all blank
 are skipped.
 """
 
@@ -58,6 +58,11 @@ from pincal.measurements.data import (
     join_sets,
 )
 from pincal.outputs import replacing
+
+__all__ = [
+    "JointKind", "QUAT_NORM_TOL", "MAX_POSITION", "CsvTable", "read_table", "read_joint_columns", "read_measurements",
+    "read_sessions", "write_measurements",
+]
 
 JointKind = Literal["revolute", "continuous", "prismatic"]
 

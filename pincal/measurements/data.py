@@ -13,6 +13,11 @@ import numpy as np
 
 from pincal.errors import MeasurementError, ModelError
 
+__all__ = [
+    "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
+    "JointSpec", "is_reserved", "default_session_name", "MeasurementSet", "join_sets",
+]
+
 ROLES = ("cpa", "calibration", "validation")
 DEFAULT_ROLE = "calibration"
 ROLE_COLUMN = "role"

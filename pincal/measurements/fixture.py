@@ -40,6 +40,12 @@ from pincal.measurements.data import (  # session: read as a synonym of placemen
     JointSpec,
 )
 
+__all__ = [
+    "POINT_COLUMN", "PLACEMENT_COLUMN", "COORDINATE_COLUMNS", "DISTANCE_COLUMNS", "MIN_ROWS_PER_SOCKET",
+    "MAX_FIXTURE_SIZE", "MIN_SOCKET_DISTANCE", "DISTANCE_TOLERANCE", "Fixture", "FixtureData", "read_fixture",
+    "read_fixture_data", "check_placements",
+]
+
 POINT_COLUMN = "point"
 PLACEMENT_COLUMN = "placement"
 COORDINATE_COLUMNS = ("x", "y", "z")

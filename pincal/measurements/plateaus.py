@@ -38,6 +38,13 @@ from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.bags import JointStream, MeasurementStream
 from pincal.measurements.data import MeasurementSet, is_reserved
 
+__all__ = [
+    "STILL_TOL", "MIN_STILL_S", "TRIM_S", "MIN_SAMPLES", "MAX_SPREAD_MM", "MAX_OFFSET_S", "SHORT_FRACTION",
+    "MIN_CORRELATION", "SPEED_SMOOTHING_S", "REFINE_STAGES", "EDGE_WINDOW_S", "DEGREE", "GRID_STEP_RANGE", "REASONS",
+    "PlateauSettings", "ClockOffset", "Refusal", "EXTRA_COLUMNS", "Extraction", "still_stretches",
+    "estimate_clock_offset", "extract_postures",
+]
+
 #: Default joint tolerance of a still stretch, max − min over the window [rad, or m for prismatic
 #: joints]: the tolerance the shipped TIAGo sessions were cut with (data/tiago_mocap/README.md, "all
 #: joints within 1 mrad for >= 2 s"); 1 mrad moves a point 1 m out by 1 mm, and the averaging takes

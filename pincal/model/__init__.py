@@ -1,4 +1,4 @@
-"""The robot model: URDF and DH tables in and out, the Pinocchio chain, the
+"""The robot model: URDF in and out, DH-described robots (``dh/``), the Pinocchio chain, the
 parameterisations of its joint placements (DH, offsets, full), their analytic
 sensitivities, the effect catalogue (joint shifts and sensor terms), the sensor's
 registration and the corrected-URDF writer.

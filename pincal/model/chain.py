@@ -26,6 +26,8 @@ from pincal.errors import ModelError, did_you_mean
 from pincal.measurements.data import JointSpec
 from pincal.model.description import read_description
 
+__all__ = ["ChainJoint", "ChainPoses", "KinematicChain", "points_in_base", "pose_from_xyz_rpy", "xyz_rpy_from_pose"]
+
 _KINDS = {
     "JointModelRX": "revolute",
     "JointModelRY": "revolute",

@@ -22,6 +22,8 @@ from pincal.model.description import read_description
 from pincal.model.urdf import XacroArgs, write_urdf_with_origins
 from pincal.model.urdf_elements import joint_origins, parent_joint
 
+__all__ = ["corrected_origins", "write_corrected_urdf"]
+
 
 def corrected_origins(
     urdf_path: str | Path,

@@ -31,6 +31,11 @@ from lxml import etree
 
 from pincal.errors import ModelError
 
+__all__ = [
+    "XACRO_SUFFIX", "XACRO_NAMESPACE", "XACRO_ARG_RE", "JOINT_TYPES", "RobotDescription", "is_xacro", "parse_xacro_arg",
+    "xacro_arguments", "read_description", "check_urdf_tree",
+]
+
 #: File-name ending of the descriptions :func:`read_description` expands with xacro.
 XACRO_SUFFIX = ".xacro"
 #: XML namespace of xacro's elements.

@@ -48,6 +48,13 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
 
+__all__ = [
+    "JOINT_EFFECTS", "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
+    "TIME_COLUMNS", "Effect", "EffectInputs", "gravity_torques", "time_column", "effect_inputs", "approach_flank",
+    "sensed_points", "joint_basis", "joint_shifts", "parse_effect", "effect_to_dict", "effect_from_dict", "TimeSpan",
+    "time_spans", "read_time_spans", "DriftOffsets", "held_times", "drift_offsets",
+]
+
 JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash", "coupling")
 SENSOR_EFFECTS = ("drift", "sensor_scale")
 EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS

@@ -25,6 +25,8 @@ from lxml import etree
 
 from pincal.errors import ModelError
 
+__all__ = ["PACKAGE_URI", "package_folders", "resolve_mesh", "with_resolved_meshes"]
+
 PACKAGE_URI = re.compile(r"^package://([^/]+)/(.*)$")
 
 

@@ -12,7 +12,7 @@ placements and says where each parameter acts, so that
   ``xi_j = (v, w)`` (m, rad; Pinocchio's ``exp6``). Six per joint; the joint
   offset is the rotation (or translation) about the joint axis among them.
 
-Both share the interface of :class:`pincal.model.dh_parameters.DHParameterSet`:
+Both share the interface of :class:`pincal.model.dh.parameters.DHParameterSet`:
 ``info``, ``size``, ``slots``, ``placements(vector)``, ``slot_points(vector)``,
 ``apply(vector)`` and ``slot_jacobian(vector)`` (the map from parameter steps to
 slot twists; identity where the parameters are the slot coordinates).
@@ -26,13 +26,17 @@ import numpy as np
 import pinocchio as pin
 
 from pincal.model.chain import KinematicChain
-from pincal.model.dh_parameters import ParameterInfo
+from pincal.model.dh.parameters import ParameterInfo
 from pincal.model.sensitivity import ParameterSlot
+
+__all__ = [
+    "joint_motion", "ChainParameters", "JointOffsets", "PlacementErrors", "NoParameters", "LEVELS", "CHAIN_LEVELS",
+]
 
 _AXES = ("x", "y", "z")
 
 
-class _ChainParameters:
+class ChainParameters:
     """Common part: the chain and its placements as loaded (the zero vector)."""
 
     def __init__(self, chain: KinematicChain) -> None:
@@ -78,7 +82,7 @@ def joint_motion(kind: str, axis: np.ndarray, value: float) -> np.ndarray:
     return out
 
 
-class JointOffsets(_ChainParameters):
+class JointOffsets(ChainParameters):
     """Zero offset of every chain joint (N parameters, rad or m)."""
 
     def __init__(self, chain: KinematicChain) -> None:
@@ -104,7 +108,7 @@ class JointOffsets(_ChainParameters):
         return out
 
 
-class PlacementErrors(_ChainParameters):
+class PlacementErrors(ChainParameters):
     """SE(3) perturbation of every joint placement and of the tip (6N + 6 parameters).
 
     Joint j: ``M_j · exp(xi_j)``, xi_j in the joint's placement frame; names
@@ -152,7 +156,7 @@ class PlacementErrors(_ChainParameters):
         return out
 
 
-class NoParameters(_ChainParameters):
+class NoParameters(ChainParameters):
     """The empty kinematic parameter set (level ``registration``): the URDF as loaded."""
 
     def placements(self, vector: np.ndarray) -> list[np.ndarray]:

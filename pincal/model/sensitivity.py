@@ -30,6 +30,8 @@ import pinocchio as pin
 
 from pincal.model.chain import KinematicChain
 
+__all__ = ["ParameterSlot", "ToolPoses", "Sensitivity", "SensitivityModel"]
+
 _ALIGNED_REVOLUTE = {0: pin.JointModelRX, 1: pin.JointModelRY, 2: pin.JointModelRZ}
 _ALIGNED_PRISMATIC = {0: pin.JointModelPX, 1: pin.JointModelPY, 2: pin.JointModelPZ}
 _EYE3 = np.eye(3)

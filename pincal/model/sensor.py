@@ -9,6 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
 
+__all__ = ["ROTATION_TOLERANCE", "checked_array", "checked_rotations", "Registration"]
+
 ROTATION_TOLERANCE = 1e-6  # max |R^T R - I| accepted for a rotation matrix
 
 

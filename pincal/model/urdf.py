@@ -57,6 +57,11 @@ from pincal.outputs import replacing
 if TYPE_CHECKING:
     import yourdfpy
 
+__all__ = [
+    "RIGID_TOLERANCE", "format_floats", "rpy_matrix", "rpy_from_matrix", "origin_attributes", "check_rigid_transform",
+    "XacroArgs", "load_urdf", "read_joint_origins", "same_file", "write_urdf_with_origins",
+]
+
 #: Tolerance [-] on ``R^T R - I`` and on the homogeneous row for an origin to be a
 #: proper rigid transform.
 RIGID_TOLERANCE = 1e-9
@@ -205,7 +210,7 @@ XacroArgs = Mapping[str, str] | Iterable[tuple[str, str]] | None
 
 
 def load_urdf(urdf_path: str | os.PathLike[str], xacro_args: XacroArgs = None) -> yourdfpy.URDF:
-    """Load a URDF with yourdfpy without touching meshes (for :mod:`pincal.model.dh_urdf`;
+    """Load a URDF with yourdfpy without touching meshes (for :mod:`pincal.model.dh.urdf`;
     yourdfpy, trimesh and networkx are imported on the first call).
 
     No scene graph is built and no mesh is loaded; mesh file names (including

@@ -32,6 +32,8 @@ from lxml import etree
 
 from pincal.errors import ModelError
 
+__all__ = ["origin_matrix", "joint_origins", "parent_joint", "render"]
+
 
 def _floats(text: str) -> np.ndarray:
     return np.array(list(map(float, text.split())))

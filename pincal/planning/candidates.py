@@ -16,6 +16,10 @@ from pincal.measurements.csv_v1 import read_joint_columns
 from pincal.model.chain import KinematicChain
 from pincal.simulation.sensor import random_configurations
 
+__all__ = [
+    "LIMIT_SLACK", "DEFAULT_SAMPLE", "WORKSPACE_SIZE", "sample_candidates", "read_candidates", "check_within_limits",
+]
+
 #: Readings this far outside a limit are accepted as on it [rad or m]: a joint driven to its
 #: stop reads slightly beyond it (TIAGo's torso reads 0.35018 m at its 0.35 m limit in
 #: data/tiago_mocap), so 1 mrad / 1 mm, the sessions' own joint-reading tolerance.

@@ -25,6 +25,8 @@ from pincal.model.description import read_description
 from pincal.model.packages import with_resolved_meshes
 from pincal.progress import Counter, Progress
 
+__all__ = ["Clearance", "check_clearance"]
+
 
 @dataclass(frozen=True)
 class Clearance:

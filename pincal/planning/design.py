@@ -44,9 +44,15 @@ from typing import cast
 import numpy as np
 
 from pincal.errors import PincalError
+from pincal.fit.gaussian_norm import mean_norm
 from pincal.fit.identifiability import condition_number, order_parameters
-from pincal.fit.noise_limit import mean_norm
 from pincal.progress import Counter
+
+__all__ = [
+    "CRITERIA", "PRIOR", "MAX_PASSES", "STARTS", "PASS_TOLERANCE", "SWAP_TOLERANCE", "QUADRATURE", "SINGULAR",
+    "Prediction", "DesignProblem", "Selection", "select", "priority_order", "ContinuousDesign", "CONTINUOUS_ITERATIONS",
+    "CONTINUOUS_EFFICIENCY", "continuous_design",
+]
 
 CRITERIA = {
     "accuracy": "predicted mean squared position error of the calibrated model over the workspace sample "
@@ -65,7 +71,7 @@ STARTS = 4
 PASS_TOLERANCE = 1e-3
 #: Relative improvement of the criterion below which a swap is not made.
 SWAP_TOLERANCE = 1e-9
-#: Sphere quadrature of the expected error norm (:func:`pincal.fit.noise_limit.mean_norm`):
+#: Sphere quadrature of the expected error norm (:func:`pincal.fit.gaussian_norm.mean_norm`):
 #: 12 Gauss–Legendre × 24 trapezoid nodes, within 0.3 % of its 24 × 48 default for error
 #: covariances with axis ratios up to 20 and 16 times faster.
 QUADRATURE = (12, 24)

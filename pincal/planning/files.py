@@ -25,6 +25,12 @@ from pincal.planning.collisions import Clearance
 from pincal.planning.design import CRITERIA
 from pincal.planning.planner import Plan, PlanSettings
 
+__all__ = [
+    "PLAN_VERSION", "PlanSources", "PlanChain", "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",
+    "PredictionJson", "RandomPrediction", "PlanPredicted", "PlanIdentifiability", "ClearanceJson", "PlanCandidates",
+    "BalanceJson", "PlanOrder", "Addition", "PlanJson", "write_plan_csv", "write_plan_json", "plan_document",
+]
+
 PLAN_VERSION = 1
 
 

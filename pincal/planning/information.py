@@ -14,7 +14,7 @@ least-squares estimate reaches it to first order).
 The error of the calibrated model at a configuration e, against the truth, is
 A_e δθ with A_e the unweighted position (and orientation) rows of the same
 Jacobian [m or rad per parameter unit]; its covariance is A_e M⁻¹ A_eᵀ
-(:mod:`pincal.fit.noise_limit` turns such covariances into expected norms).
+(:mod:`pincal.paper.noise_limit` turns such covariances into expected norms).
 
 The registration's rotation does not change these numbers (noise is isotropic),
 so the model uses the identity registration.
@@ -30,11 +30,16 @@ import numpy.typing as npt
 from pincal.errors import PincalError
 from pincal.fit.prior import prior_sigmas
 from pincal.model.chain import KinematicChain, points_in_base
-from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.parameter_sets import LEVELS, NoParameters
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual, TargetEstimate
+
+__all__ = [
+    "PLAN_LEVELS", "DEFAULT_TARGET_CENTRE_M", "DEFAULT_TARGET_RADIUS_M", "SensorModel", "default_target_points",
+    "plan_parameters", "MeasurementModel",
+]
 
 PLAN_LEVELS = ("registration", "offsets", "full", "dh")
 

@@ -22,6 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = [
+    "STILL", "TRAVEL_WEIGHT", "ANNEAL_STEPS", "move_times", "short_tour", "Balance", "flanks", "approach_balance",
+    "alternating_order",
+]
+
 #: Joint moves smaller than this keep the flank [rad or m] (the diagnose rule).
 STILL = 1e-3
 #: Weight of the travel time against the approach balance in the ``--alternate`` order.

@@ -20,11 +20,13 @@ from typing import Any
 import numpy as np
 
 from pincal.errors import PincalError, did_you_mean
-from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain, initial_target
+from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.prior import Prior, prior_of
 from pincal.fit.selection import SELECTION_CRITERIA
+from pincal.fit.sessions import initial_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import CHAIN_LEVELS
 from pincal.planning.candidates import WORKSPACE_SIZE
 from pincal.planning.design import DesignProblem, Prediction, select
 from pincal.planning.information import (
@@ -35,6 +37,11 @@ from pincal.planning.information import (
 from pincal.planning.ordering import Balance, alternating_order, approach_balance, move_times, short_tour
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor import REGISTRATION_NAMES
+
+__all__ = [
+    "DEFAULT_SIGMA_POS_MM", "DEFAULT_SIGMA_ROT_DEG", "RANDOM_DRAWS", "PlanSettings", "Addition", "Plan",
+    "plan_measurements",
+]
 
 #: Default sensor noise: the ``pincal simulate`` defaults (σ_p = 0.055 mm per axis,
 #: σ_a = 0.055° per angle; Franaszek & Marvel 2022, Section 7). Predicted errors scale with it.

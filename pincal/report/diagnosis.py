@@ -28,6 +28,8 @@ from pincal.report.model_diagnosis import (
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
 
+__all__ = ["diagnosis_report"]
+
 
 def diagnosis_report(
     head: ChainHead,

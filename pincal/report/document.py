@@ -50,7 +50,7 @@ from pincal.fit.metrics import PoseErrors
 from pincal.fit.target_hold import held_reason
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
-from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.sensor import Registration
 from pincal.outputs import write_text
 from pincal.report.model import (
@@ -79,8 +79,14 @@ from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 
 if TYPE_CHECKING:
     from pincal.fit.chain_calibration import ChainCalibration
-    from pincal.fit.paper_methods import PaperCalibration
     from pincal.model.chain import KinematicChain
+    from pincal.paper.methods import PaperCalibration
+
+__all__ = [
+    "REPORT_VERSION", "paper_report", "fit_rows", "chain_summary", "parameters_report", "identifiability_report",
+    "not_determined_report", "selection_report", "write_report", "write_evaluation", "ReportModel", "read_report",
+    "chain_head", "chain_report",
+]
 
 
 REPORT_VERSION = 1
@@ -106,7 +112,7 @@ def paper_report(
 ) -> PaperReport:
     """Build the REPORT.json document of a paper-method calibration."""
     # imported here: `pincal calibrate --level full` does not load the paper's methods
-    from pincal.fit.paper_methods import CALIBRATED, FROM_CPA
+    from pincal.paper.methods import CALIBRATED, FROM_CPA
 
     nominal = result.nominal.to_vector()
     calibrated = result.table.to_vector()

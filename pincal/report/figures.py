@@ -26,6 +26,11 @@ from pincal.palette import CALIBRATED, FLAG, NOMINAL, model_colour
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType  # matplotlib >= 3.9
 
+__all__ = [
+    "NOMINAL_COLOUR", "FLAG_COLOUR", "model_colours", "png_uri", "overview_figure", "row_errors_figure",
+    "parameter_figure", "PLAN_COLOURS", "prediction_figure", "coverage_figure",
+]
+
 #: Model colours: :mod:`pincal.palette` (the page's CSS and legend use the same).
 NOMINAL_COLOUR = NOMINAL
 FLAG_COLOUR = FLAG

@@ -38,6 +38,8 @@ from pincal.report.document import REPORT_VERSION, chain_summary, identifiabilit
 from pincal.report.model import LevelChoicePart, Sources
 from pincal.report.model_fixture import FixturePlacement, FixtureReport, fixture_metrics_json
 
+__all__ = ["TURN_NOT_DETERMINED", "fixture_report", "read_fixture_block"]
+
 #: What the report says of a collinear placement's rotation.
 TURN_NOT_DETERMINED = "the turn about the socket line: the sockets are collinear"
 

@@ -18,6 +18,8 @@ from typing import Any
 
 from scipy.spatial.transform import Rotation
 
+__all__ = ["fixture_section"]
+
 
 def _mm(value: Any) -> str:
     """A length [m] in mm, three decimals; an em dash for what is missing."""

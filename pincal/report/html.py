@@ -45,6 +45,11 @@ from pincal.report.sections import (
     sessions_section,
 )
 
+__all__ = [
+    "TEMPLATE", "PLAN_TEMPLATE", "KNOWN_KEYS", "load_document", "headline", "evaluated_sessions",
+    "orientations_measured", "render_html", "write_html",
+]
+
 TEMPLATE = "report.html.j2"
 PLAN_TEMPLATE = "plan.html.j2"
 

@@ -30,6 +30,16 @@ if TYPE_CHECKING:
     from pincal.measurements.couplings import ReadingCoupling
     from pincal.model.sensor import Registration
 
+__all__ = [
+    "Vector3", "Quaternion", "Sha256", "ChainLevel", "PaperMethod", "JointKind", "PositionStats", "OrientationStats",
+    "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "Parameter",
+    "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped", "CorrelatedPair", "NotDetermined",
+    "Identifiability", "PaperTool", "Tool", "Noise", "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
+    "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
+    "TimeSpanJson", "ChainHead", "CalibrationReport", "PaperReport", "EvaluatedSession", "DriftUse", "EvaluationJson",
+    "LevelChoicePart", "errors_json", "registration_json", "registration_pair", "level_choice_part", "findings_json",
+]
+
 # Annotated's (keyword, value) pairs are JSON Schema keywords of the type (pincal.report.schema)
 Vector3 = Annotated[list[float], ("minItems", 3), ("maxItems", 3)]
 Quaternion = Annotated[list[float], ("minItems", 4), ("maxItems", 4)]

@@ -6,6 +6,11 @@ from typing import Literal, TypedDict
 
 from pincal.report.model import CouplingJson, LevelChoiceJson, PoseErrorsJson, TimeSpanJson, Vector3, _CalibrationKeys
 
+__all__ = [
+    "EffectJson", "CandidateJson", "BeforeAfter", "DiagnosisStep", "DiagnosisJson", "ApproachContext",
+    "DiagnosisReport", "TimeSpansPart",
+]
+
 
 class _EffectKeys(TypedDict):
     type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "coupling", "drift", "sensor_scale"]

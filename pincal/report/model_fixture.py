@@ -22,6 +22,12 @@ from pincal.report.model import (
 if TYPE_CHECKING:
     from pincal.fit.socket_metrics import FixtureMetrics
 
+__all__ = [
+    "FixtureTool", "Socket", "SocketDistance", "PlacedSocket", "FixturePlacement", "SocketPairDistance",
+    "PlacementMetrics", "FixtureMetricsJson", "FixtureTraining", "FixtureNominal", "FixtureBlock", "FixtureReport",
+    "FixtureEvaluationJson", "fixture_metrics_json",
+]
+
 
 class FixtureTool(TypedDict):
     """The ball centre in the tip link (a ball has no orientation the data could see)."""

@@ -20,6 +20,8 @@ from xml.etree import ElementTree
 
 from pincal.report.sections import generic, num
 
+__all__ = ["is_plan", "find_plan_csv", "joint_limits", "plan_context"]
+
 
 def is_plan(document: dict[str, Any]) -> bool:
     """Whether ``document`` is a PLAN.json (it has ``plan_version``)."""

@@ -46,6 +46,11 @@ if TYPE_CHECKING:
     from pincal.fit.chain_calibration import ChainCalibration
     from pincal.model.chain import KinematicChain
 
+__all__ = [
+    "NOMINAL", "CALIBRATED", "WITH_EFFECTS", "row_error_set", "chain_row_errors", "paper_row_errors",
+    "diagnosis_row_errors", "evaluation_document",
+]
+
 NOMINAL = "nominal geometry"
 CALIBRATED = "calibrated geometry"
 WITH_EFFECTS = "geometry and effects"

@@ -29,6 +29,8 @@ from pincal.report.model import CalibrationReport, EvaluationJson, PaperReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 
+__all__ = ["REPORT_KINDS", "SCHEMA_ID", "OTHER_DOCUMENTS", "json_schema", "schema_text"]
+
 #: The kinds of REPORT.json, the schema's top level.
 REPORT_KINDS: tuple[type, ...] = (CalibrationReport, DiagnosisReport, PaperReport, FixtureReport)
 SCHEMA_ID = "https://pincal.invalid/report.schema.json"

@@ -12,6 +12,11 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+__all__ = [
+    "DISPLAY", "num", "change_text", "parameter_section", "effect_label", "effects_section", "fixed", "rotation_text",
+    "sessions_section", "generic",
+]
+
 #: Display units of a REPORT.json unit: (title, value scale and unit — nominal and
 #: calibrated —, change scale and unit — change and standard deviation). Lengths in
 #: mm throughout; angles in deg (values) and mrad (changes, spreads).

@@ -30,6 +30,8 @@ from pincal.model.sensor import Registration
 from pincal.report.model import SessionEntry, TimeSpanJson, errors_json, registration_pair
 from pincal.report.model_diagnosis import TimeSpansPart
 
+__all__ = ["session_errors", "session_entries", "drift_spans"]
+
 
 def session_errors(errors: PoseErrors, rows: np.ndarray) -> PoseErrors:
     """The errors of the rows ``rows`` (mask or indices) of ``errors``."""

@@ -22,6 +22,8 @@ import numpy.typing as npt
 from pincal.errors import CalibrationError
 from pincal.model.sensitivity import Sensitivity, SensitivityModel, ToolPoses
 
+__all__ = ["pair_indices", "ParameterSet", "KinematicsCache", "Objective"]
+
 
 def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows (k, k + K/2) for k = 0 .. K/2 - 1 (eq 10); an odd last row is unused."""

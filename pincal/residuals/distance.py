@@ -16,6 +16,8 @@ import numpy.typing as npt
 
 from pincal.residuals.base import KinematicsCache, Objective, pair_indices
 
+__all__ = ["DistanceResidual"]
+
 
 class DistanceResidual(Objective):
     """Eq 10–11 on the calibration rows.

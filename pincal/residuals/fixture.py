@@ -35,6 +35,8 @@ from pincal.errors import CalibrationError
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.so3 import skew
 
+__all__ = ["COLLINEAR_TOLERANCE", "rotation_basis", "FixtureEstimate", "FixtureResidual"]
+
 #: Sockets whose centred positions have a second singular value below this span a line [m].
 COLLINEAR_TOLERANCE = 1e-6
 

@@ -17,6 +17,8 @@ from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.distance import DistanceResidual
 from pincal.residuals.rotation import RotationResidual
 
+__all__ = ["MM_PER_M", "DEG_PER_RAD", "FullPoseResidual"]
+
 MM_PER_M = 1000.0
 DEG_PER_RAD = 180.0 / np.pi
 

@@ -20,6 +20,8 @@ import numpy.typing as npt
 from pincal.residuals.base import KinematicsCache, Objective, pair_indices
 from pincal.residuals.so3 import jlog3, log3
 
+__all__ = ["RotationResidual"]
+
 
 class RotationResidual(Objective):
     """Eq 14–17 on the calibration rows.

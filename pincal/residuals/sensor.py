@@ -29,9 +29,9 @@ d o/d phi = v Jlog3(E) (R_k R_T)ᵀ Jexp3(phi); d o/d psi = v Jlog3(E) Jexp3(psi
 With the chain's tool as the measured frame (one zero target point, R_T = I,
 neither fitted: :func:`pincal.residuals.tool_pose.tool_pose_residual`) and w = 1/sigma_p, v = 1/sigma_a
 the sensor's noise (eq 20–22), the least-squares solution is the
-maximum-likelihood estimate of :mod:`pincal.fit.ml_estimator`;
+maximum-likelihood estimate of :mod:`pincal.paper.ml_estimator`;
 :meth:`SensorResidual.noise_jacobian` gives the derivative with respect to the
-sensor noise that :mod:`pincal.fit.noise_limit` propagates.
+sensor noise that :mod:`pincal.paper.noise_limit` propagates.
 """
 
 from __future__ import annotations
@@ -55,6 +55,8 @@ from pincal.model.effects import (
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.so3 import jlog3, log3, skew
+
+__all__ = ["REGISTRATION_NAMES", "TargetEstimate", "SensorResidual"]
 
 #: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")

@@ -25,6 +25,8 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+__all__ = ["log3", "jlog3", "skew"]
+
 
 def log3(rotations: npt.ArrayLike) -> np.ndarray:
     """``pin.log3`` of each rotation (K, 3, 3) → rotation vectors (K, 3) [rad]."""

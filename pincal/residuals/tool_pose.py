@@ -10,6 +10,8 @@ from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 
+__all__ = ["tool_pose_residual"]
+
 
 def tool_pose_residual(
     cache: KinematicsCache,

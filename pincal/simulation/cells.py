@@ -21,6 +21,11 @@ from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
 from pincal.simulation.sensor import measure
 
+__all__ = [
+    "IK_TOLERANCE", "IK_MAX_STEP", "IK_DAMPING", "IK_ITERATIONS", "PATHS", "INDUSTRIAL_6R_TABLE", "INDUSTRIAL_6R_START",
+    "inverse_kinematics", "path_positions", "constant_orientation_path", "sensor_at", "measure_truth",
+]
+
 #: Pose error [m, rad] at which the inverse kinematics stops: far below any sensor's noise.
 IK_TOLERANCE = 1e-12
 #: Largest joint step of one inverse-kinematics iteration [rad or m]: keeps each pose on the

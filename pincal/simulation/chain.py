@@ -17,6 +17,8 @@ from pincal.simulation.sensor import (
     random_configurations,
 )
 
+__all__ = ["DEFAULT_SIMULATION_SETTINGS", "ChainExperiment", "simulate_chain", "truth_error_mm"]
+
 #: The default settings of :func:`simulate_chain` (frozen, so one shared instance is safe).
 DEFAULT_SIMULATION_SETTINGS = SimulationSettings()
 

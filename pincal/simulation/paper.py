@@ -21,7 +21,7 @@ import numpy as np
 
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
-from pincal.model.dh import DHDeviations, DHTable
+from pincal.model.dh.table import DHDeviations, DHTable
 from pincal.model.effects import (
     Effect,
 )
@@ -33,6 +33,11 @@ from pincal.simulation.sensor import (
     random_configurations,
     simulated_shifts,
 )
+
+__all__ = [
+    "DEFAULT_TOOL_XYZ", "DEFAULT_TOOL_RPY", "SimulationSettings", "SimulatedExperiment", "simulate_experiment",
+    "SECONDS_PER_ROW",
+]
 
 #: The arbitrary tool F_T (flange_T_tool): TCP 62 mm off the last axis.
 DEFAULT_TOOL_XYZ = (0.045, -0.043, 0.118)

@@ -25,6 +25,8 @@ from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
 from pincal.simulation.sensor import measure
 
+__all__ = ["RecordingSettings", "Recording", "simulate_recording"]
+
 
 @dataclass(frozen=True)
 class RecordingSettings:

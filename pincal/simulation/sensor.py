@@ -20,6 +20,11 @@ from pincal.model.effects import (
 )
 from pincal.model.sensor import Registration
 
+__all__ = [
+    "DEFAULT_REGISTRATION", "cpa_configurations", "measure", "simulated_shifts", "perfect_measurements",
+    "random_configurations",
+]
+
 #: The arbitrary sensor registration of the simulations: sensor_T_base.
 DEFAULT_REGISTRATION = Registration(
     rotation=Rotation.from_euler("ZYX", [35.0, -12.0, 8.0], degrees=True).as_matrix(),

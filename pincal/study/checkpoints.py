@@ -29,6 +29,8 @@ from typing import Any
 from pincal._version import __version__
 from pincal.outputs import TEMP_SUFFIX, write_text
 
+__all__ = ["CHECKPOINT_FOLDER", "source_digest", "TaskStore"]
+
 #: Hidden folder of the output folder holding the finished tasks of an unfinished study.
 CHECKPOINT_FOLDER = ".pincal-study-tasks"
 

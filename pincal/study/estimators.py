@@ -3,7 +3,7 @@
 Methods 1, 2 and 3 minimise Err_pos, Err_rot and Err_full (eq 16–18) of
 Franaszek & Marvel (2022); Method 3 is run with w = 1 and w =
 :data:`SECOND_WEIGHT`. The noise-weighted maximum-likelihood estimator
-(:func:`pincal.fit.ml_estimator.calibrate_ml`) is this package's addition.
+(:func:`pincal.paper.ml_estimator.calibrate_ml`) is this package's addition.
 
 :func:`ml_without_cpa_orientations` is an ablation of the ML estimator, not one
 of the study's estimators: the simulator gives the CPA rows orientations too,
@@ -16,14 +16,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pincal.fit.ml_estimator import calibrate_ml
-from pincal.fit.noise_limit import PredictedErrors, predicted_errors
-from pincal.fit.paper_methods import PaperCalibration, calibrate_paper
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import KUKA_LWR4_DH, DHTable
+from pincal.model.dh.table import KUKA_LWR4_DH, DHTable
 from pincal.model.sensor import Registration
+from pincal.paper.methods import PaperCalibration, calibrate_paper
+from pincal.paper.ml_estimator import calibrate_ml
+from pincal.paper.noise_limit import PredictedErrors, predicted_errors
 from pincal.simulation.paper import SimulatedExperiment
+
+__all__ = [
+    "SECOND_WEIGHT", "Estimator", "METHOD_1", "METHOD_2", "METHOD_3", "ML_ESTIMATOR", "ESTIMATORS",
+    "RESTART_ESTIMATORS", "ml_without_cpa_orientations",
+]
 
 #: Method 3's second weight w [mm²/deg²]: orientations dominate Err_full (eq 18).
 SECOND_WEIGHT = 100.0
@@ -35,7 +40,7 @@ class Estimator:
 
     Attributes:
         method: 1, 2 or 3 (the paper's methods) or ``"ml"`` (noise-weighted
-            maximum likelihood, :func:`pincal.fit.ml_estimator.calibrate_ml`).
+            maximum likelihood, :func:`pincal.paper.ml_estimator.calibrate_ml`).
         weight: w of Method 3 [mm²/deg²] (eq 18); None for the others.
     """
 
@@ -88,7 +93,7 @@ class Estimator:
                 weighs with it (on noise-free data any equal weights give the truth).
             start: starting eps, r, d of a paper method (default Table 1).
             twists: the CPA of ``data`` from Table 1
-                (:func:`pincal.fit.paper_methods.estimate_twists`), shared by the
+                (:func:`pincal.paper.methods.estimate_twists`), shared by the
                 estimators of one trial; computed if None.
             method2: Method 2's result on ``data`` (from :data:`METHOD_2`), the ML
                 estimator's start; computed if None. Either way the numbers are the same.
@@ -128,7 +133,7 @@ def ml_without_cpa_orientations(
 ) -> tuple[DHTable, Registration]:
     """The ML estimator with the orientations of the ``withhold`` rows left out (an ablation).
 
-    :func:`pincal.fit.ml_estimator.calibrate_ml` with known noise and
+    :func:`pincal.paper.ml_estimator.calibrate_ml` with known noise and
     ``withhold_orientations=withhold``: with the default, the CPA rows are
     positions only, as in the paper. ``withhold=()`` is the ML estimator itself.
 

@@ -30,6 +30,8 @@ from pincal.errors import PincalError
 from pincal.progress import Progress  # called after each finished task
 from pincal.study.checkpoints import TaskStore
 
+__all__ = ["default_workers", "fork_is_safe", "execute"]
+
 
 def default_workers() -> int:
     """All cores this process may use."""

@@ -30,6 +30,11 @@ from pincal.study.estimators import Estimator  # noqa: E402
 from pincal.study.executors import fork_is_safe  # noqa: E402
 from pincal.study.result import StudyResult  # noqa: E402
 
+__all__ = [
+    "figure2", "figure3", "figure4", "figure5", "figure6", "figure_noise_limit", "figure_ml", "FIGURES",
+    "start_figures", "write_figures",
+]
+
 matplotlib.use("Agg")
 
 

@@ -38,6 +38,8 @@ from pincal.study.tasks import ABLATION_REPEATS, ABLATION_SUFFIX, ablation_level
 if TYPE_CHECKING:
     from pincal.study.result import StudyResult
 
+__all__ = ["write_csv", "study_json", "write_study", "findings_markdown"]
+
 
 def _cell(value: Any) -> str:
     if value is None:

@@ -35,6 +35,8 @@ from pincal.study.protocol import (
 )
 from pincal.study.tasks import ABLATION_SUFFIX
 
+__all__ = ["COMPARABLE", "PAPER_MAX_DEVIATIONS", "check_findings", "ML_COLUMNS", "cpa_orientation_ablation"]
+
 #: Two mean errors are "comparable" when their ratio lies in this interval.
 COMPARABLE = (0.67, 1.5)
 #: Largest deviations from the ground truth reported in Section 8 [deg, deg, mm, mm].

@@ -16,9 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from pincal.errors import PincalError
-from pincal.model.dh import DEVIATION_SETS
+from pincal.model.dh.table import DEVIATION_SETS
 from pincal.simulation.paper import SimulationSettings
 from pincal.study.estimators import ESTIMATORS, Estimator
+
+__all__ = [
+    "STUDY_ENTROPY", "RESTART_SPREAD_DEG", "RESTART_SPREAD_MM", "SAME_SOLUTION_DEG", "SAME_SOLUTION_MM",
+    "FIGURE2_SIGMA", "FIGURE2_REPEAT", "StudyConfig", "deviation_index", "task_seed", "restart_start_seed",
+    "figure2_seed",
+]
 
 #: Root entropy of every seed of the study (the paper's article number).
 STUDY_ENTROPY = 3680
@@ -108,7 +114,7 @@ def _seed(entropy: int, *spawn_key: int) -> int:
 
 
 def deviation_index(deviations: str) -> int:
-    """Position of a Table 2 deviation set among :data:`pincal.model.dh.DEVIATION_SETS`."""
+    """Position of a Table 2 deviation set among :data:`pincal.model.dh.table.DEVIATION_SETS`."""
     return list(DEVIATION_SETS).index(deviations)
 
 

@@ -9,6 +9,8 @@ from pincal.study.protocol import (
     StudyConfig,
 )
 
+__all__ = ["StudyResult"]
+
 
 @dataclass(frozen=True)
 class StudyResult:

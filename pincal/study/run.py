@@ -14,7 +14,7 @@ Registration 2 (Method 1 has Registration 1 only):
   *noisy* test measurements, as in the paper;
 * ``pos_truth_mean_mm``, ``rot_truth_mean_deg``: the same against the
   *noise-free* test poses (eq 20–21 without N_k and zeta_k), which is what the
-  linearised noise limit (:func:`pincal.fit.noise_limit.predicted_errors`) predicts.
+  linearised noise limit (:func:`pincal.paper.noise_limit.predicted_errors`) predicts.
 
 Means and standard deviations over repeats follow eq 25 (1/N_rep). The
 restart test of Section 7 recalibrates a few trials from random starting DH

@@ -18,6 +18,8 @@ import numpy as np
 from pincal.study.estimators import Estimator
 from pincal.study.findings import PAPER_MAX_DEVIATIONS
 
+__all__ = ["STUDY_COLUMNS", "SUMMARY_COLUMNS", "RESTART_COLUMNS", "summarize", "limit_table", "summarize_restarts"]
+
 # The key of an eq 25 group (a summary row), and the eq 24 means averaged over its repeats.
 _GROUP = ("deviations", "level", "sigma_pos_mm", "sigma_rot_deg", "method", "weight", "registration")
 _AVERAGED = ("pos_mean_mm", "rot_mean_deg", "pos_truth_mean_mm", "rot_truth_mean_deg")

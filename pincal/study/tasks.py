@@ -27,10 +27,10 @@ import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.metrics import ErrorSummary, pose_errors
-from pincal.fit.paper_methods import PaperCalibration, estimate_twists
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import DEVIATION_SETS, KUKA_LWR4_DH, DHTable
+from pincal.model.dh.table import DEVIATION_SETS, KUKA_LWR4_DH, DHTable
+from pincal.paper.methods import PaperCalibration, estimate_twists
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import SimulatedExperiment, simulate_experiment
 from pincal.simulation.sensor import perfect_measurements
@@ -52,6 +52,12 @@ from pincal.study.protocol import (
     deviation_index,
     restart_start_seed,
 )
+
+__all__ = [
+    "worker_chain", "worker_models", "ABLATION_REPEATS", "ABLATION_SUFFIX", "ablation_levels", "ablation_trial",
+    "noise_free_test_set", "parameter_deviations", "random_start", "TrialTask", "RestartTask", "Figure2Task",
+    "LimitTask",
+]
 
 # First entry of a task's sort key: its kind.
 _TRIALS, _RESTARTS, _FIGURE2_ERRORS, _LIMITS = 0, 1, 2, 3

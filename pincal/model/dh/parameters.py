@@ -1,8 +1,8 @@
 """DH parameters of a chain as the unknowns of a calibration.
 
-:class:`DHParameterSet` ties a :class:`pincal.model.dh.DHTable` to a
+:class:`DHParameterSet` ties a :class:`pincal.model.dh.table.DHTable` to a
 :class:`pincal.model.chain.KinematicChain` whose joint placements realise it (see
-:meth:`pincal.model.dh.DHTable.joint_origins`). It gives the names of the 4N
+:meth:`pincal.model.dh.table.DHTable.joint_origins`). It gives the names of the 4N
 parameters, writes a table into the chain's placements, and says where each
 parameter acts (:class:`pincal.model.sensitivity.ParameterSlot`) so that
 :class:`pincal.model.sensitivity.SensitivityModel` can differentiate with Pinocchio.
@@ -19,8 +19,10 @@ import numpy as np
 
 from pincal.errors import ModelError, PincalError
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import DH_FIELDS, DHTable, dh_joint_origins
+from pincal.model.dh.table import DH_FIELDS, DHTable, dh_joint_origins
 from pincal.model.sensitivity import ParameterSlot
+
+__all__ = ["ParameterInfo", "DHParameterSet"]
 
 _UNITS = {"alpha": "rad", "epsilon": "rad", "r": "m", "d": "m"}
 

@@ -14,6 +14,11 @@ import numpy as np
 
 from pincal.errors import CalibrationError
 
+__all__ = [
+    "MIN_RADIUS_TO_SCATTER", "MAX_OFF_PLANE", "DEGENERATE", "NO_TURN", "CircleFit", "fit_circle", "circle_axis",
+    "circle_axis_derivative", "twists_from_axes", "twist_gradients",
+]
+
 #: The arc radius must exceed this multiple of the RMS distance of the points from the
 #: fitted circle in its plane, otherwise the point is (nearly) on the joint axis.
 MIN_RADIUS_TO_SCATTER = 10.0

@@ -11,14 +11,14 @@ Columns (header names are case-insensitive, order free):
 ``type`` (optional)   ``revolute`` (default, also for an empty cell), ``prismatic`` or
                       ``continuous`` (a revolute joint without position limits)
 ``lower``, ``upper``  position limits [rad or deg for revolute joints, m for
-(optional)            prismatic]; default :data:`pincal.model.dh_robot.DEFAULT_LIMITS`
+(optional)            prismatic]; default :data:`pincal.model.dh.robot.DEFAULT_LIMITS`
 ``velocity``          velocity limit [rad/s or m/s]; default
-(optional)            :data:`pincal.model.dh_robot.DEFAULT_VELOCITY`
+(optional)            :data:`pincal.model.dh.robot.DEFAULT_VELOCITY`
 ``effort``            effort limit [N·m or N]; default
-(optional)            :data:`pincal.model.dh_robot.DEFAULT_EFFORT`
+(optional)            :data:`pincal.model.dh.robot.DEFAULT_EFFORT`
 ====================  ==========================================================
 
-What a row means depends on the convention (:mod:`pincal.model.dh_robot`): in the
+What a row means depends on the convention (:mod:`pincal.model.dh.robot`): in the
 ``modified`` convention the row of joint i holds alpha_{i-1} and a_{i-1} (Craig's
 table layout). Every problem raises :class:`~pincal.errors.ModelError` with one
 line naming the file, the line (the header is line 1), the joint and the column,
@@ -35,15 +35,20 @@ from typing import Any
 from pincal.errors import ModelError
 from pincal.measurements.csv_v1 import MAX_POSITION, CsvTable, read_table
 from pincal.measurements.data import JOINT_SANITY
-from pincal.model.dh import check_convention
-from pincal.model.dh_robot import (
+from pincal.model.dh.robot import (
     DEFAULT_EFFORT,
     DEFAULT_LIMITS,
     DEFAULT_VELOCITY,
     DH_JOINT_TYPES,
     DHRobot,
 )
-from pincal.model.dh_urdf import DH_FLANGE_JOINT
+from pincal.model.dh.table import check_convention
+from pincal.model.dh.urdf import DH_FLANGE_JOINT
+
+__all__ = [
+    "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "RESERVED_JOINT_NAMES", "MAX_ANGLE_RAD", "MAX_LENGTH_M", "MAX_PRISMATIC_M",
+    "read_dh_csv",
+]
 
 #: Columns every DH table must have.
 REQUIRED_COLUMNS = ("joint", "a", "alpha", "d", "theta")

@@ -36,6 +36,12 @@ import numpy.typing as npt
 
 from pincal.errors import ModelError, PincalError
 
+__all__ = [
+    "DH_FIELDS", "rot_x", "rot_z", "trans", "DHTable", "dh_joint_origins", "DH_CONVENTIONS", "check_convention",
+    "dh_origin_rows", "dh_chain_origins", "dh_chain_from_origins", "DHDeviations", "KUKA_LWR4_DH", "TABLE2_SMALL",
+    "TABLE2_LARGE", "DEVIATION_SETS", "random_deviations_like",
+]
+
 #: Order of the four DH rows in a flat parameter vector.
 DH_FIELDS = ("alpha", "epsilon", "r", "d")
 

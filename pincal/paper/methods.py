@@ -23,18 +23,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pincal.errors import CalibrationError
-from pincal.fit.cpa import circle_axis, twists_from_axes
 from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.solver import Solution, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.dh import DHTable
-from pincal.model.dh_parameters import DHParameterSet
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import DHTable
 from pincal.model.sensor import Registration
+from pincal.paper.cpa import circle_axis, twists_from_axes
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.distance import DistanceResidual
 from pincal.residuals.full_pose import FullPoseResidual
 from pincal.residuals.rotation import RotationResidual
+
+__all__ = [
+    "METHODS", "CALIBRATED", "FROM_CPA", "ABSORBED", "NOT_BY_CPA", "NO_CPA_DATA", "Stage", "PaperCalibration",
+    "cpa_groups", "estimate_twists", "calibrate_paper",
+]
 
 METHODS = (1, 2, 3)
 
@@ -72,7 +77,7 @@ class PaperCalibration:
     """Outcome of one paper method.
 
     Attributes:
-        method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.fit.ml_estimator`).
+        method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.paper.ml_estimator`).
         weight: w of Method 3 [mm²/deg²], None otherwise.
         nominal: the starting DH table.
         table: the calibrated DH table.
@@ -194,7 +199,7 @@ def calibrate_paper(
         chain: the chain; its tool must be the measured target (the TCP). It is not
             changed: the calibrated table is the result's (``chain_placements`` in the chain's terms).
         data: measurements (``cpa`` rows optional, ``calibration`` rows used).
-        method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.fit.ml_estimator`).
+        method: 1, 2 or 3 (``"ml"`` for :mod:`pincal.paper.ml_estimator`).
         weight: w of Method 3 [mm²/deg²].
         nominal: the default table (read from the chain's placements if None);
             parameters the data cannot determine keep its values.

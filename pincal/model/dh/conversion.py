@@ -1,8 +1,8 @@
 """A DH table file made into a URDF file, with its provenance and a check of its kinematics.
 
 What ``pincal urdf-from-dh`` does below the command line: read the table
-(:func:`pincal.model.dh_csv.read_dh_csv`), write the URDF
-(:func:`pincal.model.dh_urdf.urdf_from_dh`) with a comment saying which table
+(:func:`pincal.model.dh.files.read_dh_csv`), write the URDF
+(:func:`pincal.model.dh.urdf.urdf_from_dh`) with a comment saying which table
 (path and SHA-256), which convention and which options made it, reload it with
 Pinocchio and measure how far its forward kinematics is from the DH product at
 seeded configurations within the limits.
@@ -19,20 +19,24 @@ import numpy as np
 from pincal._version import __version__
 from pincal.errors import ModelError
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
-from pincal.model.dh_csv import read_dh_csv
-from pincal.model.dh_robot import (
+from pincal.model.dh.files import read_dh_csv
+from pincal.model.dh.robot import (
     DEFAULT_EFFORT,
     DEFAULT_LIMITS,
     DEFAULT_VELOCITY,
     DHRobot,
 )
-from pincal.model.dh_urdf import (
+from pincal.model.dh.urdf import (
     DH_BASE_LINK,
     DH_FLANGE_JOINT,
     DH_FLANGE_LINK,
     urdf_from_dh,
 )
 from pincal.outputs import file_sha256
+
+__all__ = [
+    "CHECK_CONFIGURATIONS", "CHECK_SEED", "FK_TOLERANCE", "DHUrdf", "urdf_from_dh_table", "fk_error", "provenance",
+]
 
 #: Seeded configurations at which the written URDF is compared with the DH product.
 CHECK_CONFIGURATIONS = 20
@@ -62,7 +66,7 @@ class DHUrdf:
         notes: reader notes (defaults used, ignored columns) for the user.
         flange: ``frameN_T_flange`` written (4, 4) [m].
         fk_error: largest difference between Pinocchio's forward kinematics of
-            the written URDF (link :data:`~pincal.model.dh_urdf.DH_FLANGE_LINK`)
+            the written URDF (link :data:`~pincal.model.dh.urdf.DH_FLANGE_LINK`)
             and the DH product times ``flange``, over :data:`CHECK_CONFIGURATIONS`
             configurations [m for positions, unitless for rotation-matrix entries].
     """
@@ -84,7 +88,7 @@ def urdf_from_dh_table(
     """Read a DH table CSV, write the URDF realising it and check it.
 
     Args:
-        table_path: the DH table (:mod:`pincal.model.dh_csv`); only read.
+        table_path: the DH table (:mod:`pincal.model.dh.files`); only read.
         convention: ``standard`` or ``modified``.
         out_urdf: URDF to write; its folder must exist (the command creates it).
         name: the robot's name (default: the output file's stem).

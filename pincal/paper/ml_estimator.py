@@ -40,21 +40,26 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import CalibrationError
-from pincal.fit.paper_methods import (
+from pincal.fit.solver import Solution, solve
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import DHTable
+from pincal.paper.methods import (
     ABSORBED,
     CALIBRATED,
     PaperCalibration,
     Stage,
     calibrate_paper,
 )
-from pincal.fit.solver import Solution, solve
-from pincal.measurements.data import MeasurementSet
-from pincal.model.chain import KinematicChain
-from pincal.model.dh import DHTable
-from pincal.model.dh_parameters import DHParameterSet
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual
 from pincal.residuals.tool_pose import tool_pose_residual
+
+__all__ = [
+    "METHOD", "KEPT_NOMINAL", "SIGMA_FLOOR", "MAX_ITERATIONS", "RATIO_TOLERANCE", "MLCalibration",
+    "ml_parameter_indices", "variance_components", "calibrate_ml",
+]
 
 #: Value of :attr:`PaperCalibration.method` for this estimator.
 METHOD = "ml"
@@ -150,7 +155,7 @@ def calibrate_ml(
             with their positions only (orientation weight 0), e.g. ``("cpa",)``
             for the paper's position-only CPA.
         start: Method 2's result on the same ``data`` (from
-            :func:`pincal.fit.paper_methods.calibrate_paper`), the fit's start;
+            :func:`pincal.paper.methods.calibrate_paper`), the fit's start;
             computed if None. Its nominal table is the nominal one.
         models: Pinocchio sensitivity models of ``chain`` by their slots, shared by
             many fits of one chain (:class:`pincal.residuals.base.KinematicsCache`);

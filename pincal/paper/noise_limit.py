@@ -11,14 +11,14 @@ residual r(θ, z), linearised at its noise-free solution (where r = 0), gives
 with θ_prev the outputs of the earlier stages it depends on. The stages are
 chained as the methods run them: CPA (eq 9; the plane normals' derivatives are
 the first-order perturbation of the plane fit's SVD,
-:func:`pincal.fit.cpa.circle_axis_derivative`, the twists' are
-:func:`pincal.fit.cpa.twist_gradients`; the central differences with a 1e-6 m
+:func:`pincal.paper.cpa.circle_axis_derivative`, the twists' are
+:func:`pincal.paper.cpa.twist_gradients`; the central differences with a 1e-6 m
 step they replaced differ by their truncation, ~(h · |∂b/∂p|)² relative, and
 rounding, ~1e-9: the study's limits moved by < 1e-10 relative) → Err_rot (eq 14–17)
 → Err_pos (eq 10–12), or Err_full (eq 18) → Registration 1 (Arun: the
 least-squares fit of Ω t + τ to g) and Registration 2 (the mean rotation, which
 minimises Σ ‖log(G_kᵀ Ω R_k)‖², then τ by eq 19). For the ML estimator
-(:mod:`pincal.fit.ml_estimator`) there is one stage and the result is its Cramér–Rao
+(:mod:`pincal.paper.ml_estimator`) there is one stage and the result is its Cramér–Rao
 bound (JᵀΣ⁻¹J)⁻¹.
 
 The error of validation pose j against the noise-free truth — position
@@ -32,7 +32,6 @@ mean is a fixed Gauss–Legendre × trapezoid quadrature (spectrally accurate).
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from typing import cast
 
@@ -41,20 +40,21 @@ import pinocchio as pin
 from scipy import sparse
 
 from pincal.errors import CalibrationError
-from pincal.fit.cpa import circle_axis_derivative, twist_gradients
-from pincal.fit.ml_estimator import METHOD as ML
-from pincal.fit.ml_estimator import calibrate_ml
-from pincal.fit.paper_methods import (
+from pincal.fit.gaussian_norm import mean_norm
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.dh.table import DHTable
+from pincal.model.sensor import Registration
+from pincal.paper.cpa import circle_axis_derivative, twist_gradients
+from pincal.paper.methods import (
     FROM_CPA,
     PaperCalibration,
     calibrate_paper,
     cpa_groups,
 )
-from pincal.measurements.data import MeasurementSet
-from pincal.model.chain import KinematicChain
-from pincal.model.dh import DHTable
-from pincal.model.dh_parameters import DHParameterSet
-from pincal.model.sensor import Registration
+from pincal.paper.ml_estimator import METHOD as ML
+from pincal.paper.ml_estimator import calibrate_ml
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.distance import DistanceResidual
 from pincal.residuals.full_pose import DEG_PER_RAD, MM_PER_M, FullPoseResidual
@@ -64,10 +64,9 @@ from pincal.residuals.tool_pose import tool_pose_residual
 from pincal.simulation.paper import SimulatedExperiment
 from pincal.simulation.sensor import perfect_measurements
 
+__all__ = ["METHODS", "PredictedErrors", "predicted_errors"]
+
 METHODS = (1, 2, 3, ML)
-
-_CHI3_MEAN = 2.0 * np.sqrt(2.0 / np.pi)  # E‖u‖ for u ~ N(0, I₃)
-
 
 @dataclass(frozen=True)
 class PredictedErrors:
@@ -106,39 +105,6 @@ class PredictedErrors:
     covariance: np.ndarray
     parameter_names: tuple[str, ...]
     sensitivity: np.ndarray
-
-
-@functools.lru_cache(maxsize=8)
-def _sphere_quadrature(n_polar: int, n_azimuth: int) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes and weights of :func:`mean_norm`'s sphere rule, built once per size.
-
-    Returns:
-        n_i n_j of the M = n_polar · n_azimuth unit directions, (M, 9), and the
-        weights, (M,), summing to 1; both read-only.
-    """
-    cos, weight = np.polynomial.legendre.leggauss(n_polar)
-    azimuth = 2.0 * np.pi * np.arange(n_azimuth) / n_azimuth
-    sin = np.sqrt(1.0 - cos**2)
-    directions = np.stack(
-        [np.outer(sin, np.cos(azimuth)), np.outer(sin, np.sin(azimuth)), np.repeat(cos[:, None], n_azimuth, 1)],
-        axis=-1,
-    ).reshape(-1, 3)
-    weights = np.repeat(weight / 2.0, n_azimuth) / n_azimuth  # sums to 1
-    outer = (directions[:, :, None] * directions[:, None, :]).reshape(-1, 9)
-    outer.flags.writeable = weights.flags.writeable = False
-    return outer, weights
-
-
-def mean_norm(covariances: np.ndarray, n_polar: int = 24, n_azimuth: int = 48) -> np.ndarray:
-    """E‖e‖ for zero-mean Gaussians e ~ N(0, C) in 3D, C of shape (..., 3, 3).
-
-    E‖e‖ = 2√(2/π) · (1/4π) ∮ √(nᵀ C n) dn, the sphere integral by Gauss–Legendre
-    in cos θ (``n_polar`` nodes) times the trapezoid rule in the azimuth.
-    """
-    outer, weights = _sphere_quadrature(n_polar, n_azimuth)
-    covariances = np.asarray(covariances, dtype=float)
-    quadratic = covariances.reshape(*covariances.shape[:-2], 9) @ outer.T  # nᵀ C n = Σ_ij C_ij n_i n_j
-    return _CHI3_MEAN * np.sqrt(np.clip(quadratic, 0.0, None)) @ weights
 
 
 def _noise_free(

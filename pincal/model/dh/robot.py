@@ -1,9 +1,9 @@
 """A serial arm given by a DH table: either convention, revolute and prismatic joints, limits.
 
 :class:`DHRobot` is what ``pincal urdf-from-dh`` reads from a table file
-(:mod:`pincal.model.dh_csv`) and writes as a URDF
-(:func:`pincal.model.dh_urdf.urdf_from_dh`). Its joint origins come from the
-one DH-row core :func:`pincal.model.dh.dh_chain_origins`; :meth:`DHRobot.forward`
+(:mod:`pincal.model.dh.files`) and writes as a URDF
+(:func:`pincal.model.dh.urdf.urdf_from_dh`). Its joint origins come from the
+one DH-row core :func:`pincal.model.dh.table.dh_chain_origins`; :meth:`DHRobot.forward`
 is the DH product itself, multiplied out of elementary transforms, so the two
 can be checked against each other.
 
@@ -26,7 +26,9 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import ModelError
-from pincal.model.dh import check_convention, dh_chain_origins, rot_x, rot_z, trans
+from pincal.model.dh.table import check_convention, dh_chain_origins, rot_x, rot_z, trans
+
+__all__ = ["DH_JOINT_TYPES", "DEFAULT_LIMITS", "DEFAULT_VELOCITY", "DEFAULT_EFFORT", "DHRobot"]
 
 #: Joint types a DH row can have.
 DH_JOINT_TYPES = ("revolute", "prismatic", "continuous")

@@ -2,10 +2,10 @@
 
 Two writers share one path: :func:`apply_dh_table` (the paper's distal table into
 an existing URDF, used by ``scripts/generate_kuka_urdf.py``) and
-:func:`urdf_from_dh` (a whole URDF from a :class:`~pincal.model.dh_robot.DHRobot`
+:func:`urdf_from_dh` (a whole URDF from a :class:`~pincal.model.dh.robot.DHRobot`
 of either convention, behind ``pincal urdf-from-dh``). Both take their joint
-origins from :func:`pincal.model.dh.dh_chain_origins` (one closed-form DH row →
-joint origin, :func:`pincal.model.dh.dh_origin_rows`) and write them with
+origins from :func:`pincal.model.dh.table.dh_chain_origins` (one closed-form DH row →
+joint origin, :func:`pincal.model.dh.table.dh_origin_rows`) and write them with
 :func:`pincal.model.urdf.write_urdf_with_origins` through :func:`_write_chain_origins`.
 """
 
@@ -21,9 +21,14 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import ModelError, PincalError
-from pincal.model.dh import DHTable, dh_chain_from_origins
-from pincal.model.dh_robot import DEFAULT_LIMITS, DH_JOINT_TYPES, DHRobot
+from pincal.model.dh.robot import DEFAULT_LIMITS, DH_JOINT_TYPES, DHRobot
+from pincal.model.dh.table import DHTable, dh_chain_from_origins
 from pincal.model.urdf import load_urdf, write_urdf_with_origins
+
+__all__ = [
+    "DH_BASE_LINK", "DH_FLANGE_LINK", "DH_FLANGE_JOINT", "dh_link_name", "DH_SHAPE_TOLERANCE", "apply_dh_table",
+    "urdf_from_dh", "dh_table_from_urdf", "dh_robot_from_urdf",
+]
 
 #: Root link of a URDF written by :func:`urdf_from_dh`: DH frame 0.
 DH_BASE_LINK = "base_link"
@@ -99,7 +104,7 @@ def urdf_from_dh(
     """Write a URDF realising ``robot``'s DH table.
 
     Links: :data:`DH_BASE_LINK` (DH frame 0, the root), ``link_1`` … ``link_N``
-    (the child of joint n, see :func:`pincal.model.dh.dh_chain_origins`: DH
+    (the child of joint n, see :func:`pincal.model.dh.table.dh_chain_origins`: DH
     frame n in the modified convention, DH frame n-1 moved by joint n in the
     standard one), and :data:`DH_FLANGE_LINK` on the fixed joint
     :data:`DH_FLANGE_JOINT`: the last DH frame times ``flange``. Joints are named
