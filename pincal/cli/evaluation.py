@@ -69,14 +69,8 @@ from pincal.model.effects import (
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
-from pincal.report.model import (
-    DriftUse,
-    EvaluatedSession,
-    EvaluationJson,
-    TimeSpanJson,
-    errors_json,
-    registration_pair,
-)
+from pincal.report.model import TimeSpanJson, errors_json, registration_pair
+from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationJson
 from pincal.report.sessions import session_errors
 
 __all__ = [

@@ -34,6 +34,7 @@ from pincal.planning.information import PLAN_LEVELS, SensorModel
 __all__ = [
     "tool_pose", "prior_scale", "selection_criterion", "package_dir", "measure", "target_points", "xacro_arg",
     "joint_names", "build_parser",
+    "coupling_arg",
 ]
 
 

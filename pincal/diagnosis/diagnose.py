@@ -81,6 +81,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "MAX_EFFECTS", "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "PARALLEL_AXES_RAD", "Step", "Diagnosis",
     "parallel_neighbours", "candidate_effects", "diagnose",
+    "NO_TORQUE",
 ]
 
 #: Most effects adopted.

@@ -31,6 +31,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
     "effect_basis", "Judge", "READ_AGAINST", "coupling_advice",
+    "HELD_OUT_Z", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
 
 #: ΔBIC below which the evidence for an effect is "very strong".

@@ -24,6 +24,8 @@ from dataclasses import dataclass, replace
 from pincal.errors import MeasurementError, PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 
+__all__ = ["ReadingCoupling", "apply_couplings", "check_couplings", "couplings_from_report", "parse_coupling"]
+
 _FORM = re.compile(r"^\s*([^=\s]+)\s*=\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*([^=*\s]+)\s*$")
 
 

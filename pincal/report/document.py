@@ -58,7 +58,6 @@ from pincal.report.model import (
     ChainHead,
     ChainJson,
     CouplingsPart,
-    EvaluationJson,
     Finding,
     FitRows,
     Identifiability,
@@ -75,6 +74,7 @@ from pincal.report.model import (
     registration_pair,
 )
 from pincal.report.model_diagnosis import DiagnosisReport
+from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 
 if TYPE_CHECKING:

@@ -36,8 +36,9 @@ __all__ = [
     "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped", "CorrelatedPair", "NotDetermined",
     "Identifiability", "PaperTool", "Tool", "Noise", "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
     "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
-    "TimeSpanJson", "ChainHead", "CalibrationReport", "PaperReport", "EvaluatedSession", "DriftUse", "EvaluationJson",
+    "TimeSpanJson", "ChainHead", "CalibrationReport", "PaperReport",
     "LevelChoicePart", "errors_json", "registration_json", "registration_pair", "level_choice_part", "findings_json",
+    "CouplingJson", "CouplingsPart", "couplings_part",
 ]
 
 # Annotated's (keyword, value) pairs are JSON Schema keywords of the type (pincal.report.schema)
@@ -424,45 +425,6 @@ class PaperReport(TypedDict):
     row_errors: list[RowErrorSet]
     urdf_sha256: Sha256
     xacro_args: dict[str, str]
-
-
-# --- pincal evaluate --json -----------------------------------------------------------------------
-
-
-class EvaluatedSession(TypedDict):
-    """One evaluated session: where its registration came from and its errors."""
-
-    name: str
-    rows: int
-    registration_source: str
-    registration_reestimated: bool
-    residuals: int
-    registration_dof: int | None
-    registration: RegistrationPair
-    errors: PoseErrorsJson
-
-
-class DriftUse(TypedDict):
-    """How the report's drift was applied to the evaluated rows."""
-
-    velocity_m_per_s: Vector3
-    time_column: str | None
-    time_reference_s: float
-    time_spans_s: list[TimeSpanJson] | None
-    rows_applied: int
-    rows_held: int
-    max_gap_s: float | None
-    held_rule: str
-
-
-class _EvaluationKeys(PoseErrorsJson):
-    skipped_cpa_rows: int
-    sessions: list[EvaluatedSession]
-    drift: DriftUse | None
-
-
-class EvaluationJson(_EvaluationKeys):
-    """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use."""
 
 
 class LevelChoicePart(TypedDict, total=False):

@@ -9,6 +9,7 @@ from pincal.report.model import CouplingJson, LevelChoiceJson, PoseErrorsJson, T
 __all__ = [
     "EffectJson", "CandidateJson", "BeforeAfter", "DiagnosisStep", "DiagnosisJson", "ApproachContext",
     "DiagnosisReport", "TimeSpansPart",
+    "TargetChangeJson",
 ]
 
 

@@ -39,7 +39,8 @@ from pincal.fit.outliers import robust_scores
 from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.measurements.data import MeasurementSet, default_session_name
-from pincal.report.model import DriftUse, EvaluatedSession, RowErrorModel, RowErrorSet, errors_json
+from pincal.report.model import RowErrorModel, RowErrorSet, errors_json
+from pincal.report.model_evaluation import DriftUse, EvaluatedSession
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis

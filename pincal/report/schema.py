@@ -25,8 +25,9 @@ import typing
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from pincal.planning.files import PlanJson
-from pincal.report.model import CalibrationReport, EvaluationJson, PaperReport
+from pincal.report.model import CalibrationReport, PaperReport
 from pincal.report.model_diagnosis import DiagnosisReport
+from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 
 __all__ = ["REPORT_KINDS", "SCHEMA_ID", "OTHER_DOCUMENTS", "json_schema", "schema_text"]

@@ -22,7 +22,7 @@ from pincal.errors import CalibrationError
 from pincal.measurements.fixture import Fixture, FixtureData, check_placements
 from pincal.model.chain import KinematicChain
 
-__all__ = ["IK_TOLERANCE", "IK_ATTEMPTS", "IK_EVALUATIONS", "reach", "simulate_fixture"]
+__all__ = ["IK_TOLERANCE", "IK_ATTEMPTS", "IK_EVALUATIONS", "reach", "simulate_fixture", "ball_and_jacobian"]
 
 #: A configuration is accepted when the ball is this close to the socket [m].
 IK_TOLERANCE = 1e-12

@@ -1,0 +1,82 @@
+"""``pincal plan``: what it prints — the choice, the prediction against random choices, what is
+identifiable and the visiting order (the planning itself: :func:`pincal.cli.preparation.plan_files`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from pincal.cli.parser import selection_criterion
+
+__all__ = ["run_plan", "print_plan_summary"]
+
+
+def run_plan(args: argparse.Namespace) -> int:
+    """``pincal plan``: choose, write PLAN.csv and PLAN.json, print the summary; the exit code."""
+    from pincal.cli.preparation import plan_files
+    from pincal.cli.progress import progress_bar
+    from pincal.planning.planner import PlanSettings
+
+    settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
+                            sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,
+                            tool_known=args.tool is not None, seed=args.seed, alternate=args.alternate,
+                            selection=selection_criterion(args))
+    with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
+        run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
+                         candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
+                         workspace_path=args.workspace, min_distance=args.min_distance, xacro_args=args.xacro_args,
+                         package_dirs=dict(args.package_dir),
+                         progress=progress)
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    print_plan_summary(run)
+    print(f"wrote {args.out}\nwrote {args.report}")
+    return 0
+
+
+def print_plan_summary(run) -> None:
+    """The choice, the prediction against random, identifiability and the visiting order."""
+    plan, doc = run.plan, run.document
+    settings = doc["settings"]
+    print(f"chose {len(plan.q)} of {run.n_candidates} candidates for criterion {plan.criterion} "
+          f"(level {settings['level']}, measure {settings['measure']}, noise {plan.sigma_pos_mm:.4g} mm"
+          + ("" if plan.sigma_rot_deg is None else f", {plan.sigma_rot_deg:.4g} deg")
+          + f", {plan.sigma_source}); {plan.swaps} exchange swaps, {plan.seconds:.2f} s")
+    if run.clearance is not None:
+        c = run.clearance
+        print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
+              f"self-collision, {c.too_close} closer than {c.min_distance_m:g} m ({c.pairs_checked} link pairs "
+              f"checked, {len(c.pairs_ignored)} ignored as closer at the zero configuration)")
+    others = len(plan.estimated) - len(plan.identifiable)
+    shown = ", ".join(plan.not_identifiable[:6]) + (", ..." if len(plan.not_identifiable) > 6 else "")
+    print(f"identifiable: {len(plan.identifiable)} kinematic parameters (+ {others} registration/target); "
+          f"not identifiable: {len(plan.not_identifiable)}" + (f" ({shown})" if shown else ""))
+
+    def errors(p) -> str:
+        if p is None:
+            return "not determined"
+        text = f"mean {p.mean_position_mm:.4g} mm, max {p.max_position_mm:.4g} mm"
+        if p.mean_rotation_deg is not None:
+            text += f"; orientation mean {p.mean_rotation_deg:.4g} deg, max {p.max_rotation_deg:.4g} deg"
+        return text + f" (condition {p.condition:.3g})"
+
+    print(f"predicted error, plan:   {errors(plan.prediction)}")
+    print(f"predicted error, random: {errors(plan.random)} [median of {plan.settings.random_draws} draws, "
+          f"{plan.random_singular} not determining the parameters]")
+    ratio = doc["predicted"]["plan_over_random_mean_position"]
+    if ratio is not None:
+        print(f"plan / random mean position error: {ratio:.2f}")
+    if plan.recorded is not None:
+        print(f"recorded rows alone: {errors(plan.recorded)}")
+        for entry in doc["additions"][:10]:
+            if entry["predicted_mean_mm"] is not None:
+                gain = "" if entry["gain_mm"] is None else f" (gain {entry['gain_mm']:.4g} mm)"
+                print(f"  add #{entry['priority']}: candidate {entry['candidate']} -> "
+                      f"{entry['predicted_mean_mm']:.4g} mm{gain}")
+    order = doc["order"]
+    print(f"order: {order['method']}, {plan.travel_s:.1f} s of moves at the velocity limits")
+    for balance in plan.balance:
+        if balance.joint in order["alternate"]:
+            corr = "n/a" if balance.correlation is None else f"{balance.correlation:+.2f}"
+            print(f"  {balance.joint}: {balance.from_below} from below, {balance.from_above} from above, "
+                  f"flank-position correlation {corr}")

@@ -1,0 +1,46 @@
+"""The typed model of ``pincal evaluate --json`` (sensor rows): eq 24 on the evaluated rows, per
+session, and how a report's drift was applied (:mod:`pincal.report.model` has the shared parts)."""
+
+from __future__ import annotations
+
+from typing import TypedDict
+
+from pincal.report.model import PoseErrorsJson, RegistrationPair, TimeSpanJson, Vector3
+
+__all__ = ["EvaluatedSession", "DriftUse", "EvaluationJson"]
+
+
+class EvaluatedSession(TypedDict):
+    """One evaluated session: where its registration came from and its errors."""
+
+    name: str
+    rows: int
+    registration_source: str
+    registration_reestimated: bool
+    residuals: int
+    registration_dof: int | None
+    registration: RegistrationPair
+    errors: PoseErrorsJson
+
+
+class DriftUse(TypedDict):
+    """How the report's drift was applied to the evaluated rows."""
+
+    velocity_m_per_s: Vector3
+    time_column: str | None
+    time_reference_s: float
+    time_spans_s: list[TimeSpanJson] | None
+    rows_applied: int
+    rows_held: int
+    max_gap_s: float | None
+    held_rule: str
+
+
+class _EvaluationKeys(PoseErrorsJson):
+    skipped_cpa_rows: int
+    sessions: list[EvaluatedSession]
+    drift: DriftUse | None
+
+
+class EvaluationJson(_EvaluationKeys):
+    """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use."""
