@@ -188,9 +188,10 @@ def test_diagnose_does_not_test_effects_the_residual_freedom_cannot_carry():
     assert not diagnosis.steps
     untested = [note for note in diagnosis.notes if note.startswith("not tested,")]
     assert len(untested) == 1 and "residual degrees of freedom" in untested[0]
-    # an effect the geometry absorbs is inseparable (more rows would not help), not "not tested"
+    # the vertical shoulder pan feels no gravity torque: its compliance cannot be tested (more rows would not
+    # help), not "not tested"
     assert "compliance:shoulder_pan_joint" not in untested[0]
-    assert any("not separable" in note and "compliance:shoulder_pan_joint" in note for note in diagnosis.notes)
+    assert any("cannot be tested" in note and "compliance:shoulder_pan_joint" in note for note in diagnosis.notes)
     from pincal.diagnosis.screening import GENERIC_NOT_RUN
 
     assert diagnosis.unexplained is None and GENERIC_NOT_RUN in diagnosis.notes  # said, not "no structure left"

@@ -18,11 +18,11 @@ import tqdm.std
 from pincal.cli import progress as progress_module
 from pincal.cli.commands import main
 from pincal.cli.progress import LOG_INTERVAL_S, TERMINAL_DELAY_S, progress_bar
-from pincal.diagnosis.diagnose import MAX_EFFECTS, candidate_effects, diagnose
+from pincal.diagnosis.diagnose import MAX_EFFECTS, NO_TORQUE, candidate_effects, diagnose
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
-from pincal.model.effects import parse_effect, time_column
+from pincal.model.effects import gravity_torques, parse_effect, time_column
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.design import STARTS
 from pincal.planning.planner import PlanSettings, plan_measurements
@@ -200,7 +200,13 @@ def test_diagnose_reports_every_step(compliance):
     assert len(result.steps) >= 1
     # each step announces one unit per candidate offered and one for the adoption (the step that adopts
     # nothing too, unless MAX_EFFECTS were adopted); then one for the final fit
-    offered = len(candidate_effects(chain, has_time=True))
+    # less the candidates no gravity torque can drive (a vertical J1: pincal.diagnosis.diagnose.NO_TORQUE)
+    with chain.placed(calibration.chain_placements):
+        gravity = np.abs(gravity_torques(chain, experiment.calibration.q)).max(axis=0)
+    weightless = {name for name, g in zip(chain.joint_names, gravity) if g < NO_TORQUE}
+    offered = len([e for e in candidate_effects(chain, has_time=True)
+                   if not (e.joint in weightless and (e.type == "compliance" or e.source == "gravity"))])
+    assert weightless == {"lwr_joint_1"}
     steps = len(result.steps) + (len(result.steps) < MAX_EFFECTS)
     assert calls[-1][1] == sum(offered - step + 1 for step in range(steps)) + 1
     assert len({total for _, total in calls}) == steps + 1  # the total grew step by step
