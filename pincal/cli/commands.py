@@ -281,7 +281,10 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     print(f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
           + (f" {'held-out RMS [mm]':>19s}" if held else ""))
     kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))
-    unit = lambda effect: effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")  # noqa: E731
+
+    def unit(effect) -> str:
+        return effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")
+
     for step in diagnosis.steps:
         value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std)) + f" {unit(step.effect)}"
         line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
