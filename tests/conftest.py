@@ -127,7 +127,8 @@ def industrial_arm_urdf(tmp_path_factory):
 
 
 #: The inner loop leaves these out (``pytest -m "not slow"``, about a minute on two cores): tests that
-#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27), the heaviest
+#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27; an entry with
+#: ``[id]`` marks that parametrisation only), the heaviest
 #: parametrised ones, and whole files that run studies or start processes, a Dask cluster or a browser.
 #: The full suite (CI, the README's command) runs them.
 SLOW_FILES = (
@@ -186,11 +187,17 @@ SLOW_TESTS = (
     "tests/test_extract.py::test_static_postures_offset_and_refusals_are_recovered",
     "tests/test_extract.py::test_markers_as_points_topics_and_tf_frames_in_the_order_given",
     "tests/test_extract.py::test_bag_to_calibrate_to_evaluate_matches_the_csv_it_was_made_from",
+    # one parametrisation each: the pages whose blocks take 0.45 s or more (README.md, commands.md stay)
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/diagnose.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/fixture.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/extract.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/plan.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/getting-started.md]",
 )
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
         path, _, name = item.nodeid.partition("::")
-        if path in SLOW_FILES or f"{path}::{name.split('[')[0]}" in SLOW_TESTS:
+        if path in SLOW_FILES or f"{path}::{name.split('[')[0]}" in SLOW_TESTS or item.nodeid in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)
