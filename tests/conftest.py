@@ -3,6 +3,7 @@ document pincal writes in a test is validated against ``docs/report.schema.json`
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import json
 from pathlib import Path
@@ -11,6 +12,7 @@ import jsonschema
 import numpy as np
 import pytest
 
+from pincal.cli.parser import build_parser
 from pincal.model.chain import KinematicChain
 from pincal.model.dh import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
@@ -90,6 +92,13 @@ def _validate_written_documents(monkeypatch):
             return _write(path, text, *args, **kwargs)
 
         monkeypatch.setattr(module, "write_text", checked)
+
+
+def subcommand_actions() -> dict[str, dict[str, argparse.Action]]:
+    """Each subcommand of ``pincal`` (:func:`pincal.cli.parser.build_parser`) and its actions by option string."""
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return {name: {flag: action for action in parser._actions for flag in action.option_strings}
+            for name, parser in sub.choices.items()}
 
 
 def assert_close(actual, expected, atol, what=""):

@@ -13,7 +13,7 @@ import difflib
 import re
 from pathlib import Path
 
-from pincal.cli.parser import build_parser
+from conftest import subcommand_actions
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
@@ -34,13 +34,6 @@ PRINTED_BY = {
     "fit/": {"calibrate", "diagnose", "evaluate", "plan"},
 }
 _SUGGESTION = re.compile(r"(?<![\w-])(--[a-z][\w-]*)(?:[ =](\w+))?")
-
-
-def _parsers() -> dict[str, dict[str, argparse.Action]]:
-    """Each subcommand of ``pincal`` and its actions by option string."""
-    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    return {name: {flag: action for action in parser._actions for flag in action.option_strings}
-            for name, parser in sub.choices.items()}
 
 
 def _messages(source: str) -> list[tuple[int, str]]:
@@ -94,7 +87,7 @@ def wrong_suggestions(module: str, source: str, parsers: dict[str, dict[str, arg
 
 
 def test_every_flag_a_message_suggests_is_one_the_printing_command_accepts():
-    parsers = _parsers()
+    parsers = subcommand_actions()
     problems, seen = [], 0
     for path in sorted(PACKAGE.rglob("*.py")):
         module = path.relative_to(PACKAGE).as_posix()
@@ -108,7 +101,7 @@ def test_every_flag_a_message_suggests_is_one_the_printing_command_accepts():
 
 
 def test_the_check_sees_a_flag_no_command_has_one_of_another_command_and_a_wrong_choice():
-    parsers = _parsers()
+    parsers = subcommand_actions()
     source = ('"""Docstring: --not-checked."""\n'
               'def f(x):\n'
               '    raise ValueError(f"{x}: rerun with --reject-outlier; --level must be full")\n'
