@@ -3,6 +3,7 @@ document pincal writes in a test is validated against ``docs/report.schema.json`
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import json
 from pathlib import Path
@@ -11,6 +12,7 @@ import jsonschema
 import numpy as np
 import pytest
 
+from pincal.cli.parser import build_parser
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
@@ -92,6 +94,13 @@ def _validate_written_documents(monkeypatch):
         monkeypatch.setattr(module, "write_text", checked)
 
 
+def subcommand_actions() -> dict[str, dict[str, argparse.Action]]:
+    """Each subcommand of ``pincal`` (:func:`pincal.cli.parser.build_parser`) and its actions by option string."""
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return {name: {flag: action for action in parser._actions for flag in action.option_strings}
+            for name, parser in sub.choices.items()}
+
+
 def assert_close(actual, expected, atol, what=""):
     """Assert arrays are close and free of NaN (NaN never passes)."""
     actual = np.asarray(actual, dtype=float)
@@ -127,7 +136,8 @@ def industrial_arm_urdf(tmp_path_factory):
 
 
 #: The inner loop leaves these out (``pytest -m "not slow"``, about a minute on two cores): tests that
-#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27), the heaviest
+#: took 0.45 s or more on the development machine (``pytest --durations``, 2026-11-27; an entry with
+#: ``[id]`` marks that parametrisation only), the heaviest
 #: parametrised ones, and whole files that run studies or start processes, a Dask cluster or a browser.
 #: The full suite (CI, the README's command) runs them.
 SLOW_FILES = (
@@ -186,11 +196,17 @@ SLOW_TESTS = (
     "tests/test_extract.py::test_static_postures_offset_and_refusals_are_recovered",
     "tests/test_extract.py::test_markers_as_points_topics_and_tf_frames_in_the_order_given",
     "tests/test_extract.py::test_bag_to_calibrate_to_evaluate_matches_the_csv_it_was_made_from",
+    # one parametrisation each: the pages whose blocks take 0.45 s or more (README.md, commands.md stay)
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/diagnose.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/fixture.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/extract.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/plan.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/getting-started.md]",
 )
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
         path, _, name = item.nodeid.partition("::")
-        if path in SLOW_FILES or f"{path}::{name.split('[')[0]}" in SLOW_TESTS:
+        if path in SLOW_FILES or f"{path}::{name.split('[')[0]}" in SLOW_TESTS or item.nodeid in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)

@@ -4,7 +4,6 @@ is one the command accepts, and ``mkdocs build --strict`` passes where mkdocs is
 
 from __future__ import annotations
 
-import argparse
 import importlib.util
 import os
 import re
@@ -13,8 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from pincal.cli.parser import build_parser
+from conftest import subcommand_actions
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -99,10 +97,7 @@ def broken_links(page: Path, root: Path = ROOT) -> list[str]:
 
 def _subcommands() -> dict[str, set[str]]:
     """Each subcommand of ``pincal`` and the flags its --help lists."""
-    parser = build_parser()
-    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return {name: {flag for action in sub._actions for flag in action.option_strings}
-            for action in actions for name, sub in action.choices.items()}
+    return {name: set(actions) for name, actions in subcommand_actions().items()}
 
 
 def commands(text: str, names: set[str]) -> list[tuple[str, str]]:
