@@ -15,7 +15,6 @@ from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.model.dh.table import DHTable
 from pincal.model.urdf import read_joint_origins
-from pincal.paper.methods import calibrate_paper
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 
 #: Sensor noise of ``pincal simulate`` and ``pincal demo`` (the paper's Figure 2): sigma_p [mm], sigma_a [deg].
