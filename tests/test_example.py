@@ -23,11 +23,18 @@ DATASETS = ROOT / "pincal" / "datasets"
 @pytest.mark.parametrize("name", sorted(EXAMPLES))
 def test_a_set_is_copied_whole_and_never_over_an_existing_one(name, tmp_path, capsys):
     assert main(["example", name, "--out", str(tmp_path / "data")]) == 0
-    copied = tmp_path / "data" / name
-    shipped = sorted(p.relative_to(DATASETS / name) for p in (DATASETS / name).rglob("*") if p.is_file())
+    copied, source = tmp_path / "data" / name, dataset_folder(name)
+    shipped = sorted(p.relative_to(source) for p in source.rglob("*")
+                     if p.is_file() and p.suffix not in (".py", ".pyc") and "__pycache__" not in p.parts)
     assert sorted(p.relative_to(copied) for p in copied.rglob("*") if p.is_file()) == shipped
-    assert all((copied / p).read_bytes() == (DATASETS / name / p).read_bytes() for p in shipped)
-    assert Path("README.md") in shipped and f"wrote {copied}" in capsys.readouterr().out
+    assert all((copied / p).read_bytes() == (source / p).read_bytes() for p in shipped)
+    if name == "urdf":  # the robots: the docs' urdf/kuka_lwr4plus.urdf, and no README to carry
+        assert shipped == [Path("kuka_lwr4plus.urdf")]
+        shipped = [Path("kuka_lwr4plus.urdf")]
+        (copied / "README.md").write_text("", encoding="utf-8")  # a file the refusal below must keep
+    else:
+        assert Path("README.md") in shipped
+    assert f"wrote {copied}" in capsys.readouterr().out
     assert [p.name for p in (tmp_path / "data").iterdir()] == [name]  # no staging folder left
     (copied / "README.md").write_text("edited", encoding="utf-8")
     assert main(["example", name, "--out", str(tmp_path / "data")]) == 2

@@ -335,7 +335,8 @@ def _run_example(args: argparse.Namespace) -> int:
     print(f"wrote {target}: {EXAMPLES[args.name]}")
     for path in files:
         print(f"  {target / path}")
-    print(f"provenance and licence: {target / 'README.md'}")
+    readme = target / "README.md"
+    print(f"provenance and licence: {readme}" if readme.exists() else "provenance: docs/paper.md (Table 1)")
     return 0
 
 

@@ -24,6 +24,7 @@ EXAMPLES = {
     "tiago_mocap": "TIAGo arm, two Qualisys motion-capture sessions (4 markers): calibrate, evaluate, diagnose, plan",
     "mukca": "KUKA LBR iiwa 14 and Franka Panda on a socket fixture (MUKCa): calibrate --fixture, evaluate --fixture",
     "lwr_bag": "KUKA LWR 4+ simulated session as a ROS 2 bag (MCAP) and held-out rows: extract, calibrate, evaluate",
+    "urdf": "the packaged KUKA LWR 4+ URDF (the paper's Table 1), as urdf/kuka_lwr4plus.urdf of a clone",
 }
 
 
@@ -31,6 +32,8 @@ def dataset_folder(name: str) -> Path:
     """The installed folder of the shipped set ``name`` (:data:`EXAMPLES`)."""
     if name not in EXAMPLES:
         raise PincalError(f"no example '{name}'; the examples are: {', '.join(EXAMPLES)}")
+    if name == "urdf":  # the robots pincal ships (pincal.robots): the docs' urdf/ of a clone
+        return Path(str(importlib.resources.files("pincal.robots")))
     return Path(str(importlib.resources.files("pincal.datasets"))) / name
 
 
