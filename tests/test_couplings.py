@@ -107,3 +107,17 @@ def test_the_flag_is_refused_where_it_does_not_apply(horizontal_j3, tmp_path, ca
               "--out", str(tmp_path / "o.urdf"), "--report", str(tmp_path / "r.json")])
     assert usage.value.code == 2 and "argument --coupling: use JOINT=FACTOR*DRIVER" in capsys.readouterr().err
     assert not (tmp_path / "o.urdf").exists()
+
+
+def test_a_report_coupling_is_checked_like_the_flag():
+    from pincal.measurements.couplings import couplings_from_report
+
+    assert couplings_from_report([{"joint": "A3", "factor": -1, "driver": "A2"}], "r.json") == (
+        ReadingCoupling("A3", -1.0, "A2"),)
+    for bad in ([{"joint": "A3", "factor": 0, "driver": "A2"}], [{"joint": "A3", "factor": 1, "driver": "A3"}],
+                [{"joint": "A3"}], {"joint": "A3"}):
+        with pytest.raises(PincalError, match="r.json: couplings must be a list"):
+            couplings_from_report(bad, "r.json")
+    for bad in ("A3=.*A2", "A3=1.2.3*A2"):
+        with pytest.raises(PincalError, match="JOINT=FACTOR"):
+            parse_coupling(bad)

@@ -184,3 +184,14 @@ def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
     # positions only: the orientation term is left out
     positions = PoseErrors(before.position_m, None)
     assert held_out_verdict(positions, PoseErrors(before.position_m * 0.5, None), sigma_pos, None) == "adopted"
+
+
+def test_a_few_held_out_rows_veto_only_a_worse_total():
+    """Below MIN_PAIRED_ROWS held-out rows there is no standard error (one row: ±inf, which refused every
+    effect): only a worse total refuses."""
+    from pincal.diagnosis.verdicts import MIN_PAIRED_ROWS, held_out_verdict
+    from pincal.fit.metrics import PoseErrors
+
+    before = PoseErrors(np.full((MIN_PAIRED_ROWS - 4, 1), 0.6), None)
+    assert held_out_verdict(before, PoseErrors(before.position_m / 6, None), 2e-5, None) == "adopted"
+    assert "too few for a paired test" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None), 2e-5, None)

@@ -30,7 +30,7 @@ PRINTED_BY = {
     "planning/": {"plan"},
     "diagnosis/": {"diagnose"},
     "model/effects.py": {"diagnose"},
-    "model/dh_csv.py": {"urdf-from-dh"},
+    "model/dh/files.py": {"urdf-from-dh"},
     "fit/": {"calibrate", "diagnose", "evaluate", "plan"},
 }
 _SUGGESTION = re.compile(r"(?<![\w-])(--[a-z][\w-]*)(?:[ =](\w+))?")

@@ -363,8 +363,8 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("data", type=Path, nargs="+", metavar="DATA",
                      help="measurement CSV(s) (format v1): each file (or 'session' value) a session")
     dia.add_argument("--validation", type=Path, metavar="DATA2",
-                     help="held-out measurements: errors reported before/after, effects that make them worse "
-                          "are refused")
+                     help="held-out measurements: errors reported before/after; an effect is adopted only if they "
+                          "fit better beyond their noise (a paired test over their rows)")
     dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
                      help="link at the end of the calibrated chain, carrying the target")
     dia.add_argument("--level", choices=("registration", "offsets", "full", "auto"), default="full",

@@ -31,7 +31,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
     "effect_basis", "Judge", "READ_AGAINST", "coupling_advice",
-    "HELD_OUT_Z", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
+    "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
 
 #: ΔBIC below which the evidence for an effect is "very strong".
@@ -62,6 +62,8 @@ AMBIGUOUS = 0.8
 #: Standard errors of the paired per-row change of held-out error an effect must improve by (and must not
 #: worsen by) to be adopted: 2, a one-sided test at 98 % (:func:`held_out_verdict`).
 HELD_OUT_Z = 2.0
+#: Held-out rows below which no standard error is taken: the veto is then a plain worsening of their total.
+MIN_PAIRED_ROWS = 5
 #: Candidates shown per step.
 SHOWN = 8
 
@@ -150,18 +152,22 @@ class TargetChange:
 
 
 def target_changes(objective: SensorResidual, x: np.ndarray) -> list[TargetChange]:
-    """The :class:`TargetChange` of each effect of ``objective`` at ``x`` (its Jacobian columns times its
-    values, the rows' weights undone: metres and radians, to first order)."""
+    """The :class:`TargetChange` of each effect of ``objective`` at ``x``: the measured rows' residual at ``x``
+    against the residual with that effect's values zeroed, the rows' weights undone (metres; the
+    orientation residuals' difference [rad])."""
     data = getattr(objective, "objective", objective)  # a prior-wrapped objective's sensor residual
-    jacobian = objective.jacobian(x)
     k, n_points = data.g.shape[:2]
+    n_pos = 3 * k * n_points
+    with_all = objective.residual(x)
     out = []
     for sl in data._effect_slices:
-        change = jacobian[:, sl] @ x[sl]
-        moved = np.linalg.norm(change[: 3 * k * n_points].reshape(k, n_points, 3), axis=2) / data.w[:, None]
+        without = x.copy()
+        without[sl] = 0.0
+        change = with_all - objective.residual(without)
+        moved = np.linalg.norm(change[:n_pos].reshape(k, n_points, 3), axis=2) / data.w[:, None]
         turned = None
         if data.G is not None:
-            turned = np.linalg.norm(change[3 * k * n_points : 3 * k * (n_points + 1)].reshape(k, 3), axis=1) / data.v
+            turned = np.linalg.norm(change[n_pos : n_pos + 3 * k].reshape(k, 3), axis=1) / data.v
         out.append(TargetChange(float(np.sqrt(np.mean(moved**2))), float(moved.max(initial=0.0)),
                                 None if turned is None else float(np.sqrt(np.mean(turned**2))),
                                 None if turned is None else float(turned.max(initial=0.0))))
@@ -288,7 +294,8 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
     −2 × the change of the row's Gaussian log-likelihood, so a trade of a little orientation for much
     position counts as what it is. Adopted when mean(d) is below zero by more than :data:`HELD_OUT_Z`
     standard errors of the d_k (a paired test: the rows' own noise cancels); refused as worse when it is
-    above zero by as much, as not beyond the noise otherwise."""
+    above zero by as much, as not beyond the noise otherwise. With fewer than :data:`MIN_PAIRED_ROWS`
+    rows, only a worse total (mean(d) > 0) refuses."""
     change = (np.sum(after.position_m**2, axis=1) - np.sum(before.position_m**2, axis=1)) / sigma_pos_m**2
     shown = [f"position {before.position.rms:.3f} → {after.position.rms:.3f} mm RMS"]
     if before.rotation_rad is not None and after.rotation_rad is not None and sigma_rot_rad:
@@ -296,6 +303,9 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
         shown.append(f"orientation {1e3 * np.sqrt(np.mean(before.rotation_rad**2)):.3g} → "
                      f"{1e3 * np.sqrt(np.mean(after.rotation_rad**2)):.3g} mrad RMS")
     mean, error = paired_change(np.zeros_like(change), change)
+    if change.size < MIN_PAIRED_ROWS:  # too few rows for a standard error: only a plain worsening vetoes
+        text = f"{', '.join(shown)}; {change.size} held-out row(s), too few for a paired test"
+        return f"it makes the held-out rows worse ({text})" if mean > 0 else "adopted"
     text = f"{', '.join(shown)}; paired over {before.n_rows} rows: {mean:+.3g} ± {error:.2g} noise² per row"
     if mean - HELD_OUT_Z * error > 0:
         return f"it makes the held-out rows worse ({text})"

@@ -54,7 +54,10 @@ def parse_coupling(text: str) -> ReadingCoupling:
         PincalError: another form, a factor that is not a finite non-zero number, or J = I.
     """
     match = _FORM.match(text)
-    factor = float(match.group(2)) if match else math.nan
+    try:
+        factor = float(match.group(2)) if match else math.nan
+    except ValueError:  # "." or "1.2.3": digits and dots that are no number
+        factor = math.nan
     if not match or not math.isfinite(factor) or factor == 0.0 or match.group(1) == match.group(3):
         raise PincalError(f"--coupling '{text}': use JOINT=FACTOR*DRIVER with two different joints and a non-zero "
                           "factor, e.g. A3=-1*A2 (A3's reading includes -1 x A2's: J3 read from the horizontal)")
@@ -73,10 +76,11 @@ def couplings_from_report(entries: object, where: str) -> tuple[ReadingCoupling,
         assert isinstance(entries, list)
         out = tuple(ReadingCoupling(str(e["joint"]), float(e["factor"]), str(e["driver"])) for e in entries
                     if isinstance(e, Mapping))
-        assert len(out) == len(entries) and all(math.isfinite(c.factor) for c in out)
+        assert len(out) == len(entries)
+        assert all(math.isfinite(c.factor) and c.factor != 0.0 and c.joint != c.driver for c in out)
     except (AssertionError, KeyError, TypeError, ValueError):
-        raise PincalError(f"{where}: couplings must be a list of {{joint, factor, driver}}; rewrite it with "
-                          "pincal calibrate or diagnose") from None
+        raise PincalError(f"{where}: couplings must be a list of {{joint, factor, driver}} with two different "
+                          "joints and a non-zero factor; rewrite it with pincal calibrate or diagnose") from None
     return out
 
 
