@@ -86,6 +86,9 @@ def test_diagnose_names_it_and_the_flag_brings_the_model_to_the_noise(horizontal
     assert "final model: coupling:A3:A2 = " in printed and "run again with --coupling A3=-1*A2" in printed
     (effect,) = json.loads((tmp_path / "d" / "REPORT.json").read_text(encoding="utf-8"))["effects"]
     assert effect["driver"] == "A2" and "run again with --coupling A3=-1*A2" in effect["advice"]
+    assert main(["report", str(tmp_path / "d" / "REPORT.json"), "--out", str(tmp_path / "d.html")]) == 0
+    page = (tmp_path / "d.html").read_text(encoding="utf-8")  # the page says what to do, and how far it moves
+    assert "run again with --coupling A3=-1*A2" in page and f"{effect['target_change']['rms_mm']:.3g} mm RMS" in page
     for flags, name in (([], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
         assert main(["calibrate", str(urdf), str(calibration), *common, *flags, "--out", str(tmp_path / f"{name}.urdf"),
                      "--report", str(tmp_path / f"{name}.json")]) in (0, 3)
@@ -121,3 +124,20 @@ def test_a_report_coupling_is_checked_like_the_flag():
     for bad in ("A3=.*A2", "A3=1.2.3*A2"):
         with pytest.raises(PincalError, match="JOINT=FACTOR"):
             parse_coupling(bad)
+
+
+def test_a_wrong_factor_given_is_named_with_the_one_that_fits(horizontal_j3, tmp_path, capsys):
+    """--coupling A3=1*A2 where the readings need -1: the readings still include a coupling, which the
+    advice reports against the factor given (F − c), not as "a transmission coupling"."""
+    from pincal.diagnosis.verdicts import coupling_advice
+    from pincal.model.effects import Effect
+
+    effect = Effect("coupling", "A3", driver="A2")
+    assert "that factor looks wrong; run again with --coupling A3=-1*A2," in coupling_advice(effect, 2.0, given=1.0)
+    assert "run again with --coupling A3=0.5*A2," in coupling_advice(effect, 0.1, given=0.6)  # F − value
+    urdf, calibration, validation = horizontal_j3
+    assert main(["diagnose", str(urdf), str(calibration), "--validation", str(validation), "--tip-link", "flange",
+                 "--coupling", "A3=1*A2", "--quiet", "--out", str(tmp_path / "d.urdf"),
+                 "--report", str(tmp_path / "d" / "REPORT.json")]) in (0, 3)
+    printed = capsys.readouterr().out
+    assert "corrected by --coupling A3=1*A2, still include" in printed and "--coupling A3=-1*A2" in printed

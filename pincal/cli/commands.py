@@ -299,7 +299,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))
         print(f"final model: {effect.label} = {value} {unit(effect)}: {change.describe()}")
         if effect.type == "coupling":  # a reading taken against another joint: fix the data, not the model
-            print(f"  {verdicts.coupling_advice(effect, float(values[0]))}")
+            given = {(c.joint, c.driver): c.factor for c in settings.couplings}.get(
+                (str(effect.joint), str(effect.driver)))
+            print(f"  {verdicts.coupling_advice(effect, float(values[0]), given)}")
     for note in diagnosis.notes:
         print(f"reported, not adopted: {note}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run

@@ -318,10 +318,18 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
 READ_AGAINST = 0.01
 
 
-def coupling_advice(effect: Effect, value: float) -> str:
+def coupling_advice(effect: Effect, value: float, given: float | None = None) -> str:
     """What an adopted coupling means and what to do: a reading taken against another joint (±1) is
     corrected in the data, so that the geometry is selected on the corrected readings; a small value
-    (a transmission's) stays in the model."""
+    (a transmission's) stays in the model. ``given``: the factor F of a ``--coupling`` already given for
+    the same joint and driver (the readings were corrected by it): the one that fits is F − value."""
+    if given is not None:
+        # a convention given with the wrong sign leaves 2 x the driver: too far for the fit to find it, so
+        # the opposite sign is named; any other factor is corrected by what remains (F − value)
+        factor = f"{-given:g}" if abs(abs(given) - 1.0) < READ_AGAINST else f"{given - value:.4g}"
+        return (f"{effect.joint}'s readings, corrected by --coupling {effect.joint}={given:g}*{effect.driver}, "
+                f"still include {-value:+.3f} x {effect.driver}'s: that factor looks wrong; run again with "
+                f"--coupling {effect.joint}={factor}*{effect.driver}, or without it to see what diagnose finds")
     if abs(abs(value) - 1.0) >= READ_AGAINST:
         return (f"{effect.joint}'s reading includes {-value:+.4g} x {effect.driver}'s (a transmission coupling): "
                 "it stays in the model, and evaluate applies it")

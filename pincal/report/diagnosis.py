@@ -86,9 +86,11 @@ def diagnosis_report(
     effects = [cast(EffectJson, effect_to_dict(e, v, s)) for e, v, s in diagnosis.effects]
     for entry, change in zip(effects, diagnosis.target_changes):  # how far each moves the target (mm, mrad)
         entry["target_change"] = cast(TargetChangeJson, change.as_dict())
+    given = {(c["joint"], c["driver"]): c["factor"] for c in (couplings or {}).get("couplings", [])}
     for entry, (effect, values, _) in zip(effects, diagnosis.effects):
         if effect.type == "coupling":  # what to do: correct the readings (±1), or keep it in the model
-            entry["advice"] = coupling_advice(effect, float(values[0]))
+            entry["advice"] = coupling_advice(effect, float(values[0]),
+                                              given.get((str(effect.joint), str(effect.driver))))
     return {
         **head,
         "warnings": warnings,

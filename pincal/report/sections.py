@@ -182,7 +182,12 @@ def effects_section(doc: dict, kinds: dict[Any, str], base: Path, png: Callable)
     final = []
     for entry in doc.get("effects") or []:
         value, ratio = _effect_value(entry, prismatic(entry))
-        final.append({"label": effect_label(entry), "value": value, "ratio": ratio})
+        change = entry.get("target_change") or {}  # how far it moves the target (mm; mrad with 6D rows)
+        moves = "" if "rms_mm" not in change else (
+            f"{num(change['rms_mm'], 3)} mm RMS ({num(change.get('max_mm'), 3)} at most)"
+            + (f", {num(change['rms_mrad'], 3)} mrad RMS" if "rms_mrad" in change else ""))
+        final.append({"label": effect_label(entry), "value": value, "ratio": ratio, "moves": moves,
+                      "advice": entry.get("advice") or ""})
     steps = []
     for number, step in enumerate(diagnosis.get("steps") or [], start=1):
         effect = step.get("effect") or {}
