@@ -17,7 +17,14 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.errors import MeasurementError, PincalError
-from pincal.measurements.couplings import ReadingCoupling, apply_couplings, check_couplings, parse_coupling
+from pincal.measurements.couplings import (
+    ReadingCoupling,
+    apply_couplings,
+    check_couplings,
+    corrected_angles,
+    parse_coupling,
+    readings_of,
+)
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
@@ -141,3 +148,36 @@ def test_a_wrong_factor_given_is_named_with_the_one_that_fits(horizontal_j3, tmp
                  "--report", str(tmp_path / "d" / "REPORT.json")]) in (0, 3)
     printed = capsys.readouterr().out
     assert "corrected by --coupling A3=1*A2, still include" in printed and "--coupling A3=-1*A2" in printed
+
+
+def test_eq_c1_and_its_inverse_round_trip():
+    names = ["A1", "A2", "A3"]
+    couplings = [parse_coupling("A3=-1*A2"), parse_coupling("A2=0.25*A1")]
+    readings = np.random.default_rng(1).normal(size=(5, 3))
+    actual = corrected_angles(readings, couplings, names)
+    assert np.allclose(actual[:, 2], readings[:, 2] + readings[:, 1])
+    assert np.allclose(readings_of(actual, couplings, names), readings, rtol=0, atol=1e-12)
+
+
+def test_plan_reads_and_writes_the_controllers_joint_space(horizontal_j3, tmp_path):
+    """plan --existing with A3 read against A2: the recorded rows are corrected (the same prediction as
+    from corrected readings without the flag), and PLAN.csv is written as the controller reads A3
+    (A3 − A2), PLAN.json recording the coupling."""
+    from pincal.measurements.csv_v1 import read_measurements
+
+    urdf, calibration, _ = horizontal_j3
+    chain = KinematicChain.from_urdf(urdf, "flange")
+    corrected = tmp_path / "corrected.csv"
+    write_measurements(corrected, apply_couplings(read_measurements(calibration, chain.joint_specs)[0],
+                                                  [parse_coupling("A3=-1*A2")]))
+    common = ["--tip-link", "flange", "--count", "4", "--sample", "200", "--quiet"]
+    assert main(["plan", str(urdf), *common, "--existing", str(calibration), "--coupling", "A3=-1*A2",
+                 "--out", str(tmp_path / "c.csv"), "--report", str(tmp_path / "c.json")]) == 0
+    assert main(["plan", str(urdf), *common, "--existing", str(corrected),
+                 "--out", str(tmp_path / "p.csv"), "--report", str(tmp_path / "p.json")]) == 0
+    coupled, plain = (json.loads((tmp_path / f"{n}.json").read_text(encoding="utf-8")) for n in ("c", "p"))
+    assert coupled["sources"]["couplings"] == [{"joint": "A3", "factor": -1.0, "driver": "A2"}]
+    assert "couplings" not in plain["sources"]
+    assert coupled["predicted"]["recorded_only"] == pytest.approx(plain["predicted"]["recorded_only"], rel=1e-9)
+    rows = [np.loadtxt(tmp_path / f"{n}.csv", delimiter=",", skiprows=1, usecols=range(6)) for n in ("c", "p")]
+    assert np.allclose(rows[0][:, 2], rows[1][:, 2] - rows[1][:, 1]) and np.allclose(rows[0][:, :2], rows[1][:, :2])

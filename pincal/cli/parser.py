@@ -446,6 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--package-dir", type=package_dir, action="append", default=[], metavar="NAME=DIR",
                       help="folder of ROS package NAME for package://NAME/... meshes of --min-distance (repeat for "
                            "several; else ROS_PACKAGE_PATH, the ament index, the folders above the URDF)")
+    _add_coupling(plan)
     _add_xacro_arg(plan)
     _add_quiet(plan)
     plan.add_argument("--alternate", type=joint_names, default=(), metavar="JOINT[,JOINT...]",

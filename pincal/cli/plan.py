@@ -25,7 +25,7 @@ def run_plan(args: argparse.Namespace) -> int:
         run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
                          candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
                          workspace_path=args.workspace, min_distance=args.min_distance, xacro_args=args.xacro_args,
-                         package_dirs=dict(args.package_dir),
+                         package_dirs=dict(args.package_dir), couplings=args.coupling or (),
                          progress=progress)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)

@@ -8,13 +8,14 @@ what happened; :mod:`pincal.cli.commands` prints it.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from pincal.cli.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.errors import PincalError
+from pincal.measurements.couplings import ReadingCoupling, apply_couplings, corrected_angles, readings_of
 from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
@@ -72,6 +73,7 @@ def plan_files(
     candidates_path: str | Path | None = None,
     sample: int = DEFAULT_SAMPLE,
     existing_path: str | Path | Sequence[str | Path] | None = None,
+    couplings: Sequence[ReadingCoupling] = (),
     workspace_path: str | Path | None = None,
     min_distance: float | None = None,
     xacro_args: Sequence[tuple[str, str]] = (),
@@ -84,6 +86,9 @@ def plan_files(
     plans for the paper's DH parameters with the target known, so it needs
     ``tool_pose``. A ``.xacro`` ``urdf`` is expanded in memory with ``xacro_args``. ``package_dirs``
     (NAME → folder, ``--package-dir``) locates ``package://`` collision meshes (:mod:`pincal.model.packages`).
+    ``couplings`` (``--coupling``): joints the controller reads against another; the candidate, existing and
+    workspace files are corrected by eq C1 (:mod:`pincal.measurements.couplings`), PLAN.csv is written in
+    the controller's readings (its inverse) and PLAN.json records them (``sources.couplings``).
     ``progress(done, total)`` counts the clearance checks, then the search's steps
     (:func:`pincal.planning.planner.plan_measurements`).
 
@@ -103,17 +108,21 @@ def plan_files(
     refuse_overwrite(out_csv, *inputs)
     refuse_overwrite(out_json, *inputs, outputs=[out_csv])
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
+    names = chain.joint_names
     notes: list[str] = []
-    if candidates_path is not None:
+    if candidates_path is not None:  # a file holds the controller's readings (eq C1 with --coupling)
         candidates, labels = read_candidates(candidates_path, chain)
+        candidates = corrected_angles(candidates, couplings, names)
     else:
         candidates = sample_candidates(chain, sample, settings.seed)
         labels = np.arange(len(candidates))
     existing = None
     if existing_paths:  # several files: sessions, one registration each; the plan continues the last
         existing, read_notes = read_sessions(existing_paths, chain.joint_specs)
+        existing = apply_couplings(existing, couplings)
         notes += read_notes
-    workspace = read_candidates(workspace_path, chain)[0] if workspace_path is not None else None
+    workspace = (corrected_angles(read_candidates(workspace_path, chain)[0], couplings, names)
+                 if workspace_path is not None else None)
     stages = Stages(progress)
     clearance = (check_clearance(urdf, chain, candidates, min_distance, xacro_args=xacro_args, progress=stages.next(),
                                  package_dirs=package_dirs)
@@ -123,7 +132,9 @@ def plan_files(
     sources: PlanSources = {"urdf": str(urdf), "candidates": _text(candidates_path),
                             "existing": _existing_source(existing_paths), "workspace": _text(workspace_path),
                             "xacro_args": dict(xacro_arguments(xacro_args))}
-    digest = write_plan_csv(out_csv, plan, chain, labels)
+    if couplings:  # PLAN.csv in the controller's joint space: what it reads and is commanded in
+        sources["couplings"] = [c.as_dict() for c in couplings]
+    digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels)
     document = plan_document(plan, chain, plan.settings, sources, labels, len(candidates), clearance, tool_pose,
                              sample if candidates_path is None else None, plan_csv_sha256=digest)
     write_plan_json(out_json, document)

@@ -20,13 +20,26 @@ import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import TypedDict
+
+import numpy as np
 
 from pincal.errors import MeasurementError, PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 
-__all__ = ["ReadingCoupling", "apply_couplings", "check_couplings", "couplings_from_report", "parse_coupling"]
+__all__ = ["CouplingJson", "ReadingCoupling", "apply_couplings", "check_couplings", "corrected_angles",
+           "couplings_from_report", "parse_coupling", "readings_of"]
 
 _FORM = re.compile(r"^\s*([^=\s]+)\s*=\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*([^=*\s]+)\s*$")
+
+
+class CouplingJson(TypedDict):
+    """A joint reading taken against another, as REPORT.json and PLAN.json give it (``couplings``):
+    ``joint``'s reading includes ``factor`` × ``driver``'s."""
+
+    joint: str
+    factor: float
+    driver: str
 
 
 @dataclass(frozen=True)
@@ -42,8 +55,8 @@ class ReadingCoupling:
         """The flag's form: ``A3=-1*A2``."""
         return f"{self.joint}={self.factor:g}*{self.driver}"
 
-    def as_dict(self) -> dict:
-        """REPORT.json ``couplings`` entry."""
+    def as_dict(self) -> CouplingJson:
+        """REPORT.json and PLAN.json ``couplings`` entry."""
         return {"joint": self.joint, "factor": self.factor, "driver": self.driver}
 
 
@@ -102,13 +115,31 @@ def check_couplings(couplings: Sequence[ReadingCoupling], joint_names: Iterable[
         raise MeasurementError(f"--coupling: joint '{twice[0]}' is given twice; give one factor per joint")
 
 
+def _matrix(couplings: Sequence[ReadingCoupling], joint_names: Sequence[str]) -> np.ndarray:
+    """M of eq C1 for rows: actual = readings @ M.T (N, N)."""
+    check_couplings(couplings, joint_names)
+    names = list(joint_names)
+    matrix = np.eye(len(names))
+    for c in couplings:
+        matrix[names.index(c.joint), names.index(c.driver)] -= c.factor
+    return matrix
+
+
+def corrected_angles(readings: np.ndarray, couplings: Sequence[ReadingCoupling],
+                     joint_names: Sequence[str]) -> np.ndarray:
+    """Eq C1 on joint readings (K, N) in the order of ``joint_names``: the actual angles [rad or m]."""
+    return np.asarray(readings, dtype=float) if not couplings else readings @ _matrix(couplings, joint_names).T
+
+
+def readings_of(angles: np.ndarray, couplings: Sequence[ReadingCoupling], joint_names: Sequence[str]) -> np.ndarray:
+    """The inverse of eq C1: what the controller reads (and is commanded in) at actual angles (K, N)."""
+    if not couplings:
+        return np.asarray(angles, dtype=float)
+    return np.linalg.solve(_matrix(couplings, joint_names), np.asarray(angles, dtype=float).T).T
+
+
 def apply_couplings(data: MeasurementSet, couplings: Sequence[ReadingCoupling]) -> MeasurementSet:
     """The rows of ``data`` with eq C1 applied to their joint readings (``data`` itself unchanged)."""
     if not couplings:
         return data
-    check_couplings(couplings, data.joint_names)
-    names = list(data.joint_names)
-    q = data.q.copy()
-    for c in couplings:
-        q[:, names.index(c.joint)] -= c.factor * data.q[:, names.index(c.driver)]
-    return replace(data, q=q)
+    return replace(data, q=corrected_angles(data.q, couplings, data.joint_names))

@@ -19,6 +19,7 @@ import numpy as np
 
 from pincal._version import __version__
 from pincal.errors import PincalError
+from pincal.measurements.couplings import CouplingJson
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.outputs import file_sha256, replacing, write_text
 from pincal.planning.collisions import Clearance
@@ -39,14 +40,19 @@ PLAN_VERSION = 1
 _Vector3 = Annotated[list[float], ("minItems", 3), ("maxItems", 3)]  # keywords of the schema
 
 
-class PlanSources(TypedDict):
-    """The files the plan was made from (null: not given)."""
-
+class _PlanSourcesKeys(TypedDict):
     urdf: str
     candidates: str | None
     existing: str | list[str] | None
     workspace: str | None
     xacro_args: dict[str, str]
+
+
+class PlanSources(_PlanSourcesKeys, total=False):
+    """The files the plan was made from (null: not given), and the ``--coupling`` its joint values were
+    read and are written with (only when given: PLAN.csv holds the controller's readings)."""
+
+    couplings: list[CouplingJson]
 
 
 class PlanChain(TypedDict):

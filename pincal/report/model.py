@@ -21,6 +21,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
 
+from pincal.measurements.couplings import CouplingJson
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -433,15 +435,6 @@ class LevelChoicePart(TypedDict, total=False):
     level_choice: LevelChoiceJson
 
 
-class CouplingJson(TypedDict):
-    """A joint reading taken against another (``--coupling JOINT=FACTOR*DRIVER``,
-    :mod:`pincal.measurements.couplings`): ``joint``'s reading includes ``factor`` × ``driver``'s."""
-
-    joint: str
-    factor: float
-    driver: str
-
-
 class CouplingsPart(TypedDict, total=False):
     """``couplings`` where a report has them (``--coupling`` given), to unpack into a report."""
 
@@ -474,7 +467,7 @@ def level_choice_part(choice: LevelChoice | None) -> LevelChoicePart:
 
 def couplings_part(couplings: Sequence[ReadingCoupling]) -> CouplingsPart:
     """``{"couplings": [...]}`` of ``--coupling``, ``{}`` without (the report as before)."""
-    return {"couplings": [cast(CouplingJson, c.as_dict()) for c in couplings]} if couplings else {}
+    return {"couplings": [c.as_dict() for c in couplings]} if couplings else {}
 
 
 def findings_json(findings: list[PlausibilityFinding]) -> list[Finding]:
