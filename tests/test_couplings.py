@@ -181,3 +181,26 @@ def test_plan_reads_and_writes_the_controllers_joint_space(horizontal_j3, tmp_pa
     assert coupled["predicted"]["recorded_only"] == pytest.approx(plain["predicted"]["recorded_only"], rel=1e-9)
     rows = [np.loadtxt(tmp_path / f"{n}.csv", delimiter=",", skiprows=1, usecols=range(6)) for n in ("c", "p")]
     assert np.allclose(rows[0][:, 2], rows[1][:, 2] - rows[1][:, 1]) and np.allclose(rows[0][:, :2], rows[1][:, :2])
+
+
+def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, tmp_path, capsys):
+    """Issue 22 item 4: evaluate's before -> after. Before: the URDF the calibration started from
+    (REPORT.json sources.urdf), its registration and target fitted to the evaluated rows — recomputed
+    here with the library; after: the evaluated error. The readings corrected first (the report's coupling)."""
+    import re
+
+    from pincal.fit.chain_calibration import calibrate_chain
+    from pincal.measurements.csv_v1 import read_measurements
+
+    urdf, calibration, validation = horizontal_j3
+    assert main(["calibrate", str(urdf), str(calibration), "--tip-link", "flange", "--coupling", "A3=-1*A2",
+                 "--quiet", "--out", str(tmp_path / "c.urdf"), "--report", str(tmp_path / "c.json")]) in (0, 3)
+    capsys.readouterr()
+    after = _held_out_mm(tmp_path, tmp_path / "c.urdf", tmp_path / "c.json", validation)
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("before -> after, these rows"))
+    before_mm, after_mm = map(float, re.findall(r"([0-9.]+) -> ([0-9.]+) mm", line)[0])
+    chain = KinematicChain.from_urdf(urdf, "flange")
+    rows = apply_couplings(read_measurements(validation, chain.joint_specs)[0], [parse_coupling("A3=-1*A2")])
+    rows = replace(rows, roles=np.full(rows.n_rows, "calibration", dtype=object))
+    assert before_mm == pytest.approx(1000 * calibrate_chain(chain, rows, "registration").rms_m, abs=6e-4)
+    assert after_mm == pytest.approx(after, abs=6e-4) and before_mm > 10 * after_mm  # printed to 3 decimals

@@ -231,6 +231,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     print(f"{f'{errors.n_rows} rows':24s} {_error_columns(errors)}")
     for session in evaluation.sessions if len(evaluation.sessions) > 1 else ():
         print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
+    if evaluation.nominal_rms_mm is not None:  # as calibrate's line, on these rows
+        print(f"before -> after, these rows, RMS position: {evaluation.nominal_rms_mm:.3f} -> "
+              f"{errors.position.rms:.3f} mm (before: {evaluation.nominal_urdf}, its registration and target "
+              "fitted to these rows; after: the calibrated model, registrations as above)")
     if args.json:
         from pincal.cli.paths import refuse_overwrite
         from pincal.report.document import write_evaluation

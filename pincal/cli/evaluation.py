@@ -40,7 +40,7 @@ refused when a re-estimated session has fewer than :data:`MIN_THRESHOLD_DOF`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import cast
 
@@ -153,6 +153,10 @@ class Evaluation:
     files: tuple[str, ...] = ()  # the file of each evaluated row
     row_sessions: tuple[str, ...] = ()  # the session (in DATA) of each evaluated row
     drift: DriftUse | None = None  # how the report's drift was applied (_effect_corrections); None without
+    # the nominal model's RMS point error on these rows, its registration and target fitted to them [mm],
+    # and its URDF; None where the report's sources.urdf is not readable here (before -> after)
+    nominal_rms_mm: float | None = None
+    nominal_urdf: str | None = None
 
     def as_dict(self) -> EvaluationJson:
         """``pincal evaluate --json``."""
@@ -267,10 +271,35 @@ def evaluate_files(
                 f"registration parameters to {session.residuals} residuals ({session.dof} degree(s) of freedom "
                 f"left); expect them about sqrt(({session.residuals}−{REGISTRATION_PARAMETERS})/{session.residuals}) "
                 f"= {session.shrink:.2f} of the true error")
+    nominal_rms, nominal_urdf = _nominal_rms(report, report_path, data, xacro_args)
     return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes,
+                      nominal_rms_mm=nominal_rms, nominal_urdf=nominal_urdf,
                       lines=tuple(int(line) for line in data.lines), sessions=sessions,
                       files=tuple(str(f) for f in data.files), row_sessions=tuple(str(n) for n in data.sessions),
                       drift=drift_use)
+
+
+def _nominal_rms(report: ReportModel, report_path: str | Path, data: MeasurementSet,
+                 xacro_args) -> tuple[float | None, str | None]:
+    """The "before" of evaluate's before -> after: the RMS point error [mm] of the URDF the calibration
+    started from (REPORT.json ``sources.urdf``, as given or beside the report) on ``data``, with its
+    registration and target fitted to these rows — as calibrate's before line on its own rows; (None,
+    None) where that URDF is not here or not readable (the line is then left out)."""
+    if not report.nominal_urdf:
+        return None, None
+    given = Path(report.nominal_urdf)
+    path = next((p for p in (given, Path(report_path).parent / given) if p.is_file()), None)
+    if path is None:
+        return None, None
+    from pincal.fit.chain_calibration import calibrate_chain  # only for this line
+
+    try:
+        chain = KinematicChain.from_urdf(path, report.tool_parent, xacro_args=xacro_args)
+        nominal = calibrate_chain(chain, replace(data, roles=np.full(data.n_rows, "calibration", dtype=object)),
+                                  "registration")
+    except PincalError:
+        return None, None
+    return nominal.rms_m * 1000.0, str(path)
 
 
 def _labelled(path: str | Path, data: MeasurementSet) -> np.ndarray:

@@ -285,6 +285,7 @@ class ReportModel:
             calibration rows could not place it); empty when everything was determined.
         couplings: joint readings taken against another joint (REPORT.json ``couplings``,
             :mod:`pincal.measurements.couplings`), corrected in every row evaluated.
+        nominal_urdf: the URDF the calibration started from (``sources.urdf``, as it was given), or None.
     """
 
     tool_parent: str
@@ -299,6 +300,7 @@ class ReportModel:
     session_files: tuple[tuple[str, ...], ...] = ()
     not_determined: tuple[str, ...] = ()
     couplings: tuple[ReadingCoupling, ...] = ()
+    nominal_urdf: str | None = None
 
 
 def read_report(path: str | Path) -> ReportModel:
@@ -352,6 +354,7 @@ def read_report(path: str | Path) -> ReportModel:
             not_determined=tuple(str(entry.get("reason", "")) for entry in
                                  (doc.get("identifiability") or {}).get("not_determined") or ()),
             couplings=couplings_from_report(doc.get("couplings"), str(path)),
+            nominal_urdf=(doc.get("sources") or {}).get("urdf"),
         )
     except (KeyError, TypeError, ValueError, PincalError) as exc:
         raise PincalError(
