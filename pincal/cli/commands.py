@@ -298,14 +298,12 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(line)
     if not diagnosis.steps:
         print("  nothing significant: no effect is claimed")
-    from pincal.diagnosis import verdicts  # loaded already by the run
-    for (effect, values, std), change in zip(diagnosis.effects, diagnosis.target_changes):  # what evaluate applies
-        value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))
+    entries = run.report["effects"]  # each effect as written, a coupling's advice among its keys
+    for (effect, values, std), change, entry in zip(diagnosis.effects, diagnosis.target_changes, entries):
+        value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))  # what evaluate applies
         print(f"final model: {effect.label} = {value} {unit(effect)}: {change.describe()}")
-        if effect.type == "coupling":  # a reading taken against another joint: fix the data, not the model
-            given = {(c.joint, c.driver): c.factor for c in settings.couplings}.get(
-                (str(effect.joint), str(effect.driver)))
-            print(f"  {verdicts.coupling_advice(effect, float(values[0]), given)}")
+        if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
+            print(f"  {entry['advice']}")
     for note in diagnosis.notes:
         print(f"reported, not adopted: {note}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run

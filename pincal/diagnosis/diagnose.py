@@ -221,7 +221,7 @@ class _Model:
     def reestimate(self, objective: SensorResidual, solution) -> None:
         """Noise scales from the residuals of a fit (maximum likelihood)."""
         problem = self.problem(objective.effects)
-        problem.reestimate_sigmas(objective, solution)
+        problem.rescale(objective, solution)
         self.sigma_pos, self.sigma_rot = problem.sigma_pos, problem.sigma_rot
 
     def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray],

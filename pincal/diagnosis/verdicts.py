@@ -278,10 +278,10 @@ class Judge:
         return "adopted"
 
 
-def paired_change(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
-    """Mean and standard error of the per-row change of squared held-out error, ``after`` − ``before``
-    (K,) each: the paired comparison of two models on the same rows (their common noise cancels)."""
-    change = np.asarray(after, dtype=float) - np.asarray(before, dtype=float)
+def paired_change(change: np.ndarray) -> tuple[float, float]:
+    """Mean and standard error of a per-row change of held-out error (K,): the paired comparison of two
+    models on the same rows (their common noise cancels)."""
+    change = np.asarray(change, dtype=float)
     return float(change.mean()), float(change.std(ddof=1) / np.sqrt(change.size)) if change.size > 1 else np.inf
 
 
@@ -302,7 +302,7 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
         change = change + (after.rotation_rad**2 - before.rotation_rad**2) / sigma_rot_rad**2
         shown.append(f"orientation {1e3 * np.sqrt(np.mean(before.rotation_rad**2)):.3g} → "
                      f"{1e3 * np.sqrt(np.mean(after.rotation_rad**2)):.3g} mrad RMS")
-    mean, error = paired_change(np.zeros_like(change), change)
+    mean, error = paired_change(change)
     if change.size < MIN_PAIRED_ROWS:  # too few rows for a standard error: only a plain worsening vetoes
         text = f"{', '.join(shown)}; {change.size} held-out row(s), too few for a paired test"
         return f"it makes the held-out rows worse ({text})" if mean > 0 else "adopted"

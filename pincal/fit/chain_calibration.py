@@ -220,10 +220,6 @@ class FitProblem:
         """The noise scales weighting the rows now: positions [m], orientations [rad] (None without)."""
         return self.sigma_pos, self.sigma_rot
 
-    def rescale(self, objective: SensorResidual, solution: Solution) -> None:
-        """:meth:`reestimate_sigmas` (the pipeline's name, :mod:`pincal.fit.pipeline`)."""
-        self.reestimate_sigmas(objective, solution)
-
     def set_scales(self, scales: tuple[float, float | None]) -> None:
         self.sigma_pos, self.sigma_rot = scales
 
@@ -236,9 +232,10 @@ class FitProblem:
             log_variances -= 2.0 * 3 * np.sum(np.log(data.v))
         return log_evidence(solution.jacobian, solution.residual, float(log_variances))
 
-    def reestimate_sigmas(self, objective: SensorResidual, solution: Solution) -> None:
-        """Maximum likelihood with unknown variances: sigma² = mean squared residual per kind;
-        with a prior, eq P2 of :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
+    def rescale(self, objective: SensorResidual, solution: Solution) -> None:
+        """The noise scales from a fit's residuals (:mod:`pincal.fit.pipeline`): maximum likelihood with
+        unknown variances, sigma² = mean squared residual per kind; with a prior, eq P2 of
+        :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
         k, p = self.data.n_rows, self.data.n_points
         n_pos = 3 * k * p
         if isinstance(objective, PriorResidual):
@@ -368,7 +365,7 @@ def _calibrate_rows(
             "add calibration rows"
         )
     for _ in range(sigma_iterations):
-        problem.reestimate_sigmas(objective, solution)
+        problem.rescale(objective, solution)
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
     counter.tick()
     problem.start = objective.estimate(solution.x)

@@ -50,6 +50,12 @@ class ReadingCoupling:
     factor: float
     driver: str
 
+    def __post_init__(self) -> None:
+        """Raises ValueError: a factor that is not a finite non-zero number, or a joint read against itself
+        (the flag's and the report's readers say it their way)."""
+        if not (math.isfinite(self.factor) and self.factor != 0.0 and self.joint != self.driver):
+            raise ValueError(f"not a coupling: {self.joint}, {self.factor!r}, {self.driver}")
+
     @property
     def label(self) -> str:
         """The flag's form: ``A3=-1*A2``."""
@@ -67,14 +73,13 @@ def parse_coupling(text: str) -> ReadingCoupling:
         PincalError: another form, a factor that is not a finite non-zero number, or J = I.
     """
     match = _FORM.match(text)
-    try:
-        factor = float(match.group(2)) if match else math.nan
-    except ValueError:  # "." or "1.2.3": digits and dots that are no number
-        factor = math.nan
-    if not match or not math.isfinite(factor) or factor == 0.0 or match.group(1) == match.group(3):
-        raise PincalError(f"--coupling '{text}': use JOINT=FACTOR*DRIVER with two different joints and a non-zero "
-                          "factor, e.g. A3=-1*A2 (A3's reading includes -1 x A2's: J3 read from the horizontal)")
-    return ReadingCoupling(match.group(1), factor, match.group(3))
+    try:  # float() refuses "." or "1.2.3", the coupling a zero factor or J = I
+        if match:
+            return ReadingCoupling(match.group(1), float(match.group(2)), match.group(3))
+    except ValueError:
+        pass
+    raise PincalError(f"--coupling '{text}': use JOINT=FACTOR*DRIVER with two different joints and a non-zero "
+                      "factor, e.g. A3=-1*A2 (A3's reading includes -1 x A2's: J3 read from the horizontal)")
 
 
 def couplings_from_report(entries: object, where: str) -> tuple[ReadingCoupling, ...]:
@@ -86,15 +91,12 @@ def couplings_from_report(entries: object, where: str) -> tuple[ReadingCoupling,
     if entries is None:
         return ()
     try:
-        assert isinstance(entries, list)
-        out = tuple(ReadingCoupling(str(e["joint"]), float(e["factor"]), str(e["driver"])) for e in entries
-                    if isinstance(e, Mapping))
-        assert len(out) == len(entries)
-        assert all(math.isfinite(c.factor) and c.factor != 0.0 and c.joint != c.driver for c in out)
-    except (AssertionError, KeyError, TypeError, ValueError):
+        if not isinstance(entries, list) or not all(isinstance(e, Mapping) for e in entries):
+            raise TypeError("not a list of objects")
+        return tuple(ReadingCoupling(str(e["joint"]), float(e["factor"]), str(e["driver"])) for e in entries)
+    except (KeyError, TypeError, ValueError):
         raise PincalError(f"{where}: couplings must be a list of {{joint, factor, driver}} with two different "
                           "joints and a non-zero factor; rewrite it with pincal calibrate or diagnose") from None
-    return out
 
 
 def check_couplings(couplings: Sequence[ReadingCoupling], joint_names: Iterable[str]) -> None:
