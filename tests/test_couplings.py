@@ -204,3 +204,26 @@ def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, 
     rows = replace(rows, roles=np.full(rows.n_rows, "calibration", dtype=object))
     assert before_mm == pytest.approx(1000 * calibrate_chain(chain, rows, "registration").rms_m, abs=6e-4)
     assert after_mm == pytest.approx(after, abs=6e-4) and before_mm > 10 * after_mm  # printed to 3 decimals
+
+
+def test_joint_limits_are_judged_on_the_corrected_angles(industrial_arm_urdf, tmp_path):
+    """A3 read from the horizontal: a reading of 160° (beyond A3's 154° limit) with A2 at −50° is the
+    actual angle 110°, inside; a reading of −100° with A2 at −50° is −150°, beyond the −130° limit."""
+    from pincal.measurements.csv_v1 import read_measurements
+
+    chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
+    read = np.radians([[0.0, -50.0, 160.0, 0.0, 30.0, 0.0], [0.0, -50.0, -100.0, 0.0, 30.0, 0.0]])
+    actual = read.copy()
+    actual[:, 2] += read[:, 1]
+    params = PlacementErrors(chain)
+    rows = measure_truth(params, np.zeros(params.size), actual, sensor_at(3.0), np.random.default_rng(0), 0.0, 0.0)
+    write_measurements(tmp_path / "rows.csv", replace(rows, q=read))
+    _, raw_notes = read_measurements(tmp_path / "rows.csv", chain.joint_specs)
+    data, notes = read_measurements(tmp_path / "rows.csv", chain.joint_specs, [parse_coupling("A3=-1*A2")])
+    assert [n for n in raw_notes if "limits" in n] == [
+        f"{tmp_path / 'rows.csv'}: joint 'A3' is outside its limits [-2.26893, 2.68781] rad in 1 of 2 rows; "
+        "first at line 2: 2.79253 rad"]
+    assert [n for n in notes if "limits" in n] == [
+        f"{tmp_path / 'rows.csv'}: joint 'A3' (its reading corrected by --coupling, eq C1) is outside its limits "
+        "[-2.26893, 2.68781] rad in 1 of 2 rows; first at line 3: -2.61799 rad"]
+    assert np.allclose(data.q, actual)

@@ -50,7 +50,6 @@ from pincal.cli.settings import EvaluateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.sessions import register_session, session_pose_errors
-from pincal.measurements.couplings import apply_couplings
 from pincal.measurements.csv_v1 import read_measurements, read_table
 from pincal.measurements.data import (
     SESSION_COLUMN,
@@ -205,10 +204,10 @@ def evaluate_files(
                 "on purpose"
             )
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
-    data, read_notes = read_measurements(data_path, chain.joint_specs)
+    # the readings corrected as the calibration's were (eq C1), before the joint limits are judged
+    data, read_notes = read_measurements(data_path, chain.joint_specs, report.couplings)
     notes += read_notes
-    if report.couplings:  # the readings corrected as the calibration's were (eq C1)
-        data = apply_couplings(data, report.couplings)
+    if report.couplings:
         notes.append(f"{data_path}: readings corrected as {report_path} says (couplings: "
                      f"{', '.join(c.label for c in report.couplings)})")
     if report.not_determined:  # rows at another tool orientation meet the held target's error

@@ -15,7 +15,7 @@ import numpy as np
 
 from pincal.cli.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.errors import PincalError
-from pincal.measurements.couplings import ReadingCoupling, apply_couplings, corrected_angles, readings_of
+from pincal.measurements.couplings import ReadingCoupling, corrected_angles, readings_of
 from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
@@ -118,8 +118,7 @@ def plan_files(
         labels = np.arange(len(candidates))
     existing = None
     if existing_paths:  # several files: sessions, one registration each; the plan continues the last
-        existing, read_notes = read_sessions(existing_paths, chain.joint_specs)
-        existing = apply_couplings(existing, couplings)
+        existing, read_notes = read_sessions(existing_paths, chain.joint_specs, couplings)
         notes += read_notes
     workspace = (corrected_angles(read_candidates(workspace_path, chain)[0], couplings, names)
                  if workspace_path is not None else None)

@@ -37,7 +37,6 @@ from pincal.fit.sessions import (
     session_rows,
     where,
 )
-from pincal.measurements.couplings import apply_couplings
 from pincal.measurements.csv_v1 import (
     read_measurements,
     read_sessions,
@@ -227,8 +226,8 @@ def calibrate_files(
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
-    data, notes = read_sessions(data_paths, chain.joint_specs)
-    data = apply_couplings(data, settings.couplings)  # readings taken against another joint (eq C1)
+    # readings taken against another joint corrected (eq C1) before the joint limits are judged
+    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings)
     nominal_placements = chain.placements()
     n_rows = fit_rows(data.roles)
     sources: Sources = {"urdf": str(urdf),
@@ -418,12 +417,11 @@ def diagnose_files(
         raise PincalError("diagnose works on --level registration, offsets or full")
     started = time.perf_counter()
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
-    data, notes = read_sessions(data_paths, chain.joint_specs)
-    data = apply_couplings(data, settings.couplings)  # readings taken against another joint (eq C1)
+    # readings taken against another joint corrected (eq C1) before the joint limits are judged
+    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings)
     heldout = held_time = None
     if validation_path:
-        heldout, held_notes = read_measurements(validation_path, chain.joint_specs)
-        heldout = apply_couplings(heldout, settings.couplings)
+        heldout, held_notes = read_measurements(validation_path, chain.joint_specs, settings.couplings)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
     nominal_placements = chain.placements()

@@ -43,6 +43,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import MeasurementError, PincalError
+from pincal.measurements.couplings import ReadingCoupling, corrected_angles
 from pincal.measurements.data import (
     DEFAULT_ROLE,
     JOINT_SANITY,
@@ -347,26 +348,35 @@ def _read_extras(table: CsvTable, names: Sequence[str]) -> tuple[dict[str, np.nd
     return kept, ignored
 
 
-def _limit_notes(table: CsvTable, q: np.ndarray, joints: Sequence[JointSpec]) -> list[str]:
-    """One note per joint with readings outside its limits."""
+def _limit_notes(
+    table: CsvTable, q: np.ndarray, joints: Sequence[JointSpec], corrected: Sequence[str] = ()
+) -> list[str]:
+    """One note per joint with values ``q`` outside its limits (``corrected``: joints whose ``q`` is the
+    reading corrected by eq C1)."""
     notes = []
     for n, joint in enumerate(joints):
+        what = " (its reading corrected by --coupling, eq C1)" if joint.name in corrected else ""
         outside = np.flatnonzero((q[:, n] < joint.lower) | (q[:, n] > joint.upper))
         if outside.size:
             k, unit = outside[0], "m" if joint.kind == "prismatic" else "rad"
             notes.append(
-                f"{table.source}: joint '{joint.name}' is outside its limits [{joint.lower:.6g}, "
+                f"{table.source}: joint '{joint.name}'{what} is outside its limits [{joint.lower:.6g}, "
                 f"{joint.upper:.6g}] {unit} in {outside.size} of {len(q)} rows; "
                 f"first at line {table.lines[k]}: {q[k, n]:.6g} {unit}")
     return notes
 
 
-def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> tuple[MeasurementSet, list[str]]:
+def read_measurements(
+    path: str | os.PathLike, joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = ()
+) -> tuple[MeasurementSet, list[str]]:
     """Read and validate a measurement file (format v1).
 
     Args:
         path: CSV file.
         joints: the joints the rows must provide, in the order of the returned ``q``.
+        couplings: readings taken against another joint: ``q`` holds the actual
+            values (eq C1, :mod:`pincal.measurements.couplings`), and the joint-limit
+            notes judge those, not the readings.
 
     Returns:
         The measurement set and notes (joint limits, ignored or extra columns) for
@@ -377,7 +387,7 @@ def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> t
     """
     table = read_table(path)
     joint_names = [j.name for j in joints]
-    q = _joint_matrix(table, joints)
+    q = corrected_angles(_joint_matrix(table, joints), couplings, joint_names)
     point_names = _point_columns(table, joint_names)
     points = table.matrix([c for triplet in point_names for c in triplet])
     for i, name in enumerate(c for triplet in point_names for c in triplet):
@@ -385,7 +395,7 @@ def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> t
     rotations = _read_rotations(table)
     roles = _read_roles(table)
     extra, ignored = _read_extras(table, [n for n in table.names if not is_reserved(n, joint_names)])
-    notes = _limit_notes(table, q, joints)
+    notes = _limit_notes(table, q, joints, corrected=[c.joint for c in couplings])
     if ignored:
         notes.append(f"{table.source}: ignored non-numeric column(s): {', '.join(ignored)}")
     if extra:
@@ -397,7 +407,7 @@ def read_measurements(path: str | os.PathLike, joints: Sequence[JointSpec]) -> t
 
 
 def read_sessions(
-    paths: Sequence[str | os.PathLike], joints: Sequence[JointSpec]
+    paths: Sequence[str | os.PathLike], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = ()
 ) -> tuple[MeasurementSet, list[str]]:
     """Read one or several measurement files as the sessions of one calibration.
 
@@ -413,7 +423,7 @@ def read_sessions(
     """
     files = [Path(p) for p in paths]
     if len(files) == 1:
-        return read_measurements(files[0], joints)
+        return read_measurements(files[0], joints, couplings)
     seen: dict[str, Path] = {}
     for path in files:
         key = os.path.normcase(os.path.abspath(path))
@@ -423,7 +433,7 @@ def read_sessions(
     stems = [p.stem for p in files]
     sets, notes = [], []
     for path, stem in zip(files, stems):
-        data, file_notes = read_measurements(path, joints)
+        data, file_notes = read_measurements(path, joints, couplings)
         notes += file_notes
         name = stem if stems.count(stem) == 1 else str(path)
         own = default_session_name(data.source)
