@@ -16,6 +16,11 @@
     scripts/scenarios.py's raster at constant orientation, whole processes in alternated pairs;
     goal auto <= 3x full (the folds of --level auto are scored by one Gauss-Newton step from
     the fit of all rows from 500 rows on: pincal.fit.fold_update). Writes scripts/benchmark_auto.json.
+(h) ``--diagnose``: whole ``pincal diagnose`` processes, on every row and with a held-out split
+    (every 5th row in ``--validation``), against one ``pincal calibrate --level full`` of the same
+    2 500 6D rows, side by side in rotated triples: on (f)'s UR5 session and on scripts/scenarios.py's
+    tracker 4.2 m raster at constant orientation; goal diagnose <= 10x calibrate (issue 20 item 5).
+    ``--select CRITERION`` for all three (default: the commands' own). Writes scripts/benchmark_diagnose.json.
 (f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
     selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
     6D rows (position + orientation) taken along 6 lines and 4 planes in joint

@@ -32,7 +32,8 @@ score test). Only candidates whose score could put them in what the step
 reports or judges — the first eight, every one the adoption checks look at,
 with a margin for the linearisation — and, at the first step, every nearly
 inseparable one are refitted in full, from their Gauss–Newton step, so the
-ranking, values and verdicts are those of the full fits. All fits share one
+ranking, values and verdicts are those of the full fits (a nearly inseparable
+one whose fit crawls past :data:`NAMING_EVALUATIONS` counts as absorbed). All fits share one
 sensitivity model per set of free parameters.
 """
 
@@ -97,8 +98,9 @@ CANDIDATE_TOLERANCE = 1e-10
 #: valley the data do not determine (as :data:`pincal.diagnosis.structure.GENERIC_EVALUATIONS`), and
 #: counts as absorbed: a cyclic term on scripts/benchmark.py's UR5 wrist held at zero (sin q ≈ 0,
 #: cos q ≈ 1, its zero offset) ran 2 800 evaluations (150 s) to amplitudes of 3 and 20 rad without
-#: converging; candidate fits that converge took at most 8 on the README commands.
-NAMING_EVALUATIONS = 20
+#: converging. Naming fits that converge took at most 12 on such sessions of 300–2 500 rows, 8 on
+#: the README commands.
+NAMING_EVALUATIONS = 50
 #: Largest |gravity torque| [N·m or N] of a joint over the rows below which it has none: compliance and
 #: gravity-flank backlash cannot be tested there (rounding of Pinocchio's RNEA is ~1e-12).
 NO_TORQUE = 1e-9
