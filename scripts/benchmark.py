@@ -16,6 +16,11 @@
     scripts/scenarios.py's raster at constant orientation, whole processes in alternated pairs;
     goal auto <= 3x full (the folds of --level auto are scored by one Gauss-Newton step from
     the fit of all rows from 500 rows on: pincal.fit.fold_update). Writes scripts/benchmark_auto.json.
+(h) ``--diagnose``: whole ``pincal diagnose`` processes, on every row and with a held-out split
+    (every 5th row in ``--validation``), against one ``pincal calibrate --level full`` of the same
+    2 500 6D rows, side by side in rotated triples: on (f)'s UR5 session and on scripts/scenarios.py's
+    tracker 4.2 m raster at constant orientation; goal diagnose <= 10x calibrate (issue 20 item 5).
+    ``--select CRITERION`` for all three (default: the commands' own). Writes scripts/benchmark_diagnose.json.
 (f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
     selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
     6D rows (position + orientation) taken along 6 lines and 4 planes in joint
@@ -583,10 +588,9 @@ def _print_against(results: dict) -> None:
           "calls the run made, at Pinocchio's cost per call")
 
 
-def auto_against_full(pairs: int = 3, rows: int = 2500) -> dict:
-    """(g) ``calibrate --level auto`` against ``--level full``, whole processes side by side (alternated
-    pairs, the same machine and load), on the raster scenario of scripts/scenarios.py with ``rows`` 6D rows.
-    The goal (the unseen-setups issue): auto ≤ 3× full."""
+def _raster_session(folder: Path, rows: int) -> tuple[Path, str, Path]:
+    """scripts/scenarios.py's tracker 4.2 m, 6D raster at constant orientation with ``rows`` rows, written
+    into ``folder``: the robot's URDF, its tip link and the measurement file."""
     import importlib.util
     from dataclasses import replace
 
@@ -597,23 +601,108 @@ def auto_against_full(pairs: int = 3, rows: int = 2500) -> dict:
     sys.modules["scenarios"] = scenarios
     spec.loader.exec_module(scenarios)
     case = replace(next(c for c in scenarios.SCENARIOS if "6D, raster" in c.name), rows=rows)
+    urdf, tip = scenarios.build_robots(folder)[case.robot]
+    _, calibration, _ = scenarios.simulate(case, urdf, tip)
+    write_measurements(folder / "raster.csv", calibration)
+    return urdf, tip, folder / "raster.csv"
+
+
+def auto_against_full(pairs: int = 3, rows: int = 2500) -> dict:
+    """(g) ``calibrate --level auto`` against ``--level full``, whole processes side by side (alternated
+    pairs, the same machine and load), on the raster scenario of scripts/scenarios.py with ``rows`` 6D rows.
+    The goal (the unseen-setups issue): auto ≤ 3× full."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        urdf, tip = scenarios.build_robots(folder)[case.robot]
-        _, calibration, _ = scenarios.simulate(case, urdf, tip)
-        write_measurements(folder / "raster.csv", calibration)
+        urdf, tip, raster = _raster_session(folder, rows)
         times: dict[str, list[float]] = {"full": [], "auto": []}
         for _ in range(pairs):
             for level in ("full", "auto"):
                 started = time.perf_counter()
                 subprocess.run([sys.executable, "-c", "import sys; from pincal.cli import console; sys.exit(console())",
-                                "calibrate", str(urdf), str(folder / "raster.csv"), "--tip-link", tip, "--level", level,
+                                "calibrate", str(urdf), str(raster), "--tip-link", tip, "--level", level,
                                 "--quiet", "--out", str(folder / f"{level}.urdf"), "--report",
                                 str(folder / f"{level}.json")], check=True, capture_output=True)
                 times[level].append(time.perf_counter() - started)
     ratios = [a / f for a, f in zip(times["auto"], times["full"])]
     return {"rows": rows, "pairs": pairs, "full_s": times["full"], "auto_s": times["auto"],
             "ratio_median": statistics.median(ratios), "goal": 3.0, "load_average": os.getloadavg()}
+
+
+#: (h)'s goal (issue 20 item 5): a whole ``pincal diagnose`` at most this many times one
+#: ``pincal calibrate --level full`` of the same rows.
+DIAGNOSE_GOAL = 10.0
+#: (h): every HELD_OUT_EVERY-th row of a session goes to the --validation file.
+HELD_OUT_EVERY = 5
+
+
+def _held_out_split(path: Path) -> tuple[Path, Path]:
+    """``path``'s rows split as a user holding out every :data:`HELD_OUT_EVERY`-th one would: the
+    calibration file and the held-out file beside it (the header in both)."""
+    header, *rows = path.read_text(encoding="utf-8").splitlines()
+    files = path.with_name(path.stem + "_calibration.csv"), path.with_name(path.stem + "_heldout.csv")
+    for file, held in zip(files, (False, True)):
+        kept = [row for i, row in enumerate(rows) if (i % HELD_OUT_EVERY == HELD_OUT_EVERY - 1) == held]
+        file.write_text("\n".join([header, *kept]) + "\n", encoding="utf-8")
+    return files
+
+
+def diagnose_against_calibrate(pairs: int = 3, rows: int = 2500, select: str | None = None) -> dict:
+    """(h) whole ``pincal diagnose`` processes against one ``pincal calibrate --level full`` of the same
+    rows, side by side: on (f)'s UR5 session and on scripts/scenarios.py's tracker 4.2 m 6D raster at
+    constant orientation, ``rows`` 6D rows each. Per session and pair, three processes in an order
+    rotated from pair to pair: calibrate on every row, diagnose on every row, and diagnose with a
+    held-out split (:func:`_held_out_split`: 4/5 calibrated, 1/5 in ``--validation``). Each ratio
+    diagnose / calibrate is taken within its pair (the same load), its median over the pairs reported;
+    the goal is :data:`DIAGNOSE_GOAL`. ``select``: a ``--select`` criterion for all three (default:
+    the commands' own)."""
+    from pincal.robots import example_robot_data_urdf
+
+    extra = [] if select is None else ["--select", select]
+    out: dict = {"rows": rows, "pairs": pairs, "select": select or "default", "goal": DIAGNOSE_GOAL,
+                 "held_out_every": HELD_OUT_EVERY, "load_average_before": os.getloadavg(), "sessions": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        ur5 = folder / "ur5_tracker.csv"
+        large_session(ur5, rows)
+        raster_urdf, raster_tip, raster = _raster_session(folder, rows)
+        sessions = {"ur5_lines_planes": (example_robot_data_urdf(_UR5_URDF), _UR5_TIP, ur5),
+                    "raster_constant_orientation": (raster_urdf, raster_tip, raster)}
+        for name, (urdf, tip, data) in sessions.items():
+            calibration, heldout = _held_out_split(data)
+            common = ["--tip-link", tip, *extra, "--quiet"]
+            commands = {
+                "calibrate": ["calibrate", str(urdf), str(data), "--level", "full", *common,
+                              "--out", "{out}/calibrated.urdf", "--report", "{out}/REPORT.json"],
+                "diagnose": ["diagnose", str(urdf), str(data), *common,
+                             "--out", "{out}/diagnosed.urdf", "--report", "{out}/REPORT.json"],
+                "diagnose_validation": ["diagnose", str(urdf), str(calibration), "--validation", str(heldout),
+                                        *common, "--out", "{out}/diagnosed.urdf", "--report", "{out}/REPORT.json"],
+            }
+            times: dict[str, list[float]] = {command: [] for command in commands}
+            order = list(commands)
+            for i in range(pairs):
+                for command in order[i % 3:] + order[: i % 3]:
+                    times[command].append(_timed_run(sys.executable, commands[command], {}))
+            entry: dict = {"times_s": times}
+            for command in ("diagnose", "diagnose_validation"):
+                ratios = [d / c for d, c in zip(times[command], times["calibrate"])]
+                entry[f"{command}_over_calibrate"] = {"ratios": ratios, "median": statistics.median(ratios)}
+            out["sessions"][name] = entry
+    out["load_average_after"] = os.getloadavg()
+    return out
+
+
+def _print_diagnose(result: dict) -> None:
+    """(h)'s lines: per session, the median times and the median ratios against the goal."""
+    print(f"(h) whole pincal diagnose / one pincal calibrate --level full, {result['rows']} 6D rows, "
+          f"--select {result['select']}, median of {result['pairs']} rotated triples (goal <= {result['goal']:g}x)")
+    for name, entry in result["sessions"].items():
+        times = {command: statistics.median(values) for command, values in entry["times_s"].items()}
+        plain, held = entry["diagnose_over_calibrate"]["median"], entry["diagnose_validation_over_calibrate"]["median"]
+        print(f"    {name:28s} calibrate {times['calibrate']:6.2f} s, diagnose {times['diagnose']:6.2f} s "
+              f"({plain:.1f}x), with --validation {times['diagnose_validation']:6.2f} s ({held:.1f}x)")
+    print(f"    load average before {result['load_average_before'][0]:.2f}, after "
+          f"{result['load_average_after'][0]:.2f} ({os.cpu_count()} CPUs)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -627,12 +716,25 @@ def main(argv: list[str] | None = None) -> int:
                         help="output JSON (default scripts/benchmark_results.json, with --against "
                              "scripts/benchmark_against.json)")
     parser.add_argument("--against", metavar="REV", help="only (e): whole processes against git revision REV")
-    parser.add_argument("--pairs", type=int, default=5, help="alternated pairs of (e) (default 5)")
+    parser.add_argument("--pairs", type=int, default=None, help="alternated pairs of (e) (default 5) and "
+                        "rotated triples of (h) (default 3)")
     default_against = "diagnose_tiago,calibrate_tiago"
     parser.add_argument("--only", default=default_against,
                         help=f"benchmarks of (e) among {','.join(AGAINST)} (default {default_against})")
     parser.add_argument("--one-blas-thread", action="store_true", help="(e) with OPENBLAS_NUM_THREADS=1 for both")
+    parser.add_argument("--diagnose", action="store_true", help="only (h): whole diagnose (with and without "
+                        "--validation) against calibrate --level full, 2 500 6D rows of (f)'s UR5 and of a raster, "
+                        "side by side")
+    parser.add_argument("--select", default=None, help="(h): a --select criterion for every command "
+                        "(default: the commands' own)")
     args = parser.parse_args(argv)
+    if args.diagnose:
+        result = diagnose_against_calibrate(pairs=args.pairs or 3, select=args.select)
+        _print_diagnose(result)
+        path = args.json or HERE / "benchmark_diagnose.json"
+        path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {path}")
+        return 0
     if args.auto:
         result = auto_against_full()
         print(f"(g) calibrate --level auto / --level full, {result['rows']} raster rows, whole process: "
@@ -648,7 +750,7 @@ def main(argv: list[str] | None = None) -> int:
         unknown = [n for n in names if n not in AGAINST]
         if unknown:
             parser.error(f"unknown benchmark(s) {unknown}; choose from {list(AGAINST)}")
-        results = against(args.against, args.pairs, names, args.one_blas_thread)
+        results = against(args.against, args.pairs or 5, names, args.one_blas_thread)
         _print_against(results)
         path = args.json or HERE / "benchmark_against.json"
         path.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")

@@ -43,14 +43,23 @@ from pincal.fit.prior import (
     settled,
 )
 from pincal.fit.selection import select_subset
-from pincal.fit.solver import Solution, gram
+from pincal.fit.solver import Fittable, Solution, gram, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.progress import Counter
 
 __all__ = [
     "KEPT", "NOT_IDENTIFIABLE", "NOT_SELECTED", "Dropped", "ObjectiveT", "KindProblem", "Analysis", "KinematicFit",
-    "fit_kinematics", "dropped_parameters",
+    "fit_kinematics", "dropped_parameters", "SCALE_FIT_EVALUATIONS",
 ]
+
+#: Evaluations allowed to the unregularised fit that gives the data's own noise scale
+#: (:func:`_from_the_data_scale`). Where the data leave combinations undetermined (curvature
+#: outweighing information, eq S3 of :mod:`pincal.fit.selection`), Levenberg–Marquardt crawls along
+#: them without meeting its tolerances while the cost hardly moves: 2 × 10⁻⁷ of it per evaluation
+#: on scripts/benchmark.py's UR5 session (f), 2 × 10⁻⁵ of the scale after 3 000 evaluations
+#: (105 s), where the scale is compared with the prior's within a factor
+#: :data:`pincal.fit.prior.DATA_SCALE_GAP`. Converging fits took at most 54 on the README commands.
+SCALE_FIT_EVALUATIONS = 100
 
 KEPT = "calibrated"
 NOT_IDENTIFIABLE = "not determined: not identifiable from these measurements"
@@ -246,7 +255,8 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
     first, first_evidence = problem.scales(), problem.log_evidence(objective, solution)
     prior, problem.prior = problem.prior, None
     try:
-        plain, unregularised = problem.fit(kept, base, solution.x, what=what)
+        plain = problem.objective(kept, base)  # a crawl stops at its budget: only its scale is used
+        unregularised = solve(cast(Fittable, plain), solution.x, what=what, max_evaluations=SCALE_FIT_EVALUATIONS)
         problem.rescale(plain, unregularised)  # the data's scale: maximum likelihood
     except CalibrationError:  # not determined without the prior: the first fixed point stands
         problem.set_scales(first)
