@@ -220,3 +220,20 @@ def test_mkdocs_build_strict(tmp_path):
     warnings = [line for line in (run.stdout + run.stderr).splitlines() if "WARNING" in line or "ERROR" in line]
     assert run.returncode == 0, "\n".join(warnings) or run.stderr[-2000:]
     assert (tmp_path / "site" / "index.html").exists() and (tmp_path / "site" / "report.png").exists()
+
+
+def undocumented_packages(index: str, package: Path) -> list[str]:
+    """pincal's subpackages that the "Every package" table of docs/api/index.md (``index``) does not name."""
+    table = index.split("## Every package", 1)[-1].split("\n## ", 1)[0]
+    named = set(re.findall(r"^\| `(pincal(?:\.\w+)?)`", table, re.MULTILINE))
+    return sorted(f"pincal.{p.parent.name}" for p in package.glob("*/__init__.py")
+                  if f"pincal.{p.parent.name}" not in named)
+
+
+def test_every_package_has_an_api_page_or_a_reason(tmp_path):
+    """docs/api/index.md names each subpackage with its page or why it has none; a new package fails here."""
+    index = (DOCS / "api" / "index.md").read_text(encoding="utf-8")
+    assert undocumented_packages(index, ROOT / "pincal") == []
+    (tmp_path / "newroom").mkdir()
+    (tmp_path / "newroom" / "__init__.py").write_text("", encoding="utf-8")
+    assert undocumented_packages(index, tmp_path) == ["pincal.newroom"]
