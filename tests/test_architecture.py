@@ -14,6 +14,7 @@ import ast
 from pathlib import Path
 
 import pytest
+from conftest import package_files
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
@@ -62,7 +63,7 @@ def pincal_imports(path: Path, name: str) -> set[str]:
     return found
 
 
-MODULES: dict[str, Path] = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+MODULES: dict[str, Path] = {module_name(p): p for p in package_files()}
 
 
 def import_graph() -> dict[str, set[str]]:

@@ -342,7 +342,10 @@ def _run_example(args: argparse.Namespace) -> int:
     for path in files:
         print(f"  {target / path}")
     readme = target / "README.md"
-    print(f"provenance and licence: {readme}" if readme.exists() else "provenance: docs/paper.md (Table 1)")
+    if args.name == "examples":
+        print(f"what they print and read: {readme}")
+    else:
+        print(f"provenance and licence: {readme}" if readme.exists() else "provenance: docs/paper.md (Table 1)")
     return 0
 
 
