@@ -237,3 +237,16 @@ def test_every_package_has_an_api_page_or_a_reason(tmp_path):
     (tmp_path / "newroom").mkdir()
     (tmp_path / "newroom" / "__init__.py").write_text("", encoding="utf-8")
     assert undocumented_packages(index, tmp_path) == ["pincal.newroom"]
+
+
+def test_the_report_example_is_made_by_the_documented_diagnose_command():
+    """scripts/make_report_example.py runs docs/diagnose.md's TIAGo command as written there (the URDF, its
+    first argument, as the $(python -c ...) prints it), so the example page follows the page's command."""
+    spec = importlib.util.spec_from_file_location("make_report_example", ROOT / "scripts" / "make_report_example.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    page = (DOCS / "diagnose.md").read_text(encoding="utf-8")
+    documented = [args.split() for name, args in commands(page, set(_subcommands())) if name == "diagnose"
+                  and "tiago_mocap" in args]
+    assert len(documented) == 1, "docs/diagnose.md: one TIAGo diagnose command expected"
+    assert documented[0][:3] == ['$(python', '-c', '"")'] and documented[0][3:] == script.DIAGNOSE[1:]
