@@ -63,6 +63,15 @@ def validate_document(document, kind: str | None = None) -> None:
             raise error
 
 
+PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
+
+
+def package_files(package: Path = PACKAGE) -> list[Path]:
+    """pincal's modules: the .py files of its packages (a folder with ``__init__.py``); the example
+    scripts shipped as data in ``pincal/datasets/examples/`` are not modules of pincal."""
+    return [p for p in sorted(package.rglob("*.py")) if (p.parent / "__init__.py").exists()]
+
+
 def report_kind(document) -> str:
     """The kind of a REPORT.json, by its keys (the schema accepts exactly one)."""
     if "fixture" in document:

@@ -14,6 +14,7 @@ import ast
 from pathlib import Path
 
 import pytest
+from conftest import package_files
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
@@ -62,7 +63,7 @@ def pincal_imports(path: Path, name: str) -> set[str]:
     return found
 
 
-MODULES: dict[str, Path] = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+MODULES: dict[str, Path] = {module_name(p): p for p in package_files()}
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -305,3 +306,48 @@ def test_the_public_name_check_catches_a_private_import(tmp_path):
                        "from pincal.planning.design import QUADRATURE\n", encoding="utf-8")
     bad = private_imports({"pincal.planning.planner": planted})
     assert len(bad) == 2 and all("pincal.fit.solver" in line for line in bad)
+
+
+#: Calls that change a chain in place (pincal.model.chain.KinematicChain).
+CHAIN_MUTATORS = ("set_placements", "set_tool")
+#: Pieces of an assignment target that write into a chain's Pinocchio model or its tool.
+CHAIN_STATE = ("jointPlacements", ".frames[", "._tool")
+
+
+def chain_mutations(text: str, label: str) -> list[str]:
+    """Statements in the source ``text`` that change a chain in place: a call of
+    :data:`CHAIN_MUTATORS`, ``.apply(…)`` on a parameter set (a receiver whose source names
+    ``param``), and an assignment into :data:`CHAIN_STATE`; in the order of the source."""
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            name = node.func.attr
+            if name in CHAIN_MUTATORS or (name == "apply" and "param" in ast.unparse(node.func.value).lower()):
+                found.append((node.lineno, f"{label}:{node.lineno}: {ast.unparse(node.func)}(...)"))
+        elif isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            found += [(node.lineno, f"{label}:{node.lineno}: {ast.unparse(t)} = ...") for t in targets
+                      if any(piece in ast.unparse(t) for piece in CHAIN_STATE)]
+    return [line for _, line in sorted(found)]
+
+
+def test_only_the_model_changes_a_chain():
+    """Values, not a shared mutable chain (issue 21 item 1): outside ``pincal/model/`` a chain is
+    evaluated with another model, tool or parameter vector only inside ``chain.placed(...)``."""
+    outside = {name: path for name, path in MODULES.items() if room(name) != "model"}
+    found = [line for name, path in outside.items() for line in chain_mutations(path.read_text(encoding="utf-8"), name)]
+    assert not found, ("evaluate a model with `with chain.placed(placements, tool=...):` instead of changing "
+                       "the chain:\n" + "\n".join(found))
+    assert {room(name) for name in outside} >= {"cli", "report", "diagnosis", "fit", "paper", "simulation", "study"}
+
+
+def test_the_chain_check_catches_each_mutation():
+    """Not vacuous: each kind of change it guards is found, a registration's ``apply`` is not."""
+    text = ("def f(chain, params, result, registration):\n    chain.set_placements(x)\n    chain.set_tool(t)\n"
+            "    result.params.apply(v)\n    registration.apply(p)\n"
+            "    chain.model.jointPlacements[3] = s\n    chain.model.frames[chain.tip_frame_id].placement = s\n"
+            "    chain._tool = t\n")
+    found = [line.split(": ", 1)[1] for line in chain_mutations(text, "sample.py")]
+    assert found == ["chain.set_placements(...)", "chain.set_tool(...)", "result.params.apply(...)",
+                     "chain.model.jointPlacements[3] = ...", "chain.model.frames[chain.tip_frame_id].placement = ...",
+                     "chain._tool = ..."]

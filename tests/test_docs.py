@@ -220,3 +220,33 @@ def test_mkdocs_build_strict(tmp_path):
     warnings = [line for line in (run.stdout + run.stderr).splitlines() if "WARNING" in line or "ERROR" in line]
     assert run.returncode == 0, "\n".join(warnings) or run.stderr[-2000:]
     assert (tmp_path / "site" / "index.html").exists() and (tmp_path / "site" / "report.png").exists()
+
+
+def undocumented_packages(index: str, package: Path) -> list[str]:
+    """pincal's subpackages that the "Every package" table of docs/api/index.md (``index``) does not name."""
+    table = index.split("## Every package", 1)[-1].split("\n## ", 1)[0]
+    named = set(re.findall(r"^\| `(pincal(?:\.\w+)?)`", table, re.MULTILINE))
+    return sorted(f"pincal.{p.parent.name}" for p in package.glob("*/__init__.py")
+                  if f"pincal.{p.parent.name}" not in named)
+
+
+def test_every_package_has_an_api_page_or_a_reason(tmp_path):
+    """docs/api/index.md names each subpackage with its page or why it has none; a new package fails here."""
+    index = (DOCS / "api" / "index.md").read_text(encoding="utf-8")
+    assert undocumented_packages(index, ROOT / "pincal") == []
+    (tmp_path / "newroom").mkdir()
+    (tmp_path / "newroom" / "__init__.py").write_text("", encoding="utf-8")
+    assert undocumented_packages(index, tmp_path) == ["pincal.newroom"]
+
+
+def test_the_report_example_is_made_by_the_documented_diagnose_command():
+    """scripts/make_report_example.py runs docs/diagnose.md's TIAGo command as written there (the URDF, its
+    first argument, as the $(python -c ...) prints it), so the example page follows the page's command."""
+    spec = importlib.util.spec_from_file_location("make_report_example", ROOT / "scripts" / "make_report_example.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    page = (DOCS / "diagnose.md").read_text(encoding="utf-8")
+    documented = [args.split() for name, args in commands(page, set(_subcommands())) if name == "diagnose"
+                  and "tiago_mocap" in args]
+    assert len(documented) == 1, "docs/diagnose.md: one TIAGo diagnose command expected"
+    assert documented[0][:3] == ['$(python', '-c', '"")'] and documented[0][3:] == script.DIAGNOSE[1:]

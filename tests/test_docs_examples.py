@@ -4,7 +4,7 @@ Each page's blocks run in order in one temporary directory prepared like a user'
 tiago_mocap|mukca|lwr_bag --out data`` and the KUKA URDF at ``urdf/kuka_lwr4plus.urdf`` (a clone's
 path). A ```` ```bash ```` (``sh``, ``shell``, ``console``: ``$ `` lines) block's commands run
 in-process — ``pincal ...`` through :func:`pincal.cli.commands.main`, ``python FILE`` through
-:mod:`runpy` (a file of the clone, examples/ and scripts/, when the directory has none), and
+:mod:`runpy` (a file of the clone, scripts/, when the directory has none), and
 ``$(python -c "...")`` is replaced by what the code prints — and each must exit 0. A
 ```` ```python ```` block runs in a fresh namespace. A block that cannot run in a test says why
 right before it::
@@ -148,7 +148,7 @@ def run_command(argv: list[str], where: str) -> tuple[int, str]:
     if argv[0] == "python" and argv[1:2] == ["-c"]:
         return _captured(lambda: _exec(argv[2], where))
     if argv[0] == "python" and len(argv) > 1 and argv[1].endswith(".py"):
-        script = Path(argv[1]) if Path(argv[1]).exists() else ROOT / argv[1]  # examples/, scripts/: a clone's
+        script = Path(argv[1]) if Path(argv[1]).exists() else ROOT / argv[1]  # scripts/: a clone's
         if not script.exists():
             raise Unrunnable(f"{where}: no such script: {argv[1]}")
         def run_script() -> int:
@@ -198,10 +198,12 @@ def run_page(page: Path) -> int:
 
 @pytest.fixture(scope="session")
 def user_directory(tmp_path_factory):
-    """A directory as a user's: the three shipped examples under data/, the KUKA URDF under urdf/."""
+    """A directory as a user's: the shipped measurement sets under data/, the KUKA URDF under urdf/, the
+    example scripts under examples/."""
     folder = tmp_path_factory.mktemp("user")
     for name in EXAMPLES:
-        code, output = _captured(lambda name=name: main(["example", name, "--out", str(folder / "data")]))
+        out = folder if name == "examples" else folder / "data"
+        code, output = _captured(lambda name=name, out=out: main(["example", name, "--out", str(out)]))
         assert code == 0, output
     (folder / "urdf").mkdir()
     shutil.copy(kuka_lwr4plus_urdf(), folder / "urdf" / "kuka_lwr4plus.urdf")

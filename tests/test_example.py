@@ -7,6 +7,8 @@ the docs' commands then run as written from the folder it was copied into. Every
 
 from __future__ import annotations
 
+import runpy
+import sys
 from pathlib import Path
 
 import pytest
@@ -25,7 +27,7 @@ def test_a_set_is_copied_whole_and_never_over_an_existing_one(name, tmp_path, ca
     assert main(["example", name, "--out", str(tmp_path / "data")]) == 0
     copied, source = tmp_path / "data" / name, dataset_folder(name)
     shipped = sorted(p.relative_to(source) for p in source.rglob("*")
-                     if p.is_file() and p.suffix not in (".py", ".pyc") and "__pycache__" not in p.parts)
+                     if p.is_file() and p.name != "__init__.py" and "__pycache__" not in p.parts)
     assert sorted(p.relative_to(copied) for p in copied.rglob("*") if p.is_file()) == shipped
     assert all((copied / p).read_bytes() == (source / p).read_bytes() for p in shipped)
     if name == "urdf":  # the robots: the docs' urdf/kuka_lwr4plus.urdf, and no README to carry
@@ -55,13 +57,33 @@ def test_the_docs_commands_run_on_a_copied_set(tmp_path, monkeypatch, capsys):
                  "data/tiago_mocap/qualisys_2021-11-26_static_postures.csv"]) == 0
 
 
+def test_an_example_script_runs_outside_a_clone(tmp_path, monkeypatch, capsys):
+    """pincal example examples --out . and the data it reads: docs/getting-started.md's
+    `python examples/tiago_mocap.py` prints the table of that page (~2 s)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["example", "tiago_mocap"]) == 0 and main(["example", "examples", "--out", "."]) == 0
+    monkeypatch.setattr(sys, "argv", ["examples/tiago_mocap.py"])
+    with pytest.raises(SystemExit) as exited:
+        runpy.run_path("examples/tiago_mocap.py", run_name="__main__")
+    assert exited.value.code == 0
+    table = capsys.readouterr().out
+    page = (ROOT / "docs" / "getting-started.md").read_text(encoding="utf-8")
+    # the held-out marker-1 RMS at each level: the page's table
+    for level, page_level in (("registration", "registration"), ("offsets", "joint offsets"), ("full", "full")):
+        held_out = next(line for line in table.splitlines() if line.startswith(level)).split()[3]
+        page_row = next(line for line in page.splitlines() if line.startswith(f"| {page_level} |"))
+        assert page_row.split("|")[4].strip().strip("*") == held_out
+
+
 def test_every_shipped_file_is_package_data_and_the_clone_links_to_it():
     patterns = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))[
         "tool"]["setuptools"]["package-data"]["pincal.datasets"]
-    files = {p for p in DATASETS.rglob("*") if p.is_file() and p.suffix != ".py" and "__pycache__" not in p.parts}
+    files = {p for p in DATASETS.rglob("*")
+             if p.is_file() and p.name != "__init__.py" and p.suffix != ".pyc" and "__pycache__" not in p.parts}
     shipped = {p for pattern in patterns for p in DATASETS.glob(pattern)}  # globbed as setuptools does
     assert files and not sorted(files - shipped), "add a package-data pattern for these"
     assert (ROOT / "data").resolve() == DATASETS.resolve()  # the docs' data/ paths, in a clone
+    assert (ROOT / "examples").resolve() == (DATASETS / "examples").resolve()  # and examples/*.py
     installed = dataset_folder("mukca")  # the repository's folder, or site-packages' after pip install .
     assert sorted(p.name for p in installed.rglob("*.csv")) == sorted(
         p.name for p in (DATASETS / "mukca").rglob("*.csv"))

@@ -13,7 +13,7 @@ import difflib
 import re
 from pathlib import Path
 
-from conftest import subcommand_actions
+from conftest import package_files, subcommand_actions
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
@@ -89,7 +89,7 @@ def wrong_suggestions(module: str, source: str, parsers: dict[str, dict[str, arg
 def test_every_flag_a_message_suggests_is_one_the_printing_command_accepts():
     parsers = subcommand_actions()
     problems, seen = [], 0
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for path in package_files():
         module = path.relative_to(PACKAGE).as_posix()
         if module == "cli/parser.py":  # the flags' own definitions and help
             continue

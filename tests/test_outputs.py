@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import package_files
 from lxml import etree
 
 from pincal import outputs
@@ -346,7 +347,7 @@ def raw_writes(source: str, filename: str) -> list[str]:
 
 def test_every_write_of_pincal_goes_through_outputs():
     found = []
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for path in package_files():
         if path.name != "outputs.py":
             found += raw_writes(path.read_text(encoding="utf-8"), str(path.relative_to(PACKAGE.parent)))
     assert found == []

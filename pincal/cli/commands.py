@@ -243,13 +243,14 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         write_evaluation(args.json, evaluation.as_dict())
         print(f"wrote {args.json}")
     if args.html is not None:
-        from pincal.report.html import load_document
+        from pincal.report.reading import PAGE_KINDS, load_report
         from pincal.report.row_errors import evaluation_document
 
         shown = evaluation_document(str(args.urdf), str(args.data), errors, evaluation.lines, evaluation.n_skipped_cpa,
                                     files=evaluation.files, sessions=evaluation.row_sessions,
                                     registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift)
-        _write_html(args.html, load_document(args.report), args.report.parent, evaluation=shown, source=args.report)
+        _write_html(args.html, load_report(args.report, PAGE_KINDS), args.report.parent, evaluation=shown,
+                    source=args.report)
     failed = []
     if args.max_pos_mm is not None and errors.position.max > args.max_pos_mm:
         failed.append(f"max position error {errors.position.max:.4f} mm > {args.max_pos_mm} mm")
@@ -323,9 +324,10 @@ def _run_diagnose(args: argparse.Namespace) -> int:
 
 def _run_report(args: argparse.Namespace) -> int:
     from pincal.cli.paths import refuse_overwrite
-    from pincal.report.html import load_document, write_html
+    from pincal.report.html import write_html
+    from pincal.report.reading import PAGE_KINDS, load_report
 
-    document = load_document(args.document)
+    document = load_report(args.document, PAGE_KINDS)
     refuse_overwrite(args.out, args.document)
     write_html(args.out, document, base=args.document.parent, source=args.document)
     print(f"wrote {args.out}")
@@ -340,7 +342,10 @@ def _run_example(args: argparse.Namespace) -> int:
     for path in files:
         print(f"  {target / path}")
     readme = target / "README.md"
-    print(f"provenance and licence: {readme}" if readme.exists() else "provenance: docs/paper.md (Table 1)")
+    if args.name == "examples":
+        print(f"what they print and read: {readme}")
+    else:
+        print(f"provenance and licence: {readme}" if readme.exists() else "provenance: docs/paper.md (Table 1)")
     return 0
 
 

@@ -3,7 +3,8 @@
 The docs' commands read ``data/tiago_mocap/…``, ``data/mukca/…`` and ``data/lwr_bag/…``; in a clone ``data/`` is
 there, after ``pip install`` it is not: ``pincal example tiago_mocap --out data`` puts the set (its
 CSV files, README with the provenance, licence) at the same relative path, so those commands run
-as written. The set is copied into a temporary sibling folder and renamed into place: it appears
+as written; ``pincal example examples --out .`` puts the example scripts at ``./examples/``, beside
+that ``data/``, where they look. The set is copied into a temporary sibling folder and renamed into place: it appears
 whole or not at all, and an existing folder is never overwritten.
 """
 
@@ -25,6 +26,7 @@ EXAMPLES = {
     "mukca": "KUKA LBR iiwa 14 and Franka Panda on a socket fixture (MUKCa): calibrate --fixture, evaluate --fixture",
     "lwr_bag": "KUKA LWR 4+ simulated session as a ROS 2 bag (MCAP) and held-out rows: extract, calibrate, evaluate",
     "urdf": "the packaged KUKA LWR 4+ URDF (the paper's Table 1), as urdf/kuka_lwr4plus.urdf of a clone",
+    "examples": "the example scripts (Python API; they read ./data): --out . gives the docs' examples/*.py",
 }
 
 
@@ -50,7 +52,7 @@ def copy_example(name: str, out_dir: str | Path) -> tuple[Path, list[Path]]:
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=target.parent))
     try:
-        shutil.copytree(source, staging / name, ignore=shutil.ignore_patterns("__pycache__", "*.py"))
+        shutil.copytree(source, staging / name, ignore=shutil.ignore_patterns("__pycache__", "__init__.py"))
         os.replace(staging / name, target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)

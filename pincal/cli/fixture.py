@@ -14,13 +14,12 @@ it ("before"), when that URDF is at hand. Both write ``--html`` pages
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from pincal._version import __version__
 from pincal.cli.level_table import level_choice_lines
@@ -39,6 +38,7 @@ from pincal.report.document import write_evaluation, write_report
 from pincal.report.fixture import fixture_report, read_fixture_block
 from pincal.report.model import Sources, level_choice_part
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport, fixture_metrics_json
+from pincal.report.reading import load_report
 
 __all__ = [
     "CALIBRATE_SENSOR_ONLY", "EVALUATE_SENSOR_ONLY", "SAME_FIXTURE_M", "FixtureRun", "calibrate_fixture_files",
@@ -153,17 +153,6 @@ class FixtureEvaluation:
                 "not_held_out": list(self.not_held_out), "notes": list(self.notes)}
 
 
-def _read_report(report_path: Path) -> tuple[dict[str, Any], tuple]:
-    try:
-        document = json.loads(report_path.read_text(encoding="utf-8"))
-        return document, read_fixture_block(document)
-    except FileNotFoundError:
-        raise PincalError(f"{report_path}: no such report file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError):
-        raise PincalError(f"{report_path}: not the report of a socket-fixture calibration (no 'fixture' block); "
-                          "pass the REPORT.json written by 'pincal calibrate --fixture'") from None
-
-
 def _reported_nominal(document: dict[str, Any], report_path: Path,
                       sha: str | None) -> tuple[Path | None, list[Path], str]:
     """The report's ``sources.urdf`` as written, else beside the report: the file with the recorded SHA-256.
@@ -231,7 +220,9 @@ def evaluate_fixture_files(
     """
     urdf, report_path, fixture_path = Path(urdf), Path(report_path), Path(fixture_path)
     data_paths = _paths(data_paths)
-    document, (tip, ball, nominal_ball, nominal_sha) = _read_report(report_path)
+    document = cast(dict[str, Any], load_report(report_path, ("fixture",),
+                                                hint="pass the REPORT.json written by 'pincal calibrate --fixture'"))
+    tip, ball, nominal_ball, nominal_sha = read_fixture_block(document, report_path)
     notes: list[str] = []
     recorded = document.get("urdf_sha256")
     if recorded is not None and file_sha256(urdf) != recorded:
@@ -373,9 +364,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
         write_evaluation(args.json, evaluation.as_dict())
         print(f"wrote {args.json}")
     if args.html is not None:
-        from pincal.report.html import load_document
+        from pincal.report.reading import PAGE_KINDS, load_report
 
         shown = {"urdf": str(args.urdf), "data": ", ".join(str(p) for p in _paths(args.data)),
                  "fixture": evaluation.as_dict()}
-        _write_html(args.html, load_document(args.report), Path(args.report).parent, evaluation=shown)
+        _write_html(args.html, load_report(args.report, PAGE_KINDS), Path(args.report).parent, evaluation=shown)
     return 0

@@ -460,11 +460,11 @@ def build_parser() -> argparse.ArgumentParser:
                       help="HTML page to write: self-contained, figures embedded, no network")
 
     example = sub.add_parser("example", help="copy a measurement set shipped with pincal (TIAGo mocap, MUKCa, "
-                                             "a ROS 2 bag) or the KUKA URDF to DIR/NAME, for the docs' commands "
-                                             "outside a clone")
-    example.add_argument("name", choices=("tiago_mocap", "mukca", "lwr_bag", "urdf"), metavar="NAME",
-                         help="tiago_mocap, mukca, lwr_bag, or urdf (pincal example urdf --out . gives the "
-                              "docs' urdf/kuka_lwr4plus.urdf)")
+                                             "a ROS 2 bag), the KUKA URDF or the example scripts to DIR/NAME, for "
+                                             "the docs' commands outside a clone")
+    example.add_argument("name", choices=("tiago_mocap", "mukca", "lwr_bag", "urdf", "examples"), metavar="NAME",
+                         help="tiago_mocap, mukca, lwr_bag, urdf or examples (pincal example urdf --out . gives the "
+                              "docs' urdf/kuka_lwr4plus.urdf, pincal example examples --out . their examples/*.py)")
     example.add_argument("--out", type=Path, default=Path("data"),
                          help="folder to put NAME in (default: ./data, where the docs' commands look)")
 

@@ -220,16 +220,23 @@ class KinematicChain:
         )
 
     @contextmanager
-    def placed(self, placements: Sequence[np.ndarray]) -> Iterator[KinematicChain]:
-        """The chain with ``placements`` (see :meth:`placements`) inside a ``with`` block, its own
-        placements back on leaving it, also on an error: how code outside ``model/`` evaluates a
-        calibrated model (a calibration's ``placements``) without changing the chain it was given."""
-        saved = self.placements()
+    def placed(
+        self, placements: Sequence[np.ndarray] | None = None, tool: npt.ArrayLike | None = None
+    ) -> Iterator[KinematicChain]:
+        """The chain with ``placements`` (see :meth:`placements`) and ``tip_T_tool`` ``tool`` (4, 4)
+        [m] inside a ``with`` block, its own placements and tool back on leaving it, also on an error:
+        how code outside ``model/`` evaluates a model (a calibration's ``chain_placements``, a simulated
+        truth, a TCP) without changing the chain it was given. None keeps the current one."""
+        saved, saved_tool = self.placements(), self._tool
         try:
-            self.set_placements(placements)  # inside: a malformed entry may fail after moving some joints
+            if tool is not None:
+                self.set_tool(tool)
+            if placements is not None:
+                self.set_placements(placements)  # a malformed entry may fail after moving some joints
             yield self
         finally:
             self.set_placements(saved)
+            self._tool = saved_tool
 
     # --- kinematics -----------------------------------------------------
 

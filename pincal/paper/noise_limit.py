@@ -111,8 +111,8 @@ def _noise_free(
     chain: KinematicChain, truth: DHTable, registration: Registration, data: MeasurementSet
 ) -> MeasurementSet:
     """``data`` with the sensor readings the truth would give (eq 20–21 without noise)."""
-    DHParameterSet(chain, truth).apply(truth.to_vector())
-    return perfect_measurements(chain, data, registration)
+    with chain.placed(DHParameterSet(chain, truth).placements(truth.to_vector())):
+        return perfect_measurements(chain, data, registration)
 
 
 class _Propagation:
@@ -370,8 +370,8 @@ def predicted_errors(
     σ_a scale together; the ML estimator's depend on σ_p/σ_a through its weights.
 
     Args:
-        chain: a chain of the experiment's robot; its placements and tool are
-            restored on return.
+        chain: a chain of the experiment's robot, left as it was (the experiment's tool is
+            used inside ``chain.placed``).
         experiment: the simulated experiment (rows, truth, registration, tool);
             its noise realisation is not used.
         method: 1, 2, 3 or ``"ml"``.
@@ -390,13 +390,8 @@ def predicted_errors(
         raise CalibrationError("the ML estimator's prediction needs both sigmas positive (or both 0)")
     sigma = np.array([sigma_pos_mm / 1000.0, np.radians(sigma_rot_deg)])
     ml_sigma = sigma if sigma[0] > 0 else np.ones(2)  # only the ratio shapes the ML estimate
-    saved_placements, saved_tool = chain.placements(), chain.tool
-    try:
-        chain.set_tool(experiment.tool)
+    with chain.placed(tool=experiment.tool):
         propagation, d_position, d_rotation = _sensitivity(chain, experiment, method, ml_sigma, weight)
-    finally:
-        chain.set_placements(saved_placements)
-        chain.set_tool(saved_tool)
     std = np.tile(np.repeat(sigma, 3), propagation.data.n_rows)  # of z, eq 20–22
     d_position, d_rotation = d_position * std, d_rotation * std
     position = mean_norm(d_position @ d_position.transpose(0, 2, 1)) * 1000.0

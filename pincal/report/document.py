@@ -40,12 +40,11 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from pincal._version import __version__
-from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.target_hold import held_reason
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
@@ -76,6 +75,7 @@ from pincal.report.model import (
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
+from pincal.report.reading import load_report, value_at
 
 if TYPE_CHECKING:
     from pincal.fit.chain_calibration import ChainCalibration
@@ -303,64 +303,69 @@ class ReportModel:
     nominal_urdf: str | None = None
 
 
+def _points(value: Any) -> np.ndarray:
+    """``tool.points_m``: the target's points [m] in the parent link, (P, 3)."""
+    points = np.asarray(value, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError("a list of [x, y, z] expected")
+    return points
+
+
+def _vector3(value: Any) -> list[float]:
+    if np.shape(value) != (3,):
+        raise ValueError("3 numbers expected")
+    return [float(v) for v in value]
+
+
+def _sha256(digest: Any) -> str | None:
+    if digest is not None and not (isinstance(digest, str) and re.fullmatch(r"[0-9a-f]{64}", digest)):
+        raise ValueError("64 hexadecimal digits expected")
+    return digest
+
+
+def _registrations(pair: dict[str, Any]) -> tuple[Registration, Registration]:
+    """Registrations 1 and 2 of a ``registration`` object (2 is 1 where absent)."""
+    return Registration.from_dict(pair["position"]), Registration.from_dict(pair.get("orientation", pair["position"]))
+
+
+def _session(entry: dict[str, Any]) -> tuple[str, Registration, Registration]:
+    return (str(entry["name"]), *_registrations(entry["registration"]))
+
+
+def _session_files(entry: dict[str, Any]) -> tuple[str, ...]:
+    files = entry.get("file")
+    return tuple(str(f) for f in (files if isinstance(files, list) else [files]) if f is not None)
+
+
 def read_report(path: str | Path) -> ReportModel:
-    """Read the target and registrations of a REPORT.json (one clear error if malformed)."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise PincalError(f"{path}: no such report file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PincalError(f"{path}: not a readable JSON report ({exc})") from None
-    if isinstance(doc, dict) and "fixture" in doc:  # pincal.report.fixture: no sensor, no registration
-        raise PincalError(f"{path}: the report of a socket-fixture calibration; evaluate it with --fixture FIXTURE.csv")
-    try:
-        tool = doc["tool"]
-        registration = doc["registration"]
-        pose = pose_from_xyz_rpy(tool.get("xyz_m", [0.0, 0.0, 0.0]), tool.get("rpy_rad", [0.0, 0.0, 0.0]))
-        points = np.asarray(tool["points_m"], dtype=float) if "points_m" in tool else pose[None, :3, 3]
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise ValueError("tool.points_m must be a list of [x, y, z]")
-        digest = doc.get("urdf_sha256")
-        if digest is not None and not (isinstance(digest, str) and re.fullmatch(r"[0-9a-f]{64}", digest)):
-            raise ValueError("urdf_sha256 must be 64 hexadecimal digits")
-        return ReportModel(
-            tool_parent=str(tool["parent_link"]),
-            points=points,
-            rotation=pose[:3, :3],
-            registration_position=Registration.from_dict(registration["position"]),
-            registration_orientation=Registration.from_dict(
-                registration.get("orientation", registration["position"])
-            ),
-            effects={
-                k: doc[k]
-                for k in ("effects", "payload_kg", "time_column", "time_reference_s", "time_spans_s",
-                          "approach_context")
-                if k in doc
-            },
-            urdf_sha256=digest,
-            sessions=tuple(
-                (str(entry["name"]), Registration.from_dict(entry["registration"]["position"]),
-                 Registration.from_dict(entry["registration"].get("orientation", entry["registration"]["position"])))
-                for entry in doc.get("sessions") or ()
-            ),
-            noise=dict(doc.get("noise") or {}),
-            session_files=tuple(
-                tuple(str(f)
-                      for f in (entry.get("file") if isinstance(entry.get("file"), list) else [entry.get("file")])
-                      if f is not None)
-                for entry in doc.get("sessions") or ()
-            ),
-            not_determined=tuple(str(entry.get("reason", "")) for entry in
-                                 (doc.get("identifiability") or {}).get("not_determined") or ()),
-            couplings=couplings_from_report(doc.get("couplings"), str(path)),
-            nominal_urdf=(doc.get("sources") or {}).get("urdf"),
-        )
-    except (KeyError, TypeError, ValueError, PincalError) as exc:
-        raise PincalError(
-            f"{path}: not a pincal report (missing or bad key {exc}); "
-            "pass the REPORT.json written by 'pincal calibrate'"
-        ) from None
+    """Read the target and registrations of a REPORT.json of calibrate or diagnose
+    (:func:`pincal.report.reading.load_report`; one line naming the file and key if malformed)."""
+    doc = cast(dict[str, Any], load_report(
+        path, accept=("calibration", "diagnosis", "paper"), hint="pass the REPORT.json written by 'pincal calibrate'",
+        hints={"fixture": "evaluate it with --fixture FIXTURE.csv"}))
+    position = value_at(doc, "registration.position", path, Registration.from_dict)
+    pose = pose_from_xyz_rpy(value_at(doc, "tool.xyz_m", path, _vector3, default=[0.0, 0.0, 0.0]),
+                             value_at(doc, "tool.rpy_rad", path, _vector3, default=[0.0, 0.0, 0.0]))
+    points = value_at(doc, "tool.points_m", path, _points, default=None)
+    effect_keys = ("effects", "payload_kg", "time_column", "time_reference_s", "time_spans_s", "approach_context")
+    return ReportModel(
+        tool_parent=str(value_at(doc, "tool.parent_link", path)),
+        points=pose[None, :3, 3] if points is None else points,
+        rotation=pose[:3, :3],
+        registration_position=position,
+        registration_orientation=value_at(doc, "registration.orientation", path, Registration.from_dict,
+                                          default=position),
+        effects={k: doc[k] for k in effect_keys if k in doc},
+        urdf_sha256=value_at(doc, "urdf_sha256", path, _sha256, default=None),
+        sessions=tuple(value_at(doc, "sessions", path, lambda entries: [_session(e) for e in entries or ()], ())),
+        noise=dict(value_at(doc, "noise", path, default=None) or {}),
+        session_files=tuple(value_at(doc, "sessions", path, lambda entries: [_session_files(e) for e in entries or ()],
+                                  ())),
+        not_determined=value_at(doc, "identifiability.not_determined", path,
+                             lambda entries: tuple(str(entry.get("reason", "")) for entry in entries or ()), ()),
+        couplings=couplings_from_report(doc.get("couplings"), str(path)),
+        nominal_urdf=value_at(doc, "sources.urdf", path, default=None),
+    )
 
 
 def chain_head(

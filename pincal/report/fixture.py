@@ -25,6 +25,8 @@ tip link; no ``rpy_rad``, a ball has no orientation the data could see),
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,6 +39,7 @@ from pincal.model.chain import KinematicChain
 from pincal.report.document import REPORT_VERSION, chain_summary, identifiability_report, parameters_report
 from pincal.report.model import LevelChoicePart, Sources
 from pincal.report.model_fixture import FixturePlacement, FixtureReport, fixture_metrics_json
+from pincal.report.reading import value_at
 
 __all__ = ["TURN_NOT_DETERMINED", "fixture_report", "read_fixture_block"]
 
@@ -118,13 +121,19 @@ def _placement(placement) -> FixturePlacement:
     }
 
 
-def read_fixture_block(document: dict[str, Any]) -> tuple[str, np.ndarray, np.ndarray, str | None]:
-    """Tip link, ball centre, nominal ball centre [m] and nominal URDF SHA-256 of a fixture report.
+def read_fixture_block(
+    document: Mapping[str, Any], source: str | Path
+) -> tuple[str, np.ndarray, np.ndarray, str | None]:
+    """Tip link, ball centre, nominal ball centre [m] and nominal URDF SHA-256 of a fixture report
+    read from ``source`` (:func:`pincal.report.reading.load_report`).
 
     Raises:
-        KeyError, TypeError, ValueError: not a fixture report (the caller names the file).
+        PincalError: a key missing or malformed, one line naming ``source`` and the key.
     """
-    block = document["fixture"]
-    ball = np.asarray(block["ball_centre_m"], dtype=float).reshape(3)
-    nominal = np.asarray(block["nominal"]["ball_centre_m"], dtype=float).reshape(3)
-    return str(document["tool"]["parent_link"]), ball, nominal, block["nominal"].get("urdf_sha256")
+    def centre(value: Any) -> np.ndarray:
+        return np.asarray(value, dtype=float).reshape(3)
+
+    return (str(value_at(document, "tool.parent_link", source)),
+            value_at(document, "fixture.ball_centre_m", source, centre),
+            value_at(document, "fixture.nominal.ball_centre_m", source, centre),
+            value_at(document, "fixture.nominal.urdf_sha256", source, default=None))

@@ -13,7 +13,6 @@ formatted, in mm and mrad where the document has m and rad).
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -46,7 +45,7 @@ from pincal.report.sections import (
 )
 
 __all__ = [
-    "TEMPLATE", "PLAN_TEMPLATE", "KNOWN_KEYS", "load_document", "headline", "evaluated_sessions",
+    "TEMPLATE", "PLAN_TEMPLATE", "KNOWN_KEYS", "headline", "evaluated_sessions",
     "orientations_measured", "render_html", "write_html",
 ]
 
@@ -61,25 +60,6 @@ KNOWN_KEYS = frozenset({
     "outliers", "removed_lines", "effects", "payload_kg", "time_column", "time_reference_s",
     "approach_context", "diagnosis", "row_errors", "warnings",
 })
-
-
-def load_document(path: str | Path) -> dict[str, Any]:
-    """Read a REPORT.json (or an ``evaluate --json`` file); one clear error if it is not one."""
-    path = Path(path)
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise PincalError(f"{path}: no such report file") from None
-    except IsADirectoryError:
-        raise PincalError(f"{path}: is a directory; give the REPORT.json file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PincalError(f"{path}: not a readable JSON report ({exc})") from None
-    if not isinstance(document, dict) or not ("parameters" in document or "position" in document
-                                              or is_plan(document)):
-        raise PincalError(f"{path}: not a pincal report (no 'parameters', nor the 'position' errors of "
-                          "'pincal evaluate --json', nor a PLAN.json's 'plan_version'); pass the REPORT.json "
-                          "of calibrate or diagnose, or the PLAN.json of plan")
-    return document
 
 
 def headline(value: Any) -> str:

@@ -97,7 +97,8 @@ def simulate_experiment(
 ) -> SimulatedExperiment:
     """Simulate CPA, calibration and validation measurements of a DH chain.
 
-    The chain's placements are set to the ground truth and restored afterwards.
+    The chain is measured with the ground truth's placements and ``tool`` (``chain.placed``) and
+    left as it was.
     ``effects`` are injected into the measurements without being declared; the
     rows get a ``time`` column (:data:`SECONDS_PER_ROW` apart, validation rows
     interleaved with the calibration rows) when there are effects.
@@ -105,14 +106,11 @@ def simulate_experiment(
     rng = np.random.default_rng(settings.seed)
     tool = pose_from_xyz_rpy(DEFAULT_TOOL_XYZ, DEFAULT_TOOL_RPY) if tool is None else tool
     truth = deviations.apply(nominal)
-    saved_placements, saved_tool = chain.placements(), chain.tool
-    chain.set_placements(truth.joint_origins())
-    chain.set_tool(tool)
     lower = np.array([j.lower for j in chain.joints])
     upper = np.array([j.upper for j in chain.joints])
     sigma_p = settings.sigma_pos_mm / 1000.0
     sigma_a = np.radians(settings.sigma_rot_deg)
-    try:
+    with chain.placed(truth.joint_origins(), tool=tool):
         q_cpa = cpa_configurations(lower, upper, settings.n_cpa)
         q_cal = random_configurations(chain, rng, settings.n_calibration)
         q_val = random_configurations(chain, rng, settings.n_validation)
@@ -130,9 +128,6 @@ def simulate_experiment(
             chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation",
             effects=effects, time=_part(times, cut[1], None), shifts=_part(shifts, cut[1], None),
         )
-    finally:
-        chain.set_placements(saved_placements)
-        chain.set_tool(saved_tool)
     assert cpa.rotations is not None and cal.rotations is not None  # measured with orientations (measure's default)
     calibration = MeasurementSet(
         joint_names=cpa.joint_names,

@@ -100,7 +100,6 @@ class Estimator:
             models: Pinocchio sensitivity models of ``chain`` by their slots, shared
                 by the fits of one worker (:func:`pincal.study.tasks.worker_models`).
         """
-        chain.set_placements(KUKA_LWR4_DH.joint_origins())
         if self.method == "ml":
             scale = sigma if sigma > 0 else 1.0
             return calibrate_ml(chain, data, sigma_pos_mm=scale, sigma_rot_deg=scale, nominal=KUKA_LWR4_DH,
@@ -138,8 +137,8 @@ def ml_without_cpa_orientations(
     positions only, as in the paper. ``withhold=()`` is the ML estimator itself.
 
     Args:
-        chain: the chain with the TCP as its tool; set to ``nominal`` (the fit does not
-            change it: the calibrated table is returned).
+        chain: the chain with the TCP as its tool; left as it was (the calibrated table is
+            returned; the fit starts from ``nominal``, not from the chain's placements).
         data: the rows (full poses).
         sigma_pos_mm, sigma_rot_deg: σ_p [mm] and σ_a [deg], both positive.
         nominal: the default table; eps_1 and d_1 keep its values.
@@ -152,7 +151,6 @@ def ml_without_cpa_orientations(
         The calibrated table and the registration sensor_T_base (one for
         positions and orientations).
     """
-    chain.set_placements(nominal.joint_origins())
     result = calibrate_ml(
         chain, data, sigma_pos_mm, sigma_rot_deg, nominal, withhold_orientations=withhold, start=start,
         models=models

@@ -20,6 +20,8 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any, cast
 
@@ -101,12 +103,15 @@ def ablation_trial(config: StudyConfig, level: int, repeat: int) -> bool:
     return ML_ESTIMATOR in config.estimators and level in ablation_levels(config) and repeat < ABLATION_REPEATS
 
 
-def _simulate(config: StudyConfig, deviations: str, sigma: float, seed: int):
-    """The worker's chain (tool = the true TCP) and a simulated experiment."""
+@contextmanager
+def _simulated(
+    config: StudyConfig, deviations: str, sigma: float, seed: int
+) -> Iterator[tuple[KinematicChain, SimulatedExperiment]]:
+    """A simulated experiment and the worker's chain with its true TCP as the tool inside the block."""
     chain = worker_chain()
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], config.settings(sigma, seed))
-    chain.set_tool(experiment.tool)
-    return chain, experiment
+    with chain.placed(tool=experiment.tool):
+        yield chain, experiment
 
 
 def _twists(chain: KinematicChain, experiment: SimulatedExperiment) -> tuple:
@@ -118,16 +123,10 @@ def _twists(chain: KinematicChain, experiment: SimulatedExperiment) -> tuple:
 def noise_free_test_set(chain: KinematicChain, experiment: SimulatedExperiment) -> MeasurementSet:
     """The J test poses as a perfect sensor sees them: eq 20–21 without N_k and zeta_k.
 
-    The chain's placements and tool are restored afterwards.
+    The truth is evaluated inside ``chain.placed``: the chain is left as it was.
     """
-    saved_placements, saved_tool = chain.placements(), chain.tool
-    chain.set_placements(experiment.truth.joint_origins())
-    chain.set_tool(experiment.tool)
-    try:
+    with chain.placed(experiment.truth.joint_origins(), tool=experiment.tool):
         test_set = perfect_measurements(chain, experiment.validation, experiment.registration)
-    finally:
-        chain.set_placements(saved_placements)
-        chain.set_tool(saved_tool)
     return replace(test_set, extra={}, source="<noise-free truth>")
 
 
@@ -182,7 +181,10 @@ class TrialTask:
         return (_TRIALS, deviation_index(self.deviations), self.level, self.repeat)
 
     def run(self) -> list[dict[str, Any]]:
-        chain, experiment = _simulate(self.config, self.deviations, self.sigma, self.seed)
+        with _simulated(self.config, self.deviations, self.sigma, self.seed) as (chain, experiment):
+            return self._rows(chain, experiment)
+
+    def _rows(self, chain: KinematicChain, experiment: SimulatedExperiment) -> list[dict[str, Any]]:
         test_sets = {"": experiment.validation, "_truth": noise_free_test_set(chain, experiment)}
         rows: list[dict[str, Any]] = []
         results: dict[Any, PaperCalibration] = {}
@@ -193,35 +195,35 @@ class TrialTask:
                 chain, experiment.calibration, self.sigma, twists=twists, method2=results.get(METHOD_2),
                 models=worker_models())
             fit_ms = (time.perf_counter() - started) * 1000.0
-            chain.set_placements(result.table.joint_origins())
             deviations = parameter_deviations(result.table, experiment.truth)
             registrations = {1: result.registration_position, 2: result.registration_orientation}
-            tool = {suffix: chain.tool_poses(data.q) for suffix, data in test_sets.items()}  # both registrations'
-            for index in estimator.registrations:
-                row = {
-                    "deviations": self.deviations, "level": self.level, "sigma_pos_mm": self.sigma,
-                    "sigma_rot_deg": self.sigma, "repeat": self.repeat, "seed": self.seed,
-                    "method": str(estimator.method), "weight": estimator.weight, "registration": index,
-                }
-                for suffix, data in test_sets.items():  # eq 24 through this registration
-                    errors = pose_errors(chain, data, registrations[index], registrations[index],
-                                         tool_poses=tool[suffix])
-                    row[f"pos{suffix}_mean_mm"] = errors.position.mean
-                    # the study's rows have orientations
-                    row[f"rot{suffix}_mean_deg"] = cast(ErrorSummary, errors.rotation).mean
-                rows.append({**row, "fit_ms": fit_ms, **deviations})
+            with chain.placed(result.table.joint_origins()):  # the fitted model
+                tool = {suffix: chain.tool_poses(data.q) for suffix, data in test_sets.items()}  # both registrations'
+                for index in estimator.registrations:
+                    row = {
+                        "deviations": self.deviations, "level": self.level, "sigma_pos_mm": self.sigma,
+                        "sigma_rot_deg": self.sigma, "repeat": self.repeat, "seed": self.seed,
+                        "method": str(estimator.method), "weight": estimator.weight, "registration": index,
+                    }
+                    for suffix, data in test_sets.items():  # eq 24 through this registration
+                        errors = pose_errors(chain, data, registrations[index], registrations[index],
+                                             tool_poses=tool[suffix])
+                        row[f"pos{suffix}_mean_mm"] = errors.position.mean
+                        # the study's rows have orientations
+                        row[f"rot{suffix}_mean_deg"] = cast(ErrorSummary, errors.rotation).mean
+                    rows.append({**row, "fit_ms": fit_ms, **deviations})
         if ablation_trial(self.config, self.level, self.repeat):
             # same data, the CPA rows as positions only (the paper's CPA); on the ML rows, kept out of study.csv
             table, registration = ml_without_cpa_orientations(
                 chain, experiment.calibration, self.sigma, self.sigma, start=results.get(METHOD_2),
                 models=worker_models())
-            chain.set_placements(table.joint_origins())
             ablation = {}
-            for suffix, data in test_sets.items():
-                errors = pose_errors(chain, data, registration, registration)
-                ablation[f"pos{suffix}_mean_mm{ABLATION_SUFFIX}"] = errors.position.mean
-                # the study's rows have orientations
-                ablation[f"rot{suffix}_mean_deg{ABLATION_SUFFIX}"] = cast(ErrorSummary, errors.rotation).mean
+            with chain.placed(table.joint_origins()):
+                for suffix, data in test_sets.items():
+                    errors = pose_errors(chain, data, registration, registration)
+                    ablation[f"pos{suffix}_mean_mm{ABLATION_SUFFIX}"] = errors.position.mean
+                    # the study's rows have orientations
+                    ablation[f"rot{suffix}_mean_deg{ABLATION_SUFFIX}"] = cast(ErrorSummary, errors.rotation).mean
             for row in rows:
                 if row["method"] == str(ML_ESTIMATOR.method):
                     row.update(ablation)
@@ -248,8 +250,11 @@ class RestartTask:
         return (_RESTARTS, self.case, self.estimator_index, self.first)
 
     def run(self) -> list[dict[str, Any]]:
+        with _simulated(self.config, self.deviations, self.sigma, self.seed) as (chain, experiment):
+            return self._rows(chain, experiment)
+
+    def _rows(self, chain: KinematicChain, experiment: SimulatedExperiment) -> list[dict[str, Any]]:
         estimator = RESTART_ESTIMATORS[self.estimator_index]
-        chain, experiment = _simulate(self.config, self.deviations, self.sigma, self.seed)
         twists = _twists(chain, experiment)  # the same CPA for the reference and every start
         models = worker_models()
         reference = estimator.calibrate(chain, experiment.calibration, self.sigma, twists=twists,
@@ -291,15 +296,18 @@ class Figure2Task:
         return (_FIGURE2_ERRORS,)
 
     def run(self) -> list[dict[str, Any]]:
-        chain, experiment = _simulate(self.config, self.deviations, FIGURE2_SIGMA, self.seed)
+        with _simulated(self.config, self.deviations, FIGURE2_SIGMA, self.seed) as (chain, experiment):
+            return self._rows(chain, experiment)
+
+    def _rows(self, chain: KinematicChain, experiment: SimulatedExperiment) -> list[dict[str, Any]]:
         out, twists = [], _twists(chain, experiment)
         for estimator in (METHOD_1, METHOD_2):
             result = estimator.calibrate(chain, experiment.calibration, FIGURE2_SIGMA, twists=twists,
                                          models=worker_models())
-            chain.set_placements(result.table.joint_origins())
-            errors = pose_errors(
-                chain, experiment.validation, result.registration_position, result.registration_orientation
-            )
+            with chain.placed(result.table.joint_origins()):
+                errors = pose_errors(
+                    chain, experiment.validation, result.registration_position, result.registration_orientation
+                )
             assert errors.rotation_rad is not None  # the study's rows have orientations
             out.append({
                 "method": str(estimator.method), "deviations": self.deviations,
@@ -331,8 +339,8 @@ class LimitTask:
 
     def run(self) -> list[dict[str, Any]]:
         estimator = self.config.estimators[self.estimator_index]
-        chain, experiment = _simulate(self.config, self.deviations, 1.0, self.seed)
-        limit = estimator.noise_limit(chain, experiment, 1.0)
+        with _simulated(self.config, self.deviations, 1.0, self.seed) as (chain, experiment):
+            limit = estimator.noise_limit(chain, experiment, 1.0)
         return [{
             "deviations": self.deviations, "method": str(estimator.method), "weight": estimator.weight,
             "pose_set": self.pose_set, "seed": self.seed,

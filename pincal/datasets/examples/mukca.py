@@ -33,7 +33,8 @@ from pincal import (
 )
 from pincal.model.dh.conversion import urdf_from_dh_table
 
-DATA = Path(__file__).resolve().parent.parent / "data" / "mukca"
+# data/ beside examples/: a clone's, or `pincal example NAME` (absolute: a clone's examples/ is a link)
+DATA = Path(__file__).absolute().parent.parent / "data" / "mukca"
 LEVELS = ("offsets", "full")
 #: robot → (folder of placement files, placements, tip link)
 ROBOTS = {

@@ -29,7 +29,8 @@ import numpy as np
 
 from pincal.outputs import write_text
 
-ROOT = Path(__file__).resolve().parent.parent
+# data/ beside examples/: a clone's, or `pincal example NAME` (absolute: a clone's examples/ is a link)
+ROOT = Path(__file__).absolute().parent.parent
 
 #: Upstream robot folder → the chain's joint names, in upstream's column order.
 JOINTS = {

@@ -18,7 +18,8 @@ from pathlib import Path
 from pincal import KinematicChain, calibrate_chain, pose_errors, read_measurements
 from pincal.robots import example_robot_data_urdf
 
-DATA = Path(__file__).resolve().parent.parent / "data" / "tiago_mocap"
+# data/ beside examples/: a clone's, or `pincal example NAME` (absolute: a clone's examples/ is a link)
+DATA = Path(__file__).absolute().parent.parent / "data" / "tiago_mocap"
 TRAIN = DATA / "qualisys_2021-11-30_static_postures.csv"
 HELD_OUT = DATA / "qualisys_2021-11-26_static_postures.csv"
 TIP = "wrist_ft_tool_link"

@@ -60,7 +60,9 @@ from pincal.simulation.sensor import (
     random_configurations,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
+# the folder above examples/: a clone, or where `pincal example NAME --out data` put data/ (absolute, not
+# resolved: a clone's examples/ is a link into pincal/datasets/)
+ROOT = Path(__file__).absolute().parent.parent
 LEVELS = ("registration", "offsets", "full")
 #: Auto may be worse than the best fixed level by this factor (issue 12's "Done when").
 MARGIN = 1.10
@@ -105,7 +107,8 @@ def tiago() -> str:
              "| rows | registration | offsets | full | auto chose | auto | auto / best | lowest | lowest / best |",
              "|---|---|---|---|---|---|---|---|---|",
              f"| all 62 | {_fixed_and_auto(held, choice.chosen)} | {_ratio(held, choice.lowest)} |",
-             f"| 25 novel postures | {_fixed_and_auto(held_novel, choice.chosen)} | {_ratio(held_novel, choice.lowest)} |"]
+             f"| 25 novel postures | {_fixed_and_auto(held_novel, choice.chosen)} | "
+             f"{_ratio(held_novel, choice.lowest)} |"]
     return "\n".join(lines)
 
 
@@ -115,7 +118,8 @@ def _ratio(held: dict[str, float], level: str) -> str:
 
 def _cv_table(choice) -> str:
     rule = "richest" if choice.selection == "prior" else "simplest"
-    head = f"{choice.scheme}; rule: {rule} level within one standard error; lowest {choice.lowest}, chosen {choice.chosen}"
+    head = (f"{choice.scheme}; rule: {rule} level within one standard error; lowest {choice.lowest}, "
+            f"chosen {choice.chosen}")
     rows = [f"| {s.level} | {s.cv_error_mm:.3f} ± {s.standard_error_mm:.3f} | "
             + " ".join(f"{e:.2f}" for e in s.fold_errors_mm) + " |" for s in choice.scores]
     return "\n".join([head, "", "| level | CV error ± SE [mm] | folds [mm] |", "|---|---|---|", *rows])
