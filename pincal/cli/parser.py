@@ -283,6 +283,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
     sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
                      help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
+                          "compliance:J:DRIVER:RAD_PER_NM (J deflects under DRIVER's gravity torque), "
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
                           "coupling:J:DRIVER:REL (J's actual angle adds REL x DRIVER's reading), "
                           "drift:VX:VY:VZ (m/s), sensor_scale:REL")

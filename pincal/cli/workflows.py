@@ -117,9 +117,10 @@ def simulate_to_directory(
     chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK)
     injected = [parse_effect(text) for text in effects]
     for effect, _ in injected:
-        if effect.joint is not None and effect.joint not in chain.joint_names:
-            raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}'; "
-                              f"{did_you_mean(effect.joint, chain.joint_names, 'joints')}")
+        for name in (effect.joint, effect.driver):
+            if name is not None and name not in chain.joint_names:
+                raise PincalError(f"effect '{effect.label}': no joint '{name}'; "
+                                  f"{did_you_mean(name, chain.joint_names, 'joints')}")
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings, effects=injected)
     out = ensure_directory(out_dir)
     write_measurements(out / "calibration.csv", experiment.calibration)
