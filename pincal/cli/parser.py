@@ -154,8 +154,9 @@ def coupling_arg(text: str):
 def _add_coupling(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--coupling", type=coupling_arg, action="append", metavar="JOINT=FACTOR*DRIVER",
                         help="JOINT's reading includes FACTOR x DRIVER's (repeatable): corrected in every row read, "
-                             "recorded in REPORT.json and applied by evaluate; e.g. A3=-1*A2 where the controller "
-                             "reads J3 from the horizontal (pincal diagnose names it)")
+                             "recorded in REPORT.json and CORRECTED.effects.yaml (beside --out) and applied by "
+                             "evaluate; e.g. A3=-1*A2 where the controller reads J3 from the horizontal (pincal "
+                             "diagnose names it)")
 
 
 def _add_xacro_arg(parser: argparse.ArgumentParser) -> None:

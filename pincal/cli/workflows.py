@@ -65,6 +65,7 @@ from pincal.report.document import (
     paper_report,
     write_report,
 )
+from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import (
     CalibrationReport,
     PaperReport,
@@ -174,6 +175,8 @@ class CalibrationRun:
         reload_error: largest TCP difference after reloading the written URDF [m].
         sessions: each session's registration and errors (levels other than dh).
         level_choice: how ``--level auto`` chose the level (None for a level given).
+        effects_file: the effects.yaml written beside the URDF (``--coupling``), or None
+            (:mod:`pincal.report.effects_file`).
     """
 
     result: PaperCalibration | ChainCalibration
@@ -184,6 +187,7 @@ class CalibrationRun:
     reload_error: float
     sessions: tuple[SessionEvaluation, ...] = ()
     level_choice: LevelChoice | None = None
+    effects_file: Path | None = None
 
 
 def calibrate_chain_dh(
@@ -206,7 +210,8 @@ def calibrate_files(
     settings: CalibrateSettings,
     progress: Progress | None = None,
 ) -> CalibrationRun:
-    """Calibrate ``urdf`` on ``data_path`` as ``settings`` say; write the corrected URDF and the report.
+    """Calibrate ``urdf`` on ``data_path`` as ``settings`` say; write the corrected URDF and the report
+    (and, with ``--coupling``, the effects.yaml beside the URDF: :mod:`pincal.report.effects_file`).
 
     ``data_path`` may be several files: each is a session with its own registration
     (:func:`pincal.measurements.csv_v1.read_sessions`; levels other than dh).
@@ -227,6 +232,7 @@ def calibrate_files(
     inputs = [*description_inputs(urdf, xacro_args), *data_paths]  # a xacro's included files too
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     data, notes = read_sessions(data_paths, chain.joint_specs)
     data = apply_couplings(data, settings.couplings)  # readings taken against another joint (eq C1)
@@ -307,8 +313,9 @@ def calibrate_files(
                                   warnings=warnings, sessions=entries, row_errors=row_errors,
                                   level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro,
                                   couplings=couplings_part(settings.couplings))
+    effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
     write_report(report_path, report)
-    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice)
+    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice, effects_file)
 
 
 def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
@@ -376,7 +383,7 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class DiagnoseRun:
-    """Outcome of :func:`diagnose_files`."""
+    """Outcome of :func:`diagnose_files` (``effects_file``: the effects.yaml written beside the URDF, or None)."""
 
     calibration: ChainCalibration
     diagnosis: Diagnosis
@@ -385,6 +392,7 @@ class DiagnoseRun:
     plots: list[Path]
     seconds: float
     level_choice: LevelChoice | None = None
+    effects_file: Path | None = None
 
 
 def diagnose_files(
@@ -398,7 +406,8 @@ def diagnose_files(
     progress: Progress | None = None,
 ) -> DiagnoseRun:
     """Calibrate as ``settings`` say, search the residuals for missing effects, write the corrected
-    URDF, the report (with ``effects``) and the plots (into ``plots_dir``; None: none); held-out
+    URDF, the report (with ``effects``), the plots (into ``plots_dir``; None: none) and, with effects or
+    couplings, the effects.yaml beside the URDF (:mod:`pincal.report.effects_file`); held-out
     rows from ``validation_path``.
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
@@ -413,6 +422,7 @@ def diagnose_files(
     inputs = [*description_inputs(urdf, xacro_args), *data_paths] + ([Path(validation_path)] if validation_path else [])
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     if plots_dir is not None:  # the names pincal.diagnosis.plots gives its figures
         refuse_overwrite_matching(plots_dir, "diagnose_*.png", *inputs)
     if level == "dh":
@@ -485,8 +495,10 @@ def diagnose_files(
             level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
             couplings=couplings_part(settings.couplings),
         )
+    effects_file = write_effects_file(out_urdf, report_path, report)  # what the URDF cannot carry, for a controller
     write_report(report_path, report)
-    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice)
+    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice,
+                       effects_file)
 
 
 def _time_name(data: MeasurementSet) -> str | None:

@@ -343,4 +343,5 @@ def torque_coupling_advice(effect: Effect, value: float) -> str:
     """What an adopted gravity-torque coupling (a ``compliance`` with a ``driver``) means: joint j deflects
     under joint i's load, which a parallelogram or a counterbalance carries to it; it stays in the model."""
     return (f"{effect.joint} deflects by {value:.4g} {effect.unit()} x {effect.driver}'s gravity torque (a "
-            "parallelogram or a counterbalance links their loads): it stays in the model, and evaluate applies it")
+            f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
+            "and the effects file beside the corrected URDF gives it to a controller")
