@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -227,3 +228,53 @@ def test_joint_limits_are_judged_on_the_corrected_angles(industrial_arm_urdf, tm
         f"{tmp_path / 'rows.csv'}: joint 'A3' (its reading corrected by --coupling, eq C1) is outside its limits "
         "[-2.26893, 2.68781] rad in 1 of 2 rows; first at line 3: -2.61799 rad"]
     assert np.allclose(data.q, actual)
+
+
+def test_socket_fixture_rows_are_corrected_as_by_hand(tmp_path, capsys):
+    """calibrate --fixture --coupling (the fixture reader takes the joint columns through the CSV v1
+    reader, then eq C1): the same fit as the files corrected by hand, and evaluate --fixture corrects its
+    rows as the report says. The MUKCA iiwa's readings made to include 0.5 x joint_a3 in joint_a4."""
+    import csv
+
+    from pincal.report.effects_file import effects_path, read_effects_file
+
+    mukca = Path(__file__).resolve().parents[1] / "data" / "mukca"
+    files = {}
+    for name in ("front", "left_back", "raised_left"):
+        with open(mukca / "kuka_14" / f"{name}.csv", newline="", encoding="utf-8") as handle:
+            rows = list(csv.DictReader(handle))
+        for kind, shift in (("coupled", 0.5), ("by_hand", 0.0)):  # by hand: the coupled reading minus 0.5 x a3
+            out = tmp_path / kind / f"{name}.csv"
+            out.parent.mkdir(exist_ok=True)
+            with open(out, "w", newline="", encoding="utf-8") as handle:
+                writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+                writer.writeheader()
+                for row in rows:
+                    coupled = float(row["joint_a4"]) + 0.5 * float(row["joint_a3"])
+                    reading = coupled if shift else coupled - 0.5 * float(row["joint_a3"])
+                    writer.writerow({**row, "joint_a4": repr(reading)})
+            files[kind, name] = out
+    flags = {"coupled": ["--coupling", "joint_a4=0.5*joint_a3"], "by_hand": []}
+    reports, evaluations = {}, {}
+    for kind, given in flags.items():
+        assert main(["calibrate", str(mukca / "urdf" / "iiwa14.urdf"), str(files[kind, "front"]),
+                     str(files[kind, "left_back"]), "--fixture", str(mukca / "fixture.csv"), "--tip-link", "tool0",
+                     "--level", "offsets", *given, "--out", str(tmp_path / f"{kind}.urdf"),
+                     "--report", str(tmp_path / f"{kind}.json")]) == 0
+        reports[kind] = json.loads((tmp_path / f"{kind}.json").read_text(encoding="utf-8"))
+        assert main(["evaluate", str(tmp_path / f"{kind}.urdf"), str(tmp_path / f"{kind}.json"),
+                     str(files[kind, "raised_left"]), "--fixture", str(mukca / "fixture.csv"),
+                     "--json", str(tmp_path / f"{kind}_eval.json")]) == 0
+        evaluations[kind] = json.loads((tmp_path / f"{kind}_eval.json").read_text(encoding="utf-8"))
+    printed = capsys.readouterr()
+    assert "the URDF cannot carry 1 coupling: written to" in printed.out and "readings corrected as" in printed.err
+    assert reports["coupled"]["couplings"] == [{"joint": "joint_a4", "factor": 0.5, "driver": "joint_a3"}]
+    assert "couplings" not in reports["by_hand"] and not effects_path(tmp_path / "by_hand.urdf").exists()
+    assert [c.label for c in read_effects_file(effects_path(tmp_path / "coupled.urdf")).couplings] == [
+        "joint_a4=0.5*joint_a3"]
+    values = [[p["calibrated"] for p in reports[k]["parameters"] if p["calibrated"] is not None] for k in flags]
+    assert np.allclose(values[0], values[1], rtol=0, atol=1e-12)  # m, rad: rounding of the correction only
+    assert np.allclose(reports["coupled"]["fixture"]["ball_centre_m"], reports["by_hand"]["fixture"]["ball_centre_m"],
+                       rtol=0, atol=1e-12)
+    after = [evaluations[k]["after"]["consistency_mm"] for k in flags]
+    assert after[0] == pytest.approx(after[1], abs=1e-9)  # mm

@@ -117,8 +117,17 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
+    _print_effects_file(run.effects_file, run.report)
     _write_html(args.html, run.report, args.report.parent)
     return _warned(run.report, args.strict)
+
+
+def _print_effects_file(path, report: Mapping[str, Any]) -> None:
+    """One line where the couplings and effects a URDF cannot carry were written (effects.yaml), if any."""
+    if path is not None:
+        from pincal.report.effects_file import written_line
+
+        print(written_line(path, report))
 
 
 def _before_after(report: Mapping[str, Any]) -> str | None:
@@ -318,6 +327,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     for path in run.plots:
         print(f"wrote {path}")
     print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
+    _print_effects_file(run.effects_file, run.report)
     _write_html(args.html, run.report, args.report.parent)
     return _warned(run.report, args.strict)
 

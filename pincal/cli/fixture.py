@@ -17,7 +17,7 @@ import argparse
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -30,13 +30,15 @@ from pincal.errors import PincalError
 from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
 from pincal.fit.level_choice import choose_fixture_level
 from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
+from pincal.measurements.couplings import corrected_angles, couplings_from_report
 from pincal.measurements.fixture import Fixture, read_fixture, read_fixture_data
 from pincal.model.chain import KinematicChain
 from pincal.model.description import is_xacro, xacro_arguments
 from pincal.outputs import file_sha256
 from pincal.report.document import write_evaluation, write_report
+from pincal.report.effects_file import effects_path, write_effects_file, written_line
 from pincal.report.fixture import fixture_report, read_fixture_block
-from pincal.report.model import Sources, level_choice_part
+from pincal.report.model import Sources, couplings_part, level_choice_part
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport, fixture_metrics_json
 from pincal.report.reading import load_report
 
@@ -48,8 +50,7 @@ __all__ = [
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
                          "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                         "sigma_pos": "--sigma-pos", "strict": "--strict",  # no plausibility checks (yet) here
-                         "coupling": "--coupling"}  # not (yet) for socket-fixture rows
+                         "sigma_pos": "--sigma-pos", "strict": "--strict"}  # no plausibility checks (yet) here
 #: Flags of a sensor evaluation that a fixture evaluation has no use for.
 EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
                         "fixed_registration": "--fixed-registration", "new_session": "--new-session"}
@@ -71,6 +72,7 @@ class FixtureRun:
     report: FixtureReport
     seconds: float
     reload_error: float
+    effects_file: Path | None = None
 
 
 def calibrate_fixture_files(
@@ -82,8 +84,10 @@ def calibrate_fixture_files(
     settings: CalibrateSettings,
 ) -> FixtureRun:
     """Calibrate ``urdf`` on socket-fixture data as ``settings`` say (its tip link carries the
-    ball; level, selection and xacro arguments; nothing of a sensor); write the corrected URDF
-    and the report. Level ``auto``: the level cross-validation over the placements supports
+    ball; level, selection, xacro arguments and ``--coupling``, eq C1 on the joint readings as for sensor
+    data; nothing of a sensor); write the corrected URDF, the report and, with couplings, the
+    effects.yaml beside the URDF (:mod:`pincal.report.effects_file`). Level ``auto``: the level
+    cross-validation over the placements supports
     (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``).
 
     Raises:
@@ -106,9 +110,11 @@ def calibrate_fixture_files(
     inputs = [*description_inputs(urdf, xacro_args), fixture_path, *data_paths]  # a xacro's includes too
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     chain = KinematicChain.from_urdf(urdf, tip_link, xacro_args=xacro_args or None)
     fixture = read_fixture(fixture_path)
     data = read_fixture_data(data_paths, chain.joint_specs, fixture)
+    data = replace(data, q=corrected_angles(data.q, settings.couplings, data.joint_names))  # eq C1, as sensor data
     nominal_placements = chain.placements()
     started = time.perf_counter()
     choice = None
@@ -128,9 +134,11 @@ def calibrate_fixture_files(
     with chain.placed(result.chain_placements):
         report = fixture_report(result, chain, data, sources, [], file_sha256(urdf),
                                 level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256,
-                                xacro_args=dict(xacro_arguments(xacro_args)))  # evaluate --fixture rebuilds with them
+                                xacro_args=dict(xacro_arguments(xacro_args)),  # evaluate --fixture rebuilds with them
+                                couplings=couplings_part(settings.couplings))
+    effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
     write_report(report_path, report)
-    return FixtureRun(result, report, seconds, reload_error)
+    return FixtureRun(result, report, seconds, reload_error, effects_file)
 
 
 @dataclass(frozen=True)
@@ -257,6 +265,11 @@ def evaluate_fixture_files(
     _check_same_fixture(fixture, document, fixture_path, report_path)
     chain = KinematicChain.from_urdf(urdf, tip, xacro_args=args_of(urdf) or None)
     data = read_fixture_data(data_paths, chain.joint_specs, fixture)
+    couplings = couplings_from_report(document.get("couplings"), str(report_path))
+    if couplings:  # the readings corrected as the calibration's were (eq C1)
+        data = replace(data, q=corrected_angles(data.q, couplings, data.joint_names))
+        notes.append(f"{', '.join(map(str, data_paths))}: readings corrected as {report_path} says (couplings: "
+                     f"{', '.join(c.label for c in couplings)})")
     trained = {str(p.get("name")) for p in document["fixture"].get("placements") or []}
     seen = tuple(name for name in data.placements if name in trained)
     if seen:
@@ -305,7 +318,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.html is not None:  # before the fit, as every other output
         refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *_paths(args.data),
                          outputs=[args.out, args.report])
-    settings = CalibrateSettings(args.tip_link, level=level, selection=selection_criterion(args), xacro_args=xacro_args)
+    settings = CalibrateSettings(args.tip_link, level=level, selection=selection_criterion(args), xacro_args=xacro_args,
+                                 couplings=args.coupling or ())
     run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.out, args.report, settings)
     result, report = run.result, run.report
     level = result.level
@@ -332,6 +346,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
+    if run.effects_file is not None:
+        print(written_line(run.effects_file, report))
     _write_html(args.html, report, Path(args.report).parent)
     return 0
 

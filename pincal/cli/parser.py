@@ -154,8 +154,9 @@ def coupling_arg(text: str):
 def _add_coupling(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--coupling", type=coupling_arg, action="append", metavar="JOINT=FACTOR*DRIVER",
                         help="JOINT's reading includes FACTOR x DRIVER's (repeatable): corrected in every row read, "
-                             "recorded in REPORT.json and applied by evaluate; e.g. A3=-1*A2 where the controller "
-                             "reads J3 from the horizontal (pincal diagnose names it)")
+                             "recorded in REPORT.json and CORRECTED.effects.yaml (beside --out) and applied by "
+                             "evaluate; e.g. A3=-1*A2 where the controller reads J3 from the horizontal (pincal "
+                             "diagnose names it)")
 
 
 def _add_xacro_arg(parser: argparse.ArgumentParser) -> None:
@@ -283,6 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
     sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
                      help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
+                          "compliance:J:DRIVER:RAD_PER_NM (J deflects under DRIVER's gravity torque), "
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
                           "coupling:J:DRIVER:REL (J's actual angle adds REL x DRIVER's reading), "
                           "drift:VX:VY:VZ (m/s), sensor_scale:REL")

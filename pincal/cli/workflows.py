@@ -64,6 +64,7 @@ from pincal.report.document import (
     paper_report,
     write_report,
 )
+from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import (
     CalibrationReport,
     PaperReport,
@@ -116,9 +117,10 @@ def simulate_to_directory(
     chain = KinematicChain.from_urdf(urdf, KUKA_FLANGE_LINK)
     injected = [parse_effect(text) for text in effects]
     for effect, _ in injected:
-        if effect.joint is not None and effect.joint not in chain.joint_names:
-            raise PincalError(f"effect '{effect.label}': no joint '{effect.joint}'; "
-                              f"{did_you_mean(effect.joint, chain.joint_names, 'joints')}")
+        for name in (effect.joint, effect.driver):
+            if name is not None and name not in chain.joint_names:
+                raise PincalError(f"effect '{effect.label}': no joint '{name}'; "
+                                  f"{did_you_mean(name, chain.joint_names, 'joints')}")
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, DEVIATION_SETS[deviations], settings, effects=injected)
     out = ensure_directory(out_dir)
     write_measurements(out / "calibration.csv", experiment.calibration)
@@ -172,6 +174,8 @@ class CalibrationRun:
         reload_error: largest TCP difference after reloading the written URDF [m].
         sessions: each session's registration and errors (levels other than dh).
         level_choice: how ``--level auto`` chose the level (None for a level given).
+        effects_file: the effects.yaml written beside the URDF (``--coupling``), or None
+            (:mod:`pincal.report.effects_file`).
     """
 
     result: PaperCalibration | ChainCalibration
@@ -182,6 +186,7 @@ class CalibrationRun:
     reload_error: float
     sessions: tuple[SessionEvaluation, ...] = ()
     level_choice: LevelChoice | None = None
+    effects_file: Path | None = None
 
 
 def calibrate_chain_dh(
@@ -204,7 +209,8 @@ def calibrate_files(
     settings: CalibrateSettings,
     progress: Progress | None = None,
 ) -> CalibrationRun:
-    """Calibrate ``urdf`` on ``data_path`` as ``settings`` say; write the corrected URDF and the report.
+    """Calibrate ``urdf`` on ``data_path`` as ``settings`` say; write the corrected URDF and the report
+    (and, with ``--coupling``, the effects.yaml beside the URDF: :mod:`pincal.report.effects_file`).
 
     ``data_path`` may be several files: each is a session with its own registration
     (:func:`pincal.measurements.csv_v1.read_sessions`; levels other than dh).
@@ -225,6 +231,7 @@ def calibrate_files(
     inputs = [*description_inputs(urdf, xacro_args), *data_paths]  # a xacro's included files too
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     # readings taken against another joint corrected (eq C1) before the joint limits are judged
     data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings)
@@ -305,8 +312,9 @@ def calibrate_files(
                                   warnings=warnings, sessions=entries, row_errors=row_errors,
                                   level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro,
                                   couplings=couplings_part(settings.couplings))
+    effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
     write_report(report_path, report)
-    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice)
+    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice, effects_file)
 
 
 def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
@@ -374,7 +382,7 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class DiagnoseRun:
-    """Outcome of :func:`diagnose_files`."""
+    """Outcome of :func:`diagnose_files` (``effects_file``: the effects.yaml written beside the URDF, or None)."""
 
     calibration: ChainCalibration
     diagnosis: Diagnosis
@@ -383,6 +391,7 @@ class DiagnoseRun:
     plots: list[Path]
     seconds: float
     level_choice: LevelChoice | None = None
+    effects_file: Path | None = None
 
 
 def diagnose_files(
@@ -396,7 +405,8 @@ def diagnose_files(
     progress: Progress | None = None,
 ) -> DiagnoseRun:
     """Calibrate as ``settings`` say, search the residuals for missing effects, write the corrected
-    URDF, the report (with ``effects``) and the plots (into ``plots_dir``; None: none); held-out
+    URDF, the report (with ``effects``), the plots (into ``plots_dir``; None: none) and, with effects or
+    couplings, the effects.yaml beside the URDF (:mod:`pincal.report.effects_file`); held-out
     rows from ``validation_path``.
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
@@ -411,6 +421,7 @@ def diagnose_files(
     inputs = [*description_inputs(urdf, xacro_args), *data_paths] + ([Path(validation_path)] if validation_path else [])
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     if plots_dir is not None:  # the names pincal.diagnosis.plots gives its figures
         refuse_overwrite_matching(plots_dir, "diagnose_*.png", *inputs)
     if level == "dh":
@@ -482,8 +493,10 @@ def diagnose_files(
             level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
             couplings=couplings_part(settings.couplings),
         )
+    effects_file = write_effects_file(out_urdf, report_path, report)  # what the URDF cannot carry, for a controller
     write_report(report_path, report)
-    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice)
+    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice,
+                       effects_file)
 
 
 def _time_name(data: MeasurementSet) -> str | None:

@@ -179,7 +179,8 @@ def parallel_neighbours(chain: KinematicChain) -> set[tuple[int, int]]:
 
 def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
     """Every candidate on every joint of the chain, plus the sensor's; couplings between the
-    :func:`parallel_neighbours` only."""
+    :func:`parallel_neighbours` only, of the reading and of the gravity torque (a compliance driven by the
+    neighbour's torque): a parallelogram or a counterbalance links J2's and J3's loads."""
     out: list[Effect] = []
     names = list(chain.joint_names)
     parallel = parallel_neighbours(chain)
@@ -188,7 +189,7 @@ def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
         out.append(Effect("encoder_scale", joint))
         out += [Effect("cyclic", joint, harmonic=h) for h in HARMONICS]
         out += [Effect("backlash", joint, source=s) for s in BACKLASH_SOURCES]
-        out += [Effect("coupling", joint, driver=names[i]) for i in (j - 1, j + 1)
+        out += [Effect(kind, joint, driver=names[i]) for i in (j - 1, j + 1) for kind in ("coupling", "compliance")
                 if (min(i, j), max(i, j)) in parallel]
     if has_time:
         out.append(Effect("drift"))
@@ -315,7 +316,8 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         pool = [e for e in pool if e.type != "drift"]
     # a joint no gravity torque acts on in any row (a vertical axis; a URDF without inertias): nothing to test
     weightless = {name for j, name in enumerate(chain.joint_names) if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
-    untestable = [e for e in pool if e.joint in weightless and (e.type == "compliance" or e.source == "gravity")]
+    untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
+                  and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
     pool = [e for e in pool if e not in untestable]
 
     adopted: list[Effect] = []

@@ -100,8 +100,9 @@ def partial_residual(effect, objective, solution, inputs, chain):
         driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
     elif effect.type == "backlash":
         driver, label = basis[:, 0], "approach direction (flank: −1 from above, +1 from below)"
-    elif effect.type == "compliance":
-        driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
+    elif effect.type == "compliance":  # its own torque, or its driver's (a gravity-torque coupling)
+        driver = basis[:, 0]
+        label = _DRIVERS["compliance"] if effect.driver is None else f"gravity torque of {effect.driver} [N·m]"
     elif effect.type == "coupling":
         driver, label = basis[:, 0], f"reading of {effect.driver} [rad or m]"
     else:

@@ -30,7 +30,7 @@ from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
-    "effect_basis", "Judge", "READ_AGAINST", "coupling_advice",
+    "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice",
     "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
 
@@ -337,3 +337,11 @@ def coupling_advice(effect: Effect, value: float, given: float | None = None) ->
             f"{effect.driver}, as parallelogram arms read J3 from the horizontal): run again with --coupling "
             f"{effect.joint}={-np.sign(value):.0f}*{effect.driver} (a convention is exact), so that the geometry is "
             "chosen on the corrected readings; evaluate then corrects its rows the same way")
+
+
+def torque_coupling_advice(effect: Effect, value: float) -> str:
+    """What an adopted gravity-torque coupling (a ``compliance`` with a ``driver``) means: joint j deflects
+    under joint i's load, which a parallelogram or a counterbalance carries to it; it stays in the model."""
+    return (f"{effect.joint} deflects by {value:.4g} {effect.unit()} x {effect.driver}'s gravity torque (a "
+            f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
+            "and the effects file beside the corrected URDF gives it to a controller")

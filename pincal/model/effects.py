@@ -4,7 +4,9 @@ Each joint effect shifts the reading of one joint: actual = q_j + shift, with
 
 * ``compliance``     shift = c · tau_j(q)        c [rad/(N·m)] (m/N for a prismatic joint),
   tau the gravity torque from Pinocchio's ``computeGeneralizedGravity`` on the
-  URDF's inertias, plus an optional payload mass at the target;
+  URDF's inertias, plus an optional payload mass at the target; with a ``driver`` i,
+  shift = c · tau_i(q): joint j deflects under joint i's load (gravity-torque coupling: a
+  parallelogram or a counterbalance links J2's and J3's loads);
 * ``encoder_scale``  shift = s · q_j             s relative (gear-ratio error);
 * ``cyclic``         shift = a · sin(h q_j) + b · cos(h q_j), harmonic h = 1, 2 [rad];
 * ``coupling``       shift = c · q_i             c relative: joint j's reading includes −c × joint
@@ -76,7 +78,8 @@ class Effect:
         joint: URDF joint name for joint effects, None for sensor effects.
         harmonic: h of a ``cyclic`` effect.
         source: ``gravity`` or ``approach`` for ``backlash``.
-        driver: for ``coupling``, the joint whose reading drives this joint's shift.
+        driver: for ``coupling``, the joint whose reading drives this joint's shift; for
+            ``compliance``, optionally the joint whose gravity torque does (None: its own).
     """
 
     type: str
@@ -94,9 +97,11 @@ class Effect:
             raise PincalError(f"cyclic effect harmonic must be one of {HARMONICS}, got {self.harmonic}")
         if self.type == "backlash" and self.source not in BACKLASH_SOURCES:
             raise PincalError(f"backlash source must be one of {BACKLASH_SOURCES}, got {self.source}")
-        if (self.type == "coupling") != bool(self.driver) or (self.driver and self.driver == self.joint):
-            raise PincalError(f"effect '{self.type}': a coupling, and only a coupling, names a driving joint "
-                              f"other than its own (got joint '{self.joint}', driver '{self.driver}')")
+        if ((self.type == "coupling") != bool(self.driver) and self.type != "compliance") or (
+                self.driver and self.driver == self.joint):
+            raise PincalError(f"effect '{self.type}': a coupling names, and a compliance may name, a driving joint "
+                              f"other than its own; no other effect does (got joint '{self.joint}', "
+                              f"driver '{self.driver}')")
 
     @property
     def n_values(self) -> int:
@@ -264,15 +269,16 @@ def sensed_points(
 def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
     """Basis of a joint effect at every row, (K, n_values): shift = basis @ values."""
     q = inputs.q[:, joint]
+    if effect.driver is not None and effect.driver not in inputs.joint_names:
+        raise PincalError(f"effect '{effect.label}': no joint '{effect.driver}' on the chain; "
+                          f"{did_you_mean(effect.driver, inputs.joint_names, 'joints')}")
+    driver = joint if effect.driver is None else inputs.joint_names.index(effect.driver)
     if effect.type == "compliance":
-        return inputs.gravity[:, joint : joint + 1]
+        return inputs.gravity[:, driver : driver + 1]
     if effect.type == "encoder_scale":
         return q[:, None]
     if effect.type == "coupling":
-        if effect.driver not in inputs.joint_names:
-            raise PincalError(f"effect '{effect.label}': no joint '{effect.driver}' on the chain; "
-                              f"{did_you_mean(str(effect.driver), inputs.joint_names, 'joints')}")
-        return inputs.q[:, inputs.joint_names.index(str(effect.driver)), None]
+        return inputs.q[:, driver, None]
     if effect.type == "cyclic":
         h = effect.harmonic
         return np.column_stack([np.sin(h * q), np.cos(h * q)])
@@ -304,7 +310,8 @@ def joint_shifts(
 
 def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     """``TYPE:JOINT:VALUE`` (``cyclic:JOINT:H:SIN:COS``, ``backlash:JOINT:VALUE[:SOURCE]``,
-    ``coupling:JOINT:DRIVER:VALUE``, ``drift:VX:VY:VZ`` [m/s], ``sensor_scale:VALUE``) → effect and values."""
+    ``coupling:JOINT:DRIVER:VALUE``, ``compliance:JOINT[:DRIVER]:VALUE``, ``drift:VX:VY:VZ`` [m/s],
+    ``sensor_scale:VALUE``) → effect and values."""
     parts = text.split(":")
     try:
         kind = parts[0]
@@ -318,7 +325,7 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
             effect, values = Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
         elif kind == "sensor_scale":
             effect, values = Effect(kind), np.array([float(parts[1])])
-        elif kind == "coupling":
+        elif kind == "coupling" or (kind == "compliance" and len(parts) == 4):
             effect, values = Effect(kind, parts[1], driver=parts[2]), np.array([float(parts[3])])
         else:
             effect, values = Effect(kind, parts[1]), np.array([float(parts[2])])
@@ -328,14 +335,15 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     except (IndexError, ValueError):
         raise PincalError(
             f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "
-            "backlash:JOINT:VALUE[:gravity|approach], coupling:JOINT:DRIVER:VALUE, drift:VX:VY:VZ or "
-            "sensor_scale:VALUE"
+            "backlash:JOINT:VALUE[:gravity|approach], coupling:JOINT:DRIVER:VALUE, compliance:JOINT:DRIVER:VALUE, "
+            "drift:VX:VY:VZ or sensor_scale:VALUE"
         ) from None
 
 
 def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict:
     """REPORT.json form: {"type", "joint", "value"}; cyclic gives harmonic, sin, cos;
-    backlash adds source, coupling its driver; drift's value is [vx, vy, vz] in m/s."""
+    backlash adds source, coupling (and a compliance driven by another joint's torque) its driver;
+    drift's value is [vx, vy, vz] in m/s."""
     values = np.atleast_1d(np.asarray(values, dtype=float))
     std = None if std is None else np.atleast_1d(np.asarray(std, dtype=float))
     out: dict = {"type": effect.type, "joint": effect.joint}
@@ -349,7 +357,7 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
         out["std"] = std.tolist() if effect.type == "drift" else float(std[0])
     if effect.type == "backlash":
         out["source"] = effect.source
-    if effect.type == "coupling":
+    if effect.driver:
         out["driver"] = effect.driver
     return out
 

@@ -50,7 +50,7 @@ def diagnosis_report(
     """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
-    from pincal.diagnosis.verdicts import coupling_advice
+    from pincal.diagnosis.verdicts import coupling_advice, torque_coupling_advice
     from pincal.model.effects import effect_to_dict
 
     def errors(e) -> PoseErrorsJson | None:
@@ -91,6 +91,8 @@ def diagnosis_report(
         if effect.type == "coupling":  # what to do: correct the readings (±1), or keep it in the model
             entry["advice"] = coupling_advice(effect, float(values[0]),
                                               given.get((str(effect.joint), str(effect.driver))))
+        elif effect.driver:  # a compliance under another joint's torque: what links them
+            entry["advice"] = torque_coupling_advice(effect, float(values[0]))
     return {
         **head,
         "warnings": warnings,

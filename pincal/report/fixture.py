@@ -37,7 +37,7 @@ from pincal.fit.fixture_calibration import FixtureCalibration
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
 from pincal.report.document import REPORT_VERSION, chain_summary, identifiability_report, parameters_report
-from pincal.report.model import LevelChoicePart, Sources
+from pincal.report.model import CouplingsPart, LevelChoicePart, Sources
 from pincal.report.model_fixture import FixturePlacement, FixtureReport, fixture_metrics_json
 from pincal.report.reading import value_at
 
@@ -58,9 +58,11 @@ def fixture_report(
     level_choice: LevelChoicePart,
     xacro_args: dict[str, str],
     urdf_sha256: str,
+    couplings: CouplingsPart | None = None,
 ) -> FixtureReport:
     """Build the REPORT.json document of a socket-fixture calibration (``chain`` placed as calibrated);
-    ``level_choice``: :func:`pincal.report.model.level_choice_part`."""
+    ``level_choice``: :func:`pincal.report.model.level_choice_part`; ``couplings``:
+    :func:`pincal.report.model.couplings_part` of ``--coupling``."""
     fixture = data.fixture
     ball = result.ball.tolist()
     return {
@@ -104,6 +106,7 @@ def fixture_report(
         **level_choice,
         "xacro_args": xacro_args,
         "urdf_sha256": urdf_sha256,
+        **(couplings or {}),
     }
 
 

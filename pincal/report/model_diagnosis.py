@@ -34,8 +34,9 @@ class TargetChangeJson(_TargetChangeKeys, total=False):
 class EffectJson(_EffectKeys, total=False):
     """An effect (:func:`pincal.model.effects.effect_to_dict`): ``cyclic`` has ``harmonic``, ``sin``,
     ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``coupling``
-    its ``driver`` (the joint whose reading it adds, × value) and, in the final model's ``effects``, the
-    ``advice`` diagnose prints; ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
+    its ``driver`` (the joint whose reading it adds, × value), a ``compliance`` the ``driver`` whose gravity
+    torque it follows when not its own joint's, and, in the final model's ``effects``, the ``advice``
+    diagnose prints for either; ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
 
     harmonic: int
     sin: float

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Literal, TypedDict, cast
 from pincal.report.model import (
     ChainJson,
     ChainLevel,
+    CouplingJson,
     FixtureFit,
     Identifiability,
     LevelChoiceJson,
@@ -139,9 +140,11 @@ class _FixtureKeys(TypedDict):
 
 
 class FixtureReport(_FixtureKeys, total=False):
-    """REPORT.json of ``calibrate --fixture`` (no ``registration``: no sensor; ``level_choice``: auto)."""
+    """REPORT.json of ``calibrate --fixture`` (no ``registration``: no sensor; ``level_choice``: auto;
+    ``couplings``: ``--coupling``, the readings corrected by eq C1 before the fit and by ``evaluate --fixture``)."""
 
     level_choice: LevelChoiceJson
+    couplings: list[CouplingJson]
 
 
 class FixtureEvaluationJson(TypedDict):

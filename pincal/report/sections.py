@@ -160,6 +160,8 @@ def effect_label(entry: dict) -> str:
         text += f" (harmonic {entry.get('harmonic')})"
     if kind == "coupling":
         text = f"coupling of {joint} to {entry.get('driver')}'s reading"
+    if kind == "compliance" and entry.get("driver"):
+        text = f"compliance of {joint} to {entry.get('driver')}'s gravity torque"
     if kind == "backlash" and entry.get("source"):
         text += f" ({entry['source']} flank)" if entry["source"] == "approach" else f" ({entry['source']})"
     return text
