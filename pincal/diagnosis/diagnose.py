@@ -3,7 +3,8 @@
 After the geometric calibration (:func:`pincal.fit.chain_calibration.calibrate_chain`)
 every candidate effect of :mod:`pincal.model.effects` — each type on each joint, both
 backlash sources, both cyclic harmonics, drift when the data has a time column,
-the sensor's scale — is fitted together with the geometry, registration and
+the sensor's scale, thermal expansion and a step per pause where the rows allow them
+(:mod:`pincal.diagnosis.conditions`) — is fitted together with the geometry, registration and
 target it would change. Candidates are ranked by the change of the Bayesian
 information criterion on the calibration rows (Schwarz 1978),
 
@@ -46,6 +47,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
+from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
 from pincal.diagnosis.screening import (
     GENERIC_NOT_RUN,
     SCREEN_CONDITION,
@@ -133,6 +135,7 @@ class Diagnosis:
         chain_placements: the final model's chain placements (the geometry refitted with the
             effects; 4×4 each, as :meth:`pincal.model.chain.KinematicChain.placements`).
         target_changes: how far each of ``effects`` moves the target over the calibration rows.
+        conditions: the temperature range and pauses of the fitted rows (thermal, pause steps).
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -151,6 +154,7 @@ class Diagnosis:
     notes: tuple[str, ...] = field(default=())
     chain_placements: tuple[np.ndarray, ...] = ()
     target_changes: tuple[TargetChange, ...] = ()
+    conditions: ConditionSearch | None = None
 
 
 def parallel_neighbours(chain: KinematicChain) -> set[tuple[int, int]]:
@@ -250,6 +254,7 @@ def diagnose(
     heldout_time: np.ndarray | None = None,
     candidates: Sequence[Effect] | None = None,
     progress: Progress | None = None,
+    readings: Readings | None = None,
 ) -> Diagnosis:
     """Search the calibrated model's residuals for missing effects (module docstring).
 
@@ -265,20 +270,21 @@ def diagnose(
         sigma_column: the row-weight column used by the calibration.
         payload_kg: point mass at the target for gravity torques [kg].
         time / heldout_time: row times [s] of ``data`` / ``heldout``, or None.
-        candidates: effects to try (default: :func:`candidate_effects`).
+        candidates: effects to try (default: :func:`candidate_effects`; thermal and pause steps where allowed).
         progress: ``progress(done, total)`` (:mod:`pincal.progress`): each step counts
             one unit per candidate offered (refitted or screened out) and one for
             adopting the best; the final fit and the search for remaining structure one.
+        readings: the rows' temperatures and the pause rule (default: no temperature, pauses of 1800 s).
     """
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
         candidates = candidate_effects(chain, True)
     with chain.placed(calibration.chain_placements):  # gravity torques at the calibrated geometry
         return _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time,
-                         candidates, progress)
+                         candidates, progress, readings or Readings())
 
 
 def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time, candidates,
-              progress) -> Diagnosis:
+              progress, readings) -> Diagnosis:
     rows = data.select(calibration.used_index)
     row_time = None if time is None else time[calibration.used_index]
     if heldout is not None:  # its rows need a calibrated session's registration
@@ -294,15 +300,22 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         )
     inputs = effect_inputs(chain, rows, payload_kg, point, row_time,
                            context_q=None if heldout is None else heldout.q, context_time=heldout_time)
+    names = np.asarray(calibration.session_names, dtype=object)  # each row's session, for its pauses
+    row_names = names[session_rows(rows, calibration.session_names)]
+    conditions = search_conditions(row_time, row_names, readings, calibration.used_index)
+    inputs = conditions.inputs(inputs, conditions.temperature, row_time, row_names)
     model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference, rows.q, row_time,
                                     held_sessions=(session_rows(heldout, calibration.session_names),  # as evaluate
                                                    session_rows(rows, calibration.session_names)))
+        held_inputs = conditions.inputs(held_inputs, readings.heldout_temperature, heldout_time,
+                                        names[session_rows(heldout, calibration.session_names)])
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
+    pool += [e for e in conditions.candidates if e not in pool]
     # a joint no gravity torque acts on in any row (a vertical axis; a URDF without inertias): nothing to test
     weightless = {name for j, name in enumerate(chain.joint_names) if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
     untestable = [e for e in pool if e.joint in weightless and (e.type == "compliance" or e.source == "gravity")]
@@ -436,6 +449,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         notes.append(f"not tested, {len(untested)} candidate(s): the fit leaves {min(untested.values()):.1f} residual "
                      f"degrees of freedom, too few to test their values (noise alone would reach the evidence cut "
                      f"ΔBIC < {EVIDENCE:g}); add rows: {', '.join(untested)}")
+    notes += conditions.notes
     if inseparable:
         labels = [e.label for e in pool if e.label in inseparable]
         notes.append(
@@ -474,6 +488,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         notes=tuple(notes),
         chain_placements=final_placements,
         target_changes=tuple(target_changes(current_objective, final_solution.x)),
+        conditions=conditions,
     )
 
 

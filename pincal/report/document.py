@@ -272,7 +272,9 @@ class ReportModel:
         registration_position: Registration 1.
         registration_orientation: Registration 2.
         effects: ``effects`` and what applying them needs (``payload_kg``,
-            ``time_column``, ``time_reference_s``, ``time_spans_s``); empty without effects.
+            ``time_column``, ``time_reference_s``, ``time_spans_s``, and a thermal effect's
+            ``temperature_column``, ``temperature_range_c``, pause steps' ``pauses``, ``pause_spans_s``);
+            empty without effects.
         urdf_sha256: SHA-256 (hex) of the corrected URDF written with the
             report (``urdf_sha256``); None in reports older than the key.
         sessions: (name, Registration 1, Registration 2) of each session
@@ -335,7 +337,7 @@ def read_report(path: str | Path) -> ReportModel:
             effects={
                 k: doc[k]
                 for k in ("effects", "payload_kg", "time_column", "time_reference_s", "time_spans_s",
-                          "approach_context")
+                          "approach_context", "temperature_column", "temperature_range_c", "pauses", "pause_spans_s")
                 if k in doc
             },
             urdf_sha256=digest,
