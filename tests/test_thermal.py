@@ -186,6 +186,8 @@ def test_clean_data_adopt_neither_and_missing_columns_are_named(industrial_arm_u
     assert not any(e["type"] in ("thermal", "pause_step") for e in doc["effects"]), doc["effects"]
     said = " ".join(doc["diagnosis"]["notes"])  # both offered: neither is said to be untestable
     assert "thermal" not in said and "pause_step" not in said, said
+    with pytest.raises(AssertionError, match="no temperature column 'temperature_k'; did you mean 'temperature_c'"):
+        _diagnose(industrial_arm_urdf, tmp_path, "--temperature-column", "temperature_k")
     for name in ("cal.csv", "val.csv"):  # the same rows without time and temperature
         lines = (tmp_path / name).read_text(encoding="utf-8").splitlines()
         keep = [i for i, c in enumerate(lines[0].split(",")) if c not in ("time", "temperature_c")]

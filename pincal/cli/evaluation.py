@@ -28,6 +28,10 @@ the whole session, the span nearest its median time
 (:func:`pincal.model.effects.drift_offsets`); a note says how many rows,
 and ``drift`` in ``--json`` records it.
 
+A ``thermal`` expansion and ``pause_step`` effects are never extrapolated either: a row outside
+the fitted temperature range is held at its nearer end, a row outside the fitted time span takes
+its nearest segment (:mod:`pincal.cli.conditions`).
+
 Re-estimated means only its 6 parameters, with the model and the target fixed
 (:func:`pincal.fit.sessions.register_session`), on the evaluated rows: those
 errors then leave out the error of a registration, and are optimistic — after

@@ -427,6 +427,7 @@ def diagnose_files(
         heldout = apply_couplings(heldout, settings.couplings)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
+    readings = read_readings(data, heldout, settings.temperature_column, settings.pause_s)  # thermal, pauses
     nominal_placements = chain.placements()
     stages = Stages(progress)
     choice = None
@@ -438,7 +439,6 @@ def diagnose_files(
                                   sigma_column=sigma_column, selection=selection, progress=stages.next())
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
-    readings = read_readings(data, heldout, settings.temperature_column, settings.pause_s)  # thermal, pauses
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
                          payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next(),
                          readings=readings)
