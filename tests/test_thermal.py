@@ -269,6 +269,34 @@ def test_pauses_segments_and_the_temperature_column():
     assert temperature_column(data, "temp")[0] == "temp"
 
 
+def test_evaluate_gives_each_row_the_steps_of_its_segment_or_the_nearest():
+    """A row takes the steps of the pauses of its session before it: in a gap, the segment before; before
+    the first fitted row, the first segment; after the last, the last — those two counted as outside, and
+    said once; a row of a re-estimated registration (None) takes the session nearest its median time."""
+    from pincal.cli.conditions import applied_conditions
+    from pincal.measurements.data import MeasurementSet
+
+    time = np.array([-50.0, 0.0, 500.0, 4000.0, 9000.0, 20000.0])
+    data = MeasurementSet(joint_names=("j",), q=np.zeros((6, 1)), points=np.zeros((6, 1, 3)), rotations=None,
+                          roles=np.array(["validation"] * 6, dtype=object), lines=np.arange(2, 8),
+                          extra={"time": time}, source="v.csv")
+    report = {"time_column": "time", "pause_spans_s": [{"session": "A", "first": 0.0, "last": 10000.0, "mean": 5e3},
+                                                       {"session": "B", "first": 9e4, "last": 1e5, "mean": 9.5e4}],
+              "pauses": [Pause(1, "A", 100.0, 3000.0).as_dict(), Pause(2, "A", 3100.0, 8000.0).as_dict()]}
+    steps = [(Effect("pause_step", pause=1), np.array([0.0, 1e-5, 0.0])),
+             (Effect("pause_step", pause=2), np.array([0.0, 0.0, 2e-5]))]
+    for names in (np.array(["A"] * 6, dtype=object), np.array([None] * 6, dtype=object)):
+        applied = applied_conditions(steps, report, data, (names, np.zeros(6, dtype=np.intp)), None, "r.json")
+        assert applied.conditions is not None and applied.pause_steps is not None
+        assert applied.conditions.steps.tolist() == [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 1e-5, 0], [0, 1e-5, 2e-5],
+                                                     [0, 1e-5, 2e-5]]
+        assert (applied.pause_steps["rows_in_span"], applied.pause_steps["rows_outside"]) == (4, 2)
+        assert len(applied.notes) == 1 and "2 of 6 row(s) lie outside" in applied.notes[0]
+    with pytest.raises(PincalError, match="pause steps need pause_spans_s"):
+        applied_conditions(steps, dict(report, pause_spans_s=None), data, (names, np.zeros(6, dtype=np.intp)), None,
+                           "r.json")
+
+
 def test_alpha_outside_steel_and_aluminium_beyond_its_std_is_implausible():
     """5–30 µm/m/K (issue 20); a value outside by more than its standard deviation is named, with why."""
     thermal = Effect("thermal")

@@ -10,6 +10,7 @@ held rows, and counted in ``--json`` (``thermal``, ``pause_steps``).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
@@ -33,6 +34,7 @@ NEAREST_SEGMENT = ("a row takes the steps of the pauses of its session before it
                    "without pauses: the session whose span is nearest its evaluated session's median time")
 
 
+@dataclass(frozen=True)
 class AppliedConditions:
     """The report's thermal and pause-step changes of the evaluated rows, and how they were applied.
 
@@ -42,11 +44,10 @@ class AppliedConditions:
         notes: one line for each rule that held rows.
     """
 
-    def __init__(self) -> None:
-        self.conditions: RowConditions | None = None
-        self.thermal: ThermalUse | None = None
-        self.pause_steps: PauseStepUse | None = None
-        self.notes: list[str] = []
+    conditions: RowConditions | None = None
+    thermal: ThermalUse | None = None
+    pause_steps: PauseStepUse | None = None
+    notes: tuple[str, ...] = ()
 
 
 def applied_conditions(parsed: Sequence[tuple[Effect, np.ndarray]], effects: dict, data: MeasurementSet,
@@ -59,22 +60,21 @@ def applied_conditions(parsed: Sequence[tuple[Effect, np.ndarray]], effects: dic
     Raises:
         PincalError: a malformed report entry, or data without the temperature or time column needed.
     """
-    out = AppliedConditions()
-    expansion = steps = None
+    notes: list[str] = []
+    expansion = steps = thermal = pause_steps = None
     for effect, value in parsed:
         if effect.type == "thermal":
-            expansion = _thermal(out, float(value[0]), effects, data, temperature_name, report_path)
+            expansion, thermal = _thermal(notes, float(value[0]), effects, data, temperature_name, report_path)
     stepping = [(effect, value) for effect, value in parsed if effect.type == "pause_step"]
     if stepping:
-        steps = _steps(out, stepping, effects, data, held, report_path)
-    if expansion is not None or steps is not None:
-        out.conditions = RowConditions(expansion, steps)
-    return out
+        steps, pause_steps = _steps(notes, stepping, effects, data, held, report_path)
+    conditions = None if expansion is None and steps is None else RowConditions(expansion, steps)
+    return AppliedConditions(conditions, thermal, pause_steps, tuple(notes))
 
 
-def _thermal(out: AppliedConditions, alpha: float, effects: dict, data: MeasurementSet, name: str | None,
-             report_path) -> np.ndarray:
-    """α (T_k − T_ref) of each row, held inside the fitted range; ``out`` gains its use and note."""
+def _thermal(notes: list[str], alpha: float, effects: dict, data: MeasurementSet, name: str | None,
+             report_path) -> tuple[np.ndarray, ThermalUse]:
+    """α (T_k − T_ref) of each row, held inside the fitted range, and its use; ``notes`` gains its note."""
     fitted = TemperatureRange.read(effects.get("temperature_range_c"), str(report_path))
     name = name or effects.get("temperature_column")
     found = temperature_column(data, name)
@@ -82,23 +82,28 @@ def _thermal(out: AppliedConditions, alpha: float, effects: dict, data: Measurem
         raise PincalError(f"{data.source}: the report has a thermal expansion; the rows need their temperature [°C] "
                           "(a column temperature_c, or name it with --temperature-column NAME)")
     change, outside = fitted.held(found[1])
-    out.thermal = {"alpha_per_k": alpha, "temperature_column": found[0],
-                   "temperature_range_c": cast(TemperatureRangeJson, fitted.as_dict()),
-                   "rows_applied": int(np.sum(~outside)), "rows_held": int(np.sum(outside)), "held_rule": HELD_THERMAL}
+    use: ThermalUse = {"alpha_per_k": alpha, "temperature_column": found[0],
+                       "temperature_range_c": cast(TemperatureRangeJson, fitted.as_dict()),
+                       "rows_applied": int(np.sum(~outside)), "rows_held": int(np.sum(outside)),
+                       "held_rule": HELD_THERMAL}
     if outside.any():
         away = float(np.max(np.maximum(fitted.low - found[1], found[1] - fitted.high)))
-        out.notes.append(f"{data.source}: the report's thermal expansion is not extrapolated: {int(outside.sum())} of "
+        notes.append(f"{data.source}: the report's thermal expansion is not extrapolated: {int(outside.sum())} of "
                          f"{data.n_rows} row(s) lie outside the temperature range it was fitted on ({fitted.low:g}–"
                          f"{fitted.high:g} °C in column '{found[0]}'), up to {away:.3g} K away; they are evaluated "
                          "at the nearer end of that range")
-    return alpha * change
+    return alpha * change, use
 
 
-def _steps(out: AppliedConditions, stepping, effects: dict, data: MeasurementSet, held, report_path) -> np.ndarray:
-    """d_k of each row (K, 3) [m] (:data:`NEAREST_SEGMENT`); ``out`` gains its use and note."""
+def _steps(notes: list[str], stepping, effects: dict, data: MeasurementSet, held,
+           report_path) -> tuple[np.ndarray, PauseStepUse]:
+    """d_k of each row (K, 3) [m] (:data:`NEAREST_SEGMENT`) and its use; ``notes`` gains its note."""
     where = str(report_path)
     pauses = Pause.read(effects.get("pauses"), where)
-    spans = read_time_spans(effects.get("pause_spans_s"), where) or ()
+    spans = read_time_spans(effects.get("pause_spans_s"), where)
+    if spans is None:
+        raise PincalError(f"{where}: pause steps need pause_spans_s (the fitted rows' time span of each session with "
+                          "a pause); rewrite the report with pincal diagnose")
     time = time_column(data, effects.get("time_column"))
     if time is None:
         raise PincalError(f"{data.source}: the report has pause steps; the rows need their time column "
@@ -119,11 +124,11 @@ def _steps(out: AppliedConditions, stepping, effects: dict, data: MeasurementSet
             raise PincalError(f"{where}: effect {effect.label} names no pause of 'pauses'; rewrite it with "
                               "pincal diagnose")
         steps += applies[:, [p.number for p in pauses].index(effect.pause), None] * np.asarray(value).reshape(1, 3)
-    out.pause_steps = {"pauses": [cast(PauseJson, p.as_dict()) for p in pauses],
-                       "rows_in_span": int(np.sum(~outside)), "rows_outside": int(np.sum(outside)),
-                       "rule": NEAREST_SEGMENT}
+    use: PauseStepUse = {"pauses": [cast(PauseJson, p.as_dict()) for p in pauses],
+                         "rows_in_span": int(np.sum(~outside)), "rows_outside": int(np.sum(outside)),
+                         "rule": NEAREST_SEGMENT}
     if outside.any():
-        out.notes.append(f"{data.source}: {int(outside.sum())} of {data.n_rows} row(s) lie outside the time span of "
+        notes.append(f"{data.source}: {int(outside.sum())} of {data.n_rows} row(s) lie outside the time span of "
                          "the rows the report's pause steps were fitted on; they take the nearest segment's steps "
-                         "(the first segment before the span, the last after it)")
-    return steps
+                     "(the first segment before the span, the last after it)")
+    return steps, use
