@@ -222,7 +222,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
     _check_html(args.html, *_description_inputs(args), args.report, args.data, outputs=[args.json])
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
-                                fixed_registration=args.fixed_registration, new_session=args.new_session)
+                                fixed_registration=args.fixed_registration, new_session=args.new_session,
+                                temperature_column=args.temperature_column)
     evaluation = evaluate_files(args.urdf, args.report, args.data, settings)
     thresholds = [flag for flag, value in (("--max-pos-mm", args.max_pos_mm), ("--max-rot-deg", args.max_rot_deg))
                   if value is not None]
@@ -277,12 +278,15 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     from pincal.cli.progress import progress_bar
     from pincal.cli.settings import DiagnoseSettings
     from pincal.cli.workflows import diagnose_files
+    from pincal.model.thermal import shown
 
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
     settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),
                                 payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
-                                xacro_args=args.xacro_args, couplings=args.coupling or ())
+                                xacro_args=args.xacro_args, couplings=args.coupling or (),
+                                temperature_column=args.temperature_column,
+                                **({} if args.pause_s is None else {"pause_s": args.pause_s}))
     _check_html(args.html, *_description_inputs(args), *args.data, args.validation, outputs=[args.out, args.report])
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         run = diagnose_files(args.urdf, args.data, args.out, args.report, settings, validation_path=args.validation,
@@ -300,7 +304,8 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         return effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")
 
     for step in diagnosis.steps:
-        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std)) + f" {unit(step.effect)}"
+        values, std, shown_unit = shown(step.effect, step.values, step.std, unit(step.effect))  # α in µm/m/K
+        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(values, std)) + f" {shown_unit}"
         line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
                 f"{step.calibration_before.position.rms:7.3f} -> {step.calibration_after.position.rms:6.3f}")
         if step.heldout_before is not None and step.heldout_after is not None:  # with --validation
@@ -310,8 +315,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print("  nothing significant: no effect is claimed")
     entries = run.report["effects"]  # each effect as written, a coupling's advice among its keys
     for (effect, values, std), change, entry in zip(diagnosis.effects, diagnosis.target_changes, entries):
+        values, std, shown_unit = shown(effect, values, std, unit(effect))
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))  # what evaluate applies
-        print(f"final model: {effect.label} = {value} {unit(effect)}: {change.describe()}")
+        print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe()}")
         if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
             print(f"  {entry['advice']}")
     for note in diagnosis.notes:

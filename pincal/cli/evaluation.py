@@ -28,6 +28,10 @@ the whole session, the span nearest its median time
 (:func:`pincal.model.effects.drift_offsets`); a note says how many rows,
 and ``drift`` in ``--json`` records it.
 
+A ``thermal`` expansion and ``pause_step`` effects are never extrapolated either: a row outside
+the fitted temperature range is held at its nearer end, a row outside the fitted time span takes
+its nearest segment (:mod:`pincal.cli.conditions`).
+
 Re-estimated means only its 6 parameters, with the model and the target fixed
 (:func:`pincal.fit.sessions.register_session`), on the evaluated rows: those
 errors then leave out the error of a registration, and are optimistic — after
@@ -46,6 +50,7 @@ from typing import cast
 
 import numpy as np
 
+from pincal.cli.conditions import applied_conditions
 from pincal.cli.settings import EvaluateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
@@ -69,7 +74,7 @@ from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
 from pincal.report.model import TimeSpanJson, errors_json, registration_pair
-from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationJson
+from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationJson, PauseStepUse, ThermalUse
 from pincal.report.sessions import session_errors
 
 __all__ = [
@@ -156,11 +161,18 @@ class Evaluation:
     # and its URDF; None where the report's sources.urdf is not readable here (before -> after)
     nominal_rms_mm: float | None = None
     nominal_urdf: str | None = None
+    thermal: ThermalUse | None = None  # how the report's thermal expansion was applied (pincal.cli.conditions)
+    pause_steps: PauseStepUse | None = None  # ... and its pause steps
 
     def as_dict(self) -> EvaluationJson:
         """``pincal evaluate --json``."""
-        return {**errors_json(self.errors), "skipped_cpa_rows": self.n_skipped_cpa,
-                "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift}
+        out: EvaluationJson = {**errors_json(self.errors), "skipped_cpa_rows": self.n_skipped_cpa,
+                               "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift}
+        if self.thermal is not None:
+            out["thermal"] = self.thermal
+        if self.pause_steps is not None:
+            out["pause_steps"] = self.pause_steps
+        return out
 
     def threshold_problem(self) -> str | None:
         """Why a threshold cannot judge these errors (a re-estimated session with fewer than
@@ -234,6 +246,11 @@ def evaluate_files(
         group[members] = g
     corrections, drift_use = _effect_corrections(chain, data, report.effects, report.points, (held, group),
                                                  report_path)
+    applied = applied_conditions([effect_from_dict(e) for e in report.effects.get("effects", [])], report.effects,
+                                 data, (held, group), settings.temperature_column, report_path)
+    notes += applied.notes
+    if applied.conditions is not None:  # thermal expansion, pause steps (eq T1-T2 of pincal.model.thermal)
+        corrections["conditions"] = applied.conditions
     if drift_use is not None and drift_use["rows_held"]:
         notes.append(_drift_note(data_path, drift_use))
     index = np.empty(data.n_rows, dtype=np.intp)
@@ -248,6 +265,7 @@ def evaluate_files(
                 chain, data.select(members), report.points, report.rotation,
                 q=None if q is None else q[members], sensor_scale=corrections.get("sensor_scale", 0.0),
                 drift=None if drift is None else drift[members],
+                conditions=None if applied.conditions is None else applied.conditions.select(members),
                 sigma_pos_m=sigma_pos / 1000.0 if sigma_pos else 1e-3,
                 sigma_rot_rad=np.radians(sigma_rot) if sigma_rot else 1e-3,
             )
@@ -275,7 +293,7 @@ def evaluate_files(
                       nominal_rms_mm=nominal_rms, nominal_urdf=nominal_urdf,
                       lines=tuple(int(line) for line in data.lines), sessions=sessions,
                       files=tuple(str(f) for f in data.files), row_sessions=tuple(str(n) for n in data.sessions),
-                      drift=drift_use)
+                      drift=drift_use, thermal=applied.thermal, pause_steps=applied.pause_steps)
 
 
 def _nominal_rms(report: ReportModel, report_path: str | Path, data: MeasurementSet,

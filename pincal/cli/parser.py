@@ -165,6 +165,11 @@ def _add_xacro_arg(parser: argparse.ArgumentParser) -> None:
                         "the .xacro file is expanded in memory")
 
 
+def _add_temperature(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--temperature-column", metavar="COLUMN", help="row temperature [°C] for thermal expansion "
+                        "(default: temperature_c or temperature; evaluate: the report's)")
+
+
 def _add_quiet(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr (default: a bar in a terminal "
                         "once the work takes over a second, a line every 10 s in logs; pincal.cli.progress)")
@@ -287,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "compliance:J:DRIVER:RAD_PER_NM (J deflects under DRIVER's gravity torque), "
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
                           "coupling:J:DRIVER:REL (J's actual angle adds REL x DRIVER's reading), "
-                          "drift:VX:VY:VZ (m/s), sensor_scale:REL")
+                          "drift:VX:VY:VZ (m/s), sensor_scale:REL, thermal:ALPHA (1/K; writes temperature_c), "
+                          "pause_step:DX:DY:DZ (m; an 8 h pause halfway)")
 
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
     cal.add_argument("urdf", type=Path, help="URDF to calibrate, or a .xacro (never overwritten)")
@@ -348,6 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "(6 parameters; model and target fixed) even when the report has one session")
     ev.add_argument("--html", type=Path, metavar="REPORT.html",
                     help="also write the report with these errors (every row by file line) as one HTML page")
+    _add_temperature(ev)
     _add_xacro_arg(ev)
     ev.add_argument("--allow-other-urdf", action="store_true",
                     help="evaluate a URDF other than the one the report was written with (edited on purpose)")
@@ -382,6 +389,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="point mass at the target for gravity torques (default 0)")
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
+    _add_temperature(dia)
+    dia.add_argument("--pause-s", type=_positive, metavar="S",
+                     help="a gap longer than S seconds between rows of a session starts a new segment, its "
+                          "registration stepped (default 1800: a stop long enough for the cell's temperature to move; "
+                          "a measuring program's rows are seconds to minutes apart)")
     dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
     _add_plausibility(dia)
     _add_coupling(dia)

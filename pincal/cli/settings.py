@@ -19,6 +19,7 @@ from pincal.errors import PincalError
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.model.parameter_sets import CHAIN_LEVELS  # not from fit/: evaluate's settings need no fit module
+from pincal.model.thermal import PAUSE_S
 
 __all__ = [
     "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "METHODS", "expect", "no_prior", "default_selection", "CalibrateSettings",
@@ -192,6 +193,9 @@ class DiagnoseSettings(_FitSettings):
         payload_kg: a point mass at the target for the gravity torques [kg].
         time_column: the column of row times [s] (None: the first of
             :data:`pincal.model.effects.TIME_COLUMNS` present).
+        temperature_column: the column of row temperatures [°C] (None: the first of
+            :data:`pincal.model.thermal.TEMPERATURE_COLUMNS` present).
+        pause_s: a gap longer than this between rows of a session is a pause [s] (:mod:`pincal.model.thermal`).
 
     Raises:
         PincalError: an unknown level or selection, a prior at level registration, a negative
@@ -208,12 +212,16 @@ class DiagnoseSettings(_FitSettings):
     sigma_pos_mm: float | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
     couplings: tuple[ReadingCoupling, ...] = ()
+    temperature_column: str | None = None
+    pause_s: float = PAUSE_S
 
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:
             raise PincalError(f"--level must be one of {', '.join(DIAGNOSE_LEVELS)}, got '{self.level}'")
         if not (np.isfinite(self.payload_kg) and self.payload_kg >= 0):
             raise PincalError(f"--payload-kg must be a non-negative number, got {self.payload_kg}")
+        if not (np.isfinite(self.pause_s) and self.pause_s > 0):
+            raise PincalError(f"--pause-s must be a positive number of seconds, got {self.pause_s}")
         self._resolve()
 
 
@@ -227,6 +235,8 @@ class EvaluateSettings:
         fixed_registration: a reported session's name, or ``""`` for the only/first one, whose
             registration every row uses (``--fixed-registration``); None: the module's rule.
         new_session: re-estimate the registration of every session of the data.
+        temperature_column: the column of row temperatures [°C] (None: the report's, else the first of
+            :data:`pincal.model.thermal.TEMPERATURE_COLUMNS` present).
 
     Raises:
         PincalError: ``fixed_registration`` and ``new_session`` together.
@@ -236,6 +246,7 @@ class EvaluateSettings:
     xacro_args: tuple[tuple[str, str], ...] = ()
     fixed_registration: str | None = None
     new_session: bool = False
+    temperature_column: str | None = None
 
     def __post_init__(self) -> None:
         if self.fixed_registration is not None and self.new_session:

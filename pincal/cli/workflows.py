@@ -414,6 +414,7 @@ def diagnose_files(
     tip_link, level, tool_pose, xacro_args = settings.tip_link, settings.level, settings.tool_pose, settings.xacro_args
     sigma_column, selection, payload_kg = settings.sigma_column, settings.criterion, settings.payload_kg
     time_column_name, sigma_pos_m = settings.time_column, settings.sigma_pos_m
+    from pincal.diagnosis.conditions import read_readings
     from pincal.diagnosis.diagnose import diagnose
     from pincal.fit.level_choice import choose_level
 
@@ -435,6 +436,7 @@ def diagnose_files(
         heldout, held_notes = read_measurements(validation_path, chain.joint_specs, settings.couplings)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
+    readings = read_readings(data, heldout, settings.temperature_column, settings.pause_s)  # thermal, pauses
     nominal_placements = chain.placements()
     stages = Stages(progress)
     choice = None
@@ -447,7 +449,8 @@ def diagnose_files(
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
-                         payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next())
+                         payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next(),
+                         readings=readings)
     objective, x = diagnosis.objective, diagnosis.solution_x
     kinematic = objective.blocks["kinematic"]
     vector = calibration.vector.copy()

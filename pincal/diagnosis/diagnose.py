@@ -3,7 +3,8 @@
 After the geometric calibration (:func:`pincal.fit.chain_calibration.calibrate_chain`)
 every candidate effect of :mod:`pincal.model.effects` — each type on each joint, both
 backlash sources, both cyclic harmonics, drift when the data has a time column,
-the sensor's scale — is fitted together with the geometry, registration and
+the sensor's scale, thermal expansion and a step per pause where the rows allow them
+(:mod:`pincal.diagnosis.conditions`) — is fitted together with the geometry, registration and
 target it would change. Candidates are ranked by the change of the Bayesian
 information criterion on the calibration rows (Schwarz 1978),
 
@@ -44,9 +45,10 @@ from dataclasses import dataclass, field, replace
 from typing import cast
 
 import numpy as np
-import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
+from pincal.diagnosis.catalogue import PARALLEL_AXES_RAD, candidate_effects, parallel_neighbours
+from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
 from pincal.diagnosis.screening import (
     GENERIC_NOT_RUN,
     SCREEN_CONDITION,
@@ -70,7 +72,6 @@ from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import (
-    BACKLASH_SOURCES,
     HARMONICS,
     Effect,
     EffectInputs,
@@ -104,10 +105,6 @@ NAMING_EVALUATIONS = 50
 #: Largest |gravity torque| [N·m or N] of a joint over the rows below which it has none: compliance and
 #: gravity-flank backlash cannot be tested there (rounding of Pinocchio's RNEA is ~1e-12).
 NO_TORQUE = 1e-9
-#: Angle between two joint axes below which they count as parallel [rad]: 0.6°, so that a URDF pincal
-#: calibrated (its axes turned by ~1e-4 rad) still qualifies.
-PARALLEL_AXES_RAD = 1e-2
-
 
 @dataclass(frozen=True)
 class Step:
@@ -143,6 +140,7 @@ class Diagnosis:
         chain_placements: the final model's chain placements (the geometry refitted with the
             effects; 4×4 each, as :meth:`pincal.model.chain.KinematicChain.placements`).
         target_changes: how far each of ``effects`` moves the target over the calibration rows.
+        conditions: the temperature range and pauses of the fitted rows (thermal, pause steps).
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -161,40 +159,7 @@ class Diagnosis:
     notes: tuple[str, ...] = field(default=())
     chain_placements: tuple[np.ndarray, ...] = ()
     target_changes: tuple[TargetChange, ...] = ()
-
-
-def parallel_neighbours(chain: KinematicChain) -> set[tuple[int, int]]:
-    """Neighbouring revolute joints (i, i + 1) whose axes are parallel at the neutral configuration
-    (within :data:`PARALLEL_AXES_RAD`): where a controller may read one joint against the other (a
-    parallelogram arm's J3 from the horizontal, J2 ∥ J3), the couplings the catalogue offers."""
-    model = chain.model
-    data = model.createData()
-    jacobian = pin.computeJointJacobians(model, data, pin.neutral(model))
-    axes = [jacobian[3:, model.joints[i].idx_v] for i in chain.joint_ids]
-    kinds = [spec.kind for spec in chain.joint_specs]
-    return {(i, i + 1) for i in range(len(axes) - 1)
-            if "prismatic" not in (kinds[i], kinds[i + 1])
-            and np.linalg.norm(np.cross(axes[i], axes[i + 1])) < PARALLEL_AXES_RAD}
-
-
-def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
-    """Every candidate on every joint of the chain, plus the sensor's; couplings between the
-    :func:`parallel_neighbours` only, of the reading and of the gravity torque (a compliance driven by the
-    neighbour's torque): a parallelogram or a counterbalance links J2's and J3's loads."""
-    out: list[Effect] = []
-    names = list(chain.joint_names)
-    parallel = parallel_neighbours(chain)
-    for j, joint in enumerate(names):
-        out.append(Effect("compliance", joint))
-        out.append(Effect("encoder_scale", joint))
-        out += [Effect("cyclic", joint, harmonic=h) for h in HARMONICS]
-        out += [Effect("backlash", joint, source=s) for s in BACKLASH_SOURCES]
-        out += [Effect(kind, joint, driver=names[i]) for i in (j - 1, j + 1) for kind in ("coupling", "compliance")
-                if (min(i, j), max(i, j)) in parallel]
-    if has_time:
-        out.append(Effect("drift"))
-    out.append(Effect("sensor_scale"))
-    return out
+    conditions: ConditionSearch | None = None
 
 
 class _Model:
@@ -261,6 +226,7 @@ def diagnose(
     heldout_time: np.ndarray | None = None,
     candidates: Sequence[Effect] | None = None,
     progress: Progress | None = None,
+    readings: Readings | None = None,
 ) -> Diagnosis:
     """Search the calibrated model's residuals for missing effects (module docstring).
 
@@ -276,20 +242,21 @@ def diagnose(
         sigma_column: the row-weight column used by the calibration.
         payload_kg: point mass at the target for gravity torques [kg].
         time / heldout_time: row times [s] of ``data`` / ``heldout``, or None.
-        candidates: effects to try (default: :func:`candidate_effects`).
+        candidates: effects to try (default: :func:`candidate_effects`; thermal and pause steps where allowed).
         progress: ``progress(done, total)`` (:mod:`pincal.progress`): each step counts
             one unit per candidate offered (refitted or screened out) and one for
             adopting the best; the final fit and the search for remaining structure one.
+        readings: the rows' temperatures and the pause rule (default: no temperature, pauses of 1800 s).
     """
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
         candidates = candidate_effects(chain, True)
     with chain.placed(calibration.chain_placements):  # gravity torques at the calibrated geometry
         return _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time,
-                         candidates, progress)
+                         candidates, progress, readings or Readings())
 
 
 def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time, candidates,
-              progress) -> Diagnosis:
+              progress, readings) -> Diagnosis:
     rows = data.select(calibration.used_index)
     row_time = None if time is None else time[calibration.used_index]
     if heldout is not None:  # its rows need a calibrated session's registration
@@ -305,15 +272,22 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         )
     inputs = effect_inputs(chain, rows, payload_kg, point, row_time,
                            context_q=None if heldout is None else heldout.q, context_time=heldout_time)
+    names = np.asarray(calibration.session_names, dtype=object)  # each row's session, for its pauses
+    row_names = names[session_rows(rows, calibration.session_names)]
+    conditions = search_conditions(row_time, row_names, readings, calibration.used_index)
+    inputs = conditions.inputs(inputs, conditions.temperature, row_time, row_names)
     model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference, rows.q, row_time,
                                     held_sessions=(session_rows(heldout, calibration.session_names),  # as evaluate
                                                    session_rows(rows, calibration.session_names)))
+        held_inputs = conditions.inputs(held_inputs, readings.heldout_temperature, heldout_time,
+                                        names[session_rows(heldout, calibration.session_names)])
     pool = list(candidate_effects(chain, row_time is not None) if candidates is None else candidates)
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
+    pool += [e for e in conditions.candidates if e not in pool]
     # a joint no gravity torque acts on in any row (a vertical axis; a URDF without inertias): nothing to test
     weightless = {name for j, name in enumerate(chain.joint_names) if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
     untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
@@ -452,6 +426,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         notes.append(f"not tested, {len(untested)} candidate(s): the fit leaves {min(untested.values()):.1f} residual "
                      f"degrees of freedom, too few to test their values (noise alone would reach the evidence cut "
                      f"ΔBIC < {EVIDENCE:g}); add rows: {', '.join(untested)}")
+    notes += conditions.notes
     if inseparable:
         labels = [e.label for e in pool if e.label in inseparable]
         notes.append(
@@ -490,6 +465,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         notes=tuple(notes),
         chain_placements=final_placements,
         target_changes=tuple(target_changes(current_objective, final_solution.x)),
+        conditions=conditions,
     )
 
 

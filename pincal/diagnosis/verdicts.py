@@ -10,7 +10,8 @@ reported instead:
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
 * a close competitor (within 6 of its ΔBIC) with a strongly correlated basis: the
-  data cannot tell them apart;
+  data cannot tell them apart (a drift and a step at a pause: the step is named,
+  :mod:`pincal.model.thermal`);
 * when held-out rows are given, an effect that makes them worse.
 """
 
@@ -26,6 +27,7 @@ from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import standard_deviations
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
+from pincal.model.thermal import implausible
 from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
@@ -47,6 +49,8 @@ PLAUSIBLE = {
     "coupling": (1.5, 1.5),
     "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
     "sensor_scale": (0.01, 0.01),  # relative
+    "thermal": (np.inf, np.inf),  # 1/K: judged with its standard deviation (pincal.model.thermal.implausible)
+    "pause_step": (1e-3, 1e-3),  # m: a larger step is a sensor that was moved, a new session
 }
 #: Largest change an effect must make to some measured coordinate, in units of that coordinate's
 #: noise σ (the fit's whitened residual), to be adopted: σ/10 (the unseen-setups issue's bound on
@@ -90,10 +94,14 @@ class Candidate:
 
 
 def effect_basis(effect: Effect, inputs: EffectInputs, chain: KinematicChain) -> np.ndarray | None:
-    """The basis of an effect over the rows (K, n_values): the joint shift's, drift's time, or None."""
+    """The basis of an effect over the rows (K, n_values): the joint shift's, drift's time, thermal's
+    temperature, a pause step's a_kp, or None."""
     if effect.type not in JOINT_EFFECTS:
-        # drift is a candidate only with a time column (pincal.diagnosis.diagnose.candidate_effects)
-        return cast(np.ndarray, inputs.time)[:, None] if effect.type == "drift" else None
+        # drift, thermal and pause steps are candidates only with their columns (pincal.diagnosis.conditions)
+        if effect.type == "pause_step":
+            return cast(np.ndarray, inputs.pauses)[:, int(cast(int, effect.pause)) - 1, None]
+        series = {"drift": inputs.time, "thermal": inputs.temperature}.get(effect.type)
+        return None if series is None else series[:, None]
     return joint_basis(effect, inputs, chain.joint_names.index(effect.joint))
 
 
@@ -232,7 +240,7 @@ class Judge:
             if delta < EVIDENCE:
                 verdict = "significant"
                 if chosen is None:
-                    verdict = self.rejection(effect, value, delta, tried, held, compared, obj, sol)
+                    verdict = self.rejection(effect, value, delta, tried, held, compared, obj, sol, std)
                     if verdict == "adopted":
                         chosen = (delta, effect, obj, sol)
                     else:
@@ -248,11 +256,15 @@ class Judge:
             cut = max(cut, EVIDENCE)
         return ranking, chosen, rejected, cut
 
-    def rejection(self, effect, value, delta, tried, held, compared: list, objective=None, solution=None) -> str:
+    def rejection(self, effect, value, delta, tried, held, compared: list, objective=None, solution=None,
+                  std=None) -> str:
         """'adopted', or why the best significant candidate is only reported (``compared``
         gains ``delta`` when the candidate was compared with its competitors; ``objective`` and
-        ``solution``: the candidate's fit, for the size of what it changes)."""
+        ``solution``: the candidate's fit, for the size of what it changes; ``std`` its values')."""
         inputs, chain = self.inputs, self.chain
+        reason = None if std is None else implausible(effect, value, std)
+        if reason:
+            return reason
         if not _plausible(effect, value, chain):
             return (f"its value {np.round(value, 6).tolist()} is outside the physical range "
                     "(a stand-in for something else)")
@@ -267,8 +279,8 @@ class Judge:
             return "its basis barely changes over the rows, so it acts as a joint offset"
         compared.append(delta)
         for other_delta, other, _, _ in tried:
-            if other is effect or other_delta - delta > 6.0:
-                continue
+            if other is effect or other_delta - delta > 6.0 or (effect.type, other.type) == ("pause_step", "drift"):
+                continue  # a drift the data cannot tell from a step at a pause: the step is named
             if abs(_correlation(basis, effect_basis(other, inputs, chain))) > AMBIGUOUS:
                 return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
                         f"{_correlation(basis, effect_basis(other, inputs, chain)):+.2f}: "

@@ -20,6 +20,7 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.effects import sensed_points
 from pincal.model.sensor import Registration
+from pincal.model.thermal import RowConditions
 
 __all__ = ["ErrorSummary", "PoseErrors", "pose_errors"]
 
@@ -98,6 +99,7 @@ def pose_errors(
     sensor_scale: float = 0.0,
     drift: npt.ArrayLike | None = None,
     tool_poses: tuple[np.ndarray, np.ndarray] | None = None,
+    conditions: RowConditions | None = None,
 ) -> PoseErrors:
     """Eq 24 on every row of ``data``.
 
@@ -113,12 +115,15 @@ def pose_errors(
         tool_poses: ``chain.tool_poses`` of the rows' joint values when the caller has
             them (errors of one chain through several registrations share them); ``q``
             is then not used.
+        conditions: each row's thermal expansion and pause step (eq T1–T2 of :mod:`pincal.model.thermal`).
     """
     if tool_poses is None:
         tool_poses = chain.tool_poses(data.q if q is None else q)
     tool_rotations, tool_positions = tool_poses
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
     world = points_in_base(tool_positions, tool_rotations, points)
+    if conditions is not None:
+        world, drift = conditions.world(world), conditions.offsets(drift)
     predicted = sensed_points(registration_position, world, sensor_scale, drift)
     position = np.linalg.norm(predicted - data.points, axis=2)
     rotation = None

@@ -46,6 +46,7 @@ from pincal.measurements.data import (
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.parameter_sets import NoParameters
 from pincal.model.sensor import Registration
+from pincal.model.thermal import RowConditions
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.so3 import log3
@@ -283,6 +284,7 @@ def register_session(
     drift: npt.ArrayLike | None = None,
     sigma_pos_m: float = 1e-3,
     sigma_rot_rad: float = 1e-3,
+    conditions: RowConditions | None = None,
 ) -> Registration:
     """sensor_T_base of rows measured in a session the calibration has not seen.
 
@@ -294,7 +296,8 @@ def register_session(
     rotation (fewer than 3, or on one line) and the rows have orientations, from
     Registration 2 with the target rotation fixed (:func:`start_registration`: one
     6D row suffices). Sensor effects of a report are undone first:
-    g' = g / (1 + s) − drift_k.
+    g' = g / (1 + s) − drift_k − d_k; a thermal expansion scales the model's points (``conditions``,
+    eq T1–T2 of :mod:`pincal.model.thermal`).
 
     Args:
         q: joint values to use instead of the readings (corrected by effects), (K, N).
@@ -306,18 +309,21 @@ def register_session(
     check_registrable(data)
     q = data.q if q is None else np.asarray(q, dtype=float)
     sensed = data.points / (1.0 + sensor_scale)
-    if drift is not None:
-        sensed = sensed - np.asarray(drift, dtype=float)[:, None, :]
+    offsets = drift if conditions is None else conditions.offsets(drift)
+    if offsets is not None:
+        sensed = sensed - np.asarray(offsets, dtype=float)[:, None, :]
+    expanded = None if conditions is None or conditions.expansion is None else RowConditions(conditions.expansion)
     points = np.atleast_2d(np.asarray(points, dtype=float))
     poses = chain.poses(q)
     world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
+    world = world if expanded is None else expanded.world(world)
     start = start_registration(world, sensed, poses.tool_rotations @ np.asarray(rotation, dtype=float),
                                replace(data, points=sensed))
     cache = KinematicsCache(NoParameters(chain), np.array([], dtype=int), np.zeros(0), q)
     objective = SensorResidual(
         cache, sensed, data.rotations, TargetEstimate(start, points, np.asarray(rotation, dtype=float)),
         position_weight=1.0 / sigma_pos_m, rotation_weight=1.0 / sigma_rot_rad,
-        fit_points=False, fit_rotation=False,
+        fit_points=False, fit_rotation=False, conditions=expanded,
     )
     solution = solve(objective, objective.start_vector(), what="session registration")
     return objective.estimate(solution.x).registration
@@ -334,6 +340,7 @@ def session_pose_errors(
     q: npt.ArrayLike | None = None,
     sensor_scale: float = 0.0,
     drift: npt.ArrayLike | None = None,
+    conditions: RowConditions | None = None,
 ) -> PoseErrors:
     """Eq 24 on every row of ``data``, each through its session's registrations.
 
@@ -341,12 +348,13 @@ def session_pose_errors(
         sessions: (K,) each row's index into ``positions`` / ``orientations``.
         positions / orientations: Registrations 1 and 2 of each session
             (``orientations`` default: ``positions``).
-        points, target_rotation, q, sensor_scale, drift: as :func:`pincal.fit.metrics.pose_errors`.
+        points, target_rotation, q, sensor_scale, drift, conditions: as :func:`pincal.fit.metrics.pose_errors`.
     """
     orientations = positions if orientations is None else orientations
     options: dict[str, Any] = {"points": points, "target_rotation": target_rotation, "sensor_scale": sensor_scale}
     if len(positions) == 1:
-        return pose_errors(chain, data, positions[0], orientations[0], q=q, drift=drift, **options)
+        return pose_errors(chain, data, positions[0], orientations[0], q=q, drift=drift, conditions=conditions,
+                           **options)
     sessions = np.asarray(sessions, dtype=np.intp)
     position = np.full((data.n_rows, 1 if points is None else np.atleast_2d(points).shape[0]), np.nan)
     rotation = None if data.rotations is None else np.full(data.n_rows, np.nan)
@@ -355,7 +363,8 @@ def session_pose_errors(
         if rows.size:
             errors = pose_errors(chain, data.select(rows), reg_position, reg_orientation,
                                  q=None if q is None else np.asarray(q)[rows],
-                                 drift=None if drift is None else np.asarray(drift)[rows], **options)
+                                 drift=None if drift is None else np.asarray(drift)[rows],
+                                 conditions=None if conditions is None else conditions.select(rows), **options)
             position[rows] = errors.position_m
             if rotation is not None:
                 rotation[rows] = errors.rotation_rad

@@ -21,7 +21,8 @@ Each joint effect shifts the reading of one joint: actual = q_j + shift, with
 
 Two effects act on the sensor side: ``drift`` moves the registration's
 translation linearly with time (u [m/s], 3 values; thermal drift) and
-``sensor_scale`` scales the sensor's lengths (relative).
+``sensor_scale`` scales the sensor's lengths (relative); ``thermal`` (α [1/K]) and
+``pause_step`` (3 values) change the points row by row (:mod:`pincal.model.thermal`).
 
 A drift describes the session it was fitted on: its offset is (t_k − t̄) u,
 t̄ the mean time of the fitted rows (``time_reference_s``), and it holds only
@@ -58,8 +59,8 @@ __all__ = [
 ]
 
 JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash", "coupling")
-SENSOR_EFFECTS = ("drift", "sensor_scale")
-EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS
+SENSOR_EFFECTS = ("drift", "sensor_scale", "pause_step")
+EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS + ("thermal",)
 BACKLASH_SOURCES = ("gravity", "approach")
 HARMONICS = (1, 2)
 
@@ -80,6 +81,7 @@ class Effect:
         source: ``gravity`` or ``approach`` for ``backlash``.
         driver: for ``coupling``, the joint whose reading drives this joint's shift; for
             ``compliance``, optionally the joint whose gravity torque does (None: its own).
+        pause: for ``pause_step``, the pause's number (from 1, :func:`pincal.model.thermal.find_pauses`).
     """
 
     type: str
@@ -87,6 +89,7 @@ class Effect:
     harmonic: int | None = None
     source: str | None = None
     driver: str | None = None
+    pause: int | None = None
 
     def __post_init__(self) -> None:
         if self.type not in EFFECT_TYPES:
@@ -105,7 +108,7 @@ class Effect:
 
     @property
     def n_values(self) -> int:
-        return {"cyclic": 2, "drift": 3}.get(self.type, 1)
+        return {"cyclic": 2, "drift": 3, "pause_step": 3}.get(self.type, 1)
 
     def unit(self, prismatic: bool = False) -> str:
         """The unit of the effect's values (module docstring), for a joint that is ``prismatic`` or not."""
@@ -113,7 +116,8 @@ class Effect:
             return "m/N" if prismatic else "rad/(N·m)"
         if self.type in ("cyclic", "backlash"):
             return "m" if prismatic else "rad"
-        return "m/s" if self.type == "drift" else "(relative)"  # encoder_scale, sensor_scale
+        units = {"drift": "m/s", "thermal": "1/K", "pause_step": "m"}
+        return units.get(self.type, "(relative)")  # encoder_scale, sensor_scale
 
     @property
     def label(self) -> str:
@@ -126,6 +130,8 @@ class Effect:
             parts.append(self.source)
         if self.driver:
             parts.append(self.driver)
+        if self.pause:
+            parts.append(str(self.pause))
         return ":".join(parts)
 
 
@@ -146,6 +152,8 @@ class EffectInputs:
             is the drift's, held outside a fitted span (:func:`effect_inputs`
             ``held_sessions``), for the approach flanks; None otherwise.
         joint_names: the names of the columns of ``q`` (a coupling's driver is found by name).
+        temperature: T_k − T_ref of each row (K,) [K] (held inside the fitted range), or None.
+        pauses: a_kp of each row and pause (K, P) (:mod:`pincal.model.thermal`, eq T2), or None.
     """
 
     q: np.ndarray
@@ -156,6 +164,8 @@ class EffectInputs:
     context_time: np.ndarray | None = None
     flank_time: np.ndarray | None = None
     joint_names: tuple[str, ...] = ()
+    temperature: np.ndarray | None = None
+    pauses: np.ndarray | None = None
 
 
 def gravity_torques(
@@ -311,7 +321,8 @@ def joint_shifts(
 def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     """``TYPE:JOINT:VALUE`` (``cyclic:JOINT:H:SIN:COS``, ``backlash:JOINT:VALUE[:SOURCE]``,
     ``coupling:JOINT:DRIVER:VALUE``, ``compliance:JOINT[:DRIVER]:VALUE``, ``drift:VX:VY:VZ`` [m/s],
-    ``sensor_scale:VALUE``) → effect and values."""
+    ``sensor_scale:VALUE``, ``thermal:ALPHA`` [1/K], ``pause_step:DX:DY:DZ`` [m], the first pause's) → effect
+    and values."""
     parts = text.split(":")
     try:
         kind = parts[0]
@@ -323,8 +334,10 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
             effect, values = Effect(kind, parts[1], source=source), np.array([float(parts[2])])
         elif kind == "drift":
             effect, values = Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
-        elif kind == "sensor_scale":
+        elif kind in ("sensor_scale", "thermal"):
             effect, values = Effect(kind), np.array([float(parts[1])])
+        elif kind == "pause_step":
+            effect, values = Effect(kind, pause=1), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
         elif kind == "coupling" or (kind == "compliance" and len(parts) == 4):
             effect, values = Effect(kind, parts[1], driver=parts[2]), np.array([float(parts[3])])
         else:
@@ -336,14 +349,14 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
         raise PincalError(
             f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "
             "backlash:JOINT:VALUE[:gravity|approach], coupling:JOINT:DRIVER:VALUE, compliance:JOINT:DRIVER:VALUE, "
-            "drift:VX:VY:VZ or sensor_scale:VALUE"
+            "drift:VX:VY:VZ, sensor_scale:VALUE, thermal:ALPHA or pause_step:DX:DY:DZ"
         ) from None
 
 
 def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict:
     """REPORT.json form: {"type", "joint", "value"}; cyclic gives harmonic, sin, cos;
     backlash adds source, coupling (and a compliance driven by another joint's torque) its driver;
-    drift's value is [vx, vy, vz] in m/s."""
+    drift's value is [vx, vy, vz] in m/s; a pause step's [dx, dy, dz] in m, with its ``pause``."""
     values = np.atleast_1d(np.asarray(values, dtype=float))
     std = None if std is None else np.atleast_1d(np.asarray(std, dtype=float))
     out: dict = {"type": effect.type, "joint": effect.joint}
@@ -352,9 +365,12 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
         if std is not None:
             out.update(sin_std=float(std[0]), cos_std=float(std[1]))
         return out
-    out["value"] = values.tolist() if effect.type == "drift" else float(values[0])
+    vector = effect.type in ("drift", "pause_step")
+    out["value"] = values.tolist() if vector else float(values[0])
     if std is not None:
-        out["std"] = std.tolist() if effect.type == "drift" else float(std[0])
+        out["std"] = std.tolist() if vector else float(std[0])
+    if effect.type == "pause_step":
+        out["pause"] = effect.pause
     if effect.type == "backlash":
         out["source"] = effect.source
     if effect.driver:
@@ -370,7 +386,8 @@ def effect_from_dict(entry: dict) -> tuple[Effect, np.ndarray]:
             return Effect(kind, entry["joint"], harmonic=int(entry["harmonic"])), np.array(
                 [float(entry["sin"]), float(entry["cos"])]
             )
-        effect = Effect(kind, entry.get("joint"), source=entry.get("source"), driver=entry.get("driver"))
+        effect = Effect(kind, entry.get("joint"), source=entry.get("source"), driver=entry.get("driver"),
+                        pause=None if entry.get("pause") is None else int(entry["pause"]))
         return effect, np.atleast_1d(np.asarray(entry["value"], dtype=float))
     except (KeyError, TypeError, ValueError) as exc:
         raise PincalError(f"bad effect entry {entry} in the report ({exc})") from None

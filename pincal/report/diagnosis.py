@@ -18,6 +18,7 @@ from pincal.report.model import (
 from pincal.report.model_diagnosis import (
     ApproachContext,
     CandidateJson,
+    ConditionsPart,
     DiagnosisJson,
     DiagnosisReport,
     EffectJson,
@@ -109,7 +110,20 @@ def diagnosis_report(
         "xacro_args": xacro_args,
         **level_choice,
         **(couplings or {}),
+        **_conditions(diagnosis),
     }
+
+
+def _conditions(diagnosis: Diagnosis) -> ConditionsPart:
+    """What evaluate needs of an adopted thermal effect or pause step (:class:`ConditionsPart`); {} without."""
+    found, types = diagnosis.conditions, {effect.type for effect, _, _ in diagnosis.effects}
+    out: dict = {}
+    if found is not None and "thermal" in types and found.temperature_range is not None:
+        out.update(temperature_column=found.column, temperature_range_c=found.temperature_range.as_dict())
+    if found is not None and "pause_step" in types:
+        out.update(pause_s=found.pause_s, pauses=[p.as_dict() for p in found.pauses],
+                   pause_spans_s=[s.as_dict() for s in found.spans])
+    return cast(ConditionsPart, out)
 
 
 def _candidate(candidate) -> CandidateJson:

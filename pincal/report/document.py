@@ -272,7 +272,9 @@ class ReportModel:
         registration_position: Registration 1.
         registration_orientation: Registration 2.
         effects: ``effects`` and what applying them needs (``payload_kg``,
-            ``time_column``, ``time_reference_s``, ``time_spans_s``); empty without effects.
+            ``time_column``, ``time_reference_s``, ``time_spans_s``, and a thermal effect's
+            ``temperature_column``, ``temperature_range_c``, pause steps' ``pauses``, ``pause_spans_s``);
+            empty without effects.
         urdf_sha256: SHA-256 (hex) of the corrected URDF written with the
             report (``urdf_sha256``); None in reports older than the key.
         sessions: (name, Registration 1, Registration 2) of each session
@@ -347,7 +349,8 @@ def read_report(path: str | Path) -> ReportModel:
     pose = pose_from_xyz_rpy(value_at(doc, "tool.xyz_m", path, _vector3, default=[0.0, 0.0, 0.0]),
                              value_at(doc, "tool.rpy_rad", path, _vector3, default=[0.0, 0.0, 0.0]))
     points = value_at(doc, "tool.points_m", path, _points, default=None)
-    effect_keys = ("effects", "payload_kg", "time_column", "time_reference_s", "time_spans_s", "approach_context")
+    effect_keys = ("effects", "payload_kg", "time_column", "time_reference_s", "time_spans_s", "approach_context",
+                   "temperature_column", "temperature_range_c", "pauses", "pause_spans_s")
     return ReportModel(
         tool_parent=str(value_at(doc, "tool.parent_link", path)),
         points=pose[None, :3, 3] if points is None else points,

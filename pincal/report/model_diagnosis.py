@@ -9,12 +9,13 @@ from pincal.report.model import CouplingJson, LevelChoiceJson, PoseErrorsJson, T
 __all__ = [
     "EffectJson", "CandidateJson", "BeforeAfter", "DiagnosisStep", "DiagnosisJson", "ApproachContext",
     "DiagnosisReport", "TimeSpansPart",
-    "TargetChangeJson",
+    "TargetChangeJson", "TemperatureRangeJson", "PauseJson", "ConditionsPart",
 ]
 
 
 class _EffectKeys(TypedDict):
-    type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "coupling", "drift", "sensor_scale"]
+    type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "coupling", "drift", "sensor_scale",
+                  "pause_step", "thermal"]
     joint: str | None
 
 
@@ -33,7 +34,8 @@ class TargetChangeJson(_TargetChangeKeys, total=False):
 
 class EffectJson(_EffectKeys, total=False):
     """An effect (:func:`pincal.model.effects.effect_to_dict`): ``cyclic`` has ``harmonic``, ``sin``,
-    ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s); ``backlash`` its ``source``; ``coupling``
+    ``cos``; the others ``value`` (drift: [vx, vy, vz] m/s; thermal: α [1/K]; pause_step: the step
+    [dx, dy, dz] m of the registration's translation after its ``pause``); ``backlash`` its ``source``; ``coupling``
     its ``driver`` (the joint whose reading it adds, × value), a ``compliance`` the ``driver`` whose gravity
     torque it follows when not its own joint's, and, in the final model's ``effects``, the ``advice``
     diagnose prints for either; ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
@@ -49,6 +51,7 @@ class EffectJson(_EffectKeys, total=False):
     driver: str
     target_change: TargetChangeJson
     advice: str
+    pause: int
 
 
 class CandidateJson(EffectJson, total=False):
@@ -103,9 +106,41 @@ class _DiagnosisKeys(_CalibrationKeys):
     diagnosis: DiagnosisJson
 
 
-class DiagnosisReport(_DiagnosisKeys, total=False):
+class TemperatureRangeJson(TypedDict):
+    """The temperatures [°C] of the rows a thermal expansion was fitted on: ``mean`` is T_ref; evaluate holds
+    a row outside [min, max] at the nearer end (:class:`pincal.model.thermal.TemperatureRange`)."""
+
+    min: float
+    max: float
+    mean: float
+
+
+class PauseJson(TypedDict):
+    """A pause in one session's rows: the last row's time before it and the first after it [s]
+    (:class:`pincal.model.thermal.Pause`); a ``pause_step`` applies from ``after_s`` on."""
+
+    pause: int
+    session: str
+    before_s: float
+    after_s: float
+
+
+class ConditionsPart(TypedDict, total=False):
+    """What evaluate needs of an adopted thermal effect (``temperature_column``, ``temperature_range_c``) and of
+    adopted pause steps (``pause_s``, ``pauses``; ``pause_spans_s``: the fitted rows' time span of each session
+    with a pause, outside which a row takes its nearest segment)."""
+
+    temperature_column: str
+    temperature_range_c: TemperatureRangeJson
+    pause_s: float
+    pauses: list[PauseJson]
+    pause_spans_s: list[TimeSpanJson]
+
+
+class DiagnosisReport(_DiagnosisKeys, ConditionsPart, total=False):
     """REPORT.json of ``diagnose``: the calibration's keys, the effects and the diagnosis
-    (``time_spans_s``: with an adopted drift; ``level_choice``: ``--level auto``; ``couplings``: ``--coupling``)."""
+    (``time_spans_s``: with an adopted drift; ``level_choice``: ``--level auto``; ``couplings``: ``--coupling``;
+    :class:`ConditionsPart`: with an adopted thermal effect or pause step)."""
 
     time_spans_s: list[TimeSpanJson]
     level_choice: LevelChoiceJson

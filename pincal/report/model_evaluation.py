@@ -6,8 +6,9 @@ from __future__ import annotations
 from typing import TypedDict
 
 from pincal.report.model import PoseErrorsJson, RegistrationPair, TimeSpanJson, Vector3
+from pincal.report.model_diagnosis import PauseJson, TemperatureRangeJson
 
-__all__ = ["EvaluatedSession", "DriftUse", "EvaluationJson"]
+__all__ = ["EvaluatedSession", "DriftUse", "ThermalUse", "PauseStepUse", "EvaluationJson"]
 
 
 class EvaluatedSession(TypedDict):
@@ -36,11 +37,38 @@ class DriftUse(TypedDict):
     held_rule: str
 
 
+class ThermalUse(TypedDict):
+    """How the report's thermal expansion was applied: rows inside the fitted temperature range [°C] at their
+    own temperature, rows outside it held at the nearer end (never extrapolated)."""
+
+    alpha_per_k: float
+    temperature_column: str
+    temperature_range_c: TemperatureRangeJson
+    rows_applied: int
+    rows_held: int
+    held_rule: str
+
+
+class PauseStepUse(TypedDict):
+    """How the report's pause steps were applied: a row takes the steps of the pauses of its session before
+    it (``rows_in_span``: inside the fitted rows' time span of that session; ``rows_outside``: outside it, the
+    nearest segment's)."""
+
+    pauses: list[PauseJson]
+    rows_in_span: int
+    rows_outside: int
+    rule: str
+
+
 class _EvaluationKeys(PoseErrorsJson):
     skipped_cpa_rows: int
     sessions: list[EvaluatedSession]
     drift: DriftUse | None
 
 
-class EvaluationJson(_EvaluationKeys):
-    """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use."""
+class EvaluationJson(_EvaluationKeys, total=False):
+    """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use
+    (``thermal`` and ``pause_steps``: where the report has them)."""
+
+    thermal: ThermalUse
+    pause_steps: PauseStepUse

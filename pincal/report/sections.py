@@ -136,16 +136,18 @@ def _effect_value(entry: dict, prismatic: bool) -> tuple[str, str]:
                 f" (amplitude {num(amplitude, 3)} {unit})")
         return text, ""
     value, std = entry.get("value"), entry.get("std")
-    if kind == "drift":
+    if kind in ("drift", "pause_step"):  # [vx, vy, vz] m/s; a step's [dx, dy, dz] m
         values = value if isinstance(value, list) else [value]
         stds = std if isinstance(std, list) else [None] * len(values)
-        return ", ".join(f"v{axis} {pm(v, s, 1000.0, 'mm/s')}" for axis, v, s in zip("xyz", values, stds)), ""
+        name, scale, unit = ("v", 1000.0, "mm/s") if kind == "drift" else ("d", 1e6, "µm")
+        return ", ".join(f"{name}{axis} {pm(v, s, scale, unit)}" for axis, v, s in zip("xyz", values, stds)), ""
     scale, unit = {
         "compliance": (1000.0, "mm/N" if length else "mrad/(N·m)"),
         "encoder_scale": (100.0, "%"),
         "coupling": (1.0, f"× {entry.get('driver')}'s reading"),
         "sensor_scale": (100.0, "%"),
         "backlash": (1000.0, "mm per flank" if length else "mrad per flank"),
+        "thermal": (1e6, "µm/m/K"),
     }.get(kind, (1.0, ""))
     v, s = _finite(value), _finite(std)
     return pm(v, s, scale, unit), num(abs(v) / s, 3) if v is not None and s else ""
@@ -162,6 +164,9 @@ def effect_label(entry: dict) -> str:
         text = f"coupling of {joint} to {entry.get('driver')}'s reading"
     if kind == "compliance" and entry.get("driver"):
         text = f"compliance of {joint} to {entry.get('driver')}'s gravity torque"
+    elif kind in ("thermal", "pause_step"):
+        text = ("thermal expansion of the arm" if kind == "thermal"
+                else f"step of the registration at pause {entry.get('pause')}")
     if kind == "backlash" and entry.get("source"):
         text += f" ({entry['source']} flank)" if entry["source"] == "approach" else f" ({entry['source']})"
     return text

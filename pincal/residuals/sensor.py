@@ -15,9 +15,10 @@ registrations (Omega_s = Omega_s0 exp(phi_s), tau_s: 6 per session, session 0
 first), the points m_p, and the target
 rotation R_T = R_T0 exp(psi), and the values of unmodelled effects
 (:mod:`pincal.model.effects`): joint effects shift the joint readings before the
-forward kinematics, ``drift`` adds t_k u to the registration's translation and
-``sensor_scale`` multiplies the sensed coordinates by (1 + s). Each block can
-be held fixed.
+forward kinematics, ``drift`` adds t_k u to the registration's translation,
+``sensor_scale`` multiplies the sensed coordinates by (1 + s), ``thermal`` scales
+y by f_k and ``pause_step`` adds d_k like a drift (eq T1–T2 of :mod:`pincal.model.thermal`;
+columns :mod:`pincal.residuals.conditions`). Each block can be held fixed.
 
 Jacobians (right perturbations, Pinocchio's Jexp3 and Jlog3):
 d e/d theta = w Omega · point velocity; d e/d phi = −w Omega [y]× Jexp3(phi) with
@@ -53,7 +54,9 @@ from pincal.model.effects import (
     sensed_points,
 )
 from pincal.model.sensor import Registration
+from pincal.model.thermal import RowConditions, row_conditions
 from pincal.residuals.base import KinematicsCache, Objective
+from pincal.residuals.conditions import condition_columns, point_columns
 from pincal.residuals.so3 import jlog3, log3, skew
 
 __all__ = ["REGISTRATION_NAMES", "TargetEstimate", "SensorResidual"]
@@ -72,12 +75,14 @@ class TargetEstimate:
         rotation: target rotation R_T in the tool frame, (3, 3).
         registrations: sensor_T_base of each session (default: ``(registration,)``);
             when given, ``registration`` is set to its first.
+        conditions: each row's thermal expansion and pause step at these values, or None.
     """
 
     registration: Registration
     points: np.ndarray
     rotation: np.ndarray
     registrations: tuple[Registration, ...] = ()
+    conditions: RowConditions | None = None
 
     def __post_init__(self) -> None:
         if self.registrations:
@@ -103,6 +108,7 @@ class SensorResidual(Objective):
         point_basis: (3P, b) orthonormal columns: the points' unknowns are b values z with
             m = start.points + basis z (the directions outside the basis held at the start's
             values, :mod:`pincal.fit.target_hold`); default: the 3P coordinates themselves.
+        conditions: fixed per-row changes (a report's, :mod:`pincal.model.thermal`) its effects add to.
     """
 
     def __init__(
@@ -120,10 +126,13 @@ class SensorResidual(Objective):
         inputs: EffectInputs | None = None,
         sessions: npt.ArrayLike | None = None,
         point_basis: npt.ArrayLike | None = None,
+        conditions: RowConditions | None = None,
     ) -> None:
         super().__init__(cache)
         self.effects = tuple(effects)
         self.inputs = inputs
+        self.conditions = conditions
+        self._conditional = conditions is not None or any(e.type in ("thermal", "pause_step") for e in self.effects)
         if self.effects and inputs is None:
             raise ValueError("effects need their inputs (gravity torques, time)")
         joint_names = list(cache.params.chain.joint_names)
@@ -206,7 +215,10 @@ class SensorResidual(Objective):
             points = pts.reshape(-1, 3) if pts.size else self.start.points
         rot = x[self.blocks["rotation"]]
         rotation = self.start.rotation @ pin.exp3(rot) if rot.size else self.start.rotation
-        return TargetEstimate(registrations[0], points, rotation, registrations)
+        conditions = None
+        if self._conditional:
+            conditions = row_conditions(self.effects, self.effect_values(x), self.inputs, self.conditions)
+        return TargetEstimate(registrations[0], points, rotation, registrations, conditions)
 
     def row_frames(self, target: TargetEstimate) -> tuple[np.ndarray, np.ndarray]:
         """Omega and tau of each row's session: (3, 3) and (3,) with one session,
@@ -224,7 +236,9 @@ class SensorResidual(Objective):
         return list(zip(range(self.n_sessions), self._session_rows, target.registrations))
 
     def _registered(self, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
-        """Omega y + tau of each row's session for base-frame points ``world`` (K, P, 3) [m]."""
+        """Omega f_k y + tau of each row's session for base-frame points ``world`` (K, P, 3) [m] (eq T1)."""
+        if target.conditions is not None:
+            world = target.conditions.world(world)
         if self.n_sessions == 1:
             return target.registration.apply_points(world)
         omega, tau = self.row_frames(target)
@@ -235,8 +249,8 @@ class SensorResidual(Objective):
         x = np.asarray(x, dtype=float)
         return [x[sl] for sl in self._effect_slices]
 
-    def _sensor_terms(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        """Sensor scale s and drift offset t_k u (K, 3) at ``x``."""
+    def _sensor_terms(self, x: np.ndarray, target: TargetEstimate | None = None) -> tuple[float, np.ndarray]:
+        """Sensor scale s and drift offset t_k u (K, 3) at ``x``, plus the pause steps d_k of ``target`` (eq T2)."""
         scale, drift = 0.0, np.zeros((self.g.shape[0], 3))
         for effect, sl in zip(self.effects, self._effect_slices):
             if effect.type == "sensor_scale":
@@ -244,6 +258,8 @@ class SensorResidual(Objective):
             elif effect.type == "drift":
                 assert self.inputs is not None and self.inputs.time is not None  # checked in __init__
                 drift = self.inputs.time[:, None] * x[sl]
+        if target is not None and target.conditions is not None and target.conditions.steps is not None:
+            drift = drift + target.conditions.steps
         return scale, drift
 
     def _state(self, x: npt.ArrayLike):
@@ -276,8 +292,9 @@ class SensorResidual(Objective):
         return self._sensed(x, target, world)
 
     def _sensed(self, x: np.ndarray, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
-        scale, drift = self._sensor_terms(x)
+        scale, drift = self._sensor_terms(x, target)
         if self.n_sessions == 1:
+            world = world if target.conditions is None else target.conditions.world(world)
             return sensed_points(target.registration, world, scale, drift)
         return (1.0 + scale) * (self._registered(target, world) + drift[:, None, :])
 
@@ -348,16 +365,19 @@ class SensorResidual(Objective):
         kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
         # einsum in the order of 6975758's code: the same arithmetic, the same fits (pincal.residuals.so3)
         turn = "ij,knj->kin" if omega.ndim == 2 else "kij,knj->kin"  # one session, or each row's
+        factor = 1.0 if target.conditions is None or target.conditions.factor is None \
+            else target.conditions.factor[:, None, None]  # f_k of eq T1 scales every column of y
         for p in range(n_points):  # Omega (v + w x o), the point's velocity in the base frame turned
-            rows_pos[:, p, :, kin] = np.einsum(turn, omega, sens.point_velocity(world[:, p, :]))
+            rows_pos[:, p, :, kin] = np.einsum(turn, omega, sens.point_velocity(world[:, p, :])) * factor
         if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi), per session
+            scaled = world if target.conditions is None else target.conditions.world(world)
             for s, rows, registration in self._session_blocks(target):
                 col, om = reg.start + 6 * s, registration.rotation
                 rows_pos[rows, ..., col : col + 3] = -np.einsum(
-                    "ij,kpjl,lm->kpim", om, skew(world[rows]), pin.Jexp3(x[col : col + 3]))
+                    "ij,kpjl,lm->kpim", om, skew(scaled[rows]), pin.Jexp3(x[col : col + 3]))
                 rows_pos[rows, ..., col + 3 : col + 6] = np.eye(3)
         if pts.stop > pts.start:
-            rotated = omega @ poses.tool_rotations  # Omega R_k
+            rotated = omega @ poses.tool_rotations * factor  # Omega R_k (f_k)
             for p in range(n_points):
                 if self.point_basis is None:
                     rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
@@ -413,9 +433,10 @@ class SensorResidual(Objective):
         poses, sens, target, world = state
         omega, _ = self.row_frames(target)
         omega_t = np.swapaxes(omega, -1, -2)
-        scale, drift = self._sensor_terms(x)
+        scale, drift = self._sensor_terms(x, target)
         lin = {
             "state": state,
+            "omega": omega,
             "offsets": (world - sens.origin[:, None, :]) @ omega_t,
             "scale": scale,
             "sensed": self._registered(target, world) + drift[:, None, :],
@@ -425,8 +446,10 @@ class SensorResidual(Objective):
             lin["jlog"] = jlog3(relative)
             lin["left"] = lin["jlog"] @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
         if joints:
-            lin["joint_points"] = _point_columns(sens.joint_linear @ omega_t, sens.joint_angular @ omega_t,
-                                                 lin["offsets"])
+            lin["joint_points"] = point_columns(sens.joint_linear @ omega_t, sens.joint_angular @ omega_t,
+                                                lin["offsets"])
+            if target.conditions is not None and target.conditions.factor is not None:  # eq T1
+                lin["joint_points"] *= target.conditions.factor[:, None, None, None]
             if self.G is not None:
                 lin["joint_turns"] = lin["left"] @ sens.joint_angular.transpose(0, 2, 1)
         return lin
@@ -439,6 +462,8 @@ class SensorResidual(Objective):
         if effect.type == "drift":
             assert self.inputs is not None and self.inputs.time is not None  # drift is offered only with a time column
             return np.broadcast_to(self.inputs.time[:, None, None, None] * np.eye(3), (k, n_points, 3, 3))
+        if effect.type in ("thermal", "pause_step"):  # thermal and pause steps have their inputs (offered with them)
+            return condition_columns(effect, cast(EffectInputs, self.inputs), lin["state"][3], lin["omega"])
         return np.zeros((k, n_points, 3, effect.n_values))
 
     def _orientation_jacobian(self, x, lin: dict) -> np.ndarray:
@@ -462,16 +487,3 @@ class SensorResidual(Objective):
         rows *= self.v[:, None, None]
         return rows.reshape(-1, self.n_params)
 
-
-def _point_columns(linear: np.ndarray, angular: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Velocities of points rigidly attached to the tool, per unit of each column:
-    v + w × o for column velocities (K, n, 3) and angular velocities (K, n, 3) at
-    the tool origin and point offsets o (K, P, 3) from it, all in one frame → (K, P, 3, n)."""
-    k, n_points = offsets.shape[:2]
-    out = np.empty((k, n_points, 3, linear.shape[1]))
-    a0, a1, a2 = (angular[:, None, :, i] for i in range(3))  # (K, 1, n)
-    o0, o1, o2 = (offsets[:, :, i, None] for i in range(3))  # (K, P, 1)
-    out[:, :, 0, :] = linear[:, None, :, 0] + (a1 * o2 - a2 * o1)
-    out[:, :, 1, :] = linear[:, None, :, 1] + (a2 * o0 - a0 * o2)
-    out[:, :, 2, :] = linear[:, None, :, 2] + (a0 * o1 - a1 * o0)
-    return out

@@ -31,12 +31,14 @@ from pincal.simulation.sensor import (
     cpa_configurations,
     measure,
     random_configurations,
+    simulated_conditions,
     simulated_shifts,
+    warm_up,
 )
 
 __all__ = [
     "DEFAULT_TOOL_XYZ", "DEFAULT_TOOL_RPY", "SimulationSettings", "SimulatedExperiment", "simulate_experiment",
-    "SECONDS_PER_ROW",
+    "SECONDS_PER_ROW", "PAUSE_GAP_S",
 ]
 
 #: The arbitrary tool F_T (flange_T_tool): TCP 62 mm off the last axis.
@@ -101,7 +103,10 @@ def simulate_experiment(
     left as it was.
     ``effects`` are injected into the measurements without being declared; the
     rows get a ``time`` column (:data:`SECONDS_PER_ROW` apart, validation rows
-    interleaved with the calibration rows) when there are effects.
+    interleaved with the calibration rows) when there are effects; with a ``thermal`` effect a
+    ``temperature_c`` column, a warm-up from 20 to 26 °C (:func:`pincal.simulation.sensor.warm_up`); with a
+    ``pause_step`` the rows stop for :data:`PAUSE_GAP_S` halfway through the calibration and validation rows
+    and the registration steps by it after the pause.
     """
     rng = np.random.default_rng(settings.seed)
     tool = pose_from_xyz_rpy(DEFAULT_TOOL_XYZ, DEFAULT_TOOL_RPY) if tool is None else tool
@@ -115,19 +120,27 @@ def simulate_experiment(
         q_cal = random_configurations(chain, rng, settings.n_calibration)
         q_val = random_configurations(chain, rng, settings.n_validation)
         times = _row_times(effects, len(q_cpa), len(q_cal), len(q_val))
+        stepped = None
+        if any(e.type == "pause_step" for e, _ in effects):  # a pause halfway through the late rows
+            assert times is not None  # effects give times
+            halfway = SECONDS_PER_ROW * (len(q_cpa) + (len(q_cal) + len(q_val)) // 2)
+            stepped = times >= halfway
+            times = times + PAUSE_GAP_S * stepped
+        temperature = warm_up(times) if times is not None and any(e.type == "thermal" for e, _ in effects) else None
+        conditions = simulated_conditions(effects, temperature, stepped)
         shifts = None  # over the whole session: approach flanks carry from one part to the next
         if effects:
             shifts = simulated_shifts(chain, np.vstack([q_cpa, q_cal, q_val]), effects, times)
         cut = np.cumsum([len(q_cpa), len(q_cal)])
-        cpa = measure(chain, q_cpa, registration, rng, sigma_p, sigma_a, "cpa",
-                      effects=effects, time=_part(times, 0, cut[0]), shifts=_part(shifts, 0, cut[0]))
-        cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration",
-                      effects=effects, time=_part(times, cut[0], cut[1]), shifts=_part(shifts, cut[0], cut[1]))
+        parts = [slice(0, cut[0]), slice(cut[0], cut[1]), slice(cut[1], None)]
         val_scale = 1.0 if settings.validation_noise else 0.0
-        val = measure(
-            chain, q_val, registration, rng, sigma_p * val_scale, sigma_a * val_scale, "validation",
-            effects=effects, time=_part(times, cut[1], None), shifts=_part(shifts, cut[1], None),
-        )
+        cpa, cal, val = (
+            measure(chain, q, registration, rng, sigma_p * noise, sigma_a * noise, role, effects=effects,
+                    time=_part(times, p.start, p.stop), shifts=_part(shifts, p.start, p.stop),
+                    conditions=None if conditions is None else conditions.select(p),
+                    temperature=_part(temperature, p.start, p.stop))
+            for q, p, role, noise in zip((q_cpa, q_cal, q_val), parts, ("cpa", "calibration", "validation"),
+                                         (1.0, 1.0, val_scale)))
     assert cpa.rotations is not None and cal.rotations is not None  # measured with orientations (measure's default)
     calibration = MeasurementSet(
         joint_names=cpa.joint_names,
@@ -136,7 +149,7 @@ def simulate_experiment(
         rotations=np.vstack([cpa.rotations, cal.rotations]),
         roles=np.concatenate([cpa.roles, cal.roles]),
         lines=np.arange(2, cpa.n_rows + cal.n_rows + 2),
-        extra={} if times is None else {"time": times[: cpa.n_rows + cal.n_rows]},
+        extra={name: np.concatenate([cpa.extra[name], cal.extra[name]]) for name in cpa.extra},
         source="<simulation>",
     )
     return SimulatedExperiment(calibration, val, truth, registration, tool)
@@ -144,6 +157,8 @@ def simulate_experiment(
 
 #: Time between simulated rows when effects are injected [s].
 SECONDS_PER_ROW = 10.0
+#: The pause of a simulated ``pause_step`` [s]: 8 h, the real case of issue 20 (an 8.4 h pause stepped 76 µm).
+PAUSE_GAP_S = 8 * 3600.0
 
 
 def _row_times(effects, n_cpa: int, n_calibration: int, n_validation: int) -> np.ndarray | None:

@@ -19,11 +19,17 @@ from pincal.model.effects import (
     sensed_points,
 )
 from pincal.model.sensor import Registration
+from pincal.model.thermal import RowConditions
 
 __all__ = [
     "DEFAULT_REGISTRATION", "cpa_configurations", "measure", "simulated_shifts", "perfect_measurements",
-    "random_configurations",
+    "random_configurations", "REFERENCE_C", "TEMPERATURE_COLUMN", "warm_up", "simulated_conditions",
 ]
+
+#: The temperature at which a simulated robot's URDF lengths hold [°C]: ISO 1's reference temperature.
+REFERENCE_C = 20.0
+#: The column simulated temperatures are written to [°C] (the first of pincal.model.thermal.TEMPERATURE_COLUMNS).
+TEMPERATURE_COLUMN = "temperature_c"
 
 #: The arbitrary sensor registration of the simulations: sensor_T_base.
 DEFAULT_REGISTRATION = Registration(
@@ -58,6 +64,8 @@ def measure(
     effects: Sequence[tuple[Effect, np.ndarray]] = (),
     time: np.ndarray | None = None,
     shifts: np.ndarray | None = None,
+    conditions: RowConditions | None = None,
+    temperature: np.ndarray | None = None,
 ) -> MeasurementSet:
     """What the simulated sensor reports at configurations ``q`` (eq 20–22).
 
@@ -73,9 +81,12 @@ def measure(
         shifts: joint shifts of these rows (K, N) when computed over a longer
             sequence (approach flanks depend on the previous row); default:
             computed from these rows alone (:func:`simulated_shifts`).
+        conditions: the rows' thermal expansion and pause steps (:func:`simulated_conditions`), or None.
+        temperature: row temperatures [°C], written as the extra column :data:`TEMPERATURE_COLUMN`.
     """
     actual = np.asarray(q, dtype=float)
-    scale, drift = 0.0, np.zeros((len(q), 3))
+    scale = 0.0
+    drift: np.ndarray | None = np.zeros((len(q), 3))
     if effects:
         if shifts is None:
             shifts = simulated_shifts(chain, actual, effects, time)
@@ -90,6 +101,8 @@ def measure(
     tool_rotations, tool_positions = chain.tool_poses(actual)
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
     world = points_in_base(tool_positions, tool_rotations, points)
+    if conditions is not None:  # eq T1-T2 of pincal.model.thermal
+        world, drift = conditions.world(world), conditions.offsets(drift)
     sensed = sensed_points(registration, world, scale, drift)
     sensed = sensed + rng.normal(0.0, 1.0, sensed.shape) * sigma_pos_m
     rotations = None
@@ -104,9 +117,34 @@ def measure(
         rotations=rotations,
         roles=np.array([role] * len(q), dtype=object),
         lines=np.arange(2, len(q) + 2),
-        extra={} if time is None else {"time": np.asarray(time, dtype=float)},
+        extra={**({} if time is None else {"time": np.asarray(time, dtype=float)}),
+               **({} if temperature is None else {TEMPERATURE_COLUMN: np.asarray(temperature, dtype=float)})},
         source="<simulation>",
     )
+
+
+def warm_up(time: np.ndarray, start_c: float = REFERENCE_C, rise_k: float = 6.0, tau_s: float = 1800.0) -> np.ndarray:
+    """A cell warming up from ``start_c``: T(t) = start + rise (1 − exp(−t / τ)) [°C] at times ``time`` [s]
+    from the start (default 20 → 26 °C with τ = 30 min, the exponential approach of a machine warming up)."""
+    return start_c + rise_k * (1.0 - np.exp(-np.asarray(time, dtype=float) / tau_s))
+
+
+def simulated_conditions(effects: Sequence[tuple[Effect, np.ndarray]], temperature: np.ndarray | None,
+                         stepped: np.ndarray | None) -> RowConditions | None:
+    """The rows' changes of eq T1–T2 (:mod:`pincal.model.thermal`) under ``effects``: a ``thermal`` α
+    scales lengths by 1 + α (T − :data:`REFERENCE_C`) at row temperatures ``temperature`` [°C]; a
+    ``pause_step`` d adds d to the rows where ``stepped`` (K,) is true (after the pause). None without either."""
+    expansion = steps = None
+    for effect, value in effects:
+        if effect.type == "thermal":
+            if temperature is None:
+                raise PincalError("a simulated thermal expansion needs row temperatures")
+            expansion = float(value[0]) * (np.asarray(temperature, dtype=float) - REFERENCE_C)
+        elif effect.type == "pause_step":
+            if stepped is None:
+                raise PincalError("a simulated pause step needs the rows after the pause")
+            steps = np.asarray(stepped, dtype=float)[:, None] * np.asarray(value, dtype=float).reshape(1, 3)
+    return None if expansion is None and steps is None else RowConditions(expansion, steps)
 
 
 def simulated_shifts(
