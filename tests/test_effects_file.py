@@ -122,17 +122,23 @@ def test_every_effect_type_reads_back_with_its_unit_side_and_shift(chain, tmp_pa
                {"type": "backlash", "joint": "wrist_3_joint", "value": 4e-4, "source": "approach"},
                {"type": "coupling", "joint": "wrist_1_joint", "value": 2e-3, "driver": "elbow_joint"},
                {"type": "drift", "joint": None, "value": [1e-7, 0.0, -2e-7]},
-               {"type": "sensor_scale", "joint": None, "value": 1e-5}]
-    report = {"effects": entries, "payload_kg": 1.5, "time_reference_s": 12.0,
+               {"type": "sensor_scale", "joint": None, "value": 1e-5},
+               {"type": "pause_step", "joint": None, "value": [0.0, -7.6e-5, 0.0], "pause": 1},
+               {"type": "thermal", "joint": None, "value": 1.2e-5}]
+    report = {"effects": entries, "payload_kg": 1.5, "time_reference_s": 12.0, "temperature_column": "temperature_c",
+              "temperature_range_c": {"min": 20.0, "max": 26.0, "mean": 23.5},
               "tool": {"parent_link": "tool0", "points_m": [[0.0, 0.0, 0.1], [0.02, 0.0, 0.1]]},
               "chain": {"joints": list(chain.joint_names), "joint_kinds": ["revolute"] * 6}, "urdf_sha256": None}
     path = write_effects_file(tmp_path / "x.urdf", tmp_path / "REPORT.json", report)
     assert path == tmp_path / "x.effects.yaml"
     document = yaml.safe_load(path.read_text(encoding="utf-8"))
     assert document["schema"] == SCHEMA and [e["side"] for e in document["effects"]] == ["joint"] * 7 + [
-        "measurement"] * 2
+        "measurement"] * 3 + ["geometry"]  # thermal scales the URDF's lengths: no joint shift
     assert [e["unit"] for e in document["effects"]] == ["rad/(N·m)"] * 2 + ["(relative)", "rad", "rad", "rad",
-                                                                           "(relative)", "m/s", "(relative)"]
+                                                                           "(relative)", "m/s", "(relative)", "m",
+                                                                           "1/K"]
+    assert "(T - 23.5 degC)" in document["effects"][-1]["equation"]
+    assert "after the calibration's pause" in document["effects"][-2]["equation"]
     carried = read_effects_file(path)
     assert carried.payload_point_m.tolist() == [0.01, 0.0, 0.1] and carried.payload_kg == 1.5
     rows = _rows(chain, random_configurations(chain, np.random.default_rng(4), 30))

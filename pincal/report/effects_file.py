@@ -11,8 +11,10 @@ prismatic joint) a controller takes
     actual_j = q_j + Σ shift_j(q)  for each joint effect on j (shift formulas of the module
                                    docstring of :mod:`pincal.model.effects`, in words per entry)
 
-and gives ``actual`` to the corrected URDF's kinematics. ``drift`` and ``sensor_scale`` describe the
-calibration's sensor, not the robot: listed with ``side: measurement``, for no controller.
+and gives ``actual`` to the corrected URDF's kinematics. ``drift``, ``sensor_scale`` and ``pause_step``
+describe the calibration's sensor, not the robot: listed with ``side: measurement``, for no controller.
+``thermal`` (eq T1 of :mod:`pincal.model.thermal`) scales every length of the URDF with the arm's
+temperature: ``side: geometry``, for a controller that reads that temperature.
 :func:`read_effects_file` reads the file back (the effects and couplings as pincal's own types).
 """
 
@@ -62,6 +64,11 @@ def written_line(path: str | Path, report: Mapping[str, Any]) -> str:
     return f"the URDF cannot carry {carried(report)}: written to {path} (for a controller) and the report"
 
 
+def _side(effect: Effect) -> str:
+    """``joint`` (a shift of a joint value), ``geometry`` (the URDF's lengths) or ``measurement`` (the sensor's)."""
+    return "measurement" if effect.type in SENSOR_EFFECTS else "geometry" if effect.type == "thermal" else "joint"
+
+
 def _equation(effect: Effect, entry: Mapping[str, Any]) -> str:
     """The shift of an effect in words (:mod:`pincal.model.effects`), for a controller author: q the joint
     values after the couplings, tau(q) the gravity torques there [N·m, or N for a prismatic joint]."""
@@ -85,6 +92,14 @@ def _equation(effect: Effect, entry: Mapping[str, Any]) -> str:
     if effect.type == "drift":
         return ("measurement side, not for a controller: the sensor's registration translation moved by "
                 f"(t - {entry.get('time_reference_s')} s) x value [m/s] inside the time span of the calibration")
+    if effect.type == "pause_step":
+        return ("measurement side, not for a controller: the sensor's registration translation moved by value [m] "
+                "after the calibration's pause number pause")
+    if effect.type == "thermal":
+        return (f"every length of the URDF (joint origins' xyz and the tool) x (1 + value x (T - "
+                f"{entry.get('temperature_reference_c')} degC)), T the arm's temperature in the calibration's "
+                f"column {entry.get('temperature_column')!r}; held at the ends of the fitted range "
+                f"{entry.get('temperature_range_c')} degC, never extrapolated")
     return "measurement side, not for a controller: the sensor's lengths were scaled by 1 + value"
 
 
@@ -103,9 +118,12 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
     for entry in report.get("effects") or []:
         effect, _ = effect_from_dict(entry)
         keep = {k: v for k, v in entry.items() if k not in ("target_change", "advice")}
-        side = "measurement" if effect.type in SENSOR_EFFECTS else "joint"
-        effects.append({**keep, "unit": effect.unit(prismatic=kinds.get(effect.joint) == "prismatic"), "side": side,
-                        "equation": _equation(effect, {"time_reference_s": report.get("time_reference_s")})})
+        span = report.get("temperature_range_c") or {}
+        context = {"time_reference_s": report.get("time_reference_s"), "temperature_column": report.get(
+            "temperature_column"), "temperature_reference_c": span.get("mean"),
+            "temperature_range_c": [span.get("min"), span.get("max")]}
+        effects.append({**keep, "unit": effect.unit(prismatic=kinds.get(effect.joint) == "prismatic"),
+                        "side": _side(effect), "equation": _equation(effect, context)})
     return {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
@@ -116,7 +134,8 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
         "apply": ["r = the controller's joint readings [rad, or m for a prismatic joint]",
                   "q = r, then each entry of couplings applied (every driver from r as read; q = r without any)",
                   "actual = q + the shift of each entry of effects with side joint, evaluated at q",
-                  "the joint values of the URDF named in urdf are actual; side measurement is the sensor's"],
+                  "the joint values of the URDF named in urdf are actual; side measurement is the sensor's",
+                  "side geometry (thermal): the URDF's lengths at the arm's temperature, as its equation says"],
         "tool_parent": tool.get("parent_link"),
         "payload_kg": float(report.get("payload_kg", 0.0)),
         "payload_point_m": points.mean(axis=0).tolist(),
