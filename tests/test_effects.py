@@ -195,3 +195,17 @@ def test_a_few_held_out_rows_veto_only_a_worse_total():
     before = PoseErrors(np.full((MIN_PAIRED_ROWS - 4, 1), 0.6), None)
     assert held_out_verdict(before, PoseErrors(before.position_m / 6, None), 2e-5, None) == "adopted"
     assert "too few for a paired test" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None), 2e-5, None)
+
+
+def test_a_report_effect_with_the_wrong_number_of_values_is_refused_in_one_line():
+    """A thermal α given as two numbers, a pause step as two, a value null: refused, not run as α = 1."""
+    from pincal.errors import PincalError
+    from pincal.model.effects import effect_from_dict
+
+    for entry in ({"type": "thermal", "joint": None, "value": [1.0, 2.0]},
+                  {"type": "pause_step", "joint": None, "value": [1e-6, 2e-6], "pause": 1},
+                  {"type": "compliance", "joint": "j", "value": None},
+                  {"type": "drift", "joint": None, "value": [0.0, float("nan"), 0.0]}):
+        with pytest.raises(PincalError, match="bad effect entry .* must be [13] finite number"):
+            effect_from_dict(entry)
+    assert effect_from_dict({"type": "pause_step", "joint": None, "value": [1e-6, 2e-6, 0.0], "pause": 1})[1].size == 3

@@ -138,6 +138,9 @@ def test_every_effect_type_reads_back_with_its_unit_side_and_shift(chain, tmp_pa
                                                                            "(relative)", "m/s", "(relative)", "m",
                                                                            "1/K"]
     assert "(T - 23.5 degC)" in document["effects"][-1]["equation"]
+    assert (document["effects"][-1]["temperature_reference_c"], document["effects"][-1]["temperature_range_c"],
+            document["effects"][-1]["temperature_column"]) == (23.5, [20.0, 26.0], "temperature_c")
+    assert any("side geometry" in line for line in document["apply"])
     assert "after the calibration's pause" in document["effects"][-2]["equation"]
     carried = read_effects_file(path)
     assert carried.payload_point_m.tolist() == [0.01, 0.0, 0.1] and carried.payload_kg == 1.5

@@ -77,6 +77,8 @@ def _thermal(notes: list[str], alpha: float, effects: dict, data: MeasurementSet
     """α (T_k − T_ref) of each row, held inside the fitted range, and its use; ``notes`` gains its note."""
     fitted = TemperatureRange.read(effects.get("temperature_range_c"), str(report_path))
     name = name or effects.get("temperature_column")
+    if name is not None and not isinstance(name, str):
+        raise PincalError(f"{report_path}: temperature_column must be a column name; rewrite it with pincal diagnose")
     found = temperature_column(data, name)
     if found is None:
         raise PincalError(f"{data.source}: the report has a thermal expansion; the rows need their temperature [°C] "
@@ -100,7 +102,7 @@ def _steps(notes: list[str], stepping, effects: dict, data: MeasurementSet, held
     """d_k of each row (K, 3) [m] (:data:`NEAREST_SEGMENT`) and its use; ``notes`` gains its note."""
     where = str(report_path)
     pauses = Pause.read(effects.get("pauses"), where)
-    spans = read_time_spans(effects.get("pause_spans_s"), where)
+    spans = read_time_spans(effects.get("pause_spans_s"), where, "pause_spans_s")
     if spans is None:
         raise PincalError(f"{where}: pause steps need pause_spans_s (the fitted rows' time span of each session with "
                           "a pause); rewrite the report with pincal diagnose")

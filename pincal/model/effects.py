@@ -388,7 +388,10 @@ def effect_from_dict(entry: dict) -> tuple[Effect, np.ndarray]:
             )
         effect = Effect(kind, entry.get("joint"), source=entry.get("source"), driver=entry.get("driver"),
                         pause=None if entry.get("pause") is None else int(entry["pause"]))
-        return effect, np.atleast_1d(np.asarray(entry["value"], dtype=float))
+        values = np.atleast_1d(np.asarray(entry["value"], dtype=float))
+        if values.shape != (effect.n_values,) or not np.isfinite(values).all():
+            raise ValueError(f"'value' must be {effect.n_values} finite number(s)")
+        return effect, values
     except (KeyError, TypeError, ValueError) as exc:
         raise PincalError(f"bad effect entry {entry} in the report ({exc})") from None
 
@@ -424,7 +427,7 @@ def time_spans(time: npt.ArrayLike, sessions: npt.ArrayLike) -> tuple[TimeSpan, 
     return tuple(spans)
 
 
-def read_time_spans(entries, where: str) -> tuple[TimeSpan, ...] | None:
+def read_time_spans(entries, where: str, key: str = "time_spans_s") -> tuple[TimeSpan, ...] | None:
     """REPORT.json ``time_spans_s`` (a list of :meth:`TimeSpan.as_dict`) back; None if absent.
 
     Raises:
@@ -439,7 +442,7 @@ def read_time_spans(entries, where: str) -> tuple[TimeSpan, ...] | None:
         spans = ()
     if not spans or not all(np.isfinite([s.first, s.last, s.mean]).all() and s.first <= s.mean <= s.last
                             for s in spans):
-        raise PincalError(f"{where}: time_spans_s must be a list of {{session, first, last, mean}} with "
+        raise PincalError(f"{where}: {key} must be a list of {{session, first, last, mean}} with "
                           "first <= mean <= last (finite seconds); rewrite it with pincal diagnose")
     return spans
 

@@ -12,7 +12,10 @@ tool); scaling every translation by f_k scales every term, so
 
     y_k(T_k) = f_k y_k,      orientations unchanged                                   (T1)
 
-— the measured point scales about the base origin. α is bounded physically
+— the measured point scales about the base origin: the origin of the URDF's root link, in whose
+frame y is written. Every fixed placement from the root to the first calibrated joint (a pedestal, a
+torso, a mobile base's height) is one of the t_i and grows too: the root is taken as the point the
+robot stands on, the one that does not move with temperature. α is bounded physically
 (:data:`ALPHA_RANGE`): steel 11–13, aluminium ~23 µm/m/K (issue 20: 5–30 µm/m/K).
 The calibrated geometry holds at T_ref; a row outside the fitted temperature range
 [T_min, T_max] is held at its nearer end (never extrapolated, :meth:`TemperatureRange.held`).

@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
-from typing import Annotated, TypedDict, cast
+from typing import TYPE_CHECKING, Annotated, TypedDict, cast
 
 import numpy as np
 
@@ -24,7 +24,9 @@ from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.outputs import file_sha256, replacing, write_text
 from pincal.planning.collisions import Clearance
 from pincal.planning.design import CRITERIA
-from pincal.planning.planner import Plan, PlanSettings
+
+if TYPE_CHECKING:  # annotations only: the REPORT.json loader reads PLAN.json without the planner's imports
+    from pincal.planning.planner import Plan, PlanSettings
 
 __all__ = [
     "PLAN_VERSION", "PlanSources", "PlanChain", "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",

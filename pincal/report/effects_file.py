@@ -122,6 +122,10 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
         context = {"time_reference_s": report.get("time_reference_s"), "temperature_column": report.get(
             "temperature_column"), "temperature_reference_c": span.get("mean"),
             "temperature_range_c": [span.get("min"), span.get("max")]}
+        if effect.type == "thermal":  # what a controller needs besides alpha: T_ref, the column, the range [°C]
+            keep.update(temperature_column=context["temperature_column"],
+                        temperature_reference_c=context["temperature_reference_c"],
+                        temperature_range_c=context["temperature_range_c"])
         effects.append({**keep, "unit": effect.unit(prismatic=kinds.get(effect.joint) == "prismatic"),
                         "side": _side(effect), "equation": _equation(effect, context)})
     return {
@@ -135,7 +139,8 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
                   "q = r, then each entry of couplings applied (every driver from r as read; q = r without any)",
                   "actual = q + the shift of each entry of effects with side joint, evaluated at q",
                   "the joint values of the URDF named in urdf are actual; side measurement is the sensor's",
-                  "side geometry (thermal): the URDF's lengths at the arm's temperature, as its equation says"],
+                  *(["side geometry (thermal): the URDF's lengths at the arm's temperature, as its equation says"]
+                    if any(e["side"] == "geometry" for e in effects) else [])],
         "tool_parent": tool.get("parent_link"),
         "payload_kg": float(report.get("payload_kg", 0.0)),
         "payload_point_m": points.mean(axis=0).tolist(),
