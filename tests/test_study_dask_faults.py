@@ -135,10 +135,13 @@ def test_a_lost_remote_scheduler_stops_the_study_in_one_line_keeping_what_finish
         start("distributed.cli.dask_worker", "--scheduler-file", str(scheduler_file), "--nworkers", "1",
               "--nthreads", "1", "--no-dashboard", stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + HANG_S
-        while not scheduler_file.exists():
+        address = None
+        while address is None:  # the scheduler writes its file in place: it may exist and be empty or partial
             assert time.monotonic() < deadline and scheduler.poll() is None, "the scheduler did not start"
-            time.sleep(0.01)
-        address = json.loads(scheduler_file.read_text(encoding="utf-8"))["address"]
+            try:
+                address = json.loads(scheduler_file.read_text(encoding="utf-8"))["address"]
+            except (FileNotFoundError, json.JSONDecodeError, KeyError):
+                time.sleep(0.01)
         arguments = [a if a != "local" else address for a in ARGUMENTS]
         study = start("pincal", "study", *arguments, "--out", str(out), stdout=subprocess.PIPE,
                       stderr=subprocess.PIPE, text=True)
