@@ -17,7 +17,7 @@ import numpy as np
 
 from pincal.errors import PincalError
 from pincal.measurements.data import MeasurementSet
-from pincal.model.effects import Effect, read_time_spans, time_column
+from pincal.model.effects import Effect, own_spans, read_time_spans, time_column
 from pincal.model.thermal import Pause, RowConditions, TemperatureRange, pause_rows, temperature_column
 from pincal.report.model_diagnosis import PauseJson, TemperatureRangeJson
 from pincal.report.model_evaluation import PauseStepUse, ThermalUse
@@ -111,12 +111,7 @@ def _steps(notes: list[str], stepping, effects: dict, data: MeasurementSet, held
         raise PincalError(f"{data.source}: the report has pause steps; the rows need their time column "
                           f"'{effects.get('time_column') or 'time'}' [s]")
     first, last = np.array([s.first for s in spans]), np.array([s.last for s in spans])
-    index = {s.session: i for i, s in enumerate(spans)}
-    own = np.array([index.get(name, -1) if name is not None else -1 for name in held[0]], dtype=np.intp)
-    for g in np.unique(held[1][own < 0]):  # one span per evaluated session: the nearest to its median time
-        members = np.flatnonzero((held[1] == g) & (own < 0))
-        centre = float(np.median(time[members]))
-        own[members] = int(np.argmin(np.maximum(np.maximum(first - centre, centre - last), 0.0)))
+    own = own_spans(time, spans, held[0], held[1])  # one span per evaluated session, as a drift's
     outside = (time < first[own]) | (time > last[own])
     applies = pause_rows(time, [spans[i].session for i in own], pauses)
     numbers = {p.number: p for p in pauses}

@@ -55,7 +55,7 @@ __all__ = [
     "JOINT_EFFECTS", "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
     "TIME_COLUMNS", "Effect", "EffectInputs", "gravity_torques", "time_column", "effect_inputs", "approach_flank",
     "sensed_points", "joint_basis", "joint_shifts", "parse_effect", "effect_to_dict", "effect_from_dict", "TimeSpan",
-    "time_spans", "read_time_spans", "DriftOffsets", "held_times", "drift_offsets",
+    "time_spans", "read_time_spans", "DriftOffsets", "own_spans", "held_times", "drift_offsets",
 ]
 
 JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash", "coupling")
@@ -462,6 +462,23 @@ class DriftOffsets:
     gap: np.ndarray
 
 
+def own_spans(
+    time: np.ndarray, spans: Sequence[TimeSpan], held_session: Sequence[str | None] | np.ndarray,
+    group: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each row's span, an index in ``spans`` (K,): its session's (``held_session``); else one for all rows of its
+    ``group`` (default each row alone), the nearest their median time: a session is never split between two."""
+    first, last = (np.array([getattr(s, end) for s in spans]) for end in ("first", "last"))
+    index = {s.session: i for i, s in enumerate(spans)}
+    own = np.array([index.get(name, -1) if name is not None else -1 for name in held_session], dtype=np.intp)
+    group = np.arange(len(own)) if group is None else np.asarray(group)
+    for g in np.unique(group[own < 0]):
+        members = np.flatnonzero((group == g) & (own < 0))
+        centre = float(np.median(np.asarray(time, dtype=float)[members]))
+        own[members] = int(np.argmin(np.maximum(np.maximum(first - centre, centre - last), 0.0)))
+    return own
+
+
 def held_times(
     time: np.ndarray, spans: Sequence[TimeSpan], held_session: Sequence[str | None] | np.ndarray,
     group: np.ndarray | None = None,
@@ -469,16 +486,8 @@ def held_times(
     """The time [s] a drift is taken at for rows of times ``time`` (K,), and each
     row's distance from its span [s] (0 inside), (K,) each (:func:`drift_offsets`)."""
     time = np.asarray(time, dtype=float)
-    first = np.array([s.first for s in spans])
-    last = np.array([s.last for s in spans])
-    mean = np.array([s.mean for s in spans])
-    index = {s.session: i for i, s in enumerate(spans)}
-    own = np.array([index.get(name, -1) if name is not None else -1 for name in held_session], dtype=np.intp)
-    group = np.arange(time.size) if group is None else np.asarray(group)
-    for g in np.unique(group[own < 0]):  # one span per evaluated session: the nearest to its median time
-        members = np.flatnonzero((group == g) & (own < 0))
-        centre = float(np.median(time[members]))
-        own[members] = int(np.argmin(np.maximum(np.maximum(first - centre, centre - last), 0.0)))
+    first, last, mean = (np.array([getattr(s, key) for s in spans]) for key in ("first", "last", "mean"))
+    own = own_spans(time, spans, held_session, group)
     gap = np.maximum(np.maximum(first[own] - time, time - last[own]), 0.0)
     reestimated = np.array([name is None for name in held_session], dtype=bool)
     return np.where(reestimated, np.clip(time, first[own], last[own]), np.where(gap == 0.0, time, mean[own])), gap
@@ -490,11 +499,8 @@ def drift_offsets(
 ) -> DriftOffsets:
     """The drift's offsets at rows of times ``time`` (K,) [s], never extrapolated.
 
-    S is the span of the session ``held_session[k]`` names (the session whose
-    registration the row uses). A name without a span, or None, takes one span
-    for all the rows of its evaluated session (``group`` (K,), default each row
-    alone): the span nearest the group's median time, so that one session is
-    never split between two spans. Inside S (first_S <= t <= last_S) the offset
+    S is the row's span (:func:`own_spans`: that of the session ``held_session[k]``
+    names, whose registration the row uses, else one per ``group``). Inside S (first_S <= t <= last_S) the offset
     is (t − t̄) u as fitted, t̄ = ``reference``, u = ``velocity`` [m/s] (3,);
     outside it the drift is held at S's mean time, (t̄_S − t̄) u: the session's
     average state, where its registration is best determined (t is centred
