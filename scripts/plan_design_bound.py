@@ -1,7 +1,8 @@
 """How close can any N configurations get to the planned/random ratio of issue 9? The continuous bound.
 
     python scripts/plan_design_bound.py [--candidates 2000 10000] [--counts 12 20 40 100] [--draws 200]
-                                        [--measure point|pose] [--realised] [--json PATH]
+                                        [--measure point|pose] [--pool uniform|boundary] [--realised]
+                                        [--json PATH]
 
 Setup of the README's "Honest prediction" KUKA row (tests/test_plan.py): KUKA LWR 4+, full level,
 one point measured at (0.05, 0, 0.07) m in the flange, σ = 0.1 mm, candidates sampled uniformly
@@ -23,6 +24,12 @@ For each candidate count K it prints:
   the median of ``--draws`` random N-subsets, and the ratios plan/random and bound/random, both as
   RMS (sqrt of the traces: the bound is rigorous for it) and as the mean error E‖e‖ the README
   reports (:meth:`DesignProblem.expected_errors`; the bound's E‖e‖ is that of (N M*)⁻¹).
+
+``--pool boundary`` asks whether configurations the uniform sample rarely holds would do better: the
+pool is the K uniform candidates plus K more drawn from the arcsine law within each joint's limits
+(density ∝ 1/√((q − lower)(upper − q)): most of them near a limit, the law that optimal designs of
+polynomial models put their points by). The workspace average, ψ_rand and the random subsets stay on
+the uniform candidates, so the bound is against the same random configurations.
 
 ``--realised`` (first K only) repeats the test's experiment at each N: true robot ~1 mm / 1 mrad
 off, ``--seeds`` noise seeds (default 8, as the test), calibrate (AIC selection) the planned and as
@@ -63,14 +70,16 @@ SIGMA_POS_M = 1e-4
 SIGMA_ROT_RAD = np.radians(0.1)
 
 
-def problem_of(chain: KinematicChain, candidates: np.ndarray, measure: str = "point") -> DesignProblem:
+def problem_of(chain: KinematicChain, candidates: np.ndarray, measure: str = "point",
+               uniform: int | None = None) -> DesignProblem:
     """The design problem ``plan_measurements`` builds for these candidates with seed 0
-    (``measure`` ``point``: the README's row, AIC; ``pose``: item 8's, with the default prior)."""
+    (``measure`` ``point``: the README's row, AIC; ``pose``: item 8's, with the default prior); the
+    workspace is subsampled from the first ``uniform`` candidates (default: all)."""
     pose = measure == "pose"
     model = MeasurementModel(chain, "full", SensorModel(measure, 1), PROBE if pose else POINT,
                              sigma_pos_m=SIGMA_POS_M, sigma_rot_rad=SIGMA_ROT_RAD)
     rng = np.random.default_rng(0)  # the planner's workspace subsample (PlanSettings.seed = 0)
-    workspace = candidates[rng.choice(len(candidates), WORKSPACE_SIZE, replace=False)]
+    workspace = candidates[rng.choice(uniform or len(candidates), WORKSPACE_SIZE, replace=False)]
     return DesignProblem(model.jacobian(candidates), model.kinematic, model.jacobian(candidates[:0]),
                          *model.error_jacobian(workspace),
                          prior_precision=model.prior_precision(Prior()) if pose else None)
@@ -84,15 +93,25 @@ def mean_error_mm(problem: DesignProblem, information: np.ndarray) -> float:
     return float(problem.expected_errors(np.linalg.inv(information))[0].mean())
 
 
-def bound_table(chain: KinematicChain, count: int, counts, draws: int, measure: str = "point") -> dict:
+def boundary_candidates(chain: KinematicChain, count: int, seed: int) -> np.ndarray:
+    """``count`` configurations, each joint from the arcsine law on its limits (most near a limit)."""
+    lower = np.array([joint.lower for joint in chain.joints])
+    upper = np.array([joint.upper for joint in chain.joints])
+    return lower + (upper - lower) * np.random.default_rng(seed).beta(0.5, 0.5, size=(count, len(lower)))
+
+
+def bound_table(chain: KinematicChain, count: int, counts, draws: int, measure: str = "point",
+                pool: str = "uniform") -> dict:
     candidates = sample_candidates(chain, count, seed=0)
-    problem = problem_of(chain, candidates, measure)
+    if pool == "boundary":
+        candidates = np.vstack([candidates, boundary_candidates(chain, count, seed=3)])
+    problem = problem_of(chain, candidates, measure, uniform=count)
     started = time.perf_counter()
     best = continuous_design(problem, "accuracy")
     seconds = time.perf_counter() - started
     H = np.einsum("kim,kin->kmn", problem.blocks, problem.blocks)
     optimum = np.einsum("k,kmn->mn", best.weights, H)  # M(w*), per configuration
-    uniform = H.mean(axis=0)  # M̄
+    uniform = H[:count].mean(axis=0)  # M̄ of the uniform candidates
     psi_rand = trace(problem, uniform)
     out = {"candidates": count, "parameters": problem.n, "psi_star_upper": best.value, "psi_star_lower": best.bound,
            "efficiency": best.efficiency, "iterations": best.iterations, "seconds": seconds,
@@ -164,6 +183,8 @@ def main(argv=None) -> int:
     parser.add_argument("--draws", type=int, default=200)
     parser.add_argument("--measure", choices=("point", "pose"), default="point",
                         help="point: the README's row (default); pose: item 8's 6D setup with the default prior")
+    parser.add_argument("--pool", choices=("uniform", "boundary"), default="uniform",
+                        help="boundary: add as many candidates near the joint limits (arcsine law)")
     parser.add_argument("--realised", action="store_true")
     parser.add_argument("--seeds", type=int, default=8, help="noise seeds of --realised (the test: 8)")
     parser.add_argument("--json", type=Path)
@@ -174,7 +195,7 @@ def main(argv=None) -> int:
     chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
     results = {"tables": []}
     for count in args.candidates:
-        table = bound_table(chain, count, args.counts, args.draws, args.measure)
+        table = bound_table(chain, count, args.counts, args.draws, args.measure, args.pool)
         results["tables"].append(table)
         print(f"K = {count} candidates, {table['parameters']} parameters: psi* in [{table['psi_star_lower']:.5g}, "
               f"{table['psi_star_upper']:.5g}] m^2 (certified efficiency {table['efficiency']:.4f}, "
