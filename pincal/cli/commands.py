@@ -11,14 +11,15 @@ import argparse
 import gc
 import sys
 from collections.abc import Mapping, Sequence
-from typing import Any
-
-import numpy as np
-from threadpoolctl import threadpool_limits
+from typing import TYPE_CHECKING, Any
 
 from pincal.cli.parser import build_parser, selection_criterion
 from pincal.errors import PincalError
-from pincal.fit.metrics import PoseErrors
+
+if TYPE_CHECKING:
+    from contextlib import AbstractContextManager
+
+    from pincal.fit.metrics import PoseErrors
 
 __all__ = ["EXIT_THRESHOLD", "EXIT_USAGE", "EXIT_WARNING", "main", "console"]
 
@@ -55,6 +56,8 @@ def _warned(report: Mapping[str, Any], strict: bool) -> int:
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from pincal.cli.workflows import simulate_to_directory
     from pincal.simulation.paper import SimulationSettings
 
@@ -158,6 +161,7 @@ def _print_level_choice(report: Mapping[str, Any]) -> None:
 
 def _registration_text(registration) -> str:
     """sensor_T_base in one line: translation [m] and rotation vector [deg]."""
+    import numpy as np
     from scipy.spatial.transform import Rotation
 
     turn = np.degrees(Rotation.from_matrix(registration.rotation).as_rotvec())
@@ -191,6 +195,8 @@ def _write_html(html, document: Mapping[str, Any], base, evaluation: dict | None
 
 
 def _print_chain_summary(run) -> None:
+    import numpy as np
+
     result = run.result
     ident = run.report["identifiability"]
     kept = sum(1 for p in run.report["parameters"] if p["calibrated"] is not None)
@@ -452,13 +458,23 @@ _COMMANDS = {
 }
 
 
+def _one_blas_thread() -> AbstractContextManager:
+    """Many small factorisations: one BLAS thread each is faster than a pool that contends for the
+    cores (the study's worker processes get the same setting). threadpoolctl limits the libraries
+    already loaded, so numpy's and scipy's OpenBLAS (two builds) are loaded first, once the arguments
+    are valid."""
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pincal`` console script; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(argv)  # no numpy, scipy or Pinocchio yet: --help and refusals are quick
     try:
-        # Many small factorisations: one BLAS thread each is faster than a pool that
-        # contends for the cores (the study's worker processes get the same setting).
-        with threadpool_limits(limits=1, user_api="blas"):
+        with _one_blas_thread():
             return _COMMANDS[args.command](args)
     except PincalError as exc:
         print(f"pincal: error: {exc}", file=sys.stderr)

@@ -57,6 +57,7 @@ import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Selection
+from pincal.fit.prior_defaults import DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM, SCALE_RANGE
 from pincal.fit.solver import Solution, gram
 
 __all__ = [
@@ -66,10 +67,7 @@ __all__ = [
     "standard_deviations", "data_rows", "dominated", "reestimated_scales", "map_outcome",
 ]
 
-#: Prior standard deviation of a translation, or of a prismatic joint's zero [mm].
-DEFAULT_TRANSLATION_MM = 1.0
-#: Prior standard deviation of a rotation, or of a revolute joint's zero [deg].
-DEFAULT_ROTATION_DEG = 0.5
+# DEFAULT_TRANSLATION_MM, DEFAULT_ROTATION_DEG and SCALE_RANGE: pincal.fit.prior_defaults (the parser reads them)
 #: Posterior std / prior std above which a parameter is determined mainly by the prior (1/√2: the
 #: data's precision is below the prior's).
 PRIOR_DOMINATED = 1.0 / math.sqrt(2.0)
@@ -91,11 +89,6 @@ DATA_SCALE_GAP = 0.5
 #: ln of the Bayes factor above which that second fixed point replaces the first (eq P3): 100,
 #: "decisive" on Jeffreys' scale (Jeffreys 1961, Appendix B); nearer ones are the same answer.
 DECISIVE_LOG_EVIDENCE = math.log(100.0)
-#: Accepted range of each prior scale, inclusive (mm for translations, degrees for rotations): 1 nm to
-#: 1 km and 1e-6° to 1e6°. Beyond it the prior rows outweigh the data by ~1e12 or more (σ_data² / σ²)
-#: and the normal equations lose every digit (1e-300 ends in a singular-matrix error), or the
-#: prior is no prior at all.
-SCALE_RANGE = (1e-6, 1e6)
 PRIOR_STATUS = ("determined mainly by the prior (posterior std > 0.71 x prior std): kept near nominal, "
                 "not measured")
 

@@ -14,6 +14,7 @@ import numpy as np
 from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.csv_v1 import read_joint_columns
 from pincal.model.chain import KinematicChain
+from pincal.planning.defaults import DEFAULT_SAMPLE, WORKSPACE_SIZE
 from pincal.simulation.sensor import random_configurations
 
 __all__ = [
@@ -24,10 +25,7 @@ __all__ = [
 #: stop reads slightly beyond it (TIAGo's torso reads 0.35018 m at its 0.35 m limit in
 #: data/tiago_mocap), so 1 mrad / 1 mm, the sessions' own joint-reading tolerance.
 LIMIT_SLACK = 1e-3
-#: Configurations drawn when no candidate file is given.
-DEFAULT_SAMPLE = 2000
-#: Workspace configurations the accuracy is averaged over (a seeded subsample of the candidates).
-WORKSPACE_SIZE = 500
+# DEFAULT_SAMPLE, WORKSPACE_SIZE: pincal.planning.defaults (the parser reads them)
 
 
 def sample_candidates(chain: KinematicChain, count: int, seed: int) -> np.ndarray:

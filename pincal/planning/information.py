@@ -33,6 +33,7 @@ from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.parameter_sets import LEVELS, NoParameters
 from pincal.model.sensor import Registration
+from pincal.planning.defaults import PLAN_LEVELS
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual, TargetEstimate
 
@@ -40,8 +41,6 @@ __all__ = [
     "PLAN_LEVELS", "DEFAULT_TARGET_CENTRE_M", "DEFAULT_TARGET_RADIUS_M", "SensorModel", "default_target_points",
     "plan_parameters", "MeasurementModel",
 ]
-
-PLAN_LEVELS = ("registration", "offsets", "full", "dh")
 
 #: Corners of a cube, the default directions of the target's points (unit vectors).
 _CORNERS = np.array(

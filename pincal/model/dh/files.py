@@ -35,6 +35,7 @@ from typing import Any
 from pincal.errors import ModelError
 from pincal.measurements.csv_v1 import MAX_POSITION, CsvTable, read_table
 from pincal.measurements.data import JOINT_SANITY
+from pincal.model.dh.conventions import MAX_ANGLE_RAD
 from pincal.model.dh.robot import (
     DEFAULT_EFFORT,
     DEFAULT_LIMITS,
@@ -56,8 +57,6 @@ REQUIRED_COLUMNS = ("joint", "a", "alpha", "d", "theta")
 OPTIONAL_COLUMNS = ("type", "lower", "upper", "velocity", "effort")
 #: Joint names the URDF writer uses itself (the fixed joint carrying the flange).
 RESERVED_JOINT_NAMES = (DH_FLANGE_JOINT,)
-#: An angle beyond one turn [rad] is taken for degrees given as radians.
-MAX_ANGLE_RAD = 2.0 * math.pi
 #: A DH length beyond this [m] is taken for millimetres: the measurement reader's
 #: bound on target coordinates (:data:`pincal.measurements.csv_v1.MAX_POSITION`).
 MAX_LENGTH_M = MAX_POSITION

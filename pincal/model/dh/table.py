@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import ModelError, PincalError
+from pincal.model.dh.conventions import DH_CONVENTIONS
 
 __all__ = [
     "DH_FIELDS", "rot_x", "rot_z", "trans", "DHTable", "dh_joint_origins", "DH_CONVENTIONS", "check_convention",
@@ -221,10 +222,6 @@ def dh_joint_origins(vector: npt.ArrayLike) -> list[np.ndarray]:
     """
     alpha, epsilon, r, d = np.asarray(vector, dtype=float).reshape(4, -1)
     return dh_chain_origins("standard", alpha, r, epsilon, d)
-
-
-#: The two DH conventions of :func:`dh_chain_origins`.
-DH_CONVENTIONS = ("standard", "modified")
 
 
 def check_convention(convention: str) -> str:
