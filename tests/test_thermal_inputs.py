@@ -1,0 +1,87 @@
+"""What `diagnose` and `evaluate` say about the temperature and pause inputs they cannot use (the review of
+issue 20's heat and pauses): a temperature column in some session files only, `--temperature-column` where
+no thermal expansion applies, a malformed `pauses` entry, the text of a position-only effect, and the
+evaluate page's record of the thermal and pause-step corrections.
+
+No fit here: the CSV reader, the readers of the report's entries and the page's renderer on small inputs
+(the end-to-end runs are tests/test_thermal.py's)."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from pincal.diagnosis.conditions import read_readings, search_conditions
+from pincal.errors import PincalError
+from pincal.measurements.csv_v1 import read_sessions
+from pincal.measurements.data import JointSpec
+
+JOINTS = [JointSpec("j1", "revolute"), JointSpec("j2", "revolute")]
+
+
+def _session(path, temperature: str | None = "temperature_c", extra: str = ""):
+    """A CSV v1 session file of 4 rows a minute apart, its temperature in column ``temperature`` (None: none)
+    and one more numeric column ``extra``."""
+    columns = ["j1", "j2", "x", "y", "z", "time"] + ([temperature] if temperature else []) + ([extra] if extra else [])
+    rows = [[0.1 * k, -0.2 * k, 1.0 + k, 0.5, 0.2, 60.0 * k] + ([20.0 + k] if temperature else []) + (
+        [k] if extra else []) for k in range(4)]
+    path.write_text("\n".join([",".join(columns)] + [",".join(map(repr, r)) for r in rows]) + "\n", encoding="utf-8")
+    return path
+
+
+def _notes(data, column=None):
+    readings = read_readings(data, None, column)
+    return search_conditions(data.extra.get("time"), data.sessions.tolist(), readings, np.ones(data.n_rows, bool))
+
+
+def test_a_temperature_column_in_some_session_files_only_is_named_not_dropped(tmp_path):
+    """A default temperature column in 2 of 3 files: one note names the file without it (not the generic 'add
+    a column' line, which would tell the user to add what they have); named with --temperature-column: refused,
+    naming the file. Every file with it, or a generic extra column in some files only: no such note."""
+    with_it = [_session(tmp_path / "a.csv"), _session(tmp_path / "b.csv", extra="shipped_row")]
+    without = _session(tmp_path / "c.csv", temperature=None)
+    data, _ = read_sessions([*with_it, without], JOINTS)
+    assert data.dropped_extra == {"temperature_c": (str(without),), "shipped_row": (str(with_it[0]), str(without))}
+    search = _notes(data)
+    (thermal,) = [n for n in search.notes if n.startswith("thermal")]
+    assert thermal.startswith(f"thermal cannot be tested: {without} lack(s) the temperature column 'temperature_c'")
+    assert "add it to that file" in thermal and "add a column" not in thermal
+    refused = f"^{re.escape(str(without))}: no temperature column 'temperature_c', which the other session"
+    with pytest.raises(PincalError, match=refused):
+        _notes(data, "temperature_c")
+    data, _ = read_sessions(with_it, JOINTS)  # shipped_row in one file only: dropped, no note of it
+    search = _notes(data)
+    assert search.column == "temperature_c" and not any("shipped_row" in n for n in search.notes), search.notes
+    assert [e.type for e in search.candidates] == ["thermal"]
+    data, _ = read_sessions([tmp_path / "a.csv"], JOINTS)
+    assert data.dropped_extra == {}
+
+
+@pytest.mark.parametrize("key, index", [("pauses", 0), ("pause_spans_s", 1)])
+@pytest.mark.parametrize("session", [3, None, ["A"], ""])
+def test_a_pause_or_span_whose_session_is_not_a_name_is_refused_by_its_key(key, index, session):
+    """A REPORT.json `pauses` or `pause_spans_s` entry whose session is not a name would apply to no row
+    (str(3) = '3' names no session): refused in one line naming the key; the well-formed report applies."""
+    from pincal.cli.conditions import applied_conditions
+    from pincal.measurements.data import MeasurementSet
+    from pincal.model.effects import Effect, read_time_spans
+
+    time = np.array([0.0, 500.0, 4000.0])
+    data = MeasurementSet(joint_names=("j",), q=np.zeros((3, 1)), points=np.zeros((3, 1, 3)), rotations=None,
+                          roles=np.array(["validation"] * 3, dtype=object), lines=np.arange(2, 5),
+                          extra={"time": time}, source="v.csv")
+    report = {"time_column": "time", "pause_spans_s": [{"session": "A", "first": 0.0, "last": 5e3, "mean": 2e3}],
+              "pauses": [{"pause": 1, "session": "A", "before_s": 100.0, "after_s": 3000.0}]}
+    steps = [(Effect("pause_step", pause=1), np.array([0.0, 1e-5, 0.0]))]
+    held = (np.array(["A"] * 3, dtype=object), np.zeros(3, dtype=np.intp))
+    applied = applied_conditions(steps, report, data, held, None, "r.json")
+    assert applied.conditions is not None and applied.conditions.steps[:, 1].tolist() == [0.0, 0.0, 1e-5]
+    report[key] = [dict(report[key][0], session=session)]
+    with pytest.raises(PincalError, match=rf"^r\.json: {key}\[\]\.session must be a session's name .* got "
+                                          rf"{re.escape(repr(session))}: such an entry applies to no row"):
+        applied_conditions(steps, report, data, held, None, "r.json")
+    with pytest.raises(PincalError, match=r"^r\.json: time_spans_s\[\]\.session must be"):
+        read_time_spans([{"session": session, "first": 0.0, "last": 1.0, "mean": 0.5}], "r.json")
+
