@@ -85,3 +85,29 @@ def test_a_pause_or_span_whose_session_is_not_a_name_is_refused_by_its_key(key, 
     with pytest.raises(PincalError, match=r"^r\.json: time_spans_s\[\]\.session must be"):
         read_time_spans([{"session": session, "first": 0.0, "last": 1.0, "mean": 0.5}], "r.json")
 
+
+def test_an_effect_that_cannot_turn_the_target_is_not_said_to_turn_it(tmp_path):
+    """A thermal expansion scales lengths (eq T1: orientations unchanged), a pause step, a drift translate, a
+    sensor scale scales: with 6D rows their turn is 0 by construction, so the console line and the report page
+    say how far they move the target only; a joint effect keeps its turn."""
+    from pincal.diagnosis.verdicts import TargetChange
+    from pincal.model.effects import Effect
+    from pincal.report.sections import effects_section
+
+    change = TargetChange(41e-6, 84e-6, 0.0, 0.0)
+    position_only = [Effect("thermal"), Effect("pause_step", pause=1), Effect("drift"), Effect("sensor_scale")]
+    for effect in position_only:
+        assert change.describe(effect) == "moves the target 0.041 mm RMS (0.084 mm at most)", effect
+    turning = TargetChange(41e-6, 84e-6, 2e-4, 5e-4).describe(Effect("backlash", "j1", source="approach"))
+    assert turning.endswith(", turns it 0.2 mrad RMS (0.5 at most)"), turning
+    moved = {"rms_mm": 0.041, "max_mm": 0.084, "rms_mrad": 0.0, "max_mrad": 0.0}
+    doc = {"diagnosis": {"steps": []}, "effects": [
+        {"type": "thermal", "value": 1.2e-5, "std": 1e-6, "target_change": moved},
+        {"type": "pause_step", "pause": 1, "value": [0.0, -7.6e-5, 0.0], "std": [3e-6] * 3, "target_change": moved},
+        {"type": "backlash", "joint": "j1", "source": "approach", "value": -0.012, "std": 6e-4,
+         "target_change": dict(moved, rms_mrad=0.2, max_mrad=0.5)}]}
+    section = effects_section(doc, {"j1": "revolute"}, tmp_path, lambda *a: None)
+    assert section is not None
+    assert [e["moves"] for e in section["final"]] == ["0.041 mm RMS (0.084 at most)"] * 2 + [
+        "0.041 mm RMS (0.084 at most), 0.2 mrad RMS"]
+

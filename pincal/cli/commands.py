@@ -317,7 +317,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     for (effect, values, std), change, entry in zip(diagnosis.effects, diagnosis.target_changes, entries):
         values, std, shown_unit = shown(effect, values, std, unit(effect))
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))  # what evaluate applies
-        print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe()}")
+        print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe(effect)}")
         if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
             print(f"  {entry['advice']}")
     for note in diagnosis.notes:
