@@ -8,6 +8,7 @@ No fit here: the CSV reader, the readers of the report's entries and the page's 
 
 from __future__ import annotations
 
+import html
 import re
 
 import numpy as np
@@ -111,3 +112,52 @@ def test_an_effect_that_cannot_turn_the_target_is_not_said_to_turn_it(tmp_path):
     assert [e["moves"] for e in section["final"]] == ["0.041 mm RMS (0.084 at most)"] * 2 + [
         "0.041 mm RMS (0.084 at most), 0.2 mrad RMS"]
 
+
+def test_temperature_column_for_a_report_without_thermal_expansion_is_refused():
+    """evaluate --temperature-column on a report without a thermal effect would change nothing: refused in one
+    line naming the flag and the report, as evaluate refuses --nominal without --fixture (with --fixture:
+    tests/test_fixture.py). Without the flag, or with a thermal effect, it applies."""
+    from pincal.cli.conditions import applied_conditions
+    from pincal.measurements.data import MeasurementSet
+    from pincal.model.effects import Effect
+
+    data = MeasurementSet(joint_names=("j",), q=np.zeros((2, 1)), points=np.zeros((2, 1, 3)), rotations=None,
+                          roles=np.array(["validation"] * 2, dtype=object), lines=np.arange(2, 4),
+                          extra={"temperature_c": np.array([20.0, 22.0])}, source="v.csv")
+    held = (np.array(["A"] * 2, dtype=object), np.zeros(2, dtype=np.intp))
+    backlash = [(Effect("backlash", "j", source="approach"), np.array([0.01]))]
+    with pytest.raises(PincalError, match=r"^--temperature-column applies to a report with a thermal expansion, "
+                                          r"and r\.json has none .*; drop it$"):
+        applied_conditions(backlash, {}, data, held, "temperature_c", "r.json")
+    assert applied_conditions(backlash, {}, data, held, None, "r.json").conditions is None
+    report = {"temperature_column": "t_other", "temperature_range_c": {"min": 20.0, "max": 22.0, "mean": 21.0}}
+    applied = applied_conditions([(Effect("thermal"), np.array([1e-5]))], report, data, held, "temperature_c",
+                                 "r.json")
+    assert applied.conditions is not None and applied.conditions.expansion.tolist() == pytest.approx([-1e-5, 1e-5])
+
+
+def test_the_evaluate_page_says_which_thermal_and_pause_corrections_its_rows_took():
+    """evaluate --html: the evaluated card names the thermal expansion (α, column, range, rows held) and the
+    pause steps (rows stepped, pauses, rows outside the span) applied to its rows, from the document the
+    command builds (pincal.report.row_errors.evaluation_document) and from an evaluate --json file alone;
+    a page without them says neither."""
+    from pincal.fit.metrics import PoseErrors
+    from pincal.report.html import render_html
+    from pincal.report.row_errors import evaluation_document
+
+    errors = PoseErrors(np.full((4, 1), 3e-5), None)
+    thermal = {"alpha_per_k": 1.2e-5, "temperature_column": "temperature_c", "rows_applied": 3, "rows_held": 1,
+               "temperature_range_c": {"min": 20.0, "max": 25.4, "mean": 23.1}, "held_rule": "held"}
+    steps = {"pauses": [{"pause": 1, "session": "cal", "before_s": 1400.0, "after_s": 30200.0}], "rows_in_span": 4,
+             "rows_outside": 0, "rule": "nearest", "rows_stepped": 2}
+    said = ("thermal expansion applied (eq T1): α = 12 µm/m/K, each row at its temperature in column 'temperature_c' "
+            "against 23.1 °C: 3 row(s) inside the fitted range 20–25.4 °C, 1 outside it held at its nearer end",
+            "pause steps applied (eq T2): 2 row(s) after a pause of their session (pause 1 of session 'cal') take its "
+            "registration step")
+    shown = evaluation_document("d.urdf", "v.csv", errors, [2, 3, 4, 5], thermal=thermal, pause_steps=steps)
+    alone = dict(errors.as_dict(), skipped_cpa_rows=0, sessions=[], drift=None, thermal=thermal, pause_steps=steps)
+    for page in map(html.unescape, (render_html({}, evaluation=shown), render_html(alone))):
+        for line in said:
+            assert line in page, line
+    bare = render_html({}, evaluation=evaluation_document("d.urdf", "v.csv", errors, [2, 3, 4, 5]))
+    assert "thermal expansion applied" not in bare and "pause steps applied" not in bare
