@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import html
 import io
 import json
 from dataclasses import replace
@@ -119,12 +120,15 @@ def test_hidden_expansion_is_named_measured_and_removed(thermal_run, capsys):
     effect = doc["effects"][0]
     assert effect["type"] == "thermal", doc["effects"]
     assert abs(effect["value"] - ALPHA) <= 3 * effect["std"], effect
-    assert "final model: thermal = " in printed and " µm/m/K: moves the target " in printed
+    (final,) = [line for line in printed.splitlines() if line.startswith("final model: thermal = ")]
+    assert " µm/m/K: moves the target " in final and "turns it" not in final, final  # eq T1 turns nothing
     with open(thermal_run / "cal.csv", newline="", encoding="utf-8") as f:
         fitted = TemperatureRange.of([float(row["temperature_c"]) for row in csv.DictReader(f)])
     assert doc["temperature_column"] == "temperature_c"
     assert doc["temperature_range_c"] == pytest.approx(fitted.as_dict(), abs=1e-9)
-    evaluated, _ = _evaluate(thermal_run, thermal_run / "val.csv", capsys)
+    evaluated, _ = _evaluate(thermal_run, thermal_run / "val.csv", capsys, "e", "--html", str(thermal_run / "e.html"))
+    page = html.unescape((thermal_run / "e.html").read_text(encoding="utf-8"))
+    assert f"thermal expansion applied (eq T1): α = {effect['value'] * 1e6:.3g} µm/m/K" in page
     assert evaluated["position"]["rms_mm"] < BOUND_MM
     assert evaluated["position"]["rms_mm"] == pytest.approx(doc["diagnosis"]["heldout_errors"]["position"]["rms_mm"],
                                                            rel=1e-9)
@@ -133,6 +137,10 @@ def test_hidden_expansion_is_named_measured_and_removed(thermal_run, capsys):
     (thermal_run / "d" / "REPORT.json").write_text(json.dumps(without), encoding="utf-8")
     try:
         bare, _ = _evaluate(thermal_run, thermal_run / "val.csv", capsys, "bare")
+        code = main(["evaluate", str(thermal_run / "d.urdf"), str(thermal_run / "d" / "REPORT.json"),
+                     str(thermal_run / "val.csv"), "--temperature-column", "temperature_c"])
+        err = capsys.readouterr().err  # the flag would change nothing: refused
+        assert code == 2 and err.count("\n") == 1 and "--temperature-column applies to a report with a thermal" in err
     finally:
         (thermal_run / "d" / "REPORT.json").write_text(json.dumps(doc), encoding="utf-8")
     assert bare["position"]["rms_mm"] > evaluated["position"]["rms_mm"]
@@ -172,10 +180,16 @@ def test_hidden_pause_step_is_named_not_drift_and_removed(industrial_arm_urdf, t
     assert effect["pause"] == 1 and np.all(np.abs(np.subtract(effect["value"], STEP_M)) <= 3 * np.array(effect["std"]))
     (pause,) = doc["pauses"]
     assert pause["after_s"] - pause["before_s"] > GAP_S and doc["pause_s"] == 1800.0
-    assert "final model: pause_step:1 = " in printed
-    evaluated, _ = _evaluate(tmp_path, tmp_path / "val.csv", capsys)
+    (final,) = [line for line in printed.splitlines() if line.startswith("final model: pause_step:1 = ")]
+    assert "turns it" not in final, final  # eq T2: a translation
+    evaluated, _ = _evaluate(tmp_path, tmp_path / "val.csv", capsys, "e", "--html", str(tmp_path / "e.html"))
     assert evaluated["position"]["rms_mm"] < BOUND_MM
     assert evaluated["pause_steps"]["rows_in_span"] == N_VAL and evaluated["pause_steps"]["rows_outside"] == 0
+    with open(tmp_path / "val.csv", newline="", encoding="utf-8") as f:  # the held-out rows after the pause
+        after = sum(float(row["time"]) >= pause["after_s"] for row in csv.DictReader(f))
+    assert 0 < after < N_VAL and evaluated["pause_steps"]["rows_stepped"] == after
+    assert (f"pause steps applied (eq T2): {after} row(s) after a pause of their session (pause 1 of session "
+            f"'{pause['session']}') take its registration step") in html.unescape((tmp_path / "e.html").read_text())
 
 
 def test_clean_data_adopt_neither_and_missing_columns_are_named(industrial_arm_urdf, tmp_path):

@@ -264,7 +264,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
         shown = evaluation_document(str(args.urdf), str(args.data), errors, evaluation.lines, evaluation.n_skipped_cpa,
                                     files=evaluation.files, sessions=evaluation.row_sessions,
-                                    registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift)
+                                    registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift,
+                                    thermal=evaluation.thermal, pause_steps=evaluation.pause_steps)
         _write_html(args.html, load_report(args.report, PAGE_KINDS), args.report.parent, evaluation=shown,
                     source=args.report)
     failed = []
@@ -323,7 +324,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     for (effect, values, std), change, entry in zip(diagnosis.effects, diagnosis.target_changes, entries):
         values, std, shown_unit = shown(effect, values, std, unit(effect))
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))  # what evaluate applies
-        print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe()}")
+        print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe(effect)}")
         if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
             print(f"  {entry['advice']}")
     for note in diagnosis.notes:

@@ -58,8 +58,12 @@ def applied_conditions(parsed: Sequence[tuple[Effect, np.ndarray]], effects: dic
     session) as for a drift; ``temperature_name``: ``--temperature-column`` (None: the report's).
 
     Raises:
-        PincalError: a malformed report entry, or data without the temperature or time column needed.
+        PincalError: a malformed report entry, data without the temperature or time column needed, or a
+            ``temperature_name`` for a report without a thermal expansion (it would apply to nothing).
     """
+    if temperature_name is not None and not any(effect.type == "thermal" for effect, _ in parsed):
+        raise PincalError(f"--temperature-column applies to a report with a thermal expansion, and {report_path} has "
+                          "none (pincal diagnose adopted no effect 'thermal'); drop it")
     notes: list[str] = []
     expansion = steps = thermal = pause_steps = None
     for effect, value in parsed:
@@ -115,15 +119,17 @@ def _steps(notes: list[str], stepping, effects: dict, data: MeasurementSet, held
     outside = (time < first[own]) | (time > last[own])
     applies = pause_rows(time, [spans[i].session for i in own], pauses)
     numbers = {p.number: p for p in pauses}
-    steps = np.zeros((data.n_rows, 3))
+    steps, stepped = np.zeros((data.n_rows, 3)), np.zeros(data.n_rows, dtype=bool)
     for effect, value in stepping:
         if effect.pause not in numbers:
             raise PincalError(f"{where}: effect {effect.label} names no pause of 'pauses'; rewrite it with "
                               "pincal diagnose")
-        steps += applies[:, [p.number for p in pauses].index(effect.pause), None] * np.asarray(value).reshape(1, 3)
+        after = applies[:, [p.number for p in pauses].index(effect.pause)]
+        steps += after[:, None] * np.asarray(value).reshape(1, 3)
+        stepped |= after > 0
     use: PauseStepUse = {"pauses": [cast(PauseJson, p.as_dict()) for p in pauses],
                          "rows_in_span": int(np.sum(~outside)), "rows_outside": int(np.sum(outside)),
-                         "rule": NEAREST_SEGMENT}
+                         "rule": NEAREST_SEGMENT, "rows_stepped": int(np.sum(stepped))}
     if outside.any():
         notes.append(f"{data.source}: {int(outside.sum())} of {data.n_rows} row(s) lie outside the time span of "
                          "the rows the report's pause steps were fitted on; they take the nearest segment's steps "

@@ -38,12 +38,15 @@ class Readings:
         temperature / heldout_temperature: each calibration / held-out row's temperature [°C], or None.
         column: the temperature column's name (for messages and the report).
         pause_s: the gap between consecutive rows of a session that starts a new segment [s].
+        partial: without a temperature: a default column (:data:`~pincal.model.thermal.TEMPERATURE_COLUMNS`)
+            that some of several session files have, with the files without it (the join dropped it), or None.
     """
 
     temperature: np.ndarray | None = None
     heldout_temperature: np.ndarray | None = None
     column: str | None = None
     pause_s: float = PAUSE_S
+    partial: tuple[str, tuple[str, ...]] | None = None
 
 
 def read_readings(data: MeasurementSet, heldout: MeasurementSet | None, column: str | None,
@@ -52,11 +55,13 @@ def read_readings(data: MeasurementSet, heldout: MeasurementSet | None, column: 
     ``column`` (None: the first of :data:`~pincal.model.thermal.TEMPERATURE_COLUMNS` in ``data``).
 
     Raises:
-        PincalError: a column that is missing (did you mean), not finite, or in the calibration rows only.
+        PincalError: a column that is missing (did you mean; named, in some of several files only), not finite, or
+            in the calibration rows only.
     """
     found = temperature_column(data, column)
-    if found is None:
-        return Readings(pause_s=pause_s)
+    if found is None:  # a default column of some session files only: said by search_conditions
+        partial = next(((n, data.dropped_extra[n]) for n in TEMPERATURE_COLUMNS if n in data.dropped_extra), None)
+        return Readings(pause_s=pause_s, partial=partial)
     held = None
     if heldout is not None:
         if found[0] not in heldout.extra:
@@ -107,7 +112,12 @@ def search_conditions(time: np.ndarray | None, sessions: Sequence[str], readings
     temperature_range: TemperatureRange | None = None
     pauses: tuple[Pause, ...] = ()
     temperature = None if readings.temperature is None else np.asarray(readings.temperature, dtype=float)[used]
-    if temperature is None:
+    if temperature is None and readings.partial is not None:
+        name, lacking = readings.partial
+        notes.append(f"thermal cannot be tested: {', '.join(lacking)} lack(s) the temperature column '{name}' of the "
+                     "other session file(s), and sessions are joined on the columns every file has: add it to "
+                     f"{'that file' if len(lacking) == 1 else 'those files'}")
+    elif temperature is None:
         notes.append(f"thermal cannot be tested: the arm's lengths growing with temperature need each row's "
                      f"temperature [°C]: add a column {' or '.join(TEMPERATURE_COLUMNS)}, or name yours with "
                      "--temperature-column NAME")

@@ -32,7 +32,7 @@ from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
-    "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice",
+    "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
     "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
 
@@ -134,6 +134,12 @@ def _largest_change(objective: SensorResidual, x: np.ndarray) -> float:
     return float(np.max(change, initial=0.0))
 
 
+#: Effects that move the measured points but never turn the target: a drift and a pause step translate the
+#: registration (eq T2 of :mod:`pincal.model.thermal`), a sensor scale and a thermal expansion scale lengths
+#: (eq T1: orientations unchanged). Their text says how far they move the target only.
+POSITION_ONLY = ("drift", "sensor_scale", "thermal", "pause_step")
+
+
 @dataclass(frozen=True)
 class TargetChange:
     """How far an effect moves the measured target over the rows it was fitted on: per row, the
@@ -145,10 +151,12 @@ class TargetChange:
     rms_rad: float | None
     max_rad: float | None
 
-    def describe(self) -> str:
-        """``moves the target 0.41 mm RMS (1.2 mm at most), turns it 0.12 mrad RMS (0.3 at most)``."""
+    def describe(self, effect: Effect | None = None) -> str:
+        """``moves the target 0.41 mm RMS (1.2 mm at most), turns it 0.12 mrad RMS (0.3 at most)``; the turn
+        left out for an ``effect`` that cannot turn the target (:data:`POSITION_ONLY`)."""
         text = f"moves the target {1e3 * self.rms_m:.3g} mm RMS ({1e3 * self.max_m:.3g} mm at most)"
-        if self.rms_rad is not None and self.max_rad is not None:
+        turns = effect is None or effect.type not in POSITION_ONLY
+        if turns and self.rms_rad is not None and self.max_rad is not None:
             text += f", turns it {1e3 * self.rms_rad:.3g} mrad RMS ({1e3 * self.max_rad:.3g} at most)"
         return text
 

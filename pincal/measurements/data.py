@@ -11,11 +11,11 @@ from types import MappingProxyType
 
 import numpy as np
 
-from pincal.errors import MeasurementError, ModelError
+from pincal.errors import MeasurementError, ModelError, PincalError
 
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
-    "JointSpec", "is_reserved", "default_session_name", "MeasurementSet", "join_sets",
+    "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
 ]
 
 ROLES = ("cpa", "calibration", "validation")
@@ -77,6 +77,19 @@ def default_session_name(source: str) -> str:
     return PurePath(source).stem or str(source)
 
 
+def reported_session(value, where: str, key: str) -> str:
+    """The ``session`` of a REPORT.json entry of ``key`` (``time_spans_s``, ``pause_spans_s``, ``pauses``).
+
+    Raises:
+        PincalError: not a non-empty string, which would name no session and so apply to no row (``where``
+            names the report).
+    """
+    if isinstance(value, str) and value:
+        return value
+    raise PincalError(f"{where}: {key}[].session must be a session's name (a non-empty string), got {value!r}: "
+                      "such an entry applies to no row; rewrite it with pincal diagnose")
+
+
 @dataclass(frozen=True, eq=False)
 class MeasurementSet:
     """K measured robot configurations; arrays are read-only copies.
@@ -95,6 +108,8 @@ class MeasurementSet:
             session named after ``source`` (:func:`default_session_name`).
         files: (K,) object array, the file each row came from (``lines`` count in it);
             default: ``source``.
+        dropped_extra: the extra columns a join of several files left out because some of
+            the files lack them (:func:`join_sets`): each name with the files without it.
     """
 
     joint_names: tuple[str, ...]
@@ -108,6 +123,7 @@ class MeasurementSet:
     # None (the default) is replaced by the default labels in __post_init__: arrays once constructed
     sessions: np.ndarray = None  # type: ignore[assignment]  # None: replaced in __post_init__
     files: np.ndarray = None  # type: ignore[assignment]  # None: replaced in __post_init__
+    dropped_extra: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -119,6 +135,7 @@ class MeasurementSet:
             "roles": _frozen(self.roles, object),
             "lines": _frozen(self.lines, np.int64),
             "extra": MappingProxyType({str(k): _frozen(v, float) for k, v in self.extra.items()}),
+            "dropped_extra": MappingProxyType({str(k): tuple(map(str, v)) for k, v in self.dropped_extra.items()}),
         }
         for key, value in values.items():
             object.__setattr__(self, key, value)
@@ -190,6 +207,7 @@ class MeasurementSet:
             "source": self.source,
             "sessions": self.sessions[index],
             "files": self.files[index],
+            "dropped_extra": self.dropped_extra,
         }
         if index.ndim != 1:  # not a choice of rows: the constructor says what is wrong
             return MeasurementSet(**rows)
@@ -217,7 +235,8 @@ class MeasurementSet:
 
 def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
     """The rows of several measurement sets, in order, as one set (each row keeps its
-    session, file and line); extra columns missing from one of them are dropped.
+    session, file and line); extra columns missing from one of them are dropped, and
+    named with the files that lack them in :attr:`MeasurementSet.dropped_extra`.
 
     Raises:
         MeasurementError: the sets differ in joints, in target points per row,
@@ -239,6 +258,8 @@ def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
                     f"{other.source}: differs from {first.source} in its {what}; the sessions of one "
                     "calibration measure the same target the same way")
     common = [name for name in first.extra if all(name in s.extra for s in sets)]
+    dropped = {name: tuple(s.source for s in sets if name not in s.extra)
+               for name in dict.fromkeys(n for s in sets for n in s.extra) if name not in common}
     return MeasurementSet(
         joint_names=first.joint_names,
         q=np.concatenate([s.q for s in sets]),
@@ -250,4 +271,5 @@ def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
         source=" + ".join(s.source for s in sets),
         sessions=np.concatenate([s.sessions for s in sets]),
         files=np.concatenate([s.files for s in sets]),
+        dropped_extra=dropped,
     )

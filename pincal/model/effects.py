@@ -47,7 +47,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import PincalError, did_you_mean
-from pincal.measurements.data import MeasurementSet
+from pincal.measurements.data import MeasurementSet, reported_session
 from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
 
@@ -436,8 +436,8 @@ def read_time_spans(entries, where: str, key: str = "time_spans_s") -> tuple[Tim
     if entries is None:
         return None
     try:
-        spans = tuple(TimeSpan(str(e["session"]), float(e["first"]), float(e["last"]), float(e["mean"]))
-                      for e in entries)
+        spans = tuple(TimeSpan(reported_session(e["session"], where, key), float(e["first"]), float(e["last"]),
+                               float(e["mean"])) for e in entries)
     except (KeyError, TypeError, ValueError):
         spans = ()
     if not spans or not all(np.isfinite([s.first, s.last, s.mean]).all() and s.first <= s.mean <= s.last

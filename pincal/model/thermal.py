@@ -57,7 +57,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import PincalError, did_you_mean
-from pincal.measurements.data import MeasurementSet
+from pincal.measurements.data import MeasurementSet, reported_session
 from pincal.model.effects import Effect, EffectInputs
 
 __all__ = [
@@ -81,8 +81,14 @@ def temperature_column(data: MeasurementSet, name: str | None = None) -> tuple[s
     with the column's name; None without one.
 
     Raises:
-        PincalError: no column ``name`` (with the closest names), or an empty / non-finite cell.
+        PincalError: no column ``name`` (with the closest names; in some of several files: naming the files
+            without it), or an empty / non-finite cell.
     """
+    if name and name in data.dropped_extra:  # named, in some of the session files only
+        lacking = data.dropped_extra[name]
+        raise PincalError(f"{', '.join(lacking)}: no temperature column '{name}', which the other session file(s) "
+                          f"have; thermal expansion needs every row's temperature: add the column to "
+                          f"{'this file' if len(lacking) == 1 else 'these files'}, or leave out --temperature-column")
     if name and name not in data.extra:
         raise PincalError(f"{data.source}: no temperature column '{name}'; "
                           f"{did_you_mean(name, data.extra, 'numeric extra columns')}")
@@ -167,8 +173,8 @@ class Pause:
             PincalError: a malformed entry (``where`` names the report).
         """
         try:
-            pauses = tuple(cls(int(e["pause"]), str(e["session"]), float(e["before_s"]), float(e["after_s"]))
-                           for e in entries)
+            pauses = tuple(cls(int(e["pause"]), reported_session(e["session"], where, "pauses"), float(e["before_s"]),
+                               float(e["after_s"])) for e in entries)
         except (KeyError, TypeError, ValueError):
             pauses = ()
         if not pauses or not all(np.isfinite([p.before, p.after]).all() and p.before < p.after for p in pauses):

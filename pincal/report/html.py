@@ -175,6 +175,32 @@ def _registration_notes(evaluation: dict | None) -> list[str]:
               else "held at its session's mean time (a re-estimated registration: at the nearer end of the span)")
         notes.append(f"drift not extrapolated: {held} row(s) outside the time span it was fitted on are evaluated "
                      f"with it {at}")
+    return notes + _condition_notes(evaluation)
+
+
+def _condition_notes(evaluation: dict | None) -> list[str]:
+    """The evaluated card's lines on the report's thermal expansion (eq T1) and pause steps (eq T2) as
+    ``evaluate`` applied them to these rows (``thermal``, ``pause_steps`` of ``evaluate --json``)."""
+    thermal, steps = (evaluation or {}).get("thermal"), (evaluation or {}).get("pause_steps")
+    notes = []
+    if isinstance(thermal, dict):
+        span = thermal.get("temperature_range_c") or {}
+        held, alpha = thermal.get("rows_held"), thermal.get("alpha_per_k")
+        alpha = 1e6 * alpha if isinstance(alpha, (int, float)) else None  # µm/m/K
+        notes.append(f"thermal expansion applied (eq T1): α = {num(alpha, 3)} µm/m/K, each row "
+                     f"at its temperature in column '{thermal.get('temperature_column')}' against "
+                     f"{num(span.get('mean'), 4)} °C: {thermal.get('rows_applied')} row(s) inside the fitted range "
+                     f"{num(span.get('min'), 4)}–{num(span.get('max'), 4)} °C"
+                     + (f", {held} outside it held at its nearer end (not extrapolated)" if held else ""))
+    if isinstance(steps, dict):
+        pauses = [p for p in steps.get("pauses") or [] if isinstance(p, dict)]
+        stepped = steps.get("rows_stepped")
+        outside = steps.get("rows_outside")
+        named = ", ".join(f"pause {p.get('pause')} of session '{p.get('session')}'" for p in pauses)
+        notes.append(f"pause steps applied (eq T2): {'rows' if stepped is None else f'{stepped} row(s)'} after a "
+                     f"pause of their session ({named}) take its registration step"
+                     + (f"; {outside} row(s) outside the fitted time span take the nearest segment's" if outside
+                        else ""))
     return notes
 
 
@@ -370,7 +396,8 @@ def render_html(document: dict[str, Any], evaluation: dict[str, Any] | None = No
 def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: str | Path | None) -> str:
     if "parameters" not in document and "position" in document:  # evaluate --json alone
         evaluation = {"errors": document, "data": None, "urdf": None, "sessions": document.get("sessions") or [],
-                      "drift": document.get("drift"), **(evaluation or {})}
+                      "drift": document.get("drift"), "thermal": document.get("thermal"),
+                      "pause_steps": document.get("pause_steps"), **(evaluation or {})}
         document = {}
     base = Path(base) if base is not None else Path.cwd()
     kinds = dict(zip((document.get("chain") or {}).get("joints") or [],

@@ -49,15 +49,20 @@ class ThermalUse(TypedDict):
     held_rule: str
 
 
-class PauseStepUse(TypedDict):
-    """How the report's pause steps were applied: a row takes the steps of the pauses of its session before
-    it (``rows_in_span``: inside the fitted rows' time span of that session; ``rows_outside``: outside it, the
-    nearest segment's)."""
-
+class _PauseStepKeys(TypedDict):
     pauses: list[PauseJson]
     rows_in_span: int
     rows_outside: int
     rule: str
+
+
+class PauseStepUse(_PauseStepKeys, total=False):
+    """How the report's pause steps were applied: a row takes the steps of the pauses of its session before
+    it (``rows_in_span``: inside the fitted rows' time span of that session; ``rows_outside``: outside it, the
+    nearest segment's; ``rows_stepped``: the rows that take at least one step, after a pause — absent from
+    files of pincal before it was added)."""
+
+    rows_stepped: int
 
 
 class _EvaluationKeys(PoseErrorsJson):

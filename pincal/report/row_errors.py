@@ -40,7 +40,7 @@ from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.measurements.data import MeasurementSet, default_session_name
 from pincal.report.model import RowErrorModel, RowErrorSet, errors_json
-from pincal.report.model_evaluation import DriftUse, EvaluatedSession
+from pincal.report.model_evaluation import DriftUse, EvaluatedSession, PauseStepUse, ThermalUse
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
@@ -167,15 +167,19 @@ def evaluation_document(
     urdf: str, data: str, errors: PoseErrors, lines: Sequence[int], skipped_cpa: int = 0,
     files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
     registrations: Sequence[EvaluatedSession] = (), drift: DriftUse | None = None,
+    thermal: ThermalUse | None = None, pause_steps: PauseStepUse | None = None,
 ) -> dict[str, Any]:
     """What ``evaluate --html`` shows beside the report: the evaluated files, the eq 24
     summary (as ``evaluate --json`` writes it), the evaluated rows by file line (and
     each row's file and session), and ``sessions``: each evaluated session's entry of
     ``evaluate --json`` (its registration's source, ``registration_reestimated``,
     ``residuals`` and ``registration_dof``); ``drift``: how the report's drift was
-    applied (``evaluate --json`` ``drift``), or None."""
+    applied (``evaluate --json`` ``drift``), or None; ``thermal`` / ``pause_steps``: how its thermal
+    expansion and pause steps were (``evaluate --json``'s keys), or None."""
     return {
         "drift": drift,
+        **({} if thermal is None else {"thermal": thermal}),
+        **({} if pause_steps is None else {"pause_steps": pause_steps}),
         "urdf": urdf,
         "data": data,
         "errors": {**errors.as_dict(), "skipped_cpa_rows": skipped_cpa},

@@ -186,13 +186,16 @@ def effects_section(doc: dict, kinds: dict[Any, str], base: Path, png: Callable)
     def prismatic(entry: dict) -> bool:
         return kinds.get(entry.get("joint")) == "prismatic"
 
+    from pincal.diagnosis.verdicts import POSITION_ONLY  # loaded only for a diagnose report
+
     final = []
     for entry in doc.get("effects") or []:
         value, ratio = _effect_value(entry, prismatic(entry))
         change = entry.get("target_change") or {}  # how far it moves the target (mm; mrad with 6D rows)
+        turns = "rms_mrad" in change and entry.get("type") not in POSITION_ONLY  # an expansion turns nothing
         moves = "" if "rms_mm" not in change else (
             f"{num(change['rms_mm'], 3)} mm RMS ({num(change.get('max_mm'), 3)} at most)"
-            + (f", {num(change['rms_mrad'], 3)} mrad RMS" if "rms_mrad" in change else ""))
+            + (f", {num(change['rms_mrad'], 3)} mrad RMS" if turns else ""))
         final.append({"label": effect_label(entry), "value": value, "ratio": ratio, "moves": moves,
                       "advice": entry.get("advice") or ""})
     steps = []
