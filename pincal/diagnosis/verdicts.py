@@ -351,9 +351,11 @@ def coupling_advice(effect: Effect, value: float, given: float | None = None) ->
             "chosen on the corrected readings; evaluate then corrects its rows the same way")
 
 
-def torque_coupling_advice(effect: Effect, value: float) -> str:
+def torque_coupling_advice(effect: Effect, value: float, unit: str) -> str:
     """What an adopted gravity-torque coupling (a ``compliance`` with a ``driver``) means: joint j deflects
-    under joint i's load, which a parallelogram or a counterbalance carries to it; it stays in the model."""
-    return (f"{effect.joint} deflects by {value:.4g} {effect.unit()} x {effect.driver}'s gravity torque (a "
+    under joint i's load, which a parallelogram or a counterbalance carries to it; it stays in the model.
+    ``unit``: the value's (:func:`pincal.model.effect_units.effect_unit`; rad/(N·m) between revolute joints)."""
+    load = "gravity force" if unit.endswith("/N") else "gravity torque"
+    return (f"{effect.joint} deflects by {value:.4g} {unit} x {effect.driver}'s {load} (a "
             f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
             "and the effects file beside the corrected URDF gives it to a controller")

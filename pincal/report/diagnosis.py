@@ -52,6 +52,7 @@ def diagnosis_report(
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
     from pincal.diagnosis.verdicts import coupling_advice, torque_coupling_advice
+    from pincal.model.effect_units import effect_unit
     from pincal.model.effects import effect_to_dict
 
     def errors(e) -> PoseErrorsJson | None:
@@ -93,7 +94,8 @@ def diagnosis_report(
             entry["advice"] = coupling_advice(effect, float(values[0]),
                                               given.get((str(effect.joint), str(effect.driver))))
         elif effect.driver:  # a compliance under another joint's torque: what links them
-            entry["advice"] = torque_coupling_advice(effect, float(values[0]))
+            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
+            entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
     return {
         **head,
         "warnings": warnings,
