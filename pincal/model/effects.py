@@ -144,7 +144,7 @@ class EffectInputs:
         context_q / context_time: readings (M, N) and times (M,) [s] of other
             rows of the same session (e.g. held-out rows between calibration
             rows): the approach flank of a row follows the row before it in
-            time, whichever set it belongs to. None without them.
+            time, whichever set it belongs to. None without them or apart in time.
         flank_time: the rows' own time relative to the mean (K,) [s] when ``time``
             is the drift's, held outside a fitted span (:func:`effect_inputs`
             ``held_sessions``), for the approach flanks; None otherwise.
@@ -213,7 +213,8 @@ def effect_inputs(
     """Gravity torques, time (minus ``time_reference``, default its mean) and
     time order of the rows of ``data``. ``context_q`` (M, N) with
     ``context_time`` (M,) [s] are the joint readings of other rows of the same
-    session, interleaved in time, for approach flanks (readings only).
+    session, interleaved in time, for approach flanks (readings only); one whose time span does not
+    overlap the rows' (another day) is left out: the motion in between is unknown, the first flank 0.
 
     ``held_sessions`` = (the session of each row (K,), of each context row (M,)):
     the context rows are the rows a drift is fitted on, and these rows (held-out
@@ -224,6 +225,8 @@ def effect_inputs(
         time_reference = float(np.mean(time))
     centred = None if time is None else time - time_reference
     with_context = context_q is not None and context_time is not None and time is not None
+    interleaved = context_time is not None and time is not None and with_context and bool(
+        np.min(context_time) <= np.max(time) and np.min(time) <= np.max(context_time))
     drift_time = centred
     if with_context and held_sessions is not None:
         own, fitted = (np.asarray(sessions).astype(str) for sessions in held_sessions)
@@ -235,8 +238,8 @@ def effect_inputs(
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
         time=drift_time,
         order=order,
-        context_q=np.asarray(context_q, dtype=float) if with_context else None,
-        context_time=np.asarray(context_time, dtype=float) - time_reference if with_context else None,
+        context_q=np.asarray(context_q, dtype=float) if interleaved else None,
+        context_time=np.asarray(context_time, dtype=float) - time_reference if interleaved else None,
         flank_time=centred if drift_time is not centred else None,
         joint_names=tuple(chain.joint_names),
     )

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, cast
 
+import numpy as np
+
 from pincal.report.model import (
     ChainHead,
     CouplingsPart,
@@ -60,10 +62,14 @@ def diagnosis_report(
 
     approach = any(e.source == "approach" for e, _, _ in diagnosis.effects)
     context: ApproachContext | None = None
-    if approach and diagnosis.inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+    inputs = diagnosis.inputs
+    if approach and inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+        moves = [(inputs.time, inputs.q)]  # the calibration rows, and the held-out rows that set their flanks
+        if inputs.context_time is not None and inputs.context_q is not None:
+            moves.append((inputs.context_time, inputs.context_q))
         context = {
-            "time_s": (diagnosis.inputs.time + diagnosis.time_reference).tolist(),
-            "q": diagnosis.inputs.q.tolist(),
+            "time_s": (np.concatenate([t for t, _ in moves]) + diagnosis.time_reference).tolist(),
+            "q": np.vstack([q for _, q in moves]).tolist(),
         }
     section: DiagnosisJson = {
         "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
