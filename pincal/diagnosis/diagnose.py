@@ -20,7 +20,9 @@ one is adopted when the evidence is very strong (ΔBIC < −10, Kass & Raftery
   as a joint offset, which the model already has;
 * a close competitor with a strongly correlated basis (e.g. the approach flanks
   of two joints that always move together): the data cannot tell them apart;
-* when held-out rows are given, an effect that makes them worse.
+* an effect too small to change any measured coordinate by a tenth of its noise;
+* when held-out rows are given, an effect that does not make them better beyond their
+  noise (a paired test of the per-row change of their error).
 
 Such cases are reported, not adopted. The loop repeats until nothing
 significant remains; then a generic per-joint correction (polynomial and

@@ -12,7 +12,10 @@ reported instead:
 * a close competitor (within 6 of its ΔBIC) with a strongly correlated basis: the
   data cannot tell them apart (a drift and a step at a pause: the step is named,
   :mod:`pincal.model.thermal`);
-* when held-out rows are given, an effect that makes them worse.
+* when held-out rows are given, an effect that does not make them better beyond their noise: a
+  paired test of the per-row change of their error (:func:`held_out_verdict`).
+
+:data:`CRITERION` says the rule in words (REPORT.json's ``diagnosis.criterion``).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from pincal.model.thermal import implausible
 from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
-    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
+    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
     "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice",
     "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
@@ -68,6 +71,12 @@ AMBIGUOUS = 0.8
 HELD_OUT_Z = 2.0
 #: Held-out rows below which no standard error is taken: the veto is then a plain worsening of their total.
 MIN_PAIRED_ROWS = 5
+#: The adoption rule in words, from the constants above: REPORT.json's ``diagnosis.criterion``.
+CRITERION = (f"ΔBIC on the calibration rows < {EVIDENCE:g} (very strong evidence), physically plausible, "
+             f"changes some measured coordinate by at least {NEGLIGIBLE:g} × its noise, not offset-like, not "
+             f"ambiguous; with held-out rows, better on them beyond their noise: a paired test, the per-row change "
+             f"of squared error in noise units below zero by more than {HELD_OUT_Z:g} standard errors (with "
+             f"fewer than {MIN_PAIRED_ROWS} held-out rows, not worse in total)")
 #: Candidates shown per step.
 SHOWN = 8
 

@@ -53,7 +53,7 @@ def diagnosis_report(
     """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
-    from pincal.diagnosis.verdicts import coupling_advice, torque_coupling_advice
+    from pincal.diagnosis.verdicts import CRITERION, coupling_advice, torque_coupling_advice
     from pincal.model.effect_units import effect_unit
     from pincal.model.effects import effect_to_dict
 
@@ -72,8 +72,7 @@ def diagnosis_report(
             "q": np.vstack([q for _, q in moves]).tolist(),
         }
     section: DiagnosisJson = {
-        "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
-                     "not offset-like, not ambiguous, not worse on held-out rows",
+        "criterion": CRITERION,
         "steps": [
             {
                 "effect": cast(EffectJson, effect_to_dict(step.effect, step.values, step.std)),
