@@ -165,6 +165,8 @@ SLOW_TESTS = (
     "tests/test_effects_file.py::test_diagnose_writes_what_the_urdf_cannot_carry_and_it_reads_back_as_the_report",
     "tests/test_level_choice.py::test_cli_fixture_level_auto_holds_out_each_placement",
     "tests/test_diagnosis.py::test_undeclared_effect_is_found_measured_and_removed",
+    "tests/test_diagnosis.py::test_evaluate_on_interleaved_rows_takes_the_flanks_diagnose_fitted",
+    "tests/test_effect_units.py::test_a_lift_sagging_under_the_shoulders_torque_is_stated_in_m_per_newton_metre",
     "tests/test_selection.py::test_tiago_selection_is_that_of_refitting_every_subset",
     "tests/test_fixture.py::test_noise_free_data_recover_the_robot",
     "tests/test_fixture.py::test_example_reproduces_the_readme_iiwa_rows",

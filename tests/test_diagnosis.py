@@ -14,6 +14,7 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
+from pincal.diagnosis.verdicts import CRITERION, HELD_OUT_Z, NEGLIGIBLE
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.measurements.couplings import apply_couplings, parse_coupling
 from pincal.measurements.csv_v1 import read_measurements
@@ -117,6 +118,9 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     assert "final model: encoder_scale:lwr_joint_4 = " in printed.out and " (relative): moves the target " in printed.out
     assert abs(found["value"] - 0.003) <= 3 * found["std"], found  # within three reported sd
     assert all(p.endswith(".png") for p in doc["diagnosis"]["plots"]) and len(doc["diagnosis"]["plots"]) == 2
+    # the rule as the code applies it (pincal.diagnosis.verdicts): the paired held-out test, not "not worse"
+    assert doc["diagnosis"]["criterion"] == CRITERION and "paired test" in CRITERION
+    assert f"by more than {HELD_OUT_Z:g} standard errors" in CRITERION and f"{NEGLIGIBLE:g} × its noise" in CRITERION
     metrics = tmp_path / "m.json"
     assert main(["evaluate", str(out), str(report), str(sim / "validation.csv"), "--json", str(metrics)]) == 0
     with_effects = json.loads(metrics.read_text())["position"]["rms_mm"]
@@ -141,6 +145,41 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     assert without >= footprint - with_effects - 1e-9, (without, footprint, with_effects)
     # were the effects applied anyway, without = with: the bound above catches it as footprint > 2 with
     assert footprint > 2 * with_effects
+
+
+def test_evaluate_on_interleaved_rows_takes_the_flanks_diagnose_fitted(tmp_path, kuka_urdf, capsys):
+    """Approach backlash (2 mrad on lwr_joint_4) with held-out rows interleaved in time among the calibration
+    rows (pincal simulate: validation at 2 830–4 260 s inside 0–4 290 s): a calibration row's flank follows
+    the held-out row before it, so REPORT.json's approach_context holds both sets, and evaluate on either
+    file says what diagnose said of those rows, to rounding (without the held-out rows: 0.85 mm against
+    diagnose's 0.033 mm on the calibration file's 100 calibration rows)."""
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--out", str(sim), "--deviations", "small", "--sigma-pos", "0.02", "--sigma-rot",
+                 "0.02", "--seed", "2", "--effect", "backlash:lwr_joint_4:0.002:approach"]) == 0
+    truth = json.loads((sim / "truth.json").read_text())
+    tool = ",".join(repr(v) for v in truth["tool"]["xyz_m"] + truth["tool"]["rpy_rad"])
+    out, report = tmp_path / "k.urdf", tmp_path / "REPORT.json"
+    assert main(["diagnose", str(kuka_urdf), str(sim / "calibration.csv"), "--validation", str(sim / "validation.csv"),
+                 "--tip-link", KUKA_FLANGE_LINK, "--tool", tool, "--out", str(out), "--report", str(report),
+                 "--quiet"]) == 0
+    doc = json.loads(report.read_text())
+    assert [(e["type"], e["joint"], e["source"]) for e in doc["effects"]] == [("backlash", "lwr_joint_4", "approach")]
+    held = doc["diagnosis"]["heldout_errors"]
+    assert len(doc["approach_context"]["time_s"]) == doc["diagnosis"]["calibration_errors"]["rows"] + held["rows"]
+    metrics = tmp_path / "m.json"
+    assert main(["evaluate", str(out), str(report), str(sim / "validation.csv"), "--json", str(metrics)]) == 0
+    assert json.loads(metrics.read_text())["position"]["rms_mm"] == pytest.approx(held["position"]["rms_mm"],
+                                                                                  rel=1e-9)
+    assert main(["evaluate", str(out), str(report), str(sim / "calibration.csv"), "--json", str(metrics)]) == 0
+    evaluated = json.loads(metrics.read_text())  # its calibration rows; the CPA rows are skipped
+    fitted = next(s for s in doc["row_errors"] if s["set"] == "calibration")
+    errors = np.array(next(m for m in fitted["models"] if m["model"] == "geometry and effects")["position_mm"])
+    calibration, _ = read_measurements(sim / "calibration.csv", KinematicChain.from_urdf(
+        kuka_urdf, KUKA_FLANGE_LINK).joint_specs)
+    role = dict(zip(calibration.lines.tolist(), calibration.roles.tolist()))
+    shown = errors[[role[line] == "calibration" for line in fitted["lines"]]]
+    assert shown.size == evaluated["rows"] == 100
+    assert evaluated["position"]["rms_mm"] == pytest.approx(np.sqrt(np.mean(shown**2)), rel=1e-9)
 
 
 def test_tiago_diagnose_beats_the_geometric_calibration(tmp_path):
@@ -173,6 +212,13 @@ def test_tiago_diagnose_beats_the_geometric_calibration(tmp_path):
     assert main(["evaluate", str(out), str(report), str(data / "qualisys_2021-11-26_static_postures.csv"),
                  "--json", str(metrics)]) == 0
     assert json.loads(metrics.read_text())["position_per_point"][0]["rms_mm"] == pytest.approx(held, rel=1e-9)
+    # and on the calibration rows evaluate says what diagnose said: the 2021-11-26 rows, 100 h before them,
+    # set no approach flank of theirs (the first row's stays 0, as evaluate has it: 1.694 against 1.733 mm
+    # when they did), so the fit does not depend on which file is held out
+    assert main(["evaluate", str(out), str(report), str(data / "qualisys_2021-11-30_static_postures.csv"),
+                 "--json", str(metrics)]) == 0
+    assert json.loads(metrics.read_text())["position"]["rms_mm"] == pytest.approx(
+        doc["diagnosis"]["calibration_errors"]["position"]["rms_mm"], rel=1e-9)
 
 
 def test_screening_refits_every_candidate_that_matters(monkeypatch):

@@ -99,6 +99,14 @@ def test_approach_flank_follows_interleaved_rows_of_another_set(kuka_chain):
     from pincal.model.effects import joint_basis
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), inputs, 5)[:, 0]
     assert flank.tolist() == [0.0, -1.0, 1.0]  # 0.5 -> 0.2 goes down, 0.1 -> 0.3 goes up
+    # rows of another day (spans apart: 100 h before) set no flank: the first row's stays 0, the others
+    # follow their own rows, as without them (the README's TIAGo split: diagnose's fit then does not
+    # depend on the held-out file, and evaluate on the calibration rows says what diagnose said)
+    days_before = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
+                                context_time=np.array([10.0, 30.0]) - 3.6e5)
+    assert days_before.context_q is None
+    flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), days_before, 5)[:, 0]
+    assert flank.tolist() == [0.0, 1.0, 1.0]
 
 
 def test_parse_effect_forms():

@@ -142,10 +142,10 @@ def test_summary_shows_the_numbers_of_the_report(diagnosis_page, tiago):
              page.locator(".card .rms").nth(i).inner_text() for i in range(page.locator(".card").count())}
     held_out = report["diagnosis"]["heldout_errors"]["position"]["rms_mm"]
     calibration = report["diagnosis"]["calibration_errors"]["position"]["rms_mm"]
-    assert cards["held-out rows"] == f"{held_out:#.3g}"  # 3.44 mm in the README's run
+    assert cards["held-out rows"] == f"{held_out:#.3g}"  # 3.39 mm in the README's run
     assert cards["calibration rows"] == f"{calibration:#.3g}"
     errors = page.locator("#errors-table").inner_text()
-    # marker 1, held-out, final model: the README's 2.65 mm
+    # marker 1, held-out, final model: the README's 2.47 mm
     assert f"{report['diagnosis']['heldout_errors']['position_per_point'][0]['rms_mm']:.3g}" in errors
     assert "nominal geometry" in errors and "geometry and effects" in errors
 

@@ -308,7 +308,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))
 
     def unit(effect) -> str:
-        return effect.unit(prismatic=kinds.get(effect.joint) == "prismatic")
+        from pincal.model.effect_units import effect_unit
+
+        return effect_unit(effect, kinds)
 
     for step in diagnosis.steps:
         values, std, shown_unit = shown(step.effect, step.values, step.std, unit(step.effect))  # α in µm/m/K

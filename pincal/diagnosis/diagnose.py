@@ -20,7 +20,9 @@ one is adopted when the evidence is very strong (ΔBIC < −10, Kass & Raftery
   as a joint offset, which the model already has;
 * a close competitor with a strongly correlated basis (e.g. the approach flanks
   of two joints that always move together): the data cannot tell them apart;
-* when held-out rows are given, an effect that makes them worse.
+* an effect too small to change any measured coordinate by a tenth of its noise;
+* when held-out rows are given, an effect that does not make them better beyond their
+  noise (a paired test of the per-row change of their error).
 
 Such cases are reported, not adopted. The loop repeats until nothing
 significant remains; then a generic per-joint correction (polynomial and
@@ -108,7 +110,9 @@ NO_TORQUE = 1e-9
 
 @dataclass(frozen=True)
 class Step:
-    """One adopted effect, with the errors before and after adding it."""
+    """One adopted effect, with the errors before and after adding it; a joint effect's ``driver`` (its
+    ``driver_label`` saying what it is), ``joint_residual`` and ``fitted_shift`` per row (the shifts in
+    ``shift_unit``: rad, or m for a prismatic joint) for its plot."""
 
     effect: Effect
     values: np.ndarray
@@ -123,6 +127,7 @@ class Step:
     driver_label: str = ""
     joint_residual: np.ndarray | None = None
     fitted_shift: np.ndarray | None = None
+    shift_unit: str = "rad"
 
 
 @dataclass(frozen=True)
@@ -414,6 +419,8 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
             heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
             candidates=tuple(ranking[:SHOWN]),
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
+            shift_unit="m" if effect.joint and chain.joints[chain.joint_names.index(effect.joint)].kind == "prismatic"
+            else "rad",
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
     if untestable:

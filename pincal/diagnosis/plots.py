@@ -57,10 +57,6 @@ def effect_curve(effect: Effect, driver: np.ndarray, fitted: np.ndarray,
     return grid, _basis(effect, grid) @ values
 
 
-def _joint_unit(label: str) -> str:
-    return "rad" if "torso" not in label else "m"
-
-
 def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
     """Write one figure per adopted joint effect and one of error distributions; return the paths."""
     out = Path(out_dir)
@@ -73,13 +69,12 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
         assert step.joint_residual is not None and step.fitted_shift is not None
         fig = Figure(figsize=(6.4, 4.2), layout="tight")
         ax = fig.subplots()
-        unit = _joint_unit(step.effect.joint or "")
         grid, curve = effect_curve(step.effect, step.driver, step.fitted_shift)
         ax.plot(step.driver, step.joint_residual * 1000.0, "o", ms=4, alpha=0.6, color=DATA_COLOUR,
                 label="fitted shift + remaining residual, per row")
         ax.plot(grid, curve * 1000.0, "-", lw=2, color=WITH_EFFECTS, label=f"fitted {step.effect.type}")
         ax.set_xlabel(step.driver_label)
-        ax.set_ylabel(f"joint shift of {step.effect.joint} [m{unit}]")
+        ax.set_ylabel(f"joint shift of {step.effect.joint} [m{step.shift_unit}]")
         ax.set_title(f"step {number}: {step.effect.label} (ΔBIC {step.delta_bic:.0f})")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)

@@ -69,10 +69,18 @@ def remaining_structure(model, adopted, objective, solution, chain, freedom) -> 
 
 
 _DRIVERS = {
-    "compliance": "gravity torque tau_j [N·m]",
     "encoder_scale": "joint reading q_j",
     "cyclic": "joint reading q_j",
 }
+
+
+def _load_label(chain, driver: str | None, joint: str) -> str:
+    """The axis label of a gravity load: a joint's own (``driver`` None) or ``driver``'s, a torque [N·m] of
+    a revolute joint, a force [N] of a prismatic one (:mod:`pincal.model.effect_units`)."""
+    name = joint if driver is None else driver
+    force = chain.joints[chain.joint_names.index(name)].kind == "prismatic"
+    quantity, unit = ("gravity force", "N") if force else ("gravity torque", "N·m")
+    return f"{quantity} tau_j [{unit}]" if driver is None else f"{quantity} of {driver} [{unit}]"
 
 
 def partial_residual(effect, objective, solution, inputs, chain):
@@ -97,14 +105,14 @@ def partial_residual(effect, objective, solution, inputs, chain):
     r = residual.reshape(len(residual), -1)
     shift = fitted - np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
     if effect.type == "backlash" and effect.source == "gravity":  # shift = value · sign(tau_j): a step at 0
-        driver, label = inputs.gravity[:, j], _DRIVERS["compliance"]
+        driver, label = inputs.gravity[:, j], _load_label(chain, None, effect.joint)
     elif effect.type == "backlash":
         driver, label = basis[:, 0], "approach direction (flank: −1 from above, +1 from below)"
     elif effect.type == "compliance":  # its own torque, or its driver's (a gravity-torque coupling)
-        driver = basis[:, 0]
-        label = _DRIVERS["compliance"] if effect.driver is None else f"gravity torque of {effect.driver} [N·m]"
+        driver, label = basis[:, 0], _load_label(chain, effect.driver, effect.joint)
     elif effect.type == "coupling":
-        driver, label = basis[:, 0], f"reading of {effect.driver} [rad or m]"
+        prismatic = chain.joints[chain.joint_names.index(effect.driver)].kind == "prismatic"
+        driver, label = basis[:, 0], f"reading of {effect.driver} [{'m' if prismatic else 'rad'}]"
     else:
         driver, label = inputs.q[:, j], _DRIVERS[effect.type]
     return driver, label, shift, fitted

@@ -12,7 +12,10 @@ reported instead:
 * a close competitor (within 6 of its ΔBIC) with a strongly correlated basis: the
   data cannot tell them apart (a drift and a step at a pause: the step is named,
   :mod:`pincal.model.thermal`);
-* when held-out rows are given, an effect that makes them worse.
+* when held-out rows are given, an effect that does not make them better beyond their noise: a
+  paired test of the per-row change of their error (:func:`held_out_verdict`).
+
+:data:`CRITERION` says the rule in words (REPORT.json's ``diagnosis.criterion``).
 """
 
 from __future__ import annotations
@@ -31,8 +34,8 @@ from pincal.model.thermal import implausible
 from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
-    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "Candidate",
-    "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
+    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN",
+    "Candidate", "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
     "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
 
@@ -68,6 +71,12 @@ AMBIGUOUS = 0.8
 HELD_OUT_Z = 2.0
 #: Held-out rows below which no standard error is taken: the veto is then a plain worsening of their total.
 MIN_PAIRED_ROWS = 5
+#: The adoption rule in words, from the constants above: REPORT.json's ``diagnosis.criterion``.
+CRITERION = (f"ΔBIC on the calibration rows < {EVIDENCE:g} (very strong evidence), physically plausible, "
+             f"changes some measured coordinate by at least {NEGLIGIBLE:g} × its noise, not offset-like, not "
+             f"ambiguous; with held-out rows, better on them beyond their noise: a paired test, the per-row change "
+             f"of squared error in noise units below zero by more than {HELD_OUT_Z:g} standard errors (with "
+             f"fewer than {MIN_PAIRED_ROWS} held-out rows, not worse in total)")
 #: Candidates shown per step.
 SHOWN = 8
 
@@ -359,9 +368,11 @@ def coupling_advice(effect: Effect, value: float, given: float | None = None) ->
             "chosen on the corrected readings; evaluate then corrects its rows the same way")
 
 
-def torque_coupling_advice(effect: Effect, value: float) -> str:
+def torque_coupling_advice(effect: Effect, value: float, unit: str) -> str:
     """What an adopted gravity-torque coupling (a ``compliance`` with a ``driver``) means: joint j deflects
-    under joint i's load, which a parallelogram or a counterbalance carries to it; it stays in the model."""
-    return (f"{effect.joint} deflects by {value:.4g} {effect.unit()} x {effect.driver}'s gravity torque (a "
+    under joint i's load, which a parallelogram or a counterbalance carries to it; it stays in the model.
+    ``unit``: the value's (:func:`pincal.model.effect_units.effect_unit`; rad/(N·m) between revolute joints)."""
+    load = "gravity force" if unit.endswith("/N") else "gravity torque"
+    return (f"{effect.joint} deflects by {value:.4g} {unit} x {effect.driver}'s {load} (a "
             f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
             "and the effects file beside the corrected URDF gives it to a controller")

@@ -6,13 +6,14 @@ Each joint effect shifts the reading of one joint: actual = q_j + shift, with
   tau the gravity torque from Pinocchio's ``computeGeneralizedGravity`` on the
   URDF's inertias, plus an optional payload mass at the target; with a ``driver`` i,
   shift = c · tau_i(q): joint j deflects under joint i's load (gravity-torque coupling: a
-  parallelogram or a counterbalance links J2's and J3's loads);
+  parallelogram or a counterbalance links J2's and J3's loads), c [rad or m per N·m or N]
+  as j and i are revolute or prismatic (:mod:`pincal.model.effect_units`);
 * ``encoder_scale``  shift = s · q_j             s relative (gear-ratio error);
 * ``cyclic``         shift = a · sin(h q_j) + b · cos(h q_j), harmonic h = 1, 2 [rad];
 * ``coupling``       shift = c · q_i             c relative: joint j's reading includes −c × joint
   i's (the ``driver``), as a controller that measures J3 from the horizontal on a parallelogram
   arm reads J3 − J2 (c = 1 corrects it); a mechanical cross-coupling of the transmissions gives a
-  small c;
+  small c (rad/m or m/rad between a revolute and a prismatic joint);
 * ``backlash``       lost motion between gear flanks [rad or m], two forms:
   ``gravity``: shift = value · sign(tau_j(q)) (a static pose rests on the flank
   gravity pushes it to); ``approach``: shift = value · sign(q_j[k] − q_j[k−1])
@@ -49,6 +50,7 @@ import pinocchio as pin
 from pincal.errors import PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet, reported_session
 from pincal.model.chain import KinematicChain
+from pincal.model.effect_units import value_unit
 from pincal.model.sensor import Registration
 
 __all__ = [
@@ -110,14 +112,9 @@ class Effect:
     def n_values(self) -> int:
         return {"cyclic": 2, "drift": 3, "pause_step": 3}.get(self.type, 1)
 
-    def unit(self, prismatic: bool = False) -> str:
-        """The unit of the effect's values (module docstring), for a joint that is ``prismatic`` or not."""
-        if self.type == "compliance":
-            return "m/N" if prismatic else "rad/(N·m)"
-        if self.type in ("cyclic", "backlash"):
-            return "m" if prismatic else "rad"
-        units = {"drift": "m/s", "thermal": "1/K", "pause_step": "m"}
-        return units.get(self.type, "(relative)")  # encoder_scale, sensor_scale
+    def unit(self, prismatic: bool = False, driver_prismatic: bool | None = None) -> str:
+        """The unit of its values (:func:`~pincal.model.effect_units.value_unit`): joint, driver prismatic?"""
+        return value_unit(self.type, prismatic, driver_prismatic)
 
     @property
     def label(self) -> str:
@@ -147,7 +144,7 @@ class EffectInputs:
         context_q / context_time: readings (M, N) and times (M,) [s] of other
             rows of the same session (e.g. held-out rows between calibration
             rows): the approach flank of a row follows the row before it in
-            time, whichever set it belongs to. None without them.
+            time, whichever set it belongs to. None without them or apart in time.
         flank_time: the rows' own time relative to the mean (K,) [s] when ``time``
             is the drift's, held outside a fitted span (:func:`effect_inputs`
             ``held_sessions``), for the approach flanks; None otherwise.
@@ -216,7 +213,8 @@ def effect_inputs(
     """Gravity torques, time (minus ``time_reference``, default its mean) and
     time order of the rows of ``data``. ``context_q`` (M, N) with
     ``context_time`` (M,) [s] are the joint readings of other rows of the same
-    session, interleaved in time, for approach flanks (readings only).
+    session, interleaved in time, for approach flanks (readings only); one whose time span does not
+    overlap the rows' (another day) is left out: the motion in between is unknown, the first flank 0.
 
     ``held_sessions`` = (the session of each row (K,), of each context row (M,)):
     the context rows are the rows a drift is fitted on, and these rows (held-out
@@ -227,6 +225,8 @@ def effect_inputs(
         time_reference = float(np.mean(time))
     centred = None if time is None else time - time_reference
     with_context = context_q is not None and context_time is not None and time is not None
+    interleaved = context_time is not None and time is not None and with_context and bool(
+        np.min(context_time) <= np.max(time) and np.min(time) <= np.max(context_time))
     drift_time = centred
     if with_context and held_sessions is not None:
         own, fitted = (np.asarray(sessions).astype(str) for sessions in held_sessions)
@@ -238,8 +238,8 @@ def effect_inputs(
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
         time=drift_time,
         order=order,
-        context_q=np.asarray(context_q, dtype=float) if with_context else None,
-        context_time=np.asarray(context_time, dtype=float) - time_reference if with_context else None,
+        context_q=np.asarray(context_q, dtype=float) if interleaved else None,
+        context_time=np.asarray(context_time, dtype=float) - time_reference if interleaved else None,
         flank_time=centred if drift_time is not centred else None,
         joint_names=tuple(chain.joint_names),
     )

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, cast
 
+import numpy as np
+
 from pincal.report.model import (
     ChainHead,
     CouplingsPart,
@@ -51,7 +53,8 @@ def diagnosis_report(
     """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
-    from pincal.diagnosis.verdicts import coupling_advice, torque_coupling_advice
+    from pincal.diagnosis.verdicts import CRITERION, coupling_advice, torque_coupling_advice
+    from pincal.model.effect_units import effect_unit
     from pincal.model.effects import effect_to_dict
 
     def errors(e) -> PoseErrorsJson | None:
@@ -59,14 +62,17 @@ def diagnosis_report(
 
     approach = any(e.source == "approach" for e, _, _ in diagnosis.effects)
     context: ApproachContext | None = None
-    if approach and diagnosis.inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+    inputs = diagnosis.inputs
+    if approach and inputs.time is not None:  # the session's motion, for the flanks of interleaved rows
+        moves = [(inputs.time, inputs.q)]  # the calibration rows, and the held-out rows that set their flanks
+        if inputs.context_time is not None and inputs.context_q is not None:
+            moves.append((inputs.context_time, inputs.context_q))
         context = {
-            "time_s": (diagnosis.inputs.time + diagnosis.time_reference).tolist(),
-            "q": diagnosis.inputs.q.tolist(),
+            "time_s": (np.concatenate([t for t, _ in moves]) + diagnosis.time_reference).tolist(),
+            "q": np.vstack([q for _, q in moves]).tolist(),
         }
     section: DiagnosisJson = {
-        "criterion": "ΔBIC on the calibration rows < -10 (very strong evidence), physically plausible, "
-                     "not offset-like, not ambiguous, not worse on held-out rows",
+        "criterion": CRITERION,
         "steps": [
             {
                 "effect": cast(EffectJson, effect_to_dict(step.effect, step.values, step.std)),
@@ -93,7 +99,8 @@ def diagnosis_report(
             entry["advice"] = coupling_advice(effect, float(values[0]),
                                               given.get((str(effect.joint), str(effect.driver))))
         elif effect.driver:  # a compliance under another joint's torque: what links them
-            entry["advice"] = torque_coupling_advice(effect, float(values[0]))
+            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
+            entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
     return {
         **head,
         "warnings": warnings,

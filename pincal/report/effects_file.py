@@ -32,6 +32,7 @@ import yaml
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
+from pincal.model.effect_units import effect_unit
 from pincal.model.effects import APPROACH_MIN_STEP, SENSOR_EFFECTS, Effect, effect_from_dict
 from pincal.outputs import write_text
 
@@ -126,7 +127,7 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
             keep.update(temperature_column=context["temperature_column"],
                         temperature_reference_c=context["temperature_reference_c"],
                         temperature_range_c=context["temperature_range_c"])
-        effects.append({**keep, "unit": effect.unit(prismatic=kinds.get(effect.joint) == "prismatic"),
+        effects.append({**keep, "unit": effect_unit(effect, kinds),
                         "side": _side(effect), "equation": _equation(effect, context)})
     return {
         "schema": SCHEMA,

@@ -91,7 +91,8 @@ class DiagnosisJson(TypedDict):
 
 
 class ApproachContext(TypedDict):
-    """The session's motion (time and joint readings), for the flanks of interleaved rows."""
+    """The session's motion (time and joint readings), for the flanks of interleaved rows: the calibration
+    rows, then the held-out rows interleaved with them in time (those that set their approach flanks)."""
 
     time_s: list[float]
     q: list[list[float]]

@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pincal.model.effect_units import value_unit
+
 __all__ = [
     "DISPLAY", "num", "change_text", "parameter_section", "effect_label", "effects_section", "fixed", "rotation_text",
     "sessions_section", "generic",
@@ -117,10 +119,11 @@ def _decimals(value: float | None, scale: float, unit: str) -> str:
     return num(value * scale, 7)
 
 
-def _effect_value(entry: dict, prismatic: bool) -> tuple[str, str]:
-    """(value ± std with its unit, |value|/std) of one ``effects`` entry."""
+def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
+    """(value ± std with its unit, |value|/std) of one ``effects`` entry, its joints of the kinds ``kinds``."""
     kind: Any = entry.get("type")  # a JSON value: a string, or None when absent
-    length = prismatic
+    length = kinds.get(entry.get("joint")) == "prismatic"
+    driver = None if entry.get("driver") is None else kinds.get(entry.get("driver")) == "prismatic"
 
     def pm(value, std, scale, unit):
         text = f"{num(_finite(value) * scale if _finite(value) is not None else None, 4)}"
@@ -142,7 +145,7 @@ def _effect_value(entry: dict, prismatic: bool) -> tuple[str, str]:
         name, scale, unit = ("v", 1000.0, "mm/s") if kind == "drift" else ("d", 1e6, "µm")
         return ", ".join(f"{name}{axis} {pm(v, s, scale, unit)}" for axis, v, s in zip("xyz", values, stds)), ""
     scale, unit = {
-        "compliance": (1000.0, "mm/N" if length else "mrad/(N·m)"),
+        "compliance": (1000.0, "m" + value_unit("compliance", length, driver)),  # mrad/(N·m), mm/N, mrad/N, ...
         "encoder_scale": (100.0, "%"),
         "coupling": (1.0, f"× {entry.get('driver')}'s reading"),
         "sensor_scale": (100.0, "%"),
@@ -183,14 +186,11 @@ def effects_section(doc: dict, kinds: dict[Any, str], base: Path, png: Callable)
     if not isinstance(diagnosis, dict):
         return None
 
-    def prismatic(entry: dict) -> bool:
-        return kinds.get(entry.get("joint")) == "prismatic"
-
     from pincal.diagnosis.verdicts import POSITION_ONLY  # loaded only for a diagnose report
 
     final = []
     for entry in doc.get("effects") or []:
-        value, ratio = _effect_value(entry, prismatic(entry))
+        value, ratio = _effect_value(entry, kinds)
         change = entry.get("target_change") or {}  # how far it moves the target (mm; mrad with 6D rows)
         turns = "rms_mrad" in change and entry.get("type") not in POSITION_ONLY  # an expansion turns nothing
         moves = "" if "rms_mm" not in change else (
@@ -203,13 +203,13 @@ def effects_section(doc: dict, kinds: dict[Any, str], base: Path, png: Callable)
         effect = step.get("effect") or {}
         cal, held = step.get("calibration") or {}, step.get("heldout") or {}
         steps.append({
-            "number": number, "label": effect_label(effect), "value": _effect_value(effect, prismatic(effect))[0],
+            "number": number, "label": effect_label(effect), "value": _effect_value(effect, kinds)[0],
             "delta_bic": num(step.get("delta_bic"), 4),
             "cal": (_rms(cal.get("before")), _rms(cal.get("after"))),
             "held": (_rms(held.get("before")), _rms(held.get("after"))) if held.get("before") else None,
         })
     candidates = [{
-        "label": effect_label(c), "value": _effect_value(c, prismatic(c))[0], "delta_bic": num(c.get("delta_bic"), 4),
+        "label": effect_label(c), "value": _effect_value(c, kinds)[0], "delta_bic": num(c.get("delta_bic"), 4),
         "delta_bic_value": _finite(c.get("delta_bic")) or 0.0, "heldout": num(c.get("heldout_rms_mm"), 4),
         "verdict": c.get("verdict"),
     } for c in diagnosis.get("last_candidates") or []]

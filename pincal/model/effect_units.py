@@ -1,0 +1,52 @@
+"""The units of the effects' values (:mod:`pincal.model.effects`), which depend on the joints' kinds.
+
+A joint effect's value is a shift of its joint [rad, or m for a prismatic joint] per unit of what
+drives it: a compliance's gravity load [N·m of a revolute joint's torque, N of a prismatic joint's
+force] — its own joint's, or its ``driver``'s —, a coupling's driver reading [rad or m]. So a
+compliance is in rad/(N·m), m/N, rad/N (a revolute joint under a prismatic joint's load) or m/(N·m)
+(a prismatic joint under a revolute joint's torque).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol
+
+__all__ = ["EffectJoints", "value_unit", "effect_unit"]
+
+
+class EffectJoints(Protocol):
+    """What the unit of an effect depends on (:class:`pincal.model.effects.Effect` has it)."""
+
+    @property
+    def type(self) -> str: ...
+
+    @property
+    def joint(self) -> str | None: ...
+
+    @property
+    def driver(self) -> str | None: ...
+
+
+def value_unit(kind: str, prismatic: bool = False, driver_prismatic: bool | None = None) -> str:
+    """The unit of the values of an effect of type ``kind`` (module docstring), its joint ``prismatic``
+    or not, the joint that drives it ``driver_prismatic`` or not (None: the joint itself)."""
+    shift = "m" if prismatic else "rad"
+    driver = prismatic if driver_prismatic is None else driver_prismatic
+    if kind == "compliance":
+        return f"{shift}/N" if driver else f"{shift}/(N·m)"
+    if kind in ("cyclic", "backlash"):
+        return shift
+    if kind == "coupling" and driver != prismatic:
+        return f"{shift}/{'m' if driver else 'rad'}"
+    units = {"drift": "m/s", "thermal": "1/K", "pause_step": "m"}
+    return units.get(kind, "(relative)")  # encoder_scale, sensor_scale, a coupling of like joints
+
+
+def effect_unit(effect: EffectJoints, kinds: Mapping[str, str]) -> str:
+    """The unit of ``effect``'s values on a chain whose joints have the kinds ``kinds`` (joint name →
+    ``revolute``, ``continuous`` or ``prismatic``, as REPORT.json's ``chain``): its joint's and its driver's."""
+    def prismatic(name: str | None) -> bool:
+        return kinds.get(name or "") == "prismatic"
+
+    return value_unit(effect.type, prismatic(effect.joint), None if effect.driver is None else prismatic(effect.driver))
