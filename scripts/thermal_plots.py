@@ -29,7 +29,7 @@ from pincal.diagnosis.diagnose import diagnose
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
-from pincal.model.effects import time_column
+from pincal.model.drift import time_column
 from pincal.palette import CALIBRATED, WITH_EFFECTS
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import DEFAULT_TOOL_RPY, DEFAULT_TOOL_XYZ

@@ -20,7 +20,8 @@ from pincal.measurements.couplings import apply_couplings, parse_coupling
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
-from pincal.model.effects import parse_effect, time_column
+from pincal.model.drift import time_column
+from pincal.model.effects import parse_effect
 from pincal.robots import KUKA_FLANGE_LINK
 
 OFFSETS_ONLY = DHDeviations(

@@ -168,7 +168,7 @@ def test_offsets_inside_a_span_or_held_at_their_sessions_mean():
     """Two sessions A [0, 100] s (mean 40 s) and B [1000, 1100] s (mean 1060 s), t̄ = 500 s,
     u = (1, 2, 3) mm/s: inside its registration's session span a row gets (t − t̄) u, outside it
     (t̄_S − t̄) u; a re-estimated one (None) the nearest span's value at the nearer end."""
-    from pincal.model.effects import TimeSpan, drift_offsets
+    from pincal.model.drift import TimeSpan, drift_offsets
 
     spans = (TimeSpan("A", 0.0, 100.0, 40.0), TimeSpan("B", 1000.0, 1100.0, 1060.0))
     u = np.array([1e-3, 2e-3, 3e-3])
@@ -188,7 +188,7 @@ def test_a_session_between_two_spans_is_held_in_one_of_them():
     """Rows of one evaluated session (group 0) between A and B take the span nearest their median
     (500 s: A, 400 s away, not B, 500 s away), every row of them — the 600 s row too, though B
     is nearer to it; a session name without a span (C, reported) likewise, held at that span's mean."""
-    from pincal.model.effects import TimeSpan, drift_offsets
+    from pincal.model.drift import TimeSpan, drift_offsets
 
     spans = (TimeSpan("A", 0.0, 100.0, 40.0), TimeSpan("B", 1000.0, 1100.0, 1060.0))
     u = np.array([1e-3, 2e-3, 3e-3])
@@ -330,7 +330,7 @@ def test_heldout_inputs_keep_their_own_time_for_the_approach_flanks(kuka_chain):
 def test_a_session_of_equal_times_gives_a_span_evaluate_accepts():
     """The rounded mean of equal times can land an ulp above them (np.mean of 7 × 1637000000.1):
     the span diagnose writes must still pass the first <= mean <= last check evaluate makes."""
-    from pincal.model.effects import read_time_spans, time_spans
+    from pincal.model.drift import read_time_spans, time_spans
 
     for value, count in ((0.1, 3), (1637000000.1, 7), (86400.7, 11)):
         spans = time_spans(np.full(count, value), ["A"] * count)

@@ -22,7 +22,8 @@ from pincal.diagnosis.diagnose import MAX_EFFECTS, NO_TORQUE, candidate_effects,
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
-from pincal.model.effects import gravity_torques, parse_effect, time_column
+from pincal.model.drift import time_column
+from pincal.model.effects import gravity_torques, parse_effect
 from pincal.planning.candidates import sample_candidates
 from pincal.planning.design import STARTS
 from pincal.planning.planner import PlanSettings, plan_measurements

@@ -60,6 +60,31 @@ def test_a_temperature_column_in_some_session_files_only_is_named_not_dropped(tm
     assert data.dropped_extra == {}
 
 
+def test_a_time_or_sigma_column_in_some_session_files_only_is_named(tmp_path):
+    """The same for the time column a drift and a pause step need, and for --sigma-column: a default time
+    column in 1 of 2 files gives one note naming the file without it (not 'add a column'); named with
+    --time-column or --sigma-column it is refused, naming that file."""
+    from pincal.fit.chain_calibration import row_weights
+    from pincal.model.drift import time_column
+
+    with_time = _session(tmp_path / "a.csv", extra="sigma_mm")
+    without = tmp_path / "c.csv"  # no time, no sigma_mm
+    rows = "".join(f"{0.1 * k},{0.2 * k},{1.0 + k},0.5,0.2,{20.0 + k}\n" for k in range(4))
+    without.write_text("j1,j2,x,y,z,temperature_c\n" + rows, encoding="utf-8")
+    data, _ = read_sessions([with_time, without], JOINTS)
+    assert set(data.dropped_extra) == {"time", "sigma_mm"} and data.dropped_extra["time"] == (str(without),)
+    assert time_column(data) is None
+    readings = read_readings(data, None, None)
+    search = search_conditions(None, data.sessions.tolist(), readings, np.ones(data.n_rows, bool))
+    (timing,) = [n for n in search.notes if "pause_step" in n]
+    assert timing.startswith(f"drift and pause_step cannot be tested: {without} lack(s) the time column 'time'")
+    assert "add a column" not in timing
+    with pytest.raises(PincalError, match=f"^{re.escape(str(without))}: no time column 'time', which the other"):
+        time_column(data, "time")
+    with pytest.raises(PincalError, match=f"^{re.escape(str(without))}: no column 'sigma_mm' for --sigma-column, wh"):
+        row_weights(data, "sigma_mm")
+
+
 @pytest.mark.parametrize("key, index", [("pauses", 0), ("pause_spans_s", 1)])
 @pytest.mark.parametrize("session", [3, None, ["A"], ""])
 def test_a_pause_or_span_whose_session_is_not_a_name_is_refused_by_its_key(key, index, session):
@@ -67,7 +92,8 @@ def test_a_pause_or_span_whose_session_is_not_a_name_is_refused_by_its_key(key, 
     (str(3) = '3' names no session): refused in one line naming the key; the well-formed report applies."""
     from pincal.cli.conditions import applied_conditions
     from pincal.measurements.data import MeasurementSet
-    from pincal.model.effects import Effect, read_time_spans
+    from pincal.model.drift import read_time_spans
+    from pincal.model.effects import Effect
 
     time = np.array([0.0, 500.0, 4000.0])
     data = MeasurementSet(joint_names=("j",), q=np.zeros((3, 1)), points=np.zeros((3, 1, 3)), rotations=None,

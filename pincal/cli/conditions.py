@@ -17,7 +17,8 @@ import numpy as np
 
 from pincal.errors import PincalError
 from pincal.measurements.data import MeasurementSet
-from pincal.model.effects import Effect, own_spans, read_time_spans, time_column
+from pincal.model.drift import own_spans, read_time_spans, time_column
+from pincal.model.effects import Effect
 from pincal.model.thermal import Pause, RowConditions, TemperatureRange, pause_rows, temperature_column
 from pincal.report.model_diagnosis import PauseJson, TemperatureRangeJson
 from pincal.report.model_evaluation import PauseStepUse, ThermalUse

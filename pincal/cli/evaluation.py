@@ -25,7 +25,7 @@ span of the rows it was fitted on in the session whose registration it uses
 for a one-session fit, without the drift term; a re-estimated registration
 (which absorbs any constant offset) holds it at the nearer end of one span for
 the whole session, the span nearest its median time
-(:func:`pincal.model.effects.drift_offsets`); a note says how many rows,
+(:func:`pincal.model.drift.drift_offsets`); a note says how many rows,
 and ``drift`` in ``--json`` records it.
 
 A ``thermal`` expansion and ``pause_step`` effects are never extrapolated either: a row outside
@@ -62,14 +62,8 @@ from pincal.measurements.data import (
     default_session_name,
 )
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import (
-    drift_offsets,
-    effect_from_dict,
-    effect_inputs,
-    joint_shifts,
-    read_time_spans,
-    time_column,
-)
+from pincal.model.drift import drift_offsets, read_time_spans, time_column
+from pincal.model.effects import effect_from_dict, effect_inputs, joint_shifts
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report

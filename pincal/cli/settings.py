@@ -192,7 +192,7 @@ class DiagnoseSettings(_FitSettings):
         level: the geometry under the effects, one of :data:`DIAGNOSE_LEVELS`.
         payload_kg: a point mass at the target for the gravity torques [kg].
         time_column: the column of row times [s] (None: the first of
-            :data:`pincal.model.effects.TIME_COLUMNS` present).
+            :data:`pincal.model.drift.TIME_COLUMNS` present).
         temperature_column: the column of row temperatures [°C] (None: the first of
             :data:`pincal.model.thermal.TEMPERATURE_COLUMNS` present).
         pause_s: a gap longer than this between rows of a session is a pause [s] (:mod:`pincal.model.thermal`).

@@ -48,12 +48,8 @@ from pincal.model.corrected_urdf import write_corrected_urdf
 from pincal.model.description import xacro_arguments
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.dh.table import DEVIATION_SETS, KUKA_LWR4_DH
-from pincal.model.effects import (
-    TIME_COLUMNS,
-    effect_to_dict,
-    parse_effect,
-    time_column,
-)
+from pincal.model.drift import TIME_COLUMNS, time_column
+from pincal.model.effects import effect_to_dict, parse_effect
 from pincal.outputs import file_sha256, write_text
 from pincal.progress import Progress, Stages
 from pincal.report.diagnosis import diagnosis_report

@@ -16,7 +16,8 @@ import numpy as np
 
 from pincal.errors import PincalError
 from pincal.measurements.data import MeasurementSet
-from pincal.model.effects import TIME_COLUMNS, Effect, EffectInputs, TimeSpan, time_spans
+from pincal.model.drift import TIME_COLUMNS, TimeSpan, time_spans
+from pincal.model.effects import Effect, EffectInputs
 from pincal.model.thermal import (
     PAUSE_S,
     TEMPERATURE_COLUMNS,
@@ -40,6 +41,8 @@ class Readings:
         pause_s: the gap between consecutive rows of a session that starts a new segment [s].
         partial: without a temperature: a default column (:data:`~pincal.model.thermal.TEMPERATURE_COLUMNS`)
             that some of several session files have, with the files without it (the join dropped it), or None.
+        time_partial: the same for a default time column (:data:`~pincal.model.drift.TIME_COLUMNS`) when no
+            time column is left, or None.
     """
 
     temperature: np.ndarray | None = None
@@ -47,6 +50,7 @@ class Readings:
     column: str | None = None
     pause_s: float = PAUSE_S
     partial: tuple[str, tuple[str, ...]] | None = None
+    time_partial: tuple[str, tuple[str, ...]] | None = None
 
 
 def read_readings(data: MeasurementSet, heldout: MeasurementSet | None, column: str | None,
@@ -59,16 +63,22 @@ def read_readings(data: MeasurementSet, heldout: MeasurementSet | None, column: 
             in the calibration rows only.
     """
     found = temperature_column(data, column)
-    if found is None:  # a default column of some session files only: said by search_conditions
-        partial = next(((n, data.dropped_extra[n]) for n in TEMPERATURE_COLUMNS if n in data.dropped_extra), None)
-        return Readings(pause_s=pause_s, partial=partial)
+    # a default column of some session files only, the join dropped it: said by search_conditions
+    time_partial = None if any(n in data.extra for n in TIME_COLUMNS) else _partial(data, TIME_COLUMNS)
+    if found is None:
+        return Readings(pause_s=pause_s, partial=_partial(data, TEMPERATURE_COLUMNS), time_partial=time_partial)
     held = None
     if heldout is not None:
         if found[0] not in heldout.extra:
             raise PincalError(f"{heldout.source}: the held-out rows need the temperature column '{found[0]}' of "
                               "the calibration rows (thermal expansion is judged on both); add it")
         held = temperature_column(heldout, found[0])
-    return Readings(found[1], None if held is None else held[1], found[0], pause_s)
+    return Readings(found[1], None if held is None else held[1], found[0], pause_s, time_partial=time_partial)
+
+
+def _partial(data: MeasurementSet, names: Sequence[str]) -> tuple[str, tuple[str, ...]] | None:
+    """The first of ``names`` that some of ``data``'s session files lack, with those files; None if none."""
+    return next(((n, tuple(data.dropped_extra[n])) for n in names if n in data.dropped_extra), None)
 
 
 @dataclass(frozen=True)
@@ -128,7 +138,12 @@ def search_conditions(time: np.ndarray | None, sessions: Sequence[str], readings
         else:
             notes.append(f"thermal cannot be tested: the temperature does not change over the rows "
                          f"({temperature_range.low:g} °C in every row of column '{readings.column}')")
-    if time is None:
+    if time is None and readings.time_partial is not None:
+        name, lacking = readings.time_partial
+        notes.append(f"drift and pause_step cannot be tested: {', '.join(lacking)} lack(s) the time column '{name}' "
+                     "of the other session file(s), and sessions are joined on the columns every file has: add it "
+                     f"to {'that file' if len(lacking) == 1 else 'those files'}")
+    elif time is None:
         notes.append(f"pause_step cannot be tested: a registration step across a pause needs each row's time [s]: "
                      f"add a column {', '.join(TIME_COLUMNS)}, or name yours with --time-column NAME")
     else:

@@ -148,6 +148,12 @@ def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
     """Relative row weights from a per-row noise column (median 1), or ones."""
     if sigma_column is None:
         return np.ones(data.n_rows)
+    if sigma_column in data.dropped_extra:  # in some of the session files only
+        lacking = data.dropped_extra[sigma_column]
+        raise CalibrationError(
+            f"{', '.join(lacking)}: no column '{sigma_column}' for --sigma-column, which the other session file(s) "
+            f"have; add it to {'this file' if len(lacking) == 1 else 'these files'}, or leave out --sigma-column"
+        )
     if sigma_column not in data.extra:
         raise CalibrationError(
             f"{data.source}: no column '{sigma_column}' for --sigma-column; "

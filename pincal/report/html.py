@@ -166,7 +166,7 @@ def _registration_notes(evaluation: dict | None) -> list[str]:
     notes = [f"session {s['name']}: registration re-estimated on these rows — {s['residuals']} residuals, "
              f"{s['dof']} degrees of freedom left: errors about {s['shrink']} × the true error"
              for s in sessions if s["reestimated"]]
-    if isinstance(held, int) and held > 0:  # where evaluate held it (pincal.model.effects.drift_offsets)
+    if isinstance(held, int) and held > 0:  # where evaluate held it (pincal.model.drift.drift_offsets)
         assert drift is not None  # held comes from it
         kinds = {s["reestimated"] for s in sessions}
         at = ("at zero offset (no span recorded)" if not drift.get("time_spans_s")

@@ -25,7 +25,7 @@ import numpy as np
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.sessions import session_rows
 from pincal.measurements.data import MeasurementSet
-from pincal.model.effects import time_spans
+from pincal.model.drift import time_spans
 from pincal.model.sensor import Registration
 from pincal.report.model import SessionEntry, TimeSpanJson, errors_json, registration_pair
 from pincal.report.model_diagnosis import TimeSpansPart
@@ -70,7 +70,7 @@ def session_entries(
 def drift_spans(diagnosis, time: np.ndarray | None, calibration, used: MeasurementSet) -> TimeSpansPart:
     """REPORT.json ``time_spans_s`` when ``diagnosis`` adopted a drift: the time span
     (first, last, mean [s]) of the rows it was fitted on, per calibrated session —
-    where ``evaluate`` applies it (:func:`pincal.model.effects.drift_offsets`); {} without a drift.
+    where ``evaluate`` applies it (:func:`pincal.model.drift.drift_offsets`); {} without a drift.
 
     Args:
         diagnosis: :class:`pincal.diagnosis.diagnose.Diagnosis`.
