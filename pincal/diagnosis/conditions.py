@@ -76,6 +76,13 @@ def read_readings(data: MeasurementSet, heldout: MeasurementSet | None, column: 
     return Readings(found[1], None if held is None else held[1], found[0], pause_s, time_partial=time_partial)
 
 
+def _lacking(effects: str, kind: str, name: str, lacking: Sequence[str]) -> str:
+    """The note for a ``kind`` column ``name`` that the session files ``lacking`` lack (the join dropped it)."""
+    return (f"{effects} cannot be tested: {', '.join(lacking)} lack(s) the {kind} column '{name}' of the other "
+            "session file(s), and sessions are joined on the columns every file has: add it to "
+            f"{'that file' if len(lacking) == 1 else 'those files'}")
+
+
 def _partial(data: MeasurementSet, names: Sequence[str]) -> tuple[str, tuple[str, ...]] | None:
     """The first of ``names`` that some of ``data``'s session files lack, with those files; None if none."""
     return next(((n, tuple(data.dropped_extra[n])) for n in names if n in data.dropped_extra), None)
@@ -123,10 +130,7 @@ def search_conditions(time: np.ndarray | None, sessions: Sequence[str], readings
     pauses: tuple[Pause, ...] = ()
     temperature = None if readings.temperature is None else np.asarray(readings.temperature, dtype=float)[used]
     if temperature is None and readings.partial is not None:
-        name, lacking = readings.partial
-        notes.append(f"thermal cannot be tested: {', '.join(lacking)} lack(s) the temperature column '{name}' of the "
-                     "other session file(s), and sessions are joined on the columns every file has: add it to "
-                     f"{'that file' if len(lacking) == 1 else 'those files'}")
+        notes.append(_lacking("thermal", "temperature", *readings.partial))
     elif temperature is None:
         notes.append(f"thermal cannot be tested: the arm's lengths growing with temperature need each row's "
                      f"temperature [°C]: add a column {' or '.join(TEMPERATURE_COLUMNS)}, or name yours with "
@@ -139,10 +143,7 @@ def search_conditions(time: np.ndarray | None, sessions: Sequence[str], readings
             notes.append(f"thermal cannot be tested: the temperature does not change over the rows "
                          f"({temperature_range.low:g} °C in every row of column '{readings.column}')")
     if time is None and readings.time_partial is not None:
-        name, lacking = readings.time_partial
-        notes.append(f"drift and pause_step cannot be tested: {', '.join(lacking)} lack(s) the time column '{name}' "
-                     "of the other session file(s), and sessions are joined on the columns every file has: add it "
-                     f"to {'that file' if len(lacking) == 1 else 'those files'}")
+        notes.append(_lacking("drift and pause_step", "time", *readings.time_partial))
     elif time is None:
         notes.append(f"pause_step cannot be tested: a registration step across a pause needs each row's time [s]: "
                      f"add a column {', '.join(TIME_COLUMNS)}, or name yours with --time-column NAME")

@@ -11,7 +11,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from pincal.errors import MeasurementError, ModelError, PincalError
+from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mean
 
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
@@ -190,6 +190,23 @@ class MeasurementSet:
         """Each row's session as an index into :attr:`session_names`, (K,)."""
         order = {name: i for i, name in enumerate(self.session_names)}
         return np.array([order[name] for name in self.sessions], dtype=np.intp)
+
+    def named_column(self, name: str, what: str, needs: str, flag: str) -> np.ndarray:
+        """The numeric extra column ``name`` that ``flag`` names (``what``: "time column", …).
+
+        Raises:
+            PincalError: in some of several session files only (the join dropped it: naming the files
+                without it, and that ``needs`` every row's value), or in none (with the closest names).
+        """
+        if name in self.dropped_extra:
+            lacking = self.dropped_extra[name]
+            raise PincalError(f"{', '.join(lacking)}: no {what} '{name}', which the other session file(s) have; "
+                              f"{needs}: add the column to {'this file' if len(lacking) == 1 else 'these files'}, "
+                              f"or leave out {flag}")
+        if name not in self.extra:
+            raise PincalError(f"{self.source}: no {what} '{name}'; "
+                              f"{did_you_mean(name, self.extra, 'numeric extra columns')}")
+        return np.asarray(self.extra[name], dtype=float)
 
     def select(self, mask: np.ndarray) -> MeasurementSet:
         """Return the rows picked by a boolean mask of shape (K,) or an index array."""

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pincal.errors import PincalError, did_you_mean
+from pincal.errors import PincalError
 from pincal.measurements.data import MeasurementSet, reported_session
 
 __all__ = [
@@ -39,15 +39,9 @@ def time_column(data: MeasurementSet, name: str | None = None) -> np.ndarray | N
         PincalError: no column ``name`` (with the closest names; in some of several files: naming the files
             without it), or an empty / non-finite cell.
     """
+    if name:
+        data.named_column(name, "time column", "a drift or a pause step needs every row's time", "--time-column")
     names = [name] if name else [n for n in TIME_COLUMNS if n in data.extra]
-    if name and name in data.dropped_extra:  # named, in some of the session files only
-        lacking = data.dropped_extra[name]
-        raise PincalError(f"{', '.join(lacking)}: no time column '{name}', which the other session file(s) have; "
-                          f"a drift or a pause step needs every row's time: add the column to "
-                          f"{'this file' if len(lacking) == 1 else 'these files'}, or leave out --time-column")
-    if name and name not in data.extra:
-        raise PincalError(f"{data.source}: no time column '{name}'; "
-                          f"{did_you_mean(name, data.extra, 'numeric extra columns')}")
     if not names:
         return None
     time = np.asarray(data.extra[names[0]], dtype=float)

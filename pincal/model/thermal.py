@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pincal.errors import PincalError, did_you_mean
+from pincal.errors import PincalError
 from pincal.measurements.data import MeasurementSet, reported_session
 from pincal.model.effects import Effect, EffectInputs
 
@@ -84,14 +84,9 @@ def temperature_column(data: MeasurementSet, name: str | None = None) -> tuple[s
         PincalError: no column ``name`` (with the closest names; in some of several files: naming the files
             without it), or an empty / non-finite cell.
     """
-    if name and name in data.dropped_extra:  # named, in some of the session files only
-        lacking = data.dropped_extra[name]
-        raise PincalError(f"{', '.join(lacking)}: no temperature column '{name}', which the other session file(s) "
-                          f"have; thermal expansion needs every row's temperature: add the column to "
-                          f"{'this file' if len(lacking) == 1 else 'these files'}, or leave out --temperature-column")
-    if name and name not in data.extra:
-        raise PincalError(f"{data.source}: no temperature column '{name}'; "
-                          f"{did_you_mean(name, data.extra, 'numeric extra columns')}")
+    if name:
+        data.named_column(name, "temperature column", "thermal expansion needs every row's temperature",
+                          "--temperature-column")
     found = name or next((n for n in TEMPERATURE_COLUMNS if n in data.extra), None)
     if found is None:
         return None
