@@ -115,7 +115,7 @@ def bound_table(chain: KinematicChain, count: int, counts, draws: int, measure: 
     psi_rand = trace(problem, uniform)
     out = {"candidates": count, "parameters": problem.n, "psi_star_upper": best.value, "psi_star_lower": best.bound,
            "efficiency": best.efficiency, "iterations": best.iterations, "seconds": seconds,
-           "support": int(np.sum(best.weights > 1e-3 / count)), "psi_rand": psi_rand,
+           "support": int(np.sum(best.weights > 1e-3 / len(candidates))), "psi_rand": psi_rand,
            "asymptotic_rms_bound": float(np.sqrt(best.bound / psi_rand)),
            "asymptotic_mean_bound": mean_error_mm(problem, optimum) / mean_error_mm(problem, uniform), "N": {}}
     rng = np.random.default_rng(5)
@@ -189,6 +189,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=8, help="noise seeds of --realised (the test: 8)")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
+    if args.realised and args.pool != "uniform":
+        parser.error("--realised repeats tests/test_plan.py's experiment on uniform candidates; leave out --pool")
     if args.realised and args.measure == "pose":
         parser.error("--realised repeats tests/test_plan.py's point experiment; for pose, "
                      "scripts/plan_vs_random.py is the realised experiment")

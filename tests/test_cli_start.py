@@ -9,6 +9,7 @@ thread: the limit is set once the arguments are valid, after the libraries it li
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -53,11 +54,20 @@ def test_help_and_refusals_import_no_numerical_library(argv):
 
 def test_every_blas_the_run_loads_gets_one_thread():
     """The limit of ``main`` reaches numpy's and scipy's OpenBLAS (separate builds), and no BLAS that
-    calibrate's modules load comes after it."""
-    script = ("import json\nfrom threadpoolctl import threadpool_info\nfrom pincal.cli import commands\n"
-              "with commands._one_blas_thread():\n    import pincal.cli.workflows\n"
-              "    pools = [(i['filepath'], i['num_threads']) for i in threadpool_info() if i['user_api'] == 'blas']\n"
-              "print(json.dumps(pools))")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
-    pools = json.loads(done.stdout.strip().splitlines()[-1])
-    assert len(pools) >= 1 and all(threads == 1 for _, threads in pools), pools
+    calibrate's modules load comes after it. The processes ask for 4 BLAS threads (``OPENBLAS_NUM_THREADS``),
+    so the limit shows on a 1-core machine too; the same modules loaded without it keep more than one."""
+    template = ("import json, contextlib\nfrom threadpoolctl import threadpool_info\nfrom pincal.cli import commands\n"
+                "with {limit}:\n    import pincal.cli.workflows\n"
+                "    pools = [(i['filepath'], i['num_threads'])\n"
+                "             for i in threadpool_info() if i['user_api'] == 'blas']\n"
+                "print(json.dumps(pools))")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "4", "OMP_NUM_THREADS": "4"}
+
+    def pools(limit: str) -> list:
+        done = subprocess.run([sys.executable, "-c", template.format(limit=limit)], capture_output=True, text=True,
+                              check=True, env=env)
+        return json.loads(done.stdout.strip().splitlines()[-1])
+
+    limited, free = pools("commands._blas_limited_to_one_thread()"), pools("contextlib.nullcontext()")
+    assert len(limited) >= 1 and all(threads == 1 for _, threads in limited), limited
+    assert any(threads > 1 for _, threads in free), free  # else this test could not fail

@@ -117,6 +117,9 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     (found,) = doc["effects"]
     assert (found["type"], found["joint"]) == ("encoder_scale", "lwr_joint_4")
     assert "final model: encoder_scale:lwr_joint_4 = " in printed.out and " (relative): moves the target " in printed.out
+    # a note on what was not tested is a note (no temperature column here), not an effect 'reported, not adopted'
+    assert "\nnote: thermal cannot be tested" in printed.out and "not adopted: thermal" not in printed.out
+    assert all(line.count("not adopted") <= 1 for line in printed.out.splitlines())
     assert abs(found["value"] - 0.003) <= 3 * found["std"], found  # within three reported sd
     assert all(p.endswith(".png") for p in doc["diagnosis"]["plots"]) and len(doc["diagnosis"]["plots"]) == 2
     # the rule as the code applies it (pincal.diagnosis.verdicts): the paired held-out test, not "not worse"

@@ -154,7 +154,11 @@ def test_a_report_without_spans_never_extrapolates(diagnosed, capsys):
                                                             "mean": 3.0}]),
                                         ("time_spans_s", "yesterday"),
                                         ("time_reference_s", None), ("time_reference_s", "abc"),
-                                        ("time_reference_s", True)])
+                                        ("time_reference_s", True),
+                                        ("approach_context", {"q": [], "time_s": []}),
+                                        ("approach_context", {"q": [[0.0] * 3], "time_s": [0.0]}),
+                                        ("approach_context", {"q": [[0.0] * 7] * 2, "time_s": [0.0]}),
+                                        ("approach_context", {"q": [[0.0] * 7], "time_s": [None]})])
 def test_malformed_drift_keys_are_one_line(diagnosed, capsys, key, value):
     root, urdf, _, doc = diagnosed
     bad = root / "bad.json"

@@ -9,6 +9,7 @@ from conftest import assert_close, numeric_jacobian
 
 from pincal.errors import PincalError
 from pincal.model.effects import (
+    FLANK_GAP_S,
     Effect,
     EffectInputs,
     approach_flank,
@@ -107,6 +108,16 @@ def test_approach_flank_follows_interleaved_rows_of_another_set(kuka_chain):
     assert days_before.context_q is None
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), days_before, 5)[:, 0]
     assert flank.tolist() == [0.0, 1.0, 1.0]
+    # rows just before (10 s, not interleaved) are the same motion: 0.1 -> 0.0 reaches the first row from above
+    just_before = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
+                                context_time=np.array([-20.0, -10.0]))
+    flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), just_before, 5)[:, 0]
+    assert flank.tolist() == [-1.0, 1.0, 1.0]
+    # and up to FLANK_GAP_S (half an hour) away; beyond it, unknown
+    for gap, first in ((FLANK_GAP_S, -1.0), (FLANK_GAP_S + 1.0, 0.0)):
+        apart = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
+                              context_time=np.array([-10.0 - gap, -gap]))
+        assert joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), apart, 5)[0, 0] == first, gap
 
 
 def test_parse_effect_forms():

@@ -329,8 +329,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe(effect)}")
         if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
             print(f"  {entry['advice']}")
+    verdict = "; reported, not adopted"  # an effect's note ends so; others say what was not tested and why
     for note in diagnosis.notes:
-        print(f"reported, not adopted: {note}")
+        print(f"reported, not adopted: {note.removesuffix(verdict)}" if note.endswith(verdict) else f"note: {note}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run
 
     if diagnosis.unexplained or GENERIC_NOT_RUN not in diagnosis.notes:
@@ -461,7 +462,7 @@ _COMMANDS = {
 }
 
 
-def _one_blas_thread() -> AbstractContextManager:
+def _blas_limited_to_one_thread() -> AbstractContextManager:
     """Many small factorisations: one BLAS thread each is faster than a pool that contends for the
     cores (the study's worker processes get the same setting). threadpoolctl limits the libraries
     already loaded, so numpy's and scipy's OpenBLAS (two builds) are loaded first, once the arguments
@@ -477,7 +478,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pincal`` console script; returns the exit code."""
     args = build_parser().parse_args(argv)  # no numpy, scipy or Pinocchio yet: --help and refusals are quick
     try:
-        with _one_blas_thread():
+        with _blas_limited_to_one_thread():
             return _COMMANDS[args.command](args)
     except PincalError as exc:
         print(f"pincal: error: {exc}", file=sys.stderr)

@@ -409,7 +409,14 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
         context_q = np.asarray(context["q"], dtype=float) if context else None
         context_time = np.asarray(context["time_s"], dtype=float) if context else None
     except (KeyError, TypeError, ValueError):
-        raise PincalError(f"{data.source}: the report's payload_kg or approach_context is malformed") from None
+        raise PincalError(f"{report_path}: payload_kg or approach_context is malformed; rewrite the report with "
+                          "pincal diagnose") from None
+    if context_q is not None and context_time is not None and not (
+            context_q.ndim == 2 and context_q.shape[1] == chain.n_joints and len(context_q) > 0
+            and context_time.shape == (len(context_q),) and np.isfinite(context_q).all()
+            and np.isfinite(context_time).all()):
+        raise PincalError(f"{report_path}: approach_context must hold q, rows of {chain.n_joints} finite joint "
+                          "values, and time_s, one finite time [s] per row; rewrite the report with pincal diagnose")
     inputs = effect_inputs(chain, data, payload, points.mean(axis=0), row_time,
                            time_reference=reference if row_time is not None else None,
                            context_q=context_q, context_time=context_time)

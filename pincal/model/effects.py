@@ -50,6 +50,7 @@ from pincal.model.sensor import Registration
 
 __all__ = [
     "JOINT_EFFECTS", "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
+    "FLANK_GAP_S",
     "Effect", "EffectInputs", "gravity_torques", "effect_inputs", "approach_flank",
     "sensed_points", "joint_basis", "joint_shifts", "parse_effect", "effect_to_dict", "effect_from_dict",
 ]
@@ -62,6 +63,10 @@ HARMONICS = (1, 2)
 
 #: A joint that moved less than this between rows stays on its flank [rad or m].
 APPROACH_MIN_STEP = 1e-3
+#: Rows of another set further than this from the rows' time span say nothing of their flanks [s]: the
+#: motion in between is unknown. Half an hour, the default pause of :data:`pincal.model.thermal.PAUSE_S`
+#: (the rows of one measuring program are seconds to minutes apart; TIAGo's two days are 100 h apart).
+FLANK_GAP_S = 1800.0
 
 
 @dataclass(frozen=True)
@@ -187,8 +192,9 @@ def effect_inputs(
     """Gravity torques, time (minus ``time_reference``, default its mean) and
     time order of the rows of ``data``. ``context_q`` (M, N) with
     ``context_time`` (M,) [s] are the joint readings of other rows of the same
-    session, interleaved in time, for approach flanks (readings only); one whose time span does not
-    overlap the rows' (another day) is left out: the motion in between is unknown, the first flank 0.
+    session, interleaved in time or next to them, for approach flanks (readings only); context further than
+    :data:`FLANK_GAP_S` from the rows' time span (another day) is left out: the motion in between is unknown,
+    the first flank 0.
 
     ``held_sessions`` = (the session of each row (K,), of each context row (M,)):
     the context rows are the rows a drift is fitted on, and these rows (held-out
@@ -199,8 +205,8 @@ def effect_inputs(
         time_reference = float(np.mean(time))
     centred = None if time is None else time - time_reference
     with_context = context_q is not None and context_time is not None and time is not None
-    interleaved = context_time is not None and time is not None and with_context and bool(
-        np.min(context_time) <= np.max(time) and np.min(time) <= np.max(context_time))
+    near = context_time is not None and time is not None and with_context and bool(
+        max(np.min(context_time) - np.max(time), np.min(time) - np.max(context_time)) <= FLANK_GAP_S)
     drift_time = centred
     if with_context and held_sessions is not None:
         own, fitted = (np.asarray(sessions).astype(str) for sessions in held_sessions)
@@ -212,8 +218,8 @@ def effect_inputs(
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
         time=drift_time,
         order=order,
-        context_q=np.asarray(context_q, dtype=float) if interleaved else None,
-        context_time=np.asarray(context_time, dtype=float) - time_reference if interleaved else None,
+        context_q=np.asarray(context_q, dtype=float) if near else None,
+        context_time=np.asarray(context_time, dtype=float) - time_reference if near else None,
         flank_time=centred if drift_time is not centred else None,
         joint_names=tuple(chain.joint_names),
     )

@@ -91,8 +91,8 @@ class DiagnosisJson(TypedDict):
 
 
 class ApproachContext(TypedDict):
-    """The session's motion (time and joint readings), for the flanks of interleaved rows: the calibration
-    rows, then the held-out rows interleaved with them in time (those that set their approach flanks)."""
+    """The motion approach flanks were taken from (time [s], joint readings [rad or m]): the calibration rows,
+    then the held-out rows among them or within half an hour in time (those that set their flanks)."""
 
     time_s: list[float]
     q: list[list[float]]

@@ -64,7 +64,7 @@ def fork_is_safe() -> bool:
 _POOL_OF_VARIABLE = {"OMP_NUM_THREADS": "openmp", "OPENBLAS_NUM_THREADS": "openblas", "MKL_NUM_THREADS": "mkl"}
 
 
-def _one_blas_thread(unset: Sequence[str]) -> None:
+def _worker_with_one_blas_thread(unset: Sequence[str]) -> None:
     """Initializer of forked workers: one thread in each pool whose variable of
     :data:`_SINGLE_THREADED_BLAS` the user left unset (``unset``), as spawned workers get
     from the environment (a forked worker's libraries read it when this process loaded
@@ -178,7 +178,7 @@ def execute(
     if fork_is_safe():
         unset = _unset_thread_variables()  # before the block below sets them
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                   initializer=_one_blas_thread, initargs=(unset,))
+                                   initializer=_worker_with_one_blas_thread, initargs=(unset,))
     else:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
