@@ -13,33 +13,18 @@ import sys
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from pincal.cli.error_table import HEADER, error_columns, point_rows
 from pincal.cli.parser import build_parser, selection_criterion
 from pincal.errors import PincalError
 
 if TYPE_CHECKING:
     from contextlib import AbstractContextManager
 
-    from pincal.fit.metrics import PoseErrors
-
 __all__ = ["EXIT_THRESHOLD", "EXIT_USAGE", "EXIT_WARNING", "main", "console"]
 
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
 EXIT_WARNING = 3  # --strict and a warning (pincal.fit.plausibility); the outputs are written
-
-
-def _error_columns(errors: PoseErrors) -> str:
-    pos = errors.position
-    text = f"{pos.mean:9.4f} {pos.rms:9.4f} {pos.max:9.4f}"
-    rot = errors.rotation
-    text += f"  {rot.mean:9.4f} {rot.rms:9.4f} {rot.max:9.4f}" if rot else "  " + " " * 9 + "(no orientation data)"
-    return text
-
-
-_HEADER = (
-    f"{'':24s} {'pos mean':>9s} {'pos RMS':>9s} {'pos max':>9s}  {'rot mean':>9s} {'rot RMS':>9s} {'rot max':>9s}\n"
-    f"{'':24s} {'[mm]':>9s} {'[mm]':>9s} {'[mm]':>9s}  {'[deg]':>9s} {'[deg]':>9s} {'[deg]':>9s}"
-)
 
 
 def _print_notes(notes: Sequence[str]) -> None:
@@ -111,13 +96,15 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     for session in several:
         print(f"session {session.name} ({session.source}, {session.rows} rows): "
               f"registration {_registration_text(session.registration)}")
-    print(_HEADER)
-    print(f"{'calibration rows':24s} {_error_columns(run.errors)}")
+    print(HEADER)
+    print(f"{'calibration rows':24s} {error_columns(run.errors)}")
+    for line in point_rows(run.errors):
+        print(line)
     before_after = _before_after(run.report)
     if before_after:
         print(before_after)
     for session in several:
-        print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
+        print(f"{'  session ' + session.name:24s} {error_columns(session.errors)}")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
     _print_effects_file(run.effects_file, run.report)
@@ -243,10 +230,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             text += (f": {_registration_text(session.registration)}; {session.residuals} residuals, "
                      f"{session.dof} degrees of freedom left")
         print(text)
-    print(_HEADER)
-    print(f"{f'{errors.n_rows} rows':24s} {_error_columns(errors)}")
+    print(HEADER)
+    print(f"{f'{errors.n_rows} rows':24s} {error_columns(errors)}")
+    for line in point_rows(errors):
+        print(line)
     for session in evaluation.sessions if len(evaluation.sessions) > 1 else ():
-        print(f"{'  session ' + session.name:24s} {_error_columns(session.errors)}")
+        print(f"{'  session ' + session.name:24s} {error_columns(session.errors)}")
     if evaluation.nominal_rms_mm is not None:  # as calibrate's line, on these rows
         print(f"before -> after, these rows, RMS position: {evaluation.nominal_rms_mm:.3f} -> "
               f"{errors.position.rms:.3f} mm (before: {evaluation.nominal_urdf}, its registration and target "
@@ -278,7 +267,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             failed.append(f"max orientation error {errors.rotation.max:.4f} deg > {args.max_rot_deg} deg")
     for line in failed:
         print(f"pincal: FAIL: {line}", file=sys.stderr)
-    return EXIT_THRESHOLD if failed else 0
+    warned = _warned(evaluation.as_dict(), args.strict)
+    return warned or (EXIT_THRESHOLD if failed else 0)  # implausible data first: a FAIL on them means little
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
@@ -336,10 +326,10 @@ def _run_diagnose(args: argparse.Namespace) -> int:
 
     if diagnosis.unexplained or GENERIC_NOT_RUN not in diagnosis.notes:
         print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")
-    print(_HEADER)
-    print(f"{'calibration rows':24s} {_error_columns(diagnosis.calibration_errors)}")
+    print(HEADER)
+    print(f"{'calibration rows':24s} {error_columns(diagnosis.calibration_errors)}")
     if diagnosis.heldout_errors is not None:
-        print(f"{'held-out rows':24s} {_error_columns(diagnosis.heldout_errors)}")
+        print(f"{'held-out rows':24s} {error_columns(diagnosis.heldout_errors)}")
     for path in run.plots:
         print(f"wrote {path}")
     print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
@@ -387,10 +377,10 @@ def _run_demo(args: argparse.Namespace) -> int:
     rows = run_demo(args.out, settings)
     print()
     print("errors on held-out rows (eq 24; positions through Registration 1, orientations through Registration 2)")
-    print(_HEADER + f" {'fit [ms]':>9s}")
+    print(HEADER + f" {'fit [ms]':>9s}")
     for row in rows:
         timing = f" {row.seconds * 1000:9.1f}" if row.seconds else f" {'-':>9s}"
-        print(f"{row.label:24s} {_error_columns(row.validation)}{timing}")
+        print(f"{row.label:24s} {error_columns(row.validation)}{timing}")
     print()
     print(f"corrected URDFs, reports and data in {args.out}/ "
           f"(kuka_lwr4plus_method2.urdf is the paper's recommended calibration)")

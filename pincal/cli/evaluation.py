@@ -54,6 +54,7 @@ from pincal.cli.conditions import applied_conditions
 from pincal.cli.settings import EvaluateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
+from pincal.fit.plausibility import Finding, check_evaluation
 from pincal.fit.sessions import register_session, session_pose_errors
 from pincal.measurements.csv_v1 import read_measurements, read_table
 from pincal.measurements.data import (
@@ -62,12 +63,13 @@ from pincal.measurements.data import (
     default_session_name,
 )
 from pincal.model.chain import KinematicChain
+from pincal.model.description import read_description
 from pincal.model.drift import drift_offsets, read_time_spans, time_column
 from pincal.model.effects import effect_from_dict, effect_inputs, joint_shifts
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
-from pincal.report.model import TimeSpanJson, errors_json, registration_pair
+from pincal.report.model import TimeSpanJson, errors_json, findings_json, registration_pair
 from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationJson, PauseStepUse, ThermalUse
 from pincal.report.sessions import session_errors
 
@@ -157,11 +159,13 @@ class Evaluation:
     nominal_urdf: str | None = None
     thermal: ThermalUse | None = None  # how the report's thermal expansion was applied (pincal.cli.conditions)
     pause_steps: PauseStepUse | None = None  # ... and its pause steps
+    warnings: tuple[Finding, ...] = ()  # the evaluated error against the calibration's (check_evaluation)
 
     def as_dict(self) -> EvaluationJson:
         """``pincal evaluate --json``."""
         out: EvaluationJson = {**errors_json(self.errors), "skipped_cpa_rows": self.n_skipped_cpa,
-                               "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift}
+                               "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift,
+                               "warnings": findings_json(list(self.warnings))}
         if self.thermal is not None:
             out["thermal"] = self.thermal
         if self.pause_steps is not None:
@@ -200,7 +204,7 @@ def evaluate_files(
     allow_other_urdf, xacro_args = settings.allow_other_urdf, settings.xacro_args
     fixed_registration, new_session = settings.fixed_registration, settings.new_session
     report = read_report(report_path)
-    chain = KinematicChain.from_urdf(urdf, report.tool_parent, xacro_args=xacro_args)
+    _check_pair(urdf, report, report_path, xacro_args)  # before the chain: say the report is another URDF's
     notes: list[str] = []
     if report.urdf_sha256 is not None and file_sha256(urdf) != report.urdf_sha256:
         if not allow_other_urdf:
@@ -210,6 +214,7 @@ def evaluate_files(
                 "on purpose"
             )
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
+    chain = KinematicChain.from_urdf(urdf, report.tool_parent, xacro_args=xacro_args)
     # the readings corrected as the calibration's were (eq C1), before the joint limits are judged
     data, read_notes = read_measurements(data_path, chain.joint_specs, report.couplings)
     notes += read_notes
@@ -283,11 +288,24 @@ def evaluate_files(
                 f"left); expect them about sqrt(({session.residuals}−{REGISTRATION_PARAMETERS})/{session.residuals}) "
                 f"= {session.shrink:.2f} of the true error")
     nominal_rms, nominal_urdf = _nominal_rms(report, report_path, data, xacro_args)
-    return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes,
+    warnings = check_evaluation(errors.position.rms / 1000.0, None if report.calibration_rms_mm is None
+                                else report.calibration_rms_mm / 1000.0, any(not s.reestimated for s in sessions))
+    return Evaluation(errors=errors, n_skipped_cpa=int(np.sum(~rows)), notes=notes, warnings=tuple(warnings),
                       nominal_rms_mm=nominal_rms, nominal_urdf=nominal_urdf,
                       lines=tuple(int(line) for line in data.lines), sessions=sessions,
                       files=tuple(str(f) for f in data.files), row_sessions=tuple(str(n) for n in data.sessions),
                       drift=drift_use, thermal=applied.thermal, pause_steps=applied.pause_steps)
+
+
+def _check_pair(urdf: str | Path, report: ReportModel, report_path: str | Path, xacro_args) -> None:
+    """Refuse, in one line, a report whose chain ends at a link ``urdf`` does not have: it was written for
+    another URDF (another robot's calibration in the same folder), whatever ``--allow-other-urdf`` says."""
+    links = read_description(urdf, xacro_args).link_names()
+    if report.tool_parent not in links:
+        written = f" ({report.corrected_urdf})" if report.corrected_urdf else ""
+        raise PincalError(f"{report_path}: written for another URDF{written}: its chain ends at link "
+                          f"'{report.tool_parent}', which {urdf} does not have; evaluate {urdf} with the "
+                          "REPORT.json calibrate wrote beside it")
 
 
 def _nominal_rms(report: ReportModel, report_path: str | Path, data: MeasurementSet,

@@ -54,7 +54,8 @@ CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--
 #: Flags of a sensor evaluation that a fixture evaluation has no use for.
 EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
                         "fixed_registration": "--fixed-registration", "new_session": "--new-session",
-                        "temperature_column": "--temperature-column"}  # thermal: diagnose of sensor rows only
+                        "temperature_column": "--temperature-column",  # thermal: diagnose of sensor rows only
+                        "strict": "--strict"}  # no plausibility checks (yet) here
 #: Largest difference between a socket distance of the evaluated fixture file and the
 #: calibration's [m]: far below any fixture's manufacturing tolerance (~1e-5 m for a
 #: 3D print), far above the rounding of distances rebuilt by classical scaling (~1e-16 m).

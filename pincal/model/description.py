@@ -105,6 +105,10 @@ class RobotDescription:
         """A fresh parse of the document's ``<robot>`` element (callers may change it)."""
         return etree.fromstring(self.xml, _parser(remove_comments=True))
 
+    def link_names(self) -> tuple[str, ...]:
+        """The names of the document's links, in its order."""
+        return tuple(_name_of(link) for link in self.root() if link.tag == "link")
+
     def provenance(self) -> str | None:
         """One line saying which xacro file and arguments this URDF was expanded from; None for a URDF."""
         if not self.is_xacro:

@@ -288,6 +288,9 @@ class ReportModel:
         couplings: joint readings taken against another joint (REPORT.json ``couplings``,
             :mod:`pincal.measurements.couplings`), corrected in every row evaluated.
         nominal_urdf: the URDF the calibration started from (``sources.urdf``, as it was given), or None.
+        corrected_urdf: the URDF written with the report (``sources.corrected_urdf``), or None.
+        calibration_rms_mm: the RMS position error on the calibration rows [mm] (eq 24, every target point;
+            with a diagnosis's effects, ``diagnosis.calibration_errors``, else ``fit.calibration_errors``), or None.
     """
 
     tool_parent: str
@@ -303,6 +306,13 @@ class ReportModel:
     not_determined: tuple[str, ...] = ()
     couplings: tuple[ReadingCoupling, ...] = ()
     nominal_urdf: str | None = None
+    corrected_urdf: str | None = None
+    calibration_rms_mm: float | None = None
+
+
+def _rms_mm(errors: Any) -> float | None:
+    """``position.rms_mm`` of a set of eq 24 errors (None: not recorded)."""
+    return None if errors is None else float(errors["position"]["rms_mm"])
 
 
 def _points(value: Any) -> np.ndarray:
@@ -368,6 +378,9 @@ def read_report(path: str | Path) -> ReportModel:
                              lambda entries: tuple(str(entry.get("reason", "")) for entry in entries or ()), ()),
         couplings=couplings_from_report(doc.get("couplings"), str(path)),
         nominal_urdf=value_at(doc, "sources.urdf", path, default=None),
+        corrected_urdf=value_at(doc, "sources.corrected_urdf", path, default=None),
+        calibration_rms_mm=value_at(doc, "diagnosis.calibration_errors", path, _rms_mm, default=None)
+        or value_at(doc, "fit.calibration_errors", path, _rms_mm, default=None),
     )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TypedDict
 
-from pincal.report.model import PoseErrorsJson, RegistrationPair, TimeSpanJson, Vector3
+from pincal.report.model import Finding, PoseErrorsJson, RegistrationPair, TimeSpanJson, Vector3
 from pincal.report.model_diagnosis import PauseJson, TemperatureRangeJson
 
 __all__ = ["EvaluatedSession", "DriftUse", "ThermalUse", "PauseStepUse", "EvaluationJson"]
@@ -73,7 +73,10 @@ class _EvaluationKeys(PoseErrorsJson):
 
 class EvaluationJson(_EvaluationKeys, total=False):
     """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use
-    (``thermal`` and ``pause_steps``: where the report has them)."""
+    (``thermal`` and ``pause_steps``: where the report has them; ``warnings``: the evaluated error against
+    the calibration's, :func:`pincal.fit.plausibility.check_evaluation` — absent from files of pincal before
+    it was added)."""
 
     thermal: ThermalUse
     pause_steps: PauseStepUse
+    warnings: list[Finding]
