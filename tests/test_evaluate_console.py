@@ -113,10 +113,13 @@ def test_swapped_axes_warn_and_strict_exits_3_with_the_json_written(tiago, capsy
     err = capsys.readouterr().err
     assert "pincal: warning: " in err and "swapped" in err and "--new-session" in err, err
     metrics = folder / "swapped.json"
-    assert main(["evaluate", str(urdf), str(report), str(data), "--json", str(metrics), "--strict"]) == EXIT_WARNING
+    page = folder / "swapped.html"
+    assert main(["evaluate", str(urdf), str(report), str(data), "--json", str(metrics), "--html", str(page),
+                 "--strict"]) == EXIT_WARNING
     warnings = json.loads(metrics.read_text())["warnings"]
     assert [w["code"] for w in warnings] == ["evaluation"]
     assert f"pincal: warning: {warnings[0]['message']}" in capsys.readouterr().err
+    assert page.read_text(encoding="utf-8").count("callout warning") == 1  # the calibration itself gave none
 
 
 def test_the_evaluation_check_takes_calibrates_thresholds():

@@ -254,7 +254,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         shown = evaluation_document(str(args.urdf), str(args.data), errors, evaluation.lines, evaluation.n_skipped_cpa,
                                     files=evaluation.files, sessions=evaluation.row_sessions,
                                     registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift,
-                                    thermal=evaluation.thermal, pause_steps=evaluation.pause_steps)
+                                    thermal=evaluation.thermal, pause_steps=evaluation.pause_steps,
+                                    warnings=evaluation.as_dict().get("warnings", []))
         _write_html(args.html, load_report(args.report, PAGE_KINDS), args.report.parent, evaluation=shown,
                     source=args.report)
     failed = []

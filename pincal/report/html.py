@@ -434,8 +434,8 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "sessions": sessions if sessions and len(sessions) > 1 else None,  # one session: the registration above
         "effects": effects_section(document, kinds, base, figures.png_uri),
         "notes": [str(n) for n in document.get("notes") or []],
-        "warnings": [str(w.get("message", w)) if isinstance(w, dict) else str(w)
-                     for w in document.get("warnings") or []],
+        "warnings": [str(w.get("message", w)) if isinstance(w, dict) else str(w)  # the evaluation's after the fit's
+                     for w in [*(document.get("warnings") or []), *((evaluation or {}).get("warnings") or [])]],
         "extra": extra,
         "version": document.get("pincal_version"),
         "report_version": document.get("report_version"),

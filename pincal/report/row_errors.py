@@ -39,7 +39,7 @@ from pincal.fit.outliers import robust_scores
 from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.measurements.data import MeasurementSet, default_session_name
-from pincal.report.model import RowErrorModel, RowErrorSet, errors_json
+from pincal.report.model import Finding, RowErrorModel, RowErrorSet, errors_json
 from pincal.report.model_evaluation import DriftUse, EvaluatedSession, PauseStepUse, ThermalUse
 
 if TYPE_CHECKING:
@@ -168,6 +168,7 @@ def evaluation_document(
     files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
     registrations: Sequence[EvaluatedSession] = (), drift: DriftUse | None = None,
     thermal: ThermalUse | None = None, pause_steps: PauseStepUse | None = None,
+    warnings: Sequence[Finding] = (),
 ) -> dict[str, Any]:
     """What ``evaluate --html`` shows beside the report: the evaluated files, the eq 24
     summary (as ``evaluate --json`` writes it), the evaluated rows by file line (and
@@ -175,8 +176,10 @@ def evaluation_document(
     ``evaluate --json`` (its registration's source, ``registration_reestimated``,
     ``residuals`` and ``registration_dof``); ``drift``: how the report's drift was
     applied (``evaluate --json`` ``drift``), or None; ``thermal`` / ``pause_steps``: how its thermal
-    expansion and pause steps were (``evaluate --json``'s keys), or None."""
+    expansion and pause steps were (``evaluate --json``'s keys), or None; ``warnings``: its plausibility
+    findings (``evaluate --json`` ``warnings``)."""
     return {
+        "warnings": list(warnings),
         "drift": drift,
         **({} if thermal is None else {"thermal": thermal}),
         **({} if pause_steps is None else {"pause_steps": pause_steps}),
