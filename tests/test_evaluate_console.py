@@ -141,3 +141,18 @@ def test_the_evaluation_check_takes_calibrates_thresholds():
     assert check_evaluation(np.nan, 1 * mm) == [] and check_evaluation(1.0, None) == []
     reported = check_evaluation(1.0, 1 * mm, reported_registration=True)[0].message
     assert "--new-session" in reported and "--new-session" not in check_evaluation(1.0, 1 * mm)[0].message
+
+
+def test_diagnose_prints_the_point_rows_of_both_sets(tmp_path, capsys):
+    """diagnose's table, calibration and held-out rows, has the same rows (docs/diagnose.md's 2.47 mm marker 1)."""
+    urdf = example_robot_data_urdf("tiago_description/robots/tiago.urdf")
+    report = tmp_path / "REPORT.json"
+    assert main(["diagnose", str(urdf), str(TRAIN), "--validation", str(HELD_OUT), "--tip-link", "wrist_ft_tool_link",
+                 "--out", str(tmp_path / "d.urdf"), "--report", str(report), "--plots", str(tmp_path / "p"),
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out.rsplit("\nheld-out rows ", 1)  # the table's row, not a note's words
+    diagnosis = json.loads(report.read_text())["diagnosis"]
+    for text, errors in zip(out, (diagnosis["calibration_errors"], diagnosis["heldout_errors"])):
+        for p, point in enumerate(errors["position_per_point"]):
+            assert _row(text, f"  point {p + 1}") == pytest.approx(
+                [point[k] for k in ("mean_mm", "rms_mm", "max_mm")], abs=0.5e-4 + 1e-9)

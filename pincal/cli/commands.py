@@ -329,8 +329,12 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")
     print(HEADER)
     print(f"{'calibration rows':24s} {error_columns(diagnosis.calibration_errors)}")
+    for line in point_rows(diagnosis.calibration_errors):
+        print(line)
     if diagnosis.heldout_errors is not None:
         print(f"{'held-out rows':24s} {error_columns(diagnosis.heldout_errors)}")
+        for line in point_rows(diagnosis.heldout_errors):
+            print(line)
     for path in run.plots:
         print(f"wrote {path}")
     print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")

@@ -305,7 +305,7 @@ def _check_pair(urdf: str | Path, report: ReportModel, report_path: str | Path, 
         written = f" ({report.corrected_urdf})" if report.corrected_urdf else ""
         raise PincalError(f"{report_path}: written for another URDF{written}: its chain ends at link "
                           f"'{report.tool_parent}', which {urdf} does not have; evaluate {urdf} with the "
-                          "REPORT.json calibrate wrote beside it")
+                          "REPORT.json calibrate wrote with it")
 
 
 def _nominal_rms(report: ReportModel, report_path: str | Path, data: MeasurementSet,
