@@ -440,8 +440,8 @@ def diagnose_files(
         choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
                               selection=selection, progress=stages.next())
         level = choice.chosen
-    calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None,
-                                  sigma_column=sigma_column, selection=selection, progress=stages.next())
+    calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
+                                  selection=selection, progress=stages.next(), refit_offered=False)
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,

@@ -113,8 +113,8 @@ def check_calibration(chain: KinematicChain, result, rows: MeasurementSet,
     elif rms > MAX_RMS_M:
         findings.append(Finding("residual", f"the calibrated model misses the measured points by {rms * 1e3:.3g} mm "
                                 f"RMS (more than {MAX_RMS_M * 1e3:g} mm): the data and the model disagree beyond "
-                                f"any kinematic error. Likely: {causes}. Check a few rows by hand against the "
-                                "nominal model (pincal evaluate URDF on the nominal file)"))
+                                f"any kinematic error. Likely: {causes}. See how far the nominal model is with the "
+                                "same command at --level registration, and check a few rows by hand"))
     per_axis = rms / np.sqrt(3.0)
     if geometry and stated_sigma_pos_m and per_axis > MAX_NOISE_RATIO * stated_sigma_pos_m:
         findings.append(Finding("noise", f"the residual ({per_axis * 1e3:.3g} mm per axis) is "
