@@ -314,7 +314,7 @@ def test_evaluate_gives_each_row_the_steps_of_its_segment_or_the_nearest():
 def test_alpha_outside_steel_and_aluminium_beyond_its_std_is_implausible():
     """5–30 µm/m/K (issue 20); a value outside by more than its standard deviation is named, with why."""
     thermal = Effect("thermal")
-    assert ALPHA_RANGE == (5e-6, 30e-6) and PLAUSIBLE["thermal"][0] == np.inf
+    assert ALPHA_RANGE == (5e-6, 30e-6) and PLAUSIBLE["thermal"]["1/K"] == np.inf
     assert implausible(thermal, np.array([12e-6]), np.array([1e-6])) is None
     assert implausible(thermal, np.array([31e-6]), np.array([2e-6])) is None  # within its std of the bound
     reason = implausible(thermal, np.array([45e-6]), np.array([3e-6]))
