@@ -33,6 +33,7 @@ from pincal.diagnosis.verdicts import PLAUSIBLE
 from pincal.errors import PincalError
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
+from pincal.model.effect_units import value_unit
 from pincal.model.effects import Effect, EffectInputs, effect_from_dict, effect_to_dict, gravity_torques
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
@@ -331,7 +332,7 @@ def test_report_forms_and_the_flags():
         back, read = effect_from_dict(entry)
         assert back == effect and np.array_equal(read, values)
     assert effect_to_dict(Effect("pause_step", pause=2), np.zeros(3))["pause"] == 2
-    assert Effect("thermal").unit() == "1/K" and Effect("pause_step", pause=1).label == "pause_step:1"
+    assert value_unit("thermal") == "1/K" and Effect("pause_step", pause=1).label == "pause_step:1"
     from pincal.cli.settings import DiagnoseSettings
 
     with pytest.raises(PincalError, match="--pause-s must be a positive number of seconds"):

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pincal.model.effect_units import value_unit
+from pincal.model.effect_units import shift_unit, value_unit
 
 __all__ = [
     "DISPLAY", "num", "change_text", "parameter_section", "effect_label", "effects_section", "fixed", "rotation_text",
@@ -134,7 +134,7 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
     if kind == "cyclic":
         sin, cos = _finite(entry.get("sin")), _finite(entry.get("cos"))
         amplitude = math.hypot(sin, cos) * 1000.0 if sin is not None and cos is not None else None
-        unit = "mm" if length else "mrad"
+        unit = "m" + shift_unit(length)  # mm or mrad
         text = (f"sin {pm(sin, entry.get('sin_std'), 1000.0, unit)}, cos {pm(cos, entry.get('cos_std'), 1000.0, unit)}"
                 f" (amplitude {num(amplitude, 3)} {unit})")
         return text, ""
@@ -149,7 +149,7 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
         "encoder_scale": (100.0, "%"),
         "coupling": (1.0, f"× {entry.get('driver')}'s reading"),
         "sensor_scale": (100.0, "%"),
-        "backlash": (1000.0, "mm per flank" if length else "mrad per flank"),
+        "backlash": (1000.0, f"m{shift_unit(length)} per flank"),
         "thermal": (1e6, "µm/m/K"),
     }.get(kind, (1.0, ""))
     v, s = _finite(value), _finite(std)
