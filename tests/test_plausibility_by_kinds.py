@@ -21,12 +21,15 @@ below is judged by what it would do on this arm, not by the bound it is tested a
 
 from __future__ import annotations
 
+import html
+
 import numpy as np
 import pytest
 
 from pincal.diagnosis.verdicts import Judge
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, EffectInputs, gravity_torques
+from pincal.report.html import render_html
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.sensor import random_configurations
 
@@ -66,3 +69,15 @@ def test_a_value_is_judged_in_the_unit_its_joints_kinds_give(judge, effect, unit
     assert OUTSIDE in verdict(implausible)
     assert OUTSIDE not in verdict(plausible), verdict(plausible)
 
+
+def test_the_page_states_a_coupling_between_kinds_in_its_unit():
+    """A revolute joint following the lift's reading: rad/m on the page, as on the console; like joints: × a reading."""
+    kinds = {"torso_lift_joint": "prismatic", "arm_1_joint": "revolute", "arm_2_joint": "revolute"}
+    across = {"type": "coupling", "joint": "arm_1_joint", "driver": "torso_lift_joint", "value": 0.3, "std": 0.01}
+    like = {"type": "coupling", "joint": "arm_1_joint", "driver": "arm_2_joint", "value": 0.02, "std": 0.001}
+    for entry, shown, not_shown in ((across, "0.3 ± 0.01 rad/m", "× torso_lift_joint's reading"),
+                                    (like, "0.02 ± 0.001 × arm_2_joint's reading", "rad/")):
+        report = {"chain": {"joints": list(kinds), "joint_kinds": list(kinds.values())}, "effects": [entry],
+                  "diagnosis": {"steps": [{"effect": entry}], "last_candidates": [{**entry, "delta_bic": -50.0}]}}
+        page = html.unescape(render_html(report))
+        assert page.count(shown) == 3 and not_shown not in page  # the final model, the step, the candidate

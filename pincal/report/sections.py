@@ -144,10 +144,11 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
         stds = std if isinstance(std, list) else [None] * len(values)
         name, scale, unit = ("v", 1000.0, "mm/s") if kind == "drift" else ("d", 1e6, "µm")
         return ", ".join(f"{name}{axis} {pm(v, s, scale, unit)}" for axis, v, s in zip("xyz", values, stds)), ""
+    reading = value_unit("coupling", length, driver)  # rad/m or m/rad between a revolute and a prismatic joint
     scale, unit = {
         "compliance": (1000.0, "m" + value_unit("compliance", length, driver)),  # mrad/(N·m), mm/N, mrad/N, ...
         "encoder_scale": (100.0, "%"),
-        "coupling": (1.0, f"× {entry.get('driver')}'s reading"),
+        "coupling": (1.0, f"× {entry.get('driver')}'s reading" if reading == "(relative)" else reading),
         "sensor_scale": (100.0, "%"),
         "backlash": (1000.0, f"m{shift_unit(length)} per flank"),
         "thermal": (1e6, "µm/m/K"),
