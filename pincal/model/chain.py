@@ -187,6 +187,12 @@ class KinematicChain:
         return [j.spec for j in self.joints]
 
     @property
+    def joint_kinds(self) -> dict[str, str]:
+        """Joint name → ``revolute``, ``continuous`` or ``prismatic``, as REPORT.json's ``chain``: the kinds
+        :func:`pincal.model.effect_units.effect_unit` takes."""
+        return {j.name: j.kind for j in self.joints}
+
+    @property
     def root_link(self) -> str:
         return self.model.frames[1].name if self.model.nframes > 1 else "universe"
 
