@@ -20,6 +20,11 @@ names the likely causes and what to try. The thresholds and their sources:
   :mod:`pincal.fit.prior` (1 mm, 0.5°), i.e. a ten-sigma deviation under them. Manufacturing and
   mastering errors are of the prior's scale; corrections ten times larger mean the model absorbs
   something else.
+* **Tip link** — a column of the rows named after a joint of the URDF below ``--tip-link`` (it moves
+  the tip's descendants, not the chain) whose value changes across the rows: the target moved with a
+  joint the chain does not have, so ``--tip-link`` names a link short of the one the target is on.
+  A column held constant is not judged: the fitted tool absorbs a fixed joint exactly. Columns of
+  joints on other branches (a head's joints in an arm's file) are not the chain's and are ignored.
 * **Cross-validation** — the linearised leave-one-row-out prediction error (PRESS, Allen 1974) of
   the calibrated model above the nominal model's (registration and target refitted, the same
   weights) by more than its own noise: the RMS ratio sqrt(PRESS_cal / PRESS_nom) above
@@ -33,6 +38,7 @@ names the likely causes and what to try. The thresholds and their sources:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,7 +53,8 @@ from pincal.model.chain import KinematicChain
 
 __all__ = [
     "MAX_RMS_M", "MAX_NOISE_RATIO", "MAX_SENSOR_DISTANCE_M", "MAX_TRANSLATION_M", "MAX_ROTATION_RAD", "DATA_CAUSES",
-    "Finding", "reach_m", "check_calibration", "refit_nominal", "press_against_nominal", "calibration_findings",
+    "Finding", "tip_link_findings", "reach_m", "check_calibration", "refit_nominal", "press_against_nominal",
+    "calibration_findings",
 ]
 
 #: Largest plausible RMS point residual after a calibration [m] (module docstring).
@@ -76,6 +83,21 @@ class Finding:
 
     def as_dict(self) -> dict[str, str]:
         return {"code": self.code, "message": self.message}
+
+
+def tip_link_findings(chain: KinematicChain, columns: Mapping[str, np.ndarray], source: str) -> list[Finding]:
+    """A finding when ``columns`` (a file's numeric extra columns, name -> values per row) hold joints of
+    the URDF below the chain's tip link that move across the rows (module docstring); ``source`` names
+    the file."""
+    moved = [name for name in chain.beyond_tip_joints if name in columns
+             and np.nanmax(columns[name]) > np.nanmin(columns[name])]  # all-NaN columns are not kept
+    if not moved:
+        return []
+    last = chain.beyond_tip_joints[moved[-1]]  # depth-first order: the last is the farthest out
+    return [Finding("tip_link", f"{source}: column(s) {', '.join(moved)} are joints of the URDF below --tip-link "
+                    f"{chain.tip_link} and move in these rows, so the target moved with joints the chain does not "
+                    f"have: give --tip-link a link further out, e.g. {last} (the last link they move), or the link "
+                    "the target is on")]
 
 
 def reach_m(chain: KinematicChain, q: np.ndarray) -> float:
