@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import re
 from pathlib import Path
 
 import jsonschema
@@ -108,6 +109,22 @@ def subcommand_actions() -> dict[str, dict[str, argparse.Action]]:
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     return {name: {flag: action for action in parser._actions for flag in action.option_strings}
             for name, parser in sub.choices.items()}
+
+
+def unaccepted_flags(command: str, printed: str) -> list[str]:
+    """The ``--flags`` that ``pincal COMMAND``'s output ``printed`` suggests and the command does not
+    accept (a line naming another command — "pincal calibrate … --x", "calibrate with --x" — is that one's)."""
+    actions = subcommand_actions()
+    wrong = []
+    for line in printed.splitlines():
+        for match in re.finditer(r"(?<![\w-])(--[a-z][\w-]*)", line):
+            before = line[:match.start()]
+            named = re.findall(rf"\bpincal ({'|'.join(map(re.escape, actions))})\b|\b({'|'.join(actions)}) with $",
+                               before)
+            owner = next((a or b for a, b in reversed(named)), command) if named else command
+            if match[1] not in actions[owner] and not re.search(r"\bpip install\b", before):
+                wrong.append(f"{match[1]} ({owner}): {line.strip()[:160]}")
+    return wrong
 
 
 def assert_close(actual, expected, atol, what=""):

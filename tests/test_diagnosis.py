@@ -11,6 +11,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import unaccepted_flags
 
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
@@ -116,10 +117,13 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     doc = json.loads(report.read_text())
     (found,) = doc["effects"]
     assert (found["type"], found["joint"]) == ("encoder_scale", "lwr_joint_4")
-    assert "final model: encoder_scale:lwr_joint_4 = " in printed.out and " (relative): moves the target " in printed.out
+    assert "final model: encoder_scale:lwr_joint_4 = " in printed.out
+    assert " (relative): moves the target " in printed.out
     # a note on what was not tested is a note (no temperature column here), not an effect 'reported, not adopted'
     assert "\nnote: thermal cannot be tested" in printed.out and "not adopted: thermal" not in printed.out
     assert all(line.count("not adopted") <= 1 for line in printed.out.splitlines())
+    # every flag its output suggests is one diagnose takes (it printed calibrate's --reject-outliers advice)
+    assert "look like outliers" in printed.err and unaccepted_flags("diagnose", printed.out + printed.err) == []
     assert abs(found["value"] - 0.003) <= 3 * found["std"], found  # within three reported sd
     assert all(p.endswith(".png") for p in doc["diagnosis"]["plots"]) and len(doc["diagnosis"]["plots"]) == 2
     # the rule as the code applies it (pincal.diagnosis.verdicts): the paired held-out test, not "not worse"

@@ -6,7 +6,8 @@ its own or its driver's. TIAGo's chain (example-robot-data) starts with a prisma
 seven revolute arm joints: the lift deflecting under the shoulder's (arm_2) gravity torque is in
 m/(N·m), an arm joint under the lift's gravity force in rad/N. The cell: 80 calibration and 30
 held-out rows, a tracker 3 m away (20 µm), the lift sagging 5e-5 m/(N·m) × arm_2's torque (|tau| up
-to ~20 N·m: up to ~1 mm, 50 × the noise); the plausible range of a prismatic compliance is 1e-4.
+to ~30 N·m: up to ~1.5 mm, 75 × the noise); the plausible range of a prismatic joint's compliance to a
+revolute joint's torque is 1e-3 m/(N·m) (pincal.diagnosis.verdicts.PLAUSIBLE).
 """
 
 from __future__ import annotations

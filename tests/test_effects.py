@@ -167,14 +167,15 @@ def test_effect_columns_are_the_jacobian_columns_an_added_effect_brings(kuka_cha
 
 
 def test_each_effect_states_its_unit():
-    """The units of the module docstring of pincal.model.effects, for revolute and prismatic joints."""
-    from pincal.model.effects import Effect
+    """The units of the module docstring of pincal.model.effects, for revolute and prismatic joints
+    (pincal.model.effect_units.value_unit)."""
+    from pincal.model.effect_units import value_unit
 
-    assert Effect("compliance", "j").unit() == "rad/(N·m)" and Effect("compliance", "j").unit(True) == "m/N"
-    assert Effect("backlash", "j", source="approach").unit() == "rad"
-    assert Effect("cyclic", "j", harmonic=1).unit(prismatic=True) == "m"
-    assert Effect("encoder_scale", "j").unit() == Effect("sensor_scale").unit() == "(relative)"
-    assert Effect("drift").unit() == "m/s"
+    assert value_unit("compliance") == "rad/(N·m)" and value_unit("compliance", True) == "m/N"
+    assert value_unit("backlash") == "rad"
+    assert value_unit("cyclic", prismatic=True) == "m"
+    assert value_unit("encoder_scale") == value_unit("sensor_scale") == "(relative)"
+    assert value_unit("drift") == "m/s"
 
 
 def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():

@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import unaccepted_flags
 
 from pincal.cli.commands import EXIT_WARNING, main
 from pincal.fit.chain_calibration import calibrate_chain
@@ -83,6 +84,7 @@ def test_bad_data_warns_and_strict_exits_3_with_the_outputs_written(industrial_a
     warnings = json.loads(report.read_text())["warnings"]
     assert warnings and {"residual", "noise"} & {w["code"] for w in warnings}
     assert all(f"pincal: warning: {w['message']}" in err for w in warnings)
+    assert unaccepted_flags("calibrate", err + capsys.readouterr().out) == []  # what it says to try, it takes
     page = (tmp_path / "REPORT.html").read_text(encoding="utf-8")
     assert "Warning: " in page and "callout warning" in page
 

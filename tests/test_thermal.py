@@ -33,6 +33,7 @@ from pincal.diagnosis.verdicts import PLAUSIBLE
 from pincal.errors import PincalError
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
+from pincal.model.effect_units import value_unit
 from pincal.model.effects import Effect, EffectInputs, effect_from_dict, effect_to_dict, gravity_torques
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
@@ -314,7 +315,7 @@ def test_evaluate_gives_each_row_the_steps_of_its_segment_or_the_nearest():
 def test_alpha_outside_steel_and_aluminium_beyond_its_std_is_implausible():
     """5–30 µm/m/K (issue 20); a value outside by more than its standard deviation is named, with why."""
     thermal = Effect("thermal")
-    assert ALPHA_RANGE == (5e-6, 30e-6) and PLAUSIBLE["thermal"][0] == np.inf
+    assert ALPHA_RANGE == (5e-6, 30e-6) and PLAUSIBLE["thermal"]["1/K"] == np.inf
     assert implausible(thermal, np.array([12e-6]), np.array([1e-6])) is None
     assert implausible(thermal, np.array([31e-6]), np.array([2e-6])) is None  # within its std of the bound
     reason = implausible(thermal, np.array([45e-6]), np.array([3e-6]))
@@ -331,7 +332,7 @@ def test_report_forms_and_the_flags():
         back, read = effect_from_dict(entry)
         assert back == effect and np.array_equal(read, values)
     assert effect_to_dict(Effect("pause_step", pause=2), np.zeros(3))["pause"] == 2
-    assert Effect("thermal").unit() == "1/K" and Effect("pause_step", pause=1).label == "pause_step:1"
+    assert value_unit("thermal") == "1/K" and Effect("pause_step", pause=1).label == "pause_step:1"
     from pincal.cli.settings import DiagnoseSettings
 
     with pytest.raises(PincalError, match="--pause-s must be a positive number of seconds"):

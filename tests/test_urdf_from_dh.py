@@ -331,6 +331,11 @@ BAD_TABLES = {
     "alpha in degrees": (HEADER + "j1,0,-90,0.3,0,-1,1", [], "line 2 (joint 'j1'), column 'alpha': -90 looks like degrees"),
     "theta in degrees": (HEADER + "j1,0,0,0.3,180,-1,1", [], "column 'theta': 180 looks like degrees"),
     "limit in degrees": (HEADER + "j1,0,0,0.3,0,-170,170", [], "column 'lower': -170 looks like degrees"),
+    # --degrees on a table in radians (a twist of -1.5708° is no design angle; conventions.RIGHT_ANGLE_TOL)
+    "radians with --degrees": (HEADER + "j1,0,-1.5707963267948966,0.3,0,-1,1", ["--degrees"],
+                               "line 2 (joint 'j1'), column 'alpha': -1.5708 looks like radians"),
+    "π to two decimals with --degrees": (HEADER + "j1,0,0,0.3,3.14,-1,1", ["--degrees"],
+                                         "column 'theta': 3.14 looks like radians"),
     "length in mm": (HEADER + "j1,0,0,450,0,-1,1", [], "column 'd': 450 looks like millimetres"),
     "unknown type": ("joint,a,alpha,d,theta,type\nj1,0,0,0.3,0,rotary", [],
                      "line 2 (joint 'j1'), column 'type': unknown joint type 'rotary'; use revolute, prismatic or continuous"),

@@ -184,11 +184,13 @@ def _write_html(html, document: Mapping[str, Any], base, evaluation: dict | None
 def _print_chain_summary(run) -> None:
     import numpy as np
 
+    from pincal.cli.level_table import held_by_prior
+
     result = run.result
     ident = run.report["identifiability"]
     kept = sum(1 for p in run.report["parameters"] if p["calibrated"] is not None)
     print(f"level {result.level}: {kept} kinematic parameters kept of {len(run.report['parameters'])} "
-          f"({ident['rank']} identifiable), plus registration and target")
+          f"({ident['rank']} identifiable{held_by_prior(ident, kept)}), plus registration and target")
     if ident["selection"]:
         sel = ident["selection"]
         print(f"selection: {sel['criterion']} = {sel['value']:.4g} with {sel['kept']} kept")

@@ -216,7 +216,7 @@ def evaluate_files(
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
     chain = KinematicChain.from_urdf(urdf, report.tool_parent, xacro_args=xacro_args)
     # the readings corrected as the calibration's were (eq C1), before the joint limits are judged
-    data, read_notes = read_measurements(data_path, chain.joint_specs, report.couplings)
+    data, read_notes = read_measurements(data_path, chain.joint_specs, report.couplings, chain.other_branch_joints)
     notes += read_notes
     if report.couplings:
         notes.append(f"{data_path}: readings corrected as {report_path} says (couplings: "

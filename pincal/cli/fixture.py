@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, cast
 
 from pincal._version import __version__
-from pincal.cli.level_table import level_choice_lines
+from pincal.cli.level_table import held_by_prior, level_choice_lines
 from pincal.cli.parser import selection_criterion
 from pincal.cli.paths import description_inputs, refuse_overwrite
 from pincal.cli.settings import CalibrateSettings, expect
@@ -332,8 +332,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     ident = report["identifiability"]
     kept = sum(1 for p in report["parameters"] if p["calibrated"] is not None)
     print(f"socket fixture, level {level}: {result.n_rows} rows in {len(result.placements)} placement(s); "
-          f"{kept} kinematic parameters kept of {len(report['parameters'])} ({ident['rank']} identifiable), "
-          "plus the ball centre and the placements")
+          f"{kept} kinematic parameters kept of {len(report['parameters'])} ({ident['rank']} identifiable"
+          f"{held_by_prior(ident, kept)}), plus the ball centre and the placements")
     if ident["selection"]:
         print(f"selection: {ident['selection']['criterion']} = {ident['selection']['value']:.4g} "
               f"with {ident['selection']['kept']} kept")

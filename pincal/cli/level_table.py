@@ -1,11 +1,12 @@
-"""What ``--level auto`` prints: each level's cross-validated error and the level chosen."""
+"""What the calibration summaries print about the level: ``--level auto``'s table (each level's
+cross-validated error and the level chosen) and the parameters a prior holds near nominal."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["level_choice_lines"]
+__all__ = ["level_choice_lines", "held_by_prior"]
 
 
 def level_choice_lines(choice: Mapping[str, Any]) -> list[str]:
@@ -26,3 +27,9 @@ def level_choice_lines(choice: Mapping[str, Any]) -> list[str]:
     lines.append(f"chosen: {choice['chosen']} (lowest: {choice['lowest']}; {choice['rule']}: "
                  f"<= {choice['threshold_mm']:.4f} mm)")
     return lines
+
+
+def held_by_prior(ident: Mapping[str, Any], kept: int) -> str:
+    """What the summary adds when the prior holds fitted parameters near nominal (not reported as kept)."""
+    fitted = (ident.get("selection") or {}).get("kept", kept)
+    return f"; {fitted - kept} more fitted, held near nominal by the prior" if fitted > kept else ""

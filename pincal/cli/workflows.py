@@ -30,7 +30,7 @@ from pincal.cli.settings import CalibrateSettings, DiagnoseSettings, expect
 from pincal.errors import CalibrationError, PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.plausibility import calibration_findings
+from pincal.fit.plausibility import calibration_findings, tip_link_findings
 from pincal.fit.sessions import (
     check_registrable,
     session_pose_errors,
@@ -230,7 +230,7 @@ def calibrate_files(
     refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     # readings taken against another joint corrected (eq C1) before the joint limits are judged
-    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings)
+    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings, chain.other_branch_joints)
     nominal_placements = chain.placements()
     n_rows = fit_rows(data.roles)
     sources: Sources = {"urdf": str(urdf),
@@ -276,7 +276,8 @@ def calibrate_files(
             sessions = session_rows(used, fitted.session_names)
             errors = session_pose_errors(chain, used, sessions, fitted.target.registrations,
                                          points=fitted.target.points, target_rotation=fitted.target.rotation)
-            warnings = findings_json(calibration_findings(chain, fitted, used, sigma_column, settings.sigma_pos_m))
+            warnings = findings_json(tip_link_findings(chain, data.extra, data.source)
+                                     + calibration_findings(chain, fitted, used, sigma_column, settings.sigma_pos_m))
             entries = session_entries(fitted.session_names, fitted.target.registrations, used, sessions, errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
@@ -426,10 +427,11 @@ def diagnose_files(
     started = time.perf_counter()
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
     # readings taken against another joint corrected (eq C1) before the joint limits are judged
-    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings)
+    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings, chain.other_branch_joints)
     heldout = held_time = None
     if validation_path:
-        heldout, held_notes = read_measurements(validation_path, chain.joint_specs, settings.couplings)
+        heldout, held_notes = read_measurements(validation_path, chain.joint_specs, settings.couplings,
+                                                 chain.other_branch_joints)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
     readings = read_readings(data, heldout, settings.temperature_column, settings.pause_s)  # thermal, pauses
@@ -440,8 +442,8 @@ def diagnose_files(
         choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
                               selection=selection, progress=stages.next())
         level = choice.chosen
-    calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None,
-                                  sigma_column=sigma_column, selection=selection, progress=stages.next())
+    calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
+                                  selection=selection, progress=stages.next(), refit_offered=False)
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
@@ -480,8 +482,9 @@ def diagnose_files(
         head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
         report = diagnosis_report(
             head, diagnosis, payload_kg, time_column_name or _time_name(data),
-            warnings=findings_json(calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
-                                                        press_of=calibration)),
+            warnings=findings_json(tip_link_findings(chain, data.extra, data.source)
+                                   + calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                          press_of=calibration)),
             sessions=session_entries(final.session_names, final.target.registrations, used,
                                      session_rows(used, final.session_names), diagnosis.calibration_errors),
             time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)

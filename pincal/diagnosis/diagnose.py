@@ -73,6 +73,7 @@ from pincal.fit.sessions import session_rows
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.model.effect_units import shift_unit
 from pincal.model.effects import (
     HARMONICS,
     Effect,
@@ -419,8 +420,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
             heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
             candidates=tuple(ranking[:SHOWN]),
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
-            shift_unit="m" if effect.joint and chain.joints[chain.joint_names.index(effect.joint)].kind == "prismatic"
-            else "rad",
+            shift_unit=shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic"),
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
     if untestable:

@@ -15,6 +15,7 @@ import numpy as np
 from pincal.diagnosis.screening import SCREEN_CONDITION, Linearisation, bic, may_reach, n_prior_rows, testable
 from pincal.diagnosis.verdicts import EVIDENCE
 from pincal.errors import CalibrationError
+from pincal.model.effect_units import load_unit, shift_unit
 from pincal.model.effects import HARMONICS, JOINT_EFFECTS, Effect, joint_basis
 
 __all__ = ["GENERIC_EVALUATIONS", "remaining_structure", "partial_residual"]
@@ -77,10 +78,9 @@ _DRIVERS = {
 def _load_label(chain, driver: str | None, joint: str) -> str:
     """The axis label of a gravity load: a joint's own (``driver`` None) or ``driver``'s, a torque [N·m] of
     a revolute joint, a force [N] of a prismatic one (:mod:`pincal.model.effect_units`)."""
-    name = joint if driver is None else driver
-    force = chain.joints[chain.joint_names.index(name)].kind == "prismatic"
-    quantity, unit = ("gravity force", "N") if force else ("gravity torque", "N·m")
-    return f"{quantity} tau_j [{unit}]" if driver is None else f"{quantity} of {driver} [{unit}]"
+    force = chain.joint_kinds[joint if driver is None else driver] == "prismatic"
+    subject = "tau_j" if driver is None else f"of {driver}"
+    return f"{'gravity force' if force else 'gravity torque'} {subject} [{load_unit(force)}]"
 
 
 def partial_residual(effect, objective, solution, inputs, chain):
@@ -111,8 +111,8 @@ def partial_residual(effect, objective, solution, inputs, chain):
     elif effect.type == "compliance":  # its own torque, or its driver's (a gravity-torque coupling)
         driver, label = basis[:, 0], _load_label(chain, effect.driver, effect.joint)
     elif effect.type == "coupling":
-        prismatic = chain.joints[chain.joint_names.index(effect.driver)].kind == "prismatic"
-        driver, label = basis[:, 0], f"reading of {effect.driver} [{'m' if prismatic else 'rad'}]"
+        reading = shift_unit(chain.joint_kinds[effect.driver] == "prismatic")
+        driver, label = basis[:, 0], f"reading of {effect.driver} [{reading}]"
     else:
         driver, label = inputs.q[:, j], _DRIVERS[effect.type]
     return driver, label, shift, fitted

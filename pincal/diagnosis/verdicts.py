@@ -29,6 +29,7 @@ import numpy as np
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import standard_deviations
 from pincal.model.chain import KinematicChain
+from pincal.model.effect_units import effect_unit
 from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 from pincal.model.thermal import implausible
 from pincal.residuals.sensor import SensorResidual
@@ -41,19 +42,33 @@ __all__ = [
 
 #: ΔBIC below which the evidence for an effect is "very strong".
 EVIDENCE = -10.0
-#: Largest plausible magnitude of each effect's value(s), by type (revolute, prismatic).
-PLAUSIBLE = {
-    "compliance": (1e-3, 1e-4),  # rad/(N·m), m/N: stiffer than 1 000 N·m/rad
-    "encoder_scale": (0.02, 0.02),  # relative
-    "cyclic": (0.02, 0.005),  # rad, m
-    "backlash": (0.1, 0.01),  # rad, m
-    # relative: a joint read against another (1 on parallelogram arms whose controller reads J3 − J2),
-    # a differential wrist's ratio below it
-    "coupling": (1.5, 1.5),
-    "drift": (1e-5, 1e-5),  # m/s (36 mm/h)
-    "sensor_scale": (0.01, 0.01),  # relative
-    "thermal": (np.inf, np.inf),  # 1/K: judged with its standard deviation (pincal.model.thermal.implausible)
-    "pause_step": (1e-3, 1e-3),  # m: a larger step is a sensor that was moved, a new session
+#: Largest plausible magnitude of each effect's value(s), by type and unit: the unit follows the kinds of the
+#: shifted joint and of its driver (:func:`pincal.model.effect_units.effect_unit`), so a compliance is bounded
+#: by which joint shifts [rad or m] under which load [N·m or N], a coupling by which reading it follows.
+#:
+#: Compliance: the largest plausible deflection over the largest gravity load of an arm. The loads: 100 N·m of
+#: torque on a revolute joint (a 5 kg-payload arm's shoulder: UR5's effort limit 150 N·m; TIAGo's shoulder
+#: bears up to 30 N·m), 1 000 N of force along a prismatic joint (TIAGo's lift carries ~19 kg, 188 N, its effort
+#: limit 2 000 N; a gantry's Z axis 50–100 kg; URDFs of example-robot-data). The deflections: 0.1 rad of a
+#: revolute joint, 0.1 m of a prismatic one, each moving the tool ~100 mm at an arm's 1 m reach, far beyond an
+#: arm that positions to a millimetre. Like joints give the stiffness floors 1 000 N·m/rad and 10 000 N/m; across kinds
+#: 0.1 rad / 1 000 N and 0.1 m / 100 N·m (at TIAGo's ~200 N of lift load, 1e-4 rad/N is 0.02 rad).
+#:
+#: Coupling: a joint's reading includes at most 1.5 × its driver's (1 on parallelogram arms whose controller
+#: reads J3 − J2, a differential wrist's ratio below it), so it moves the tool at most 1.5 × what its driver's
+#: motion does. Across kinds a turn moves the tool by its lever, 0.1 m (a wrist) to 1 m (an arm's reach): a
+#: revolute joint following a prismatic reading, 1.5 / 0.1 m = 15 rad/m; a prismatic joint following a revolute
+#: reading, 1.5 × 1 m = 1.5 m/rad.
+PLAUSIBLE: dict[str, dict[str, float]] = {
+    "compliance": {"rad/(N·m)": 1e-3, "m/N": 1e-4, "rad/N": 1e-4, "m/(N·m)": 1e-3},  # 0.1 rad or m / 100 N·m, 1 kN
+    "coupling": {"(relative)": 1.5, "rad/m": 15.0, "m/rad": 1.5},
+    "encoder_scale": {"(relative)": 0.02},
+    "cyclic": {"rad": 0.02, "m": 0.005},
+    "backlash": {"rad": 0.1, "m": 0.01},
+    "drift": {"m/s": 1e-5},  # 36 mm/h
+    "sensor_scale": {"(relative)": 0.01},
+    "thermal": {"1/K": np.inf},  # judged with its standard deviation (pincal.model.thermal.implausible)
+    "pause_step": {"m": 1e-3},  # a larger step is a sensor that was moved, a new session
 }
 #: Largest change an effect must make to some measured coordinate, in units of that coordinate's
 #: noise σ (the fit's whitened residual), to be adopted: σ/10 (the unseen-setups issue's bound on
@@ -123,8 +138,7 @@ def _offset_like(basis: np.ndarray | None) -> bool:
 
 
 def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> bool:
-    prismatic = effect.joint is not None and chain.joints[chain.joint_names.index(effect.joint)].kind == "prismatic"
-    limit = PLAUSIBLE[effect.type][1 if prismatic else 0]
+    limit = PLAUSIBLE[effect.type][effect_unit(effect, chain.joint_kinds)]
     magnitude = np.hypot(*values) if effect.type == "cyclic" else np.max(np.abs(values))
     return bool(magnitude <= limit)
 

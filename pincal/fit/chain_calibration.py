@@ -265,6 +265,7 @@ def calibrate_chain(
     sigma_iterations: int = 2,
     selection: str = "aic",
     progress: Progress | None = None,
+    refit_offered: bool = True,
 ) -> ChainCalibration:
     """Calibrate ``chain`` at ``level`` on the non-validation rows of ``data``.
 
@@ -282,6 +283,8 @@ def calibrate_chain(
         sigma_iterations: refits re-estimating the position/orientation noise scales (with a
             prior: up to eq P2's fixed point instead, :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
         progress: ``progress(done, total)`` after the registration, each subset scored, the fit.
+        refit_offered: whether the caller can refit without outliers (``calibrate --reject-outliers``);
+            else (``diagnose``) the outlier note says to check the rows instead.
 
     The chain is not changed: the calibrated model is the result's ``chain_placements`` (evaluate
     it with ``chain.placed(result.chain_placements)``).
@@ -325,7 +328,9 @@ def calibrate_chain(
     if flagged and not removed:
         notes.append(
             f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
-            "rerun with --reject-outliers to refit without them"
+            + ("rerun with --reject-outliers to refit without them" if refit_offered else
+               "they stay in the fit: check them and remove the bad ones from the file (an effect found "
+               "later may explain the others)")
         )
     if result.held:
         notes.append(f"target not determined: {held_reason(result.held)}")

@@ -20,6 +20,11 @@ names the likely causes and what to try. The thresholds and their sources:
   :mod:`pincal.fit.prior` (1 mm, 0.5°), i.e. a ten-sigma deviation under them. Manufacturing and
   mastering errors are of the prior's scale; corrections ten times larger mean the model absorbs
   something else.
+* **Tip link** — a column of the rows named after a joint of the URDF below ``--tip-link`` (it moves
+  the tip's descendants, not the chain) whose value changes across the rows: the target moved with a
+  joint the chain does not have, so ``--tip-link`` names a link short of the one the target is on.
+  A column held constant is not judged: the fitted tool absorbs a fixed joint exactly. Columns of
+  joints on other branches (a head's joints in an arm's file) are not the chain's and are ignored.
 * **Cross-validation** — the linearised leave-one-row-out prediction error (PRESS, Allen 1974) of
   the calibrated model above the nominal model's (registration and target refitted, the same
   weights) by more than its own noise: the RMS ratio sqrt(PRESS_cal / PRESS_nom) above
@@ -41,6 +46,7 @@ names the likely causes and what to try. The thresholds and their sources:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,8 +61,8 @@ from pincal.model.chain import KinematicChain
 
 __all__ = [
     "MAX_RMS_M", "MAX_NOISE_RATIO", "MAX_SENSOR_DISTANCE_M", "MAX_TRANSLATION_M", "MAX_ROTATION_RAD", "DATA_CAUSES",
-    "MIN_REFERENCE_RMS_M", "CALIBRATED_ACCURACY_M", "Finding", "reach_m", "check_calibration", "check_evaluation",
-    "refit_nominal", "press_against_nominal", "calibration_findings",
+    "MIN_REFERENCE_RMS_M", "CALIBRATED_ACCURACY_M", "Finding", "tip_link_findings", "reach_m", "check_calibration",
+    "check_evaluation", "refit_nominal", "press_against_nominal", "calibration_findings",
 ]
 
 #: Largest plausible RMS point residual after a calibration [m] (module docstring).
@@ -89,6 +95,21 @@ class Finding:
 
     def as_dict(self) -> dict[str, str]:
         return {"code": self.code, "message": self.message}
+
+
+def tip_link_findings(chain: KinematicChain, columns: Mapping[str, np.ndarray], source: str) -> list[Finding]:
+    """A finding when ``columns`` (a file's numeric extra columns, name -> values per row) hold joints of
+    the URDF below the chain's tip link that move across the rows (module docstring); ``source`` names
+    the file."""
+    moved = [name for name in chain.beyond_tip_joints if name in columns
+             and np.nanmax(columns[name]) > np.nanmin(columns[name])]  # all-NaN columns are not kept
+    if not moved:
+        return []
+    last = chain.beyond_tip_joints[moved[-1]]  # depth-first order: the last is the farthest out
+    return [Finding("tip_link", f"{source}: column(s) {', '.join(moved)} are joints of the URDF below --tip-link "
+                    f"{chain.tip_link} and move in these rows, so the target moved with joints the chain does not "
+                    f"have: give --tip-link a link further out, e.g. {last} (the last link they move), or the link "
+                    "the target is on")]
 
 
 def reach_m(chain: KinematicChain, q: np.ndarray) -> float:
@@ -126,8 +147,8 @@ def check_calibration(chain: KinematicChain, result, rows: MeasurementSet,
     elif rms > MAX_RMS_M:
         findings.append(Finding("residual", f"the calibrated model misses the measured points by {rms * 1e3:.3g} mm "
                                 f"RMS (more than {MAX_RMS_M * 1e3:g} mm): the data and the model disagree beyond "
-                                f"any kinematic error. Likely: {causes}. Check a few rows by hand against the "
-                                "nominal model (pincal evaluate URDF on the nominal file)"))
+                                f"any kinematic error. Likely: {causes}. See how far the nominal model is with the "
+                                "same command at --level registration, and check a few rows by hand"))
     per_axis = rms / np.sqrt(3.0)
     if geometry and stated_sigma_pos_m and per_axis > MAX_NOISE_RATIO * stated_sigma_pos_m:
         findings.append(Finding("noise", f"the residual ({per_axis * 1e3:.3g} mm per axis) is "

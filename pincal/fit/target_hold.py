@@ -153,7 +153,9 @@ def _reason(group: list[HeldDirection]) -> tuple[str, str]:
         need = max(np.degrees(h.turn_rad) * h.std_m / MAX_TARGET_STD_M for h in group)
         why = (f"the data fix {what} along {them} only to ±{max(h.std_m for h in group) * 1e3:.3g} mm (more than "
                f"{MAX_TARGET_STD_M * 1e3:g} mm)")
-        advice = f"vary the tool's orientation by ≥ {need:.2g}° across {them}"
+        advice = (f"vary the tool's orientation by ≥ {need:.2g}° across {them}" if need <= 90.0 else
+                  f"vary the tool's orientation far more across {them} (by over 90°: if it did vary, check the "
+                  "data's axes and units)")
     else:
         why = f"{what} along {them} cannot be told from the sensor's position"
         advice = f"turn the tool about axes across {them}"

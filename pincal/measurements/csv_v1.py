@@ -62,7 +62,7 @@ from pincal.outputs import replacing
 
 __all__ = [
     "JointKind", "QUAT_NORM_TOL", "MAX_POSITION", "CsvTable", "read_table", "read_joint_columns", "read_measurements",
-    "read_sessions", "write_measurements",
+    "read_sessions", "read_extra_columns", "write_measurements",
 ]
 
 JointKind = Literal["revolute", "continuous", "prismatic"]
@@ -227,15 +227,22 @@ def _encoding_hint(path: str | os.PathLike) -> str:
     return " (it is UTF-16, e.g. Excel's 'Unicode text')" if head.startswith((b"\xff\xfe", b"\xfe\xff")) else ""
 
 
-def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec]) -> np.ndarray:
-    """The joint columns as (K, N) [rad or m], in ``joints``' order, checked for a unit mistake."""
+def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec], other_branches: Sequence[str] = ()) -> np.ndarray:
+    """The joint columns as (K, N) [rad or m], in ``joints``' order, checked for a unit mistake.
+
+    ``other_branches``: joints of the same robot description on other branches than ``joints``' chain;
+    a file with columns for them is of another chain, not misspelt (the error says so)."""
     joint_names = [j.name for j in joints]
     missing = [n for n in joint_names if n not in table.names]
     if missing:
         hint = "; is the file comma-separated?" if len(table.names) == 1 else ""
-        extra = [n for n in table.names if n not in joint_names]  # a misspelt joint column is among these
+        branch = [n for n in table.names if n in other_branches]
+        extra = [n for n in table.names if n not in joint_names and n not in branch]  # a misspelt joint is here
         close = [f"'{c[0]}' to '{m}'" for m in missing if (c := difflib.get_close_matches(m, extra, n=1))]
         guess = f" (rename the file's column {', '.join(close)}?)" if close else ""
+        if branch:
+            guess = (f"; the file's column(s) {', '.join(branch)} are joints of the URDF on another branch than "
+                     "the chain to the tip link: is --tip-link right?")
         raise table.error(f"missing joint column(s) {', '.join(missing)}{guess}; the URDF expects "
                           f"{', '.join(joint_names)}{hint}")
     q = table.matrix(joint_names)
@@ -244,10 +251,12 @@ def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec]) -> np.ndarray:
     return q
 
 
-def read_joint_columns(path: str | os.PathLike, joints: Sequence[JointSpec]) -> tuple[np.ndarray, np.ndarray]:
+def read_joint_columns(path: str | os.PathLike, joints: Sequence[JointSpec], other_branches: Sequence[str] = ()
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """The joint readings of a CSV table: the joint columns of format v1, every other column ignored.
 
-    So a measurement file serves as a list of configurations as is.
+    So a measurement file serves as a list of configurations as is. ``other_branches``: as for
+    :func:`read_measurements`.
 
     Returns:
         q (K, N) [rad or m] in ``joints``' order, and each row's line in the file (K,).
@@ -258,7 +267,7 @@ def read_joint_columns(path: str | os.PathLike, joints: Sequence[JointSpec]) -> 
             naming the file, line and column.
     """
     table = read_table(path)
-    return _joint_matrix(table, joints), np.array(table.lines)
+    return _joint_matrix(table, joints, other_branches), np.array(table.lines)
 
 
 def _point_columns(table: CsvTable, joint_names: Sequence[str]) -> list[tuple[str, str, str]]:
@@ -348,6 +357,12 @@ def _read_extras(table: CsvTable, names: Sequence[str]) -> tuple[dict[str, np.nd
     return kept, ignored
 
 
+def read_extra_columns(path: str | os.PathLike, joint_names: Sequence[str]) -> dict[str, np.ndarray]:
+    """The numeric extra columns of a CSV table, as :func:`read_measurements` keeps them (name -> (K,))."""
+    table = read_table(path)
+    return _read_extras(table, [n for n in table.names if not is_reserved(n, joint_names)])[0]
+
+
 def _limit_notes(
     table: CsvTable, q: np.ndarray, joints: Sequence[JointSpec], corrected: Sequence[str] = ()
 ) -> list[str]:
@@ -367,7 +382,8 @@ def _limit_notes(
 
 
 def read_measurements(
-    path: str | os.PathLike, joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = ()
+    path: str | os.PathLike, joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
+    other_branches: Sequence[str] = (),
 ) -> tuple[MeasurementSet, list[str]]:
     """Read and validate a measurement file (format v1).
 
@@ -377,6 +393,9 @@ def read_measurements(
         couplings: readings taken against another joint: ``q`` holds the actual
             values (eq C1, :mod:`pincal.measurements.couplings`), and the joint-limit
             notes judge those, not the readings.
+        other_branches: joints of the same URDF off the chain of ``joints`` (other branches, e.g. a
+            head's joints for an arm): a file lacking a joint of ``joints`` but holding these is said to
+            be of another chain (a wrong tip link), not to have a misspelt column.
 
     Returns:
         The measurement set and notes (joint limits, ignored or extra columns) for
@@ -387,7 +406,7 @@ def read_measurements(
     """
     table = read_table(path)
     joint_names = [j.name for j in joints]
-    q = corrected_angles(_joint_matrix(table, joints), couplings, joint_names)
+    q = corrected_angles(_joint_matrix(table, joints, other_branches), couplings, joint_names)
     point_names = _point_columns(table, joint_names)
     points = table.matrix([c for triplet in point_names for c in triplet])
     for i, name in enumerate(c for triplet in point_names for c in triplet):
@@ -407,12 +426,14 @@ def read_measurements(
 
 
 def read_sessions(
-    paths: Sequence[str | os.PathLike], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = ()
+    paths: Sequence[str | os.PathLike], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
+    other_branches: Sequence[str] = (),
 ) -> tuple[MeasurementSet, list[str]]:
     """Read one or several measurement files as the sessions of one calibration.
 
-    One file: :func:`read_measurements` (its sessions are the values of its
-    ``session`` column, the file's stem where empty or absent). Several files:
+    One file: :func:`read_measurements` (``couplings`` and ``other_branches`` as there; its
+    sessions are the values of its ``session`` column, the file's stem where empty or absent).
+    Several files:
     each row's session is its file's stem — or the path as given when two files
     share a stem — followed by ``:VALUE`` for a ``session`` value of its own;
     every row keeps its file and line (:attr:`MeasurementSet.files`, ``lines``).
@@ -423,7 +444,7 @@ def read_sessions(
     """
     files = [Path(p) for p in paths]
     if len(files) == 1:
-        return read_measurements(files[0], joints, couplings)
+        return read_measurements(files[0], joints, couplings, other_branches)
     seen: dict[str, Path] = {}
     for path in files:
         key = os.path.normcase(os.path.abspath(path))
@@ -433,7 +454,7 @@ def read_sessions(
     stems = [p.stem for p in files]
     sets, notes = [], []
     for path, stem in zip(files, stems):
-        data, file_notes = read_measurements(path, joints, couplings)
+        data, file_notes = read_measurements(path, joints, couplings, other_branches)
         notes += file_notes
         name = stem if stems.count(stem) == 1 else str(path)
         own = default_session_name(data.source)

@@ -129,6 +129,8 @@ class KinematicChain:
                     "and prismatic joints only"
                 )
         chain_names = [model.names[j] for j in support]
+        #: the URDF's movable joints off the chain: below the tip link (joint -> its child link), and the others
+        self.beyond_tip_joints, self.other_branch_joints = _off_chain(model, full_tip, support)
         locked = [j for j in range(1, model.njoints) if j not in support]
         if locked:
             model = _reduced(model, locked)
@@ -185,6 +187,12 @@ class KinematicChain:
     @property
     def joint_specs(self) -> list[JointSpec]:
         return [j.spec for j in self.joints]
+
+    @property
+    def joint_kinds(self) -> dict[str, str]:
+        """Joint name → ``revolute``, ``continuous`` or ``prismatic``, as REPORT.json's ``chain``: the kinds
+        :func:`pincal.model.effect_units.effect_unit` takes."""
+        return {j.name: j.kind for j in self.joints}
 
     @property
     def root_link(self) -> str:
@@ -303,6 +311,27 @@ class KinematicChain:
             tool_rot[row] = tool.rotation
             tool_pos[row] = tool.translation
         return ChainPoses(joint_rot, joint_pos, tool_rot, tool_pos)
+
+
+def _off_chain(model: pin.Model, tip: pin.Frame, support: Sequence[int]) -> tuple[dict[str, str], tuple[str, ...]]:
+    """The movable joints of ``model`` not in ``support``: ({joint: its child link} of those whose
+    parent link hangs below the link ``tip``, through fixed joints or not; the others' names), in the
+    model's (depth-first) order."""
+    tip_id = model.getFrameId(tip.name, pin.FrameType.BODY)
+    child = {model.frames[f.parentFrame].name: f.name for f in model.frames if f.type == pin.FrameType.BODY}
+    beyond: dict[str, str] = {}
+    other = []
+    for frame in model.frames:
+        if frame.type != pin.FrameType.JOINT or frame.parentJoint in support:
+            continue
+        up = frame.parentFrame
+        while up not in (0, tip_id):  # up the frame tree to the tip or the root (frame 0)
+            up = model.frames[up].parentFrame
+        if up == tip_id:
+            beyond[frame.name] = child.get(frame.name, frame.name)
+        else:
+            other.append(frame.name)
+    return beyond, tuple(other)
 
 
 def _reduced(model: pin.Model, locked: list[int]) -> pin.Model:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Protocol
 
-__all__ = ["EffectJoints", "value_unit", "effect_unit"]
+__all__ = ["EffectJoints", "shift_unit", "load_unit", "value_unit", "effect_unit"]
 
 
 class EffectJoints(Protocol):
@@ -28,17 +28,28 @@ class EffectJoints(Protocol):
     def driver(self) -> str | None: ...
 
 
+def shift_unit(prismatic: bool) -> str:
+    """The unit of a joint's reading and of its shift: ``m`` for a prismatic joint, ``rad`` otherwise."""
+    return "m" if prismatic else "rad"
+
+
+def load_unit(prismatic: bool) -> str:
+    """The unit of a joint's gravity load: the force of a prismatic joint [``N``], the torque of a
+    revolute one [``N·m``]."""
+    return "N" if prismatic else "N·m"
+
+
 def value_unit(kind: str, prismatic: bool = False, driver_prismatic: bool | None = None) -> str:
     """The unit of the values of an effect of type ``kind`` (module docstring), its joint ``prismatic``
     or not, the joint that drives it ``driver_prismatic`` or not (None: the joint itself)."""
-    shift = "m" if prismatic else "rad"
+    shift = shift_unit(prismatic)
     driver = prismatic if driver_prismatic is None else driver_prismatic
     if kind == "compliance":
         return f"{shift}/N" if driver else f"{shift}/(N·m)"
     if kind in ("cyclic", "backlash"):
         return shift
     if kind == "coupling" and driver != prismatic:
-        return f"{shift}/{'m' if driver else 'rad'}"
+        return f"{shift}/{shift_unit(driver)}"
     units = {"drift": "m/s", "thermal": "1/K", "pause_step": "m"}
     return units.get(kind, "(relative)")  # encoder_scale, sensor_scale, a coupling of like joints
 

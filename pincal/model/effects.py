@@ -45,7 +45,6 @@ from pincal.errors import PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.drift import held_times, time_spans
-from pincal.model.effect_units import value_unit
 from pincal.model.sensor import Registration
 
 __all__ = [
@@ -108,10 +107,6 @@ class Effect:
     @property
     def n_values(self) -> int:
         return {"cyclic": 2, "drift": 3, "pause_step": 3}.get(self.type, 1)
-
-    def unit(self, prismatic: bool = False, driver_prismatic: bool | None = None) -> str:
-        """The unit of its values (:func:`~pincal.model.effect_units.value_unit`): joint, driver prismatic?"""
-        return value_unit(self.type, prismatic, driver_prismatic)
 
     @property
     def label(self) -> str:

@@ -46,7 +46,7 @@ def read_candidates(path: str | Path, chain: KinematicChain) -> tuple[np.ndarray
             that is not a finite number, a value in degrees or millimetres, or a
             value outside the joint's limits — naming the file, line and column.
     """
-    q, lines = read_joint_columns(path, chain.joint_specs)
+    q, lines = read_joint_columns(path, chain.joint_specs, chain.other_branch_joints)
     check_within_limits(q, chain, str(path), lines)
     return q, lines
 

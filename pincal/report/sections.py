@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pincal.model.effect_units import value_unit
+from pincal.model.effect_units import shift_unit, value_unit
 
 __all__ = [
     "DISPLAY", "num", "change_text", "parameter_section", "effect_label", "effects_section", "fixed", "rotation_text",
@@ -134,7 +134,7 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
     if kind == "cyclic":
         sin, cos = _finite(entry.get("sin")), _finite(entry.get("cos"))
         amplitude = math.hypot(sin, cos) * 1000.0 if sin is not None and cos is not None else None
-        unit = "mm" if length else "mrad"
+        unit = "m" + shift_unit(length)  # mm or mrad
         text = (f"sin {pm(sin, entry.get('sin_std'), 1000.0, unit)}, cos {pm(cos, entry.get('cos_std'), 1000.0, unit)}"
                 f" (amplitude {num(amplitude, 3)} {unit})")
         return text, ""
@@ -144,12 +144,13 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
         stds = std if isinstance(std, list) else [None] * len(values)
         name, scale, unit = ("v", 1000.0, "mm/s") if kind == "drift" else ("d", 1e6, "µm")
         return ", ".join(f"{name}{axis} {pm(v, s, scale, unit)}" for axis, v, s in zip("xyz", values, stds)), ""
+    reading = value_unit("coupling", length, driver)  # rad/m or m/rad between a revolute and a prismatic joint
     scale, unit = {
         "compliance": (1000.0, "m" + value_unit("compliance", length, driver)),  # mrad/(N·m), mm/N, mrad/N, ...
         "encoder_scale": (100.0, "%"),
-        "coupling": (1.0, f"× {entry.get('driver')}'s reading"),
+        "coupling": (1.0, f"× {entry.get('driver')}'s reading" if reading == "(relative)" else reading),
         "sensor_scale": (100.0, "%"),
-        "backlash": (1000.0, "mm per flank" if length else "mrad per flank"),
+        "backlash": (1000.0, f"m{shift_unit(length)} per flank"),
         "thermal": (1e6, "µm/m/K"),
     }.get(kind, (1.0, ""))
     v, s = _finite(value), _finite(std)

@@ -35,7 +35,7 @@ from typing import Any
 from pincal.errors import ModelError
 from pincal.measurements.csv_v1 import MAX_POSITION, CsvTable, read_table
 from pincal.measurements.data import JOINT_SANITY
-from pincal.model.dh.conventions import MAX_ANGLE_RAD
+from pincal.model.dh.conventions import MAX_ANGLE_RAD, is_right_angles_in_radians
 from pincal.model.dh.robot import (
     DEFAULT_EFFORT,
     DEFAULT_LIMITS,
@@ -134,6 +134,10 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
                 raise table.error(f"{row[column]:g} looks like degrees (more than one turn, "
                                   f"|value| > 2π rad); give radians, or pass --degrees if the "
                                   "table's angles are in degrees", line, column, name)
+            if row[column] is not None and degrees and is_right_angles_in_radians(row[column]):
+                raise table.error(f"{row[column]:g} looks like radians (a multiple of π/2 = 90°, not a "
+                                  "plausible angle in degrees); drop --degrees if the table's angles are in "
+                                  "radians", line, column, name)
         lengths = ["a", "d"] + (["lower", "upper"] if kind == "prismatic" else [])
         for column in lengths:
             bound = MAX_LENGTH_M if column in ("a", "d") else MAX_PRISMATIC_M
