@@ -212,7 +212,9 @@ def check_evaluation(evaluated_rms_m: float, calibration_rms_m: float | None,
         limit = min(limit, MAX_RMS_M)
     if evaluated_rms_m <= limit:
         return []
-    causes = (*DATA_CAUSES, "a URDF or REPORT.json other than the pair calibrate wrote")
+    # another day is what evaluate is for: only another robot's file is a cause here
+    causes = (*DATA_CAUSES[:-1], "a data file of another robot", "a URDF or REPORT.json other than the pair "
+              "calibrate wrote")
     moved = ("; or the sensor moved since the calibration (--new-session re-estimates its registration on these "
              "rows)") if reported_registration else ""
     return [Finding("evaluation", f"the evaluated rows miss the calibrated model by {evaluated_rms_m * 1e3:.4g} mm "
