@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import unaccepted_flags
 
 from pincal.cli.commands import EXIT_USAGE, EXIT_WARNING, main
 from pincal.robots import example_robot_data_urdf, kuka_lwr4plus_urdf
@@ -112,6 +113,7 @@ def test_swapped_axes_warn_and_strict_exits_3_with_the_json_written(tiago, capsy
     assert main(["evaluate", str(urdf), str(report), str(data)]) == 0  # a warning alone keeps exit 0
     err = capsys.readouterr().err
     assert "pincal: warning: " in err and "swapped" in err and "--new-session" in err, err
+    assert unaccepted_flags("evaluate", err) == []  # what it says to try, evaluate takes
     metrics = folder / "swapped.json"
     page = folder / "swapped.html"
     assert main(["evaluate", str(urdf), str(report), str(data), "--json", str(metrics), "--html", str(page),

@@ -78,13 +78,14 @@ def test_bad_data_warns_and_strict_exits_3_with_the_outputs_written(industrial_a
                                                                     spoil):
     code, out, report = _calibrate(industrial_arm_urdf, spoil(rows), tmp_path, "--strict", "--sigma-pos",
                                    str(SIGMA_POS_MM), "--html", str(tmp_path / "REPORT.html"))
-    err = capsys.readouterr().err
+    printed = capsys.readouterr()
+    err = printed.err
     assert code == EXIT_WARNING, err
     assert out.is_file() and report.is_file()  # written all the same
     warnings = json.loads(report.read_text())["warnings"]
     assert warnings and {"residual", "noise"} & {w["code"] for w in warnings}
     assert all(f"pincal: warning: {w['message']}" in err for w in warnings)
-    assert unaccepted_flags("calibrate", err + capsys.readouterr().out) == []  # what it says to try, it takes
+    assert unaccepted_flags("calibrate", err + printed.out) == []  # what it says to try, it takes
     page = (tmp_path / "REPORT.html").read_text(encoding="utf-8")
     assert "Warning: " in page and "callout warning" in page
 

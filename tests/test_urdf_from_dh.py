@@ -336,6 +336,8 @@ BAD_TABLES = {
                                "line 2 (joint 'j1'), column 'alpha': -1.5708 looks like radians"),
     "π to two decimals with --degrees": (HEADER + "j1,0,0,0.3,3.14,-1,1", ["--degrees"],
                                          "column 'theta': 3.14 looks like radians"),
+    "3π/2 to two decimals with --degrees": (HEADER + "j1,0,0,0.3,-4.71,-1,1", ["--degrees"],
+                                            "column 'theta': -4.71 looks like radians"),
     "length in mm": (HEADER + "j1,0,0,450,0,-1,1", [], "column 'd': 450 looks like millimetres"),
     "unknown type": ("joint,a,alpha,d,theta,type\nj1,0,0,0.3,0,rotary", [],
                      "line 2 (joint 'j1'), column 'type': unknown joint type 'rotary'; use revolute, prismatic or continuous"),

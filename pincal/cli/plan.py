@@ -29,8 +29,6 @@ def run_plan(args: argparse.Namespace) -> int:
                          progress=progress)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
-    for warning in run.warnings:
-        print(f"pincal: warning: {warning}", file=sys.stderr)
     print_plan_summary(run)
     print(f"wrote {args.out}\nwrote {args.report}")
     return 0

@@ -17,7 +17,7 @@ from pincal.cli.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.errors import PincalError
 from pincal.fit.plausibility import tip_link_findings
 from pincal.measurements.couplings import ReadingCoupling, corrected_angles, readings_of
-from pincal.measurements.csv_v1 import read_extra_columns, read_sessions
+from pincal.measurements.csv_v1 import file_columns, read_sessions
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
 from pincal.model.dh.conversion import DHUrdf, urdf_from_dh_table
@@ -62,7 +62,6 @@ class PlanRun:
     clearance: Clearance | None
     n_candidates: int
     notes: list[str]
-    warnings: list[str]  # pincal.fit.plausibility's tip-link check of the files read
 
 
 def plan_files(
@@ -118,13 +117,14 @@ def plan_files(
     else:
         candidates = sample_candidates(chain, sample, settings.seed)
         labels = np.arange(len(candidates))
-    warnings = ([] if candidates_path is None else
-                tip_link_findings(chain, read_extra_columns(candidates_path, names), str(candidates_path)))
+    # no calibration to judge here: whether the target moved with them is for calibrate to say (a note)
+    files = [] if candidates_path is None else [candidates_path]
     existing = None
     if existing_paths:  # several files: sessions, one registration each; the plan continues the last
         existing, read_notes = read_sessions(existing_paths, chain.joint_specs, couplings, chain.other_branch_joints)
         notes += read_notes
-        warnings += tip_link_findings(chain, existing.extra, existing.source)
+        files += existing_paths
+    notes += [finding.message for finding in tip_link_findings(chain, file_columns(files, names))]
     workspace = (corrected_angles(read_candidates(workspace_path, chain)[0], couplings, names)
                  if workspace_path is not None else None)
     stages = Stages(progress)
@@ -142,8 +142,7 @@ def plan_files(
     document = plan_document(plan, chain, plan.settings, sources, labels, len(candidates), clearance, tool_pose,
                              sample if candidates_path is None else None, plan_csv_sha256=digest)
     write_plan_json(out_json, document)
-    return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes),
-                   [w.message for w in warnings])
+    return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes))
 
 
 def _existing_source(paths: list[Path]) -> str | list[str] | None:

@@ -30,7 +30,7 @@ from pincal.cli.settings import CalibrateSettings, DiagnoseSettings, expect
 from pincal.errors import CalibrationError, PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.plausibility import calibration_findings, tip_link_findings
+from pincal.fit.plausibility import calibration_findings, tip_link_findings, tip_link_verdict
 from pincal.fit.sessions import (
     check_registrable,
     session_pose_errors,
@@ -38,6 +38,7 @@ from pincal.fit.sessions import (
     where,
 )
 from pincal.measurements.csv_v1 import (
+    file_columns,
     read_measurements,
     read_sessions,
     write_measurements,
@@ -276,8 +277,10 @@ def calibrate_files(
             sessions = session_rows(used, fitted.session_names)
             errors = session_pose_errors(chain, used, sessions, fitted.target.registrations,
                                          points=fitted.target.points, target_rotation=fitted.target.rotation)
-            warnings = findings_json(tip_link_findings(chain, data.extra, data.source)
-                                     + calibration_findings(chain, fitted, used, sigma_column, settings.sigma_pos_m))
+            warned, tip_notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)),
+                                                 calibration_findings(chain, fitted, used, sigma_column,
+                                                                      settings.sigma_pos_m))
+            warnings, notes = findings_json(warned), notes + tip_notes
             entries = session_entries(fitted.session_names, fitted.target.registrations, used, sessions, errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
@@ -479,12 +482,13 @@ def diagnose_files(
         plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
     with chain.placed(final.chain_placements):  # the report describes the final model
         used = data.select(calibration.used_index)
+        warned, tip_notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)),
+                                             calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                                  press_of=calibration))
+        notes += tip_notes
         head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
         report = diagnosis_report(
-            head, diagnosis, payload_kg, time_column_name or _time_name(data),
-            warnings=findings_json(tip_link_findings(chain, data.extra, data.source)
-                                   + calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
-                                                          press_of=calibration)),
+            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=findings_json(warned),
             sessions=session_entries(final.session_names, final.target.registrations, used,
                                      session_rows(used, final.session_names), diagnosis.calibration_errors),
             time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)

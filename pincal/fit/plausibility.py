@@ -23,8 +23,11 @@ names the likely causes and what to try. The thresholds and their sources:
 * **Tip link** — a column of the rows named after a joint of the URDF below ``--tip-link`` (it moves
   the tip's descendants, not the chain) whose value changes across the rows: the target moved with a
   joint the chain does not have, so ``--tip-link`` names a link short of the one the target is on.
-  A column held constant is not judged: the fitted tool absorbs a fixed joint exactly. Columns of
-  joints on other branches (a head's joints in an arm's file) are not the chain's and are ignored.
+  A column held constant (within :data:`MOVED_MIN`, above encoder jitter) is not judged: the fitted
+  tool absorbs a fixed joint exactly. Columns of joints on other branches (a head's joints in an arm's
+  file) are not the chain's and are ignored. A joint below the tip can also move what the target is
+  not on (a gripper's fingers below a wrist): so this is a warning only when the calibration is
+  doubtful for another reason too (any other finding, which it would explain), else a note.
 * **Cross-validation** — the linearised leave-one-row-out prediction error (PRESS, Allen 1974) of
   the calibrated model above the nominal model's (registration and target refitted, the same
   weights) by more than its own noise: the RMS ratio sqrt(PRESS_cal / PRESS_nom) above
@@ -46,7 +49,7 @@ names the likely causes and what to try. The thresholds and their sources:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,10 +64,14 @@ from pincal.model.chain import KinematicChain
 
 __all__ = [
     "MAX_RMS_M", "MAX_NOISE_RATIO", "MAX_SENSOR_DISTANCE_M", "MAX_TRANSLATION_M", "MAX_ROTATION_RAD", "DATA_CAUSES",
-    "MIN_REFERENCE_RMS_M", "CALIBRATED_ACCURACY_M", "Finding", "tip_link_findings", "reach_m", "check_calibration",
-    "check_evaluation", "refit_nominal", "press_against_nominal", "calibration_findings",
+    "MIN_REFERENCE_RMS_M", "CALIBRATED_ACCURACY_M", "Finding", "MOVED_MIN", "tip_link_findings", "tip_link_verdict",
+    "reach_m", "check_calibration", "check_evaluation", "refit_nominal", "press_against_nominal",
+    "calibration_findings",
 ]
 
+#: A joint column whose values span less than this has not moved [rad or m]: encoder jitter is ~1e-5 rad;
+#: 1e-4 rad turns a target 1 m out by 0.1 mm, a tracker's noise (module docstring, tip link).
+MOVED_MIN = 1e-4
 #: Largest plausible RMS point residual after a calibration [m] (module docstring).
 MAX_RMS_M = 5e-3
 #: Largest plausible ratio of the per-axis residual to the sensor's stated noise.
@@ -97,19 +104,29 @@ class Finding:
         return {"code": self.code, "message": self.message}
 
 
-def tip_link_findings(chain: KinematicChain, columns: Mapping[str, np.ndarray], source: str) -> list[Finding]:
-    """A finding when ``columns`` (a file's numeric extra columns, name -> values per row) hold joints of
-    the URDF below the chain's tip link that move across the rows (module docstring); ``source`` names
-    the file."""
-    moved = [name for name in chain.beyond_tip_joints if name in columns
-             and np.nanmax(columns[name]) > np.nanmin(columns[name])]  # all-NaN columns are not kept
-    if not moved:
-        return []
-    last = chain.beyond_tip_joints[moved[-1]]  # depth-first order: the last is the farthest out
-    return [Finding("tip_link", f"{source}: column(s) {', '.join(moved)} are joints of the URDF below --tip-link "
-                    f"{chain.tip_link} and move in these rows, so the target moved with joints the chain does not "
-                    f"have: give --tip-link a link further out, e.g. {last} (the last link they move), or the link "
-                    "the target is on")]
+def tip_link_findings(chain: KinematicChain, files: Sequence[tuple[str, Mapping[str, np.ndarray]]]) -> list[Finding]:
+    """A finding per file (``(source, numeric extra columns: name -> values per row)``, each file
+    before sessions are joined, which keeps only the columns every file has) whose columns hold joints
+    of the URDF below the chain's tip link that move across its rows by more than :data:`MOVED_MIN`
+    (module docstring)."""
+    findings = []
+    for source, columns in files:
+        moved = [name for name in chain.beyond_tip_joints if name in columns
+                 and np.nanmax(columns[name]) - np.nanmin(columns[name]) > MOVED_MIN]  # all-NaN ones are not kept
+        if moved:
+            last = chain.beyond_tip_joints[moved[-1]]  # depth-first order: the last is the farthest out
+            findings.append(Finding(
+                "tip_link", f"{source}: column(s) {', '.join(moved)} are joints of the URDF below --tip-link "
+                f"{chain.tip_link} that move in these rows: if the target moves with them, give --tip-link a link "
+                f"further out (e.g. {last}, the link the last of them moves) or the link the target is on"))
+    return findings
+
+
+def tip_link_verdict(tip: list[Finding], others: list[Finding]) -> tuple[list[Finding], list[str]]:
+    """(warnings, notes): the tip-link findings ``tip`` are warnings beside the calibration's other
+    findings ``others`` when there are any (a target that moved with joints the chain lacks explains
+    them), else notes (the fit is plausible: the joints may move what the target is not on)."""
+    return (tip + others, []) if others else (others, [finding.message for finding in tip])
 
 
 def reach_m(chain: KinematicChain, q: np.ndarray) -> float:
@@ -212,9 +229,10 @@ def check_evaluation(evaluated_rms_m: float, calibration_rms_m: float | None,
         limit = min(limit, MAX_RMS_M)
     if evaluated_rms_m <= limit:
         return []
-    # another day is what evaluate is for: only another robot's file is a cause here
-    causes = (*DATA_CAUSES[:-1], "a data file of another robot", "a URDF or REPORT.json other than the pair "
-              "calibrate wrote")
+    # another day is what evaluate is for: only another robot's file is a cause here; the tip link and
+    # column order are the calibration's (evaluate takes no --tip-link)
+    causes = (*DATA_CAUSES[:3], "a joint column order other than the calibration's", "a data file of another robot",
+              "a URDF or REPORT.json other than the pair calibrate wrote")
     moved = ("; or the sensor moved since the calibration (--new-session re-estimates its registration on these "
              "rows)") if reported_registration else ""
     return [Finding("evaluation", f"the evaluated rows miss the calibrated model by {evaluated_rms_m * 1e3:.4g} mm "

@@ -62,7 +62,7 @@ from pincal.outputs import replacing
 
 __all__ = [
     "JointKind", "QUAT_NORM_TOL", "MAX_POSITION", "CsvTable", "read_table", "read_joint_columns", "read_measurements",
-    "read_sessions", "read_extra_columns", "write_measurements",
+    "read_sessions", "read_extra_columns", "file_columns", "write_measurements",
 ]
 
 JointKind = Literal["revolute", "continuous", "prismatic"]
@@ -240,7 +240,7 @@ def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec], other_branches: 
         extra = [n for n in table.names if n not in joint_names and n not in branch]  # a misspelt joint is here
         close = [f"'{c[0]}' to '{m}'" for m in missing if (c := difflib.get_close_matches(m, extra, n=1))]
         guess = f" (rename the file's column {', '.join(close)}?)" if close else ""
-        if branch:
+        if branch and 2 * len(missing) > len(joint_names):  # most of the chain absent: another chain's file
             guess = (f"; the file's column(s) {', '.join(branch)} are joints of the URDF on another branch than "
                      "the chain to the tip link: is --tip-link right?")
         raise table.error(f"missing joint column(s) {', '.join(missing)}{guess}; the URDF expects "
@@ -361,6 +361,13 @@ def read_extra_columns(path: str | os.PathLike, joint_names: Sequence[str]) -> d
     """The numeric extra columns of a CSV table, as :func:`read_measurements` keeps them (name -> (K,))."""
     table = read_table(path)
     return _read_extras(table, [n for n in table.names if not is_reserved(n, joint_names)])[0]
+
+
+def file_columns(paths: Sequence[str | os.PathLike], joint_names: Sequence[str]
+                 ) -> list[tuple[str, dict[str, np.ndarray]]]:
+    """(file, its numeric extra columns) of each file of several sessions, before the join keeps only
+    the columns every file has (``joint_names``: the joint columns)."""
+    return [(str(path), read_extra_columns(path, joint_names)) for path in paths]
 
 
 def _limit_notes(

@@ -310,6 +310,11 @@ class ReportModel:
     calibration_rms_mm: float | None = None
 
 
+def _first_present(*values: float | None) -> float | None:
+    """The first value that is not None (0.0 is a value)."""
+    return next((value for value in values if value is not None), None)
+
+
 def _rms_mm(errors: Any) -> float | None:
     """``position.rms_mm`` of a set of eq 24 errors (None: not recorded)."""
     return None if errors is None else float(errors["position"]["rms_mm"])
@@ -379,8 +384,8 @@ def read_report(path: str | Path) -> ReportModel:
         couplings=couplings_from_report(doc.get("couplings"), str(path)),
         nominal_urdf=value_at(doc, "sources.urdf", path, default=None),
         corrected_urdf=value_at(doc, "sources.corrected_urdf", path, default=None),
-        calibration_rms_mm=value_at(doc, "diagnosis.calibration_errors", path, _rms_mm, default=None)
-        or value_at(doc, "fit.calibration_errors", path, _rms_mm, default=None),
+        calibration_rms_mm=_first_present(value_at(doc, "diagnosis.calibration_errors", path, _rms_mm, default=None),
+                                          value_at(doc, "fit.calibration_errors", path, _rms_mm, default=None)),
     )
 
 

@@ -17,11 +17,12 @@ DH_CONVENTIONS = ("standard", "modified")
 #: An angle beyond one turn [rad] is taken for degrees given as radians (DH table files,
 #: :mod:`pincal.model.dh.files`; ``--tool`` and ``--flange``).
 MAX_ANGLE_RAD = 2.0 * math.pi
-#: How close to a multiple of π/2 a number is taken for right angles written in radians: π/2 and π to two
-#: decimals (1.57, 3.14) are 8e-4 and 1.6e-3 from them. Read as degrees such a number (a 1.57° twist) is
-#: no design angle: DH twists and offsets of arms are multiples of 90° (consecutive axes parallel or
-#: perpendicular), and calibrated deviations from them are of the physical prior's scale, 0.5°.
-RIGHT_ANGLE_TOL = 2e-3
+#: How close to a multiple of π/2 a number is taken for right angles written in radians: k·π/2 to two
+#: decimals (1.57, 3.14, 4.71, 6.28) is at most 5e-3 from it (3.2e-3 for 6.28), the rounding's half unit.
+#: Read as degrees such a number (a 1.57° twist) is no design angle: DH twists and offsets of arms are
+#: multiples of 90° (consecutive axes parallel or perpendicular), and calibrated deviations from them are
+#: of the physical prior's scale, 0.5°.
+RIGHT_ANGLE_TOL = 5e-3
 
 
 def is_right_angles_in_radians(value: float) -> bool:
