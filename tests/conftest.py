@@ -174,6 +174,21 @@ SLOW_FILES = (
     "tests/test_study_processes.py",
 )
 SLOW_TESTS = (
+    # whole-package scans and fresh interpreters (0.6-3 s each): the full suite and CI run them
+    "tests/test_architecture.py::test_rooms_import_only_public_names",
+    "tests/test_architecture.py::test_every_module_states_its_public_names",
+    "tests/test_architecture.py::test_one_calibration_pipeline",
+    "tests/test_flag_messages.py::test_every_flag_a_message_suggests_is_one_the_printing_command_accepts",
+    "tests/test_public_api.py::test_star_import_in_a_fresh_interpreter",
+    "tests/test_html_plan.py::test_one_colour_per_model_in_every_section",
+    "tests/test_html_plan.py::test_percent_change_reads_minus_100_only_for_zero",
+    "tests/test_prior_downstream.py::test_diagnose_report_gives_the_posterior_std",
+    "tests/test_diagnosis.py::test_a_joint_read_against_another_is_named_and_corrected_in_the_data",
+    "tests/test_tip_link.py::test_calibrate_and_plan_warn_on_a_short_tip",
+    "tests/test_tip_link.py::test_diagnose_warns_on_a_short_tip",
+    "tests/test_cli_start.py::test_every_blas_the_run_loads_gets_one_thread",
+    "tests/test_evaluate_console.py::test_diagnose_prints_the_point_rows_of_both_sets",
+    "tests/test_evaluate_console.py::test_swapped_axes_warn_and_strict_exits_3_with_the_json_written",
     "tests/test_crawling_fits.py::test_a_candidate_whose_naming_fit_crawls_is_named_absorbed",
     "tests/test_crawling_fits.py::test_the_data_scale_fit_of_a_prior_calibration_stops_at_its_budget",
     "tests/test_couplings.py::test_diagnose_names_it_and_the_flag_brings_the_model_to_the_noise",
