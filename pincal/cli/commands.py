@@ -13,8 +13,9 @@ import sys
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from pincal.cli.arguments import selection_criterion
 from pincal.cli.error_table import HEADER, error_columns, point_rows
-from pincal.cli.parser import build_parser, selection_criterion
+from pincal.cli.parser import build_parser
 from pincal.errors import PincalError
 
 if TYPE_CHECKING:

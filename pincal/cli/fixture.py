@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any, cast
 
 from pincal._version import __version__
+from pincal.cli.arguments import selection_criterion
 from pincal.cli.level_table import held_by_prior, level_choice_lines
-from pincal.cli.parser import selection_criterion
 from pincal.cli.paths import description_inputs, refuse_overwrite
 from pincal.cli.settings import CalibrateSettings, expect
 from pincal.errors import PincalError

@@ -1,5 +1,5 @@
-"""The ``pincal`` command line's arguments: every subcommand, flag, default and
-argument type (values are checked here, so a bad number is one argparse line).
+"""The ``pincal`` command line's arguments: every subcommand, flag and default (the values' types,
+which check them so that a bad number is one argparse line, are :mod:`pincal.cli.arguments`).
 
 No numpy, scipy or Pinocchio here (``--help`` and refusals in 0.06 s, not 0.7 s; tests/test_cli_start.py):
 defaults and choices come from constant modules of the layers owning them; a type returning a library value
@@ -8,14 +8,25 @@ imports it for a valid one. ``--coupling`` and ``--xacro-arg`` load numpy, lxml 
 from __future__ import annotations
 
 import argparse
-import math
-import re
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from pincal._version import __version__
-from pincal.errors import PincalError
-from pincal.fit.prior_defaults import DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM, SCALE_RANGE
+from pincal.cli.arguments import (
+    count,
+    count_or_zero,
+    coupling_arg,
+    joint_names,
+    measure,
+    non_negative,
+    package_dir,
+    positive,
+    prior_scale,
+    seconds,
+    target_points,
+    tool_pose,
+    xacro_arg,
+)
+from pincal.fit.prior_defaults import DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM
 from pincal.measurements.plateau_defaults import (
     MAX_OFFSET_S,
     MAX_SPREAD_MM,
@@ -24,137 +35,10 @@ from pincal.measurements.plateau_defaults import (
     STILL_TOL,
     TRIM_S,
 )
-from pincal.model.dh.conventions import DH_CONVENTIONS, MAX_ANGLE_RAD
+from pincal.model.dh.conventions import DH_CONVENTIONS
 from pincal.planning.defaults import DEFAULT_SAMPLE, PLAN_LEVELS, WORKSPACE_SIZE
 
-if TYPE_CHECKING:
-    import numpy as np
-
-    from pincal.planning.information import SensorModel
-
-__all__ = [
-    "tool_pose", "prior_scale", "selection_criterion", "package_dir", "measure", "target_points", "xacro_arg",
-    "joint_names", "build_parser",
-    "coupling_arg",
-]
-
-
-def tool_pose(text: str) -> np.ndarray:
-    """argparse type of ``--tool`` and ``--flange``: ``X,Y,Z,ROLL,PITCH,YAW`` (metres, then URDF
-    roll-pitch-yaw [rad]) as a 4x4 pose; angles beyond one turn are refused as degrees given as radians."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not all(map(math.isfinite, values)):
-        raise argparse.ArgumentTypeError(
-            f"'{text}' is not X,Y,Z,ROLL,PITCH,YAW (six numbers: metres, then radians)"
-        )
-    if max(abs(v) for v in values[3:]) > MAX_ANGLE_RAD:
-        raise argparse.ArgumentTypeError(
-            f"'{text}': roll/pitch/yaw beyond one turn look like degrees; give radians"
-        )
-    from pincal.model.chain import pose_from_xyz_rpy  # Pinocchio: a valid --tool, the command runs
-
-    return pose_from_xyz_rpy(values[:3], values[3:])
-
-
-def prior_scale(text: str) -> tuple[float, float]:
-    """argparse type of ``--prior-scale``: ``MM,DEG``, the prior std of placement translations [mm]
-    and rotations [deg] (two numbers within :data:`pincal.fit.prior.SCALE_RANGE`)."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    low, high = SCALE_RANGE
-    if len(values) != 2 or not all(math.isfinite(v) and low <= v <= high for v in values):
-        raise argparse.ArgumentTypeError(
-            f"'{text}' is not MM,DEG (two numbers from {low:g} to {high:g}: the prior std of translations in mm, "
-            "of rotations in degrees)")
-    return values[0], values[1]
-
-
-def selection_criterion(args: argparse.Namespace) -> str:
-    """``--select`` as the fits take it: with ``prior``, a :class:`pincal.fit.prior.Prior` of ``--prior-scale``.
-
-    Raises:
-        PincalError: ``--prior-scale`` without ``--select prior``; ``--select prior`` or
-            ``--prior-scale`` with ``--level registration`` or ``dh`` (``--method``), which fit no
-            kinematic parameter a prior could hold (refused rather than silently ignored).
-    """
-    scale = getattr(args, "prior_scale", None)
-    select = args.select
-    level = getattr(args, "level", None) or ("dh" if getattr(args, "method", None) is not None else None)
-    if level in ("registration", "dh") and (select == "prior" or scale is not None):
-        from pincal.cli.settings import no_prior
-
-        raise no_prior("--select prior" if select == "prior" else "--prior-scale", level)
-    if select is None:  # the default: the prior wherever kinematic parameters are fitted (docs/defaults.md)
-        from pincal.cli.settings import default_selection
-
-        select = str(default_selection(level))
-    if select != "prior":
-        if scale is not None:
-            raise PincalError(f"--prior-scale applies to --select prior only (got --select {select})")
-        return select
-    from pincal.fit.prior import Prior
-
-    return Prior(*scale) if scale is not None else Prior()
-
-
-def package_dir(text: str) -> tuple[str, Path]:
-    """argparse type of ``--package-dir``: ``NAME=DIR``, DIR an existing folder (the package itself)."""
-    name, sep, folder = text.partition("=")
-    if not sep or not name or not folder:
-        raise argparse.ArgumentTypeError(f"'{text}' is not NAME=DIR (a ROS package's name and its folder)")
-    if not Path(folder).is_dir():
-        raise argparse.ArgumentTypeError(f"'{folder}' is not a folder (--package-dir {name}=DIR)")
-    return name, Path(folder)
-
-
-def measure(text: str) -> SensorModel:
-    """argparse type of ``--measure``: ``point``, ``points:M`` (M >= 2) or ``pose``."""
-    match = re.fullmatch(r"points:([0-9]+)", text)
-    if text not in ("point", "pose") and not (match and int(match[1]) >= 2):
-        raise argparse.ArgumentTypeError(
-            f"'{text}': use point, points:M (M >= 2 points of one rigid target) or pose"
-        )
-    from pincal.planning.information import SensorModel  # the planner's modules: a valid --measure
-
-    return SensorModel("points", int(match[1])) if match else SensorModel(text, 1)
-
-
-def target_points(text: str) -> np.ndarray:
-    """argparse type of ``--target-points``: ``X,Y,Z[;X,Y,Z...]`` [m] as (P, 3)."""
-    try:
-        points = [[float(v) for v in point.split(",")] for point in text.split(";")]
-    except ValueError:
-        points = []
-    if not points or any(len(point) != 3 or not all(map(math.isfinite, point)) for point in points):
-        raise argparse.ArgumentTypeError(f"'{text}': give X,Y,Z[;X,Y,Z...] in metres, in the tip link")
-    import numpy as np
-
-    return np.array(points)
-
-
-def xacro_arg(text: str) -> tuple[str, str]:
-    """argparse type of ``--xacro-arg``: ``NAME:=VALUE`` as ``(NAME, VALUE)``."""
-    from pincal.model.description import parse_xacro_arg  # lxml
-
-    try:
-        return parse_xacro_arg(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def coupling_arg(text: str):
-    """argparse type of ``--coupling``: ``JOINT=FACTOR*DRIVER`` (:mod:`pincal.measurements.couplings`)."""
-    from pincal.measurements.couplings import parse_coupling
-
-    try:
-        return parse_coupling(text)
-    except PincalError as exc:
-        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--coupling '{text}': ")) from None
+__all__ = ["build_parser"]
 
 
 def _add_coupling(parser: argparse.ArgumentParser) -> None:
@@ -182,50 +66,11 @@ def _add_quiet(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_plausibility(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sigma-pos", type=_positive, metavar="MM",
+    parser.add_argument("--sigma-pos", type=positive, metavar="MM",
                         help="the sensor's stated position noise per axis [mm]: a residual above 20x it is warned "
                              "about (pincal.fit.plausibility); the fit's weights come from the data either way")
     parser.add_argument("--strict", action="store_true",
                         help="exit 3 when any warning is given (the outputs are written all the same)")
-
-
-def joint_names(text: str) -> tuple[str, ...]:
-    """argparse type of ``--alternate``: ``JOINT[,JOINT...]``, at least one name."""
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    if not names:
-        raise argparse.ArgumentTypeError(f"'{text}': give JOINT[,JOINT...]")
-    return names
-
-
-def _number(kind: type, minimum: float, what: str):
-    """argparse type: a finite ``kind`` (float or int) >= ``minimum``; ``what`` names it in errors."""
-
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"'{text}' is not {what}") from None
-        if not ((kind is int or math.isfinite(value)) and value >= minimum):  # an int is finite
-            raise argparse.ArgumentTypeError(f"'{text}' must be >= {minimum:g} (a finite {what})")
-        return value
-
-    return parse
-
-
-_non_negative = _number(float, 0.0, "number")
-_count_or_zero = _number(int, 0, "integer")
-_count = _number(int, 1, "integer")
-
-
-def _seconds(text: str) -> float:
-    """argparse type of ``--clock-offset``: a finite number of seconds, of either sign."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"'{text}' is not a finite number of seconds")
-    return value
 
 
 def _add_extract(sub) -> None:
@@ -242,22 +87,22 @@ def _add_extract(sub) -> None:
                                "x,y,z, several x1,y1,z1,x2,... in the order given (points of one rigid target)")
     ext.add_argument("--joint-names", type=joint_names, metavar="JOINT[,JOINT...]",
                      help="keep these joints only, judged still and written (default: every joint of the topic)")
-    ext.add_argument("--still-tol", type=_positive, default=STILL_TOL, metavar="RAD",
+    ext.add_argument("--still-tol", type=positive, default=STILL_TOL, metavar="RAD",
                      help=f"still: every joint within this (max - min) [rad; m for prismatic] (default {STILL_TOL:g})")
-    ext.add_argument("--min-still", type=_positive, default=MIN_STILL_S, metavar="S",
+    ext.add_argument("--min-still", type=positive, default=MIN_STILL_S, metavar="S",
                      help=f"for at least this long [s] (default {MIN_STILL_S:g})")
-    ext.add_argument("--trim", type=_non_negative, default=TRIM_S, metavar="S",
+    ext.add_argument("--trim", type=non_negative, default=TRIM_S, metavar="S",
                      help=f"cut from both ends of a still stretch before averaging [s] (default {TRIM_S:g})")
-    ext.add_argument("--min-samples", type=_count, default=MIN_SAMPLES, metavar="N",
+    ext.add_argument("--min-samples", type=count, default=MIN_SAMPLES, metavar="N",
                      help=f"refuse a stop with fewer samples of a measured topic in its window (default {MIN_SAMPLES})")
-    ext.add_argument("--max-spread", type=_positive, default=MAX_SPREAD_MM, metavar="MM",
+    ext.add_argument("--max-spread", type=positive, default=MAX_SPREAD_MM, metavar="MM",
                      help="refuse a stop whose measured positions spread more (RMS about their mean) [mm] "
                           f"(default {MAX_SPREAD_MM:g})")
     offset = ext.add_mutually_exclusive_group()  # a given offset is not searched for
-    offset.add_argument("--max-offset", type=_positive, default=MAX_OFFSET_S, metavar="S",
+    offset.add_argument("--max-offset", type=positive, default=MAX_OFFSET_S, metavar="S",
                      help="search the clock offset this far either side of the receive times' estimate [s] "
                           f"(default {MAX_OFFSET_S:g})")
-    offset.add_argument("--clock-offset", type=_seconds, metavar="S",
+    offset.add_argument("--clock-offset", type=seconds, metavar="S",
                      help="measurement stamp minus joint stamp of one instant [s], instead of estimating it")
     ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv", help="measurement CSV (v1) to write")
 
@@ -267,13 +112,6 @@ def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
                      help="with --select prior: prior std of each placement translation and prismatic joint zero "
                           f"[mm] and of each rotation and revolute joint zero [deg] (default "
                           f"{DEFAULT_TRANSLATION_MM:g},{DEFAULT_ROTATION_DEG:g})")
-
-
-def _positive(text: str) -> float:
-    value = _non_negative(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be > 0")
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -288,11 +126,11 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", required=True, type=Path, help="output directory")
     sim.add_argument("--deviations", choices=("small", "large"), default="large",
                      help="Table 2 deviation set of the ground truth (default: large)")
-    sim.add_argument("--sigma-pos", type=_non_negative, default=0.055, metavar="MM",
+    sim.add_argument("--sigma-pos", type=non_negative, default=0.055, metavar="MM",
                      help="position noise per axis [mm] (default 0.055)")
-    sim.add_argument("--sigma-rot", type=_non_negative, default=0.055, metavar="DEG",
+    sim.add_argument("--sigma-rot", type=non_negative, default=0.055, metavar="DEG",
                      help="orientation noise per angle [deg] (default 0.055)")
-    sim.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
+    sim.add_argument("--seed", type=count_or_zero, default=0, help="random seed (default 0)")
     sim.add_argument("--effect", action="append", default=[], metavar="TYPE:JOINT:VALUE",
                      help="inject an undeclared effect (repeatable): compliance:J:RAD_PER_NM, "
                           "compliance:J:DRIVER:RAD_PER_NM (J deflects under DRIVER's gravity torque), "
@@ -309,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--method", type=int, choices=(1, 2, 3),
                      help="1: positions only; 2: offsets from orientations, lengths from "
                           "positions (default); 3: full pose in one cost")
-    cal.add_argument("--weight", type=_positive, metavar="W",
+    cal.add_argument("--weight", type=positive, metavar="W",
                      help="Method 3 weight w of Err_rot [mm^2/deg^2] (default 1)")
     cal.add_argument("--level", choices=("dh", "registration", "offsets", "full", "auto"),
                      help="what to calibrate: dh = the paper's DH parameters (needs --tool); "
@@ -368,9 +206,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="socket-fixture data (calibrate --fixture): consistency and distortion of the ball centre")
     ev.add_argument("--nominal", type=Path, metavar="URDF",
                     help="with --fixture: the uncalibrated URDF, for 'before' (default: the report's sources.urdf)")
-    ev.add_argument("--max-pos-mm", type=_non_negative, metavar="X",
+    ev.add_argument("--max-pos-mm", type=non_negative, metavar="X",
                     help="fail (exit 1) if the largest position error exceeds X mm")
-    ev.add_argument("--max-rot-deg", type=_non_negative, metavar="Y",
+    ev.add_argument("--max-rot-deg", type=non_negative, metavar="Y",
                     help="fail (exit 1) if the largest orientation error exceeds Y deg")
     ev.add_argument("--strict", action="store_true", help="exit 3 when a warning is given (the evaluated error "
                     "implausible against the calibration's; before --max-pos-mm's exit 1; --json written all the same)")
@@ -393,12 +231,12 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("--select", choices=("aic", "bic", "press", "all", "prior"), default=None,
                      help="criterion for the geometric parameters (default prior; prior: see calibrate)")
     _add_prior_scale(dia)
-    dia.add_argument("--payload-kg", type=_non_negative, default=0.0, metavar="KG",
+    dia.add_argument("--payload-kg", type=non_negative, default=0.0, metavar="KG",
                      help="point mass at the target for gravity torques (default 0)")
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     _add_temperature(dia)
-    dia.add_argument("--pause-s", type=_positive, metavar="S",
+    dia.add_argument("--pause-s", type=positive, metavar="S",
                      help="a gap longer than S seconds between rows of a session starts a new segment, its "
                           "registration stepped (default 1800: a stop long enough for the cell's temperature to move; "
                           "a measuring program's rows are seconds to minutes apart)")
@@ -431,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("urdf", type=Path, help="URDF of the robot, or a .xacro")
     plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK",
                       help="link at the end of the calibrated chain, carrying the target")
-    plan.add_argument("--count", type=_count, required=True, metavar="N", help="configurations to choose")
+    plan.add_argument("--count", type=count, required=True, metavar="N", help="configurations to choose")
     plan.add_argument("--out", required=True, type=Path, metavar="PLAN.csv", help="plan to write (visiting order)")
     plan.add_argument("--report", required=True, type=Path, metavar="PLAN.json", help="prediction to write")
     plan.add_argument("--level", choices=PLAN_LEVELS, default="full",
@@ -447,9 +285,9 @@ def build_parser() -> argparse.ArgumentParser:
     pool = plan.add_mutually_exclusive_group()
     pool.add_argument("--candidates", type=Path, metavar="CSV", help="choose among these configurations "
                       "(joint columns as in CSV v1; other columns ignored)")
-    pool.add_argument("--sample", type=_count, default=DEFAULT_SAMPLE, metavar="M",
+    pool.add_argument("--sample", type=count, default=DEFAULT_SAMPLE, metavar="M",
                       help=f"else draw M within the joint limits (default {DEFAULT_SAMPLE})")
-    plan.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
+    plan.add_argument("--seed", type=count_or_zero, default=0, help="random seed (default 0)")
     plan.add_argument("--existing", type=Path, nargs="+", metavar="DATA.csv", help="measurements already "
                       "recorded, one file per session (the plan continues the last): choose what adds most to them")
     plan.add_argument("--workspace", type=Path, metavar="CSV", help="configurations where accuracy matters "
@@ -460,10 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the selection the calibration will use, as calibrate's --select (default prior at "
                            "offsets and full, as calibrate): with prior the plan counts its information too")
     _add_prior_scale(plan)
-    plan.add_argument("--sigma-pos", type=_positive, metavar="MM", help="sensor noise per axis [mm] "
+    plan.add_argument("--sigma-pos", type=positive, metavar="MM", help="sensor noise per axis [mm] "
                       "(default: from --existing, else 0.055)")
-    plan.add_argument("--sigma-rot", type=_positive, metavar="DEG", help="orientation noise [deg] (pose)")
-    plan.add_argument("--min-distance", type=_non_negative, metavar="M",
+    plan.add_argument("--sigma-rot", type=positive, metavar="DEG", help="orientation noise [deg] (pose)")
+    plan.add_argument("--min-distance", type=non_negative, metavar="M",
                       help="refuse candidates in self-collision or with links closer than M metres")
     plan.add_argument("--package-dir", type=package_dir, action="append", default=[], metavar="NAME=DIR",
                       help="folder of ROS package NAME for package://NAME/... meshes of --min-distance (repeat for "
@@ -495,21 +333,21 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
                       help="output directory (default: ./pincal-demo)")
-    demo.add_argument("--seed", type=_count_or_zero, default=0, help="random seed (default 0)")
+    demo.add_argument("--seed", type=count_or_zero, default=0, help="random seed (default 0)")
 
     study = sub.add_parser("study", help="the paper's simulation study (Section 7): all methods, "
                                          "noise limit, findings, figures")
     study.add_argument("--out", type=Path, default=Path("pincal-study"),
                        help="output directory (default: ./pincal-study)")
-    study.add_argument("--reps", type=_count, default=25, metavar="N",
+    study.add_argument("--reps", type=count, default=25, metavar="N",
                        help="noise realisations per level, N_rep (default 25)")
-    study.add_argument("--levels", type=_count, default=16, metavar="M",
+    study.add_argument("--levels", type=count, default=16, metavar="M",
                        help="noise levels from 0 to 0.15, M_n (default 16)")
-    study.add_argument("--restarts", type=_count_or_zero, default=300, metavar="N",
+    study.add_argument("--restarts", type=count_or_zero, default=300, metavar="N",
                        help="random starting points per restart case (default 300, the paper's; 0 skips)")
-    study.add_argument("--limit-pose-sets", type=_count_or_zero, default=2, metavar="L",
+    study.add_argument("--limit-pose-sets", type=count_or_zero, default=2, metavar="L",
                        help="pose sets the noise limit is averaged over (default 2; 0 skips it)")
-    study.add_argument("--workers", type=_count, default=None, metavar="N",
+    study.add_argument("--workers", type=count, default=None, metavar="N",
                        help="local worker processes (default: all cores; 1 runs in this process)")
     study.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on a Dask cluster at ADDRESS, or 'local' to start a Dask LocalCluster")

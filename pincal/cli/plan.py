@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pincal.cli.parser import selection_criterion
+from pincal.cli.arguments import selection_criterion
 
 __all__ = ["run_plan", "print_plan_summary"]
 
