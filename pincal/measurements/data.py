@@ -191,22 +191,34 @@ class MeasurementSet:
         order = {name: i for i, name in enumerate(self.session_names)}
         return np.array([order[name] for name in self.sessions], dtype=np.intp)
 
-    def named_column(self, name: str, what: str, needs: str, flag: str) -> np.ndarray:
-        """The numeric extra column ``name`` that ``flag`` names (``what``: "time column", …).
+    def reading_column(self, name: str | None, defaults: Sequence[str], quantity: str, needs: str, flag: str,
+                       unit: str = "") -> tuple[str, np.ndarray] | None:
+        """A per-row reading from a numeric extra column: the one ``flag`` names (``name``), else the first
+        of ``defaults`` present, with its name; None without one. ``quantity`` ("time", "temperature")
+        and ``unit`` (" (°C)") word the errors.
 
         Raises:
-            PincalError: in some of several session files only (the join dropped it: naming the files
-                without it, and that ``needs`` every row's value), or in none (with the closest names).
+            PincalError: a named column in some of several session files only (the join dropped it:
+                naming the files without it, and that ``needs`` every row's value) or in none (with the
+                closest names); an empty or non-finite cell (file, line and column).
         """
-        if name in self.dropped_extra:
+        if name and name in self.dropped_extra:
             lacking = self.dropped_extra[name]
-            raise PincalError(f"{', '.join(lacking)}: no {what} '{name}', which the other session file(s) have; "
-                              f"{needs}: add the column to {'this file' if len(lacking) == 1 else 'these files'}, "
-                              f"or leave out {flag}")
-        if name not in self.extra:
-            raise PincalError(f"{self.source}: no {what} '{name}'; "
+            raise PincalError(f"{', '.join(lacking)}: no {quantity} column '{name}', which the other session "
+                              f"file(s) have; {needs}: add the column to "
+                              f"{'this file' if len(lacking) == 1 else 'these files'}, or leave out {flag}")
+        if name and name not in self.extra:
+            raise PincalError(f"{self.source}: no {quantity} column '{name}'; "
                               f"{did_you_mean(name, self.extra, 'numeric extra columns')}")
-        return np.asarray(self.extra[name], dtype=float)
+        found = name or next((n for n in defaults if n in self.extra), None)
+        if found is None:
+            return None
+        values = np.asarray(self.extra[found], dtype=float)
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise PincalError(f"{self.source}, line {int(self.lines[bad[0]])}, column '{found}': empty or "
+                              f"non-finite {quantity}; fill it in{unit} or choose another column with {flag}")
+        return found, values
 
     def select(self, mask: np.ndarray) -> MeasurementSet:
         """Return the rows picked by a boolean mask of shape (K,) or an index array."""

@@ -39,19 +39,9 @@ def time_column(data: MeasurementSet, name: str | None = None) -> np.ndarray | N
         PincalError: no column ``name`` (with the closest names; in some of several files: naming the files
             without it), or an empty / non-finite cell.
     """
-    if name:
-        data.named_column(name, "time column", "a drift or a pause step needs every row's time", "--time-column")
-    names = [name] if name else [n for n in TIME_COLUMNS if n in data.extra]
-    if not names:
-        return None
-    time = np.asarray(data.extra[names[0]], dtype=float)
-    bad = np.flatnonzero(~np.isfinite(time))
-    if bad.size:
-        raise PincalError(
-            f"{data.source}, line {int(data.lines[bad[0]])}, column '{names[0]}': empty or non-finite time; "
-            "fill it in or choose another column with --time-column"
-        )
-    return time
+    found = data.reading_column(name, TIME_COLUMNS, "time", "a drift or a pause step needs every row's time",
+                                "--time-column")
+    return None if found is None else found[1]
 
 
 @dataclass(frozen=True)

@@ -84,18 +84,8 @@ def temperature_column(data: MeasurementSet, name: str | None = None) -> tuple[s
         PincalError: no column ``name`` (with the closest names; in some of several files: naming the files
             without it), or an empty / non-finite cell.
     """
-    if name:
-        data.named_column(name, "temperature column", "thermal expansion needs every row's temperature",
-                          "--temperature-column")
-    found = name or next((n for n in TEMPERATURE_COLUMNS if n in data.extra), None)
-    if found is None:
-        return None
-    values = np.asarray(data.extra[found], dtype=float)
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        raise PincalError(f"{data.source}, line {int(data.lines[bad[0]])}, column '{found}': empty or non-finite "
-                          "temperature; fill it in (°C) or choose another column with --temperature-column")
-    return found, values
+    return data.reading_column(name, TEMPERATURE_COLUMNS, "temperature",
+                               "thermal expansion needs every row's temperature", "--temperature-column", " (°C)")
 
 
 @dataclass(frozen=True)
