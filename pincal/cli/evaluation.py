@@ -63,7 +63,7 @@ from pincal.measurements.data import (
     default_session_name,
 )
 from pincal.model.chain import KinematicChain
-from pincal.model.description import read_description
+from pincal.model.description import RobotDescription, read_description
 from pincal.model.drift import drift_offsets, read_time_spans, time_column
 from pincal.model.effects import effect_from_dict, effect_inputs, joint_shifts
 from pincal.model.sensor import Registration
@@ -204,7 +204,8 @@ def evaluate_files(
     allow_other_urdf, xacro_args = settings.allow_other_urdf, settings.xacro_args
     fixed_registration, new_session = settings.fixed_registration, settings.new_session
     report = read_report(report_path)
-    _check_pair(urdf, report, report_path, xacro_args)  # before the chain: say the report is another URDF's
+    description = read_description(urdf, xacro_args)
+    _check_pair(description, urdf, report, report_path)  # before the chain: say the report is another URDF's
     notes: list[str] = []
     if report.urdf_sha256 is not None and file_sha256(urdf) != report.urdf_sha256:
         if not allow_other_urdf:
@@ -214,7 +215,7 @@ def evaluate_files(
                 "on purpose"
             )
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
-    chain = KinematicChain.from_urdf(urdf, report.tool_parent, xacro_args=xacro_args)
+    chain = KinematicChain.from_description(description, report.tool_parent)
     # the readings corrected as the calibration's were (eq C1), before the joint limits are judged
     data, read_notes = read_measurements(data_path, chain.joint_specs, report.couplings, chain.other_branch_joints)
     notes += read_notes
@@ -297,11 +298,12 @@ def evaluate_files(
                       drift=drift_use, thermal=applied.thermal, pause_steps=applied.pause_steps)
 
 
-def _check_pair(urdf: str | Path, report: ReportModel, report_path: str | Path, xacro_args) -> None:
-    """Refuse, in one line, a report whose chain ends at a link ``urdf`` does not have: it was written for
-    another URDF (another robot's calibration in the same folder), whatever ``--allow-other-urdf`` says."""
-    links = read_description(urdf, xacro_args).link_names()
-    if report.tool_parent not in links:
+def _check_pair(description: RobotDescription, urdf: str | Path, report: ReportModel, report_path: str | Path
+                ) -> None:
+    """Refuse, in one line, a report whose chain ends at a link the URDF ``urdf`` (read: ``description``)
+    does not have: it was written for another URDF (another robot's calibration in the same folder),
+    whatever ``--allow-other-urdf`` says."""
+    if report.tool_parent not in description.link_names():
         written = f" ({report.corrected_urdf})" if report.corrected_urdf else ""
         raise PincalError(f"{report_path}: written for another URDF{written}: its chain ends at link "
                           f"'{report.tool_parent}', which {urdf} does not have; evaluate {urdf} with the "

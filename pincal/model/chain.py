@@ -24,7 +24,7 @@ import pinocchio as pin
 
 from pincal.errors import ModelError, did_you_mean
 from pincal.measurements.data import JointSpec
-from pincal.model.description import read_description
+from pincal.model.description import RobotDescription, read_description
 
 __all__ = ["ChainJoint", "ChainPoses", "KinematicChain", "points_in_base", "pose_from_xyz_rpy", "xyz_rpy_from_pose"]
 
@@ -166,7 +166,13 @@ class KinematicChain:
         A ``*.xacro`` file is expanded in memory with ``xacro_args``
         (:func:`pincal.model.description.read_description`, which also checks the tree).
         """
-        description = read_description(urdf_path, xacro_args)
+        return cls.from_description(read_description(urdf_path, xacro_args), tip_link, tool)
+
+    @classmethod
+    def from_description(cls, description: RobotDescription, tip_link: str, tool: npt.ArrayLike | None = None
+                         ) -> KinematicChain:
+        """The chain of a robot description already read (:func:`pincal.model.description.read_description`),
+        as :meth:`from_urdf`: for a caller that also reads the description's XML, which is then parsed once."""
         try:
             model = pin.buildModelFromXML(description.text)
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
