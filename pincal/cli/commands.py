@@ -243,12 +243,13 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         print(f"before -> after, these rows, RMS position: {evaluation.nominal_rms_mm:.3f} -> "
               f"{errors.position.rms:.3f} mm (before: {evaluation.nominal_urdf}, its registration and target "
               "fitted to these rows; after: the calibrated model, registrations as above)")
+    document = evaluation.as_dict()  # evaluate --json; its warnings are printed and shown as such
     if args.json:
         from pincal.cli.paths import refuse_overwrite
         from pincal.report.document import write_evaluation
 
         refuse_overwrite(args.json, *_description_inputs(args), args.report, args.data)
-        write_evaluation(args.json, evaluation.as_dict())
+        write_evaluation(args.json, document)
         print(f"wrote {args.json}")
     if args.html is not None:
         from pincal.report.reading import PAGE_KINDS, load_report
@@ -258,7 +259,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
                                     files=evaluation.files, sessions=evaluation.row_sessions,
                                     registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift,
                                     thermal=evaluation.thermal, pause_steps=evaluation.pause_steps,
-                                    warnings=evaluation.as_dict().get("warnings", []))
+                                    warnings=document["warnings"])
         _write_html(args.html, load_report(args.report, PAGE_KINDS), args.report.parent, evaluation=shown,
                     source=args.report)
     failed = []
@@ -271,7 +272,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             failed.append(f"max orientation error {errors.rotation.max:.4f} deg > {args.max_rot_deg} deg")
     for line in failed:
         print(f"pincal: FAIL: {line}", file=sys.stderr)
-    warned = _warned(evaluation.as_dict(), args.strict)
+    warned = _warned(document, args.strict)
     return warned or (EXIT_THRESHOLD if failed else 0)  # implausible data first: a FAIL on them means little
 
 
@@ -323,10 +324,11 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe(effect)}")
         if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
             print(f"  {entry['advice']}")
-    verdict = "; reported, not adopted"  # an effect's note ends so; others say what was not tested and why
-    for note in diagnosis.notes:
-        print(f"reported, not adopted: {note.removesuffix(verdict)}" if note.endswith(verdict) else f"note: {note}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run
+    from pincal.diagnosis.verdicts import REJECTED
+
+    for note in diagnosis.notes:  # a rejected effect's note ends with REJECTED; others say what was not tested
+        print(f"reported, not adopted: {note.removesuffix(REJECTED)}" if note.endswith(REJECTED) else f"note: {note}")
 
     if diagnosis.unexplained or GENERIC_NOT_RUN not in diagnosis.notes:
         print(diagnosis.unexplained or "no structure left that a generic joint-angle correction would explain")

@@ -35,7 +35,7 @@ from pincal.model.thermal import implausible
 from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
-    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN",
+    "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "REJECTED",
     "Candidate", "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
     "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
 ]
@@ -94,6 +94,8 @@ CRITERION = (f"ΔBIC on the calibration rows < {EVIDENCE:g} (very strong evidenc
              f"fewer than {MIN_PAIRED_ROWS} held-out rows, not worse in total)")
 #: Candidates shown per step.
 SHOWN = 8
+#: How the note of a significant candidate that was not adopted ends (its verdict in the ranking).
+REJECTED = "; reported, not adopted"
 
 
 @dataclass(frozen=True)
@@ -276,7 +278,7 @@ class Judge:
                         chosen = (delta, effect, obj, sol)
                     else:
                         rejected[effect.label] = (
-                            f"{effect.label}: ΔBIC {delta:.1f} but {verdict}; reported, not adopted")
+                            f"{effect.label}: ΔBIC {delta:.1f} but {verdict}{REJECTED}")
             ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
         # what is shown (the first eight), the competitors a check compared (within 6 of
         # the candidate checked) and, when nothing is adopted, every significant candidate
