@@ -30,7 +30,7 @@ from pincal.cli.settings import CalibrateSettings, DiagnoseSettings, expect
 from pincal.errors import CalibrationError, PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.plausibility import calibration_findings, tip_link_findings, tip_link_verdict
+from pincal.fit.plausibility import Finding, calibration_findings, tip_link_findings, tip_link_verdict
 from pincal.fit.sessions import (
     check_registrable,
     session_pose_errors,
@@ -70,6 +70,7 @@ from pincal.report.model import (
     findings_json,
     level_choice_part,
 )
+from pincal.report.model import Finding as FindingJson
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.row_errors import (
     chain_row_errors,
@@ -277,10 +278,9 @@ def calibrate_files(
             sessions = session_rows(used, fitted.session_names)
             errors = session_pose_errors(chain, used, sessions, fitted.target.registrations,
                                          points=fitted.target.points, target_rotation=fitted.target.rotation)
-            warned, tip_notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)),
-                                                 calibration_findings(chain, fitted, used, sigma_column,
-                                                                      settings.sigma_pos_m))
-            warnings, notes = findings_json(warned), notes + tip_notes
+            warnings, tip_notes = _judged(chain, data_paths, calibration_findings(chain, fitted, used, sigma_column,
+                                                                                 settings.sigma_pos_m))
+            notes = notes + tip_notes
             entries = session_entries(fitted.session_names, fitted.target.registrations, used, sessions, errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
@@ -315,6 +315,14 @@ def calibrate_files(
     effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
     write_report(report_path, report)
     return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice, effects_file)
+
+
+def _judged(chain: KinematicChain, data_paths: Sequence[str | Path], findings: list[Finding]
+            ) -> tuple[list[FindingJson], list[str]]:
+    """REPORT.json ``warnings`` and the notes of a calibration of the files ``data_paths``: its plausibility
+    ``findings`` and the tip-link check of each file (:func:`pincal.fit.plausibility.tip_link_verdict`)."""
+    warned, notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)), findings)
+    return findings_json(warned), notes
 
 
 def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
@@ -482,13 +490,12 @@ def diagnose_files(
         plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
     with chain.placed(final.chain_placements):  # the report describes the final model
         used = data.select(calibration.used_index)
-        warned, tip_notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)),
-                                             calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
-                                                                  press_of=calibration))
+        warnings, tip_notes = _judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column,
+                                                                             sigma_pos_m, press_of=calibration))
         notes += tip_notes
         head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
         report = diagnosis_report(
-            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=findings_json(warned),
+            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=warnings,
             sessions=session_entries(final.session_names, final.target.registrations, used,
                                      session_rows(used, final.session_names), diagnosis.calibration_errors),
             time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)
