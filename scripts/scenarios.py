@@ -11,6 +11,11 @@ packaged KUKA LWR 4+), a sensor and a way the robot was moved, simulated with a 
   surface raster reversing every 50 rows), the orientation held by the controller in its own —
   the nominal — model (:mod:`pincal.simulation.cells`): the target cannot be estimated, and must be
   reported as held;
+* one straight line, or one arc, at constant orientation (every pass on the same path, 210 rows, a
+  6D probe or a reflector, the target unknown or known: ``--tool``): a line leaves the sensor's
+  rotation about it free besides (:mod:`pincal.fit.registration_hold`), held and reported; these are
+  held out along the same path (its other points: 37 rows a pass instead of 50), where the model is
+  checked, not off it;
 * motion-capture markers (three points on a rigid plate, 0.3 mm noise) 1.5 m away;
 * a socket fixture (no external sensor): a ball on the flange seated in 9 sockets of a plate in
   three placements, the joint readings noisy (20 µrad); held out on other configurations in the
@@ -109,6 +114,8 @@ class Scenario:
     seed: int = 0
     joint_noise_rad: float = 2e-5  # socket fixture: the joint readings' noise
     levels: tuple[str, ...] = field(default=CHAIN_LEVELS)
+    heights: int = 3  # a line or arc's passes stepped through this many heights (1: one path)
+    tool_known: bool = False  # the target given as --tool (the chain's tool), not estimated
 
 
 SCENARIOS = (
@@ -129,6 +136,10 @@ SCENARIOS = (
     Scenario("tracker 4 m, 6D, prismatic + continuous joints", "RPRRR standard", rows=40, seed=12),
     Scenario("tracker 3 m, 6D, KUKA LWR 4+ (7 axes)", "KUKA LWR 4+", distance_m=3.0, rows=50, seed=13),
     Scenario("socket fixture, 9 sockets x 3 placements", "6R modified", motion="fixture", rows=3, seed=14),
+    *(Scenario(f"tracker 4.2 m, {dims}, one {path} at constant orientation{tool}", "6R modified", motion=path,
+               rows=210, heights=1, sigma_rot_deg=0.003 if dims == "6D" else None, tool_known=bool(tool), seed=seed)
+      for seed, (path, dims, tool) in enumerate(((p, d, t) for p in ("line", "arc") for d in ("6D", "3D")
+                                                 for t in ("", ", --tool")), start=15)),
 )
 #: The socket fixture's plate: a 3 x 3 grid, 120 mm pitch [m]; its placements (base_T_fixture: where,
 #: and a tilt about x then y [deg]) in front of the 6R arm; the ball's centre on the flange [m].
@@ -149,20 +160,32 @@ def build_robots(folder: Path) -> dict[str, tuple[Path, str]]:
 
 
 def simulate(scenario: Scenario, urdf: Path, tip: str):
-    """The chain, its calibration rows and held-out rows (same kind, same session), seeded."""
+    """The chain (with the target as its tool when it is known), its calibration rows and held-out rows
+    (same kind, same session), seeded."""
     chain = KinematicChain.from_urdf(urdf, tip)
+    target = np.eye(4)
+    target[:3, :3] = Rotation.from_euler("xyz", [10, -20, 30], degrees=True).as_matrix()
+    target[:3, 3] = scenario.points[0]
     params = PlacementErrors(chain)
     rng = np.random.default_rng(scenario.seed)
     truth = rng.normal(0.0, 3e-4, params.size)
     if scenario.motion == "spread":
         q, q_test = random_configurations(chain, rng, scenario.rows), random_configurations(chain, rng, scenario.rows)
+    elif scenario.heights == 1:  # one path: held out at its other points
+        path = dict(kind=scenario.motion, count=scenario.rows, centre=np.array([1.2, 0.0, 0.5]), rotation=DOWN,
+                    q_start=START_6R, heights=1)
+        q, q_test = constant_orientation_path(chain, **path), constant_orientation_path(chain, **path, rows_per_line=37)
     else:
         centre = np.array([1.2, 0.0, 0.5])
         q = constant_orientation_path(chain, scenario.motion, scenario.rows, centre, DOWN, START_6R)
         q_test = constant_orientation_path(chain, scenario.motion, scenario.rows, centre + [0.0, 0.05, 0.05], DOWN,
                                            START_6R)
     options = dict(points=np.array(scenario.points), with_rotation=scenario.sigma_rot_deg is not None,
-                   target_rotation=Rotation.from_euler("xyz", [10, -20, 30], degrees=True).as_matrix())
+                   target_rotation=target[:3, :3])
+    if scenario.tool_known:  # the same robot program; the sensor measures the tool frame itself
+        chain = KinematicChain.from_urdf(urdf, tip, tool=target)
+        params = PlacementErrors(chain)
+        options.update(points=np.zeros((1, 3)), target_rotation=np.eye(3))
     sigma_p, sigma_a = scenario.sigma_pos_mm / 1000.0, np.radians(scenario.sigma_rot_deg or 0.0)
     sensor = sensor_at(scenario.distance_m)
     calibration = measure_truth(params, truth, q, sensor, rng, sigma_p, sigma_a, **options)
@@ -220,7 +243,7 @@ def run(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELEC
     rows = []
     for level in scenario.levels:
         started = time.perf_counter()
-        result = calibrate_chain(chain, calibration, level, selection=selection)
+        result = calibrate_chain(chain, calibration, level, tool_known=scenario.tool_known, selection=selection)
         seconds = time.perf_counter() - started
         target = result.target
         with chain.placed(result.chain_placements):
@@ -232,7 +255,7 @@ def run(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELEC
         rows.append({
             "level": level, "kept": int(result.kept.size), "identifiable": int(result.rank),
             "held_out_mm": held_out, "predicted_mm": predicted, "ratio": held_out / predicted,
-            "not_determined": len(result.held), "seconds": seconds,
+            "not_determined": len(result.held), "rotations_held": len(result.held_rotations), "seconds": seconds,
         })
     return {"scenario": scenario.name, "robot": scenario.robot, "rows": scenario.rows, "sigma_pos_mm": sigma,
             "levels": rows}
@@ -245,7 +268,8 @@ def markdown(results: list[dict], selection: str = DEFAULT_SELECTION) -> str:
         "Written by `python scripts/scenarios.py --markdown docs/scenarios.md` (seeded); "
         f"`calibrate`'s defaults (`--select {selection}`). What each scenario is, the truth behind it and "
         "the prediction: the script's docstring. *kept / identifiable*: kinematic parameters; *target held*: "
-        "directions of the target's position reported as not determined (`identifiability.not_determined`). "
+        "directions of the target's position reported as not determined (`identifiability.not_determined`), "
+        "and (+ rotation) the sensor's rotation about a line held (`identifiability.not_determined_rotations`). "
         f"At level full (the truth's) every scenario must be within {BOUND}× its prediction (✔); the lower "
         "levels lack part of the truth, and their ratio shows how much it costs.",
         "",
@@ -258,8 +282,14 @@ def markdown(results: list[dict], selection: str = DEFAULT_SELECTION) -> str:
                 " ✘" if row["level"] == "full" else "")
             lines.append(f"| {entry['scenario']} | {row['level']} | {row['kept']} / {row['identifiable']} | "
                          f"{row['held_out_mm']:.4f} | {row['predicted_mm']:.4f} | {row['ratio']:.2f}{mark} | "
-                         f"{row['not_determined'] or '—'} |")
+                         f"{_held(row)} |")
     return "\n".join(lines) + "\n"
+
+
+def _held(row: dict) -> str:
+    """The *target held* cell: the target directions held, and a registration rotation held (+ rotation)."""
+    rotations = row.get("rotations_held", 0)
+    return f"{row['not_determined']} + rotation" if rotations else f"{row['not_determined'] or '—'}"
 
 
 def main(argv=None) -> int:
@@ -279,7 +309,7 @@ def main(argv=None) -> int:
             full = next(r for r in entry["levels"] if r["level"] == "full")
             print(f"{scenario.name:55s} full: {full['held_out_mm']:.4f} mm vs {full['predicted_mm']:.4f} "
                   f"({full['ratio']:.2f}x), kept {full['kept']}/{full['identifiable']}, "
-                  f"target held {full['not_determined']}", flush=True)
+                  f"target held {_held(full)}", flush=True)
     table = markdown(results, args.select)
     print(table)
     if args.markdown:

@@ -147,19 +147,6 @@ def test_turn_is_the_rms_rotation_across_a_direction():
     assert turns[1:] == pytest.approx([rms, rms], rel=1e-3)  # 1 − cos θ is second order
 
 
-def test_a_single_straight_line_is_refused_in_one_line(industrial_arm_urdf, tmp_path, capsys):
-    """One straight pass at constant orientation: the registration's turn about the line and the target's
-    place on the tool are one unknown. One line naming the file and what to add, exit 2, nothing written."""
-    _, calibration, _ = _cell(industrial_arm_urdf, "line", 40, seed=9)  # 40 rows: one pass of 50
-    write_measurements(tmp_path / "line.csv", calibration)
-    out = tmp_path / "arm.urdf"
-    code = main(["calibrate", str(industrial_arm_urdf), str(tmp_path / "line.csv"), "--tip-link", "flange",
-                 "--out", str(out), "--report", str(tmp_path / "R.json"), "--quiet"])
-    err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1 and "line.csv" in err and "lie on one line" in err
-    assert not out.exists()
-
-
 def test_a_straight_line_with_a_turning_tool(industrial_arm_urdf):
     """One line while the tool turns ±5°: with orientations the registration starts from them (a fit);
     positions only, one line saying what to add (the start cannot come from collinear positions)."""

@@ -227,6 +227,10 @@ def evaluate_files(
                      "direction(s) held at the tip link's origin, identifiability.not_determined): rows at another "
                      "tool orientation than the calibration's carry that error; calibrate with --tool to use the "
                      "model there")
+    if report.held_rotations:  # rows off the calibration's line meet the held rotation's error
+        notes.append(f"{report_path}: the calibration rows lay on one line, so the sensor's rotation about it was "
+                     "held (identifiability.not_determined_rotations): rows off that line, or in a registration "
+                     "re-estimated on them, test a geometry the calibration did not check")
     if data.n_points != len(report.points):
         raise PincalError(
             f"{data_path}: {data.n_points} target point(s) per row, but the report's tool has "

@@ -196,6 +196,7 @@ class _Model:
         )
         problem.prior = self.calibration.prior_sigma  # the geometry's prior, if any (class docstring)
         problem.point_basis = self.calibration.point_basis  # a target held where the data leave it free
+        problem.registration_basis = self.calibration.registration_basis  # a registration rotation held
         problem.sigma_pos = self.sigma_pos
         problem.sigma_rot = self.sigma_rot
         return problem

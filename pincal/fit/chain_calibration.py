@@ -33,6 +33,7 @@ from pincal.fit.identifiability import Ordering, Selection, condition_number, co
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import PriorResidual, data_rows, log_evidence, reestimated_scales
+from pincal.fit.registration_hold import HeldRotation, hold_registration, rotation_reason
 from pincal.fit.selection import SELECTION_CRITERIA
 from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
 from pincal.fit.solver import Solution, solve
@@ -83,6 +84,9 @@ class ChainCalibration:
         chain_placements: the calibrated chain's joint and tip placements (4×4 each, as
             :meth:`pincal.model.chain.KinematicChain.placements`): the model as a value, to evaluate
             with ``chain.placed(result.chain_placements)``.
+        held / point_basis: the target directions held and the target points' free ones
+            (:mod:`pincal.fit.target_hold`); held_rotations / registration_basis: the registration
+            rotations held and the registrations' free unknowns (:mod:`pincal.fit.registration_hold`).
     """
 
     level: str
@@ -119,6 +123,8 @@ class ChainCalibration:
     held: tuple[HeldDirection, ...] = ()
     point_basis: np.ndarray | None = None
     chain_placements: tuple[np.ndarray, ...] = ()
+    held_rotations: tuple[HeldRotation, ...] = ()
+    registration_basis: np.ndarray | None = None
 
     def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
         """Linearised prediction of the RMS error of the target points at
@@ -138,6 +144,7 @@ class ChainCalibration:
             fit_rotation=self.fit_target,
             sessions=np.zeros(k, dtype=int),
             point_basis=self.point_basis,
+            registration_basis=self.registration_basis,
         )
         jac = objective.jacobian(self.solution)[: 3 * k * n_points]
         variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
@@ -196,6 +203,8 @@ class FitProblem:
         self.prior: np.ndarray | None = None
         # the target points' free directions (pincal.fit.target_hold), None: all
         self.point_basis: np.ndarray | None = None
+        # the registrations' free unknowns (pincal.fit.registration_hold), None: all
+        self.registration_basis: np.ndarray | None = None
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
@@ -213,6 +222,7 @@ class FitProblem:
             inputs=self.inputs,
             sessions=self.sessions,
             point_basis=self.point_basis,
+            registration_basis=self.registration_basis,
         )
         return objective if self.prior is None else PriorResidual(objective, self.prior[free])
 
@@ -334,6 +344,7 @@ def calibrate_chain(
         )
     if result.held:
         notes.append(f"target not determined: {held_reason(result.held)}")
+    notes.extend(f"registration not determined: {rotation_reason(h)}" for h in result.held_rotations)
     if result.selection is not None:
         notes.extend(result.selection.notes)
     counter.settle()
@@ -363,6 +374,7 @@ def _calibrate_rows(
     held: tuple[HeldDirection, ...] = ()
     if not tool_known:
         held = hold_target(problem, extra=hold)
+    rotations = hold_registration(problem)  # with the target held: what is left free is the registration's
     size = params.size if params is not None else 0
     base = np.zeros(size)
     empty = np.array([], dtype=int)
@@ -435,6 +447,8 @@ def _calibrate_rows(
         held=held,
         point_basis=problem.point_basis,
         chain_placements=tuple(params.placements(fit.vector)) if size else tuple(nominal),
+        held_rotations=rotations,
+        registration_basis=problem.registration_basis,
     )
     weak = () if tool_known or hold else weak_target(result, problem)
     if weak:  # the kinematics took what the target was left to explain: again, with it held
@@ -445,7 +459,9 @@ def _calibrate_rows(
 
 def _column_names(objective: SensorResidual | PriorResidual, params, kept: np.ndarray, sessions=()) -> list[str]:
     names = [params.info[i].name for i in kept] if params is not None else []
-    if objective.blocks["registration"].stop > objective.blocks["registration"].start:
+    if objective.registration_basis is not None:  # the free unknowns of a held rotation (registration_hold)
+        names += [f"registration.free{i + 1}" for i in range(objective.registration_basis.shape[1])]
+    elif objective.blocks["registration"].stop > objective.blocks["registration"].start:
         prefixes = ["registration"] if objective.n_sessions == 1 else [f"registration[{n}]" for n in sessions]
         names += [f"{prefix}.{axis}" for prefix in prefixes for axis in ("rx", "ry", "rz", "x", "y", "z")]
     pts = objective.blocks["points"]

@@ -47,6 +47,7 @@ def final_problem(chain: KinematicChain, result: ChainCalibration, rows: Measure
     problem = FitProblem(chain, result.params, rows, result.start, fit_target=result.fit_target, row_weight=weight,
                          session_names=result.session_names)
     problem.point_basis = result.point_basis
+    problem.registration_basis = result.registration_basis
     problem.sigma_pos, problem.sigma_rot = result.sigma_pos_m, result.sigma_rot_rad
     problem.prior = result.prior_sigma
     return problem

@@ -28,6 +28,10 @@ names the likely causes and what to try. The thresholds and their sources:
   file) are not the chain's and are ignored. A joint below the tip can also move what the target is
   not on (a gripper's fingers below a wrist): so this is a warning only when the calibration is
   doubtful for another reason too (any other finding, which it would explain), else a note.
+* **Path** — the rows lie on one line at one tool orientation, so the registration's rotation about
+  it was held (:mod:`pincal.fit.registration_hold`): the model is checked only near that path, and
+  other positions and orientations are predicted by a geometry no row tested. Not a sign of bad data,
+  but of a model whose use elsewhere nothing supports (``--strict`` refuses it).
 * **Cross-validation** — the linearised leave-one-row-out prediction error (PRESS, Allen 1974) of
   the calibrated model above the nominal model's (registration and target refitted, the same
   weights) by more than its own noise: the RMS ratio sqrt(PRESS_cal / PRESS_nom) above
@@ -58,6 +62,7 @@ from pincal.fit.chain_calibration import row_weights
 from pincal.fit.fold_update import final_problem
 from pincal.fit.identifiability import press_of_blocks
 from pincal.fit.prior import PRIOR_STATUS
+from pincal.fit.registration_hold import path_warning
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
@@ -126,7 +131,8 @@ def tip_link_verdict(tip: list[Finding], others: list[Finding]) -> tuple[list[Fi
     """(warnings, notes): the tip-link findings ``tip`` are warnings beside the calibration's other
     findings ``others`` when there are any (a target that moved with joints the chain lacks explains
     them), else notes (the fit is plausible: the joints may move what the target is not on)."""
-    return (tip + others, []) if others else (others, [finding.message for finding in tip])
+    doubtful = [finding for finding in others if finding.code != "path"]  # a path is no sign of another link
+    return (tip + others, []) if doubtful else (others, [finding.message for finding in tip])
 
 
 def reach_m(chain: KinematicChain, q: np.ndarray) -> float:
@@ -199,6 +205,9 @@ def check_calibration(chain: KinematicChain, result, rows: MeasurementSet,
                                 f"something it is not: an effect the model lacks (pincal diagnose), a weakly "
                                 f"determined combination (--select prior holds each correction to its physical "
                                 f"scale), or bad data. Likely: {likely}"))
+    path = path_warning(getattr(result, "held_rotations", ()))  # rows on one line: checked only near it
+    if path:
+        findings.append(Finding("path", path))
     if press is not None and np.isinf(press[0]) and np.isfinite(press[1]):
         findings.append(Finding("cross_validation", "a row is fitted exactly whatever it measured (leverage 1: "
                                 "some parameter is determined by that row alone, e.g. the only row where a joint "

@@ -3,7 +3,8 @@
 Sensor coordinates ``g`` and robot-base (URDF root) coordinates ``t`` are related by
 ``g ≈ Ω t + τ``. Registration 1 takes Ω from 3D points by the SVD method of Arun,
 Huang & Blostein (1987); Registration 2 takes Ω as the Riemannian (geodesic L2) mean
-(Moakher 2002) of the relative rotations ``G_k R_k^T``. Both take τ from eq 19,
+(Moakher 2002) of the relative rotations ``G_k R_k^T``. Points on one line fix Ω only up to a
+rotation about it: :func:`register_line` states which. All take τ from eq 19,
 ``τ = ḡ − Ω t̄``. Lengths in metres.
 """
 
@@ -16,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from pincal.errors import CalibrationError
 from pincal.model.sensor import Registration, checked_array, checked_rotations
 
-__all__ = ["register_points", "mean_rotation", "register_orientations"]
+__all__ = ["register_points", "mean_rotation", "register_orientations", "register_line"]
 
 
 def _weights(weights, k: int) -> np.ndarray:
@@ -131,4 +132,40 @@ def register_orientations(robot_rotations, sensor_rotations, robot_points, senso
     if len(t) != len(g):
         raise CalibrationError(f"robot_points ({len(t)}) and sensor_points ({len(g)}) differ in number")
     rotation = mean_rotation(g_rot @ r.transpose(0, 2, 1))
+    return Registration(rotation, _translation(rotation, t, g, np.full(len(t), 1.0 / len(t))))
+
+
+def register_line(robot_points, sensor_points, reference=None) -> Registration:
+    """Ω and τ of points on one line, which leave Ω's rotation about it free: Ω is the rotation
+    nearest ``reference`` that turns the robot points' line onto the sensed points' — ``reference``
+    turned by the smallest rotation taking ``reference`` l onto l_g (l, l_g: the lines' directions,
+    the principal axes of the centred points, l_g signed so that the points run along it in the same
+    order) —, τ by eq 19.
+
+    With ``reference`` a Registration 2 taken with the target's rotation as the tool's (the sensor's
+    rotation is then known but for the target's turn on the tool about the line), the target's
+    rotation comes out the nearest the tool's own (smallest angle) that agrees with the line; with
+    the identity (points only), the sensor's axes come out as near the robot base's as the line allows.
+
+    Args:
+        robot_points: (K, 3) points t_k in robot-base coordinates [m], K >= 2, not all one.
+        sensor_points: (K, 3) the same points g_k measured by the sensor [m].
+        reference: (3, 3) the rotation to stay nearest (default the identity).
+
+    Raises:
+        CalibrationError: fewer than 2 points, mismatched shapes, NaN, or coincident points.
+    """
+    t = checked_array(robot_points, (3,), "robot_points", 2)
+    g = checked_array(sensor_points, (3,), "sensor_points", 2)
+    if len(t) != len(g):
+        raise CalibrationError(f"robot_points ({len(t)}) and sensor_points ({len(g)}) differ in number")
+    tc, gc = t - t.mean(axis=0), g - g.mean(axis=0)
+    _, spread, vt = np.linalg.svd(tc, full_matrices=False)
+    along = gc.T @ (tc @ vt[0])  # Σ s_k (g_k − ḡ): the sensed line's direction, with the robot line's sign
+    if spread[0] <= 0.0 or not np.linalg.norm(along) > 0.0:
+        raise CalibrationError(f"the {len(t)} points coincide, so neither the registration's rotation nor a line "
+                               "is defined; measure the target at 3 or more positions not on one line")
+    start = np.eye(3) if reference is None else checked_rotations(np.asarray(reference)[None], "reference")[0]
+    turn, _ = Rotation.align_vectors(along[None, :] / np.linalg.norm(along), (start @ vt[0])[None, :])
+    rotation = turn.as_matrix() @ start
     return Registration(rotation, _translation(rotation, t, g, np.full(len(t), 1.0 / len(t))))

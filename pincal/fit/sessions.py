@@ -34,6 +34,7 @@ from pincal.errors import CalibrationError
 from pincal.fit.metrics import PoseErrors, pose_errors
 from pincal.fit.registration import (
     mean_rotation,
+    register_line,
     register_orientations,
     register_points,
 )
@@ -193,41 +194,30 @@ def initial_target(
     points cannot fix a rotation (fewer than 3, or on one line) but whose rows
     have orientations by Registration 2 (:func:`start_registration`), with the
     target rotation R_T of the sessions registered by points (the identity when
-    there are none, or the target is known: ``fit_points=False``).
+    there are none, or the target is known: ``fit_points=False``). A session whose
+    modelled tool positions lie on one line at one orientation (a straight-line path),
+    which its rows cannot register but about the line, is registered by
+    :func:`pincal.fit.registration.register_line`: nearest Registration 2 taken with
+    that R_T (rows with orientations), else nearest the identity — the rotation about the
+    line the calibration then holds (:mod:`pincal.fit.registration_hold`).
     """
     poses = chain.poses(data.q)
     t, rot = poses.tool_positions, poses.tool_rotations
     index = data.session_index
     groups = [np.flatnonzero(index == s) for s in range(len(data.session_names))]
-    from_points = [data.rotations is None or by_points(data.select(rows)) for rows in groups]
-    for s, (name, rows) in enumerate(zip(data.session_names, groups)):
-        if from_points[s] and fit_points and _on_one_line(t[rows]):
-            turns = np.linalg.norm(log3(rot[rows[0]].T @ rot[rows]), axis=1)  # from the first row's [rad]
-            if data.rotations is not None and turns.max() > MIN_TURN_RAD:  # register by the orientations
-                from_points[s] = False
-                continue
-            if turns.max() > MIN_TURN_RAD:  # the tool turns, so the data may fix it; the start cannot
-                raise CalibrationError(
-                    f"{where(data, name)}: the tool positions of these rows lie on one line in the model (e.g. a "
-                    "straight-line path) and no orientation was measured: pincal cannot start the registration "
-                    "from them; add rows off the line, orientation columns (qx,qy,qz,qw), or give --tool")
-            raise CalibrationError(
-                f"{where(data, name)}: the tool positions of these rows lie on one line (or at one point) in the "
-                "model, e.g. a straight-line path: the sensor's rotation about that line cannot be told from where "
-                "the target sits on the tool; add rows off the line (a second line, an arc), turn the tool along it "
-                "and measure its orientation, or give --tool")
+    how = [_start_kind(data, name, rows, t, rot, fit_points) for name, rows in zip(data.session_names, groups)]
+    from_points = [kind != "orientations" for kind in how]  # τ by eq 19 from the points (Arun's, or a line's)
     points = np.zeros((data.n_points, 3))
     for _ in range(iterations if fit_points else 1):
         world = points_in_base(t, rot, points)
         registrations = [register_points(world[rows].reshape(-1, 3), data.points[rows].reshape(-1, 3))
-                         if registered else None for rows, registered in zip(groups, from_points)]
-        if not all(from_points):
+                         if kind == "points" else None for rows, kind in zip(groups, how)]
+        if not all(kind == "points" for kind in how):
             target = np.eye(3)
-            if fit_points and any(from_points):
+            if fit_points and "points" in how and data.rotations is not None:
                 target = _target_rotation(rot, data, registrations)
-            registrations = [registration or start_registration(world[rows], data.points[rows], rot[rows] @ target,
-                                                                 data.select(rows))
-                             for rows, registration in zip(groups, registrations)]
+            registrations = [registration or _start_session(world[rows], data.select(rows), rot[rows] @ target, kind)
+                             for rows, registration, kind in zip(groups, registrations, how)]
         if not fit_points:
             break
         local = np.empty_like(data.points)
@@ -244,6 +234,49 @@ def initial_target(
         rotation = _target_rotation(rot, data, registrations)
     registered = cast("list[Registration]", registrations)  # every session's, as above
     return TargetEstimate(registered[0], points, rotation, tuple(registered))
+
+
+def _start_kind(data: MeasurementSet, name: str, rows: np.ndarray, t: np.ndarray, rot: np.ndarray,
+                fit_points: bool) -> str:
+    """How :func:`initial_target` starts a session's registration: ``points`` (Arun), ``orientations``
+    (Registration 2) or ``line`` (:func:`pincal.fit.registration.register_line`).
+
+    Raises:
+        CalibrationError: modelled tool positions on one line that no rule registers: the tool turns and
+            no orientation was measured (the data may fix the target; the start cannot), or they coincide.
+    """
+    if data.rotations is not None and not by_points(data.select(rows)):
+        return "orientations"
+    if not _on_one_line(t[rows]):
+        return "points"
+    turns = np.linalg.norm(log3(rot[rows[0]].T @ rot[rows]), axis=1)  # from the first row's [rad]
+    if data.rotations is not None and (turns.max() > MIN_TURN_RAD or not fit_points):  # they fix the rotation
+        return "orientations"
+    if turns.max() > MIN_TURN_RAD and fit_points:  # the tool turns, so the data may fix it; the start cannot
+        raise CalibrationError(
+            f"{where(data, name)}: the tool positions of these rows lie on one line in the model (e.g. a "
+            "straight-line path) and no orientation was measured: pincal cannot start the registration "
+            "from them; add rows off the line, orientation columns (qx,qy,qz,qw), or give --tool")
+    if _spreads(t[rows])[0] <= MIN_SPREAD_M:
+        raise CalibrationError(
+            f"{where(data, name)}: the tool sits at one point in the model in all of these rows: the sensor's "
+            "rotation cannot be told from them and no geometry is seen; move the tool along a path (a line, an "
+            "arc), or measure its orientation and give --tool")
+    return "line"
+
+
+def _start_session(world: np.ndarray, measured: MeasurementSet, model_rotations: np.ndarray, kind: str
+                   ) -> Registration:
+    """A session's start not by Arun's method: :func:`start_registration` (``orientations``), or the
+    rotation about the line stated by :func:`pincal.fit.registration.register_line` (``line``), nearest
+    Registration 2 with the target frame at ``model_rotations`` (K, 3, 3) when the rows have orientations."""
+    if kind != "line":
+        return start_registration(world, measured.points, model_rotations, measured)
+    sensed = measured.points.reshape(-1, 3)
+    reference = None
+    if measured.rotations is not None:
+        reference = register_orientations(model_rotations, measured.rotations, world.reshape(-1, 3), sensed).rotation
+    return register_line(world.reshape(-1, 3), sensed, reference)
 
 
 def _on_one_line(positions: np.ndarray) -> bool:

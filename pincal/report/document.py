@@ -46,6 +46,7 @@ import numpy as np
 
 from pincal._version import __version__
 from pincal.fit.metrics import PoseErrors
+from pincal.fit.registration_hold import rotation_reason
 from pincal.fit.target_hold import held_reason
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
@@ -205,7 +206,7 @@ def identifiability_report(result) -> Identifiability:
     the dropped parameters with what absorbs them, and the strongly correlated pairs."""
     params = result.params
     names = {i: params.info[i].name for i in range(params.size)} if params is not None else {}
-    return {
+    out: Identifiability = {
         "rank": result.rank,
         "jacobian_condition": result.condition,
         "selection": selection_report(result.selection),
@@ -220,6 +221,14 @@ def identifiability_report(result) -> Identifiability:
         "correlated_pairs": [{"a": a, "b": b, "correlation": c} for a, b, c in result.correlated],
         "not_determined": not_determined_report(result),
     }
+    rotations = getattr(result, "held_rotations", ())
+    if rotations:  # present only when a registration rotation was held (pincal.fit.registration_hold)
+        out["not_determined_rotations"] = [
+            {"name": f"registration[{h.session}].rotation" if h.session else "registration.rotation",
+             "axis": [float(v) for v in h.axis], "frame": h.frame, "seen": h.seen,
+             "rule": "nearest_tool_rotation" if h.orientations else "nearest_base_axes",
+             "reason": rotation_reason(h)} for h in rotations]
+    return out
 
 
 def not_determined_report(result) -> list[NotDetermined]:
@@ -285,6 +294,8 @@ class ReportModel:
             calibrate (``sessions[].file``), in the order of ``sessions``.
         not_determined: the reasons of ``identifiability.not_determined`` (a target held where the
             calibration rows could not place it); empty when everything was determined.
+        held_rotations: the reasons of ``identifiability.not_determined_rotations`` (a registration
+            rotation held: calibration rows on one line); empty when none was.
         couplings: joint readings taken against another joint (REPORT.json ``couplings``,
             :mod:`pincal.measurements.couplings`), corrected in every row evaluated.
         nominal_urdf: the URDF the calibration started from (``sources.urdf``, as it was given), or None.
@@ -304,6 +315,7 @@ class ReportModel:
     noise: dict = field(default_factory=dict)
     session_files: tuple[tuple[str, ...], ...] = ()
     not_determined: tuple[str, ...] = ()
+    held_rotations: tuple[str, ...] = ()
     couplings: tuple[ReadingCoupling, ...] = ()
     nominal_urdf: str | None = None
     corrected_urdf: str | None = None
@@ -349,6 +361,11 @@ def _session(entry: dict[str, Any]) -> tuple[str, Registration, Registration]:
     return (str(entry["name"]), *_registrations(entry["registration"]))
 
 
+def _reasons(entries: Any) -> tuple[str, ...]:
+    """The ``reason`` of each entry of a list of held unknowns (``identifiability.not_determined...``)."""
+    return tuple(str(entry.get("reason", "")) for entry in entries or ())
+
+
 def _session_files(entry: dict[str, Any]) -> tuple[str, ...]:
     files = entry.get("file")
     return tuple(str(f) for f in (files if isinstance(files, list) else [files]) if f is not None)
@@ -379,8 +396,8 @@ def read_report(path: str | Path) -> ReportModel:
         noise=dict(value_at(doc, "noise", path, default=None) or {}),
         session_files=tuple(value_at(doc, "sessions", path, lambda entries: [_session_files(e) for e in entries or ()],
                                   ())),
-        not_determined=value_at(doc, "identifiability.not_determined", path,
-                             lambda entries: tuple(str(entry.get("reason", "")) for entry in entries or ()), ()),
+        not_determined=value_at(doc, "identifiability.not_determined", path, _reasons, ()),
+        held_rotations=value_at(doc, "identifiability.not_determined_rotations", path, _reasons, ()),
         couplings=couplings_from_report(doc.get("couplings"), str(path)),
         nominal_urdf=value_at(doc, "sources.urdf", path, default=None),
         corrected_urdf=value_at(doc, "sources.corrected_urdf", path, default=None),

@@ -317,7 +317,8 @@ def _identifiability(doc: dict) -> dict[str, Any] | None:
                                 for a in d.get("absorbed_into") or [])
                       or "—") for d in ident.get("dropped") or []],
             not_determined=[(n.get("name"), n.get("held_at_m"), n.get("reason"))
-                            for n in ident.get("not_determined") or []],
+                            for n in ident.get("not_determined") or []]
+            + [(n.get("name"), "—", n.get("reason")) for n in ident.get("not_determined_rotations") or []],
         )
     return out
 

@@ -36,7 +36,8 @@ __all__ = [
     "Vector3", "Quaternion", "Sha256", "ChainLevel", "PaperMethod", "JointKind", "PositionStats", "OrientationStats",
     "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "Parameter",
     "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped", "CorrelatedPair", "NotDetermined",
-    "Identifiability", "PaperTool", "Tool", "Noise", "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
+    "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise", "Outlier", "FitRows", "Stage", "PaperFit",
+    "FixtureFit",
     "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
     "TimeSpanJson", "ChainHead", "CalibrationReport", "PaperReport",
     "LevelChoicePart", "errors_json", "registration_json", "registration_pair", "level_choice_part", "findings_json",
@@ -200,15 +201,33 @@ class NotDetermined(TypedDict):
     reason: str
 
 
-class Identifiability(TypedDict):
-    """Rank, condition number, selection, dropped parameters, correlated pairs, held directions."""
+class NotDeterminedRotation(TypedDict):
+    """A rotation of a session's registration the data leave free (rows on one line), held by a stated rule:
+    ``nearest_tool_rotation`` (the target's rotation on the tool the nearest the tool frame's) or
+    ``nearest_base_axes`` (the sensor's axes the nearest the robot base's)."""
 
+    name: str
+    axis: Vector3
+    frame: str
+    seen: float
+    rule: Literal["nearest_tool_rotation", "nearest_base_axes"]
+    reason: str
+
+
+class _IdentifiabilityKeys(TypedDict):
     rank: int
     jacobian_condition: float
     selection: SelectionJson | None
     dropped: list[Dropped]
     correlated_pairs: list[CorrelatedPair]
     not_determined: list[NotDetermined]
+
+
+class Identifiability(_IdentifiabilityKeys, total=False):
+    """Rank, condition number, selection, dropped parameters, correlated pairs, held directions (and
+    ``not_determined_rotations`` when a registration rotation was held)."""
+
+    not_determined_rotations: list[NotDeterminedRotation]
 
 
 class PaperTool(TypedDict):

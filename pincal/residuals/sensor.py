@@ -108,6 +108,9 @@ class SensorResidual(Objective):
         point_basis: (3P, b) orthonormal columns: the points' unknowns are b values z with
             m = start.points + basis z (the directions outside the basis held at the start's
             values, :mod:`pincal.fit.target_hold`); default: the 3P coordinates themselves.
+        registration_basis: (6S, b) orthonormal columns: the registrations' unknowns (phi_s, tau_s of
+            each session) are b values z, (phi, tau) = (0, start's tau) + basis z (the rotations outside
+            it held at the start's, :mod:`pincal.fit.registration_hold`); default: the 6S themselves.
         conditions: fixed per-row changes (a report's, :mod:`pincal.model.thermal`) its effects add to.
     """
 
@@ -127,6 +130,7 @@ class SensorResidual(Objective):
         sessions: npt.ArrayLike | None = None,
         point_basis: npt.ArrayLike | None = None,
         conditions: RowConditions | None = None,
+        registration_basis: npt.ArrayLike | None = None,
     ) -> None:
         super().__init__(cache)
         self.effects = tuple(effects)
@@ -160,10 +164,14 @@ class SensorResidual(Objective):
         self.point_basis = None
         if point_basis is not None and fit_points:
             self.point_basis = np.asarray(point_basis, dtype=float).reshape(3 * n_points, -1)
+        self.registration_basis = None
+        if registration_basis is not None and fit_registration:
+            self.registration_basis = np.asarray(registration_basis, dtype=float).reshape(6 * self.n_sessions, -1)
         self._effect_slices = []
         sizes = {
             "kinematic": n_kin,
-            "registration": 6 * self.n_sessions if fit_registration else 0,
+            "registration": (6 * self.n_sessions if self.registration_basis is None
+                             else self.registration_basis.shape[1]) if fit_registration else 0,
             "points": (3 * n_points if self.point_basis is None else self.point_basis.shape[1]) if fit_points else 0,
             "rotation": 3 if (fit_rotation and self.G is not None) else 0,
             "effects": sum(e.n_values for e in self.effects),
@@ -190,7 +198,7 @@ class SensorResidual(Objective):
         x = np.zeros(self.n_params)
         x[self.blocks["kinematic"]] = self.cache.base[self.cache.free]
         reg, pts = self.blocks["registration"], self.blocks["points"]
-        if reg.stop > reg.start:
+        if reg.stop > reg.start and self.registration_basis is None:
             for s, registration in enumerate(self.start.registrations):
                 x[reg.start + 6 * s + 3 : reg.start + 6 * s + 6] = registration.translation
         if pts.stop > pts.start and self.point_basis is None:
@@ -200,7 +208,7 @@ class SensorResidual(Objective):
     def estimate(self, x: npt.ArrayLike) -> TargetEstimate:
         """Registrations, points and target rotation at ``x``."""
         x = np.asarray(x, dtype=float)
-        reg = x[self.blocks["registration"]]
+        reg = self._registration_values(x)
         registrations = self.start.registrations
         if reg.size:
             registrations = tuple(
@@ -219,6 +227,18 @@ class SensorResidual(Objective):
         if self._conditional:
             conditions = row_conditions(self.effects, self.effect_values(x), self.inputs, self.conditions)
         return TargetEstimate(registrations[0], points, rotation, registrations, conditions)
+
+    def _registration_values(self, x: np.ndarray) -> np.ndarray:
+        """(phi_s, tau_s) of every session at ``x`` (6S,), through ``registration_basis`` if any."""
+        reg = x[self.blocks["registration"]]
+        if self.registration_basis is None or not reg.size:
+            return reg
+        start = np.concatenate([np.r_[0.0, 0.0, 0.0, r.translation] for r in self.start.registrations])
+        return start + self.registration_basis @ reg
+
+    def _in_basis(self, columns: np.ndarray) -> np.ndarray:
+        """Jacobian columns (..., 6S) of every registration unknown as those of ``registration_basis``'s."""
+        return columns if self.registration_basis is None else columns @ self.registration_basis
 
     def row_frames(self, target: TargetEstimate) -> tuple[np.ndarray, np.ndarray]:
         """Omega and tau of each row's session: (3, 3) and (3,) with one session,
@@ -371,11 +391,13 @@ class SensorResidual(Objective):
             rows_pos[:, p, :, kin] = np.einsum(turn, omega, sens.point_velocity(world[:, p, :])) * factor
         if reg.stop > reg.start:  # -Omega [y]x Jexp3(phi), per session
             scaled = world if target.conditions is None else target.conditions.world(world)
+            values = self._registration_values(x)
+            columns = np.zeros((k, n_points, 3, values.size))
             for s, rows, registration in self._session_blocks(target):
-                col, om = reg.start + 6 * s, registration.rotation
-                rows_pos[rows, ..., col : col + 3] = -np.einsum(
-                    "ij,kpjl,lm->kpim", om, skew(scaled[rows]), pin.Jexp3(x[col : col + 3]))
-                rows_pos[rows, ..., col + 3 : col + 6] = np.eye(3)
+                columns[rows, ..., 6 * s : 6 * s + 3] = -np.einsum(
+                    "ij,kpjl,lm->kpim", registration.rotation, skew(scaled[rows]), pin.Jexp3(values[6 * s : 6 * s + 3]))
+                columns[rows, ..., 6 * s + 3 : 6 * s + 6] = np.eye(3)
+            rows_pos[..., reg] = self._in_basis(columns)
         if pts.stop > pts.start:
             rotated = omega @ poses.tool_rotations * factor  # Omega R_k (f_k)
             for p in range(n_points):
@@ -475,10 +497,12 @@ class SensorResidual(Objective):
         rows[:, :, kin] = np.einsum("kij,knj->kin", lin["left"], sens.angular)
         tool = poses.tool_rotations @ target.rotation  # R_k R_T
         if reg.stop > reg.start:
+            values = self._registration_values(x)
+            columns = np.zeros((len(jlog), 3, values.size))
             for s, session_rows, _ in self._session_blocks(target):
-                col = reg.start + 6 * s
-                rows[session_rows, :, col : col + 3] = (
-                    jlog[session_rows] @ tool[session_rows].transpose(0, 2, 1) @ pin.Jexp3(x[col : col + 3]))
+                columns[session_rows, :, 6 * s : 6 * s + 3] = (
+                    jlog[session_rows] @ tool[session_rows].transpose(0, 2, 1) @ pin.Jexp3(values[6 * s : 6 * s + 3]))
+            rows[:, :, reg] = self._in_basis(columns)
         if rot.stop > rot.start:
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
         for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):

@@ -80,11 +80,13 @@ def inverse_kinematics(chain: KinematicChain, rotation: np.ndarray, position: np
     raise PincalError(f"inverse kinematics: no posture reaches {np.round(position, 4).tolist()} m from the start")
 
 
-def path_positions(kind: str, count: int, centre: np.ndarray, size_m: float, rows_per_line: int = 50) -> np.ndarray:
+def path_positions(kind: str, count: int, centre: np.ndarray, size_m: float, rows_per_line: int = 50,
+                   heights: int = 3) -> np.ndarray:
     """Tool positions (count, 3) [m] along a path in the root frame's horizontal plane about ``centre``.
 
-    ``line``: back and forth along x over ``size_m``, the passes stepped in z by size/6;
-    ``arc``: back and forth along a half circle of diameter ``size_m``; ``raster``: a surface
+    ``line``: back and forth along x over ``size_m``, the passes stepped in z by size/6 through
+    ``heights`` heights (1: every pass on one straight line); ``arc``: back and forth along a half
+    circle of diameter ``size_m``, stepped likewise (1: one arc); ``raster``: a surface
     ``size_m`` × 2/3 ``size_m`` swept along x, reversing every ``rows_per_line`` rows.
     """
     if kind not in PATHS:
@@ -96,12 +98,12 @@ def path_positions(kind: str, count: int, centre: np.ndarray, size_m: float, row
     out = np.tile(np.asarray(centre, dtype=float), (count, 1))
     if kind == "line":
         out[:, 0] += size_m * (u - 0.5)
-        out[:, 2] += size_m / 6 * ((line % 3) - 1)
+        out[:, 2] += size_m / 6 * ((line % heights) - (heights - 1) / 2)
     elif kind == "arc":
         angle = np.pi * u
         out[:, 0] += size_m / 2 * np.cos(angle)
         out[:, 1] += size_m / 2 * np.sin(angle) - size_m / 4
-        out[:, 2] += size_m / 6 * ((line % 3) - 1)
+        out[:, 2] += size_m / 6 * ((line % heights) - (heights - 1) / 2)
     else:
         lines = max(int(np.ceil(count / rows_per_line)), 1)
         out[:, 0] += size_m * (u - 0.5)
@@ -111,12 +113,13 @@ def path_positions(kind: str, count: int, centre: np.ndarray, size_m: float, row
 
 def constant_orientation_path(chain: KinematicChain, kind: str, count: int, centre: np.ndarray,
                               rotation: np.ndarray, q_start: np.ndarray, size_m: float = 0.6,
-                              turn_rad: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
-    """Joint readings (count, N) of the chain's tool moving along :func:`path_positions` with its
-    orientation ``rotation`` held (in the chain's current — the controller's — model), each
-    commanded orientation turned by a random rotation vector of ``turn_rad`` RMS per axis (0:
-    exactly constant, as a controller holds it)."""
-    positions = path_positions(kind, count, centre, size_m)
+                              turn_rad: float = 0.0, rng: np.random.Generator | None = None,
+                              rows_per_line: int = 50, heights: int = 3) -> np.ndarray:
+    """Joint readings (count, N) of the chain's tool moving along :func:`path_positions` (``rows_per_line``,
+    ``heights``) with its orientation ``rotation`` held (in the chain's current — the controller's —
+    model), each commanded orientation turned by a random rotation vector of ``turn_rad`` RMS per axis
+    (0: exactly constant, as a controller holds it)."""
+    positions = path_positions(kind, count, centre, size_m, rows_per_line, heights)
     turns = np.zeros((count, 3)) if not turn_rad else (rng or np.random.default_rng(0)).normal(0.0, turn_rad,
                                                                                                 (count, 3))
     q = inverse_kinematics(chain, rotation, positions[0], q_start)
