@@ -25,14 +25,17 @@ def scenarios():
 
 
 @pytest.mark.parametrize("name", ["6D, raster at constant orientation", "3D, 24 postures", "mocap",
-                                  "prismatic + continuous", "socket fixture"])
+                                  "prismatic + continuous", "socket fixture", "3D, one line at constant orientation"])
 def test_scenario_reaches_its_noise_floor(scenarios, tmp_path, name):
     scenario = next(s for s in scenarios.SCENARIOS if name in s.name)
     robots = scenarios.build_robots(tmp_path)
     full = next(r for r in scenarios.run(scenario, *robots[scenario.robot])["levels"] if r["level"] == "full")
     assert 1 / scenarios.BOUND <= full["ratio"] <= scenarios.BOUND  # either way: a prediction too wide fails too
     assert full["kept"] >= 1
-    assert (full["not_determined"] == 3) == ("constant orientation" in scenario.name)
+    assert (full["not_determined"] == 3) == ("constant orientation" in scenario.name and not scenario.tool_known)
+    # one line leaves the sensor's rotation about it free: held, unless orientations and --tool fix it
+    line_free = "one line" in scenario.name and not (scenario.tool_known and scenario.sigma_rot_deg is not None)
+    assert (full.get("rotations_held", 0) == 1) == line_free
 
 
 def test_the_script_writes_its_table(scenarios, tmp_path):

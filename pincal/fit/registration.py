@@ -17,7 +17,12 @@ from scipy.spatial.transform import Rotation
 from pincal.errors import CalibrationError
 from pincal.model.sensor import Registration, checked_array, checked_rotations
 
-__all__ = ["register_points", "mean_rotation", "register_orientations", "register_line"]
+__all__ = ["VERTICAL_LINE", "register_points", "mean_rotation", "register_orientations", "register_line"]
+
+#: A line whose sensed direction is within this sine of the sensor's z axis is vertical for
+#: :func:`register_line`: turning about it moves base z's image across the sensor's z by less, which
+#: leaves the rotation to rounding (1e-6: a line off vertical by a micrometre per metre).
+VERTICAL_LINE = 1e-6
 
 
 def _weights(weights, k: int) -> np.ndarray:
@@ -136,21 +141,24 @@ def register_orientations(robot_rotations, sensor_rotations, robot_points, senso
 
 
 def register_line(robot_points, sensor_points, reference=None) -> Registration:
-    """Ω and τ of points on one line, which leave Ω's rotation about it free: Ω is the rotation
-    nearest ``reference`` that turns the robot points' line onto the sensed points' — ``reference``
-    turned by the smallest rotation taking ``reference`` l onto l_g (l, l_g: the lines' directions,
-    the principal axes of the centred points, l_g signed so that the points run along it in the same
-    order) —, τ by eq 19.
+    """Ω and τ of points on one line, which leave Ω's rotation about it free: Ω is one of the rotations
+    that turn the robot points' line onto the sensed points' (l, l_g: the lines' directions, the
+    principal axes of the centred points, l_g signed so that the points run along it in the same order),
+    chosen by a stated rule; τ by eq 19.
 
-    With ``reference`` a Registration 2 taken with the target's rotation as the tool's (the sensor's
-    rotation is then known but for the target's turn on the tool about the line), the target's
-    rotation comes out the nearest the tool's own (smallest angle) that agrees with the line; with
-    the identity (points only), the sensor's axes come out as near the robot base's as the line allows.
+    * With a ``reference`` rotation: the one nearest it — ``reference`` turned by the smallest rotation
+      taking ``reference`` l onto l_g. With a Registration 2 taken with the target's rotation as the
+      tool's, the target's rotation then comes out the nearest the tool's own (the smallest angle) that
+      agrees with the line; the rule is the sensor frame's: moving the sensor moves Ω with it.
+    * Without (points only): the one whose image of the robot base's z axis is nearest the sensor's z
+      axis — a levelled sensor beside a robot standing on the floor — so turning the sensor about its
+      vertical moves Ω with it; for a vertical line, which leaves that free too, the one nearest the
+      identity.
 
     Args:
         robot_points: (K, 3) points t_k in robot-base coordinates [m], K >= 2, not all one.
         sensor_points: (K, 3) the same points g_k measured by the sensor [m].
-        reference: (3, 3) the rotation to stay nearest (default the identity).
+        reference: (3, 3) the rotation to stay nearest, or None.
 
     Raises:
         CalibrationError: fewer than 2 points, mismatched shapes, NaN, or coincident points.
@@ -165,7 +173,13 @@ def register_line(robot_points, sensor_points, reference=None) -> Registration:
     if spread[0] <= 0.0 or not np.linalg.norm(along) > 0.0:
         raise CalibrationError(f"the {len(t)} points coincide, so neither the registration's rotation nor a line "
                                "is defined; measure the target at 3 or more positions not on one line")
+    line = along / np.linalg.norm(along)
     start = np.eye(3) if reference is None else checked_rotations(np.asarray(reference)[None], "reference")[0]
-    turn, _ = Rotation.align_vectors(along[None, :] / np.linalg.norm(along), (start @ vt[0])[None, :])
+    turn, _ = Rotation.align_vectors(line[None, :], (start @ vt[0])[None, :])
     rotation = turn.as_matrix() @ start
+    if reference is None:  # then about the line: base z's image the nearest sensor z
+        up = rotation[:, 2] - (rotation[:, 2] @ line) * line  # its part across the line, turned by α about it
+        cos, sin = up[2], np.cross(line, up)[2]  # e_z · (cos α up + sin α line × up)
+        if np.hypot(cos, sin) > VERTICAL_LINE * np.linalg.norm(up):
+            rotation = Rotation.from_rotvec(np.arctan2(sin, cos) * line).as_matrix() @ rotation
     return Registration(rotation, _translation(rotation, t, g, np.full(len(t), 1.0 / len(t))))

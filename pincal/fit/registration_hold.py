@@ -118,7 +118,7 @@ def rotation_reason(held: HeldRotation) -> str:
         advice = "give --tool X,Y,Z,R,P,Y (the measured frame on the tip link fixes it), or add rows off the line"
     else:
         cannot = "cannot be told from positions on that line" + (" (the tool known or not)" if held.tool_known else "")
-        rule = "where the sensor's axes are the nearest the robot base's"
+        rule = "where the robot base's z axis turns the nearest the sensor's z axis (a levelled sensor)"
         advice = "add rows off the line (a second line, an arc) or measure orientations (qx,qy,qz,qw) with --tool"
     return (f"{which}the modelled tool positions lie on one line ({line}) at one tool orientation: the sensor's "
             f"rotation about it {cannot}, so it is held {rule}; the rows along the line are predicted as well as "

@@ -198,8 +198,8 @@ def initial_target(
     modelled tool positions lie on one line at one orientation (a straight-line path),
     which its rows cannot register but about the line, is registered by
     :func:`pincal.fit.registration.register_line`: nearest Registration 2 taken with
-    that R_T (rows with orientations), else nearest the identity — the rotation about the
-    line the calibration then holds (:mod:`pincal.fit.registration_hold`).
+    that R_T (rows with orientations), else levelled — the rotation about the line the
+    calibration then holds (:mod:`pincal.fit.registration_hold`).
     """
     poses = chain.poses(data.q)
     t, rot = poses.tool_positions, poses.tool_rotations

@@ -226,7 +226,7 @@ def identifiability_report(result) -> Identifiability:
         out["not_determined_rotations"] = [
             {"name": f"registration[{h.session}].rotation" if h.session else "registration.rotation",
              "axis": [float(v) for v in h.axis], "frame": h.frame, "seen": h.seen,
-             "rule": "nearest_tool_rotation" if h.orientations else "nearest_base_axes",
+             "rule": "nearest_tool_rotation" if h.orientations else "levelled",
              "reason": rotation_reason(h)} for h in rotations]
     return out
 

@@ -204,13 +204,13 @@ class NotDetermined(TypedDict):
 class NotDeterminedRotation(TypedDict):
     """A rotation of a session's registration the data leave free (rows on one line), held by a stated rule:
     ``nearest_tool_rotation`` (the target's rotation on the tool the nearest the tool frame's) or
-    ``nearest_base_axes`` (the sensor's axes the nearest the robot base's)."""
+    ``levelled`` (the robot base's z axis turned the nearest the sensor's z axis)."""
 
     name: str
     axis: Vector3
     frame: str
     seen: float
-    rule: Literal["nearest_tool_rotation", "nearest_base_axes"]
+    rule: Literal["nearest_tool_rotation", "levelled"]
     reason: str
 
 
