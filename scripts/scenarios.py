@@ -33,7 +33,7 @@ with σ the sensor's noise per axis and e the calibration's own estimation error
 configurations (:meth:`pincal.fit.chain_calibration.ChainCalibration.predicted_point_rms`, the
 fit's covariance propagated). At level full (the truth's) each scenario must be within 1.3× it;
 lower levels lack part of the truth and show how much. Prints a table, writes ``--markdown``
-(the docs' table) and ``--json``. About 10 s on 2 cores.
+(the docs' table) and ``--json``. About 20 s on 2 cores.
 """
 
 from __future__ import annotations

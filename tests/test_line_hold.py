@@ -16,6 +16,7 @@ import functools
 import json
 from dataclasses import replace
 
+import lxml.html
 import numpy as np
 import pytest
 import scipy.linalg
@@ -107,7 +108,9 @@ def test_one_line_end_to_end_calibrate_diagnose_and_evaluate(industrial_arm_urdf
     for command in ("calibrate", "diagnose"):
         for strict in (False, True):
             out, report = tmp_path / f"{command}{strict}.urdf", tmp_path / f"{command}{strict}.json"
-            code = main([command, *common, "--out", str(out), "--report", str(report), *(["--strict"] * strict)])
+            html = ["--html", str(tmp_path / f"{command}.html")] if command == "calibrate" and not strict else []
+            code = main([command, *common, "--out", str(out), "--report", str(report), *(["--strict"] * strict),
+                         *html])
             err = capsys.readouterr().err
             assert code == (3 if strict else 0), err
             assert out.exists() and "registration not determined" in err and "checked only near that path" in err
@@ -116,6 +119,10 @@ def test_one_line_end_to_end_calibrate_diagnose_and_evaluate(industrial_arm_urdf
             (held,) = doc["identifiability"]["not_determined_rotations"]
             assert held["name"] == "registration.rotation" and held["rule"] == "nearest_tool_rotation"
             assert abs(held["axis"][0]) == pytest.approx(1.0) and held["frame"] == "base_link"
+    page = lxml.html.fromstring((tmp_path / "calibrate.html").read_text(encoding="utf-8"))
+    (table,) = page.xpath('//table[@id="not-determined-table"]')
+    names = [tr.xpath("./td")[0].text_content() for tr in table.xpath("./tbody/tr")]
+    assert names == ["target.position"] * 3 + ["registration.rotation"]
     assert main(["evaluate", str(tmp_path / "calibrateFalse.urdf"), str(tmp_path / "calibrateFalse.json"),
                  str(held_out), "--json", str(tmp_path / "e.json")]) == 0
     assert "rows off that line" in capsys.readouterr().err
