@@ -25,7 +25,7 @@ def scenarios():
 
 
 @pytest.mark.parametrize("name", ["6D, raster at constant orientation", "3D, 24 postures", "mocap",
-                                  "prismatic + continuous", "socket fixture"])
+                                  "prismatic + continuous", "socket fixture", "each left out in turn"])
 def test_scenario_reaches_its_noise_floor(scenarios, tmp_path, name):
     scenario = next(s for s in scenarios.SCENARIOS if name in s.name)
     robots = scenarios.build_robots(tmp_path)
@@ -33,6 +33,8 @@ def test_scenario_reaches_its_noise_floor(scenarios, tmp_path, name):
     assert 1 / scenarios.BOUND <= full["ratio"] <= scenarios.BOUND  # either way: a prediction too wide fails too
     assert full["kept"] >= 1
     assert (full["not_determined"] == 3) == ("constant orientation" in scenario.name)
+    # each placement left out: the calibrated model predicts every one better than the nominal one, unwarned
+    assert all(not p["warned"] and p["calibrated_mm"] < p["nominal_mm"] for p in full.get("left_out", []))
 
 
 def test_the_script_writes_its_table(scenarios, tmp_path):
