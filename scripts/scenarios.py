@@ -55,8 +55,8 @@ from scipy.spatial.transform import Rotation
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture, initial_fixture
 from pincal.fit.level_choice import fixture_heldout_error
-from pincal.fit.placement_check import predictions
 from pincal.fit.metrics import pose_errors
+from pincal.fit.placement_check import predictions
 from pincal.measurements.fixture import Fixture
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.conversion import urdf_from_dh_table
