@@ -7,7 +7,10 @@ REPORT.json (:mod:`pincal.report.fixture`). evaluate: the consistency and
 distortion (:mod:`pincal.fit.socket_metrics`) of the corrected URDF with the
 reported ball centre on placements the fit has not seen — no registration,
 nothing re-estimated — and of the nominal URDF with the ball centre fitted to
-it ("before"), when that URDF is at hand. Both write ``--html`` pages
+it ("before"), when that URDF is at hand. Both judge placements the model has
+not seen against the nominal model (:mod:`pincal.fit.placement_check`: calibrate
+leaves each out in turn, evaluate takes the evaluated ones), their warnings in
+REPORT.json / ``--json`` ``warnings`` for ``--strict``. Both write ``--html`` pages
 (:mod:`pincal.report.fixture_html`); the flags of sensor data are refused.
 """
 
@@ -107,7 +110,10 @@ def calibrate_fixture_files(
     data; nothing of a sensor); write the corrected URDF, the report and, with couplings, the
     effects.yaml beside the URDF (:mod:`pincal.report.effects_file`). Level ``auto``: the level
     cross-validation over the placements supports
-    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``).
+    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``). Each placement
+    left out in turn is predicted by the level's calibration of the others against the nominal model
+    (:func:`pincal.fit.placement_check.check_placements`; REPORT.json ``fixture.held_out_placements`` and
+    ``warnings``); one placement gets a note instead.
 
     Raises:
         PincalError: settings of a sensor (a tool, method, row weights, outlier rejection, a
