@@ -196,6 +196,8 @@ SLOW_TESTS = (
     "tests/test_effects_file.py::test_calibrate_writes_couplings_only_and_a_plain_run_removes_its_stale_file",
     "tests/test_effects_file.py::test_diagnose_writes_what_the_urdf_cannot_carry_and_it_reads_back_as_the_report",
     "tests/test_level_choice.py::test_cli_fixture_level_auto_holds_out_each_placement",
+    "tests/test_placement_check.py::test_strict_calibrate_exits_3_on_the_warning_with_every_output_written",
+    "tests/test_placement_check.py::test_strict_evaluate_exits_3_on_a_held_out_placement_predicted_worse",
     "tests/test_diagnosis.py::test_undeclared_effect_is_found_measured_and_removed",
     "tests/test_diagnosis.py::test_evaluate_on_interleaved_rows_takes_the_flanks_diagnose_fitted",
     "tests/test_effect_units.py::test_a_lift_sagging_under_the_shoulders_torque_is_stated_in_m_per_newton_metre",

@@ -326,7 +326,6 @@ def test_calibrate_sensor_flags_are_refused_in_one_line(tmp_path, capsys, flags,
     (["--new-session"], "--new-session"),
     (["--max-pos-mm", "1", "--max-rot-deg", "1"], "--max-pos-mm, --max-rot-deg"),
     (["--temperature-column", "temperature_c"], "--temperature-column"),  # was ignored silently
-    (["--strict"], "--strict"),  # no plausibility check of fixture evaluations
 ])
 def test_evaluate_sensor_flags_are_refused_in_one_line(tmp_path, capsys, flags, named):
     code = main(["evaluate", str(IIWA), str(tmp_path / "r.json"), str(MUKCA / "kuka_14" / "front.csv"),

@@ -25,7 +25,8 @@ def scenarios():
 
 
 @pytest.mark.parametrize("name", ["6D, raster at constant orientation", "3D, 24 postures", "mocap",
-                                  "prismatic + continuous", "socket fixture", "3D, one line at constant orientation"])
+                                  "prismatic + continuous", "socket fixture", "3D, one line at constant orientation",
+                                  "each left out in turn"])
 def test_scenario_reaches_its_noise_floor(scenarios, tmp_path, name):
     scenario = next(s for s in scenarios.SCENARIOS if name in s.name)
     robots = scenarios.build_robots(tmp_path)
@@ -36,6 +37,8 @@ def test_scenario_reaches_its_noise_floor(scenarios, tmp_path, name):
     # one line leaves the sensor's rotation about it free: held, unless orientations and --tool fix it
     line_free = "one line" in scenario.name and not (scenario.tool_known and scenario.sigma_rot_deg is not None)
     assert (full.get("rotations_held", 0) == 1) == line_free
+    # each placement left out: the calibrated model predicts every one better than the nominal one, unwarned
+    assert all(not p["warned"] and p["calibrated_mm"] < p["nominal_mm"] for p in full.get("left_out", []))
 
 
 def test_the_script_writes_its_table(scenarios, tmp_path):

@@ -66,7 +66,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     if args.fixture is not None:  # socket-fixture data, no sensor
         from pincal.cli.fixture import run_calibrate
 
-        return run_calibrate(args)
+        return _warned(run_calibrate(args), args.strict)
     level = args.level or ("dh" if args.method is not None else "full")
     if level == "dh" and args.strict:
         raise PincalError("--strict applies to --level registration, offsets, full or auto (the plausibility checks "
@@ -213,7 +213,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.fixture is not None:
         from pincal.cli.fixture import run_evaluate
 
-        return run_evaluate(args)
+        return _warned(run_evaluate(args), args.strict)
     if args.nominal is not None:
         raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
     _check_html(args.html, *_description_inputs(args), args.report, args.data, outputs=[args.json])

@@ -7,7 +7,10 @@ REPORT.json (:mod:`pincal.report.fixture`). evaluate: the consistency and
 distortion (:mod:`pincal.fit.socket_metrics`) of the corrected URDF with the
 reported ball centre on placements the fit has not seen — no registration,
 nothing re-estimated — and of the nominal URDF with the ball centre fitted to
-it ("before"), when that URDF is at hand. Both write ``--html`` pages
+it ("before"), when that URDF is at hand. Both judge placements the model has
+not seen against the nominal model (:mod:`pincal.fit.placement_check`: calibrate
+leaves each out in turn, evaluate takes the evaluated ones), their warnings in
+REPORT.json / ``--json`` ``warnings`` for ``--strict``. Both write ``--html`` pages
 (:mod:`pincal.report.fixture_html`); the flags of sensor data are refused.
 """
 
@@ -21,6 +24,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
+import numpy as np
+
 from pincal._version import __version__
 from pincal.cli.arguments import selection_criterion
 from pincal.cli.level_table import held_by_prior, level_choice_lines
@@ -28,7 +33,17 @@ from pincal.cli.paths import description_inputs, refuse_overwrite
 from pincal.cli.settings import CalibrateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
-from pincal.fit.level_choice import choose_fixture_level
+from pincal.fit.level_choice import choose_fixture_level, fixture_heldout_error
+from pincal.fit.placement_check import (
+    PlacementCheck,
+    PlacementPrediction,
+    check_placements,
+    evaluation_findings,
+    one_placement_note,
+    placement_findings,
+    predictions,
+)
+from pincal.fit.plausibility import Finding
 from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
 from pincal.measurements.couplings import corrected_angles, couplings_from_report
 from pincal.measurements.fixture import Fixture, read_fixture, read_fixture_data
@@ -38,8 +53,13 @@ from pincal.outputs import file_sha256
 from pincal.report.document import write_evaluation, write_report
 from pincal.report.effects_file import effects_path, write_effects_file, written_line
 from pincal.report.fixture import fixture_report, read_fixture_block
-from pincal.report.model import Sources, couplings_part, level_choice_part
-from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport, fixture_metrics_json
+from pincal.report.model import Sources, couplings_part, findings_json, level_choice_part
+from pincal.report.model_fixture import (
+    FixtureEvaluationJson,
+    FixtureReport,
+    PlacementPredictionJson,
+    fixture_metrics_json,
+)
 from pincal.report.reading import load_report
 
 __all__ = [
@@ -50,12 +70,11 @@ __all__ = [
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
                          "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                         "sigma_pos": "--sigma-pos", "strict": "--strict"}  # no plausibility checks (yet) here
+                         "sigma_pos": "--sigma-pos"}
 #: Flags of a sensor evaluation that a fixture evaluation has no use for.
 EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
                         "fixed_registration": "--fixed-registration", "new_session": "--new-session",
-                        "temperature_column": "--temperature-column",  # thermal: diagnose of sensor rows only
-                        "strict": "--strict"}  # no plausibility checks (yet) here
+                        "temperature_column": "--temperature-column"}  # thermal: diagnose of sensor rows only
 #: Largest difference between a socket distance of the evaluated fixture file and the
 #: calibration's [m]: far below any fixture's manufacturing tolerance (~1e-5 m for a
 #: 3D print), far above the rounding of distances rebuilt by classical scaling (~1e-16 m).
@@ -75,6 +94,7 @@ class FixtureRun:
     seconds: float
     reload_error: float
     effects_file: Path | None = None
+    check: PlacementCheck | None = None
 
 
 def calibrate_fixture_files(
@@ -90,7 +110,10 @@ def calibrate_fixture_files(
     data; nothing of a sensor); write the corrected URDF, the report and, with couplings, the
     effects.yaml beside the URDF (:mod:`pincal.report.effects_file`). Level ``auto``: the level
     cross-validation over the placements supports
-    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``).
+    (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``). Each placement
+    left out in turn is predicted by the level's calibration of the others against the nominal model
+    (:func:`pincal.fit.placement_check.check_placements`; REPORT.json ``fixture.held_out_placements`` and
+    ``warnings``); one placement gets a note instead.
 
     Raises:
         PincalError: settings of a sensor (a tool, method, row weights, outlier rejection, a
@@ -124,6 +147,10 @@ def calibrate_fixture_files(
         choice = choose_fixture_level(chain, data, selection=selection)
         level = choice.chosen
     result = calibrate_fixture(chain, data, level, selection=selection)
+    # each placement predicted by the level's fit of the others, against the nominal model's (plausibility)
+    check = check_placements(chain, data, level, selection, choice)
+    warnings, notes = placement_findings(check)
+    notes += [note for note in [one_placement_note(data)] if note is not None]
     seconds = time.perf_counter() - started
     sources: Sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
                         "corrected_urdf": str(out_urdf)}
@@ -134,13 +161,14 @@ def calibrate_fixture_files(
         f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args,
     )
     with chain.placed(result.chain_placements):
-        report = fixture_report(result, chain, data, sources, [], file_sha256(urdf),
+        report = fixture_report(result, chain, data, sources, notes, file_sha256(urdf),
                                 level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256,
                                 xacro_args=dict(xacro_arguments(xacro_args)),  # evaluate --fixture rebuilds with them
-                                couplings=couplings_part(settings.couplings))
+                                couplings=couplings_part(settings.couplings), warnings=findings_json(warnings),
+                                held_out=check)
     effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
     write_report(report_path, report)
-    return FixtureRun(result, report, seconds, reload_error, effects_file)
+    return FixtureRun(result, report, seconds, reload_error, effects_file, check)
 
 
 @dataclass(frozen=True)
@@ -155,12 +183,16 @@ class FixtureEvaluation:
     before: FixtureMetrics | None
     notes: list[str]
     not_held_out: tuple[str, ...] = ()
+    held_out: tuple[PlacementPrediction, ...] = ()
+    warnings: tuple[Finding, ...] = ()
 
     def as_dict(self) -> FixtureEvaluationJson:
         """``pincal evaluate --fixture --json``."""
         return {"after": fixture_metrics_json(self.after),
                 "before": None if self.before is None else fixture_metrics_json(self.before),
-                "not_held_out": list(self.not_held_out), "notes": list(self.notes)}
+                "not_held_out": list(self.not_held_out), "notes": list(self.notes),
+                "held_out_placements": [cast(PlacementPredictionJson, p.as_dict()) for p in self.held_out],
+                "warnings": findings_json(list(self.warnings))}
 
 
 def _reported_nominal(document: dict[str, Any], report_path: Path,
@@ -278,13 +310,16 @@ def evaluate_fixture_files(
         notes.append(f"not held out: placement(s) {', '.join(seen)} of the calibration's ({report_path}); "
                      "their errors are not those of new placements")
     after = fixture_metrics(chain, data, ball)
-    before = None
+    predicted, before = fixture_heldout_error(chain, data, ball), None
+    nominal_error = np.full(len(data.placements), np.nan)
     if nominal is not None:
         if file_sha256(nominal) != nominal_sha:
             notes.append(f"{nominal}: not the URDF the calibration started from (SHA-256 differs)")
-        before = fixture_metrics(KinematicChain.from_urdf(nominal, tip, xacro_args=args_of(nominal) or None), data,
-                                 nominal_ball)
-    return FixtureEvaluation(after, before, notes, seen)
+        nominal_chain = KinematicChain.from_urdf(nominal, tip, xacro_args=args_of(nominal) or None)
+        before = fixture_metrics(nominal_chain, data, nominal_ball)
+        nominal_error = fixture_heldout_error(nominal_chain, data, nominal_ball)
+    held_out = tuple(p for p in predictions(data, predicted, nominal_error) if p.placement not in seen)
+    return FixtureEvaluation(after, before, notes, seen, held_out, tuple(evaluation_findings(held_out)))
 
 
 # --- what the commands print -------------------------------------------------------------
@@ -309,8 +344,9 @@ def _write_html(html: Path | None, document: Mapping[str, Any], base: Path, eval
         print(f"wrote {html}")
 
 
-def run_calibrate(args: argparse.Namespace) -> int:
-    """``pincal calibrate URDF DATA... --fixture FIXTURE.csv --tip-link LINK``."""
+def run_calibrate(args: argparse.Namespace) -> FixtureReport:
+    """``pincal calibrate URDF DATA... --fixture FIXTURE.csv --tip-link LINK``: prints the summary, returns
+    the report (whose ``warnings`` the caller prints and turns into ``--strict``'s exit code)."""
     _refuse(args, CALIBRATE_SENSOR_ONLY)
     level = args.level or "full"
     if level == "dh":
@@ -345,13 +381,15 @@ def run_calibrate(args: argparse.Namespace) -> int:
     for file, line, score in result.outliers:
         print(f"outlier (kept in the fit): {file} line {line} (robust score {score:.1f})")
     _print_metrics("calibration placements", result.nominal_training, result.training)
+    if run.check is not None:
+        _print_predictions(f"each placement left out, level {level} fitted on the others", run.check.placements)
     print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")
     print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
     if run.effects_file is not None:
         print(written_line(run.effects_file, report))
     _write_html(args.html, report, Path(args.report).parent)
-    return 0
+    return report
 
 
 def _print_metrics(title: str, before: FixtureMetrics | None, after: FixtureMetrics) -> None:
@@ -367,8 +405,20 @@ def _print_metrics(title: str, before: FixtureMetrics | None, after: FixtureMetr
     print("(nominal -> calibrated)" if before is not None else "(calibrated model only)")
 
 
-def run_evaluate(args: argparse.Namespace) -> int:
-    """``pincal evaluate CORRECTED.urdf REPORT.json DATA... --fixture FIXTURE.csv [--nominal URDF]``."""
+def _print_predictions(title: str, predicted: Sequence[PlacementPrediction]) -> None:
+    """Each placement's RMS ball-to-socket distance with only its own pose refitted, nominal -> calibrated [mm]."""
+    if predicted:
+        print(f"{title}, each with only its own pose fitted to its rows: RMS ball-to-socket distance [mm]")
+    for p in predicted:
+        nominal = "—" if not np.isfinite(p.nominal_mm) else f"{p.nominal_mm:.3f}"
+        calibrated = f"not fitted ({p.failure})" if p.failure else f"{p.calibrated_mm:.3f}"
+        flag = f"  worse than nominal (×{p.ratio:.2f} > ×{p.bound:.2f})" if p.worse else ""
+        print(f"{p.placement:24s} {nominal:>8s} -> {calibrated}{flag}")
+
+
+def run_evaluate(args: argparse.Namespace) -> FixtureEvaluationJson:
+    """``pincal evaluate CORRECTED.urdf REPORT.json DATA... --fixture FIXTURE.csv [--nominal URDF]``: prints the
+    metrics, returns the ``--json`` document (whose ``warnings`` the caller prints, as for ``run_calibrate``)."""
     _refuse(args, EVALUATE_SENSOR_ONLY)
     outputs = [Path(o) for o in (args.json, args.html) if o is not None]
     evaluation = evaluate_fixture_files(args.urdf, args.report, args.data, args.fixture, nominal_urdf=args.nominal,
@@ -378,13 +428,15 @@ def run_evaluate(args: argparse.Namespace) -> int:
         print(f"pincal: note: {note}", file=sys.stderr)
     _print_metrics("evaluated placements" + (" (not held out)" if evaluation.not_held_out else ""),
                    evaluation.before, evaluation.after)
+    _print_predictions("held-out placements", evaluation.held_out)
+    document = evaluation.as_dict()
     if args.json:
-        write_evaluation(args.json, evaluation.as_dict())
+        write_evaluation(args.json, document)
         print(f"wrote {args.json}")
     if args.html is not None:
         from pincal.report.reading import PAGE_KINDS, load_report
 
         shown = {"urdf": str(args.urdf), "data": ", ".join(str(p) for p in _paths(args.data)),
-                 "fixture": evaluation.as_dict()}
+                 "fixture": document, "warnings": document["warnings"]}
         _write_html(args.html, load_report(args.report, PAGE_KINDS), Path(args.report).parent, evaluation=shown)
-    return 0
+    return document

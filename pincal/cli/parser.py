@@ -211,7 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--max-rot-deg", type=non_negative, metavar="Y",
                     help="fail (exit 1) if the largest orientation error exceeds Y deg")
     ev.add_argument("--strict", action="store_true", help="exit 3 when a warning is given (the evaluated error "
-                    "implausible against the calibration's; before --max-pos-mm's exit 1; --json written all the same)")
+                    "implausible against the calibration's; with --fixture, a placement the calibration has not seen "
+                    "predicted worse than by the nominal URDF; before --max-pos-mm's exit 1; --json written all the "
+                    "same)")
 
     dia = sub.add_parser("diagnose", help="calibrate, then find and add the effects the model lacks")
     dia.add_argument("urdf", type=Path, help="URDF to calibrate, or a .xacro (never overwritten)")

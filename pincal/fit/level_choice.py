@@ -72,7 +72,7 @@ __all__ = [
     "DEFAULT_FOLDS", "SEED", "SAME_CONFIGURATION_RAD", "MIN_TRAINING_ROWS", "MIN_CONFIGURATIONS",
     "MIN_HELD_OUT_COORDINATES", "RULE", "RULE_PRIOR", "Fold", "LevelScore", "LevelChoice", "one_standard_error",
     "row_folds", "configuration_keys", "sensor_folds", "choose_level", "fixture_heldout_error", "fixture_rows",
-    "fixture_folds", "choose_fixture_level",
+    "fixture_folds", "choose_fixture_level", "placement_error",
 ]
 
 #: Folds over rows when there is one session or placement (Hastie et al. 2009, §7.10: K = 5 or 10).
@@ -418,6 +418,22 @@ def fixture_heldout_error(chain: KinematicChain, data: FixtureData, ball: npt.Ar
     return np.array(out)
 
 
+def placement_error(chain: KinematicChain, data: FixtureData, level: str, placement: str,
+                    selection: str = "aic") -> tuple[float, int]:
+    """Placement ``placement`` of ``data`` predicted by the calibration (``level``, ``selection``) of the
+    others: (its :func:`fixture_heldout_error` [m], the kinematic parameters kept). Level
+    ``registration`` is the nominal model with the ball centre fitted on the others.
+
+    Raises:
+        CalibrationError: the other placements cannot be calibrated at ``level``.
+    """
+    train = data.select_placements([name for name in data.placements if name != placement])
+    result = calibrate_fixture(chain, train, level, selection=selection)
+    test = data.select_placements([placement])
+    with chain.placed(result.chain_placements):
+        return float(fixture_heldout_error(chain, test, result.ball)[0]), len(result.kept)
+
+
 def fixture_rows(data: FixtureData, index: np.ndarray) -> FixtureData:
     """The rows ``index`` of ``data`` (every placement kept)."""
     index = np.asarray(index, dtype=np.intp)
@@ -482,12 +498,7 @@ def choose_fixture_level(
 
     def fit_and_score(level: str, fold: Fold) -> tuple[float, int]:
         if several:
-            held = data.placement[fold.test[0]]
-            train = data.select_placements([n for s, n in enumerate(data.placements) if s != held])
-            result = calibrate_fixture(chain, train, level, selection=selection)
-            test = data.select_placements([data.placements[held]])
-            with chain.placed(result.chain_placements):
-                return float(fixture_heldout_error(chain, test, result.ball)[0]), len(result.kept)
+            return placement_error(chain, data, level, fold.name, selection)
         result = calibrate_fixture(chain, fixture_rows(data, fold.train), level, selection=selection)
         test = fixture_rows(data, fold.test)
         placement = result.placements[0]

@@ -19,7 +19,12 @@ tip link; no ``rpy_rad``, a ball has no orientation the data could see),
   the calibration placements;
 * ``nominal``: the ball centre fitted with the nominal kinematics and the
   SHA-256 of the nominal URDF — what ``pincal evaluate --fixture`` needs for
-  its "before".
+  its "before";
+* ``held_out_placements``: with two or more placements and a level other than
+  ``registration``, each placement predicted by the level's calibration of the
+  others and by the nominal model (:mod:`pincal.fit.placement_check`), else null.
+
+``warnings`` holds the plausibility findings (that check's), as a sensor calibration's does.
 """
 
 from __future__ import annotations
@@ -27,18 +32,19 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pincal._version import __version__
 from pincal.fit.fixture_calibration import FixtureCalibration
+from pincal.fit.placement_check import PlacementCheck
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
 from pincal.report.document import REPORT_VERSION, chain_summary, identifiability_report, parameters_report
-from pincal.report.model import CouplingsPart, LevelChoicePart, Sources
-from pincal.report.model_fixture import FixturePlacement, FixtureReport, fixture_metrics_json
+from pincal.report.model import CouplingsPart, Finding, LevelChoicePart, Sources
+from pincal.report.model_fixture import FixturePlacement, FixtureReport, HeldOutPlacements, fixture_metrics_json
 from pincal.report.reading import value_at
 
 __all__ = ["TURN_NOT_DETERMINED", "fixture_report", "read_fixture_block"]
@@ -59,10 +65,13 @@ def fixture_report(
     xacro_args: dict[str, str],
     urdf_sha256: str,
     couplings: CouplingsPart | None = None,
+    warnings: list[Finding] | None = None,
+    held_out: PlacementCheck | None = None,
 ) -> FixtureReport:
     """Build the REPORT.json document of a socket-fixture calibration (``chain`` placed as calibrated);
     ``level_choice``: :func:`pincal.report.model.level_choice_part`; ``couplings``:
-    :func:`pincal.report.model.couplings_part` of ``--coupling``."""
+    :func:`pincal.report.model.couplings_part` of ``--coupling``; ``warnings``: the plausibility findings
+    (:func:`pincal.report.model.findings_json`); ``held_out``: the leave-one-placement-out check."""
     fixture = data.fixture
     ball = result.ball.tolist()
     return {
@@ -101,8 +110,10 @@ def fixture_report(
                          "after": fixture_metrics_json(result.training)},
             "nominal": {"urdf_sha256": nominal_urdf_sha256, "ball_centre_m": result.nominal_ball.tolist(),
                         "rms_point_error_mm": result.nominal_rms_m * math.sqrt(3.0) * 1000.0},
+            "held_out_placements": None if held_out is None else cast(HeldOutPlacements, held_out.as_dict()),
         },
         "notes": list(result.notes) + list(notes),
+        "warnings": list(warnings or []),
         **level_choice,
         "xacro_args": xacro_args,
         "urdf_sha256": urdf_sha256,

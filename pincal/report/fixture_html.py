@@ -7,7 +7,10 @@ before (nominal URDF) and after (calibrated), on the calibration placements and,
 from ``evaluate --fixture``, on the evaluated ones; the ball centre with its
 standard deviation; the sockets and their distances; and of each placement what
 its sockets determine — each socket's centre in the URDF root frame, and the
-socket line's direction where the turn about it is not determined. Lengths are
+socket line's direction where the turn about it is not determined; and each
+placement predicted by models that have not seen it — left out in turn by the
+calibration (``fixture.held_out_placements``), or evaluated — nominal → calibrated,
+flagged where worse (:mod:`pincal.fit.placement_check`). Lengths are
 shown in mm with three decimals (the CLI's), angles in degrees.
 """
 
@@ -81,6 +84,17 @@ def _placement(entry: dict) -> dict[str, Any]:
             "undetermined": undetermined}
 
 
+def _predictions(label: str, entries: Any) -> dict[str, Any] | None:
+    """Placements predicted without them: nominal → calibrated [mm], ratio and bound, worse or not."""
+    if not isinstance(entries, list) or not entries:
+        return None
+    rows = [{"placement": e.get("placement"), "rows": e.get("rows"),
+             "errors": (_decimals(e.get("nominal_mm")), _decimals(e.get("calibrated_mm"))),
+             "ratio": _decimals(e.get("ratio"), 2), "bound": _decimals(e.get("bound"), 2),
+             "worse": bool(e.get("worse")), "failure": e.get("failure")} for e in entries if isinstance(e, dict)]
+    return {"label": label, "rows": rows}
+
+
 def fixture_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = None) -> dict[str, Any]:
     """Everything the fixture partial shows, from a fixture REPORT.json ``doc``.
 
@@ -98,12 +112,18 @@ def fixture_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = Non
         label = "evaluated placements" + (" (not held out: used in the calibration)" if seen else " (held out)")
         sets.append(_metric_set(label, measured.get("before"), measured.get("after"), seen))
     shown = [s for s in sets if s is not None]
+    check = block.get("held_out_placements") or {}
+    predicted = [_predictions(f"each calibration placement left out, predicted by level {check.get('level')} "
+                              "fitted on the others", check.get("placements")),
+                 _predictions("evaluated placements the calibration has not seen",
+                              (measured or {}).get("held_out_placements") if isinstance(measured, dict) else None)]
     nominal = block.get("nominal") or {}
     ball, std = block.get("ball_centre_m"), block.get("ball_centre_std_m")
     return {
         "file": block.get("file"),
         "tip_link": (doc.get("tool") or {}).get("parent_link"),
         "sets": shown,
+        "predicted": [p for p in predicted if p is not None],
         "cards": [{"label": s["label"], "consistency": s["all"]["consistency"], "distortion": s["all"]["distortion"],
                    "has_before": s["has_before"]} for s in shown],
         "ball": [{"axis": axis, "value": _mm(v), "std": _mm(s)}

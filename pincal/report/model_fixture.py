@@ -8,6 +8,7 @@ from pincal.report.model import (
     ChainJson,
     ChainLevel,
     CouplingJson,
+    Finding,
     FixtureFit,
     Identifiability,
     LevelChoiceJson,
@@ -25,8 +26,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FixtureTool", "Socket", "SocketDistance", "PlacedSocket", "FixturePlacement", "SocketPairDistance",
-    "PlacementMetrics", "FixtureMetricsJson", "FixtureTraining", "FixtureNominal", "FixtureBlock", "FixtureReport",
-    "FixtureEvaluationJson", "fixture_metrics_json",
+    "PlacementMetrics", "FixtureMetricsJson", "FixtureTraining", "FixtureNominal", "PlacementPredictionJson",
+    "HeldOutPlacements", "FixtureBlock", "FixtureReport", "FixtureEvaluationJson", "fixture_metrics_json",
 ]
 
 
@@ -104,6 +105,30 @@ class FixtureNominal(TypedDict):
     rms_point_error_mm: float
 
 
+class PlacementPredictionJson(TypedDict):
+    """A placement predicted by models fitted without it (:class:`pincal.fit.placement_check.PlacementPrediction`):
+    its RMS ball-to-socket distance with only its own pose refitted, nominal and calibrated [mm]."""
+
+    placement: str
+    rows: int
+    nominal_mm: float | None
+    calibrated_mm: float | None
+    ratio: float | None
+    bound: float
+    worse: bool
+    failure: str | None
+
+
+class HeldOutPlacements(TypedDict):
+    """Leave-one-placement-out of the calibration (:mod:`pincal.fit.placement_check`)."""
+
+    scheme: Literal["leave-one-placement-out"]
+    level: ChainLevel
+    error: str
+    rule: str
+    placements: list[PlacementPredictionJson]
+
+
 class FixtureBlock(TypedDict):
     """The sockets, ball centre, placements, consistency and distortion (:mod:`pincal.report.fixture`)."""
 
@@ -115,6 +140,7 @@ class FixtureBlock(TypedDict):
     placements: list[FixturePlacement]
     training: FixtureTraining
     nominal: FixtureNominal
+    held_out_placements: HeldOutPlacements | None
 
 
 class _FixtureKeys(TypedDict):
@@ -135,6 +161,7 @@ class _FixtureKeys(TypedDict):
     fit: FixtureFit
     fixture: FixtureBlock
     notes: list[str]
+    warnings: list[Finding]
     xacro_args: dict[str, str]
     urdf_sha256: Sha256
 
@@ -148,12 +175,16 @@ class FixtureReport(_FixtureKeys, total=False):
 
 
 class FixtureEvaluationJson(TypedDict):
-    """``pincal evaluate --fixture --json``: consistency and distortion after (and before) calibration."""
+    """``pincal evaluate --fixture --json``: consistency and distortion after (and before) calibration; each
+    placement the calibration has not seen predicted by the corrected and the nominal URDF
+    (``held_out_placements``, :mod:`pincal.fit.placement_check`) and the plausibility ``warnings``."""
 
     after: FixtureMetricsJson
     before: FixtureMetricsJson | None
     not_held_out: list[str]
     notes: list[str]
+    held_out_placements: list[PlacementPredictionJson]
+    warnings: list[Finding]
 
 
 def fixture_metrics_json(metrics: FixtureMetrics) -> FixtureMetricsJson:
