@@ -50,7 +50,8 @@ __all__ = [
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
                          "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                         "sigma_pos": "--sigma-pos", "strict": "--strict"}  # no plausibility checks (yet) here
+                         "sigma_pos": "--sigma-pos", "strict": "--strict",  # no plausibility checks (yet) here
+                         "force": "--force"}  # nor a gross misfit's withheld URDF
 #: Flags of a sensor evaluation that a fixture evaluation has no use for.
 EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
                         "fixed_registration": "--fixed-registration", "new_session": "--new-session",
