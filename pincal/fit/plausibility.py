@@ -192,26 +192,23 @@ def noise_ratio(result, stated_sigma_pos_m: float | None) -> float | None:
     return float(result.rms_m / np.sqrt(3.0) / stated_sigma_pos_m)
 
 
-def unmodelled_reason(result, reach: float, stated_sigma_pos_m: float | None,
-                      what: str = "the calibrated model") -> str | None:
-    """Why ``what`` (``result``, a chain calibration on rows of a robot of ``reach`` [m]) likely lacks an
-    effect, in words; None when nothing says so, at level ``registration`` (its residual holds the
-    geometry's own errors) and for a gross misfit (a data problem: :func:`gross_misfit`).
+def unmodelled_reason(result, reach: float, stated_sigma_pos_m: float | None) -> str | None:
+    """Why ``result`` (a chain calibration on rows of a robot of ``reach`` [m]) likely lacks an effect, in
+    words; None when nothing says so, at level ``registration`` (its residual holds the geometry's own
+    errors) and for a gross misfit (a data problem: :func:`gross_misfit`).
 
-    The signs, first that applies: the estimated noise above :data:`NOTE_NOISE_RATIO` × the stated
-    ``stated_sigma_pos_m`` [m] (:func:`noise_ratio`), or an RMS point residual above :data:`MAX_RMS_M`."""
+    The signs, first that applies: the residual per axis above :data:`NOTE_NOISE_RATIO` × the stated
+    noise ``stated_sigma_pos_m`` [m] (:func:`noise_ratio`), or an RMS point residual above :data:`MAX_RMS_M`."""
     rms = result.rms_m
     if result.level == "registration" or gross_misfit(rms, reach) is not None:
         return None
     ratio = noise_ratio(result, stated_sigma_pos_m)
     if ratio is not None and stated_sigma_pos_m and ratio > NOTE_NOISE_RATIO:  # a stated noise: a ratio
-        sign = (f"the residual ({rms * 1e3 / np.sqrt(3.0):.3g} mm per axis) is {ratio:.1f}× the sensor's stated "
+        return (f"the residual ({rms * 1e3 / np.sqrt(3.0):.3g} mm per axis) is {ratio:.1f}× the sensor's stated "
                 f"noise ({stated_sigma_pos_m * 1e3:g} mm, --sigma-pos; more than {NOTE_NOISE_RATIO:g}×)")
-    elif rms > MAX_RMS_M:
-        sign = f"the residual ({rms * 1e3:.3g} mm RMS) is more than the {MAX_RMS_M * 1e3:g} mm of any geometric error"
-    else:
-        return None
-    return f"{sign}: {what} leaves something unmodelled ({UNMODELLED_CAUSES})"
+    if rms > MAX_RMS_M:
+        return f"the residual ({rms * 1e3:.3g} mm RMS) is more than the {MAX_RMS_M * 1e3:g} mm of any geometric error"
+    return None
 
 
 def _likely(gross: bool, diagnosed: bool) -> str:
