@@ -28,7 +28,7 @@ import numpy as np
 
 from pincal.cli.settings import CalibrateSettings, default_selection
 from pincal.errors import CalibrationError
-from pincal.fit.plausibility import Finding, tip_link_findings, tip_link_verdict
+from pincal.fit.plausibility import UNMODELLED_CAUSES, Finding, tip_link_findings, tip_link_verdict, unmodelled_reason
 from pincal.fit.prior import Prior
 from pincal.measurements.csv_v1 import file_columns
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
@@ -39,7 +39,7 @@ from pincal.report.model import Finding as FindingJson
 from pincal.report.model import findings_json
 
 __all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withhold", "urdf_line", "write_checked_urdf",
-           "diagnose_command"]
+           "unmodelled_notes", "diagnose_command"]
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
@@ -145,6 +145,20 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
             np.abs(a.tool_rotations - b.tool_rotations).max(),
         )
     )
+
+
+def unmodelled_notes(result, reach: float, stated_sigma_pos_m: float | None, command: str | None = None
+                     ) -> list[str]:
+    """The note on a model ``result`` (of a robot of ``reach`` [m]) that likely lacks an effect
+    (:func:`pincal.fit.plausibility.unmodelled_reason`), or none: with the ``pincal diagnose`` ``command``
+    to run (calibrate's), else (diagnose's final model) that the effects diagnose tries do not explain it."""
+    reason = unmodelled_reason(result, reach, stated_sigma_pos_m)
+    if reason is None:
+        return []
+    if command is None:
+        return [f"{reason}: the model with its effects leaves something unmodelled that the effects pincal diagnose "
+                "tries do not explain"]
+    return [f"{reason}: the geometry leaves something unmodelled ({UNMODELLED_CAUSES}); to look for it: {command}"]
 
 
 def diagnose_command(urdf: Path, data_paths: Sequence[Path], settings: CalibrateSettings, out_urdf: Path,

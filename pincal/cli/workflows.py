@@ -32,13 +32,14 @@ from pincal.cli.verdict import (  # noqa: F401 (RELOAD_TOLERANCE and write_check
     Verdict,
     diagnose_command,
     judged,
+    unmodelled_notes,
     withhold,
     write_checked_urdf,
 )
 from pincal.errors import PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.plausibility import UNMODELLED_CAUSES, calibration_findings, reach_m, unmodelled_reason
+from pincal.fit.plausibility import calibration_findings, reach_m
 from pincal.fit.sessions import (
     check_registrable,
     session_pose_errors,
@@ -285,11 +286,9 @@ def calibrate_files(
                                          points=fitted.target.points, target_rotation=fitted.target.rotation)
             verdict = judged(chain, data_paths, calibration_findings(chain, fitted, used, sigma_column,
                                                                      settings.sigma_pos_m), settings.force)
-            unmodelled = unmodelled_reason(fitted, reach_m(chain, used.q), settings.sigma_pos_m)
-            notes = notes + verdict.notes + ([f"{unmodelled}: the geometry leaves something unmodelled "
-                                              f"({UNMODELLED_CAUSES}); to look for it: "
-                                              f"{diagnose_command(urdf, data_paths, settings, out_urdf, report_path)}"]
-                                             if unmodelled else [])
+            notes = notes + verdict.notes + unmodelled_notes(
+                fitted, reach_m(chain, used.q), settings.sigma_pos_m,
+                diagnose_command(urdf, data_paths, settings, out_urdf, report_path))
             entries = session_entries(fitted.session_names, fitted.target.registrations, used, sessions, errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
@@ -443,9 +442,7 @@ def diagnose_files(
     with chain.placed(final.chain_placements):  # judged: the final model, with the effects it adopted
         verdict = judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
                                                                  press_of=calibration, diagnosed=True), settings.force)
-        unmodelled = unmodelled_reason(final, reach_m(chain, used.q), sigma_pos_m)
-    notes += verdict.notes + ([f"{unmodelled}: the model with its effects leaves something unmodelled that the "
-                               "effects pincal diagnose tries do not explain"] if unmodelled else [])
+        notes += verdict.notes + unmodelled_notes(final, reach_m(chain, used.q), sigma_pos_m)
     _, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, final.chain_placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
