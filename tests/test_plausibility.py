@@ -147,8 +147,9 @@ def test_a_calibration_that_predicts_worse_than_nominal_is_caught(industrial_arm
 
 
 @pytest.mark.parametrize("flags", [["--method", "2", "--tool", "0,0,0,0,0,0", "--strict"],
-                                   ["--method", "2", "--tool", "0,0,0,0,0,0", "--sigma-pos", "0.02"]],
-                         ids=["dh-strict", "dh-sigma-pos"])
+                                   ["--method", "2", "--tool", "0,0,0,0,0,0", "--sigma-pos", "0.02"],
+                                   ["--method", "2", "--tool", "0,0,0,0,0,0", "--force"]],
+                         ids=["dh-strict", "dh-sigma-pos", "dh-force"])
 def test_flags_without_checks_are_refused_in_one_line(industrial_arm_urdf, rows, tmp_path, capsys, flags):
     code, out, _ = _calibrate(industrial_arm_urdf, rows, tmp_path, *flags)
     err = capsys.readouterr().err.strip()
