@@ -186,6 +186,8 @@ SLOW_TESTS = (
     "tests/test_diagnosis.py::test_a_joint_read_against_another_is_named_and_corrected_in_the_data",
     "tests/test_tip_link.py::test_calibrate_and_plan_warn_on_a_short_tip",
     "tests/test_tip_link.py::test_diagnose_warns_on_a_short_tip",
+    "tests/test_plausibility_gross.py::test_diagnose_withholds_a_gross_final_model_and_writes_a_corrected_one",
+    "tests/test_plausibility_gross.py::test_a_residual_16_times_the_stated_noise_names_the_diagnose_command",
     "tests/test_cli_start.py::test_every_blas_the_run_loads_gets_one_thread",
     "tests/test_evaluate_console.py::test_diagnose_prints_the_point_rows_of_both_sets",
     "tests/test_evaluate_console.py::test_swapped_axes_warn_and_strict_exits_3_with_the_json_written",

@@ -97,7 +97,8 @@ def test_diagnose_names_it_and_the_flag_brings_the_model_to_the_noise(horizontal
     assert main(["report", str(tmp_path / "d" / "REPORT.json"), "--out", str(tmp_path / "d.html")]) == 0
     page = (tmp_path / "d.html").read_text(encoding="utf-8")  # the page says what to do, and how far it moves
     assert "run again with --coupling A3=-1*A2" in page and f"{effect['target_change']['rms_mm']:.3g} mm RMS" in page
-    for flags, name in (([], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
+    # plain: the readings as they are miss by ~1 m, a model no URDF is written of unless --force
+    for flags, name in ((["--force"], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
         assert main(["calibrate", str(urdf), str(calibration), *common, *flags, "--out", str(tmp_path / f"{name}.urdf"),
                      "--report", str(tmp_path / f"{name}.json")]) in (0, 3)
     report = json.loads((tmp_path / "coupled.json").read_text(encoding="utf-8"))

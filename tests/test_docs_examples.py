@@ -5,8 +5,12 @@ tiago_mocap|mukca|lwr_bag --out data`` and the KUKA URDF at ``urdf/kuka_lwr4plus
 path). A ```` ```bash ```` (``sh``, ``shell``, ``console``: ``$ `` lines) block's commands run
 in-process — ``pincal ...`` through :func:`pincal.cli.commands.main`, ``python FILE`` through
 :mod:`runpy` (a file of the clone, scripts/, when the directory has none), and
-``$(python -c "...")`` is replaced by what the code prints — and each must exit 0. A
-```` ```python ```` block runs in a fresh namespace. A block that cannot run in a test says why
+``$(python -c "...")`` is replaced by what the code prints — and each must exit 0, or the code a
+marker right before the block states for every command of it (a command that shows a refusal)::
+
+    <!-- exits 3: REASON -->
+
+A ```` ```python ```` block runs in a fresh namespace. A block that cannot run in a test says why
 right before it::
 
     <!-- not run: REASON -->
@@ -45,6 +49,7 @@ EXAMPLES = ("tiago_mocap", "mukca", "lwr_bag")
 _FENCE = re.compile(r"^(```|~~~)\s*([\w+-]*)")
 _NOT_RUN = re.compile(r"^<!--\s*not run:\s*(\S.*?)\s*-->$")
 _OUTPUT = re.compile(r"^<!--\s*output of the block above\s*-->$")
+_EXITS = re.compile(r"^<!--\s*exits (\d+):\s*(\S.*?)\s*-->$")
 _PYTHON_C = re.compile(r'\$\(python -c "([^"]*)"\)')
 
 
@@ -58,6 +63,7 @@ class Block:
     text: str
     not_run: str | None = None  # the reason given
     output: bool = False  # a listing of the previous block's output
+    exits: int = 0  # every command's exit code (<!-- exits N: REASON -->)
 
     def __str__(self) -> str:
         return f"{self.page.relative_to(ROOT) if self.page.is_relative_to(ROOT) else self.page}:{self.line}"
@@ -77,9 +83,10 @@ def blocks(page: Path) -> list[Block]:
             start, language = i, fence[2].lower()
         elif fence and line.strip() == fence[1]:
             before = next((lines[j].strip() for j in range(start - 1, -1, -1) if lines[j].strip()), "")
-            not_run = _NOT_RUN.match(before)
+            not_run, exits = _NOT_RUN.match(before), _EXITS.match(before)
             found.append(Block(page, start + 1, language, "\n".join(lines[start + 1:i]),
-                               not_run[1] if not_run else None, bool(_OUTPUT.match(before))))
+                               not_run[1] if not_run else None, bool(_OUTPUT.match(before)),
+                               int(exits[1]) if exits else 0))
             start = None
     return found
 
@@ -172,7 +179,8 @@ def run_block(block: Block) -> str:
     outputs = []
     for argv in shell_commands(block):
         code, output = run_command(argv, str(block))
-        assert code == 0, f"{block}: {shlex.join(argv)[:300]} exited {code}:\n{output[-3000:]}"
+        assert code == block.exits, (f"{block}: {shlex.join(argv)[:300]} exited {code}"
+                                     f"{f' (the page says {block.exits})' if block.exits else ''}:\n{output[-3000:]}")
         outputs.append(output)
     return "".join(outputs)
 
@@ -241,6 +249,8 @@ def test_the_runner_fails_on_a_wrong_flag_an_unmarked_block_and_a_wrong_output(t
     assert "exited 2" in wrong_flag and "unrecognized arguments: --sed" in wrong_flag
     assert "neither runs nor says why" in failure("```\npincal demo\n```\n")
     assert "cannot run 'rm -rf x'" in failure("```bash\nrm -rf x\n```\n")
+    assert "exited 0 (the page says 3)" in failure('<!-- exits 3: a refusal -->\n```bash\npython -c "print(1)"\n'
+                                                   "```\n")
     assert "did not print" in failure('```bash\npython -c "print(1)"\n```\n<!-- output of the block above -->\n'
                                       "```text\n2\n```\n")
     page.write_text('```sh\npython -c "print(1)" && python -c "print($(python -c "print(2)"))"  # a comment\n```\n\n'

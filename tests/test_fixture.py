@@ -311,6 +311,7 @@ CALIBRATE_IIWA = [str(IIWA), str(MUKCA / "kuka_14" / "front.csv"), "--fixture", 
     (["--tip-link", "tool0", "--weight", "1"], "--weight"),  # the default value, given: still refused
     (["--tip-link", "tool0", "--sigma-column", "sigma"], "--sigma-column"),
     (["--tip-link", "tool0", "--reject-outliers"], "--reject-outliers"),
+    (["--tip-link", "tool0", "--force"], "--force"),  # the fixture path withholds no URDF (yet): not ignored
 ])
 def test_calibrate_sensor_flags_are_refused_in_one_line(tmp_path, capsys, flags, named):
     code = main(["calibrate", *CALIBRATE_IIWA, *flags, "--out", str(tmp_path / "o.urdf"),

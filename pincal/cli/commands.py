@@ -2,7 +2,10 @@
 
 The arguments are defined in :mod:`pincal.cli.parser`. Every user error is
 printed as one line ``pincal: error: ...`` with exit code 2; ``pincal
-evaluate`` exits 1 when a threshold is exceeded.
+evaluate`` exits 1 when a threshold is exceeded; ``calibrate`` and ``diagnose``
+exit 3 when their model misses its rows grossly and the corrected URDF is
+withheld (:mod:`pincal.cli.verdict`), and any of the three with ``--strict``
+and a warning.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ __all__ = ["EXIT_THRESHOLD", "EXIT_USAGE", "EXIT_WARNING", "main", "console"]
 
 EXIT_THRESHOLD = 1
 EXIT_USAGE = 2
-EXIT_WARNING = 3  # --strict and a warning (pincal.fit.plausibility); the outputs are written
+EXIT_WARNING = 3  # --strict and a warning (the outputs written), or a gross misfit (the corrected URDF withheld)
 
 
 def _print_notes(notes: Sequence[str]) -> None:
@@ -33,12 +36,13 @@ def _print_notes(notes: Sequence[str]) -> None:
         print(f"pincal: note: {note}", file=sys.stderr)
 
 
-def _warned(report: Mapping[str, Any], strict: bool) -> int:
-    """Print REPORT.json's ``warnings`` on stderr; the exit code: 3 with ``strict`` and a warning, else 0."""
+def _warned(report: Mapping[str, Any], strict: bool, withheld: bool = False) -> int:
+    """Print REPORT.json's ``warnings`` on stderr; the exit code: 3 with ``strict`` and a warning, or when
+    the corrected URDF was ``withheld`` (a gross misfit: pincal.cli.verdict), else 0."""
     warnings = report.get("warnings") or []
     for warning in warnings:
         print(f"pincal: warning: {warning['message']}", file=sys.stderr)
-    return EXIT_WARNING if strict and warnings else 0
+    return EXIT_WARNING if withheld or (strict and warnings) else 0
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
@@ -68,15 +72,16 @@ def _run_calibrate(args: argparse.Namespace) -> int:
 
         return _warned(run_calibrate(args), args.strict)
     level = args.level or ("dh" if args.method is not None else "full")
-    if level == "dh" and args.strict:
-        raise PincalError("--strict applies to --level registration, offsets, full or auto (the plausibility checks "
-                          "of pincal.fit.plausibility), not to the paper's methods; drop it")
+    for flag, given in (("--strict", args.strict), ("--force", args.force)):
+        if level == "dh" and given:
+            raise PincalError(f"{flag} applies to --level registration, offsets, full or auto (the plausibility "
+                              "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
     settings = CalibrateSettings(
         tip_link=args.tip_link, level=level, method=args.method,
         weight=1.0 if args.weight is None else args.weight,  # None: not given (refused with --fixture)
         tool_pose=args.tool, sigma_column=args.sigma_column, reject_outliers=args.reject_outliers,
         selection=selection_criterion(args), sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args,
-        couplings=args.coupling or ())
+        couplings=args.coupling or (), force=args.force)
     method = settings.paper_method
     _check_html(args.html, *_description_inputs(args), *args.data, outputs=[args.out, args.report])
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
@@ -106,11 +111,13 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         print(before_after)
     for session in several:
         print(f"{'  session ' + session.name:24s} {error_columns(session.errors)}")
-    print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
+    from pincal.cli.verdict import urdf_line
+
+    print(urdf_line(args.out, run.withheld, run.reload_error))
     print(f"wrote {args.report}")
     _print_effects_file(run.effects_file, run.report)
     _write_html(args.html, run.report, args.report.parent)
-    return _warned(run.report, args.strict)
+    return _warned(run.report, args.strict, run.withheld)
 
 
 def _print_effects_file(path, report: Mapping[str, Any]) -> None:
@@ -287,7 +294,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),
                                 payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
                                 xacro_args=args.xacro_args, couplings=args.coupling or (),
-                                temperature_column=args.temperature_column,
+                                temperature_column=args.temperature_column, force=args.force,
                                 **({} if args.pause_s is None else {"pause_s": args.pause_s}))
     _check_html(args.html, *_description_inputs(args), *args.data, args.validation, outputs=[args.out, args.report])
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
@@ -342,10 +349,13 @@ def _run_diagnose(args: argparse.Namespace) -> int:
             print(line)
     for path in run.plots:
         print(f"wrote {path}")
-    print(f"wrote {args.out}\nwrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
+    from pincal.cli.verdict import urdf_line
+
+    print(f"{urdf_line(args.out, run.withheld)}\n"
+          f"wrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
     _print_effects_file(run.effects_file, run.report)
     _write_html(args.html, run.report, args.report.parent)
-    return _warned(run.report, args.strict)
+    return _warned(run.report, args.strict, run.withheld)
 
 
 def _run_report(args: argparse.Namespace) -> int:

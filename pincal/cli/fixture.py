@@ -70,7 +70,8 @@ __all__ = [
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
                          "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                         "sigma_pos": "--sigma-pos"}
+                         "sigma_pos": "--sigma-pos",
+                         "force": "--force"}  # nothing withheld here: the sensor path's gross misfit
 #: Flags of a sensor evaluation that a fixture evaluation has no use for.
 EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
                         "fixed_registration": "--fixed-registration", "new_session": "--new-session",

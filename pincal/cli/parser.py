@@ -67,10 +67,15 @@ def _add_quiet(parser: argparse.ArgumentParser) -> None:
 
 def _add_plausibility(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sigma-pos", type=positive, metavar="MM",
-                        help="the sensor's stated position noise per axis [mm]: a residual above 20x it is warned "
-                             "about (pincal.fit.plausibility); the fit's weights come from the data either way")
+                        help="the sensor's stated position noise per axis [mm]: a residual per axis above 3x it is "
+                             "noted (with the pincal diagnose command to run), above 20x warned about "
+                             "(pincal.fit.plausibility); the fit's weights come from the data either way")
     parser.add_argument("--strict", action="store_true",
                         help="exit 3 when any warning is given (the outputs are written all the same)")
+    parser.add_argument("--force", action="store_true",
+                        help="write the corrected URDF (and effects.yaml) even when the model misses its rows by more "
+                             "than 5%% of the robot's reach, which no physical effect does (without it: exit 3, the "
+                             "report and --html written, not these)")
 
 
 def _add_extract(sub) -> None:

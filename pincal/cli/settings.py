@@ -92,6 +92,7 @@ class _FitSettings:
     tool_pose: np.ndarray | None
     xacro_args: tuple[tuple[str, str], ...]
     couplings: tuple[ReadingCoupling, ...]
+    force: bool
 
     def _resolve(self) -> None:
         """From ``__post_init__``, after the level is checked: the default selection, then the checks."""
@@ -137,6 +138,8 @@ class CalibrateSettings(_FitSettings):
         xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
         couplings: joint readings taken against another joint (``--coupling``), corrected in every
             row read (:mod:`pincal.measurements.couplings`, eq C1).
+        force: write the corrected URDF (and effects.yaml) even of a model that misses its rows grossly
+            (``--force``; :func:`pincal.fit.plausibility.gross_misfit`); without it they are withheld.
 
     Raises:
         PincalError: an unknown level, method or selection; a method outside level ``dh``, or
@@ -156,6 +159,7 @@ class CalibrateSettings(_FitSettings):
     sigma_pos_mm: float | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
     couplings: tuple[ReadingCoupling, ...] = ()
+    force: bool = False
 
     def __post_init__(self) -> None:
         if self.level not in CALIBRATE_LEVELS:
@@ -187,8 +191,9 @@ class DiagnoseSettings(_FitSettings):
     """``pincal diagnose`` without its paths.
 
     Attributes:
-        tip_link, tool_pose, sigma_column, selection, sigma_pos_mm, xacro_args, couplings: as for
-            :class:`CalibrateSettings` (``selection`` None: :func:`default_selection`).
+        tip_link, tool_pose, sigma_column, selection, sigma_pos_mm, xacro_args, couplings, force: as for
+            :class:`CalibrateSettings` (``selection`` None: :func:`default_selection`; ``force``: of the
+            final model, with its effects).
         level: the geometry under the effects, one of :data:`DIAGNOSE_LEVELS`.
         payload_kg: a point mass at the target for the gravity torques [kg].
         time_column: the column of row times [s] (None: the first of
@@ -214,6 +219,7 @@ class DiagnoseSettings(_FitSettings):
     couplings: tuple[ReadingCoupling, ...] = ()
     temperature_column: str | None = None
     pause_s: float = PAUSE_S
+    force: bool = False
 
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:

@@ -27,10 +27,19 @@ from pincal.cli.paths import (
     refuse_overwrite_matching,
 )
 from pincal.cli.settings import CalibrateSettings, DiagnoseSettings, expect
-from pincal.errors import CalibrationError, PincalError, did_you_mean
+from pincal.cli.verdict import (  # noqa: F401 (RELOAD_TOLERANCE and write_checked_urdf re-exported)
+    RELOAD_TOLERANCE,
+    Verdict,
+    diagnose_command,
+    judged,
+    unmodelled_notes,
+    withhold,
+    write_checked_urdf,
+)
+from pincal.errors import PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
-from pincal.fit.plausibility import Finding, calibration_findings, tip_link_findings, tip_link_verdict
+from pincal.fit.plausibility import calibration_findings, reach_m
 from pincal.fit.sessions import (
     check_registrable,
     session_pose_errors,
@@ -38,20 +47,18 @@ from pincal.fit.sessions import (
     where,
 )
 from pincal.measurements.csv_v1 import (
-    file_columns,
     read_measurements,
     read_sessions,
     write_measurements,
 )
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
-from pincal.model.corrected_urdf import write_corrected_urdf
 from pincal.model.description import xacro_arguments
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.dh.table import DEVIATION_SETS, KUKA_LWR4_DH
 from pincal.model.drift import TIME_COLUMNS, time_column
 from pincal.model.effects import effect_to_dict, parse_effect
-from pincal.outputs import file_sha256, write_text
+from pincal.outputs import write_text
 from pincal.progress import Progress, Stages
 from pincal.report.diagnosis import diagnosis_report
 from pincal.report.document import (
@@ -67,10 +74,8 @@ from pincal.report.model import (
     PaperReport,
     Sources,
     couplings_part,
-    findings_json,
     level_choice_part,
 )
-from pincal.report.model import Finding as FindingJson
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.row_errors import (
     chain_row_errors,
@@ -90,9 +95,6 @@ __all__ = [
     "RELOAD_TOLERANCE", "simulate_to_directory", "CalibrationRun", "calibrate_chain_dh", "calibrate_files",
     "unfitted_sessions", "write_checked_urdf", "DiagnoseRun", "diagnose_files",
 ]
-
-#: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
-RELOAD_TOLERANCE = 1e-9
 
 
 # --- simulate ----------------------------------------------------------------
@@ -174,6 +176,8 @@ class CalibrationRun:
         level_choice: how ``--level auto`` chose the level (None for a level given).
         effects_file: the effects.yaml written beside the URDF (``--coupling``), or None
             (:mod:`pincal.report.effects_file`).
+        withheld: the model misses its rows grossly: the corrected URDF and effects.yaml were not written
+            (:mod:`pincal.cli.verdict`; ``reload_error`` is of the URDF withheld).
     """
 
     result: PaperCalibration | ChainCalibration
@@ -185,6 +189,7 @@ class CalibrationRun:
     sessions: tuple[SessionEvaluation, ...] = ()
     level_choice: LevelChoice | None = None
     effects_file: Path | None = None
+    withheld: bool = False
 
 
 def calibrate_chain_dh(
@@ -240,6 +245,7 @@ def calibrate_files(
                         "corrected_urdf": str(out_urdf)}
     choice = None
     paper: PaperCalibration | None = None
+    verdict = Verdict([], [], withheld=False)  # the paper's methods are not judged
     if level == "dh":
         if len(data.session_names) > 1:
             raise PincalError(
@@ -278,9 +284,11 @@ def calibrate_files(
             sessions = session_rows(used, fitted.session_names)
             errors = session_pose_errors(chain, used, sessions, fitted.target.registrations,
                                          points=fitted.target.points, target_rotation=fitted.target.rotation)
-            warnings, tip_notes = _judged(chain, data_paths, calibration_findings(chain, fitted, used, sigma_column,
-                                                                                 settings.sigma_pos_m))
-            notes = notes + tip_notes
+            verdict = judged(chain, data_paths, calibration_findings(chain, fitted, used, sigma_column,
+                                                                     settings.sigma_pos_m), settings.force)
+            notes = notes + verdict.notes + unmodelled_notes(
+                fitted, reach_m(chain, used.q), settings.sigma_pos_m,
+                diagnose_command(urdf, data_paths, settings, out_urdf, report_path))
             entries = session_entries(fitted.session_names, fitted.target.registrations, used, sessions, errors)
             session_list = tuple(
                 SessionEvaluation(entry["name"], entry["rows"], registration, registration,
@@ -298,8 +306,11 @@ def calibrate_files(
     reload_error, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {', '.join(p.name for p in data_paths)}. "
-        "Registration and tool: see the report.", xacro_args,
+        "Registration and tool: see the report.", xacro_args, keep=not verdict.withheld,
     )
+    if verdict.withheld:
+        removed = withhold(out_urdf)
+        notes, report_notes = notes + removed, report_notes + removed
     xacro = dict(xacro_arguments(xacro_args))
     report: PaperReport | CalibrationReport
     if paper is not None:
@@ -309,20 +320,14 @@ def calibrate_files(
     else:
         with chain.placed(placements):  # the report describes the calibrated model
             report = chain_report(chain_head(fitted, chain, tool_parent, errors, n_rows, sources, report_notes),
-                                  warnings=warnings, sessions=entries, row_errors=row_errors,
+                                  warnings=verdict.warnings, sessions=entries, row_errors=row_errors,
                                   level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro,
                                   couplings=couplings_part(settings.couplings))
-    effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
+    # the couplings, which a URDF cannot carry, beside the URDF (none beside a withheld one)
+    effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
-    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice, effects_file)
-
-
-def _judged(chain: KinematicChain, data_paths: Sequence[str | Path], findings: list[Finding]
-            ) -> tuple[list[FindingJson], list[str]]:
-    """REPORT.json ``warnings`` and the notes of a calibration of the files ``data_paths``: its plausibility
-    ``findings`` and the tip-link check of each file (:func:`pincal.fit.plausibility.tip_link_verdict`)."""
-    warned, notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)), findings)
-    return findings_json(warned), notes
+    return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice, effects_file,
+                          verdict.withheld)
 
 
 def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
@@ -340,48 +345,6 @@ def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:
     return notes
 
 
-def write_checked_urdf(
-    source: Path, destination: Path, chain: KinematicChain, placements, nominal_placements, q: np.ndarray,
-    comment: str, xacro_args: Sequence[tuple[str, str]] = (),
-) -> tuple[float, str]:
-    """Write the URDF of ``chain`` with ``placements`` (a calibration's ``chain_placements``),
-    checking before it replaces ``destination`` that reloading it reproduces that model's tool
-    poses at ``q`` to :data:`RELOAD_TOLERANCE` (a failed check leaves the old file); a ``.xacro``
-    source is expanded with ``xacro_args``. The chain is left as it was.
-
-    Returns:
-        The largest difference [m, -] and the SHA-256 (hex) of the bytes written
-        (the report's ``urdf_sha256``).
-    """
-    checked: list[float] = []
-    digest: list[str] = []
-
-    def verify(written: Path) -> None:
-        checked.append(_reload_error(written, chain, q))
-        if checked[-1] > RELOAD_TOLERANCE:
-            raise CalibrationError(
-                f"{destination}: reloading the written URDF moves the tool by {checked[-1]:.3g} "
-                f"(> {RELOAD_TOLERANCE:g}); not written; please report this as a bug"
-            )
-        digest.append(file_sha256(written))
-
-    with chain.placed(placements):
-        write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify,
-                             xacro_args=xacro_args)
-    return checked[-1], digest[-1]
-
-
-def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
-    reloaded = KinematicChain.from_urdf(urdf, chain.tip_link, tool=chain.tool)
-    a, b = chain.poses(q), reloaded.poses(q)
-    return float(
-        max(
-            np.abs(a.tool_positions - b.tool_positions).max(),
-            np.abs(a.tool_rotations - b.tool_rotations).max(),
-        )
-    )
-
-
 # --- evaluate: pincal.cli.evaluation (re-exported here) ----------------------------------
 
 
@@ -390,7 +353,8 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class DiagnoseRun:
-    """Outcome of :func:`diagnose_files` (``effects_file``: the effects.yaml written beside the URDF, or None)."""
+    """Outcome of :func:`diagnose_files` (``effects_file``: the effects.yaml written beside the URDF, or None;
+    ``withheld``: the final model misses its rows grossly, the URDF and effects.yaml were not written)."""
 
     calibration: ChainCalibration
     diagnosis: Diagnosis
@@ -400,6 +364,7 @@ class DiagnoseRun:
     seconds: float
     level_choice: LevelChoice | None = None
     effects_file: Path | None = None
+    withheld: bool = False
 
 
 def diagnose_files(
@@ -473,12 +438,20 @@ def diagnose_files(
         rms_m=float(np.sqrt(np.mean(diagnosis.calibration_errors.position_m**2))),
         chain_placements=diagnosis.chain_placements,
     )
+    used = data.select(calibration.used_index)
+    with chain.placed(final.chain_placements):  # judged: the final model, with the effects it adopted
+        verdict = judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                                 press_of=calibration, diagnosed=True), settings.force)
+        notes += verdict.notes + unmodelled_notes(final, reach_m(chain, used.q), sigma_pos_m)
     _, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, final.chain_placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
         f"{', '.join(p.name for p in data_paths)}. "
         "Registration, tool and effects (which a URDF cannot carry): see the report.", xacro_args,
+        keep=not verdict.withheld,
     )
+    if verdict.withheld:
+        notes += withhold(out_urdf)
     sources: Sources = {"urdf": str(urdf),
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf),
@@ -489,13 +462,9 @@ def diagnose_files(
 
         plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
     with chain.placed(final.chain_placements):  # the report describes the final model
-        used = data.select(calibration.used_index)
-        warnings, tip_notes = _judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column,
-                                                                             sigma_pos_m, press_of=calibration))
-        notes += tip_notes
         head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
         report = diagnosis_report(
-            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=warnings,
+            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=verdict.warnings,
             sessions=session_entries(final.session_names, final.target.registrations, used,
                                      session_rows(used, final.session_names), diagnosis.calibration_errors),
             time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)
@@ -506,10 +475,11 @@ def diagnose_files(
             level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
             couplings=couplings_part(settings.couplings),
         )
-    effects_file = write_effects_file(out_urdf, report_path, report)  # what the URDF cannot carry, for a controller
+    # what the URDF cannot carry, for a controller (nothing beside a withheld URDF)
+    effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
     return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice,
-                       effects_file)
+                       effects_file, verdict.withheld)
 
 
 def _time_name(data: MeasurementSet) -> str | None:

@@ -19,8 +19,9 @@ Keys promised to users (never renamed, only extended):
   what absorbs it, correlated pairs), ``noise``, ``outliers``;
 * ``fit``: stages, row counts and the errors (eq 24) on the calibration rows;
 * ``urdf_sha256``: SHA-256 of the corrected URDF written with the report (the
-  bytes written), so ``pincal evaluate`` can tell the pair apart from a URDF of
-  another run;
+  bytes written; of a URDF withheld for a gross misfit, the bytes ``--force``
+  writes: :mod:`pincal.cli.verdict`), so ``pincal evaluate`` can tell the pair
+  apart from a URDF of another run;
 * ``xacro_args``: ``{NAME: VALUE}`` the ``.xacro`` URDF was expanded with
   (``--xacro-arg``; ``{}`` for a URDF file or the xacro's defaults);
 * ``row_errors``: the error of every row by file line, nominal geometry to the

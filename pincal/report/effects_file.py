@@ -37,7 +37,7 @@ from pincal.model.effects import APPROACH_MIN_STEP, SENSOR_EFFECTS, Effect, effe
 from pincal.outputs import write_text
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "EffectsFile", "effects_path", "carried", "written_line", "effects_document",
-           "write_effects_file", "read_effects_file"]
+           "remove_effects_file", "write_effects_file", "read_effects_file"]
 
 #: The file's ``schema`` and ``schema_version``: a new key may appear; a changed meaning gets a new version.
 SCHEMA = "pincal-effects"
@@ -151,17 +151,26 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
     }
 
 
+def remove_effects_file(out_urdf: str | Path) -> Path | None:
+    """Remove the ``CORRECTED.effects.yaml`` (:func:`effects_path`) pincal wrote beside ``out_urdf`` for an
+    earlier run, if there is one (a file of that name not pincal's is left alone); the file removed, or None."""
+    path = effects_path(out_urdf)
+    try:
+        if yaml.safe_load(path.read_text(encoding="utf-8")).get("schema") == SCHEMA:
+            path.unlink()
+            return path
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError):
+        pass  # absent, or not ours: left alone
+    return None
+
+
 def write_effects_file(out_urdf: str | Path, report_path: str | Path, report: Mapping[str, Any]) -> Path | None:
     """Write ``CORRECTED.effects.yaml`` (:func:`effects_path`) of ``report`` when it has couplings or effects
     (atomically: :func:`pincal.outputs.write_text`); without either, remove a file of that name pincal wrote
     for an earlier run (it would pair the new URDF with old effects). Returns the file written, or None."""
     path = effects_path(out_urdf)
     if not carried(report):
-        try:
-            if yaml.safe_load(path.read_text(encoding="utf-8")).get("schema") == SCHEMA:
-                path.unlink()
-        except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError):
-            pass  # absent, or not ours: left alone
+        remove_effects_file(out_urdf)
         return None
     document = effects_document(report, out_urdf, report_path)
     write_text(path, _HEADER + yaml.safe_dump(document, sort_keys=False, allow_unicode=True, width=110))
