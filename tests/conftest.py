@@ -191,7 +191,7 @@ SLOW_TESTS = (
     "tests/test_evaluate_console.py::test_swapped_axes_warn_and_strict_exits_3_with_the_json_written",
     "tests/test_crawling_fits.py::test_a_candidate_whose_naming_fit_crawls_is_named_absorbed",
     "tests/test_crawling_fits.py::test_the_data_scale_fit_of_a_prior_calibration_stops_at_its_budget",
-    "tests/test_couplings.py::test_diagnose_names_it_and_the_flag_brings_the_model_to_the_noise",
+    "tests/test_couplings.py::test_diagnose_corrects_it_itself_and_the_flag_brings_the_model_to_the_noise",
     "tests/test_couplings.py::test_a_wrong_factor_given_is_named_with_the_one_that_fits",
     "tests/test_effects_file.py::test_calibrate_writes_couplings_only_and_a_plain_run_removes_its_stale_file",
     "tests/test_effects_file.py::test_diagnose_writes_what_the_urdf_cannot_carry_and_it_reads_back_as_the_report",

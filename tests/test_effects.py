@@ -179,8 +179,8 @@ def test_each_effect_states_its_unit():
 
 
 def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
-    """pincal.diagnosis.verdicts.held_out_verdict: the per-row change of squared held-out error over
-    the noise, position and orientation together, must fall by more than 2 standard errors."""
+    """pincal.diagnosis.verdicts.held_out_verdict: the per-row change of held-out error over the noise,
+    position and orientation together, must fall at the signed-rank test's one-sided level Φ(−2)."""
     from pincal.diagnosis.verdicts import held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
@@ -206,15 +206,36 @@ def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
     assert held_out_verdict(positions, PoseErrors(before.position_m * 0.5, None), sigma_pos, None) == "adopted"
 
 
-def test_a_few_held_out_rows_veto_only_a_worse_total():
-    """Below MIN_PAIRED_ROWS held-out rows there is no standard error (one row: ±inf, which refused every
-    effect): only a worse total refuses."""
-    from pincal.diagnosis.verdicts import MIN_PAIRED_ROWS, held_out_verdict
+def test_a_few_held_out_rows_veto_only_a_worse_median():
+    """Below MIN_PAIRED_ROWS held-out rows the signed-rank test cannot reach its level (2⁻ⁿ > 0.0228): only
+    most rows worse (the median change above zero) refuses, so one wild row cannot either."""
+    from pincal.diagnosis.verdicts import HELD_OUT_LEVEL, MIN_PAIRED_ROWS, held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
+    assert 2.0 ** -MIN_PAIRED_ROWS < HELD_OUT_LEVEL < 2.0 ** -(MIN_PAIRED_ROWS - 1)
     before = PoseErrors(np.full((MIN_PAIRED_ROWS - 4, 1), 0.6), None)
     assert held_out_verdict(before, PoseErrors(before.position_m / 6, None), 2e-5, None) == "adopted"
-    assert "too few for a paired test" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None), 2e-5, None)
+    assert "too few for a signed-rank test" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None),
+                                                                2e-5, None)
+    three = PoseErrors(np.array([[1e-4], [1e-4], [1.0]]), None)  # two rows improve, one a metre off worsens
+    assert held_out_verdict(three, PoseErrors(np.array([[2e-5], [2e-5], [1.5]]), None), 2e-5, None) == "adopted"
+
+
+def test_two_wild_held_out_rows_cannot_decide():
+    """18 held-out rows that an effect brings from its 0.3 mm to the noise (20 µm), and two rows a metre off (a
+    bad measurement) whose error it moves 0.3 mm further: the mean change of squared error is the wild rows'
+    (+1.5e6 noise² each against −225 for each good row), the signed-rank test of the distances is not."""
+    from pincal.diagnosis.verdicts import held_out_verdict
+    from pincal.fit.metrics import PoseErrors
+
+    rng = np.random.default_rng(29)
+    sigma, shift = 20e-6, 3e-4
+    noise = np.abs(rng.normal(0.0, sigma * np.sqrt(3), 20))
+    before = PoseErrors(np.concatenate([shift + noise[:18], [1.0, 1.2]])[:, None], None)
+    after = PoseErrors(np.concatenate([noise[:18], [1.0 + shift, 1.2 + shift]])[:, None], None)
+    assert held_out_verdict(before, after, sigma, None) == "adopted"
+    worse = PoseErrors(before.position_m * 1.02, None)  # every row 2 % worse, the wild ones too: still worse
+    assert held_out_verdict(before, worse, sigma, None).startswith("it makes the held-out rows worse")
 
 
 def test_a_report_effect_with_the_wrong_number_of_values_is_refused_in_one_line():

@@ -80,6 +80,7 @@ def diagnosis_report(
                 "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
                 "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
                 "candidates": [_candidate(c) for c in step.candidates],
+                **({} if step.convention is None else {"convention": step.convention.as_dict()}),
             }
             for step in diagnosis.steps
         ],
