@@ -94,7 +94,8 @@ def test_diagnose_corrects_it_itself_and_the_flag_brings_the_model_to_the_noise(
     assert main(["diagnose", str(urdf), str(calibration), "--validation", str(validation), *common,
                  "--out", str(tmp_path / "d.urdf"), "--report", str(tmp_path / "d" / "REPORT.json")]) == 0
     printed = capsys.readouterr().out
-    assert "A3 is read against A2 (as parallelogram arms read J3 from the horizontal): its reading is A3 − A2" in printed
+    assert ("A3 is read against A2 (as parallelogram arms read J3 from the horizontal): its reading is A3 − A2"
+            in printed)
     document = json.loads((tmp_path / "d" / "REPORT.json").read_text(encoding="utf-8"))
     assert document["couplings"] == [{"joint": "A3", "factor": -1.0, "driver": "A2"}]
     assert not [e for e in document["effects"] if e["type"] == "coupling"]

@@ -15,7 +15,8 @@ from conftest import unaccepted_flags
 
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
-from pincal.diagnosis.verdicts import CRITERION, HELD_OUT_Z, NEGLIGIBLE
+from pincal.diagnosis.held_out import HELD_OUT_Z
+from pincal.diagnosis.verdicts import CRITERION, NEGLIGIBLE
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.measurements.couplings import apply_couplings, parse_coupling
 from pincal.measurements.csv_v1 import read_measurements

@@ -8,6 +8,7 @@ import pytest
 from conftest import assert_close, numeric_jacobian
 
 from pincal.errors import PincalError
+from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.effects import (
     FLANK_GAP_S,
     Effect,
@@ -17,7 +18,6 @@ from pincal.model.effects import (
     gravity_torques,
     parse_effect,
 )
-from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
@@ -181,7 +181,7 @@ def test_each_effect_states_its_unit():
 def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
     """pincal.diagnosis.verdicts.held_out_verdict: the per-row change of held-out error over the noise,
     position and orientation together, must fall at the signed-rank test's one-sided level Φ(−2)."""
-    from pincal.diagnosis.verdicts import held_out_verdict
+    from pincal.diagnosis.held_out import held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
     rng = np.random.default_rng(4)
@@ -207,25 +207,29 @@ def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
 
 
 def test_a_few_held_out_rows_veto_only_a_worse_median():
-    """Below MIN_PAIRED_ROWS held-out rows the signed-rank test cannot reach its level (2⁻ⁿ > 0.0228): only
-    most rows worse (the median change above zero) refuses, so one wild row cannot either."""
-    from pincal.diagnosis.verdicts import HELD_OUT_LEVEL, MIN_PAIRED_ROWS, held_out_verdict
+    """Below MIN_PAIRED_ROWS held-out rows the effect moves by a noise unit (TELLING_CHANGE) the signed-rank
+    test cannot reach its level (2⁻ⁿ > 0.0228): only most of them worse (their median change above zero)
+    refuses, so one wild row cannot either; rows it does not move cannot refute it."""
+    from pincal.diagnosis.held_out import HELD_OUT_LEVEL, MIN_PAIRED_ROWS, held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
     assert 2.0 ** -MIN_PAIRED_ROWS < HELD_OUT_LEVEL < 2.0 ** -(MIN_PAIRED_ROWS - 1)
     before = PoseErrors(np.full((MIN_PAIRED_ROWS - 4, 1), 0.6), None)
     assert held_out_verdict(before, PoseErrors(before.position_m / 6, None), 2e-5, None) == "adopted"
-    assert "too few for a signed-rank test" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None),
-                                                                2e-5, None)
+    assert "most of them worse" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None), 2e-5, None)
     three = PoseErrors(np.array([[1e-4], [1e-4], [1.0]]), None)  # two rows improve, one a metre off worsens
     assert held_out_verdict(three, PoseErrors(np.array([[2e-5], [2e-5], [1.5]]), None), 2e-5, None) == "adopted"
+    # twelve rows of which one sees the effect (circle point analysis: one joint moves in two held-out rows)
+    twelve = PoseErrors(np.r_[np.full(11, 3e-5), 8e-4][:, None], None)
+    moved = PoseErrors(np.r_[np.full(11, 3e-5) * np.r_[1.3, np.ones(10)], 3e-5][:, None], None)
+    assert held_out_verdict(twelve, moved, 2e-5, None) == "adopted"
 
 
 def test_two_wild_held_out_rows_cannot_decide():
     """18 held-out rows that an effect brings from its 0.3 mm to the noise (20 µm), and two rows a metre off (a
     bad measurement) whose error it moves 0.3 mm further: the mean change of squared error is the wild rows'
     (+1.5e6 noise² each against −225 for each good row), the signed-rank test of the distances is not."""
-    from pincal.diagnosis.verdicts import held_out_verdict
+    from pincal.diagnosis.held_out import held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
     rng = np.random.default_rng(29)

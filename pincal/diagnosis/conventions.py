@@ -27,7 +27,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
-from pincal.diagnosis.verdicts import Judge, fitted_scales, held_out_verdict
+from pincal.diagnosis.held_out import fitted_scales, held_out_verdict
+from pincal.diagnosis.verdicts import Judge
 from pincal.fit.chain_calibration import ChainCalibration, row_weights
 from pincal.fit.metrics import PoseErrors
 from pincal.measurements.couplings import ReadingCoupling

@@ -18,13 +18,17 @@ one is adopted when the evidence is very strong (ΔBIC < −10, Kass & Raftery
 * a value outside physical range — a stand-in for something else;
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
-* a close competitor with a strongly correlated basis (e.g. the approach flanks
-  of two joints that always move together): the data cannot tell them apart;
 * an effect too small to change any measured coordinate by a tenth of its noise;
 * when held-out rows are given, an effect that does not make them better beyond their
-  noise (a paired test of the per-row change of their error).
+  noise (a signed-rank test of the per-row change of their error that a few wild rows cannot decide).
 
-Such cases are reported, not adopted. The loop repeats until nothing
+Such cases are reported, not adopted. Candidates that correct the same poses the same way (a close
+competitor with a strongly correlated basis, e.g. the approach flanks of two joints that always move
+together, or two harmonics over a short range) are not refused: the one that predicts the held-out rows
+best, or the simpler, is taken and the others named. A gross effect is fitted to the end: a fit given
+a budget goes on while it gains (:mod:`pincal.diagnosis.effect_fits`), and a coupling nearer ±1 than 0 is
+tried as a joint read against another — the readings corrected, the geometry calibrated again on them
+(:mod:`pincal.diagnosis.conventions`). The loop repeats until nothing
 significant remains; then a generic per-joint correction (polynomial and
 harmonics of the joint angle) tests whether structure remains that no
 candidate explains.
@@ -369,7 +373,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
             lambda objective, x, held_inputs=held_inputs: cast(PoseErrors, heldout_errors(
                 model, objective, x, heldout, held_inputs)))
         judge = Judge(inputs, chain, held_errors, current_objective, current_x, (model.sigma_pos, model.sigma_rot),
-                      stated_pos)
+                      stated_pos, pool)
         if not adopted:  # name every candidate the geometry absorbs
             for effect, score in screened:
                 if score.condition > SCREEN_CONDITION:
