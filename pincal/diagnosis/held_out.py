@@ -21,8 +21,7 @@ HELD_OUT_Z = 2.0
 #: One-sided level of the held-out signed-rank test: Φ(−:data:`HELD_OUT_Z`) = 0.0228.
 HELD_OUT_LEVEL = float(scipy.stats.norm.sf(HELD_OUT_Z))
 #: Held-out rows below which the signed-rank test cannot reach :data:`HELD_OUT_LEVEL` — its smallest
-#: one-sided p is 2⁻ⁿ, 1/64 = 0.016 at six rows, 1/32 = 0.031 at five: the veto is then that most of them are
-#: worse (their median change above zero).
+#: one-sided p is 2⁻ⁿ, 1/64 = 0.016 at six rows, 1/32 = 0.031 at five: the veto is then a worse total.
 MIN_PAIRED_ROWS = int(np.ceil(-np.log2(HELD_OUT_LEVEL)))
 #: Change of a held-out row's error [noise units: σ of one coordinate] below which the row cannot tell the two
 #: models apart: one σ, the resolution of a single measurement of it.
@@ -60,9 +59,10 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
     * worse, when all rows' changes lie above zero, or those of the rows it moves by at least
       :data:`TELLING_CHANGE` noise units (the rows that can tell the two models apart);
     * adopted, when those rows' changes lie below zero;
-    * with fewer than :data:`MIN_PAIRED_ROWS` such rows the test cannot reach its level: worse when most of
-      them are (their median above zero), adopted otherwise — rows the effect does not move cannot refute it,
-      and the calibration rows' evidence stands;
+    * with fewer than :data:`MIN_PAIRED_ROWS` such rows the test cannot reach its level: adopted unless the
+      rows' errors grow in total (Σ d_k > 0) — rows the effect barely moves cannot refute it, and the calibration
+      rows' evidence stands (circle point analysis moves one joint at a time: two held-out rows of twelve see an
+      effect of one joint);
     * not beyond the noise otherwise.
 
     A rank test, not the mean of the d_k: each row weighs by the rank of its change, so two rows with errors of a
@@ -79,9 +79,10 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
         return (f"it makes the held-out rows worse ({', '.join(shown)}; signed-rank over {nonzero.size} rows, "
                 f"{np.sum(nonzero > 0)} worse: one-sided p {_p(nonzero, 'greater'):.2g})")
     text = f"{', '.join(shown)}; {telling.size} of {change.size} rows moved by {TELLING_CHANGE:g} noise unit or more"
-    if telling.size < MIN_PAIRED_ROWS:  # too few rows for the test to reach its level: only a worse median vetoes
-        worse = telling.size and np.median(telling) > 0
-        return f"it makes the held-out rows worse ({text}, most of them worse)" if worse else "adopted"
+    if telling.size < MIN_PAIRED_ROWS:  # too few rows for the test to reach its level: only a worse total vetoes
+        total = float(np.sum(change))
+        return "adopted" if total <= 0 else (f"it makes the held-out rows worse in total ({text}, too few for a "
+                                             f"signed-rank test; their errors grow by {total:.3g} noise units)")
     better, worse = _p(telling, "less"), _p(telling, "greater")
     text += f", {np.sum(telling < 0)} better: signed-rank one-sided p {min(better, worse):.2g}"
     if worse < HELD_OUT_LEVEL:

@@ -101,8 +101,8 @@ CRITERION = (f"ΔBIC on the calibration rows < {EVIDENCE:g} (very strong evidenc
              f"held-out rows, better on them beyond their noise: a Wilcoxon signed-rank test of the per-row change "
              f"of error distance in noise units, of the rows it moves by {TELLING_CHANGE:g} noise unit or more, "
              f"below zero at the one-sided level {HELD_OUT_LEVEL:.3g} (Φ(−{HELD_OUT_Z:g})), so that a few wild "
-             f"rows cannot decide (with fewer than {MIN_PAIRED_ROWS} such rows, not worse on most of them; worse "
-             f"on all rows refuses)")
+             f"rows cannot decide (with fewer than {MIN_PAIRED_ROWS} such rows, not worse in total; worse on all "
+             f"rows refuses)")
 #: Candidates shown per step.
 SHOWN = 8
 #: How the note of a significant candidate that was not adopted ends (its verdict in the ranking).
