@@ -259,7 +259,9 @@ def diagnose(
     """
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
         candidates = candidate_effects(chain, True)
-    nominal, applied, earlier, counter = chain.placements(), [], (), Counter(progress)
+    nominal, counter = chain.placements(), Counter(progress)
+    applied: list[ReadingCoupling] = []
+    earlier: tuple[Step, ...] = ()
     while True:
         corrected = {name for c in (*couplings, *applied) for name in (c.joint, c.driver)}
 
@@ -401,16 +403,17 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         unit = shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic")
         coupling = None if trial is None else convention_for(effect, float(sol.x[obj._effect_slices[-1]][0]), corrected)
         try:
-            tried = None if coupling is None else adopted_trial(trial(coupling), chain, sigma_column, inputs,
-                                                              held_inputs, (obj, sol), before_held, judge)
+            found = None if coupling is None else adopted_trial(trial(coupling), chain, sigma_column, inputs,
+                                                                held_inputs, (obj, sol), before_held, judge)
         except CalibrationError:  # the corrected rows cannot be calibrated: the coupling stays an effect
-            tried = None
-        if tried is not None:  # a joint read against another: the search goes on from the corrected readings
+            found = None
+        if found is not None:  # a joint read against another: the search goes on from the corrected readings
             counter.tick()
-            return _Restart(tried[0], (*steps, Step(
-                effect, np.array([-tried[0].coupling.factor]), np.zeros(1), float(delta), before_cal, tried[1],
-                before_held, tried[2], tuple(ranking[:SHOWN]), driver, driver_label, joint_residual, fitted, unit,
-                convention=tried[0].coupling)))
+            convention, after_cal, after_held = found
+            return _Restart(convention, (*steps, Step(
+                effect, np.array([-convention.coupling.factor]), np.zeros(1), float(delta), before_cal, after_cal,
+                before_held, after_held, tuple(ranking[:SHOWN]), driver, driver_label, joint_residual, fitted, unit,
+                convention=convention.coupling)))
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
         scales = model.sigma_pos, model.sigma_rot

@@ -119,7 +119,8 @@ def pose_errors_of(objective: SensorResidual | PriorResidual, x: np.ndarray) -> 
     return PoseErrors(position_m=position, rotation_rad=rotation)
 
 
-def heldout_errors(model: EffectModel, objective: SensorResidual, x: np.ndarray, heldout: MeasurementSet | None,
+def heldout_errors(model: EffectModel, objective: SensorResidual | PriorResidual, x: np.ndarray,
+                   heldout: MeasurementSet | None,
                    held_inputs) -> PoseErrors | None:
     """The errors of the fit (``objective`` at ``x``) on held-out rows (None without them), each in its
     calibrated session's registration."""
