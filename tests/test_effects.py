@@ -274,3 +274,24 @@ def test_the_signed_rank_test_is_scipys():
         for alternative in ("less", "greater"):
             expected = scipy.stats.wilcoxon(change, alternative=alternative).pvalue
             assert abs(signed_rank_p(change, alternative) - expected) < 1e-12, (size, decimals, alternative)
+
+
+def test_the_held_out_noise_is_the_sensors_or_the_fitting_models():
+    """Judge.judged_noise: the stated σ_pos (--sigma-pos) when given; otherwise, per kind, the smallest of the
+    current model's and the fitted models' — never the scale of a model a hundred times off — at least
+    NOISE_FLOOR. With the misfit's scale no row would move by a noise unit, and the test could not refuse."""
+    from pincal.diagnosis.held_out import held_out_verdict
+    from pincal.diagnosis.verdicts import NOISE_FLOOR, Judge
+    from pincal.fit.metrics import PoseErrors
+
+    misfit = Judge(None, None, None, None, None, noise=(2e-3, 0.05))  # a geometry on the wrong readings
+    assert misfit.judged_noise((2e-5, 3e-4)) == (2e-5, 3e-4)
+    assert misfit.judged_noise((0.0, None)) == (NOISE_FLOOR, 0.05)
+    stated = Judge(None, None, None, None, None, noise=(2e-3, None), stated_pos=1e-5)
+    assert stated.judged_noise((2e-5, None)) == (1e-5, None)
+    # four rows 5 σ better, eight 2 σ worse: not beyond the noise at the fitting scale, where every row tells;
+    # at the misfit's none moves by a noise unit, and the total alone would let it through
+    before = PoseErrors(np.r_[np.full(4, 1.2e-4), np.full(8, 3e-5)][:, None], None)
+    after = PoseErrors(np.r_[np.full(4, 2e-5), np.full(8, 7e-5)][:, None], None)
+    assert "beyond their noise" in held_out_verdict(before, after, *misfit.judged_noise((2e-5, None)))
+    assert held_out_verdict(before, after, 2e-3, None) == "adopted"

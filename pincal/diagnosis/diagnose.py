@@ -69,14 +69,7 @@ from pincal.diagnosis.screening import (
     testable,
 )
 from pincal.diagnosis.structure import partial_residual, remaining_structure
-from pincal.diagnosis.verdicts import (
-    EVIDENCE,
-    SHOWN,
-    Candidate,
-    Judge,
-    TargetChange,
-    target_changes,
-)
+from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge, TargetChange, target_changes
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, row_weights
 from pincal.fit.metrics import PoseErrors
