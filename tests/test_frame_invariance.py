@@ -56,7 +56,7 @@ def _moved(data, rotation, shift):
                    rotations=None if data.rotations is None else rotation @ data.rotations)
 
 
-@functools.cache
+@functools.lru_cache(maxsize=None)
 def _rows(urdf, kind, seed):
     chain = KinematicChain.from_urdf(urdf, "flange")
     params = PlacementErrors(chain)

@@ -23,7 +23,7 @@ TRAIN = DATA / "qualisys_2021-11-30_static_postures.csv"
 HELD_OUT = DATA / "qualisys_2021-11-26_static_postures.csv"
 
 
-@functools.cache
+@functools.lru_cache(maxsize=None)
 def _example():
     spec = importlib.util.spec_from_file_location("tiago_mocap", ROOT / "examples" / "tiago_mocap.py")
     module = importlib.util.module_from_spec(spec)
@@ -31,7 +31,7 @@ def _example():
     return module
 
 
-@functools.cache
+@functools.lru_cache(maxsize=None)
 def _level(level):
     """examples/tiago_mocap.py's row for ``level`` (computed once per session)."""
     return _example().run_level(level)
