@@ -12,6 +12,7 @@ import numpy as np
 from test_selection import _straight_wrist_session
 
 import pincal.diagnosis.diagnose as diagnosis
+import pincal.diagnosis.effect_fits as effect_fits
 import pincal.fit.pipeline as pipeline
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.solver import solve
@@ -47,14 +48,16 @@ def test_the_data_scale_fit_of_a_prior_calibration_stops_at_its_budget(monkeypat
 
 def test_a_candidate_whose_naming_fit_crawls_is_named_absorbed(monkeypatch):
     """A cyclic term on the straight wrist (sin q ≈ 0, cos q ≈ 1: its zero offset) is nearly
-    inseparable from the geometry; its fit wanders to amplitudes of radians without converging. It
-    stops at NAMING_EVALUATIONS and is named as absorbed by the geometry, not ranked."""
+    inseparable from the geometry; its fit wanders to amplitudes of radians without converging. Its
+    first chunk of NAMING_EVALUATIONS gains far less than GAIN_PER_CHUNK of BIC, so it stops there and
+    is named as absorbed by the geometry, not ranked."""
     chain, data = _straight_wrist_session(600, seed=11)
     calibration = calibrate_chain(chain, data, "full", selection="aic")
-    fits = _counting(monkeypatch, diagnosis)
+    fits = _counting(monkeypatch, effect_fits)
     result = diagnosis.diagnose(chain, calibration, data)
     crawled = [n for what, n, converged in fits if not converged]
     assert crawled and max(crawled) <= diagnosis.NAMING_EVALUATIONS
+    assert crawled.count(diagnosis.NAMING_EVALUATIONS) == 2  # one chunk each: h1 and h2 gain nothing
     absorbed = next(note for note in result.notes if note.startswith("not separable"))
     assert "cyclic:wrist_2_joint:h1" in absorbed and "cyclic:wrist_2_joint:h2" in absorbed
     assert not {"cyclic:wrist_2_joint:h1", "cyclic:wrist_2_joint:h2"} & {c.effect.label for c in result.last_candidates}

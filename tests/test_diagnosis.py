@@ -15,7 +15,8 @@ from conftest import unaccepted_flags
 
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
-from pincal.diagnosis.verdicts import CRITERION, HELD_OUT_Z, NEGLIGIBLE
+from pincal.diagnosis.held_out import HELD_OUT_Z
+from pincal.diagnosis.verdicts import CRITERION, NEGLIGIBLE
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.measurements.couplings import apply_couplings, parse_coupling
 from pincal.measurements.csv_v1 import read_measurements
@@ -126,9 +127,9 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     assert "look like outliers" in printed.err and unaccepted_flags("diagnose", printed.out + printed.err) == []
     assert abs(found["value"] - 0.003) <= 3 * found["std"], found  # within three reported sd
     assert all(p.endswith(".png") for p in doc["diagnosis"]["plots"]) and len(doc["diagnosis"]["plots"]) == 2
-    # the rule as the code applies it (pincal.diagnosis.verdicts): the paired held-out test, not "not worse"
-    assert doc["diagnosis"]["criterion"] == CRITERION and "paired test" in CRITERION
-    assert f"by more than {HELD_OUT_Z:g} standard errors" in CRITERION and f"{NEGLIGIBLE:g} × its noise" in CRITERION
+    # the rule as the code applies it (pincal.diagnosis.verdicts): the signed-rank held-out test, not "not worse"
+    assert doc["diagnosis"]["criterion"] == CRITERION and "Wilcoxon signed-rank test" in CRITERION
+    assert f"(Φ(−{HELD_OUT_Z:g}))" in CRITERION and f"{NEGLIGIBLE:g} × its noise" in CRITERION
     metrics = tmp_path / "m.json"
     assert main(["evaluate", str(out), str(report), str(sim / "validation.csv"), "--json", str(metrics)]) == 0
     with_effects = json.loads(metrics.read_text())["position"]["rms_mm"]

@@ -8,6 +8,7 @@ import pytest
 from conftest import assert_close, numeric_jacobian
 
 from pincal.errors import PincalError
+from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.effects import (
     FLANK_GAP_S,
     Effect,
@@ -17,7 +18,6 @@ from pincal.model.effects import (
     gravity_torques,
     parse_effect,
 )
-from pincal.model.chain import pose_from_xyz_rpy
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
@@ -179,9 +179,9 @@ def test_each_effect_states_its_unit():
 
 
 def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
-    """pincal.diagnosis.verdicts.held_out_verdict: the per-row change of squared held-out error over
-    the noise, position and orientation together, must fall by more than 2 standard errors."""
-    from pincal.diagnosis.verdicts import held_out_verdict
+    """pincal.diagnosis.verdicts.held_out_verdict: the per-row change of held-out error over the noise,
+    position and orientation together, must fall at the signed-rank test's one-sided level Φ(−2)."""
+    from pincal.diagnosis.held_out import held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
     rng = np.random.default_rng(4)
@@ -207,14 +207,41 @@ def test_held_out_rows_judge_an_effect_by_a_paired_test_in_noise_units():
 
 
 def test_a_few_held_out_rows_veto_only_a_worse_total():
-    """Below MIN_PAIRED_ROWS held-out rows there is no standard error (one row: ±inf, which refused every
-    effect): only a worse total refuses."""
-    from pincal.diagnosis.verdicts import MIN_PAIRED_ROWS, held_out_verdict
+    """Below MIN_PAIRED_ROWS held-out rows the effect moves by a noise unit (TELLING_CHANGE) the signed-rank
+    test cannot reach its level (2⁻ⁿ > 0.0228): only errors that grow in total refuse — by their distances, so
+    a row a metre off counts by how far it moves, not by its square; rows it does not move cannot refute it."""
+    from pincal.diagnosis.held_out import HELD_OUT_LEVEL, MIN_PAIRED_ROWS, held_out_verdict
     from pincal.fit.metrics import PoseErrors
 
+    assert 2.0 ** -MIN_PAIRED_ROWS < HELD_OUT_LEVEL < 2.0 ** -(MIN_PAIRED_ROWS - 1)
     before = PoseErrors(np.full((MIN_PAIRED_ROWS - 4, 1), 0.6), None)
     assert held_out_verdict(before, PoseErrors(before.position_m / 6, None), 2e-5, None) == "adopted"
-    assert "too few for a paired test" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None), 2e-5, None)
+    assert "worse in total" in held_out_verdict(before, PoseErrors(before.position_m * 1.1, None), 2e-5, None)
+    three = PoseErrors(np.array([[1e-4], [1e-4], [1.0]]), None)  # two rows improve by 4 σ, one a metre off
+    assert held_out_verdict(three, PoseErrors(np.array([[2e-5], [2e-5], [1.0001]]), None), 2e-5, None) == "adopted"
+    assert "worse in total" in held_out_verdict(three, PoseErrors(np.array([[2e-5], [2e-5], [1.0002]]), None),
+                                                2e-5, None)  # it moves 10 σ the wrong way
+    # twelve rows of which one sees the effect (circle point analysis: one joint moves in two held-out rows)
+    twelve = PoseErrors(np.r_[np.full(11, 3e-5), 8e-4][:, None], None)
+    moved = PoseErrors(np.r_[np.full(11, 3e-5) * np.r_[1.3, np.ones(10)], 3e-5][:, None], None)
+    assert held_out_verdict(twelve, moved, 2e-5, None) == "adopted"
+
+
+def test_two_wild_held_out_rows_cannot_decide():
+    """18 held-out rows that an effect brings from its 0.3 mm to the noise (20 µm), and two rows a metre off (a
+    bad measurement) whose error it moves 0.3 mm further: the mean change of squared error is the wild rows'
+    (+1.5e6 noise² each against −225 for each good row), the signed-rank test of the distances is not."""
+    from pincal.diagnosis.held_out import held_out_verdict
+    from pincal.fit.metrics import PoseErrors
+
+    rng = np.random.default_rng(29)
+    sigma, shift = 20e-6, 3e-4
+    noise = np.abs(rng.normal(0.0, sigma * np.sqrt(3), 20))
+    before = PoseErrors(np.concatenate([shift + noise[:18], [1.0, 1.2]])[:, None], None)
+    after = PoseErrors(np.concatenate([noise[:18], [1.0 + shift, 1.2 + shift]])[:, None], None)
+    assert held_out_verdict(before, after, sigma, None) == "adopted"
+    worse = PoseErrors(before.position_m * 1.02, None)  # every row 2 % worse, the wild ones too: still worse
+    assert held_out_verdict(before, worse, sigma, None).startswith("it makes the held-out rows worse")
 
 
 def test_a_report_effect_with_the_wrong_number_of_values_is_refused_in_one_line():
@@ -229,3 +256,42 @@ def test_a_report_effect_with_the_wrong_number_of_values_is_refused_in_one_line(
         with pytest.raises(PincalError, match="bad effect entry .* must be [13] finite number"):
             effect_from_dict(entry)
     assert effect_from_dict({"type": "pause_step", "joint": None, "value": [1e-6, 2e-6, 0.0], "pause": 1})[1].size == 3
+
+
+def test_the_signed_rank_test_is_scipys():
+    """pincal.diagnosis.held_out.signed_rank_p, written with numpy (importing scipy.stats costs 0.6 s of CPU),
+    gives scipy.stats.wilcoxon's one-sided p to 1e-12: exact up to 50 rows, ties among them (up to 13 rows, where
+    scipy enumerates every sign), the normal approximation with its tie correction beyond."""
+    import scipy.stats
+
+    from pincal.diagnosis.held_out import signed_rank_p
+
+    rng = np.random.default_rng(45)
+    for size, decimals in [(n, None) for n in (1, 6, 20, 50, 51, 120)] + [(n, 1) for n in (6, 9)] + [(120, 1)]:
+        change = rng.normal(0.3, 1.0, size)
+        change = change if decimals is None else np.round(change, decimals)
+        change = change[change != 0]
+        for alternative in ("less", "greater"):
+            expected = scipy.stats.wilcoxon(change, alternative=alternative).pvalue
+            assert abs(signed_rank_p(change, alternative) - expected) < 1e-12, (size, decimals, alternative)
+
+
+def test_the_held_out_noise_is_the_sensors_or_the_fitting_models():
+    """Judge.judged_noise: the stated σ_pos (--sigma-pos) when given; otherwise, per kind, the smallest of the
+    current model's and the fitted models' — never the scale of a model a hundred times off — at least
+    NOISE_FLOOR. With the misfit's scale no row would move by a noise unit, and the test could not refuse."""
+    from pincal.diagnosis.held_out import held_out_verdict
+    from pincal.diagnosis.verdicts import NOISE_FLOOR, Judge
+    from pincal.fit.metrics import PoseErrors
+
+    misfit = Judge(None, None, None, None, None, noise=(2e-3, 0.05))  # a geometry on the wrong readings
+    assert misfit.judged_noise((2e-5, 3e-4)) == (2e-5, 3e-4)
+    assert misfit.judged_noise((0.0, None)) == (NOISE_FLOOR, 0.05)
+    stated = Judge(None, None, None, None, None, noise=(2e-3, None), stated_pos=1e-5)
+    assert stated.judged_noise((2e-5, None)) == (1e-5, None)
+    # four rows 5 σ better, eight 2 σ worse: not beyond the noise at the fitting scale, where every row tells;
+    # at the misfit's none moves by a noise unit, and the total alone would let it through
+    before = PoseErrors(np.r_[np.full(4, 1.2e-4), np.full(8, 3e-5)][:, None], None)
+    after = PoseErrors(np.r_[np.full(4, 2e-5), np.full(8, 7e-5)][:, None], None)
+    assert "beyond their noise" in held_out_verdict(before, after, *misfit.judged_noise((2e-5, None)))
+    assert held_out_verdict(before, after, 2e-3, None) == "adopted"

@@ -316,7 +316,8 @@ def _run_diagnose(args: argparse.Namespace) -> int:
 
     for step in diagnosis.steps:
         values, std, shown_unit = shown(step.effect, step.values, step.std, unit(step.effect))  # α in µm/m/K
-        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(values, std)) + f" {shown_unit}"
+        value = (f"{values[0]:g} (read against)" if step.convention else  # a convention is exact
+                 ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(values, std)) + f" {shown_unit}")
         line = (f"{step.effect.label:38s} {value:>26s} {step.delta_bic:8.1f} "
                 f"{step.calibration_before.position.rms:7.3f} -> {step.calibration_after.position.rms:6.3f}")
         if step.heldout_before is not None and step.heldout_after is not None:  # with --validation

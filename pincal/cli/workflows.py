@@ -11,7 +11,8 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,6 +47,7 @@ from pincal.fit.sessions import (
     session_rows,
     where,
 )
+from pincal.measurements.couplings import apply_couplings
 from pincal.measurements.csv_v1 import (
     read_measurements,
     read_sessions,
@@ -418,26 +420,20 @@ def diagnose_files(
         choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
                               selection=selection, progress=stages.next())
         level = choice.chosen
-    calibration = calibrate_chain(chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
-                                  selection=selection, progress=stages.next(), refit_offered=False)
+    # the geometric calibration, made again by diagnose on readings it corrects (a joint read against another)
+    recalibrate = partial(calibrate_chain, chain, level=level, tool_known=tool_pose is not None,
+                          sigma_column=sigma_column, selection=selection, refit_offered=False)
+    calibration = recalibrate(data, progress=stages.next())
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
     diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
                          payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next(),
-                         readings=readings)
-    objective, x = diagnosis.objective, diagnosis.solution_x
-    kinematic = objective.blocks["kinematic"]
-    vector = calibration.vector.copy()
-    vector[calibration.kept] = x[kinematic]
-    std = np.full(vector.size, np.nan)
-    std[calibration.kept] = diagnosis.solution_std[kinematic]
-    final = replace(  # the model with its effects: values, spreads, noise and fit of the final fit
-        calibration, vector=vector, std=std, target=objective.estimate(x),
-        target_std=diagnosis.solution_std[kinematic.stop : objective.blocks["effects"].start],
-        sigma_pos_m=diagnosis.sigma_pos_m, sigma_rot_rad=diagnosis.sigma_rot_rad,
-        rms_m=float(np.sqrt(np.mean(diagnosis.calibration_errors.position_m**2))),
-        chain_placements=diagnosis.chain_placements,
-    )
+                         readings=readings, recalibrate=recalibrate, couplings=settings.couplings,
+                         stated_sigma_pos_m=sigma_pos_m)
+    # the final model: on the readings corrected by the conventions diagnose found, from their calibration
+    data, calibration = apply_couplings(data, diagnosis.couplings), diagnosis.calibration or calibration
+    heldout = None if heldout is None else apply_couplings(heldout, diagnosis.couplings)
+    final = diagnosis.final_calibration()  # the model with its effects, as the report and its checks see it
     used = data.select(calibration.used_index)
     with chain.placed(final.chain_placements):  # judged: the final model, with the effects it adopted
         verdict = judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
@@ -473,7 +469,7 @@ def diagnose_files(
                                              None if validation_path is None else str(validation_path))),
             urdf_sha256=urdf_sha256, xacro_args=dict(xacro_arguments(xacro_args)),
             level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
-            couplings=couplings_part(settings.couplings),
+            couplings=couplings_part((*settings.couplings, *diagnosis.couplings)),
         )
     # what the URDF cannot carry, for a controller (nothing beside a withheld URDF)
     effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)

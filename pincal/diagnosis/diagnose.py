@@ -18,13 +18,17 @@ one is adopted when the evidence is very strong (ΔBIC < −10, Kass & Raftery
 * a value outside physical range — a stand-in for something else;
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
-* a close competitor with a strongly correlated basis (e.g. the approach flanks
-  of two joints that always move together): the data cannot tell them apart;
 * an effect too small to change any measured coordinate by a tenth of its noise;
 * when held-out rows are given, an effect that does not make them better beyond their
-  noise (a paired test of the per-row change of their error).
+  noise (a signed-rank test of the per-row change of their error that a few wild rows cannot decide).
 
-Such cases are reported, not adopted. The loop repeats until nothing
+Such cases are reported, not adopted. Candidates that correct the same poses the same way (a close
+competitor with a strongly correlated basis, e.g. the approach flanks of two joints that always move
+together, or two harmonics over a short range) are not refused: the one that predicts the held-out rows
+best, or the simpler, is taken and the others named. A gross effect is fitted to the end: a fit given
+a budget goes on while it gains (:mod:`pincal.diagnosis.effect_fits`), and a coupling nearer ±1 than 0 is
+tried as a joint read against another — the readings corrected, the geometry calibrated again on them
+(:mod:`pincal.diagnosis.conventions`). The loop repeats until nothing
 significant remains; then a generic per-joint correction (polynomial and
 harmonics of the joint angle) tests whether structure remains that no
 candidate explains.
@@ -36,21 +40,22 @@ reports or judges — the first eight, every one the adoption checks look at,
 with a margin for the linearisation — and, at the first step, every nearly
 inseparable one are refitted in full, from their Gauss–Newton step, so the
 ranking, values and verdicts are those of the full fits (a nearly inseparable
-one whose fit crawls past :data:`NAMING_EVALUATIONS` counts as absorbed). All fits share one
-sensitivity model per set of free parameters.
+one whose fit stops gaining before it converges counts as absorbed: chunks of
+:data:`NAMING_EVALUATIONS`). All fits share one sensitivity model per set of free parameters.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import cast
+from typing import NamedTuple, cast
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pincal.diagnosis.catalogue import PARALLEL_AXES_RAD, candidate_effects, parallel_neighbours
 from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
+from pincal.diagnosis.conventions import ConventionTrial, adopted_trial, convention_for, read_against_words
+from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
 from pincal.diagnosis.screening import (
     GENERIC_NOT_RUN,
     SCREEN_CONDITION,
@@ -66,11 +71,12 @@ from pincal.diagnosis.screening import (
 from pincal.diagnosis.structure import partial_residual, remaining_structure
 from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, Judge, TargetChange, target_changes
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import ChainCalibration, FitProblem, row_weights
+from pincal.fit.chain_calibration import ChainCalibration, row_weights
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import PriorResidual, standard_deviations
+from pincal.fit.prior import standard_deviations
 from pincal.fit.sessions import session_rows
 from pincal.fit.solver import solve
+from pincal.measurements.couplings import ReadingCoupling, apply_couplings
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.effect_units import shift_unit
@@ -96,14 +102,16 @@ GRAVITY_REFRESHES = 2
 #: Tolerance of a candidate's full fit (:func:`pincal.fit.solver.solve`): it ranks
 #: and is judged; an adopted effect is refitted at the solver's own tolerance.
 CANDIDATE_TOLERANCE = 1e-10
-#: Evaluations allowed to the full fit of a candidate the screen finds nearly inseparable from the
+#: Evaluations of one chunk of the full fit of a candidate the screen finds nearly inseparable from the
 #: geometry (condition number of [J, B] above :data:`pincal.diagnosis.screening.SCREEN_CONDITION`),
-#: fitted to tell whether the geometry absorbs it. One that has not converged by then crawls along a
-#: valley the data do not determine (as :data:`pincal.diagnosis.structure.GENERIC_EVALUATIONS`), and
-#: counts as absorbed: a cyclic term on scripts/benchmark.py's UR5 wrist held at zero (sin q ≈ 0,
-#: cos q ≈ 1, its zero offset) ran 2 800 evaluations (150 s) to amplitudes of 3 and 20 rad without
-#: converging. Naming fits that converge took at most 12 on such sessions of 300–2 500 rows, 8 on
-#: the README commands.
+#: fitted to tell whether the geometry absorbs it. The fit goes on chunk by chunk while each chunk still
+#: gains (:func:`pincal.diagnosis.effect_fits.fit_while_gaining`, eq F1): one that stops gaining before it
+#: converges crawls along a valley the data do not determine (as
+#: :data:`pincal.diagnosis.structure.GENERIC_EVALUATIONS`), and counts as absorbed: a cyclic term on
+#: scripts/benchmark.py's UR5 wrist held at zero (sin q ≈ 0, cos q ≈ 1, its zero offset) ran 2 800
+#: evaluations (150 s) to amplitudes of 3 and 20 rad without converging, gaining 1e-4 of BIC per chunk.
+#: Naming fits that converge took at most 12 on such sessions of 300–2 500 rows, 8 on the README
+#: commands; a coupling read against its driver, fitted from far, more than one chunk.
 NAMING_EVALUATIONS = 50
 #: Largest |gravity torque| [N·m or N] of a joint over the rows below which it has none: compliance and
 #: gravity-flank backlash cannot be tested there (rounding of Pinocchio's RNEA is ~1e-12).
@@ -113,7 +121,9 @@ NO_TORQUE = 1e-9
 class Step:
     """One adopted effect, with the errors before and after adding it; a joint effect's ``driver`` (its
     ``driver_label`` saying what it is), ``joint_residual`` and ``fitted_shift`` per row (the shifts in
-    ``shift_unit``: rad, or m for a prismatic joint) for its plot."""
+    ``shift_unit``: rad, or m for a prismatic joint) for its plot. A coupling found to be a joint read against
+    another has its ``convention``: applied to the readings (:mod:`pincal.diagnosis.conventions`), its value
+    exactly ±1 (``std`` 0), ``calibration_after`` the geometry calibrated again on the corrected readings."""
 
     effect: Effect
     values: np.ndarray
@@ -129,6 +139,7 @@ class Step:
     joint_residual: np.ndarray | None = None
     fitted_shift: np.ndarray | None = None
     shift_unit: str = "rad"
+    convention: ReadingCoupling | None = None
 
 
 @dataclass(frozen=True)
@@ -147,6 +158,10 @@ class Diagnosis:
             effects; 4×4 each, as :meth:`pincal.model.chain.KinematicChain.placements`).
         target_changes: how far each of ``effects`` moves the target over the calibration rows.
         conditions: the temperature range and pauses of the fitted rows (thermal, pause steps).
+        calibration: the geometric calibration the final model grew from: the one given, or the one
+            calibrated again on readings corrected by ``couplings``.
+        couplings: the joints found read against another, applied to the readings (eq C1 of
+            :mod:`pincal.measurements.couplings`; REPORT.json's ``couplings``, as ``--coupling``).
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -166,60 +181,30 @@ class Diagnosis:
     chain_placements: tuple[np.ndarray, ...] = ()
     target_changes: tuple[TargetChange, ...] = ()
     conditions: ConditionSearch | None = None
+    calibration: ChainCalibration | None = None
+    couplings: tuple[ReadingCoupling, ...] = ()
+
+    def final_calibration(self) -> ChainCalibration:
+        """The final model as a calibration of ``calibration``'s parameters: the geometry, target, their standard
+        deviations, noise scales and fit of the final fit (its effects in ``effects``)."""
+        assert self.calibration is not None  # diagnose sets it
+        calibration, objective, x = self.calibration, self.objective, self.solution_x
+        kinematic = objective.blocks["kinematic"]
+        vector, std = calibration.vector.copy(), np.full(calibration.vector.size, np.nan)
+        vector[calibration.kept], std[calibration.kept] = x[kinematic], self.solution_std[kinematic]
+        return replace(calibration, vector=vector, std=std, target=objective.estimate(x),
+                       target_std=self.solution_std[kinematic.stop : objective.blocks["effects"].start],
+                       sigma_pos_m=self.sigma_pos_m, sigma_rot_rad=self.sigma_rot_rad,
+                       rms_m=float(np.sqrt(np.mean(self.calibration_errors.position_m**2))),
+                       chain_placements=self.chain_placements)
 
 
-class _Model:
-    """The calibrated geometry plus a list of effects, refittable on calibration rows.
+class _Restart(NamedTuple):
+    """A convention adopted at a step: the search goes on from its trial (the corrected rows, the geometry
+    calibrated again), the steps so far ending with its own."""
 
-    Under ``--select prior`` every fit keeps the calibration's prior on the geometry
-    (``calibration.prior_sigma``, eq P1 of :mod:`pincal.fit.prior`): its residual ends with
-    the prior rows and its ΔBIC compares the penalised sums of squares. The effects get no
-    prior (their columns are zero on the prior rows).
-    """
-
-    def __init__(self, chain, calibration: ChainCalibration, rows: MeasurementSet, row_weight, inputs):
-        self.chain, self.calibration, self.rows, self.inputs = chain, calibration, rows, inputs
-        self.row_weight = row_weight
-        self.sigma_pos = calibration.sigma_pos_m
-        self.sigma_rot = calibration.sigma_rot_rad
-        self.models: dict = {}  # sensitivity models, shared by every fit and held-out evaluation
-
-    def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
-        data = self.rows if data is None else data
-        weight = self.row_weight if data is self.rows else np.ones(data.n_rows)
-        assert self.calibration.start is not None  # calibrate_chain always sets it
-        problem = FitProblem(
-            self.chain, self.calibration.params, data, self.calibration.start,
-            fit_target=self.calibration.fit_target, row_weight=weight,
-            effects=effects, inputs=self.inputs if inputs is None else inputs, models=self.models,
-            session_names=self.calibration.session_names,
-        )
-        problem.prior = self.calibration.prior_sigma  # the geometry's prior, if any (class docstring)
-        problem.point_basis = self.calibration.point_basis  # a target held where the data leave it free
-        problem.registration_basis = self.calibration.registration_basis  # a registration rotation held
-        problem.sigma_pos = self.sigma_pos
-        problem.sigma_rot = self.sigma_rot
-        return problem
-
-    def reestimate(self, objective: SensorResidual, solution) -> None:
-        """Noise scales from the residuals of a fit (maximum likelihood)."""
-        problem = self.problem(objective.effects)
-        problem.rescale(objective, solution)
-        self.sigma_pos, self.sigma_rot = problem.sigma_pos, problem.sigma_rot
-
-    def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray],
-            max_evaluations: int | None = None, tolerance: float | None = None):
-        """Fit geometry, registration, target and ``effects`` from a start."""
-        problem = self.problem(effects)
-        base = self.calibration.vector
-        objective = problem.objective(self.calibration.kept, base)
-        x0 = np.zeros(objective.n_params)
-        n_core = x_start.size
-        x0[:n_core] = x_start
-        for sl, value in zip(objective._effect_slices, values_start):
-            x0[sl] = value
-        solution = solve(objective, x0, what="effect fit", max_evaluations=max_evaluations, tolerance=tolerance)
-        return objective, solution
+    trial: ConventionTrial
+    steps: tuple[Step, ...]
 
 
 def diagnose(
@@ -234,6 +219,9 @@ def diagnose(
     candidates: Sequence[Effect] | None = None,
     progress: Progress | None = None,
     readings: Readings | None = None,
+    recalibrate: Callable[[MeasurementSet], ChainCalibration] | None = None,
+    couplings: Sequence[ReadingCoupling] = (),
+    stated_sigma_pos_m: float | None = None,
 ) -> Diagnosis:
     """Search the calibrated model's residuals for missing effects (module docstring).
 
@@ -254,16 +242,42 @@ def diagnose(
             one unit per candidate offered (refitted or screened out) and one for
             adopting the best; the final fit and the search for remaining structure one.
         readings: the rows' temperatures and the pause rule (default: no temperature, pauses of 1800 s).
+        recalibrate: the geometric calibration of rows as ``calibration`` was made (its level, selection,
+            weights), to test a coupling as a joint read against another (:mod:`pincal.diagnosis.conventions`);
+            None: such a coupling stays an effect, its advice naming ``--coupling``.
+        couplings: the couplings ``data`` and ``heldout`` were corrected by (``--coupling``): their joints
+            are not corrected again.
+        stated_sigma_pos_m: the sensor's position noise per axis [m] when stated (``--sigma-pos``): the scale
+            of the held-out test (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`).
     """
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
         candidates = candidate_effects(chain, True)
-    with chain.placed(calibration.chain_placements):  # gravity torques at the calibrated geometry
-        return _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time,
-                         candidates, progress, readings or Readings())
+    nominal, counter = chain.placements(), Counter(progress)
+    applied: list[ReadingCoupling] = []
+    earlier: tuple[Step, ...] = ()
+    while True:
+        corrected = {name for c in (*couplings, *applied) for name in (c.joint, c.driver)}
+
+        def trial(coupling: ReadingCoupling, rows: MeasurementSet = data,
+                  held: MeasurementSet | None = heldout) -> ConventionTrial:
+            assert recalibrate is not None  # offered only with it
+            rows, held = apply_couplings(rows, [coupling]), None if held is None else apply_couplings(held, [coupling])
+            with chain.placed(nominal):  # calibrated as at the start: from the nominal geometry
+                return ConventionTrial(coupling, recalibrate(rows), rows, held)
+
+        with chain.placed(calibration.chain_placements):  # gravity torques at the calibrated geometry
+            outcome = _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time,
+                                candidates, counter, readings or Readings(), None if recalibrate is None else trial,
+                                corrected, earlier, stated_sigma_pos_m)
+        if isinstance(outcome, Diagnosis):
+            return replace(outcome, calibration=calibration, couplings=tuple(applied))
+        applied.append(outcome.trial.coupling)
+        calibration, data, heldout, earlier = (outcome.trial.calibration, outcome.trial.data, outcome.trial.heldout,
+                                               outcome.steps)
 
 
 def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time, heldout_time, candidates,
-              progress, readings) -> Diagnosis:
+              counter, readings, trial, corrected, earlier, stated_pos) -> Diagnosis | _Restart:
     rows = data.select(calibration.used_index)
     row_time = None if time is None else time[calibration.used_index]
     if heldout is not None:  # its rows need a calibrated session's registration
@@ -283,7 +297,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
     row_names = names[session_rows(rows, calibration.session_names)]
     conditions = search_conditions(row_time, row_names, readings, calibration.used_index)
     inputs = conditions.inputs(inputs, conditions.temperature, row_time, row_names)
-    model = _Model(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
+    model = EffectModel(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference, rows.q, row_time,
@@ -304,14 +318,13 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
     adopted: list[Effect] = []
     objective, solution = model.fit([], calibration.solution, [])
     current_x, current_bic = solution.x, bic(solution.residual, solution.x.size, n_prior_rows(objective))
-    steps: list[Step] = []
-    notes: list[str] = []
+    steps: list[Step] = list(earlier)
+    notes: list[str] = [read_against_words(s.convention) for s in earlier if s.convention is not None]
     ranking: list[Candidate] = []
     inseparable: set[str] = set()
     rejected: dict[str, str] = {}
     untested: dict[str, float] = {}  # candidates too many for the residual degrees of freedom (_testable)
     current_objective, current_solution = objective, solution
-    counter = Counter(progress)
     while len(adopted) < MAX_EFFECTS:
         offered = [e for e in pool if e not in adopted]
         if not offered:  # every candidate adopted (or none offered)
@@ -338,24 +351,25 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                     obj, sol = model.fit(adopted + [effect], start[: current_objective.blocks["effects"].start],
                                          [start[sl] for sl in current_objective._effect_slices]
                                          + [score.step[current_x.size:]], tolerance=CANDIDATE_TOLERANCE,
-                                         max_evaluations=NAMING_EVALUATIONS if naming else None)
+                                         chunk=NAMING_EVALUATIONS if naming else None)
                 except CalibrationError:
                     sol = None
                 if naming and sol is not None and not sol.converged:  # it crawls: absorbed (NAMING_EVALUATIONS)
                     sol = None
             counter.tick()
             if sol is None:
-                if not steps:
+                if not adopted:
                     inseparable.add(effect.label)
                 fits[effect] = None
                 return
             fits[effect] = (bic(sol.residual, sol.x.size, n_prior_rows(obj)) - current_bic, effect, obj, sol)
 
         held_errors = None if heldout is None else (
-            lambda objective, x, held_inputs=held_inputs: cast(PoseErrors, _heldout_errors(
+            lambda objective, x, held_inputs=held_inputs: cast(PoseErrors, heldout_errors(
                 model, objective, x, heldout, held_inputs)))
-        judge = Judge(inputs, chain, held_errors, current_objective, current_x, (model.sigma_pos, model.sigma_rot))
-        if not steps:  # name every candidate the geometry absorbs
+        judge = Judge(inputs, chain, held_errors, current_objective, current_x, (model.sigma_pos, model.sigma_rot),
+                      stated_pos, pool)
+        if not adopted:  # name every candidate the geometry absorbs
             for effect, score in screened:
                 if score.condition > SCREEN_CONDITION:
                     refit(effect, score)
@@ -376,9 +390,23 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         if chosen is None:
             break
         delta, effect, obj, sol = chosen
-        before_cal = _errors(current_objective, current_x)
-        before_held = _heldout_errors(model, current_objective, current_x, heldout, held_inputs)
+        before_cal = pose_errors_of(current_objective, current_x)
+        before_held = heldout_errors(model, current_objective, current_x, heldout, held_inputs)
         driver, driver_label, joint_residual, fitted = partial_residual(effect, obj, sol, inputs, chain)
+        unit = shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic")
+        coupling = None if trial is None else convention_for(effect, float(sol.x[obj._effect_slices[-1]][0]), corrected)
+        try:
+            found = None if coupling is None else adopted_trial(trial(coupling), chain, sigma_column, inputs,
+                                                                held_inputs, (obj, sol), before_held, judge)
+        except CalibrationError:  # the corrected rows cannot be calibrated: the coupling stays an effect
+            found = None
+        if found is not None:  # a joint read against another: the search goes on from the corrected readings
+            counter.tick()
+            convention, after_cal, after_held = found
+            return _Restart(convention, (*steps, Step(
+                effect, np.array([-convention.coupling.factor]), np.zeros(1), float(delta), before_cal, after_cal,
+                before_held, after_held, tuple(ranking[:SHOWN]), driver, driver_label, joint_residual, fitted, unit,
+                convention=convention.coupling)))
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
         scales = model.sigma_pos, model.sigma_rot
@@ -416,12 +444,12 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         steps.append(Step(
             effect=effect, values=sol.x[obj._effect_slices[-1]],
             std=standard_deviations(obj, sol)[obj._effect_slices[-1]],
-            delta_bic=float(delta), calibration_before=before_cal, calibration_after=_errors(obj, sol.x),
+            delta_bic=float(delta), calibration_before=before_cal, calibration_after=pose_errors_of(obj, sol.x),
             heldout_before=before_held,
-            heldout_after=_heldout_errors(model, obj, sol.x, heldout, held_inputs),
+            heldout_after=heldout_errors(model, obj, sol.x, heldout, held_inputs),
             candidates=tuple(ranking[:SHOWN]),
             driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
-            shift_unit=shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic"),
+            shift_unit=unit,
         ))
     notes += [text for label, text in rejected.items() if label not in {e.label for e in adopted}]
     if untestable:
@@ -465,8 +493,8 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         solution_x=final_solution.x,
         inputs=inputs,
         time_reference=reference,
-        calibration_errors=_errors(current_objective, final_solution.x),
-        heldout_errors=_heldout_errors(model, current_objective, final_solution.x, heldout, held_inputs),
+        calibration_errors=pose_errors_of(current_objective, final_solution.x),
+        heldout_errors=heldout_errors(model, current_objective, final_solution.x, heldout, held_inputs),
         solution_std=final_std,
         sigma_pos_m=model.sigma_pos,
         sigma_rot_rad=model.sigma_rot,
@@ -475,27 +503,3 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         target_changes=tuple(target_changes(current_objective, final_solution.x)),
         conditions=conditions,
     )
-
-
-def _errors(objective: SensorResidual | PriorResidual, x: np.ndarray) -> PoseErrors:
-    """Point errors (and orientation errors with 6D data) of a fit on its own rows (eq 24)."""
-    position = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
-    rotation = None
-    if objective.G is not None:
-        poses, _, target, _ = objective._state(x)
-        relative = objective._orientation_error(poses, target)
-        rotation = np.linalg.norm(Rotation.from_matrix(relative).as_rotvec(), axis=1)
-    return PoseErrors(position_m=position, rotation_rad=rotation)
-
-
-def _heldout_objective(model: _Model, objective: SensorResidual, heldout,
-                       held_inputs) -> SensorResidual | PriorResidual:
-    problem = model.problem(objective.effects, heldout, held_inputs)
-    return problem.objective(model.calibration.kept, model.calibration.vector)
-
-
-def _heldout_errors(model, objective, x, heldout, held_inputs) -> PoseErrors | None:
-    if heldout is None:
-        return None
-    return _errors(_heldout_objective(model, objective, heldout, held_inputs), x)
-

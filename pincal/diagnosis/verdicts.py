@@ -9,23 +9,35 @@ reported instead:
   whatever its ΔBIC: too small to matter (a rounding-level "effect" on near noise-free data);
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
-* a close competitor (within 6 of its ΔBIC) with a strongly correlated basis: the
-  data cannot tell them apart (a drift and a step at a pause: the step is named,
-  :mod:`pincal.model.thermal`);
+* a close competitor (within 6 of its ΔBIC, passing the checks above) with a strongly correlated basis
+  corrects the same poses the same way: the data cannot tell them apart, and of them the one that predicts
+  the held-out rows best is taken (without held-out rows the simpler: fewer values, then the catalogue's
+  order), the others named beside it (:func:`ambiguity_words`) — ambiguity never leaves the model without
+  the correction (a drift and a step at a pause: the step is named, :mod:`pincal.model.thermal`);
 * when held-out rows are given, an effect that does not make them better beyond their noise: a
-  paired test of the per-row change of their error (:func:`held_out_verdict`).
+  signed-rank test of the per-row change of their error, which a few wild rows cannot decide
+  (:func:`pincal.diagnosis.held_out.held_out_verdict`).
 
 :data:`CRITERION` says the rule in words (REPORT.json's ``diagnosis.criterion``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
 
+from pincal.diagnosis.effect_fits import pose_errors_of
+from pincal.diagnosis.held_out import (
+    HELD_OUT_LEVEL,
+    HELD_OUT_Z,
+    MIN_PAIRED_ROWS,
+    TELLING_CHANGE,
+    fitted_scales,
+    held_out_verdict,
+)
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import standard_deviations
 from pincal.model.chain import KinematicChain
@@ -37,7 +49,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "REJECTED",
     "Candidate", "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
-    "HELD_OUT_Z", "MIN_PAIRED_ROWS", "TargetChange", "held_out_verdict", "paired_change", "target_changes",
+    "TargetChange", "target_changes", "ambiguity_words",
 ]
 
 #: ΔBIC below which the evidence for an effect is "very strong".
@@ -81,17 +93,16 @@ NOISE_FLOOR = 1e-7
 OFFSET_LIKE = 0.95
 #: |correlation| of two candidates' bases above which they are hard to tell apart.
 AMBIGUOUS = 0.8
-#: Standard errors of the paired per-row change of held-out error an effect must improve by (and must not
-#: worsen by) to be adopted: 2, a one-sided test at 98 % (:func:`held_out_verdict`).
-HELD_OUT_Z = 2.0
-#: Held-out rows below which no standard error is taken: the veto is then a plain worsening of their total.
-MIN_PAIRED_ROWS = 5
 #: The adoption rule in words, from the constants above: REPORT.json's ``diagnosis.criterion``.
 CRITERION = (f"ΔBIC on the calibration rows < {EVIDENCE:g} (very strong evidence), physically plausible, "
-             f"changes some measured coordinate by at least {NEGLIGIBLE:g} × its noise, not offset-like, not "
-             f"ambiguous; with held-out rows, better on them beyond their noise: a paired test, the per-row change "
-             f"of squared error in noise units below zero by more than {HELD_OUT_Z:g} standard errors (with "
-             f"fewer than {MIN_PAIRED_ROWS} held-out rows, not worse in total)")
+             f"changes some measured coordinate by at least {NEGLIGIBLE:g} × its noise, not offset-like; of "
+             f"candidates within 6 of its ΔBIC with bases correlated above {AMBIGUOUS:g} (the same correction), "
+             f"the one that predicts the held-out rows best (without them the simpler), the others named; with "
+             f"held-out rows, better on them beyond their noise: a Wilcoxon signed-rank test of the per-row change "
+             f"of error distance in noise units, of the rows it moves by {TELLING_CHANGE:g} noise unit or more, "
+             f"below zero at the one-sided level {HELD_OUT_LEVEL:.3g} (Φ(−{HELD_OUT_Z:g})), so that a few wild "
+             f"rows cannot decide (with fewer than {MIN_PAIRED_ROWS} such rows, not worse in total; worse on all "
+             f"rows refuses)")
 #: Candidates shown per step.
 SHOWN = 8
 #: How the note of a significant candidate that was not adopted ends (its verdict in the ranking).
@@ -231,15 +242,20 @@ class Judge:
         held_rms: held-out RMS point error [mm] of an objective at x, or None
             without held-out rows.
         current_objective / current_x: the fit the candidates would extend.
-        noise: the noise scales of positions [m] and orientations [rad] (None: positions only) the
-            held-out errors are judged in (:func:`held_out_verdict`).
+        noise: the current model's noise scales of positions [m] and orientations [rad] (None: positions
+            only), of which :meth:`judged_noise` takes the held-out test's (:func:`held_out_verdict`).
+        stated_pos: the sensor's position noise per axis [m] when stated (``--sigma-pos``), or None.
+        catalogue: the candidates in the catalogue's order (the simpler of two that correct alike: the first).
     """
 
     def __init__(self, inputs: EffectInputs, chain: KinematicChain,
                  held_errors: Callable[[SensorResidual, np.ndarray], PoseErrors] | None,
                  current_objective: SensorResidual, current_x: np.ndarray,
-                 noise: tuple[float, float | None] = (1.0, None)) -> None:
+                 noise: tuple[float, float | None] = (1.0, None), stated_pos: float | None = None,
+                 catalogue: Sequence[Effect] = ()) -> None:
         self.inputs, self.chain, self._held_errors, self.noise = inputs, chain, held_errors, noise
+        self.stated_pos, self.catalogue = stated_pos, list(catalogue)
+        self._ambiguous: dict[Effect, tuple[str, list[Effect]]] = {}  # a candidate's alternatives: words, effects
         self.current_objective, self.current_x = current_objective, current_x
         self._held: dict[Effect, PoseErrors] = {}
         self._before: PoseErrors | None = None
@@ -251,6 +267,15 @@ class Judge:
         if effect not in self._held:
             self._held[effect] = self._held_errors(objective, x)
         return self._held[effect].position.rms
+
+    def judged_noise(self, *fitted: tuple[float, float | None]) -> tuple[float, float | None]:
+        """The noise scales (σ_pos [m], σ_rot [rad] or None) a held-out test judges in: σ_pos the sensor's when
+        stated; otherwise, per kind, the smallest of the current model's and of the ``fitted`` models' compared
+        — the one that fits: a model a hundred times off the data puts its noise estimate a hundred times too
+        high —, at least :data:`NOISE_FLOOR`."""
+        pos = max(min([self.noise[0], *(f[0] for f in fitted)]), NOISE_FLOOR)
+        rotations = [r for r in (self.noise[1], *(f[1] for f in fitted)) if r is not None]
+        return self.stated_pos or pos, max(min(rotations), NOISE_FLOOR) if rotations else None
 
     def held_before(self) -> PoseErrors:
         assert self._held_errors is not None  # called only with held-out rows (rejection)
@@ -272,10 +297,14 @@ class Judge:
             verdict = "not significant"
             if delta < EVIDENCE:
                 verdict = "significant"
+                if chosen is not None and effect in self._ambiguous.get(chosen[1], ("", []))[1]:
+                    verdict = f"the same correction as {chosen[1].label}, adopted: these poses cannot tell them apart"
                 if chosen is None:
                     verdict = self.rejection(effect, value, delta, tried, held, compared, obj, sol, std)
                     if verdict == "adopted":
                         chosen = (delta, effect, obj, sol)
+                        if effect in self._ambiguous:  # its alternatives named (not adopted: a note)
+                            rejected[f"{effect.label}:alternatives"] = self._ambiguous[effect][0]
                     else:
                         rejected[effect.label] = (
                             f"{effect.label}: ΔBIC {delta:.1f} but {verdict}{REJECTED}")
@@ -293,12 +322,52 @@ class Judge:
                   std=None) -> str:
         """'adopted', or why the best significant candidate is only reported (``compared``
         gains ``delta`` when the candidate was compared with its competitors; ``objective`` and
-        ``solution``: the candidate's fit, for the size of what it changes; ``std`` its values')."""
-        inputs, chain = self.inputs, self.chain
+        ``solution``: the candidate's fit, for the size of what it changes; ``std`` its values').
+
+        Competitors within 6 of its ΔBIC whose basis is correlated with its own above :data:`AMBIGUOUS` correct
+        the same poses the same way: of those that pass the other checks, the one that predicts the held-out
+        rows best is taken (the smallest sum of their error distances in noise units), without held-out rows
+        the simpler (fewer values, then the catalogue's order), and the others are named beside it
+        (:func:`ambiguity_words`) — a drift the data cannot tell from a step at a pause excepted: the step."""
+        reason = self._unphysical(effect, value, std, objective, solution)
+        if reason:
+            return reason
+        compared.append(delta)
+        basis = effect_basis(effect, self.inputs, self.chain)
+        rivals = []
+        for other_delta, other, obj, sol in tried:
+            if other is effect or other_delta - delta > 6.0 or (effect.type, other.type) == ("pause_step", "drift"):
+                continue  # a drift the data cannot tell from a step at a pause: the step is named
+            correlation = _correlation(basis, effect_basis(other, self.inputs, self.chain))
+            if abs(correlation) <= AMBIGUOUS:
+                continue
+            if (effect.type, other.type) == ("drift", "pause_step"):
+                return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
+                        f"{correlation:+.2f}: the data cannot tell a drift from a step at a pause; the step is named")
+            sl = obj._effect_slices[-1]
+            if not self._unphysical(other, sol.x[sl], standard_deviations(obj, sol)[sl], obj, sol):
+                rivals.append((other, obj, sol, correlation))
+        if rivals:
+            members = [(effect, objective, solution)] + [(other, obj, sol) for other, obj, sol, _ in rivals]
+            taken, why = self._preferred(members)
+            if taken is not effect:
+                return (f"{taken.label} corrects the same poses the same way (bases correlated "
+                        f"{next(c for o, _, _, c in rivals if o is taken):+.2f}): these poses cannot tell them apart, "
+                        f"and {taken.label} is preferred ({why})")
+            others = [other for other, _, _, _ in rivals]
+            self._ambiguous[effect] = ambiguity_words(effect, others, why), others
+        if self._held_errors is not None and effect in self._held:
+            fitted = () if objective is None else (fitted_scales(pose_errors_of(objective, solution.x)),)
+            return held_out_verdict(self.held_before(), self._held[effect], *self.judged_noise(*fitted))
+        return "adopted"
+
+    def _unphysical(self, effect, value, std, objective, solution) -> str | None:
+        """Why a candidate cannot be adopted whatever its competitors (out of physical range, too small to matter,
+        acting as an offset), or None."""
         reason = None if std is None else implausible(effect, value, std)
         if reason:
             return reason
-        if not _plausible(effect, value, chain):
+        if not _plausible(effect, value, self.chain):
             return (f"its value {np.round(value, 6).tolist()} is outside the physical range "
                     "(a stand-in for something else)")
         if objective is not None:
@@ -306,57 +375,28 @@ class Judge:
             if largest < NEGLIGIBLE:
                 return (f"it changes no measured coordinate by more than {largest:.2g} of its noise (below "
                         f"{NEGLIGIBLE:g}): too small to matter, whatever its ΔBIC")
-        basis = effect_basis(effect, inputs, chain)
         # a coupling's mean part is the joint offset the geometry has: its ΔBIC and change (above) are its variation's
-        if effect.type != "coupling" and _offset_like(basis):
+        if effect.type != "coupling" and _offset_like(effect_basis(effect, self.inputs, self.chain)):
             return "its basis barely changes over the rows, so it acts as a joint offset"
-        compared.append(delta)
-        for other_delta, other, _, _ in tried:
-            if other is effect or other_delta - delta > 6.0 or (effect.type, other.type) == ("pause_step", "drift"):
-                continue  # a drift the data cannot tell from a step at a pause: the step is named
-            if abs(_correlation(basis, effect_basis(other, inputs, chain))) > AMBIGUOUS:
-                return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
-                        f"{_correlation(basis, effect_basis(other, inputs, chain)):+.2f}: "
-                        "the data cannot tell them apart")
-        if self._held_errors is not None and effect in self._held:
-            return held_out_verdict(self.held_before(), self._held[effect], *self.noise)
-        return "adopted"
+        return None
 
-
-def paired_change(change: np.ndarray) -> tuple[float, float]:
-    """Mean and standard error of a per-row change of held-out error (K,): the paired comparison of two
-    models on the same rows (their common noise cancels)."""
-    change = np.asarray(change, dtype=float)
-    return float(change.mean()), float(change.std(ddof=1) / np.sqrt(change.size)) if change.size > 1 else np.inf
-
-
-def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, sigma_rot_rad: float | None) -> str:
-    """``adopted`` when the held-out rows fit better beyond their noise, else why not (issue: judged on
-    held-out poses in position and orientation).
-
-    Per held-out row k, the change of its squared errors in units of the noise,
-    d_k = Σ_p (|e'_kp|² − |e_kp|²) / σ_pos² + (η'_k² − η_k²) / σ_rot² (the orientation term with 6D rows):
-    −2 × the change of the row's Gaussian log-likelihood, so a trade of a little orientation for much
-    position counts as what it is. Adopted when mean(d) is below zero by more than :data:`HELD_OUT_Z`
-    standard errors of the d_k (a paired test: the rows' own noise cancels); refused as worse when it is
-    above zero by as much, as not beyond the noise otherwise. With fewer than :data:`MIN_PAIRED_ROWS`
-    rows, only a worse total (mean(d) > 0) refuses."""
-    change = (np.sum(after.position_m**2, axis=1) - np.sum(before.position_m**2, axis=1)) / sigma_pos_m**2
-    shown = [f"position {before.position.rms:.3f} → {after.position.rms:.3f} mm RMS"]
-    if before.rotation_rad is not None and after.rotation_rad is not None and sigma_rot_rad:
-        change = change + (after.rotation_rad**2 - before.rotation_rad**2) / sigma_rot_rad**2
-        shown.append(f"orientation {1e3 * np.sqrt(np.mean(before.rotation_rad**2)):.3g} → "
-                     f"{1e3 * np.sqrt(np.mean(after.rotation_rad**2)):.3g} mrad RMS")
-    mean, error = paired_change(change)
-    if change.size < MIN_PAIRED_ROWS:  # too few rows for a standard error: only a plain worsening vetoes
-        text = f"{', '.join(shown)}; {change.size} held-out row(s), too few for a paired test"
-        return f"it makes the held-out rows worse ({text})" if mean > 0 else "adopted"
-    text = f"{', '.join(shown)}; paired over {before.n_rows} rows: {mean:+.3g} ± {error:.2g} noise² per row"
-    if mean - HELD_OUT_Z * error > 0:
-        return f"it makes the held-out rows worse ({text})"
-    if mean + HELD_OUT_Z * error >= 0:
-        return f"it does not improve the held-out rows beyond their noise ({text})"
-    return "adopted"
+    def _preferred(self, members) -> tuple[Effect, str]:
+        """Of candidates that correct the same poses alike, (objective, solution) each, the one to take and why:
+        with held-out rows the one whose errors there sum to least in noise units (:func:`row_changes`' units),
+        else the simpler: fewer values, then the catalogue's order."""
+        if self._held_errors is not None:
+            sigma_pos, sigma_rot = self.judged_noise(*(fitted_scales(pose_errors_of(o, x.x)) for _, o, x in members))
+            scores = []
+            for effect, objective, solution in members:
+                self.held(effect, objective, solution.x)
+                errors = self._held[effect]
+                scores.append(float(np.sum(errors.position_m)) / sigma_pos + (
+                    float(np.sum(errors.rotation_rad)) / sigma_rot if errors.rotation_rad is not None and sigma_rot
+                    else 0.0))
+            return members[int(np.argmin(scores))][0], "it predicts the held-out rows best"
+        order = [(e.n_values, self.catalogue.index(e) if e in self.catalogue else len(self.catalogue))
+                 for e, _, _ in members]
+        return members[order.index(min(order))][0], "the simpler: fewest values, then the catalogue's order"
 
 
 #: |c| within this of 1: a joint read against its driver (J3 from the horizontal), not a transmission's ratio.
@@ -392,3 +432,39 @@ def torque_coupling_advice(effect: Effect, value: float, unit: str) -> str:
     return (f"{effect.joint} deflects by {value:.4g} {unit} x {effect.driver}'s {load} (a "
             f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
             "and the effects file beside the corrected URDF gives it to a controller")
+
+
+#: What each joint effect is, in words, for the alternatives of an ambiguous one (:func:`ambiguity_words`).
+_WORDS = {"compliance": "a compliance", "encoder_scale": "an encoder scale", "coupling": "a coupling",
+          "backlash": "a backlash", "drift": "a drift", "sensor_scale": "the sensor's scale",
+          "thermal": "a thermal expansion", "pause_step": "a step at a pause"}
+
+
+def _words(effect: Effect) -> str:
+    """``a 2nd harmonic``, ``a backlash on the approach flank``, ``a coupling to A2``, ``a drift``."""
+    if effect.type == "cyclic":
+        return f"a {effect.harmonic}{'st' if effect.harmonic == 1 else 'nd'} harmonic"
+    text = _WORDS[effect.type]
+    if effect.source:
+        text += f" on the {effect.source} flank"
+    if effect.driver:
+        text += f" to {effect.driver}'s {'reading' if effect.type == 'coupling' else 'torque'}"
+    return text
+
+
+def ambiguity_words(taken: Effect, others: Sequence[Effect], why: str) -> str:
+    """The alternatives of an effect taken among candidates that correct the same poses alike, in words:
+    ``A2's error: a 1st or a 2nd harmonic — these poses cannot tell; move A2 over more of its range to separate
+    them; cyclic:A2:h1 is taken (…) and applied``; effects of several joints, each joint's, then to move them over
+    more of their ranges and in other combinations; effects of the sensor, to measure where they differ."""
+    effects = [taken, *others]
+    joints = list(dict.fromkeys(e.joint for e in effects))
+    what = "; or ".join((f"{joint}'s error: " if joint else "") + " or ".join(_words(e) for e in effects
+                                                                              if e.joint == joint) for joint in joints)
+    if None in joints:
+        move = "measure where they differ (at other times, temperatures or postures)"
+    elif len(joints) == 1:
+        move = f"move {joints[0]} over more of its range"
+    else:
+        move = f"move {' and '.join(str(j) for j in joints)} over more of their ranges, and in other combinations,"
+    return f"{what} — these poses cannot tell; {move} to separate them; {taken.label} is taken ({why}) and applied"

@@ -23,6 +23,7 @@ from pincal.report.model_diagnosis import (
     ConditionsPart,
     DiagnosisJson,
     DiagnosisReport,
+    DiagnosisStep,
     EffectJson,
     TargetChangeJson,
     TimeSpansPart,
@@ -73,16 +74,7 @@ def diagnosis_report(
         }
     section: DiagnosisJson = {
         "criterion": CRITERION,
-        "steps": [
-            {
-                "effect": cast(EffectJson, effect_to_dict(step.effect, step.values, step.std)),
-                "delta_bic": step.delta_bic,
-                "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
-                "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
-                "candidates": [_candidate(c) for c in step.candidates],
-            }
-            for step in diagnosis.steps
-        ],
+        "steps": [_step(step, errors) for step in diagnosis.steps],
         "last_candidates": [_candidate(c) for c in diagnosis.last_candidates],
         "unexplained": diagnosis.unexplained,
         "calibration_errors": errors(diagnosis.calibration_errors),
@@ -131,6 +123,23 @@ def _conditions(diagnosis: Diagnosis) -> ConditionsPart:
         out.update(pause_s=found.pause_s, pauses=[p.as_dict() for p in found.pauses],
                    pause_spans_s=[s.as_dict() for s in found.spans])
     return cast(ConditionsPart, out)
+
+
+def _step(step, errors) -> DiagnosisStep:
+    """A diagnosis step's REPORT.json entry (``errors``: PoseErrors or None → its JSON); a coupling found to be a
+    joint read against another with its ``convention``."""
+    from pincal.model.effects import effect_to_dict
+
+    entry: DiagnosisStep = {
+        "effect": cast(EffectJson, effect_to_dict(step.effect, step.values, step.std)),
+        "delta_bic": step.delta_bic,
+        "calibration": {"before": errors(step.calibration_before), "after": errors(step.calibration_after)},
+        "heldout": {"before": errors(step.heldout_before), "after": errors(step.heldout_after)},
+        "candidates": [_candidate(c) for c in step.candidates],
+    }
+    if step.convention is not None:
+        entry["convention"] = step.convention.as_dict()
+    return entry
 
 
 def _candidate(candidate) -> CandidateJson:

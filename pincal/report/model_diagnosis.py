@@ -67,14 +67,20 @@ class BeforeAfter(TypedDict):
     after: PoseErrorsJson | None
 
 
-class DiagnosisStep(TypedDict):
-    """An adopted effect, its ΔBIC, the errors before and after, and the candidates of the step."""
-
+class _DiagnosisStepKeys(TypedDict):
     effect: EffectJson
     delta_bic: float
     calibration: BeforeAfter
     heldout: BeforeAfter
     candidates: list[CandidateJson]
+
+
+class DiagnosisStep(_DiagnosisStepKeys, total=False):
+    """An adopted effect, its ΔBIC, the errors before and after, and the candidates of the step; a coupling
+    found to be a joint read against another has its ``convention`` (the readings corrected by it, the
+    geometry calibrated again: the report's ``couplings`` hold it, the effect's value is exactly ±1)."""
+
+    convention: CouplingJson
 
 
 class DiagnosisJson(TypedDict):

@@ -38,13 +38,15 @@ DEFAULT_REGISTRATION = Registration(
 )
 
 
-def cpa_configurations(lower: np.ndarray, upper: np.ndarray, per_joint: int) -> np.ndarray:
-    """Eq 23: joint n at lower_n + k·delta_n (k = 1..K_alpha), others at zero; (N·K_alpha, N)."""
+def cpa_configurations(lower: np.ndarray, upper: np.ndarray, per_joint: int,
+                       start: np.ndarray | None = None) -> np.ndarray:
+    """Eq 23: joint n at lower_n + k·delta_n (k = 1..K_alpha), the others at zero (or at ``start``, (N,): one
+    joint moving at a time from a posture); (N·K_alpha, N)."""
     n = len(lower)
     rows = []
     for joint in range(n):
         step = (upper[joint] - lower[joint]) / (per_joint + 1)
-        block = np.zeros((per_joint, n))
+        block = np.zeros((per_joint, n)) if start is None else np.tile(np.asarray(start, dtype=float), (per_joint, 1))
         block[:, joint] = lower[joint] + step * np.arange(1, per_joint + 1)
         rows.append(block)
     return np.vstack(rows)
