@@ -80,6 +80,18 @@ J5,revolute,0,-90,0.4,0,-170,170
 J6,revolute,0,90,0,0,-120,120
 J7,continuous,0,0,0.126,0,,
 """),
+    # standard DH: a humanoid's torso (yaw, pitch) and 7-axis arm, 0.25-0.3 m links (no vendor's table)
+    "humanoid 9R standard": ("standard", """joint,type,a,alpha,d,theta,lower,upper
+T1,revolute,0,-90,0.25,0,-60,60
+T2,revolute,0.2,0,0,-90,-30,60
+S1,revolute,0,-90,0.15,0,-170,170
+S2,revolute,0,90,0,0,-100,100
+S3,revolute,0,-90,0.28,0,-170,170
+E1,revolute,0,90,0,0,-120,120
+W1,revolute,0,-90,0.25,0,-170,170
+W2,revolute,0,90,0,0,-90,90
+W3,revolute,0,0,0.1,0,-170,170
+"""),
     # standard DH: a gantry-like arm, prismatic column and a continuous base joint
     "RPRRR standard": ("standard", """joint,type,a,alpha,d,theta,lower,upper
 B1,continuous,0,0,0.4,0,,
@@ -109,6 +121,12 @@ class Scenario:
     seed: int = 0
     joint_noise_rad: float = 2e-5  # socket fixture: the joint readings' noise
     levels: tuple[str, ...] = field(default=CHAIN_LEVELS)
+    #: the true placement errors: ("normal", mm, mrad), each translation N(0, mm) and rotation N(0, mrad);
+    #: ("uniform", (mm, mm), (mrad, mrad)), magnitudes uniform between the two, signs at random
+    deviations: tuple = ("normal", 0.3, 0.3)
+    held_out_rows: int | None = None  # held-out rows (None: as many as ``rows``)
+    joint_range: float = 1.0  # spread postures: the share of each joint's range they span, about its middle
+    held_out_range: float | None = None  # the held-out postures' share (None: as the calibration's)
 
 
 SCENARIOS = (
@@ -129,6 +147,11 @@ SCENARIOS = (
     Scenario("tracker 4 m, 6D, prismatic + continuous joints", "RPRRR standard", rows=40, seed=12),
     Scenario("tracker 3 m, 6D, KUKA LWR 4+ (7 axes)", "KUKA LWR 4+", distance_m=3.0, rows=50, seed=13),
     Scenario("socket fixture, 9 sockets x 3 placements", "6R modified", motion="fixture", rows=3, seed=14),
+    Scenario("tracker 4 m, 6D, 40 postures, deviations 10x the old prior", "6R modified", distance_m=4.0, seed=15,
+             deviations=("uniform", (5.0, 10.0), (2.0, 5.0))),
+    Scenario("humanoid arm, mocap 1.5 m, 3 markers, 43 + 18 held-out rows, mm deviations", "humanoid 9R standard",
+             distance_m=1.5, sigma_pos_mm=0.4, sigma_rot_deg=None, rows=43, held_out_rows=18, seed=16,
+             points=((0.05, 0.0, 0.05), (-0.03, 0.04, 0.06), (0.0, -0.05, 0.04)), deviations=("normal", 3.0, 5.0)),
 )
 #: The socket fixture's plate: a 3 x 3 grid, 120 mm pitch [m]; its placements (base_T_fixture: where,
 #: and a tilt about x then y [deg]) in front of the 6R arm; the ball's centre on the flange [m].
@@ -148,14 +171,38 @@ def build_robots(folder: Path) -> dict[str, tuple[Path, str]]:
     return robots
 
 
+def true_deviations(params, deviations: tuple, rng: np.random.Generator) -> np.ndarray:
+    """The true placement errors of ``params`` [m, rad] drawn as :attr:`Scenario.deviations` says."""
+    metres = np.array([info.unit == "m" for info in params.info])
+    if deviations[0] == "normal":
+        return rng.normal(0.0, 1.0, params.size) * np.where(metres, deviations[1] * 1e-3, deviations[2] * 1e-3)
+    (low_mm, high_mm), (low_mrad, high_mrad) = deviations[1:]
+    size = rng.uniform(0.0, 1.0, params.size)
+    magnitude = np.where(metres, low_mm + size * (high_mm - low_mm), low_mrad + size * (high_mrad - low_mrad))
+    return rng.choice([-1.0, 1.0], params.size) * magnitude * 1e-3
+
+
+def spread_configurations(chain: KinematicChain, rng: np.random.Generator, rows: int, share: float) -> np.ndarray:
+    """Random configurations (rows, N) over ``share`` of each joint's range about its middle (continuous
+    joints: of ±π about 0); the whole range draws as :func:`pincal.simulation.sensor.random_configurations`."""
+    if share >= 1.0:
+        return random_configurations(chain, rng, rows)
+    lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
+    upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    middle, half = (lower + upper) / 2.0, share * (upper - lower) / 2.0
+    return rng.uniform(middle - half, middle + half, (rows, chain.n_joints))
+
+
 def simulate(scenario: Scenario, urdf: Path, tip: str):
     """The chain, its calibration rows and held-out rows (same kind, same session), seeded."""
     chain = KinematicChain.from_urdf(urdf, tip)
     params = PlacementErrors(chain)
     rng = np.random.default_rng(scenario.seed)
-    truth = rng.normal(0.0, 3e-4, params.size)
+    truth = true_deviations(params, scenario.deviations, rng)
+    held_out = scenario.held_out_rows or scenario.rows
     if scenario.motion == "spread":
-        q, q_test = random_configurations(chain, rng, scenario.rows), random_configurations(chain, rng, scenario.rows)
+        q, q_test = (spread_configurations(chain, rng, scenario.rows, scenario.joint_range),
+                     spread_configurations(chain, rng, held_out, scenario.held_out_range or scenario.joint_range))
     else:
         centre = np.array([1.2, 0.0, 0.5])
         q = constant_orientation_path(chain, scenario.motion, scenario.rows, centre, DOWN, START_6R)

@@ -37,10 +37,19 @@ from pincal.fit.prior import (
     PRIOR_STATUS,
     Prior,
     PriorResidual,
+    ScaleChoice,
     map_outcome,
+    parameter_kinds,
     prior_of,
     prior_sigmas,
     settled,
+)
+from pincal.fit.prior_scales import (
+    LinearisedFit,
+    cross_validated,
+    estimate_scales,
+    prior_log_evidence,
+    scale_folds,
 )
 from pincal.fit.selection import select_subset
 from pincal.fit.solver import Fittable, Solution, gram, solve
@@ -109,6 +118,15 @@ class KindProblem(Protocol[ObjectiveT]):
 
     def log_evidence(self, objective: ObjectiveT, solution: Solution) -> float:
         """Eq P3 of :mod:`pincal.fit.prior` for a MAP fit of this problem."""
+        ...
+
+    def scale_rows(self, objective: ObjectiveT) -> tuple[slice, ...]:
+        """The data rows each noise scale of :meth:`scales` weights (those not None, in order)."""
+        ...
+
+    def fold_rows(self, objective: ObjectiveT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each row's joint readings (K, N), stratum (K,) and residual entries (K, b), for the prior's
+        folds (:func:`pincal.fit.prior_scales.scale_folds`)."""
         ...
 
 
@@ -190,8 +208,12 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
     if size:
         objective, solution = _settle(problem, objective, solution, kept, base, what, refits)
     closer = None  # the unregularised fit's position scale, where the evidence kept the prior's fixed point
+    choice = None if prior is None else ScaleChoice(prior)  # the prior's scales the fit ends with
     if problem.prior is not None and kept.size:
         objective, solution, closer = _from_the_data_scale(problem, objective, solution, kept, base, what)
+        if cast(Prior, prior).estimated:
+            objective, solution, choice = _estimated(problem, objective, solution, kept, base, what, cast(Prior, prior))
+            closer = None if choice.used.estimated else closer
     fit_seconds = time.perf_counter() - started
     counter.tick()
     kinematic = objective.blocks["kinematic"]
@@ -209,7 +231,7 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
         # a PriorResidual is fitted only with a prior: problem.prior and prior are set
         covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept,
                                                   cast(np.ndarray, problem.prior), selection,
-                                                  problem.params, cast(Prior, prior))
+                                                  problem.params, cast(ScaleChoice, choice))
         std_all = np.sqrt(np.diag(covariance))
         status[weak] = PRIOR_STATUS
         if closer is not None:
@@ -279,6 +301,50 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
         return second, second_solution, None
     problem.set_scales(first)
     return objective, solution, cast(float, unbiased[0])
+
+
+def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
+               base: np.ndarray, what: str, prior: Prior) -> tuple[ObjectiveT, Solution, ScaleChoice]:
+    """The prior's scales estimated from the rows, from the MAP fit at ``prior``'s (the defaults), and
+    the fit kept: the estimate's where its evidence (eq P4) is the larger and it predicts held-out
+    configurations better by more than one standard error, else the defaults'
+    (:mod:`pincal.fit.prior_scales`). The problem's scales and prior are left at the fit kept's."""
+    kinds = parameter_kinds(problem.params)
+    first_scales, first_prior = problem.scales(), cast(np.ndarray, problem.prior)
+    first_evidence = prior_log_evidence(problem.log_evidence(objective, solution), first_prior[kept])
+    default = _linearised(problem, objective, solution, kinds[kept])
+    start = np.array([prior.translation_mm * 1e-3, np.radians(prior.rotation_deg), np.radians(prior.joint_zero_deg)])
+    defaults = Prior(*prior.scales, estimated=False)
+    try:
+        estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base, what, kinds, start)
+        evidence = prior_log_evidence(problem.log_evidence(cast(Any, estimate), fit),
+                                      cast(np.ndarray, problem.prior)[kept])
+        folds = scale_folds(*problem.fold_rows(cast(ObjectiveT, estimate)))
+        check = cross_validated(_linearised(problem, estimate, fit, kinds[kept]), default, folds)
+    except CalibrationError as exc:  # a scale the fit cannot take: the defaults' fit stands
+        problem.set_scales(first_scales)
+        problem.prior = first_prior
+        return objective, solution, ScaleChoice(defaults, reason=f"the default scales: the estimate failed ({exc})")
+    lengths, angles, zeros = sigma
+    found = Prior(lengths * 1e3, float(np.degrees(angles)), float(np.degrees(zeros)), estimated=True)
+    gain = evidence - first_evidence
+    cv = (f"{check.folds}-fold cross-validated error {check.ratio:.3f} x the defaults' "
+          f"(standard error {check.standard_error:.3f})")
+    if gain > 0.0 and check.better:
+        reason = f"estimated: evidence e^{gain:.3g} times the defaults', {cv}"
+        return cast(ObjectiveT, estimate), fit, ScaleChoice(found, found, gain, check.ratio, check.standard_error,
+                                                             reason)
+    problem.set_scales(first_scales)
+    problem.prior = first_prior
+    reason = "the default scales: the estimate's " + (
+        cv + ", not lower by one standard error" if gain > 0.0 else "evidence is not the larger")
+    return objective, solution, ScaleChoice(defaults, found, gain, check.ratio, check.standard_error, reason)
+
+
+def _linearised(problem: KindProblem[ObjectiveT], objective, solution: Solution, kinds: np.ndarray) -> LinearisedFit:
+    """Eq P5's linearisation of ``problem``'s MAP fit (``objective`` at ``solution``) at its noise scales now."""
+    present = [s for s in problem.scales() if s is not None]
+    return LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds)
 
 
 def _prior_too_narrow(n_kept: int, closer_m: float, scale_m: float, prior: Prior) -> str:
