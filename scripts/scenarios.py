@@ -147,11 +147,12 @@ SCENARIOS = (
     Scenario("tracker 4 m, 6D, prismatic + continuous joints", "RPRRR standard", rows=40, seed=12),
     Scenario("tracker 3 m, 6D, KUKA LWR 4+ (7 axes)", "KUKA LWR 4+", distance_m=3.0, rows=50, seed=13),
     Scenario("socket fixture, 9 sockets x 3 placements", "6R modified", motion="fixture", rows=3, seed=14),
-    Scenario("tracker 4 m, 6D, 40 postures, deviations 10x the old prior", "6R modified", distance_m=4.0, seed=15,
-             deviations=("uniform", (5.0, 10.0), (2.0, 5.0))),
-    Scenario("humanoid arm, mocap 1.5 m, 3 markers, 43 + 18 held-out rows, mm deviations", "humanoid 9R standard",
+    Scenario("tracker 4 m, 3D, 24 postures, deviations 10x the old prior", "6R modified", distance_m=4.0,
+             sigma_rot_deg=None, rows=24, seed=15, deviations=("uniform", (5.0, 10.0), (2.0, 5.0))),
+    Scenario("humanoid arm, mocap 1.5 m, 3 markers, 43 + 18 rows, mm deviations", "humanoid 9R standard",
              distance_m=1.5, sigma_pos_mm=0.4, sigma_rot_deg=None, rows=43, held_out_rows=18, seed=16,
-             points=((0.05, 0.0, 0.05), (-0.03, 0.04, 0.06), (0.0, -0.05, 0.04)), deviations=("normal", 3.0, 5.0)),
+             points=((0.05, 0.0, 0.05), (-0.03, 0.04, 0.06), (0.0, -0.05, 0.04)), deviations=("normal", 3.0, 5.0),
+             joint_range=0.3, held_out_range=0.6),
 )
 #: The socket fixture's plate: a 3 x 3 grid, 120 mm pitch [m]; its placements (base_T_fixture: where,
 #: and a tilt about x then y [deg]) in front of the 6R arm; the ball's centre on the flange [m].

@@ -185,7 +185,7 @@ def _write_html(html, document: Mapping[str, Any], base, evaluation: dict | None
 def _print_chain_summary(run) -> None:
     import numpy as np
 
-    from pincal.cli.level_table import held_by_prior
+    from pincal.cli.level_table import held_by_prior, prior_scale_line
 
     result = run.result
     ident = run.report["identifiability"]
@@ -195,6 +195,9 @@ def _print_chain_summary(run) -> None:
     if ident["selection"]:
         sel = ident["selection"]
         print(f"selection: {sel['criterion']} = {sel['value']:.4g} with {sel['kept']} kept")
+        scales = prior_scale_line(sel)
+        if scales:
+            print(scales)
     print(f"Jacobian condition number (scaled): {ident['jacobian_condition']:.3g}")
     for pair in ident["correlated_pairs"][:10]:
         print(f"correlated: {pair['a']} ~ {pair['b']} ({pair['correlation']:+.3f})")
