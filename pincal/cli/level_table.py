@@ -54,4 +54,5 @@ def prior_scale_line(selection: Mapping[str, Any] | None) -> str | None:
     estimate = scale.get("estimate")
     if estimate is None:
         return line + (" (given)" if scale.get("reason", "given") == "given" else f" ({scale['reason']})")
-    return line + f" (the defaults; estimated {_scales(estimate)}: {scale['reason'].removeprefix('the default scales: ')})"
+    why = scale["reason"].removeprefix("the default scales: ")
+    return line + f" (the defaults; estimated {_scales(estimate)}: {why})"
