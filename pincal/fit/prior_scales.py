@@ -48,7 +48,7 @@ the evidence is a smooth function of the three scales that every row informs onc
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -62,7 +62,7 @@ from pincal.fit.solver import Solution, gram
 
 __all__ = [
     "SETTLE_TOLERANCE", "MAX_ROUNDS", "bounds_si", "prior_log_evidence", "LinearisedFit", "estimate_scales",
-    "scale_folds", "CrossValidation", "cross_validated",
+    "scale_folds", "CrossValidation", "cross_validated", "chosen_scales",
 ]
 
 #: Relative change of every estimated scale (prior and noise) below which the rounds of eq P5 stop: the
@@ -124,15 +124,30 @@ class LinearisedFit:
            kinds: np.ndarray) -> LinearisedFit:
         """Of a MAP fit: its data rows (divided by the objective's ``noise`` weight: whitened) in the
         ``row_groups`` of the noise scales ``noise`` now, its kinematic unknowns of ``kinds``."""
-        m = solution.residual.size - objective.n_prior
+        return cls.of(objective, solution.x, solution.jacobian, solution.residual, row_groups, noise, kinds)
+
+    @classmethod
+    def of(cls, objective: PriorResidual, x: np.ndarray, jacobian: np.ndarray, residual: np.ndarray,
+           row_groups: tuple[slice, ...], noise, kinds: np.ndarray) -> LinearisedFit:
+        """As :meth:`at`, from the objective's unknowns ``x``, Jacobian and residual there (prior rows last)."""
+        m = residual.size - objective.n_prior
         group = np.full(m, -1)
         for k, rows in enumerate(row_groups):
             group[rows] = k
         kin = objective.blocks["kinematic"]
-        return cls(jacobian=solution.jacobian[:m] / objective.noise, residual=solution.residual[:m] / objective.noise,
+        return cls(jacobian=jacobian[:m] / objective.noise, residual=residual[:m] / objective.noise,
                    group=group, noise=np.asarray(noise, dtype=float), kinematic=np.arange(kin.start, kin.stop),
-                   theta=solution.x[kin].copy(), kinds=np.asarray(kinds, dtype=int),
+                   theta=np.asarray(x)[kin].copy(), kinds=np.asarray(kinds, dtype=int),
                    sigma=objective.noise / objective.weight)
+
+    def on(self, rows: np.ndarray) -> LinearisedFit:
+        """The same linearisation over the data rows ``rows`` only (boolean, (m,)): what a fit of those rows
+        would see (the model is linear: the solution it moves from does not matter)."""
+        return replace(self, jacobian=self.jacobian[rows], residual=self.residual[rows], group=self.group[rows])
+
+    def at_scales(self, sigma_kinds: np.ndarray) -> LinearisedFit:
+        """The same linearisation with the prior scales of the kinds ``sigma_kinds`` (3,) [SI]."""
+        return replace(self, sigma=np.asarray(sigma_kinds, dtype=float)[self.kinds])
 
     @property
     def present(self) -> np.ndarray:
@@ -301,3 +316,21 @@ def cross_validated(estimate: LinearisedFit, default: LinearisedFit, folds: list
     difference = mine - theirs
     return CrossValidation(float(np.mean(mine)) / mean,
                            float(np.std(difference, ddof=1) / np.sqrt(difference.size)) / mean, len(folds))
+
+
+def chosen_scales(fit: LinearisedFit, rows: np.ndarray, q: np.ndarray, strata: np.ndarray, entries: np.ndarray,
+                  defaults: np.ndarray) -> np.ndarray:
+    """The σ_i (n_kin,) [m, rad] this module's rule chooses from the data rows ``rows`` (boolean, (m,)) of a
+    linearised fit alone: eq P5 maximised on them from the scales ``defaults`` of the kinds (3,) [SI] (its
+    maximum's evidence is at least the defaults'), and the estimate kept where it beats the defaults by
+    one standard error over folds of those rows (``q``, ``strata``, ``entries``: the rows', as
+    :func:`scale_folds` takes them, ``entries`` numbering ``fit``'s data rows). For cross-validation at
+    scale (:mod:`pincal.fit.fold_update`): a fold's scales then owe nothing to its held-out rows."""
+    at_defaults = fit.on(rows).at_scales(defaults)
+    try:
+        _, estimate = at_defaults.maximise(defaults)
+        candidate = at_defaults.at_scales(estimate)
+        check = cross_validated(candidate, at_defaults, scale_folds(q, strata, (np.cumsum(rows) - 1)[entries]))
+    except CalibrationError:
+        return at_defaults.sigma
+    return candidate.sigma if check.better else at_defaults.sigma
