@@ -15,7 +15,8 @@ From there the steps are the same, and :func:`fit_kinematics` runs them:
    ``prior``, every identifiable one in a MAP fit, :mod:`pincal.fit.prior` eq P1);
 3. fit the kept parameters, then re-estimate the residual's noise scale and refit (without a
    prior a given number of times, maximum likelihood with unknown variances; with one, up to
-   eq P2's fixed point);
+   eq P2's fixed point; with a prior whose scales are estimated, then those scales,
+   :mod:`pincal.fit.prior_scales`);
 4. the covariance (the fit's, scaled by the residual; with a prior, the posterior) and each
    parameter's status: kept, not selected, not identifiable, or determined by the prior only.
 """

@@ -35,8 +35,8 @@ for placement errors and widens the scales to fit them (Grünwald & van Ommen 20
 misspecification Bayesian inference overfits). TIAGo's arm (data/tiago_mocap: a noise of 1.45 mm
 against the markers' 0.2 mm, a backlash ``pincal diagnose`` finds) is such a case: the evidence
 prefers 4.8 mm to 1 mm lengths by a Bayes factor of e⁵⁴, while 10-fold cross-validation on the
-same rows predicts the held-out configurations no better (4.37 against 4.34 mm) and the other day
-worse (3.52 against 3.10 mm). Cross-validation does not trust the model, so it referees
+same rows finds the held-out configurations predicted no better (mean squared error 1.03 × the
+defaults', standard error 0.15) and the other day is predicted worse (3.52 against 3.10 mm). Cross-validation does not trust the model, so it referees
 (:func:`cross_validated`): the estimate replaces the default scales only where its evidence is the
 larger and its cross-validated error is lower than theirs by more than one standard error of the
 paired difference over the folds — the one-standard-error rule of ``--level auto`` (Breiman et al.
