@@ -280,6 +280,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
+    from pincal.cli.level_table import prior_scale_line
     from pincal.cli.progress import progress_bar
     from pincal.cli.settings import DiagnoseSettings
     from pincal.cli.workflows import diagnose_files
@@ -301,6 +302,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     diagnosis = run.diagnosis
     held = diagnosis.heldout_errors is not None
     print(f"geometric calibration ({run.calibration.level}), then {len(diagnosis.steps)} effect(s) adopted:")
+    scales = prior_scale_line((run.report.get("identifiability") or {}).get("selection"))
+    if scales:
+        print(scales)
     print(f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
           + (f" {'held-out RMS [mm]':>19s}" if held else ""))
     kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))

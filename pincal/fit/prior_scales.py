@@ -36,11 +36,12 @@ misspecification Bayesian inference overfits). TIAGo's arm (data/tiago_mocap: a 
 against the markers' 0.2 mm, a backlash ``pincal diagnose`` finds) is such a case: the evidence
 prefers 4.8 mm to 1 mm lengths by a Bayes factor of e⁵⁴, while 10-fold cross-validation on the
 same rows finds the held-out configurations predicted no better (mean squared error 1.03 × the
-defaults', standard error 0.15) and the other day is predicted worse (3.52 against 3.10 mm). Cross-validation does not trust the model, so it referees
-(:func:`cross_validated`): the estimate replaces the default scales only where its evidence is the
-larger and its cross-validated error is lower than theirs by more than one standard error of the
-paired difference over the folds — the one-standard-error rule of ``--level auto`` (Breiman et al.
-1984), the physical defaults being the simpler answer. Why not cross-validation alone, over a grid
+defaults', standard error 0.15) and the other day is predicted worse (3.52 against 3.10 mm).
+Cross-validation does not trust the model, so it referees (:func:`cross_validated`): the estimate
+replaces the default scales only where its evidence is the larger and its cross-validated error is
+lower than theirs by more than one standard error of the paired difference over the folds — the
+one-standard-error rule of ``--level auto`` (Breiman et al. 1984), the physical defaults being the
+simpler answer. Why not cross-validation alone, over a grid
 of scales: a fold's error jumps with the rows dealt to it, and the grid's minimum with it, where
 the evidence is a smooth function of the three scales that every row informs once.
 """
