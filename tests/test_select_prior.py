@@ -225,7 +225,7 @@ def test_cli_select_prior_records_its_scales(tmp_path, capsys):
     assert code == 0 and "prior_scale" not in json.loads(report.read_text())["identifiability"]["selection"]
 
 
-@pytest.mark.parametrize("scale", ["-1,0.5", "0,0.5", "1,0", "a,b", "1", "1,2,3", "inf,1"])
+@pytest.mark.parametrize("scale", ["-1,0.5", "0,0.5", "1,0", "a,b", "1", "1,2,3,4", "1,2,0", "inf,1"])
 def test_cli_bad_prior_scale_is_one_line(tmp_path, capsys, scale):
     with pytest.raises(SystemExit) as exit_info:
         _cli(tmp_path, "--select", "prior", f"--prior-scale={scale}")

@@ -49,6 +49,7 @@ from pincal.fit.prior_scales import (
     LinearisedFit,
     cross_validated,
     estimate_scales,
+    hyperprior,
     prior_log_evidence,
     scale_folds,
 )
@@ -331,14 +332,16 @@ def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution
     gain = evidence - first_evidence
     cv = (f"{check.folds}-fold cross-validated error {check.ratio:.3f} x the defaults' "
           f"(standard error {check.standard_error:.3f})")
-    if gain > 0.0 and check.better:
+    present = np.unique(kinds[kept])  # the estimate's posterior (eq P4 + P6) against the defaults'
+    if gain + hyperprior(np.log(sigma[present]), start[present])[0] > 0.0 and check.better:
         reason = f"estimated: evidence e^{gain:.3g} times the defaults', {cv}"
         return cast(ObjectiveT, estimate), fit, ScaleChoice(found, found, gain, check.ratio, check.standard_error,
                                                              reason)
     problem.set_scales(first_scales)
     problem.prior = first_prior
     reason = "the default scales: the estimate's " + (
-        cv + ", not lower by one standard error" if gain > 0.0 else "evidence is not the larger")
+        cv + ", not lower by one standard error" if check.ratio >= 1.0 - check.standard_error
+        else "evidence is not the larger")
     return objective, solution, ScaleChoice(defaults, found, gain, check.ratio, check.standard_error, reason)
 
 

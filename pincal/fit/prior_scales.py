@@ -28,17 +28,25 @@ within the bounds, the fit is redone at the new scales, and again until they set
 
 **Guards.** Empirical Bayes fails in two known ways. On few rows a scale collapses to zero (a kind
 whose few well-determined parameters the rows put near nominal: γ_j → 0) or explodes (a kind the
-rows hardly see): each scale stays within its physical range
+rows hardly see). A hyperprior holds the scales the rows hardly inform near the defaults:
+
+    ln σ_j ~ N(ln σ_j(default), τ²),   τ = :data:`HYPERPRIOR_SPREAD`                        (P6)
+
+(the spread of ISO 2768-1's general tolerance classes), and the scales maximise P4 + P6 — the
+posterior mode of the scales; each stays within its physical range besides
 (:data:`pincal.fit.prior_defaults.ESTIMATE_BOUNDS`, machining tolerances to the coarsest general
-tolerance). And the evidence trusts the model: where the rows hold effects it lacks, it takes them
-for placement errors and widens the scales to fit them (Grünwald & van Ommen 2017: under
-misspecification Bayesian inference overfits). TIAGo's arm (data/tiago_mocap: a noise of 1.45 mm
-against the markers' 0.2 mm, a backlash ``pincal diagnose`` finds) is such a case: the evidence
-prefers 4.8 mm to 1 mm lengths by a Bayes factor of e⁵⁴, while 10-fold cross-validation on the
-same rows finds the held-out configurations predicted no better (mean squared error 1.03 × the
-defaults', standard error 0.15) and the other day is predicted worse (3.52 against 3.10 mm).
+tolerance). On a 3D tracker raster at constant orientation, which hardly turns the tool, the
+evidence alone shrank the angles' scale to 0.001–0.02° (the truth's 0.017°) and predicted a parallel
+raster 3 % worse than the defaults; with P6 it stays at 0.02–0.05°. And the evidence trusts the
+model: where the rows hold effects it lacks, it takes them for placement errors and widens the
+scales to fit them (Grünwald & van Ommen 2017: under misspecification Bayesian inference overfits).
+TIAGo's arm (data/tiago_mocap: a noise of 1.45 mm against the markers' 0.2 mm, a backlash ``pincal
+diagnose`` finds) is such a case: the evidence prefers 4.8 mm to 1 mm lengths by a Bayes factor of
+e⁵⁴, while 10-fold cross-validation on the same rows finds the held-out configurations predicted no
+better (mean squared error 1.03 × the defaults', standard error 0.15) and the other day is predicted
+worse (3.52 against 3.10 mm).
 Cross-validation does not trust the model, so it referees (:func:`cross_validated`): the estimate
-replaces the default scales only where its evidence is the larger and its cross-validated error is
+replaces the default scales only where its P4 + P6 is the larger and its cross-validated error is
 lower than theirs by more than one standard error of the paired difference over the folds — the
 one-standard-error rule of ``--level auto`` (Breiman et al. 1984), the physical defaults being the
 simpler answer. Why not cross-validation alone, over a grid
@@ -62,8 +70,8 @@ from pincal.fit.prior_defaults import ESTIMATE_BOUNDS
 from pincal.fit.solver import Solution, gram
 
 __all__ = [
-    "SETTLE_TOLERANCE", "MAX_ROUNDS", "bounds_si", "prior_log_evidence", "LinearisedFit", "estimate_scales",
-    "scale_folds", "CrossValidation", "cross_validated", "chosen_scales",
+    "SETTLE_TOLERANCE", "MAX_ROUNDS", "HYPERPRIOR_SPREAD", "bounds_si", "hyperprior", "prior_log_evidence",
+    "LinearisedFit", "estimate_scales", "scale_folds", "CrossValidation", "cross_validated", "chosen_scales",
 ]
 
 #: Relative change of every estimated scale (prior and noise) below which the rounds of eq P5 stop: the
@@ -72,6 +80,12 @@ __all__ = [
 SETTLE_TOLERANCE = 1e-2
 #: Most rounds of eq P5 and a refit (two or three settle it; the bound stops a cycle).
 MAX_ROUNDS = 8
+#: Standard deviation of ln σ_j in the hyperprior about the default scales (eq P6): ln(13.3) / 2. The
+#: general tolerances of ISO 2768-1 over 400–1000 mm run from class f (±0.3 mm) to class v (±4 mm), a
+#: factor 13.3 whose geometric middle, 1.1 mm, is the default length scale; f and v then lie one
+#: standard deviation either side. A scale the rows inform (TIAGo's lengths: the evidence moves by
+#: e⁵⁴) hardly feels it (0.7 nats at 4.8 mm); one they hardly inform stays near its default.
+HYPERPRIOR_SPREAD = math.log(13.3) / 2.0
 
 
 def bounds_si() -> np.ndarray:
@@ -79,6 +93,13 @@ def bounds_si() -> np.ndarray:
     (low_l, high_l), (low_a, high_a), (low_z, high_z) = ESTIMATE_BOUNDS
     return np.array([[low_l * 1e-3, high_l * 1e-3], [math.radians(low_a), math.radians(high_a)],
                      [math.radians(low_z), math.radians(high_z)]])
+
+
+def hyperprior(log_sigma: np.ndarray, centre: np.ndarray) -> tuple[float, np.ndarray]:
+    """ln of the hyperprior of the scales (eq P6) at ``log_sigma`` (ln σ_j [SI]), up to a constant, and
+    its gradient: ln σ_j ~ N(ln centre_j, :data:`HYPERPRIOR_SPREAD`²)."""
+    z = (np.asarray(log_sigma) - np.log(centre)) / HYPERPRIOR_SPREAD
+    return float(-0.5 * np.sum(z**2)), -z / HYPERPRIOR_SPREAD
 
 
 def prior_log_evidence(data_evidence: float, sigma: np.ndarray) -> float:
@@ -201,9 +222,11 @@ class LinearisedFit:
         grad_prior = np.array([per[self.kinds == j].sum() for j in self.present])
         return value, np.concatenate([grad_noise, grad_prior])
 
-    def maximise(self, sigma_kinds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The noise scales (K,) and the scales of the kinds (3,) [SI] maximising eq P5 from the noise now
-        and ``sigma_kinds`` (3,) [SI], within :func:`bounds_si` (kinds without an unknown keep theirs)."""
+    def maximise(self, sigma_kinds: np.ndarray, centre: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The noise scales (K,) and the scales of the kinds (3,) [SI] maximising eq P5 plus the hyperprior
+        about ``centre`` (3,) [SI] (:func:`hyperprior`; default: ``sigma_kinds``) from the noise now and
+        ``sigma_kinds`` (3,) [SI], within :func:`bounds_si` (kinds without an unknown keep theirs)."""
+        centre = np.asarray(sigma_kinds if centre is None else centre, dtype=float)
         bounds = bounds_si()
         present = self.present
         start = np.clip(np.asarray(sigma_kinds, dtype=float)[present], bounds[present, 0], bounds[present, 1])
@@ -217,7 +240,8 @@ class LinearisedFit:
 
         def negative(u):
             value, grad = self.evidence(u, groups)
-            return -value, -grad
+            prior, prior_grad = hyperprior(u[self.noise.size:], centre[present])
+            return -(value + prior), -np.concatenate([grad[: self.noise.size], grad[self.noise.size:] + prior_grad])
 
         u = minimize(negative, u0, jac=True, method="L-BFGS-B", bounds=limits).x
         out = np.asarray(sigma_kinds, dtype=float).copy()
@@ -259,12 +283,12 @@ def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept:
         The last fit (its objective and solution) and the scales of the kinds it was made with
         [SI], (3,); the problem's noise scales and ``prior`` are left at them.
     """
-    sigma = np.asarray(start, dtype=float)
+    centre = sigma = np.asarray(start, dtype=float)
     for _ in range(MAX_ROUNDS):
         now = problem.scales()
         present = np.array([s for s in now if s is not None])
         model = LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds[kept])
-        noise, estimate = model.maximise(sigma)
+        noise, estimate = model.maximise(sigma, centre)
         moved = np.concatenate([np.abs(np.log(estimate / sigma)), np.abs(np.log(noise / present))])
         if moved.max() < SETTLE_TOLERANCE:
             break  # the fit is made at the scales its own linearisation prefers
