@@ -308,41 +308,55 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
 def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
                base: np.ndarray, what: str, prior: Prior) -> tuple[ObjectiveT, Solution, ScaleChoice]:
     """The prior's scales estimated from the rows, from the MAP fit at ``prior``'s (the defaults), and
-    the fit kept: the estimate's where its evidence (eq P4) is the larger and it predicts held-out
+    the fit kept: the estimate's where its posterior (eq P4 + P6) is the larger and it predicts held-out
     configurations better by more than one standard error, else the defaults'
-    (:mod:`pincal.fit.prior_scales`). The problem's scales and prior are left at the fit kept's."""
+    (:mod:`pincal.fit.prior_scales`). The first estimate, from the defaults' fit, is checked by the folds
+    on that fit's linearisation before any refit: where it is no better, the defaults stand at the cost
+    of one factorisation per trial. The problem's scales and prior are left at the fit kept's."""
     kinds = parameter_kinds(problem.params)
     first_scales, first_prior = problem.scales(), cast(np.ndarray, problem.prior)
-    first_evidence = prior_log_evidence(problem.log_evidence(objective, solution), first_prior[kept])
     default = _linearised(problem, objective, solution, kinds[kept])
     start = np.array([prior.translation_mm * 1e-3, np.radians(prior.rotation_deg), np.radians(prior.joint_zero_deg)])
+    present = default.present
     defaults = Prior(*prior.scales, estimated=False)
+    folds = scale_folds(*problem.fold_rows(objective))
+
+    def posterior_gain(noise: np.ndarray, sigma: np.ndarray) -> tuple[float, float]:
+        """eq P4 (linearised at the defaults' fit) and P4 + P6 of ``sigma`` over the defaults'."""
+        at = np.log(np.r_[default.noise / noise, sigma[present]])
+        gain = default.evidence(at)[0] - default.evidence(np.log(np.r_[np.ones(default.noise.size),
+                                                                         start[present]]))[0]
+        return gain, gain + hyperprior(np.log(sigma[present]), start[present])[0]
+
+    estimate, fit = cast(Any, objective), solution  # the defaults' fit, until an estimate is refitted
     try:
-        estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base, what, kinds, start)
-        evidence = prior_log_evidence(problem.log_evidence(cast(Any, estimate), fit),
-                                      cast(np.ndarray, problem.prior)[kept])
-        folds = scale_folds(*problem.fold_rows(cast(ObjectiveT, estimate)))
-        check = cross_validated(_linearised(problem, estimate, fit, kinds[kept]), default, folds)
+        noise, sigma = default.maximise(start, start)
+        check = cross_validated(default.at_scales(sigma), default, folds)
+        gain, posterior = posterior_gain(noise, sigma)
+        if check.better and posterior > 0.0:  # refitted at the estimate, and checked again
+            estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base, what, kinds,
+                                                   start, first=(noise, sigma))
+            first_evidence = prior_log_evidence(problem.log_evidence(objective, solution), first_prior[kept])
+            gain = prior_log_evidence(problem.log_evidence(cast(Any, estimate), fit),
+                                      cast(np.ndarray, problem.prior)[kept]) - first_evidence
+            posterior = gain + hyperprior(np.log(sigma[present]), start[present])[0]
+            check = cross_validated(_linearised(problem, estimate, fit, kinds[kept]), default, folds)
     except CalibrationError as exc:  # a scale the fit cannot take: the defaults' fit stands
         problem.set_scales(first_scales)
         problem.prior = first_prior
         return objective, solution, ScaleChoice(defaults, reason=f"the default scales: the estimate failed ({exc})")
     lengths, angles, zeros = sigma
     found = Prior(lengths * 1e3, float(np.degrees(angles)), float(np.degrees(zeros)), estimated=True)
-    gain = evidence - first_evidence
     cv = (f"{check.folds}-fold cross-validated error {check.ratio:.3f} x the defaults' "
           f"(standard error {check.standard_error:.3f})")
-    present = np.unique(kinds[kept])  # the estimate's posterior (eq P4 + P6) against the defaults'
-    if gain + hyperprior(np.log(sigma[present]), start[present])[0] > 0.0 and check.better:
+    record = (found, gain, check.ratio, check.standard_error)
+    if check.better and posterior > 0.0:
         reason = f"estimated: evidence e^{gain:.3g} times the defaults', {cv}"
-        return cast(ObjectiveT, estimate), fit, ScaleChoice(found, found, gain, check.ratio, check.standard_error,
-                                                             reason)
+        return cast(ObjectiveT, estimate), fit, ScaleChoice(found, *record, reason)
     problem.set_scales(first_scales)
     problem.prior = first_prior
-    reason = "the default scales: the estimate's " + (
-        cv + ", not lower by one standard error" if check.ratio >= 1.0 - check.standard_error
-        else "evidence is not the larger")
-    return objective, solution, ScaleChoice(defaults, found, gain, check.ratio, check.standard_error, reason)
+    why = cv + ", not lower by one standard error" if not check.better else "posterior is not the larger"
+    return objective, solution, ScaleChoice(defaults, *record, f"the default scales: the estimate's {why}")
 
 
 def _linearised(problem: KindProblem[ObjectiveT], objective, solution: Solution, kinds: np.ndarray) -> LinearisedFit:

@@ -270,14 +270,16 @@ class LinearisedFit:
 
 
 def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept: np.ndarray, base: np.ndarray,
-                    what: str, kinds: np.ndarray, start: np.ndarray) -> tuple[PriorResidual, Solution, np.ndarray]:
-    """Rounds of eq P5 from a MAP fit of ``problem`` (:class:`pincal.fit.pipeline.KindProblem`):
-    the scales maximising the linearised evidence, the fit redone at them, until they settle
-    (:data:`SETTLE_TOLERANCE`, at most :data:`MAX_ROUNDS`).
+                    what: str, kinds: np.ndarray, start: np.ndarray,
+                    first: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[PriorResidual, Solution, np.ndarray]:
+    """Rounds of eq P5 + P6 from a MAP fit of ``problem`` (:class:`pincal.fit.pipeline.KindProblem`):
+    the scales maximising the linearised posterior of the scales, the fit redone at them, until they
+    settle (:data:`SETTLE_TOLERANCE`, at most :data:`MAX_ROUNDS`).
 
     Args:
         kinds: the kind of every kinematic parameter of the problem (:func:`pincal.fit.prior.parameter_kinds`), (n,).
-        start: the scales of the kinds the fit was made with [m, rad, rad], (3,).
+        start: the scales of the kinds the fit was made with [m, rad, rad], (3,), the hyperprior's centre.
+        first: the first round's maximum (noise scales, scales of the kinds), when the caller has it.
 
     Returns:
         The last fit (its objective and solution) and the scales of the kinds it was made with
@@ -287,8 +289,11 @@ def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept:
     for _ in range(MAX_ROUNDS):
         now = problem.scales()
         present = np.array([s for s in now if s is not None])
-        model = LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds[kept])
-        noise, estimate = model.maximise(sigma, centre)
+        if first is None:
+            model = LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds[kept])
+            noise, estimate = model.maximise(sigma, centre)
+        else:
+            (noise, estimate), first = first, None
         moved = np.concatenate([np.abs(np.log(estimate / sigma)), np.abs(np.log(noise / present))])
         if moved.max() < SETTLE_TOLERANCE:
             break  # the fit is made at the scales its own linearisation prefers
