@@ -15,9 +15,16 @@ packaged KUKA LWR 4+), a sensor and a way the robot was moved, simulated with a 
 * a socket fixture (no external sensor): a ball on the flange seated in 9 sockets of a plate in
   three placements, the joint readings noisy (20 µrad); held out on other configurations in the
   same sockets and placements, predicted as sqrt(joint noise's share² + e²) (below);
-* revolute, prismatic and continuous joints; 6- and 7-axis arms in standard and modified DH.
+* revolute, prismatic and continuous joints; 6- and 7-axis arms in standard and modified DH;
+* robots whose placements are far off the URDF, for the prior's scales estimated from the rows
+  (pincal.fit.prior_scales): a 3D tracker on the 6-axis arm with every placement off by 5–10 mm /
+  2–5 mrad (ten times the old fixed prior of 1 mm / 0.5°), and a humanoid's torso and arm (9 joints)
+  with 3-marker motion capture (0.4 mm), placements off by N(0, 3 mm) / N(0, 5 mrad), 43 rows over
+  30 % of each joint's range and 18 held-out rows over 60 % (a recording's last rows reaching
+  further than its first).
 
-The true geometry has every joint placement off by ~0.3 mm / 0.3 mrad (level full). Every level
+The true geometry has every joint placement off by ~0.3 mm / 0.3 mrad (level full), but where a
+scenario says otherwise (``deviations``). Every level
 is calibrated with ``calibrate``'s defaults on the calibration rows and evaluated on as many
 held-out rows of the same kind (the same session: its registration). The noise-limited
 prediction of the held-out RMS distance between measured and predicted points is
