@@ -242,6 +242,7 @@ SLOW_TESTS = (
     "tests/test_prior_downstream.py::test_cli_prior_scale_under_level_auto_needs_no_select",
     "tests/test_prior_scales.py::test_a_prismatic_joints_zero_is_a_length",
     "tests/test_prior_scales.py::test_prior_scale_fixes_the_scales",
+    "tests/test_prior_scales.py::test_folds_at_scale_choose_their_scales_without_their_held_out_rows",
     "tests/test_progress.py::test_commands_report_progress_on_stderr_and_quiet_silences_it",
     "tests/test_scenarios.py::test_scenario_reaches_its_noise_floor",
     "tests/test_study_reference.py::test_study_rows_equal_those_of_6975758",

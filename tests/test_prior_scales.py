@@ -278,3 +278,32 @@ def test_tiago_keeps_the_default_scales_its_own_folds_do_not_prefer_the_estimate
     assert not scale["estimated"] and (scale["translation_mm"], scale["rotation_deg"]) == (1.0, 0.5)
     assert scale["estimate"]["translation_mm"] > 3.0 and scale["log_bayes_factor"] > 10
     assert scale["cv_ratio"] > 1.0 - scale["cv_standard_error"]
+
+
+def test_folds_at_scale_choose_their_scales_without_their_held_out_rows(industrial_arm_urdf, monkeypatch):
+    """--level auto at scale (pincal.fit.fold_update): each fold's prior scales come from the rule applied to
+    its training rows alone; the rows given to it never include the fold's held-out rows."""
+    from pincal.fit import fold_update
+    from pincal.fit.level_choice import sensor_folds
+
+    chain, data = _industrial_rows(industrial_arm_urdf, 3e-4, rows=60, seed=8)
+    result = calibrate_chain(chain, data, "full", selection="prior")
+    assert "estimate" in result.selection.prior_scale
+    seen = []
+    real = fold_update.chosen_scales
+
+    def recording(fit, rows, *args):
+        seen.append(rows.copy())
+        return real(fit, rows, *args)
+
+    monkeypatch.setattr(fold_update, "chosen_scales", recording)
+    _, folds = sensor_folds(data)
+    tests = [fold.test for fold in folds]
+    errors = fold_update.linearised_fold_errors(chain, result, data, tests)
+    assert len(seen) == len(tests) and np.all(np.isfinite(errors))
+    k = data.n_rows  # the residual's layout: each row's point coordinates, then each row's orientation
+    entries = np.hstack([np.arange(3 * k).reshape(k, 3), 3 * k + np.arange(3 * k).reshape(k, 3)])
+    for rows, test in zip(seen, tests):
+        held = np.zeros(rows.size, dtype=bool)
+        held[entries[test].ravel()] = True
+        assert not np.any(rows & held) and np.all(rows | held)
