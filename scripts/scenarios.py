@@ -31,8 +31,16 @@ packaged KUKA LWR 4+), a sensor and a way the robot was moved, simulated with a 
   *placements warned* counts the left-out placements the check warns about (calibrated worse
   than the nominal model beyond 1 + 2/sqrt(2 rows));
 * revolute, prismatic and continuous joints; 6- and 7-axis arms in standard and modified DH.
+* revolute, prismatic and continuous joints; 6- and 7-axis arms in standard and modified DH;
+* robots whose placements are far off the URDF, for the prior's scales estimated from the rows
+  (pincal.fit.prior_scales): a 3D tracker on the 6-axis arm with every placement off by 5–10 mm /
+  2–5 mrad (ten times the old fixed prior of 1 mm / 0.5°), and a humanoid's torso and arm (9 joints)
+  with 3-marker motion capture (0.4 mm), placements off by N(0, 3 mm) / N(0, 5 mrad), 43 rows over
+  30 % of each joint's range and 18 held-out rows over 60 % (a recording's last rows reaching
+  further than its first).
 
-The true geometry has every joint placement off by ~0.3 mm / 0.3 mrad (level full). Every level
+The true geometry has every joint placement off by ~0.3 mm / 0.3 mrad (level full), but where a
+scenario says otherwise (``deviations``). Every level
 is calibrated with ``calibrate``'s defaults on the calibration rows and evaluated on as many
 held-out rows of the same kind (the same session: its registration). The noise-limited
 prediction of the held-out RMS distance between measured and predicted points is
@@ -104,6 +112,18 @@ J5,revolute,0,-90,0.4,0,-170,170
 J6,revolute,0,90,0,0,-120,120
 J7,continuous,0,0,0.126,0,,
 """),
+    # standard DH: a humanoid's torso (yaw, pitch) and 7-axis arm, 0.25-0.3 m links (no vendor's table)
+    "humanoid 9R standard": ("standard", """joint,type,a,alpha,d,theta,lower,upper
+T1,revolute,0,-90,0.25,0,-60,60
+T2,revolute,0.2,0,0,-90,-30,60
+S1,revolute,0,-90,0.15,0,-170,170
+S2,revolute,0,90,0,0,-100,100
+S3,revolute,0,-90,0.28,0,-170,170
+E1,revolute,0,90,0,0,-120,120
+W1,revolute,0,-90,0.25,0,-170,170
+W2,revolute,0,90,0,0,-90,90
+W3,revolute,0,0,0.1,0,-170,170
+"""),
     # standard DH: a gantry-like arm, prismatic column and a continuous base joint
     "RPRRR standard": ("standard", """joint,type,a,alpha,d,theta,lower,upper
 B1,continuous,0,0,0.4,0,,
@@ -139,6 +159,12 @@ class Scenario:
     # effect no level models, so level full is not the truth's and is not held to the bound)
     remastered_rad: tuple[float, ...] = ()
     read_against: bool = False  # A3 read against A2 (cpa motion): calibrate at the levels, then diagnose
+    #: the true placement errors: ("normal", mm, mrad), each translation N(0, mm) and rotation N(0, mrad);
+    #: ("uniform", (mm, mm), (mrad, mrad)), magnitudes uniform between the two, signs at random
+    deviations: tuple = ("normal", 0.3, 0.3)
+    held_out_rows: int | None = None  # held-out rows (None: as many as ``rows``)
+    joint_range: float = 1.0  # spread postures: the share of each joint's range they span, about its middle
+    held_out_range: float | None = None  # the held-out postures' share (None: as the calibration's)
 
 
 SCENARIOS = (
@@ -170,6 +196,12 @@ SCENARIOS = (
     Scenario("tracker 4 m, 3 reflectors, 24 CPA rows, A3 read against A2", "6R modified", distance_m=4.0,
              sigma_rot_deg=None, motion="cpa", rows=24, seed=3, levels=("full",), read_against=True,
              points=((0.05, 0.0, 0.1), (-0.03, 0.05, 0.12), (0.0, -0.06, 0.08))),
+    Scenario("tracker 4 m, 3D, 24 postures, deviations 10x the old prior", "6R modified", distance_m=4.0,
+             sigma_rot_deg=None, rows=24, seed=15, deviations=("uniform", (5.0, 10.0), (2.0, 5.0))),
+    Scenario("humanoid arm, mocap 1.5 m, 3 markers, 43 + 18 rows, mm deviations", "humanoid 9R standard",
+             distance_m=1.5, sigma_pos_mm=0.4, sigma_rot_deg=None, rows=43, held_out_rows=18, seed=16,
+             points=((0.05, 0.0, 0.05), (-0.03, 0.04, 0.06), (0.0, -0.05, 0.04)), deviations=("normal", 3.0, 5.0),
+             joint_range=0.3, held_out_range=0.6),
 )
 #: The socket fixture's plate: a 3 x 3 grid, 120 mm pitch [m]; its placements (base_T_fixture: where,
 #: and a tilt about x then y [deg]) in front of the 6R arm; the ball's centre on the flange [m].
@@ -193,6 +225,28 @@ def build_robots(folder: Path) -> dict[str, tuple[Path, str]]:
     return robots
 
 
+def true_deviations(params, deviations: tuple, rng: np.random.Generator) -> np.ndarray:
+    """The true placement errors of ``params`` [m, rad] drawn as :attr:`Scenario.deviations` says."""
+    metres = np.array([info.unit == "m" for info in params.info])
+    if deviations[0] == "normal":
+        return rng.normal(0.0, 1.0, params.size) * np.where(metres, deviations[1] * 1e-3, deviations[2] * 1e-3)
+    (low_mm, high_mm), (low_mrad, high_mrad) = deviations[1:]
+    size = rng.uniform(0.0, 1.0, params.size)
+    magnitude = np.where(metres, low_mm + size * (high_mm - low_mm), low_mrad + size * (high_mrad - low_mrad))
+    return rng.choice([-1.0, 1.0], params.size) * magnitude * 1e-3
+
+
+def spread_configurations(chain: KinematicChain, rng: np.random.Generator, rows: int, share: float) -> np.ndarray:
+    """Random configurations (rows, N) over ``share`` of each joint's range about its middle (continuous
+    joints: of ±π about 0); the whole range draws as :func:`pincal.simulation.sensor.random_configurations`."""
+    if share >= 1.0:
+        return random_configurations(chain, rng, rows)
+    lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
+    upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    middle, half = (lower + upper) / 2.0, share * (upper - lower) / 2.0
+    return rng.uniform(middle - half, middle + half, (rows, chain.n_joints))
+
+
 def simulate(scenario: Scenario, urdf: Path, tip: str):
     """The chain (with the target as its tool when it is known), its calibration rows and held-out rows
     (same kind, same session), seeded."""
@@ -202,9 +256,11 @@ def simulate(scenario: Scenario, urdf: Path, tip: str):
     target[:3, 3] = scenario.points[0]
     params = PlacementErrors(chain)
     rng = np.random.default_rng(scenario.seed)
-    truth = rng.normal(0.0, 3e-4, params.size)
+    truth = true_deviations(params, scenario.deviations, rng)
+    held_out = scenario.held_out_rows or scenario.rows
     if scenario.motion == "spread":
-        q, q_test = random_configurations(chain, rng, scenario.rows), random_configurations(chain, rng, scenario.rows)
+        q, q_test = (spread_configurations(chain, rng, scenario.rows, scenario.joint_range),
+                     spread_configurations(chain, rng, held_out, scenario.held_out_range or scenario.joint_range))
     elif scenario.heights == 1:  # one path: held out at its other points
         path = dict(kind=scenario.motion, count=scenario.rows, centre=np.array([1.2, 0.0, 0.5]), rotation=DOWN,
                     q_start=START_6R, heights=1)

@@ -141,14 +141,16 @@ def test_cli_prior_scale_without_any_select_is_the_default_prior(tmp_path):
     """The default selection at levels offsets and full is the prior (docs/defaults.md): its scale is taken."""
     assert _cli(tmp_path, "--level", "full", "--prior-scale", "1,0.5") == 0
     document = json.loads((tmp_path / "REPORT.json").read_text())
-    assert document["identifiability"]["selection"]["prior_scale"] == {"translation_mm": 1.0, "rotation_deg": 0.5}
+    assert document["identifiability"]["selection"]["prior_scale"] == {
+        "translation_mm": 1.0, "rotation_deg": 0.5, "joint_zero_deg": 0.5, "estimated": False, "reason": "given"}
 
 
 def test_cli_prior_scale_under_level_auto_needs_no_select(tmp_path):
     """Under --level auto the default selection is the prior, so its scale is accepted as is."""
     assert _cli(tmp_path, "--level", "auto", "--prior-scale", "2,0.5") == 0
     document = json.loads((tmp_path / "REPORT.json").read_text())
-    assert document["identifiability"]["selection"]["prior_scale"] == {"translation_mm": 2.0, "rotation_deg": 0.5}
+    assert document["identifiability"]["selection"]["prior_scale"] == {
+        "translation_mm": 2.0, "rotation_deg": 0.5, "joint_zero_deg": 0.5, "estimated": False, "reason": "given"}
 
 
 def test_diagnose_bic_counts_the_data_rows_not_the_prior_rows():
@@ -183,11 +185,14 @@ def test_diagnose_does_not_test_effects_the_residual_freedom_cannot_carry():
     this seed, a refit failed with 'the data do not determine all 31 parameters'. Fitting e values to
     noise lowers BIC by m ln(1 − e/d) + e ln m in expectation; below the −10 cut nothing is tested."""
     chain, train, _ = _rows(9, seed=18, sigma_m=SIGMA_M)
-    calibration = calibrate_chain(chain, train, "full", selection="prior")
+    calibration = calibrate_chain(chain, train, "full", selection=Prior(1.0, 0.5))  # the scales of that case
     diagnosis = diagnose(chain, calibration, train)
     assert not diagnosis.steps
     untested = [note for note in diagnosis.notes if note.startswith("not tested,")]
     assert len(untested) == 1 and "residual degrees of freedom" in untested[0]
+    # the scales estimated from these rows (0.06 mm, 0.005 deg: the truth's 0.1 mm / 0.1 mrad) leave more
+    # residual freedom; the candidates are tested and none is adopted
+    assert not diagnose(chain, calibrate_chain(chain, train, "full", selection="prior"), train).steps
     # the vertical shoulder pan feels no gravity torque: its compliance cannot be tested (more rows would not
     # help), not "not tested"
     assert "compliance:shoulder_pan_joint" not in untested[0]

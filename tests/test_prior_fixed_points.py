@@ -63,7 +63,7 @@ def test_a_prior_too_narrow_for_the_robot_is_named(industrial_arm_urdf):
     """10 mm / 10 mrad deviations: under the 1 mm prior the evidence keeps the prior's fixed point (the
     closer fit's θᵀΛθ is ~900), and the note names the way out, which then reaches the noise floor."""
     chain, data = _rows(industrial_arm_urdf, 1e-2)
-    narrow = calibrate_chain(chain, data, "full", selection="prior")
+    narrow = calibrate_chain(chain, data, "full", selection=Prior(1.0, 0.5))  # the fixed default of old
     assert narrow.rms_m > 100 * FLOOR_M
     assert any("--prior-scale" in note and "--select aic" in note for note in narrow.selection.notes)
     wide = calibrate_chain(chain, data, "full", selection=Prior(30.0, 3.0))
@@ -100,7 +100,7 @@ def test_a_failing_second_start_keeps_the_first_fixed_point(industrial_arm_urdf,
 
     monkeypatch.setattr(pipeline, "_settle", failing_second)
     chain, data = _rows(industrial_arm_urdf, 3e-3)
-    result = calibrate_chain(chain, data, "full", selection="prior")
+    result = calibrate_chain(chain, data, "full", selection=Prior(1.0, 0.5))  # fixed: no estimate to move it
     assert len(calls) == 2 and result.rms_m > 10 * FLOOR_M  # the trapped fixed point, kept
 
 

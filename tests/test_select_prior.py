@@ -96,7 +96,9 @@ def test_noise_free_data_recovers_the_truth_under_the_default_prior():
     result = calibrate_chain(chain, train, "full", selection="prior")
     # rounding and solver tolerance leave ~1e-12 m; 1e-9 m is far above that, far below the 1 mm errors
     assert _heldout_m(chain, result, test) < 1e-9
-    assert result.selection.prior_scale == {"translation_mm": 1.0, "rotation_deg": 0.5}
+    scale = result.selection.prior_scale  # the scales used: estimated from the rows, or the defaults kept
+    assert scale["estimated"] or (scale["translation_mm"], scale["rotation_deg"], scale["joint_zero_deg"]) == (
+        1.0, 0.5, 0.5)
 
 
 def test_a_huge_prior_scale_is_the_select_all_fit():
@@ -166,7 +168,9 @@ def test_fixture_prior_fit_recovers_noise_free_data_and_flags_what_the_prior_dec
     # noise-free: the noise scale falls to rounding and the prior's weight with it (as for sensor data);
     # 1e-6 mm is far above rounding (~1e-12 m) and far below the ~1 mm placement errors
     assert after.consistency_mm < 1e-6 and after.distortion_mm < 1e-6
-    assert result.selection.prior_scale == {"translation_mm": 1.0, "rotation_deg": 0.5}
+    scale = result.selection.prior_scale  # the scales used: estimated from the rows, or the defaults kept
+    assert scale["estimated"] or (scale["translation_mm"], scale["rotation_deg"], scale["joint_zero_deg"]) == (
+        1.0, 0.5, 0.5)
     tight = calibrate_fixture(chain, data, "full", selection=Prior(1e-6, 1e-6))  # 1 nm, 1e-6 °: the prior decides
     assert tight.status.count(PRIOR_STATUS) == len(tight.kept) > 0
 
@@ -205,7 +209,8 @@ def test_cli_select_prior_records_its_scales(tmp_path, capsys):
     assert code == 0
     document = json.loads(report.read_text())
     selection = document["identifiability"]["selection"]
-    assert selection["prior_scale"] == {"translation_mm": 2.0, "rotation_deg": 0.25}
+    assert selection["prior_scale"] == {"translation_mm": 2.0, "rotation_deg": 0.25, "joint_zero_deg": 0.25,
+                                        "estimated": False, "reason": "given"}
     assert "prior" in selection["criterion"]
     # 1 µm / 0.001°: the prior decides some parameters (none at 2 mm / 0.25° on these rows)
     code, report = _cli(tmp_path, "--select", "prior", "--prior-scale", "0.001,0.001")
@@ -220,7 +225,7 @@ def test_cli_select_prior_records_its_scales(tmp_path, capsys):
     assert code == 0 and "prior_scale" not in json.loads(report.read_text())["identifiability"]["selection"]
 
 
-@pytest.mark.parametrize("scale", ["-1,0.5", "0,0.5", "1,0", "a,b", "1", "1,2,3", "inf,1"])
+@pytest.mark.parametrize("scale", ["-1,0.5", "0,0.5", "1,0", "a,b", "1", "1,2,3,4", "1,2,0", "inf,1"])
 def test_cli_bad_prior_scale_is_one_line(tmp_path, capsys, scale):
     with pytest.raises(SystemExit) as exit_info:
         _cli(tmp_path, "--select", "prior", f"--prior-scale={scale}")

@@ -47,19 +47,20 @@ def tool_pose(text: str) -> np.ndarray:
     return pose_from_xyz_rpy(values[:3], values[3:])
 
 
-def prior_scale(text: str) -> tuple[float, float]:
-    """argparse type of ``--prior-scale``: ``MM,DEG``, the prior std of placement translations [mm]
-    and rotations [deg] (two numbers within :data:`pincal.fit.prior.SCALE_RANGE`)."""
+def prior_scale(text: str) -> tuple[float, ...]:
+    """argparse type of ``--prior-scale``: ``MM,DEG[,DEG]``, the prior std of placement translations [mm],
+    rotations [deg] and revolute joint zeros [deg] (two or three numbers within
+    :data:`pincal.fit.prior.SCALE_RANGE`; with two, joint zeros take the rotations')."""
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
         values = []
     low, high = SCALE_RANGE
-    if len(values) != 2 or not all(math.isfinite(v) and low <= v <= high for v in values):
+    if len(values) not in (2, 3) or not all(math.isfinite(v) and low <= v <= high for v in values):
         raise argparse.ArgumentTypeError(
-            f"'{text}' is not MM,DEG (two numbers from {low:g} to {high:g}: the prior std of translations in mm, "
-            "of rotations in degrees)")
-    return values[0], values[1]
+            f"'{text}' is not MM,DEG[,DEG] (two or three numbers from {low:g} to {high:g}: the prior std of "
+            "translations in mm, of rotations in degrees, and of revolute joint zeros in degrees)")
+    return tuple(values)
 
 
 def selection_criterion(args: argparse.Namespace) -> str:

@@ -192,7 +192,7 @@ def _write_html(html, document: Mapping[str, Any], base, evaluation: dict | None
 def _print_chain_summary(run) -> None:
     import numpy as np
 
-    from pincal.cli.level_table import held_by_prior
+    from pincal.cli.level_table import held_by_prior, prior_scale_line
 
     result = run.result
     ident = run.report["identifiability"]
@@ -202,6 +202,9 @@ def _print_chain_summary(run) -> None:
     if ident["selection"]:
         sel = ident["selection"]
         print(f"selection: {sel['criterion']} = {sel['value']:.4g} with {sel['kept']} kept")
+        scales = prior_scale_line(sel)
+        if scales:
+            print(scales)
     print(f"Jacobian condition number (scaled): {ident['jacobian_condition']:.3g}")
     for pair in ident["correlated_pairs"][:10]:
         print(f"correlated: {pair['a']} ~ {pair['b']} ({pair['correlation']:+.3f})")
@@ -284,6 +287,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
+    from pincal.cli.level_table import prior_scale_line
     from pincal.cli.progress import progress_bar
     from pincal.cli.settings import DiagnoseSettings
     from pincal.cli.workflows import diagnose_files
@@ -305,6 +309,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     diagnosis = run.diagnosis
     held = diagnosis.heldout_errors is not None
     print(f"geometric calibration ({run.calibration.level}), then {len(diagnosis.steps)} effect(s) adopted:")
+    scales = prior_scale_line((run.report.get("identifiability") or {}).get("selection"))
+    if scales:
+        print(scales)
     print(f"{'step':38s} {'value ± std':>26s} {'dBIC':>8s} {'cal RMS [mm]':>17s}"
           + (f" {'held-out RMS [mm]':>19s}" if held else ""))
     kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))

@@ -28,7 +28,7 @@ import numpy as np
 
 from pincal._version import __version__
 from pincal.cli.arguments import selection_criterion
-from pincal.cli.level_table import held_by_prior, level_choice_lines
+from pincal.cli.level_table import held_by_prior, level_choice_lines, prior_scale_line
 from pincal.cli.paths import description_inputs, refuse_overwrite
 from pincal.cli.settings import CalibrateSettings, expect
 from pincal.errors import PincalError
@@ -374,6 +374,9 @@ def run_calibrate(args: argparse.Namespace) -> FixtureReport:
     if ident["selection"]:
         print(f"selection: {ident['selection']['criterion']} = {ident['selection']['value']:.4g} "
               f"with {ident['selection']['kept']} kept")
+        scales = prior_scale_line(ident["selection"])
+        if scales:
+            print(scales)
     ball, std = result.ball * 1000.0, result.ball_std * 1000.0
     print(f"ball centre in {args.tip_link}: " + ", ".join(f"{v:.3f} ± {s:.3f}" for v, s in zip(ball, std)) + " mm")
     for placement in result.placements:

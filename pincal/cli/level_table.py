@@ -1,12 +1,13 @@
 """What the calibration summaries print about the level: ``--level auto``'s table (each level's
-cross-validated error and the level chosen) and the parameters a prior holds near nominal."""
+cross-validated error and the level chosen), the parameters a prior holds near nominal and the
+prior's scales."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["level_choice_lines", "held_by_prior"]
+__all__ = ["level_choice_lines", "held_by_prior", "prior_scale_line"]
 
 
 def level_choice_lines(choice: Mapping[str, Any]) -> list[str]:
@@ -33,3 +34,25 @@ def held_by_prior(ident: Mapping[str, Any], kept: int) -> str:
     """What the summary adds when the prior holds fitted parameters near nominal (not reported as kept)."""
     fitted = (ident.get("selection") or {}).get("kept", kept)
     return f"; {fitted - kept} more fitted, held near nominal by the prior" if fitted > kept else ""
+
+
+def _scales(scale: Mapping[str, Any]) -> str:
+    return (f"lengths {scale['translation_mm']:.3g} mm, angles {scale['rotation_deg']:.3g}°, "
+            f"joint zeros {scale.get('joint_zero_deg', scale['rotation_deg']):.3g}°")
+
+
+def prior_scale_line(selection: Mapping[str, Any] | None) -> str | None:
+    """``prior scales: lengths X mm, angles Y°, joint zeros Z° (estimated)`` from REPORT.json's
+    ``identifiability.selection`` (None without a prior): the scales the fit used, and whether they are
+    the rows' estimate, the defaults the estimate did not beat (with the estimate and why) or given."""
+    scale = (selection or {}).get("prior_scale")
+    if not scale:
+        return None
+    line = f"prior scales: {_scales(scale)}"
+    if scale.get("estimated"):
+        return line + " (estimated)"
+    estimate = scale.get("estimate")
+    if estimate is None:
+        return line + (" (given)" if scale.get("reason", "given") == "given" else f" ({scale['reason']})")
+    why = scale["reason"].removeprefix("the default scales: ")
+    return line + f" (the defaults; estimated {_scales(estimate)}: {why})"

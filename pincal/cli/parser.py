@@ -26,7 +26,7 @@ from pincal.cli.arguments import (
     tool_pose,
     xacro_arg,
 )
-from pincal.fit.prior_defaults import DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM
+from pincal.fit.prior_defaults import DEFAULT_JOINT_ZERO_DEG, DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM
 from pincal.measurements.plateau_defaults import (
     MAX_OFFSET_S,
     MAX_SPREAD_MM,
@@ -113,10 +113,12 @@ def _add_extract(sub) -> None:
 
 
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
-    sub.add_argument("--prior-scale", type=prior_scale, metavar="MM,DEG",
-                     help="with --select prior: prior std of each placement translation and prismatic joint zero "
-                          f"[mm] and of each rotation and revolute joint zero [deg] (default "
-                          f"{DEFAULT_TRANSLATION_MM:g},{DEFAULT_ROTATION_DEG:g})")
+    sub.add_argument("--prior-scale", type=prior_scale, metavar="MM,DEG[,DEG]",
+                     help="with --select prior: fix the prior std of each placement translation and prismatic joint "
+                          "zero [mm], of each placement rotation [deg] and of each revolute joint zero [deg] (the "
+                          "rotations' when not given) (default: estimated from the rows, from "
+                          f"{DEFAULT_TRANSLATION_MM:g},{DEFAULT_ROTATION_DEG:g},{DEFAULT_JOINT_ZERO_DEG:g}; "
+                          "pincal.fit.prior_scales)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -248,6 +248,19 @@ class FitProblem:
             log_variances -= 2.0 * 3 * np.sum(np.log(data.v))
         return log_evidence(solution.jacobian, solution.residual, float(log_variances))
 
+    def fold_rows(self, objective) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What the prior's folds deal (:func:`pincal.fit.prior_scales.scale_folds`): each row's joint
+        readings (K, N), its session (K,) and its entries in ``objective``'s residual (K, b)."""
+        data = getattr(objective, "objective", objective)  # the sensor residual inside a prior-wrapped one
+        return self.data.q, self.data.session_index, data.row_indices()
+
+    def scale_rows(self, objective) -> tuple[slice, ...]:
+        """The data rows each noise scale of :meth:`scales` weights (positions, then orientations if measured)."""
+        n_pos = 3 * self.data.n_rows * self.data.n_points
+        if self.sigma_rot is None:
+            return (slice(0, n_pos),)
+        return slice(0, n_pos), slice(n_pos, n_pos + 3 * self.data.n_rows)
+
     def rescale(self, objective: SensorResidual, solution: Solution) -> None:
         """The noise scales from a fit's residuals (:mod:`pincal.fit.pipeline`): maximum likelihood with
         unknown variances, sigma² = mean squared residual per kind; with a prior, eq P2 of

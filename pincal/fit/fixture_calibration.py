@@ -230,6 +230,17 @@ class FixtureProblem:
     def set_scales(self, scales: tuple[float]) -> None:
         (self.noise,) = scales
 
+    def fold_rows(self, objective) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What the prior's folds deal (:func:`pincal.fit.prior_scales.scale_folds`): each row's joint
+        readings (K, N), its placement and socket as one stratum (K,), its three residual entries (K, 3)."""
+        data = self.data
+        strata = data.placement * len(data.fixture.names) + data.socket
+        return data.q, strata, np.arange(3 * data.n_rows).reshape(data.n_rows, 3)
+
+    def scale_rows(self, objective) -> tuple[slice, ...]:
+        """The data rows the noise scale of :meth:`scales` weights: every ball-centre coordinate."""
+        return (slice(0, 3 * self.data.n_rows),)
+
     def log_evidence(self, objective: PriorResidual, solution) -> float:
         """Eq P3 (:func:`pincal.fit.prior.log_evidence`) with the rows [m] divided by σ."""
         rows = solution.residual.size - objective.n_prior

@@ -14,18 +14,31 @@ for a block of rows, without the linearisation's assumption that x̂ fits the he
 δ_f is computed, not approximated by the hat matrix). The held-out error is then the RMS
 distance of the held-out rows' target points, e_V turned back into metres. The selection of
 the fold's parameters is the all-rows fit's: under ``--select prior`` (the default) that is
-every identifiable parameter anyway. Several sessions, and ``--reject-outliers``, keep the
-exact refits (a held-out session needs its own registration).
+every identifiable parameter anyway. The prior's scales, where they were estimated from the
+rows, are estimated again for each fold from its training rows alone, by the same rule on the
+same linearisation (:func:`pincal.fit.prior_scales.chosen_scales`), and the fold's prior rows
+θ/σ take them: a refit of the fold estimates its own, and a scale estimated on all rows would
+let the held-out rows into the fold's fit through three numbers. Several sessions, and
+``--reject-outliers``, keep the exact refits (a held-out session needs its own registration).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, calibrate_chain, row_weights
+from pincal.fit.prior import (
+    DEFAULT_JOINT_ZERO_DEG,
+    DEFAULT_ROTATION_DEG,
+    DEFAULT_TRANSLATION_MM,
+    PriorResidual,
+    parameter_kinds,
+)
+from pincal.fit.prior_scales import LinearisedFit, chosen_scales
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.progress import Counter
@@ -67,10 +80,23 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
     n_pos = 3 * rows.n_points
     scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0.0] = 1.0
+    estimated = _estimated_prior(result)
+    if estimated is not None:  # each fold's scales from its training rows alone (pincal.fit.prior_scales)
+        prior = cast(PriorResidual, objective)  # an estimated prior's fit carries its rows
+        linear = LinearisedFit.of(prior, result.solution, jacobian, residual, problem.scale_rows(prior),
+                                  [s for s in problem.scales() if s is not None],
+                                  parameter_kinds(result.params)[result.kept])
+        m, kin = residual.size - prior.n_prior, prior.blocks["kinematic"]
     out = []
     for test in tests:
         held = np.zeros(residual.size, dtype=bool)
         held[blocks[test].ravel()] = True
+        if estimated is not None:
+            train = np.setdiff1d(np.arange(rows.n_rows), test)
+            sigma = chosen_scales(linear, ~held[:m], rows.q[train], rows.session_index[train], blocks[train],
+                                  estimated)
+            jacobian[m:, kin] = np.diag(1.0 / sigma)  # the prior rows θ/σ (eq P1) at the fold's scales
+            residual[m:] = result.solution[kin] / sigma
         step, *_ = np.linalg.lstsq(jacobian[~held] / scale, -residual[~held], rcond=None)
         positions = blocks[test][:, :n_pos]
         predicted = residual[positions] + (jacobian[positions] / scale) @ step  # (V, 3P), weighted
@@ -78,6 +104,16 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
         distances = np.linalg.norm(metres.reshape(len(test), rows.n_points, 3), axis=2)
         out.append(float(np.sqrt(np.mean(distances**2))))
     return out
+
+
+def _estimated_prior(result: ChainCalibration) -> np.ndarray | None:
+    """The scales the estimate of ``result``'s prior started from, the defaults [m, rad, rad] (3,), where
+    its scales were estimated from the rows (REPORT.json's ``prior_scale`` has an ``estimate``); else None."""
+    scale = None if result.selection is None else result.selection.prior_scale
+    if not scale or "estimate" not in scale:
+        return None
+    return np.array([DEFAULT_TRANSLATION_MM * 1e-3, np.radians(DEFAULT_ROTATION_DEG),
+                     np.radians(DEFAULT_JOINT_ZERO_DEG)])
 
 
 def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequence[np.ndarray],

@@ -61,6 +61,7 @@ from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.fold_update import LINEARISED_FROM_ROWS, linearised_levels
+from pincal.fit.folds import DEFAULT_FOLDS, SAME_CONFIGURATION_RAD, SEED, configuration_keys, row_folds
 from pincal.fit.metrics import pose_errors
 from pincal.fit.sessions import register_session, where
 from pincal.measurements.data import MeasurementSet
@@ -75,14 +76,6 @@ __all__ = [
     "fixture_folds", "choose_fixture_level", "placement_error",
 ]
 
-#: Folds over rows when there is one session or placement (Hastie et al. 2009, §7.10: K = 5 or 10).
-DEFAULT_FOLDS = 10
-#: Seed of the random order in which configurations are dealt to the folds (fixed: a rerun
-#: chooses the same level).
-SEED = 0
-#: Joint readings that agree to this in every joint are one configuration [rad or m]
-#: (0.06°: far below any two postures a calibration plans, above encoder noise).
-SAME_CONFIGURATION_RAD = 1e-3
 #: Fewest rows a fold may calibrate on (a calibration needs 3: pincal.fit.chain_calibration).
 MIN_TRAINING_ROWS = 3
 #: Fewest configurations of one session to cross-validate over (one held out leaves 4 to fit).
@@ -214,28 +207,6 @@ def one_standard_error(errors: npt.ArrayLike, standard_errors: npt.ArrayLike,
     threshold = float(errors[lowest] + spreads[lowest])
     chosen = int(np.flatnonzero(finite & (errors <= threshold))[-1 if richest else 0])
     return lowest, chosen, threshold
-
-
-def row_folds(keys: np.ndarray, strata: np.ndarray | None = None, folds: int = DEFAULT_FOLDS,
-              seed: int = SEED) -> list[np.ndarray]:
-    """Held-out rows of ``folds`` folds: the groups of rows with equal ``keys`` (K, d)
-    are dealt to the folds in a random order (``seed``), whole; with ``strata`` (K,),
-    each stratum's groups are dealt alike and fold f joins their shares f."""
-    rng = np.random.default_rng(seed)
-    strata = np.zeros(len(keys), dtype=int) if strata is None else np.asarray(strata)
-    group = np.ravel(np.unique(keys, axis=0, return_inverse=True)[1])
-    out: list[list[np.ndarray]] = [[] for _ in range(folds)]
-    for stratum in dict.fromkeys(strata.tolist()):
-        mine = rng.permutation(np.unique(group[strata == stratum]))
-        for f, block in enumerate(np.array_split(mine, folds)):
-            out[f].append(np.flatnonzero((strata == stratum) & np.isin(group, block)))
-    return [np.sort(np.concatenate(parts)) for parts in out]
-
-
-def configuration_keys(q: np.ndarray) -> np.ndarray:
-    """Each row's joint readings on a :data:`SAME_CONFIGURATION_RAD` grid (K, N): repeats of one posture
-    share a key unless a reading straddles a grid line (then the twins may land in different folds)."""
-    return np.round(np.asarray(q, dtype=float) / SAME_CONFIGURATION_RAD).astype(np.int64)
 
 
 def _score(level: str, errors: list[float], kept: list[int], failures: list[str]) -> LevelScore:

@@ -15,7 +15,8 @@ From there the steps are the same, and :func:`fit_kinematics` runs them:
    ``prior``, every identifiable one in a MAP fit, :mod:`pincal.fit.prior` eq P1);
 3. fit the kept parameters, then re-estimate the residual's noise scale and refit (without a
    prior a given number of times, maximum likelihood with unknown variances; with one, up to
-   eq P2's fixed point);
+   eq P2's fixed point; with a prior whose scales are estimated, then those scales,
+   :mod:`pincal.fit.prior_scales`);
 4. the covariance (the fit's, scaled by the residual; with a prior, the posterior) and each
    parameter's status: kept, not selected, not identifiable, or determined by the prior only.
 """
@@ -37,10 +38,20 @@ from pincal.fit.prior import (
     PRIOR_STATUS,
     Prior,
     PriorResidual,
+    ScaleChoice,
     map_outcome,
+    parameter_kinds,
     prior_of,
     prior_sigmas,
     settled,
+)
+from pincal.fit.prior_scales import (
+    LinearisedFit,
+    cross_validated,
+    estimate_scales,
+    hyperprior,
+    prior_log_evidence,
+    scale_folds,
 )
 from pincal.fit.selection import select_subset
 from pincal.fit.solver import Fittable, Solution, gram, solve
@@ -109,6 +120,15 @@ class KindProblem(Protocol[ObjectiveT]):
 
     def log_evidence(self, objective: ObjectiveT, solution: Solution) -> float:
         """Eq P3 of :mod:`pincal.fit.prior` for a MAP fit of this problem."""
+        ...
+
+    def scale_rows(self, objective: ObjectiveT) -> tuple[slice, ...]:
+        """The data rows each noise scale of :meth:`scales` weights (those not None, in order)."""
+        ...
+
+    def fold_rows(self, objective: ObjectiveT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each row's joint readings (K, N), stratum (K,) and residual entries (K, b), for the prior's
+        folds (:func:`pincal.fit.prior_scales.scale_folds`)."""
         ...
 
 
@@ -190,8 +210,12 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
     if size:
         objective, solution = _settle(problem, objective, solution, kept, base, what, refits)
     closer = None  # the unregularised fit's position scale, where the evidence kept the prior's fixed point
+    choice = None if prior is None else ScaleChoice(prior)  # the prior's scales the fit ends with
     if problem.prior is not None and kept.size:
         objective, solution, closer = _from_the_data_scale(problem, objective, solution, kept, base, what)
+        if cast(Prior, prior).estimated:
+            objective, solution, choice = _estimated(problem, objective, solution, kept, base, what, cast(Prior, prior))
+            closer = None if choice.used.estimated else closer
     fit_seconds = time.perf_counter() - started
     counter.tick()
     kinematic = objective.blocks["kinematic"]
@@ -209,7 +233,7 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
         # a PriorResidual is fitted only with a prior: problem.prior and prior are set
         covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept,
                                                   cast(np.ndarray, problem.prior), selection,
-                                                  problem.params, cast(Prior, prior))
+                                                  problem.params, cast(ScaleChoice, choice))
         std_all = np.sqrt(np.diag(covariance))
         status[weak] = PRIOR_STATUS
         if closer is not None:
@@ -279,6 +303,66 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
         return second, second_solution, None
     problem.set_scales(first)
     return objective, solution, cast(float, unbiased[0])
+
+
+def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
+               base: np.ndarray, what: str, prior: Prior) -> tuple[ObjectiveT, Solution, ScaleChoice]:
+    """The prior's scales estimated from the rows, from the MAP fit at ``prior``'s (the defaults), and
+    the fit kept: the estimate's where its posterior (eq P4 + P6) is the larger and it predicts held-out
+    configurations better by more than one standard error, else the defaults'
+    (:mod:`pincal.fit.prior_scales`). The first estimate, from the defaults' fit, is checked by the folds
+    on that fit's linearisation before any refit: where it is no better, the defaults stand at the cost
+    of one factorisation per trial. The problem's scales and prior are left at the fit kept's."""
+    kinds = parameter_kinds(problem.params)
+    first_scales, first_prior = problem.scales(), cast(np.ndarray, problem.prior)
+    default = _linearised(problem, objective, solution, kinds[kept])
+    start = np.array([prior.translation_mm * 1e-3, np.radians(prior.rotation_deg), np.radians(prior.joint_zero_deg)])
+    present = default.present
+    defaults = Prior(*prior.scales, estimated=False)
+    folds = scale_folds(*problem.fold_rows(objective))
+
+    def posterior_gain(noise: np.ndarray, sigma: np.ndarray) -> tuple[float, float]:
+        """eq P4 (linearised at the defaults' fit) and P4 + P6 of ``sigma`` over the defaults'."""
+        at = np.log(np.r_[default.noise / noise, sigma[present]])
+        gain = default.evidence(at)[0] - default.evidence(np.log(np.r_[np.ones(default.noise.size),
+                                                                         start[present]]))[0]
+        return gain, gain + hyperprior(np.log(sigma[present]), start[present])[0]
+
+    estimate, fit = cast(Any, objective), solution  # the defaults' fit, until an estimate is refitted
+    try:
+        noise, sigma = default.maximise(start, start)
+        check = cross_validated(default.at_scales(sigma), default, folds)
+        gain, posterior = posterior_gain(noise, sigma)
+        if check.better and posterior > 0.0:  # refitted at the estimate, and checked again
+            estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base, what, kinds,
+                                                   start, first=(noise, sigma))
+            first_evidence = prior_log_evidence(problem.log_evidence(objective, solution), first_prior[kept])
+            gain = prior_log_evidence(problem.log_evidence(cast(Any, estimate), fit),
+                                      cast(np.ndarray, problem.prior)[kept]) - first_evidence
+            posterior = gain + hyperprior(np.log(sigma[present]), start[present])[0]
+            check = cross_validated(_linearised(problem, estimate, fit, kinds[kept]), default, folds)
+    except CalibrationError as exc:  # a scale the fit cannot take: the defaults' fit stands
+        problem.set_scales(first_scales)
+        problem.prior = first_prior
+        return objective, solution, ScaleChoice(defaults, reason=f"the default scales: the estimate failed ({exc})")
+    lengths, angles, zeros = sigma
+    found = Prior(lengths * 1e3, float(np.degrees(angles)), float(np.degrees(zeros)), estimated=True)
+    cv = (f"{check.folds}-fold cross-validated error {check.ratio:.3f} x the defaults' "
+          f"(standard error {check.standard_error:.3f})")
+    record = (found, gain, check.ratio, check.standard_error)
+    if check.better and posterior > 0.0:
+        reason = f"estimated: evidence e^{gain:.3g} times the defaults', {cv}"
+        return cast(ObjectiveT, estimate), fit, ScaleChoice(found, *record, reason)
+    problem.set_scales(first_scales)
+    problem.prior = first_prior
+    why = cv + ", not lower by one standard error" if not check.better else "posterior is not the larger"
+    return objective, solution, ScaleChoice(defaults, *record, f"the default scales: the estimate's {why}")
+
+
+def _linearised(problem: KindProblem[ObjectiveT], objective, solution: Solution, kinds: np.ndarray) -> LinearisedFit:
+    """Eq P5's linearisation of ``problem``'s MAP fit (``objective`` at ``solution``) at its noise scales now."""
+    present = [s for s in problem.scales() if s is not None]
+    return LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds)
 
 
 def _prior_too_narrow(n_kept: int, closer_m: float, scale_m: float, prior: Prior) -> str:

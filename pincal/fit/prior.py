@@ -4,11 +4,14 @@ Instead of keeping a subset of the identifiable kinematic parameters
 (:mod:`pincal.fit.selection`), the maximum a posteriori (MAP) fit keeps all of
 them (``ordering.rank`` of :func:`pincal.fit.identifiability.order_parameters`;
 the non-identifiable ones stay nominal and are reported as not determined) with
-independent Gaussian priors θ_i ~ N(0, σ_i²) about the nominal model:
-σ_i = :data:`DEFAULT_TRANSLATION_MM` (1 mm) for a translation or a prismatic
-joint's zero, :data:`DEFAULT_ROTATION_DEG` (0.5°) for a rotation or a revolute
-joint's zero — the placement errors of machined and assembled arms the issue
-names (``--prior-scale MM,DEG`` sets them). The registration and the target are
+independent Gaussian priors θ_i ~ N(0, σ_i²) about the nominal model, one
+scale per kind of parameter (:func:`parameter_kinds`): lengths (a translation
+or a prismatic joint's zero), angles (a rotation of a placement) and joint zeros
+(a revolute joint's turn about its own axis). By default the three scales are
+estimated from the data (empirical Bayes, :mod:`pincal.fit.prior_scales`), from
+:data:`DEFAULT_TRANSLATION_MM` (1 mm), :data:`DEFAULT_ROTATION_DEG` (0.5°) and
+:data:`DEFAULT_JOINT_ZERO_DEG` (0.5°), the placement errors of machined and
+assembled arms; ``--prior-scale MM,DEG[,DEG]`` fixes them. The registration and the target are
 not penalised. With the residuals r(x) already divided by their noise scales
 (σ_pos, σ_rot), the MAP estimate minimises
 
@@ -52,22 +55,31 @@ model) is not presented as measured.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Selection
-from pincal.fit.prior_defaults import DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM, SCALE_RANGE
+from pincal.fit.prior_defaults import (
+    DEFAULT_JOINT_ZERO_DEG,
+    DEFAULT_ROTATION_DEG,
+    DEFAULT_TRANSLATION_MM,
+    KINDS,
+    SCALE_RANGE,
+)
 from pincal.fit.solver import Solution, gram
 
 __all__ = [
-    "DEFAULT_TRANSLATION_MM", "DEFAULT_ROTATION_DEG", "PRIOR_DOMINATED", "MAX_SCALE_ITERATIONS", "SCALE_TOLERANCE",
-    "SCALE_FLOOR", "DATA_SCALE_GAP", "DECISIVE_LOG_EVIDENCE", "SCALE_RANGE", "PRIOR_STATUS", "Prior", "prior_of",
-    "prior_sigmas", "PriorResidual", "settled", "hat_diagonal", "effective_scale", "posterior", "log_evidence",
-    "standard_deviations", "data_rows", "dominated", "reestimated_scales", "map_outcome",
+    "DEFAULT_TRANSLATION_MM", "DEFAULT_ROTATION_DEG", "DEFAULT_JOINT_ZERO_DEG", "KINDS", "PRIOR_DOMINATED",
+    "MAX_SCALE_ITERATIONS", "SCALE_TOLERANCE", "SCALE_FLOOR", "DATA_SCALE_GAP", "DECISIVE_LOG_EVIDENCE", "SCALE_RANGE",
+    "PRIOR_STATUS", "Prior", "prior_of", "parameter_kinds", "kind_sigmas", "prior_sigmas", "PriorResidual", "settled",
+    "hat_diagonal", "effective_scale", "posterior", "log_evidence", "standard_deviations", "data_rows", "dominated",
+    "reestimated_scales", "ScaleChoice", "prior_scale", "map_outcome",
 ]
 
-# DEFAULT_TRANSLATION_MM, DEFAULT_ROTATION_DEG and SCALE_RANGE: pincal.fit.prior_defaults (the parser reads them)
+# DEFAULT_TRANSLATION_MM, DEFAULT_ROTATION_DEG, DEFAULT_JOINT_ZERO_DEG, KINDS and SCALE_RANGE:
+# pincal.fit.prior_defaults (the parser reads them)
 #: Posterior std / prior std above which a parameter is determined mainly by the prior (1/√2: the
 #: data's precision is below the prior's).
 PRIOR_DOMINATED = 1.0 / math.sqrt(2.0)
@@ -96,13 +108,20 @@ PRIOR_STATUS = ("determined mainly by the prior (posterior std > 0.71 x prior st
 class Prior(str):
     """The selection criterion ``"prior"`` (equal to that string) carrying its scales.
 
+    ``Prior()`` estimates the three scales from the data (:mod:`pincal.fit.prior_scales`), starting
+    from the defaults; ``Prior(mm, deg)`` fixes lengths at ``mm`` and angles and joint zeros at ``deg``,
+    ``Prior(mm, deg, zero_deg)`` joint zeros at ``zero_deg``. ``estimated=True`` with scales: the
+    estimate starts from them.
+
     Equality: a Prior equals the plain string ``"prior"`` (so ``selection == "prior"`` and
-    ``SELECTION_CRITERIA[selection]`` work), and another Prior only with the same scales; its
-    hash is the string's. It pickles and copies with its scales.
+    ``SELECTION_CRITERIA[selection]`` work), and another Prior only with the same scales and the same
+    ``estimated``; its hash is the string's. It pickles and copies with its scales.
 
     Attributes:
-        translation_mm: prior std of translations and prismatic joint zeros [mm].
-        rotation_deg: prior std of rotations and revolute joint zeros [deg].
+        translation_mm: prior std of lengths: translations and prismatic joint zeros [mm].
+        rotation_deg: prior std of angles: the rotations of placements [deg].
+        joint_zero_deg: prior std of revolute joint zeros [deg].
+        estimated: whether a calibration estimates the scales from its data (starting from these).
 
     Raises:
         CalibrationError: a scale that is not a number within :data:`SCALE_RANGE`.
@@ -110,10 +129,20 @@ class Prior(str):
 
     translation_mm: float
     rotation_deg: float
+    joint_zero_deg: float
+    estimated: bool
 
-    def __new__(cls, translation_mm: float = DEFAULT_TRANSLATION_MM, rotation_deg: float = DEFAULT_ROTATION_DEG):
+    def __new__(cls, translation_mm: float | None = None, rotation_deg: float | None = None,
+                joint_zero_deg: float | None = None, estimated: bool | None = None):
+        if estimated is None:
+            estimated = translation_mm is None and rotation_deg is None and joint_zero_deg is None
+        translation_mm = DEFAULT_TRANSLATION_MM if translation_mm is None else translation_mm
+        rotation_deg = DEFAULT_ROTATION_DEG if rotation_deg is None else rotation_deg
+        if joint_zero_deg is None:  # two scales: a joint zero is a rotation, as before there were three
+            joint_zero_deg = DEFAULT_JOINT_ZERO_DEG if estimated else rotation_deg
         low, high = SCALE_RANGE
-        for name, unit, value in (("translation", "mm", translation_mm), ("rotation", "deg", rotation_deg)):
+        for name, unit, value in (("translation", "mm", translation_mm), ("rotation", "deg", rotation_deg),
+                                  ("joint zero", "deg", joint_zero_deg)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise CalibrationError(f"prior scale: the {name} scale must be a positive number, got {value!r}")
             if not low <= value <= high:
@@ -121,14 +150,18 @@ class Prior(str):
                                        f"got {value!r}")
         out = super().__new__(cls, "prior")
         out.translation_mm, out.rotation_deg = float(translation_mm), float(rotation_deg)
+        out.joint_zero_deg, out.estimated = float(joint_zero_deg), bool(estimated)
         return out
 
     def __reduce__(self):
-        return type(self), (self.translation_mm, self.rotation_deg)
+        return type(self), (self.translation_mm, self.rotation_deg, self.joint_zero_deg, self.estimated)
+
+    def _key(self) -> tuple:
+        return self.translation_mm, self.rotation_deg, self.joint_zero_deg, self.estimated
 
     def __eq__(self, other) -> bool:
         if isinstance(other, Prior):
-            return (self.translation_mm, self.rotation_deg) == (other.translation_mm, other.rotation_deg)
+            return self._key() == other._key()
         return str.__eq__(self, other)
 
     def __ne__(self, other) -> bool:
@@ -136,9 +169,20 @@ class Prior(str):
 
     __hash__ = str.__hash__
 
+    @property
+    def scales(self) -> tuple[float, float, float]:
+        """The scales of :data:`KINDS`: lengths [mm], angles [deg], joint zeros [deg]."""
+        return self.translation_mm, self.rotation_deg, self.joint_zero_deg
+
     def as_dict(self) -> dict[str, float]:
-        """REPORT.json ``identifiability.selection.prior_scale``."""
+        """PLAN.json ``settings.prior_scale``, and REPORT.json ``identifiability.selection.prior_scale``'s
+        first two keys."""
         return {"translation_mm": self.translation_mm, "rotation_deg": self.rotation_deg}
+
+    def describe(self) -> str:
+        """The scales in words: ``lengths 1 mm, angles 0.5°, joint zeros 0.5°``."""
+        return (f"lengths {self.translation_mm:.3g} mm, angles {self.rotation_deg:.3g}°, "
+                f"joint zeros {self.joint_zero_deg:.3g}°")
 
 
 def prior_of(selection: str) -> Prior | None:
@@ -149,10 +193,38 @@ def prior_of(selection: str) -> Prior | None:
     return selection if isinstance(selection, Prior) else Prior()
 
 
+def parameter_kinds(params) -> np.ndarray:
+    """The kind of every parameter of ``params`` (indices into :data:`KINDS`), (n,): 0 a length (a
+    translation, a prismatic joint's zero; unit m), 2 a joint zero (a rotation about the axis of the
+    revolute or continuous joint it belongs to — ``PlacementErrors``' r-axis along it, ``JointOffsets``,
+    DH's theta), 1 any other angle (the tip's rotations among them: no joint turns there)."""
+    chain = getattr(params, "chain", None)
+    joints = {} if chain is None else {j.name: j for j in chain.joints}
+    slots = getattr(params, "slots", ())
+    out = np.ones(len(params.info), dtype=int)
+    for i, info in enumerate(params.info):
+        if info.unit == "m":
+            out[i] = 0
+            continue
+        joint = joints.get(info.joint)
+        if joint is None or joint.kind == "prismatic" or i >= len(slots):
+            continue
+        slot = slots[i]
+        if slot.kind == "revolute" and abs(float(np.dot(slot.axis, joint.axis))) > 1.0 - 1e-9:
+            out[i] = 2
+    return out
+
+
+def kind_sigmas(params, scales_si) -> np.ndarray:
+    """σ_i of every parameter of ``params`` from the scales of :data:`KINDS` in SI units (m, rad, rad), (n,)."""
+    return np.asarray(scales_si, dtype=float)[parameter_kinds(params)]
+
+
 def prior_sigmas(params, prior: Prior) -> np.ndarray:
-    """σ_i of every parameter of ``params`` in its own unit (m or rad), (n,)."""
-    return np.array([prior.translation_mm * 1e-3 if info.unit == "m" else math.radians(prior.rotation_deg)
-                     for info in params.info])
+    """σ_i of every parameter of ``params`` in its own unit (m or rad), (n,): the prior's scales
+    (an estimated prior's start)."""
+    lengths, angles, zeros = prior.scales
+    return kind_sigmas(params, (lengths * 1e-3, math.radians(angles), math.radians(zeros)))
 
 
 class PriorResidual:
@@ -267,11 +339,53 @@ def reestimated_scales(solution: Solution, n_prior: int, n_pos: int, sigma_pos: 
     return out_pos, max(effective_scale(data[n_pos:] * sigma_rot, hat[n_pos:]), SCALE_FLOOR)
 
 
+@dataclass(frozen=True)
+class ScaleChoice:
+    """The prior scales a MAP fit was made with, and how they were chosen (:mod:`pincal.fit.prior_scales`).
+
+    Attributes:
+        used: the scales of the fit (``used.estimated``: the data's estimate, else the given or default ones).
+        estimate: the empirical-Bayes estimate, also where it was not adopted (None: the scales were given).
+        log_bayes_factor: ln of the estimate's evidence over the default scales' (eq P4), None without one.
+        cv_ratio: the estimate's cross-validated mean squared error over the defaults' (None without one).
+        cv_standard_error: its standard error (the estimate is adopted below 1 − it).
+        reason: in words, why ``used``.
+    """
+
+    used: Prior
+    estimate: Prior | None = None
+    log_bayes_factor: float | None = None
+    cv_ratio: float | None = None
+    cv_standard_error: float | None = None
+    reason: str = "given"
+
+
+def _finite(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+def prior_scale(choice: ScaleChoice) -> dict:
+    """REPORT.json ``identifiability.selection.prior_scale``: the scales a fit was made with
+    (``translation_mm``, ``rotation_deg``, ``joint_zero_deg``), whether they are the data's estimate
+    (``estimated``), why (``reason``), and with an estimate its scales, Bayes factor and
+    cross-validation against the default scales."""
+    used = choice.used
+    out: dict = {**used.as_dict(), "joint_zero_deg": used.joint_zero_deg, "estimated": used.estimated,
+                 "reason": choice.reason}
+    if choice.estimate is not None:
+        out["estimate"] = {**choice.estimate.as_dict(), "joint_zero_deg": choice.estimate.joint_zero_deg}
+        out["log_bayes_factor"] = _finite(choice.log_bayes_factor)
+        out["cv_ratio"] = _finite(choice.cv_ratio)
+        out["cv_standard_error"] = _finite(choice.cv_standard_error)
+    return out
+
+
 def map_outcome(jacobian: np.ndarray, residual: np.ndarray, objective: PriorResidual, kept: np.ndarray,
-                sigma: np.ndarray, selection: Selection | None, params, prior: Prior):
+                sigma: np.ndarray, selection: Selection | None, params, choice: ScaleChoice):
     """What a MAP fit reports: the posterior covariance of its unknowns, the kept parameters
     (indices of ``params``) determined mainly by the prior, and the selection with the
     effective number of kinematic parameters as its value and a note naming those parameters.
+    ``choice``: the scales the fit was made with and how they were chosen.
 
     The effective number is n_kin − Σ_i [(WᵀW + Λ)⁻¹]_ii Λ_ii (the kinematic part of tr H,
     eq P2: tr H = n − tr((WᵀW + Λ)⁻¹Λ), and only penalised columns enter the second term).
@@ -286,10 +400,10 @@ def map_outcome(jacobian: np.ndarray, residual: np.ndarray, objective: PriorResi
     if weak.size:
         names = ", ".join(params.info[i].name for i in weak)
         notes.append(f"{weak.size} of the {kept.size} identifiable parameters are determined mainly by the prior "
-                     f"(posterior std > {PRIOR_DOMINATED:.2f} x prior std of {prior.translation_mm:g} mm / "
-                     f"{prior.rotation_deg:g} deg): {names}; the corrected model holds them near nominal, "
+                     f"(posterior std > {PRIOR_DOMINATED:.2f} x prior std of {choice.used.describe()}): {names}; "
+                     "the corrected model holds them near nominal, "
                      "and their values are not reported as measured")
     out = Selection(criterion=selection.criterion if selection is not None else "prior", sizes=(int(kept.size),),
                     scores=(effective,), chosen=int(kept.size), notes=tuple(notes), refitted=(int(kept.size),),
-                    solution=None if selection is None else selection.solution, prior_scale=prior.as_dict())
+                    solution=None if selection is None else selection.solution, prior_scale=prior_scale(choice))
     return covariance, weak, out

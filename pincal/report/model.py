@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Vector3", "Quaternion", "Sha256", "ChainLevel", "PaperMethod", "JointKind", "PositionStats", "OrientationStats",
     "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "Parameter",
-    "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped", "CorrelatedPair", "NotDetermined",
+    "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped", "CorrelatedPair", "NotDetermined",
     "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise", "Outlier", "FitRows", "Stage", "PaperFit",
     "FixtureFit",
     "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
@@ -145,11 +145,29 @@ class Parameter(TypedDict):
     status: str
 
 
-class PriorScale(TypedDict):
-    """The prior of ``--select prior``: σ of a translation [mm] and of a rotation [deg]."""
-
+class _PriorScaleKeys(TypedDict):
     translation_mm: float
     rotation_deg: float
+
+
+class PriorScaleEstimate(_PriorScaleKeys):
+    """The prior's scales estimated from the rows (empirical Bayes, :mod:`pincal.fit.prior_scales`)."""
+
+    joint_zero_deg: float
+
+
+class PriorScale(_PriorScaleKeys, total=False):
+    """The prior of ``--select prior``: the σ a fit used for a translation [mm], a rotation [deg] and a
+    revolute joint's zero [deg]; whether they are the rows' estimate and why; with an estimate, its
+    scales, ln of its Bayes factor over the default scales and its cross-validated error over theirs."""
+
+    joint_zero_deg: float
+    estimated: bool
+    reason: str
+    estimate: PriorScaleEstimate
+    log_bayes_factor: float | None
+    cv_ratio: float | None
+    cv_standard_error: float | None
 
 
 class SelectionCandidate(TypedDict):
