@@ -107,7 +107,7 @@ def test_diagnose_corrects_it_itself_and_the_flag_brings_the_model_to_the_noise(
     assert main(["report", str(tmp_path / "d" / "REPORT.json"), "--out", str(tmp_path / "d.html")]) == 0
     assert "A3 is read against A2" in (tmp_path / "d.html").read_text(encoding="utf-8")  # the page says it
     # plain: the readings as they are miss by ~1 m, a model no URDF is written of unless --force
-    for flags, name in (["--force"], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
+    for flags, name in ((["--force"], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
         assert main(["calibrate", str(urdf), str(calibration), *common, *flags, "--out", str(tmp_path / f"{name}.urdf"),
                      "--report", str(tmp_path / f"{name}.json")]) in (0, 3)
     report = json.loads((tmp_path / "coupled.json").read_text(encoding="utf-8"))

@@ -157,8 +157,9 @@ def test_moving_the_sensor_changes_nothing(industrial_arm_urdf, with_rotation):
     """The rows in a sensor frame moved by 12 m and turned: with orientations, the held rotation is the sensor
     frame's (register_line's reference), so nothing changes (1e-9 m per row's error, 1e-9 relative placements,
     as tests/test_frame_invariance.py). Positions alone carry no direction to hold it by but the vertical: a
-    sensor turned about its z axis changes nothing either (placements to 1e-8: measured 3e-9, the solver's
-    stop in the flat valley of the directions the prior holds); tilted, only the geometry across the line
+    sensor turned about its z axis changes nothing either (placements to 1e-7: measured 3e-9 with fixed prior
+    scales, 5e-8 with the scales estimated from the rows, whose estimate stops when they move by less than
+    1 %: the solver's stop in the flat valley of the directions only the prior holds); tilted, only the geometry across the line
     may differ, by what the data cannot see: the held-out rows along the line are predicted to within 1 %
     (measured 0.05 %; the placements moved by 1e-4)."""
     chain, rows, test = _line(industrial_arm_urdf, with_rotation, False)
@@ -169,7 +170,7 @@ def test_moving_the_sensor_changes_nothing(industrial_arm_urdf, with_rotation):
         moved, moved_errors = _outcome(chain, _moved(rows, turn, np.array([-7.0, 9.0, 2.5])))
         assert np.abs(moved_errors - errors).max() <= 1e-9
         scale = max(1.0, np.abs(placements).max())
-        assert np.abs(moved - placements).max() <= (1e-9 if with_rotation else 1e-8) * scale
+        assert np.abs(moved - placements).max() <= (1e-9 if with_rotation else 1e-7) * scale
     if not with_rotation:
         shift = np.array([-7.0, 9.0, 2.5])
         result = calibrate_chain(chain, rows, "full", selection="prior")

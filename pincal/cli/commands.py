@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from pincal.cli.arguments import selection_criterion
 from pincal.cli.error_table import HEADER, error_columns, point_rows
+from pincal.cli.paper_commands import demo_command, simulate_command, study_command
 from pincal.cli.parser import build_parser
 from pincal.errors import PincalError
 
@@ -43,23 +44,6 @@ def _warned(report: Mapping[str, Any], strict: bool, withheld: bool = False) -> 
     for warning in warnings:
         print(f"pincal: warning: {warning['message']}", file=sys.stderr)
     return EXIT_WARNING if withheld or (strict and warnings) else 0
-
-
-def _run_simulate(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from pincal.cli.workflows import simulate_to_directory
-    from pincal.simulation.paper import SimulationSettings
-
-    settings = SimulationSettings(sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, seed=args.seed)
-    experiment, truth = simulate_to_directory(args.out, args.deviations, settings, effects=args.effect)
-    print(f"wrote {args.out / 'calibration.csv'} ({experiment.calibration.n_rows} rows: "
-          f"{int(np.sum(experiment.calibration.roles == 'cpa'))} cpa, "
-          f"{int(np.sum(experiment.calibration.roles == 'calibration'))} calibration)")
-    print(f"wrote {args.out / 'validation.csv'} ({experiment.validation.n_rows} rows)")
-    print(f"wrote {args.out / 'truth.json'}")
-    print(f"next: {truth['calibrate_command']}")
-    return 0
 
 
 def _run_calibrate(args: argparse.Namespace) -> int:
@@ -393,56 +377,6 @@ def _run_example(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_demo(args: argparse.Namespace) -> int:
-    from pincal.cli.demo import run_demo
-    from pincal.simulation.paper import SimulationSettings
-
-    settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=args.seed)
-    print("KUKA LWR 4+ (Table 1), ground truth = Table 1 + large deviations (Table 2),")
-    print(f"sensor noise sigma_p = {settings.sigma_pos_mm} mm, sigma_a = {settings.sigma_rot_deg} deg, "
-          f"K = {settings.n_calibration} calibration + {settings.n_cpa} CPA rows per joint, "
-          f"J = {settings.n_validation} held-out rows, seed {settings.seed}")
-    rows = run_demo(args.out, settings)
-    print()
-    print("errors on held-out rows (eq 24; positions through Registration 1, orientations through Registration 2)")
-    print(HEADER + f" {'fit [ms]':>9s}")
-    for row in rows:
-        timing = f" {row.seconds * 1000:9.1f}" if row.seconds else f" {'-':>9s}"
-        print(f"{row.label:24s} {error_columns(row.validation)}{timing}")
-    print()
-    print(f"corrected URDFs, reports and data in {args.out}/ "
-          f"(kuka_lwr4plus_method2.urdf is the paper's recommended calibration)")
-    return 0
-
-
-def _run_study(args: argparse.Namespace) -> int:
-    from pincal.cli.paths import ensure_directory
-    from pincal.cli.progress import progress_bar
-    from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
-    from pincal.study.run import StudyConfig, run_study, write_study
-
-    ensure_directory(args.out)  # before the run, not after it
-    config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts,
-                         limit_pose_sets=args.limit_pose_sets)
-    checkpoints = args.out / CHECKPOINT_FOLDER  # finished tasks: a rerun after a crash resumes from them
-    with progress_bar("study tasks", quiet=args.quiet) as progress:
-        result = run_study(config, workers=args.workers, scheduler=args.scheduler, progress=progress,
-                           checkpoints=checkpoints)
-    paths = write_study(result, args.out, workers=args.workers)  # figures drawn by as many processes
-    TaskStore(checkpoints).clear()
-    print(f"{len(result.rows)} rows from {config.levels} noise levels x {config.repeats} repeats x "
-          f"{len(config.deviations)} deviation sets, {sum(r['starts'] for r in result.restart_summary)} restarts; "
-          f"{result.wall_s:.1f} s on {result.executor}")
-    print()
-    for finding in result.findings:
-        print(f"{'holds' if finding['holds'] else 'FAILS':5s}  {finding['finding']}: {finding['evidence']}")
-    print()
-    for name in ("study", "summary", "restarts", "findings", "json"):
-        print(f"wrote {paths[name]}")
-    print(f"wrote {len(paths['figures'])} figures in {args.out}/")
-    return 0
-
-
 def _run_urdf_from_dh(args: argparse.Namespace) -> int:
     from pincal.cli.preparation import urdf_from_dh_file
     from pincal.model.dh.urdf import DH_BASE_LINK, DH_FLANGE_LINK
@@ -474,9 +408,9 @@ def _run_extract(args: argparse.Namespace) -> int:
 
 
 _COMMANDS = {
-    "simulate": _run_simulate, "calibrate": _run_calibrate, "evaluate": _run_evaluate, "diagnose": _run_diagnose,
-    "demo": _run_demo, "example": _run_example, "plan": _run_plan, "urdf-from-dh": _run_urdf_from_dh,
-    "study": _run_study, "report": _run_report, "extract": _run_extract,
+    "simulate": simulate_command, "calibrate": _run_calibrate, "evaluate": _run_evaluate, "diagnose": _run_diagnose,
+    "demo": demo_command, "example": _run_example, "plan": _run_plan, "urdf-from-dh": _run_urdf_from_dh,
+    "study": study_command, "report": _run_report, "extract": _run_extract,
 }
 
 

@@ -35,9 +35,9 @@ if TYPE_CHECKING:
 __all__ = [
     "Vector3", "Quaternion", "Sha256", "ChainLevel", "PaperMethod", "JointKind", "PositionStats", "OrientationStats",
     "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "Parameter",
-    "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped", "CorrelatedPair", "NotDetermined",
-    "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise", "Outlier", "FitRows", "Stage", "PaperFit",
-    "FixtureFit",
+    "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped",
+    "CorrelatedPair", "NotDetermined", "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise",
+    "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
     "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
     "TimeSpanJson", "ChainHead", "CalibrationReport", "PaperReport",
     "LevelChoicePart", "errors_json", "registration_json", "registration_pair", "level_choice_part", "findings_json",
