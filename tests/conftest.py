@@ -212,6 +212,7 @@ SLOW_TESTS = (
     "tests/test_chain_calibration.py::test_noisy_heldout_error_matches_noise_limited_prediction",
     "tests/test_line_hold.py::test_one_line_end_to_end_calibrate_diagnose_and_evaluate",
     "tests/test_line_hold.py::test_moving_the_sensor_changes_nothing",
+    "tests/test_line_hold.py::test_one_arc_at_constant_orientation_predicts_the_path",
     "tests/test_chain_values.py::test_the_level_choice_and_diagnose_leave_the_chain",
     "tests/test_continuous_joints.py::test_every_serial_chain_of_example_robot_data_is_recovered",
     "tests/test_continuous_joints.py::test_kinova_calibrate_diagnose_plan",

@@ -311,7 +311,6 @@ CALIBRATE_IIWA = [str(IIWA), str(MUKCA / "kuka_14" / "front.csv"), "--fixture", 
     (["--tip-link", "tool0", "--weight", "1"], "--weight"),  # the default value, given: still refused
     (["--tip-link", "tool0", "--sigma-column", "sigma"], "--sigma-column"),
     (["--tip-link", "tool0", "--reject-outliers"], "--reject-outliers"),
-    (["--tip-link", "tool0", "--force"], "--force"),  # the fixture path withholds no URDF (yet): not ignored
 ])
 def test_calibrate_sensor_flags_are_refused_in_one_line(tmp_path, capsys, flags, named):
     code = main(["calibrate", *CALIBRATE_IIWA, *flags, "--out", str(tmp_path / "o.urdf"),
@@ -319,6 +318,23 @@ def test_calibrate_sensor_flags_are_refused_in_one_line(tmp_path, capsys, flags,
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and f"{named} do" in err and "not apply to socket-fixture" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_gross_misfit_withholds_the_corrected_urdf_as_on_the_sensor_path(tmp_path, capsys):
+    """Two joint columns swapped (a2 read as a3): the calibrated model misses the sockets by ~74 mm, 8 % of
+    the iiwa's 0.94 m reach in these rows, beyond pincal.fit.plausibility's 5 % bound (no physical effect of
+    a robot that size): exit 3, REPORT.json with the gross_misfit warning, no URDF (an earlier one removed)."""
+    text = (MUKCA / "kuka_14" / "front.csv").read_text(encoding="utf-8")
+    swapped = _write(tmp_path / "swapped.csv", text.replace("joint_a2,joint_a3", "joint_a3,joint_a2", 1))
+    out = tmp_path / "o.urdf"
+    out.write_text("an earlier run's URDF")
+    code = main(["calibrate", str(IIWA), str(swapped), "--fixture", str(FIXTURE_CSV), "--tip-link", "tool0",
+                 "--level", "offsets", "--out", str(out), "--report", str(tmp_path / "o.json")])
+    printed, err = capsys.readouterr()
+    assert code == 3 and not out.exists(), err
+    assert f"not written: {out}" in printed
+    warnings = json.loads((tmp_path / "o.json").read_text())["warnings"]
+    assert [w["code"] for w in warnings] == ["gross_misfit"] and "give --force" in warnings[0]["message"]
 
 
 @pytest.mark.parametrize("flags, named", [
@@ -387,6 +403,11 @@ def test_evaluate_finds_the_nominal_beside_the_report_and_protects_it(iiwa_run, 
     out, err = capsys.readouterr()
     assert "no 'before': the nominal URDF robot/iiwa14.urdf (the report's sources.urdf) is not at" in err
     assert "(calibrated model only)" in out
+    # nothing to judge the held-out placement against: a warning, which --strict turns into exit 3
+    assert "warning: evaluated placement(s) raised_left not checked against the nominal URDF" in err
+    assert _evaluate(moved, "raised_left.csv", "--strict", "--json", str(tmp_path / "strict.json")) == 3
+    warned = json.loads((tmp_path / "strict.json").read_text())["warnings"]
+    assert [w["code"] for w in warned] == ["unchecked_placement"]
 
 
 @pytest.mark.parametrize("text, expected", [

@@ -97,6 +97,19 @@ def test_one_line_holds_what_the_rows_leave_free_and_predicts_the_path(industria
         assert any("registration not determined" in note for note in result.notes)
 
 
+@pytest.mark.parametrize("with_rotation,tool_known", [(True, False), (True, True), (False, False), (False, True)],
+                         ids=["6D", "6D --tool", "3D", "3D --tool"])
+def test_one_arc_at_constant_orientation_predicts_the_path(industrial_arm_urdf, with_rotation, tool_known):
+    """One arc at constant orientation: its points span a plane, so the registration's rotation is fixed and
+    nothing is held about an axis; what the rows leave free of the target is held as for a line; the rows
+    along the arc within 1.3× the noise-limited prediction."""
+    chain, rows, test = _line(industrial_arm_urdf, with_rotation, tool_known, kind="arc")
+    result = calibrate_chain(chain, rows, "full", tool_known=tool_known, selection="prior")
+    assert result.held_rotations == () and len(result.held) == (0 if tool_known else 3)
+    measured, predicted = _held_out(chain, result, test)
+    assert 1.0 / BOUND <= measured / predicted <= BOUND
+
+
 def test_one_line_end_to_end_calibrate_diagnose_and_evaluate(industrial_arm_urdf, tmp_path, capsys):
     """calibrate and diagnose on one line: written, exit 0 with the warning, 3 with --strict; the report says
     what was held; evaluate on the line's other points notes it; a correct --tool: nothing held or warned."""

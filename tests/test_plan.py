@@ -351,7 +351,7 @@ def test_cli_plans_writes_the_plan_and_its_prediction(tmp_path, capsys):
     assert doc["criterion"]["name"] == "accuracy" and doc["candidates"]["count"] == 500
     # calibrate's default at level full is the prior: the plan is for it, and says so
     assert doc["settings"]["select"] == "prior"
-    assert doc["settings"]["prior_scale"] == {"translation_mm": 1.0, "rotation_deg": 0.5}
+    assert doc["settings"]["prior_scale"] == {"translation_mm": 1.0, "rotation_deg": 0.5, "joint_zero_deg": 0.5}
 
 
 def test_cli_candidates_file_plan_feeds_calibrate(tmp_path, capsys):

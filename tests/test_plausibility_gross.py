@@ -184,7 +184,7 @@ def test_gross_bound_and_unmodelled_signs():
 def test_the_diagnose_command_keeps_calibrates_settings(tmp_path):
     settings = CalibrateSettings(
         "flange", level="offsets", tool_pose=pose_from_xyz_rpy([0.1, 0.2, 0.3], [0.1, -0.2, 0.3]),
-        sigma_column="sigma", selection=Prior(5.0, 2.0), sigma_pos_mm=0.02,
+        sigma_column="sigma", selection=Prior(5.0, 2.0, 0.3), sigma_pos_mm=0.02,
         couplings=(ReadingCoupling("A3", -1.0 / 3.0, "A2"),), xacro_args=(("prefix", "left "),))
     data = [tmp_path / "a b.csv", tmp_path / "c.csv"]
     command = diagnose_command(tmp_path / "robot.urdf", data, settings, tmp_path / "out.urdf", tmp_path / "R.json")
@@ -193,7 +193,7 @@ def test_the_diagnose_command_keeps_calibrates_settings(tmp_path):
     args = build_parser().parse_args(argv[1:])
     assert args.data == data and args.tip_link == "flange" and args.level == "offsets"
     assert np.allclose(args.tool, settings.tool_pose, atol=1e-15)
-    assert (args.sigma_column, args.select, args.prior_scale, args.sigma_pos) == ("sigma", "prior", (5.0, 2.0), 0.02)
+    assert (args.sigma_column, args.select, args.prior_scale, args.sigma_pos) == ("sigma", "prior", (5.0, 2.0, 0.3), 0.02)
     assert args.coupling == list(settings.couplings) and args.xacro_args == [("prefix", "left ")]
     assert (args.out, args.report) == (tmp_path / "out_diagnosed.urdf", tmp_path / "R_diagnose.json")
     plain = diagnose_command(tmp_path / "robot.urdf", data, CalibrateSettings("flange"), tmp_path / "o.urdf",

@@ -54,7 +54,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     if args.fixture is not None:  # socket-fixture data, no sensor
         from pincal.cli.fixture import run_calibrate
 
-        return _warned(run_calibrate(args), args.strict)
+        report, withheld = run_calibrate(args)
+        return _warned(report, args.strict, withheld)
     level = args.level or ("dh" if args.method is not None else "full")
     for flag, given in (("--strict", args.strict), ("--force", args.force)):
         if level == "dh" and given:

@@ -43,7 +43,7 @@ from pincal.fit.placement_check import (
     placement_findings,
     predictions,
 )
-from pincal.fit.plausibility import Finding
+from pincal.fit.plausibility import Finding, gross_misfit, reach_m
 from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
 from pincal.measurements.couplings import corrected_angles, couplings_from_report
 from pincal.measurements.fixture import Fixture, read_fixture, read_fixture_data
@@ -70,8 +70,7 @@ __all__ = [
 #: Flags of a sensor calibration that a fixture calibration has no use for (argparse dest → flag).
 CALIBRATE_SENSOR_ONLY = {"method": "--method", "weight": "--weight", "tool": "--tool",
                          "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                         "sigma_pos": "--sigma-pos",
-                         "force": "--force"}  # nothing withheld here: the sensor path's gross misfit
+                         "sigma_pos": "--sigma-pos"}
 #: Flags of a sensor evaluation that a fixture evaluation has no use for.
 EVALUATE_SENSOR_ONLY = {"max_pos_mm": "--max-pos-mm", "max_rot_deg": "--max-rot-deg",
                         "fixed_registration": "--fixed-registration", "new_session": "--new-session",
@@ -96,6 +95,7 @@ class FixtureRun:
     reload_error: float
     effects_file: Path | None = None
     check: PlacementCheck | None = None
+    withheld: bool = False
 
 
 def calibrate_fixture_files(
@@ -114,12 +114,15 @@ def calibrate_fixture_files(
     (:func:`pincal.fit.level_choice.choose_fixture_level`; REPORT.json ``level_choice``). Each placement
     left out in turn is predicted by the level's calibration of the others against the nominal model
     (:func:`pincal.fit.placement_check.check_placements`; REPORT.json ``fixture.held_out_placements`` and
-    ``warnings``); one placement gets a note instead.
+    ``warnings``); one placement gets a note instead. A calibrated model that misses the sockets grossly
+    (:func:`pincal.fit.plausibility.gross_misfit`) is no correction of the robot: its URDF and effects.yaml
+    are withheld, as on the sensor path (:mod:`pincal.cli.verdict`), unless ``settings.force``.
 
     Raises:
         PincalError: settings of a sensor (a tool, method, row weights, outlier rejection, a
             stated noise) or level ``dh``.
     """
+    from pincal.cli.verdict import withhold, withholding
     from pincal.cli.workflows import write_checked_urdf
 
     expect(settings, CalibrateSettings, "calibrate_fixture_files")
@@ -152,6 +155,9 @@ def calibrate_fixture_files(
     check = check_placements(chain, data, level, selection, choice)
     warnings, notes = placement_findings(check)
     notes += [note for note in [one_placement_note(data)] if note is not None]
+    # eq F1's residual per coordinate, as a point distance: the sensor path's RMS point residual
+    gross = gross_misfit(result.rms_m * np.sqrt(3.0), reach_m(chain, data.q))
+    warnings, withheld = withholding(([] if gross is None else [gross]) + warnings, settings.force)
     seconds = time.perf_counter() - started
     sources: Sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
                         "corrected_urdf": str(out_urdf)}
@@ -159,17 +165,20 @@ def calibrate_fixture_files(
     reload_error, urdf_sha256 = write_checked_urdf(
         urdf, out_urdf, chain, result.chain_placements, nominal_placements, data.q,
         f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
-        f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args,
+        f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args, keep=not withheld,
     )
+    if withheld:
+        notes += withhold(out_urdf)
     with chain.placed(result.chain_placements):
         report = fixture_report(result, chain, data, sources, notes, file_sha256(urdf),
                                 level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256,
                                 xacro_args=dict(xacro_arguments(xacro_args)),  # evaluate --fixture rebuilds with them
                                 couplings=couplings_part(settings.couplings), warnings=findings_json(warnings),
                                 held_out=check)
-    effects_file = write_effects_file(out_urdf, report_path, report)  # the couplings, which a URDF cannot carry
+    # the couplings, which a URDF cannot carry (none beside a withheld URDF)
+    effects_file = None if withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
-    return FixtureRun(result, report, seconds, reload_error, effects_file, check)
+    return FixtureRun(result, report, seconds, reload_error, effects_file, check, withheld)
 
 
 @dataclass(frozen=True)
@@ -276,13 +285,15 @@ def evaluate_fixture_files(
                 "on purpose")
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
     candidates: list[Path] = []
+    why: str | None = None  # why there is no nominal URDF to compare with
     if nominal_urdf is not None:
         nominal: Path | None = Path(nominal_urdf)
         nominal_args = tuple(xacro_args)
     else:
-        nominal, candidates, why = _reported_nominal(document, report_path, nominal_sha)
+        nominal, candidates, missing = _reported_nominal(document, report_path, nominal_sha)
         nominal_args = tuple(xacro_args) or tuple((document.get("xacro_args") or {}).items())
         if nominal is None:
+            why = missing
             notes.append(f"no 'before': {why}; pass --nominal URDF")
     if xacro_args and not (is_xacro(urdf) or (nominal is not None and is_xacro(nominal))):
         raise PincalError("--xacro-arg applies to a .xacro URDF, and neither the evaluated nor the nominal URDF "
@@ -320,7 +331,7 @@ def evaluate_fixture_files(
         before = fixture_metrics(nominal_chain, data, nominal_ball)
         nominal_error = fixture_heldout_error(nominal_chain, data, nominal_ball)
     held_out = tuple(p for p in predictions(data, predicted, nominal_error) if p.placement not in seen)
-    return FixtureEvaluation(after, before, notes, seen, held_out, tuple(evaluation_findings(held_out)))
+    return FixtureEvaluation(after, before, notes, seen, held_out, tuple(evaluation_findings(held_out, why)))
 
 
 # --- what the commands print -------------------------------------------------------------
@@ -345,9 +356,10 @@ def _write_html(html: Path | None, document: Mapping[str, Any], base: Path, eval
         print(f"wrote {html}")
 
 
-def run_calibrate(args: argparse.Namespace) -> FixtureReport:
+def run_calibrate(args: argparse.Namespace) -> tuple[FixtureReport, bool]:
     """``pincal calibrate URDF DATA... --fixture FIXTURE.csv --tip-link LINK``: prints the summary, returns
-    the report (whose ``warnings`` the caller prints and turns into ``--strict``'s exit code)."""
+    the report (whose ``warnings`` the caller prints and turns into ``--strict``'s exit code) and whether
+    the corrected URDF was withheld (exit 3)."""
     _refuse(args, CALIBRATE_SENSOR_ONLY)
     level = args.level or "full"
     if level == "dh":
@@ -358,7 +370,7 @@ def run_calibrate(args: argparse.Namespace) -> FixtureReport:
         refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *_paths(args.data),
                          outputs=[args.out, args.report])
     settings = CalibrateSettings(args.tip_link, level=level, selection=selection_criterion(args), xacro_args=xacro_args,
-                                 couplings=args.coupling or ())
+                                 couplings=args.coupling or (), force=args.force)
     run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.out, args.report, settings)
     result, report = run.result, run.report
     level = result.level
@@ -388,12 +400,14 @@ def run_calibrate(args: argparse.Namespace) -> FixtureReport:
     if run.check is not None:
         _print_predictions(f"each placement left out, level {level} fitted on the others", run.check.placements)
     print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")
-    print(f"wrote {args.out} (reload check: TCP reproduced to {run.reload_error:.1e} m)")
+    from pincal.cli.verdict import urdf_line
+
+    print(urdf_line(args.out, run.withheld, run.reload_error))
     print(f"wrote {args.report}")
     if run.effects_file is not None:
         print(written_line(run.effects_file, report))
     _write_html(args.html, report, Path(args.report).parent)
-    return report
+    return report, run.withheld
 
 
 def _print_metrics(title: str, before: FixtureMetrics | None, after: FixtureMetrics) -> None:

@@ -38,8 +38,8 @@ from pincal.report.effects_file import remove_effects_file
 from pincal.report.model import Finding as FindingJson
 from pincal.report.model import findings_json
 
-__all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withhold", "urdf_line", "write_checked_urdf",
-           "unmodelled_notes", "diagnose_command"]
+__all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withholding", "withhold", "urdf_line",
+           "write_checked_urdf", "unmodelled_notes", "diagnose_command"]
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
@@ -67,11 +67,17 @@ def judged(chain: KinematicChain, data_paths: Sequence[str | Path], findings: li
     tip-link check of each file (:func:`pincal.fit.plausibility.tip_link_verdict`), and whether a gross
     misfit withholds the corrected URDF (not with ``force``)."""
     warned, notes = tip_link_verdict(tip_link_findings(chain, file_columns(data_paths, chain.joint_names)), findings)
-    withheld = not force and any(f.code == GROSS_CODE for f in warned)
+    warned, withheld = withholding(warned, force)
+    return Verdict(findings_json(warned), notes, withheld)
+
+
+def withholding(findings: list[Finding], force: bool) -> tuple[list[Finding], bool]:
+    """The ``findings`` with the ``gross_misfit`` one saying what becomes of the corrected URDF, and
+    whether it is withheld (a gross misfit without ``force``)."""
+    withheld = not force and any(f.code == GROSS_CODE for f in findings)
     said = ("the corrected URDF is not written (nor its effects.yaml; the report is): give --force to write them "
             "all the same" if withheld else "the corrected URDF is written all the same (--force)")
-    warned = [replace(f, message=f"{f.message}; {said}") if f.code == GROSS_CODE else f for f in warned]
-    return Verdict(findings_json(warned), notes, withheld)
+    return [replace(f, message=f"{f.message}; {said}") if f.code == GROSS_CODE else f for f in findings], withheld
 
 
 def withhold(out_urdf: Path) -> list[str]:
@@ -177,7 +183,7 @@ def diagnose_command(urdf: Path, data_paths: Sequence[Path], settings: Calibrate
     if selection != default_selection(settings.level):
         words += ["--select", str(selection)]
         if isinstance(selection, Prior):
-            words += ["--prior-scale", f"{selection.translation_mm!r},{selection.rotation_deg!r}"]
+            words += ["--prior-scale", ",".join(repr(v) for v in selection.scales)]
     if settings.sigma_pos_mm is not None:
         words += ["--sigma-pos", repr(settings.sigma_pos_mm)]
     for coupling in settings.couplings:

@@ -21,7 +21,9 @@ from pincal.model.effects import HARMONICS, JOINT_EFFECTS, Effect, joint_basis
 __all__ = ["GENERIC_EVALUATIONS", "remaining_structure", "partial_residual"]
 
 #: Evaluations allowed to the full fit of a generic correction (an ill-posed one
-#: crawls along a valley of equivalent corrections; its linearised ΔBIC is then used).
+#: crawls along a valley of equivalent corrections; its linearised ΔBIC is then used). A fixed budget
+#: here, unlike the candidates' (:func:`pincal.diagnosis.effect_fits.fit_while_gaining`): this fit is
+#: never adopted, it only says that structure remains, and the better of the two ΔBIC errs towards saying so.
 GENERIC_EVALUATIONS = 20
 
 

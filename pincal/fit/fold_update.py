@@ -31,13 +31,7 @@ import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem, calibrate_chain, row_weights
-from pincal.fit.prior import (
-    DEFAULT_JOINT_ZERO_DEG,
-    DEFAULT_ROTATION_DEG,
-    DEFAULT_TRANSLATION_MM,
-    PriorResidual,
-    parameter_kinds,
-)
+from pincal.fit.prior import Prior, PriorResidual, parameter_kinds, prior_of
 from pincal.fit.prior_scales import LinearisedFit, chosen_scales
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
@@ -67,9 +61,12 @@ def final_problem(chain: KinematicChain, result: ChainCalibration, rows: Measure
 
 
 def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows: MeasurementSet,
-                           tests: Sequence[np.ndarray], row_weight: np.ndarray | None = None) -> list[float]:
+                           tests: Sequence[np.ndarray], row_weight: np.ndarray | None = None,
+                           calibrated_with: Prior | None = None) -> list[float]:
     """Eq L1's held-out RMS point distance [m] of each fold, its held-out rows ``tests`` (indices into
-    ``rows``, the rows ``result`` was fitted on)."""
+    ``rows``, the rows ``result`` was fitted on); ``calibrated_with``: the prior ``result`` was calibrated with (where
+    its scales were estimated, each fold's estimate starts from its scales, as the fit's did; default
+    the default scales)."""
     problem = final_problem(chain, result, rows, row_weight)
     size = 0 if result.params is None else result.params.size
     objective = problem.objective(result.kept, np.zeros(size))
@@ -80,7 +77,7 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
     n_pos = 3 * rows.n_points
     scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0.0] = 1.0
-    estimated = _estimated_prior(result)
+    estimated = _estimated_prior(result, calibrated_with)
     if estimated is not None:  # each fold's scales from its training rows alone (pincal.fit.prior_scales)
         prior = cast(PriorResidual, objective)  # an estimated prior's fit carries its rows
         linear = LinearisedFit.of(prior, result.solution, jacobian, residual, problem.scale_rows(prior),
@@ -106,14 +103,14 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
     return out
 
 
-def _estimated_prior(result: ChainCalibration) -> np.ndarray | None:
-    """The scales the estimate of ``result``'s prior started from, the defaults [m, rad, rad] (3,), where
-    its scales were estimated from the rows (REPORT.json's ``prior_scale`` has an ``estimate``); else None."""
+def _estimated_prior(result: ChainCalibration, prior: Prior | None) -> np.ndarray | None:
+    """The scales the estimate of ``result``'s prior started from [m, rad, rad] (3,): ``prior``'s (the
+    defaults without one), where its scales were estimated from the rows (REPORT.json's ``prior_scale``
+    has an ``estimate``); else None."""
     scale = None if result.selection is None else result.selection.prior_scale
     if not scale or "estimate" not in scale:
         return None
-    return np.array([DEFAULT_TRANSLATION_MM * 1e-3, np.radians(DEFAULT_ROTATION_DEG),
-                     np.radians(DEFAULT_JOINT_ZERO_DEG)])
+    return (Prior() if prior is None else prior).si
 
 
 def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequence[np.ndarray],
@@ -136,6 +133,7 @@ def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequen
             continue
         finally:
             counter.tick()
-        errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options["sigma_column"]))
+        errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options["sigma_column"]),
+                                        prior_of(options.get("selection", "aic")))
         out.append((level, [e * 1000.0 for e in errors], [len(result.kept)] * len(tests), []))
     return out

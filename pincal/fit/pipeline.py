@@ -316,7 +316,7 @@ def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution
     kinds = parameter_kinds(problem.params)
     first_scales, first_prior = problem.scales(), cast(np.ndarray, problem.prior)
     default = _linearised(problem, objective, solution, kinds[kept])
-    start = np.array([prior.translation_mm * 1e-3, np.radians(prior.rotation_deg), np.radians(prior.joint_zero_deg)])
+    start = prior.si
     present = default.present
     defaults = Prior(*prior.scales, estimated=False)
     folds = scale_folds(*problem.fold_rows(objective))

@@ -203,10 +203,18 @@ def _listed(worse: Sequence[PlacementPrediction]) -> str:
         f"×{p.bound:.2f})" for p in worse)
 
 
-def evaluation_findings(evaluated: Sequence[PlacementPrediction]) -> list[Finding]:
+def evaluation_findings(evaluated: Sequence[PlacementPrediction], nominal_missing: str | None = None
+                        ) -> list[Finding]:
     """The finding of ``pincal evaluate --fixture`` on placements the calibration has not seen: those the
     corrected URDF (with the reported ball centre) predicts worse than the nominal URDF (with the ball centre
-    fitted to it on the calibration placements), beyond the noise of their rows (:func:`worse_bound`)."""
+    fitted to it on the calibration placements), beyond the noise of their rows (:func:`worse_bound`).
+    ``nominal_missing``: why there is no nominal URDF to compare with (then no placement can be judged,
+    and that is the finding: ``unchecked_placement``)."""
+    if nominal_missing is not None and evaluated:
+        return [Finding("unchecked_placement", (
+            f"evaluated placement(s) {', '.join(p.placement for p in evaluated)} not checked against the nominal "
+            f"URDF ({nominal_missing}): "
+            "whether the calibration carries over to it is unknown; pass --nominal URDF"))]
     worse = [p for p in evaluated if p.worse]
     if not worse:
         return []

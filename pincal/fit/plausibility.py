@@ -15,7 +15,8 @@ names the likely causes and what to try. The thresholds and their sources:
   (:func:`unmodelled_reason`, a note for the caller): a model that fits leaves a residual within
   ~1 ± sqrt(2/dof) of the noise (a few % over tens of rows), and a stated noise is a data sheet's,
   which real setups miss by up to ~2× (air, vibration, marker centroids); 3× (9× the variance) is
-  beyond both, yet not proof — a note up to 20×, a warning beyond.
+  beyond both, yet not proof — a note from 3× on (it names the diagnose command to run), and beyond
+  20× a warning as well.
 * **Gross misfit** — the RMS point residual above :data:`GROSS_REACH_FRACTION` (5 %) of the robot's
   reach in the rows (:func:`reach_m`): beyond what any physical effect of a robot that size
   produces. Physical effects scale with the arm: an elastic humanoid upper body, the most compliant

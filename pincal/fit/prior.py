@@ -174,10 +174,17 @@ class Prior(str):
         """The scales of :data:`KINDS`: lengths [mm], angles [deg], joint zeros [deg]."""
         return self.translation_mm, self.rotation_deg, self.joint_zero_deg
 
+    @property
+    def si(self) -> np.ndarray:
+        """The scales of :data:`KINDS` in SI units: lengths [m], angles [rad], joint zeros [rad], (3,)."""
+        return np.array([self.translation_mm * 1e-3, math.radians(self.rotation_deg),
+                         math.radians(self.joint_zero_deg)])
+
     def as_dict(self) -> dict[str, float]:
         """PLAN.json ``settings.prior_scale``, and REPORT.json ``identifiability.selection.prior_scale``'s
-        first two keys."""
-        return {"translation_mm": self.translation_mm, "rotation_deg": self.rotation_deg}
+        first three keys: ``translation_mm``, ``rotation_deg``, ``joint_zero_deg``."""
+        return {"translation_mm": self.translation_mm, "rotation_deg": self.rotation_deg,
+                "joint_zero_deg": self.joint_zero_deg}
 
     def describe(self) -> str:
         """The scales in words: ``lengths 1 mm, angles 0.5°, joint zeros 0.5°``."""
@@ -223,8 +230,7 @@ def kind_sigmas(params, scales_si) -> np.ndarray:
 def prior_sigmas(params, prior: Prior) -> np.ndarray:
     """σ_i of every parameter of ``params`` in its own unit (m or rad), (n,): the prior's scales
     (an estimated prior's start)."""
-    lengths, angles, zeros = prior.scales
-    return kind_sigmas(params, (lengths * 1e-3, math.radians(angles), math.radians(zeros)))
+    return kind_sigmas(params, prior.si)
 
 
 class PriorResidual:
@@ -370,10 +376,9 @@ def prior_scale(choice: ScaleChoice) -> dict:
     (``estimated``), why (``reason``), and with an estimate its scales, Bayes factor and
     cross-validation against the default scales."""
     used = choice.used
-    out: dict = {**used.as_dict(), "joint_zero_deg": used.joint_zero_deg, "estimated": used.estimated,
-                 "reason": choice.reason}
+    out: dict = {**used.as_dict(), "estimated": used.estimated, "reason": choice.reason}
     if choice.estimate is not None:
-        out["estimate"] = {**choice.estimate.as_dict(), "joint_zero_deg": choice.estimate.joint_zero_deg}
+        out["estimate"] = choice.estimate.as_dict()
         out["log_bayes_factor"] = _finite(choice.log_bayes_factor)
         out["cv_ratio"] = _finite(choice.cv_ratio)
         out["cv_standard_error"] = _finite(choice.cv_standard_error)

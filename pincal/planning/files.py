@@ -66,6 +66,7 @@ class PlanChain(TypedDict):
 class PlanPriorScale(TypedDict):
     translation_mm: float
     rotation_deg: float
+    joint_zero_deg: float
 
 
 class PlanTool(TypedDict):
