@@ -19,7 +19,7 @@
 (h) ``--diagnose``: whole ``pincal diagnose`` processes, on every row and with a held-out split
     (every 5th row in ``--validation``), against one ``pincal calibrate --level full`` of the same
     2 500 6D rows, side by side in rotated triples: on (f)'s UR5 session and on scripts/scenarios.py's
-    tracker 4.2 m raster at constant orientation; goal diagnose <= 10x calibrate (issue 20 item 5).
+    tracker 4.2 m raster at constant orientation; goal diagnose <= 10x calibrate.
     ``--select CRITERION`` for all three (default: the commands' own). Writes scripts/benchmark_diagnose.json.
 (f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
     selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
@@ -628,7 +628,7 @@ def auto_against_full(pairs: int = 3, rows: int = 2500) -> dict:
             "ratio_median": statistics.median(ratios), "goal": 3.0, "load_average": os.getloadavg()}
 
 
-#: (h)'s goal (issue 20 item 5): a whole ``pincal diagnose`` at most this many times one
+#: (h)'s goal: a whole ``pincal diagnose`` at most this many times one
 #: ``pincal calibrate --level full`` of the same rows.
 DIAGNOSE_GOAL = 10.0
 #: (h): every HELD_OUT_EVERY-th row of a session goes to the --validation file.

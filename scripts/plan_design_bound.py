@@ -1,4 +1,4 @@
-"""How close can any N configurations get to the planned/random ratio of issue 9? The continuous bound.
+"""How close can any N configurations get to the planned/random ratio tests/test_plan.py asks for (0.7)? The continuous bound.
 
     python scripts/plan_design_bound.py [--candidates 2000 10000] [--counts 12 20 40 100] [--draws 200]
                                         [--measure point|pose] [--pool uniform|boundary] [--realised]

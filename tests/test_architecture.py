@@ -167,7 +167,7 @@ def test_the_checks_catch_what_they_guard():
 
 @pytest.mark.parametrize("name", sorted(MODULES))
 def test_modules_stay_small(name):
-    """One concept per module (docs/architecture.md); issue 8 caps a module at about 500 lines."""
+    """One concept per module (docs/architecture.md); a module is capped at about 500 lines."""
     lines = len(MODULES[name].read_text(encoding="utf-8").splitlines())
     assert lines <= 520, f"{name} has {lines} lines: split it by concept"
 
@@ -332,7 +332,7 @@ def chain_mutations(text: str, label: str) -> list[str]:
 
 
 def test_only_the_model_changes_a_chain():
-    """Values, not a shared mutable chain (issue 21 item 1): outside ``pincal/model/`` a chain is
+    """Values, not a shared mutable chain: outside ``pincal/model/`` a chain is
     evaluated with another model, tool or parameter vector only inside ``chain.placed(...)``."""
     outside = {name: path for name, path in MODULES.items() if room(name) != "model"}
     found = [line for name, path in outside.items() for line in chain_mutations(path.read_text(encoding="utf-8"), name)]

@@ -195,7 +195,7 @@ def test_plan_reads_and_writes_the_controllers_joint_space(horizontal_j3, tmp_pa
 
 
 def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, tmp_path, capsys):
-    """Issue 22 item 4: evaluate's before -> after. Before: the URDF the calibration started from
+    """Evaluate's before -> after. Before: the URDF the calibration started from
     (REPORT.json sources.urdf), its registration and target fitted to the evaluated rows — recomputed
     here with the library; after: the evaluated error. The readings corrected first (the report's coupling)."""
     import re

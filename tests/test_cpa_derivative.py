@@ -1,7 +1,7 @@
 """The analytic CPA derivatives (pincal.paper.cpa.circle_axis_derivative, twist_gradients)
 against the central finite differences that pincal.paper.noise_limit used before them.
 
-Until issue 10 the noise limit differentiated the plane normal of every joint's arc by
+The noise limit once differentiated the plane normal of every joint's arc by
 central differences of :func:`circle_axis` with a step h = 1e-6 m on each point coordinate
 (2 × 3K circle fits per arc), and the twists of eq 9 by central differences of
 :func:`twists_from_axes` with h = 1e-6 on each axis component. ``_central_differences``

@@ -1,5 +1,5 @@
 """effects.yaml beside the corrected URDF: what a URDF cannot carry, for a controller
-(:mod:`pincal.report.effects_file`; issue 20 item 1).
+(:mod:`pincal.report.effects_file`).
 
 The cell: example-robot-data's UR5 measured by a tracker 3 m away in 6D (20 µm, 0.003°), 150
 calibration and 60 held-out rows, whose controller reads the elbow from the horizontal (reading =

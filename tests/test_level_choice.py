@@ -296,7 +296,7 @@ def test_cli_diagnose_level_auto(tmp_path, capsys):
 
 
 def test_tiago_level_auto_under_the_prior_is_within_ten_percent_of_the_best_fixed_level():
-    """Issue 12's bound (auto never more than 10 % worse on held-out data than the best fixed level),
+    """The bound --level auto is held to (never more than 10 % worse on held-out data than the best fixed level),
     on the real TIAGo sessions: choose on 2021-11-30 by CV only, then marker-1 RMS on 2021-11-26 with
     the training registration (examples/level_auto.py; README, "Choosing the level")."""
     from pincal.fit.chain_calibration import calibrate_chain

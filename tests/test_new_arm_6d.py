@@ -1,4 +1,4 @@
-"""A new user's path on an unseen 6-axis industrial arm (issue 12, item 4).
+"""A new user's path on an unseen 6-axis industrial arm.
 
 The arm is given by a modified-DH table (Craig's layout, degrees, metres) and
 measured in 6D (position + orientation of a tracker target) by a simulated laser

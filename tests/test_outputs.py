@@ -1,4 +1,4 @@
-"""Outputs survive faults (issue 11, item 3): every file pincal writes is replaced atomically.
+"""Outputs survive faults: every file pincal writes is replaced atomically.
 
 Unit tests of :mod:`pincal.outputs`, a scan that no module of pincal writes a
 file around it, and kill tests: ``pincal calibrate`` and ``pincal study`` run as

@@ -3,8 +3,8 @@
 Simulated robots (KUKA, Panda, UR5, TIAGo; seeded): calibrating on the planned
 configurations must give a held-out error within 15 % of the plan's prediction
 (mean over noise seeds) and at most 0.7 × the error of as many random
-candidates (medians over the same seeds, same noise) — both thresholds from
-issue 9. Real data (TIAGo, data/tiago_mocap): 20 planned rows of 2021-11-30
+candidates (medians over the same seeds, same noise) — both thresholds are
+the planner's promise. Real data (TIAGo, data/tiago_mocap): 20 planned rows of 2021-11-30
 against random 20-row subsets, held out on 2021-11-26. Plus the rank-m updates
 of the search against a fresh inverse, the orders, the clearance and the CLI's
 errors.
@@ -59,7 +59,7 @@ ROBOTS = {
     "tiago": ("tiago_description/robots/tiago.urdf", "wrist_ft_tool_link"),
 }
 MARKERS = np.array([[0.05, 0.0, 0.07], [0.07, 0.0, -0.08], [0.16, 0.0, -0.05], [0.15, 0.01, 0.06]])
-#: Issue 9: planned held-out error within 15 % of the prediction, and at most 0.7 × random.
+#: The planner's promise: planned held-out error within 15 % of the prediction, and at most 0.7 × random.
 PREDICTION_TOLERANCE = 0.15
 RANDOM_RATIO = 0.7
 

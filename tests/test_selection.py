@@ -146,7 +146,7 @@ def test_refine_skips_failed_fits():
     assert chosen == 1 and exact[2] is None
 
 
-#: The sizes the full nonlinear sweep (every prefix refitted, pincal at fe7e23b) kept on the
+#: The sizes the full nonlinear sweep (every prefix refitted, before the linearised screen) kept on the
 #: TIAGo training session, per level and criterion.
 SWEEP_CHOICE = {("full", "aic"): 24, ("full", "bic"): 21, ("full", "press"): 4,
                 ("offsets", "aic"): 4, ("offsets", "bic"): 4, ("offsets", "press"): 3}

@@ -1,4 +1,4 @@
-"""A study survives faults (issue 11, item 4): a lost Dask worker loses nothing, and a study whose
+"""A study survives faults: a lost Dask worker loses nothing, and a study whose
 scheduler dies — here the whole ``pincal study --scheduler local`` process, SIGKILLed — resumes from
 the tasks it finished (:mod:`pincal.study.checkpoints`).
 

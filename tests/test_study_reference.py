@@ -1,5 +1,5 @@
-"""The study's numbers are those of commit 6975758 (issue 10: faster, with "the same study.csv
-numbers, within 1e-9 relative").
+"""The study's numbers are those of the reference revision 6975758 (a faster study must
+write the same study.csv numbers, within 1e-9 relative).
 
 ``data/study_6975758_small.csv`` is the ``study.csv`` that commit 6975758 wrote for
 ``pincal study --reps 2 --levels 3 --restarts 0 --limit-pose-sets 0 --workers 1`` (both

@@ -1,4 +1,4 @@
-"""Temperature and pauses (issue 20 item 2): thermal expansion and a registration step per pause.
+"""Temperature and pauses: thermal expansion and a registration step per pause.
 
 The cell: the 6-axis arm of tests/conftest.py (its geometry off by 0.3 mm / 0.3 mrad per placement
 parameter) measured by a laser tracker 3 m away in 6D (20 µm per axis, 0.003°), one target point
@@ -10,8 +10,8 @@ coordinates adds ~10 %, as in tests/test_couplings.py). The hidden effects:
 * thermal: α = 12e-6/K (steel) under a warm-up 20 → 26 °C (τ = 30 min,
   :func:`pincal.simulation.sensor.warm_up`; 20 → 25.4 °C over the rows): the tool ~1.3 m from the
   base moves up to 12e-6 × 5.4 K × 1.3 m = 84 µm, 4 noise σ;
-* pause: an 8 h stop halfway, the registration's translation stepped by 76 µm in y (the real case of
-  issue 20).
+* pause: an 8 h stop halfway, the registration's translation stepped by 76 µm in y (as on a real
+  laser-tracker raster).
 """
 
 from __future__ import annotations
@@ -313,7 +313,7 @@ def test_evaluate_gives_each_row_the_steps_of_its_segment_or_the_nearest():
 
 
 def test_alpha_outside_steel_and_aluminium_beyond_its_std_is_implausible():
-    """5–30 µm/m/K (issue 20); a value outside by more than its standard deviation is named, with why."""
+    """5–30 µm/m/K (steel and aluminium); a value outside by more than its standard deviation is named, with why."""
     thermal = Effect("thermal")
     assert ALPHA_RANGE == (5e-6, 30e-6) and PLAUSIBLE["thermal"]["1/K"] == np.inf
     assert implausible(thermal, np.array([12e-6]), np.array([1e-6])) is None

@@ -1,5 +1,5 @@
-"""What `diagnose` and `evaluate` say about the temperature and pause inputs they cannot use (the review of
-issue 20's heat and pauses): a temperature column in some session files only, `--temperature-column` where
+"""What `diagnose` and `evaluate` say about the temperature and pause inputs they cannot use (a review of
+heat and pauses): a temperature column in some session files only, `--temperature-column` where
 no thermal expansion applies, a malformed `pauses` entry, the text of a position-only effect, and the
 evaluate page's record of the thermal and pause-step corrections.
 

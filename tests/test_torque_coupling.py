@@ -1,5 +1,5 @@
 """Gravity-torque coupling: joint j deflects under joint i's gravity torque, shift_j = c · tau_i(q)
-(``Effect("compliance", j, driver=i)``, :mod:`pincal.model.effects`; issue 20 item 1).
+(``Effect("compliance", j, driver=i)``, :mod:`pincal.model.effects`).
 
 The cell: example-robot-data's UR5 (J2 ∥ J3 ∥ J4, the URDF's inertias) measured by a laser tracker 3 m
 away in 6D (20 µm, 0.003°), 150 calibration and 60 held-out postures, geometry ~0.3 mm / 0.3 mrad off

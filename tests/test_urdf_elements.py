@@ -1,11 +1,11 @@
 """The lxml URDF reader and writer give what yourdfpy gave, bit for bit; calibrate imports neither.
 
 pincal read joint origins and wrote corrected URDFs through yourdfpy 0.0.60 until
-the calibrate path stopped importing it (and trimesh, networkx: ~0.3 s per run,
-issue 10 item 3). The promise kept is byte-identical output, so the reference
-here is yourdfpy itself, on every URDF example-robot-data ships (69 files:
-arms, humanoids, quadrupeds, mobile manipulators; meshes, transmissions, gazebo
-tags, mimic joints) and on the packaged KUKA LWR 4+.
+the calibrate path stopped importing it (and trimesh, networkx: ~0.3 s per run).
+The promise kept is byte-identical output, so the reference here is yourdfpy
+itself, on every URDF example-robot-data ships (69 files: arms, humanoids,
+quadrupeds, mobile manipulators; meshes, transmissions, gazebo tags, mimic
+joints) and on the packaged KUKA LWR 4+.
 """
 
 from __future__ import annotations

@@ -1,6 +1,5 @@
 """What the rows' temperature and time let ``diagnose`` test: the ``thermal`` and ``pause_step``
-candidates (:mod:`pincal.model.thermal`), and a line for each that cannot be tested, with what to add
-(issue 20 item 6).
+candidates (:mod:`pincal.model.thermal`), and a line for each that cannot be tested, with what to add.
 
 ``thermal`` is offered only with a temperature column whose value changes over the fitted rows
 (without a change its basis, T_k − T_ref, is zero); a ``pause_step`` for every gap longer than

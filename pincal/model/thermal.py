@@ -16,7 +16,7 @@ tool); scaling every translation by f_k scales every term, so
 frame y is written. Every fixed placement from the root to the first calibrated joint (a pedestal, a
 torso, a mobile base's height) is one of the t_i and grows too: the root is taken as the point the
 robot stands on, the one that does not move with temperature. α is bounded physically
-(:data:`ALPHA_RANGE`): steel 11–13, aluminium ~23 µm/m/K (issue 20: 5–30 µm/m/K).
+(:data:`ALPHA_RANGE`): steel 11–13, aluminium ~23 µm/m/K, so 5–30 µm/m/K.
 The calibrated geometry holds at T_ref; a row outside the fitted temperature range
 [T_min, T_max] is held at its nearer end (never extrapolated, :meth:`TemperatureRange.held`).
 
@@ -31,7 +31,7 @@ sensor frame; the steps of several pauses add:
 Translation only: the registration changes across a pause because the cell's temperature
 moved the sensor against the base — the floor and the stand between them expand by α L ΔT
 (12e-6/K × 3 m × 1 K = 36 µm), a translation along them; a tilt takes a differential
-expansion, second order. Were the whole 76 µm step of issue 20 a tilt ρ of the tracker 3 m away,
+expansion, second order. Were the whole 76 µm step of a real 8.4 h pause a tilt ρ of the tracker 3 m away,
 ρ = 25 µrad, a translation would leave ρ × 0.5 m = 13 µm across the workspace — one noise σ of a
 tracker — while a rotation's 3 more values cost 3 ln(m) ≈ 22 in ΔBIC (m ≈ 1 500 residuals), enough
 to hand the pause to a 3-value drift (below); a step large enough for its tilt to matter is a
@@ -70,9 +70,9 @@ TEMPERATURE_COLUMNS = ("temperature_c", "temperature")
 #: Default gap between consecutive rows of a session that starts a new segment [s]: half an hour.
 #: The rows of one measuring program are seconds to minutes apart (the TIAGo sessions' at most 17 s,
 #: a raster lap a few minutes); a stop of half an hour is long enough for the cell's temperature to
-#: move and the sensor to be touched (issue 20: an 8.4 h pause stepped the registration by 76 µm).
+#: move and the sensor to be touched (on a real laser-tracker raster an 8.4 h pause stepped the registration by 76 µm).
 PAUSE_S = 1800.0
-#: Physical range of an arm's expansion coefficient α [1/K] (issue 20): steel 11–13, aluminium ~23 µm/m/K.
+#: Physical range of an arm's expansion coefficient α [1/K]: steel 11–13, aluminium ~23 µm/m/K.
 ALPHA_RANGE = (5e-6, 30e-6)
 
 

@@ -383,7 +383,7 @@ class SensorResidual(Objective):
         omega, _ = self.row_frames(target)
         rows_pos = np.zeros((k, n_points, 3, self.n_params))
         kin, reg, pts = self.blocks["kinematic"], self.blocks["registration"], self.blocks["points"]
-        # einsum in the order of 6975758's code: the same arithmetic, the same fits (pincal.residuals.so3)
+        # einsum in the reference study's order: the same arithmetic, the same fits (pincal.residuals.so3)
         turn = "ij,knj->kin" if omega.ndim == 2 else "kij,knj->kin"  # one session, or each row's
         factor = 1.0 if target.conditions is None or target.conditions.factor is None \
             else target.conditions.factor[:, None, None]  # f_k of eq T1 scales every column of y

@@ -9,7 +9,7 @@
     alpha = 1/theta² − 1 / (2 theta tan(theta/2)),  r = log R.
 
 A numpy evaluation of the same formulas over the whole stack (scipy's
-rotation vector; commit 384bd79) was no faster for the study's 100-row stacks
+rotation vector, tried) was no faster for the study's 100-row stacks
 (about 2 µs per matrix either way) but rounded differently, and the
 Levenberg–Marquardt fits, which stop at a relative cost change of 1e-12,
 turn such rounding into differences of ~1e-7 relative in fitted values (the

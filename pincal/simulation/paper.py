@@ -157,7 +157,7 @@ def simulate_experiment(
 
 #: Time between simulated rows when effects are injected [s].
 SECONDS_PER_ROW = 10.0
-#: The pause of a simulated ``pause_step`` [s]: 8 h, the real case of issue 20 (an 8.4 h pause stepped 76 µm).
+#: The pause of a simulated ``pause_step`` [s]: 8 h, as on a real laser-tracker raster (an 8.4 h pause stepped 76 µm).
 PAUSE_GAP_S = 8 * 3600.0
 
 

@@ -64,7 +64,7 @@ from pincal.simulation.sensor import (
 # resolved: a clone's examples/ is a link into pincal/datasets/)
 ROOT = Path(__file__).absolute().parent.parent
 LEVELS = ("registration", "offsets", "full")
-#: Auto may be worse than the best fixed level by this factor (issue 12's "Done when").
+#: Auto may be worse than the best fixed level by this factor (the bound --level auto is held to).
 MARGIN = 1.10
 #: The selection within each level (--select).
 SELECT = {"selection": "aic"}

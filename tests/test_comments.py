@@ -1,0 +1,75 @@
+"""Comments explain the why in the code's own terms, and docs/architecture.md names every module.
+
+An issue number or a commit hash points outside the repository: a reader cannot follow it, and the
+rationale it stands for is lost when the tracker moves. Reference data keep their provenance: a
+revision named as the source of a committed reference file or as a benchmark's baseline is data,
+listed in :data:`PROVENANCE`.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Every Python file of the package, its scripts and tests (this one, which lists the forms, aside).
+SOURCES = sorted(path for path in [*(ROOT / "pincal").rglob("*.py"), *(ROOT / "scripts").glob("*.py"),
+                                   *(ROOT / "tests").glob("*.py")] if path != Path(__file__).resolve())
+#: "issue 20", "Issue 12's", "issue #9"
+ISSUE = re.compile(r"\bissues? #?\d+", re.IGNORECASE)
+#: "commit 384bd79", "at fe7e23b", "6975758's code": a 7-40 digit hexadecimal word with a digit and a letter
+HASH = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+#: Revisions that are the provenance of reference data or a benchmark's baseline, by file.
+PROVENANCE = {
+    "scripts/benchmark.py": {"6975758"},
+    "tests/test_study_reference.py": {"6975758"},
+    "pincal/outputs.py": {"1a2b3c4d"},  # a temporary file's random part, shown
+}
+
+
+def _comments_and_docstrings(path: Path) -> list[tuple[int, str]]:
+    """(line number, text) of every comment and string literal of ``path`` (docstrings among them)."""
+    import io
+    import tokenize
+
+    out = []
+    with io.open(path, encoding="utf-8") as handle:
+        for token in tokenize.generate_tokens(handle.readline):
+            if token.type in (tokenize.COMMENT, tokenize.STRING):
+                out.append((token.start[0], token.string))
+    return out
+
+
+def test_no_issue_numbers_or_commit_hashes_as_rationale():
+    found = []
+    for path in SOURCES:
+        rel = path.relative_to(ROOT).as_posix()
+        allowed = PROVENANCE.get(rel, set())
+        for line, text in _comments_and_docstrings(path):
+            for match in ISSUE.finditer(text):
+                found.append(f"{rel}:{line}: {match.group(0)!r}")
+            for match in HASH.finditer(text):
+                if match.group(0) not in allowed and not re.search(r"sha256|[0-9a-f]{41,}", text):
+                    found.append(f"{rel}:{line}: {match.group(0)!r}")
+    assert not found, "say the why in the code's own terms:\n" + "\n".join(found)
+
+
+def test_the_checks_find_what_they_look_for():
+    """The patterns catch the forms removed from the code, and leave the ordinary words alone."""
+    assert ISSUE.search("the bound of issue 12's Done when") and ISSUE.search("Issue #9: planned")
+    assert HASH.search("a numpy evaluation (commit 384bd79) was no faster")
+    assert not HASH.search("a deadbeef-free 1234567 row count") and not ISSUE.search("the issues it raises")
+
+
+def test_architecture_names_every_module():
+    """Every module of pincal is named in docs/architecture.md (as `name.py` or a path ending in it)."""
+    doc = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"`([\w/.]+\.py)`", doc))
+    missing = []
+    for path in sorted((ROOT / "pincal").rglob("*.py")):
+        rel = path.relative_to(ROOT / "pincal").as_posix()
+        if path.name == "__init__.py":
+            continue
+        if not any(rel == n or rel.endswith("/" + n) for n in named):
+            missing.append(rel)
+    assert not missing, f"docs/architecture.md does not name: {', '.join(missing)}"
