@@ -30,7 +30,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
 from pincal.simulation.sensor import random_configurations
-from tests.conftest import INDUSTRIAL_ARM_START
+from conftest import INDUSTRIAL_ARM_START
 
 RELATIVE = 1e-9
 TARGET = np.array([[0.035, -0.02, 0.21]])

@@ -35,7 +35,7 @@ from pincal.model.parameter_sets import PlacementErrors
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual
 from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
-from tests.conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
+from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres
 SIGMA_ROT_RAD = np.radians(0.003)  # its 6D probe

@@ -30,7 +30,7 @@ from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
-from tests.conftest import INDUSTRIAL_ARM_START
+from conftest import INDUSTRIAL_ARM_START
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres (15 µm + 6 µm/m)
 SIGMA_ROT_RAD = np.radians(0.003)  # its 6D probe
