@@ -98,3 +98,16 @@ def test_an_arm_joint_under_the_lifts_gravity_force_is_stated_in_rad_per_newton(
     shown = [section["final"][0]["value"], section["steps"][0]["value"], section["candidates"][0]["value"]]
     assert all(text.endswith(" mrad/N") for text in shown), shown
     assert "2e-05 rad/N x torso_lift_joint's gravity force" in torque_coupling_advice(effect, 2e-5, "rad/N")
+
+
+def test_a_compliance_says_its_sign_convention_and_stiffness():
+    """c < 0 is a joint that sags under its holding torque (pincal.model.effects: actual = reading + c·τ, τ
+    Pinocchio's generalized gravity), its stiffness 1/|c|; a prismatic joint's in N/m."""
+    from pincal.report.diagnosis import compliance_words
+
+    sag = compliance_words("A2", -2e-4, "rad/(N·m)")
+    assert "c = -0.0002 rad/(N·m), a stiffness of 5e+03 N·m/rad" in sag and "gives way under its load" in sag
+    lean = compliance_words("A2", 2e-4, "rad/(N·m)")
+    assert "leans against its load" in lean and "gives way" not in lean
+    lift = compliance_words("lift", -1e-6, "m/N")
+    assert "gravity force" in lift and "a stiffness of 1e+06 N/m" in lift

@@ -322,7 +322,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         values, std, shown_unit = shown(effect, values, std, unit(effect))
         value = ", ".join(f"{v:.4g} ± {s:.2g}" for v, s in zip(values, std))  # what evaluate applies
         print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe(effect)}")
-        if "advice" in entry:  # a reading taken against another joint: fix the data, not the model
+        if "advice" in entry:  # what a coupling asks of the data, what a compliance's sign means
             print(f"  {entry['advice']}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run
     from pincal.diagnosis.verdicts import REJECTED

@@ -35,6 +35,21 @@ if TYPE_CHECKING:
 __all__ = ["diagnosis_report"]
 
 
+def compliance_words(joint: str, value: float, unit: str) -> str:
+    """A joint compliance c in words, with its sign convention (:mod:`pincal.model.effects`): the joint is at
+    its reading + c · τ, τ its gravity torque (force, for a prismatic joint) as Pinocchio gives it — what holds
+    the link against gravity — so a joint that gives way under its load has c < 0, its stiffness 1 / |c|."""
+    force = unit.endswith("/N")
+    load, stiffness = ("gravity force", "N/m") if force else ("gravity torque", "N·m/rad")
+    if value == 0.0:
+        return f"{joint}: c = 0 {unit}"
+    way = ("gives way under its load, as a gearbox's or a link's elasticity does" if value < 0 else
+           "leans against its load, as a spring or a counterbalance the URDF lacks would make it")
+    return (f"{joint} is at its reading + c x its {load} (what holds it against gravity, as Pinocchio computes "
+            f"it), so c < 0 is a joint that sags: here c = {value:.3g} {unit}, a stiffness of "
+            f"{1.0 / abs(value):.3g} {stiffness}; it {way}")
+
+
 def diagnosis_report(
     head: ChainHead,
     diagnosis: Diagnosis,
@@ -93,6 +108,9 @@ def diagnosis_report(
         elif effect.driver:  # a compliance under another joint's torque: what links them
             kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
             entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
+        elif effect.type == "compliance":  # its sign convention, where the value is read
+            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
+            entry["advice"] = compliance_words(str(effect.joint), float(values[0]), effect_unit(effect, kinds))
     return {
         **head,
         "warnings": warnings,
