@@ -215,6 +215,9 @@ def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, 
     rows = replace(rows, roles=np.full(rows.n_rows, "calibration", dtype=object))
     assert before_mm == pytest.approx(1000 * calibrate_chain(chain, rows, "registration").rms_m, abs=6e-4)
     assert after_mm == pytest.approx(after, abs=6e-4) and before_mm > 10 * after_mm  # printed to 3 decimals
+    before = json.loads((tmp_path / "e.json").read_text(encoding="utf-8"))["before"]  # --json: the same before
+    assert before["position_rms_mm"] == pytest.approx(before_mm, abs=6e-4) and before["urdf"] == str(urdf)
+    assert before["registration"] == "fitted to the evaluated rows"
 
 
 def test_joint_limits_are_judged_on_the_corrected_angles(industrial_arm_urdf, tmp_path):

@@ -254,7 +254,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
                                     files=evaluation.files, sessions=evaluation.row_sessions,
                                     registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift,
                                     thermal=evaluation.thermal, pause_steps=evaluation.pause_steps,
-                                    warnings=document["warnings"])
+                                    warnings=document["warnings"], before=document.get("before"))
         _write_html(args.html, load_report(args.report, PAGE_KINDS), args.report.parent, evaluation=shown,
                     source=args.report)
     failed = []

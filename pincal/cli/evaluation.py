@@ -166,6 +166,9 @@ class Evaluation:
         out: EvaluationJson = {**errors_json(self.errors), "skipped_cpa_rows": self.n_skipped_cpa,
                                "sessions": [s.as_dict() for s in self.sessions], "drift": self.drift,
                                "warnings": findings_json(list(self.warnings))}
+        if self.nominal_rms_mm is not None and self.nominal_urdf is not None:
+            out["before"] = {"position_rms_mm": self.nominal_rms_mm, "urdf": self.nominal_urdf,
+                             "registration": "fitted to the evaluated rows"}
         if self.thermal is not None:
             out["thermal"] = self.thermal
         if self.pause_steps is not None:

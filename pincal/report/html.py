@@ -158,8 +158,8 @@ def evaluated_sessions(evaluation: dict | None) -> list[dict[str, Any]]:
 
 
 def _registration_notes(evaluation: dict | None) -> list[str]:
-    """The evaluated card's lines on registrations re-estimated on the evaluated rows, and on
-    rows a drift was not extrapolated to (``drift`` of ``evaluate --json``)."""
+    """The evaluated card's lines on registrations re-estimated on the evaluated rows, on
+    rows a drift was not extrapolated to (``drift`` of ``evaluate --json``), and evaluate's "before"."""
     drift = (evaluation or {}).get("drift")
     held = drift.get("rows_held") if isinstance(drift, dict) else None
     sessions = evaluated_sessions(evaluation)
@@ -175,6 +175,11 @@ def _registration_notes(evaluation: dict | None) -> list[str]:
               else "held at its session's mean time (a re-estimated registration: at the nearer end of the span)")
         notes.append(f"drift not extrapolated: {held} row(s) outside the time span it was fitted on are evaluated "
                      f"with it {at}")
+    before = (evaluation or {}).get("before")
+    if isinstance(before, dict):  # evaluate's before -> after, which registers the nominal URDF to these rows
+        notes.append(f"before: {before['position_rms_mm']:.3f} mm RMS — the nominal URDF with its registration and "
+                     "target fitted to these rows (evaluate's before -> after; the nominal geometry of the "
+                     "calibration rows is registered to those)")
     return notes + _condition_notes(evaluation)
 
 

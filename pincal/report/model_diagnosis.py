@@ -38,7 +38,8 @@ class EffectJson(_EffectKeys, total=False):
     [dx, dy, dz] m of the registration's translation after its ``pause``); ``backlash`` its ``source``; ``coupling``
     its ``driver`` (the joint whose reading it adds, × value), a ``compliance`` the ``driver`` whose gravity
     torque it follows when not its own joint's, and, in the final model's ``effects``, the ``advice``
-    diagnose prints for a coupling or a compliance (its sign convention and stiffness, with its own torque); ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
+    diagnose prints for a coupling or a compliance (its sign convention and stiffness, with its own
+    torque); ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
 
     harmonic: int
     sin: float

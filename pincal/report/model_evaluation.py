@@ -3,12 +3,12 @@ session, and how a report's drift was applied (:mod:`pincal.report.model` has th
 
 from __future__ import annotations
 
-from typing import TypedDict
+from typing import Literal, TypedDict
 
 from pincal.report.model import Finding, PoseErrorsJson, RegistrationPair, TimeSpanJson, Vector3
 from pincal.report.model_diagnosis import PauseJson, TemperatureRangeJson
 
-__all__ = ["EvaluatedSession", "DriftUse", "ThermalUse", "PauseStepUse", "EvaluationJson"]
+__all__ = ["EvaluatedSession", "DriftUse", "ThermalUse", "PauseStepUse", "EvaluationBefore", "EvaluationJson"]
 
 
 class EvaluatedSession(TypedDict):
@@ -71,12 +71,23 @@ class _EvaluationKeys(PoseErrorsJson):
     drift: DriftUse | None
 
 
+class EvaluationBefore(TypedDict):
+    """evaluate's "before": the URDF the calibration started from on the evaluated rows, its registration
+    and target fitted to these rows (not the calibration's: the HTML's "nominal geometry" of the calibration
+    rows is registered to those)."""
+
+    position_rms_mm: float
+    urdf: str
+    registration: Literal["fitted to the evaluated rows"]
+
+
 class EvaluationJson(_EvaluationKeys, total=False):
     """``pincal evaluate --json``: eq 24 on the evaluated rows, per session, and the drift's use
     (``thermal`` and ``pause_steps``: where the report has them; ``warnings``: the evaluated error against
     the calibration's, :func:`pincal.fit.plausibility.check_evaluation` — absent from files of pincal before
-    it was added)."""
+    it was added; ``before``: where the nominal URDF is readable, :class:`EvaluationBefore`)."""
 
     thermal: ThermalUse
     pause_steps: PauseStepUse
     warnings: list[Finding]
+    before: EvaluationBefore

@@ -40,7 +40,7 @@ from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.measurements.data import MeasurementSet, default_session_name
 from pincal.report.model import Finding, RowErrorModel, RowErrorSet, errors_json
-from pincal.report.model_evaluation import DriftUse, EvaluatedSession, PauseStepUse, ThermalUse
+from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationBefore, PauseStepUse, ThermalUse
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
@@ -168,7 +168,7 @@ def evaluation_document(
     files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
     registrations: Sequence[EvaluatedSession] = (), drift: DriftUse | None = None,
     thermal: ThermalUse | None = None, pause_steps: PauseStepUse | None = None,
-    warnings: Sequence[Finding] = (),
+    warnings: Sequence[Finding] = (), before: EvaluationBefore | None = None,
 ) -> dict[str, Any]:
     """What ``evaluate --html`` shows beside the report: the evaluated files, the eq 24
     summary (as ``evaluate --json`` writes it), the evaluated rows by file line (and
@@ -177,9 +177,11 @@ def evaluation_document(
     ``residuals`` and ``registration_dof``); ``drift``: how the report's drift was
     applied (``evaluate --json`` ``drift``), or None; ``thermal`` / ``pause_steps``: how its thermal
     expansion and pause steps were (``evaluate --json``'s keys), or None; ``warnings``: its plausibility
-    findings (``evaluate --json`` ``warnings``)."""
+    findings (``evaluate --json`` ``warnings``); ``before``: the nominal URDF on these rows, registered to
+    them (``evaluate --json`` ``before``), or None."""
     return {
         "warnings": list(warnings),
+        **({} if before is None else {"before": before}),
         "drift": drift,
         **({} if thermal is None else {"thermal": thermal}),
         **({} if pause_steps is None else {"pause_steps": pause_steps}),
