@@ -12,8 +12,9 @@ reported instead:
 * a close competitor (within 6 of its ΔBIC, passing the checks above) with a strongly correlated basis
   corrects the same poses the same way: the data cannot tell them apart, and of them the one that predicts
   the held-out rows best is taken (without held-out rows the simpler: fewer values, then the catalogue's
-  order), the others named beside it (:func:`ambiguity_words`) — ambiguity never leaves the model without
-  the correction (a drift and a step at a pause: the step is named, :mod:`pincal.model.thermal`);
+  order), the others named beside it (:func:`pincal.diagnosis.ambiguity.ambiguity_words`) — ambiguity never
+  leaves the model without the correction (a drift and a step at a pause: the step is named,
+  :mod:`pincal.model.thermal`);
 * when held-out rows are given, an effect that does not make them better beyond their noise: a
   signed-rank test of the per-row change of their error, which a few wild rows cannot decide
   (:func:`pincal.diagnosis.held_out.held_out_verdict`).
@@ -29,6 +30,7 @@ from typing import cast
 
 import numpy as np
 
+from pincal.diagnosis.ambiguity import ambiguity_words
 from pincal.diagnosis.effect_fits import pose_errors_of
 from pincal.diagnosis.held_out import (
     HELD_OUT_LEVEL,
@@ -49,7 +51,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "REJECTED",
     "Candidate", "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
-    "TargetChange", "target_changes", "ambiguity_words",
+    "TargetChange", "target_changes",
 ]
 
 #: ΔBIC below which the evidence for an effect is "very strong".
@@ -328,7 +330,8 @@ class Judge:
         the same poses the same way: of those that pass the other checks, the one that predicts the held-out
         rows best is taken (the smallest sum of their error distances in noise units), without held-out rows
         the simpler (fewer values, then the catalogue's order), and the others are named beside it
-        (:func:`ambiguity_words`) — a drift the data cannot tell from a step at a pause excepted: the step."""
+        (:func:`pincal.diagnosis.ambiguity.ambiguity_words`) — a drift the data cannot tell from a step at a pause
+        excepted: the step."""
         reason = self._unphysical(effect, value, std, objective, solution)
         if reason:
             return reason
@@ -432,39 +435,3 @@ def torque_coupling_advice(effect: Effect, value: float, unit: str) -> str:
     return (f"{effect.joint} deflects by {value:.4g} {unit} x {effect.driver}'s {load} (a "
             f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
             "and the effects file beside the corrected URDF gives it to a controller")
-
-
-#: What each joint effect is, in words, for the alternatives of an ambiguous one (:func:`ambiguity_words`).
-_WORDS = {"compliance": "a compliance", "encoder_scale": "an encoder scale", "coupling": "a coupling",
-          "backlash": "a backlash", "drift": "a drift", "sensor_scale": "the sensor's scale",
-          "thermal": "a thermal expansion", "pause_step": "a step at a pause"}
-
-
-def _words(effect: Effect) -> str:
-    """``a 2nd harmonic``, ``a backlash on the approach flank``, ``a coupling to A2``, ``a drift``."""
-    if effect.type == "cyclic":
-        return f"a {effect.harmonic}{'st' if effect.harmonic == 1 else 'nd'} harmonic"
-    text = _WORDS[effect.type]
-    if effect.source:
-        text += f" on the {effect.source} flank"
-    if effect.driver:
-        text += f" to {effect.driver}'s {'reading' if effect.type == 'coupling' else 'torque'}"
-    return text
-
-
-def ambiguity_words(taken: Effect, others: Sequence[Effect], why: str) -> str:
-    """The alternatives of an effect taken among candidates that correct the same poses alike, in words:
-    ``A2's error: a 1st or a 2nd harmonic — these poses cannot tell; move A2 over more of its range to separate
-    them; cyclic:A2:h1 is taken (…) and applied``; effects of several joints, each joint's, then to move them over
-    more of their ranges and in other combinations; effects of the sensor, to measure where they differ."""
-    effects = [taken, *others]
-    joints = list(dict.fromkeys(e.joint for e in effects))
-    what = "; or ".join((f"{joint}'s error: " if joint else "") + " or ".join(_words(e) for e in effects
-                                                                              if e.joint == joint) for joint in joints)
-    if None in joints:
-        move = "measure where they differ (at other times, temperatures or postures)"
-    elif len(joints) == 1:
-        move = f"move {joints[0]} over more of its range"
-    else:
-        move = f"move {' and '.join(str(j) for j in joints)} over more of their ranges, and in other combinations,"
-    return f"{what} — these poses cannot tell; {move} to separate them; {taken.label} is taken ({why}) and applied"
