@@ -10,10 +10,12 @@ reported instead:
 * a basis that barely varies (e.g. sign(tau_j) constant on most rows): it acts
   as a joint offset, which the model already has;
 * a close competitor (within 6 of its ΔBIC, passing the checks above) with a strongly correlated basis
-  corrects the same poses the same way: the data cannot tell them apart, and of them the one that predicts
-  the held-out rows best is taken (without held-out rows the simpler: fewer values, then the catalogue's
-  order), the others named beside it (:func:`ambiguity_words`) — ambiguity never leaves the model without
-  the correction (a drift and a step at a pause: the step is named, :mod:`pincal.model.thermal`);
+  corrects the same poses the same way: the data cannot tell them apart, and of them the one taken is the
+  one that predicts the held-out rows best among those that pass the held-out test below (without held-out
+  rows the simpler: fewer values, then the catalogue's order), the others named beside it
+  (:func:`pincal.diagnosis.ambiguity.ambiguity_words`) — ambiguity never leaves the model without the
+  correction one of them passes with (a drift and a step at a pause: the step is named,
+  :mod:`pincal.model.thermal`);
 * when held-out rows are given, an effect that does not make them better beyond their noise: a
   signed-rank test of the per-row change of their error, which a few wild rows cannot decide
   (:func:`pincal.diagnosis.held_out.held_out_verdict`).
@@ -29,6 +31,7 @@ from typing import cast
 
 import numpy as np
 
+from pincal.diagnosis.ambiguity import ambiguity_words
 from pincal.diagnosis.effect_fits import pose_errors_of
 from pincal.diagnosis.held_out import (
     HELD_OUT_LEVEL,
@@ -49,7 +52,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "REJECTED",
     "Candidate", "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
-    "TargetChange", "target_changes", "ambiguity_words",
+    "TargetChange", "target_changes",
 ]
 
 #: ΔBIC below which the evidence for an effect is "very strong".
@@ -97,12 +100,12 @@ AMBIGUOUS = 0.8
 CRITERION = (f"ΔBIC on the calibration rows < {EVIDENCE:g} (very strong evidence), physically plausible, "
              f"changes some measured coordinate by at least {NEGLIGIBLE:g} × its noise, not offset-like; of "
              f"candidates within 6 of its ΔBIC with bases correlated above {AMBIGUOUS:g} (the same correction), "
-             f"the one that predicts the held-out rows best (without them the simpler), the others named; with "
-             f"held-out rows, better on them beyond their noise: a Wilcoxon signed-rank test of the per-row change "
-             f"of error distance in noise units, of the rows it moves by {TELLING_CHANGE:g} noise unit or more, "
-             f"below zero at the one-sided level {HELD_OUT_LEVEL:.3g} (Φ(−{HELD_OUT_Z:g})), so that a few wild "
-             f"rows cannot decide (with fewer than {MIN_PAIRED_ROWS} such rows, not worse in total; worse on all "
-             f"rows refuses)")
+             f"of those that pass the held-out test the one that predicts the held-out rows best (without them "
+             f"the simpler), the others named; with held-out rows, better on them beyond their noise: a Wilcoxon "
+             f"signed-rank test of the per-row change of error distance in noise units, of the rows it moves by "
+             f"{TELLING_CHANGE:g} noise unit or more, below zero at the one-sided level {HELD_OUT_LEVEL:.3g} "
+             f"(Φ(−{HELD_OUT_Z:g})), so that a few wild rows cannot decide (with fewer than {MIN_PAIRED_ROWS} such "
+             f"rows, not worse in total; worse on all rows refuses)")
 #: Candidates shown per step.
 SHOWN = 8
 #: How the note of a significant candidate that was not adopted ends (its verdict in the ranking).
@@ -255,7 +258,11 @@ class Judge:
                  catalogue: Sequence[Effect] = ()) -> None:
         self.inputs, self.chain, self._held_errors, self.noise = inputs, chain, held_errors, noise
         self.stated_pos, self.catalogue = stated_pos, list(catalogue)
-        self._ambiguous: dict[Effect, tuple[str, list[Effect]]] = {}  # a candidate's alternatives: words, effects
+        # the alternatives of a candidate taken among those that correct alike: words, effects, why it is taken
+        self._ambiguous: dict[Effect, tuple[str, list[Effect], str]] = {}
+        # each group of candidates that correct alike decided once: the one taken (or none), why, the others
+        self._decided: dict[frozenset[Effect], tuple[Effect | None, str, list[Effect]]] = {}
+        self._verdicts: dict[Effect, str] = {}  # each candidate's held-out verdict
         self.current_objective, self.current_x = current_objective, current_x
         self._held: dict[Effect, PoseErrors] = {}
         self._before: PoseErrors | None = None
@@ -288,6 +295,7 @@ class Judge:
         objective, solution) best first; the ranking covers the candidates shown
         and judged. Any candidate whose ΔBIC is above ``cut`` would change none of it."""
         ranking, chosen, rejected, compared = [], None, {}, []
+        fits = {t[1]: t for t in tried}
         for rank, (delta, effect, obj, sol) in enumerate(tried):
             if rank >= SHOWN and (chosen is not None or delta >= EVIDENCE):
                 break
@@ -297,15 +305,17 @@ class Judge:
             verdict = "not significant"
             if delta < EVIDENCE:
                 verdict = "significant"
-                if chosen is not None and effect in self._ambiguous.get(chosen[1], ("", []))[1]:
-                    verdict = f"the same correction as {chosen[1].label}, adopted: these poses cannot tell them apart"
-                if chosen is None:
-                    verdict = self.rejection(effect, value, delta, tried, held, compared, obj, sol, std)
-                    if verdict == "adopted":
-                        chosen = (delta, effect, obj, sol)
-                        if effect in self._ambiguous:  # its alternatives named (not adopted: a note)
-                            rejected[f"{effect.label}:alternatives"] = self._ambiguous[effect][0]
-                    else:
+                if chosen is not None and effect == chosen[1]:  # taken for a better-ranked one that corrects alike
+                    verdict = "adopted"
+                elif chosen is not None and effect in self._ambiguous.get(chosen[1], ("", [], ""))[1]:
+                    verdict = self._alike(effect, chosen[1])
+                elif chosen is None:
+                    verdict, taken = self.judged(effect, value, delta, tried, compared, obj, sol, std)
+                    if taken is not None:
+                        chosen = fits[taken]
+                        if taken in self._ambiguous:  # its alternatives named (not adopted: a note)
+                            rejected[f"{taken.label}:alternatives"] = self._ambiguous[taken][0]
+                    if verdict != "adopted":
                         rejected[effect.label] = (
                             f"{effect.label}: ΔBIC {delta:.1f} but {verdict}{REJECTED}")
             ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
@@ -320,21 +330,28 @@ class Judge:
 
     def rejection(self, effect, value, delta, tried, held, compared: list, objective=None, solution=None,
                   std=None) -> str:
-        """'adopted', or why the best significant candidate is only reported (``compared``
-        gains ``delta`` when the candidate was compared with its competitors; ``objective`` and
-        ``solution``: the candidate's fit, for the size of what it changes; ``std`` its values').
+        """'adopted', or why the best significant candidate is not (:meth:`judged`'s verdict; ``held`` unused:
+        its held-out errors are the judge's)."""
+        return self.judged(effect, value, delta, tried, compared, objective, solution, std)[0]
+
+    def judged(self, effect, value, delta, tried, compared: list, objective=None, solution=None,
+               std=None) -> tuple[str, Effect | None]:
+        """(verdict, the candidate to adopt): 'adopted' and ``effect``, or why the best significant candidate is
+        not adopted and the one that corrects the same poses alike adopted instead, or None (``compared`` gains
+        ``delta`` when the candidate was compared with its competitors; ``objective`` and ``solution``: the
+        candidate's fit, for the size of what it changes; ``std`` its values').
 
         Competitors within 6 of its ΔBIC whose basis is correlated with its own above :data:`AMBIGUOUS` correct
-        the same poses the same way: of those that pass the other checks, the one that predicts the held-out
-        rows best is taken (the smallest sum of their error distances in noise units), without held-out rows
-        the simpler (fewer values, then the catalogue's order), and the others are named beside it
-        (:func:`ambiguity_words`) — a drift the data cannot tell from a step at a pause excepted: the step."""
+        the same poses the same way: with those that pass the other checks they form a group, decided once
+        (:meth:`_decision`): the one taken is the most preferred (:meth:`_preference`) that the held-out test
+        adopts, the others named beside it (:func:`pincal.diagnosis.ambiguity.ambiguity_words`); none only when
+        none passes — a drift the data cannot tell from a step at a pause excepted: the step."""
         reason = self._unphysical(effect, value, std, objective, solution)
         if reason:
-            return reason
+            return reason, None
         compared.append(delta)
         basis = effect_basis(effect, self.inputs, self.chain)
-        rivals = []
+        members = [(effect, objective, solution)]
         for other_delta, other, obj, sol in tried:
             if other is effect or other_delta - delta > 6.0 or (effect.type, other.type) == ("pause_step", "drift"):
                 continue  # a drift the data cannot tell from a step at a pause: the step is named
@@ -343,23 +360,63 @@ class Judge:
                 continue
             if (effect.type, other.type) == ("drift", "pause_step"):
                 return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
-                        f"{correlation:+.2f}: the data cannot tell a drift from a step at a pause; the step is named")
+                        f"{correlation:+.2f}: the data cannot tell a drift from a step at a pause; the step is "
+                        "named"), None
             sl = obj._effect_slices[-1]
             if not self._unphysical(other, sol.x[sl], standard_deviations(obj, sol)[sl], obj, sol):
-                rivals.append((other, obj, sol, correlation))
-        if rivals:
-            members = [(effect, objective, solution)] + [(other, obj, sol) for other, obj, sol, _ in rivals]
-            taken, why = self._preferred(members)
-            if taken is not effect:
-                return (f"{taken.label} corrects the same poses the same way (bases correlated "
-                        f"{next(c for o, _, _, c in rivals if o is taken):+.2f}): these poses cannot tell them apart, "
-                        f"and {taken.label} is preferred ({why})")
-            others = [other for other, _, _, _ in rivals]
-            self._ambiguous[effect] = ambiguity_words(effect, others, why), others
-        if self._held_errors is not None and effect in self._held:
+                members.append((other, obj, sol))
+        taken, _ = self._decision(members)
+        if taken == effect:
+            return "adopted", taken
+        if taken is not None:
+            return self._alike(effect, taken), taken
+        others = ", ".join(other.label for other, _, _ in members[1:])
+        return self._verdicts[effect] + (f"; the held-out test refuses {others} too (the same correction)"
+                                         if others else ""), None
+
+    def _held_out(self, effect: Effect, objective, solution) -> str:
+        """The held-out test's verdict of a candidate's fit (:func:`held_out_verdict`, judged in the noise of the
+        current model and of its own fit, :meth:`judged_noise`), once per candidate; 'adopted' without held-out
+        rows."""
+        if self._held_errors is None:
+            return "adopted"
+        if effect not in self._verdicts:
+            self.held(effect, objective, solution.x)
             fitted = () if objective is None else (fitted_scales(pose_errors_of(objective, solution.x)),)
-            return held_out_verdict(self.held_before(), self._held[effect], *self.judged_noise(*fitted))
-        return "adopted"
+            self._verdicts[effect] = held_out_verdict(self.held_before(), self._held[effect],
+                                                      *self.judged_noise(*fitted))
+        return self._verdicts[effect]
+
+    def _decision(self, members) -> tuple[Effect | None, str]:
+        """The candidate taken of a group that corrects the same poses alike ((effect, objective, solution) each)
+        and why: the most preferred (:meth:`_preference`) that the held-out test adopts (:meth:`_held_out`), else
+        None; the others are the taken's alternatives. The first candidate judged of a group decides it, and the
+        one taken is adopted then (:meth:`rank`): judged again from another member, whose group (rivals within 6
+        of the candidate judged) and so whose noise scales may differ, a group could prefer back the one that
+        preferred it, and neither be adopted. Decided once per set of members: a step ranks its candidates again
+        as more are fitted, and meets the same group with the same answer."""
+        key = frozenset(effect for effect, _, _ in members)
+        if key not in self._decided:
+            order, why = self._preference(members)
+            passing = [m for m in order if self._held_out(*m) == "adopted"]
+            taken = passing[0][0] if passing else None
+            if passing and passing[0] is not order[0]:  # the preferred ones fail the held-out test
+                why = "of those the held-out test adopts, it predicts the held-out rows best"
+            self._decided[key] = taken, why, [effect for effect, _, _ in order if effect != taken]
+        taken, why, others = self._decided[key]
+        if taken is not None and others:
+            self._ambiguous[taken] = ambiguity_words(taken, others, why), others, why
+        return taken, why
+
+    def _alike(self, effect: Effect, taken: Effect) -> str:
+        """The verdict of a candidate that corrects the same poses as the one ``taken`` instead (with its own
+        held-out verdict when it fails the test)."""
+        correlation = _correlation(effect_basis(effect, self.inputs, self.chain),
+                                   effect_basis(taken, self.inputs, self.chain))
+        own = self._verdicts.get(effect, "adopted")
+        return (f"{taken.label} corrects the same poses the same way (bases correlated {correlation:+.2f}): these "
+                f"poses cannot tell them apart, and {taken.label} is preferred ({self._ambiguous[taken][2]})"
+                + ("" if own == "adopted" else f"; this one: {own}"))
 
     def _unphysical(self, effect, value, std, objective, solution) -> str | None:
         """Why a candidate cannot be adopted whatever its competitors (out of physical range, too small to matter,
@@ -380,10 +437,11 @@ class Judge:
             return "its basis barely changes over the rows, so it acts as a joint offset"
         return None
 
-    def _preferred(self, members) -> tuple[Effect, str]:
-        """Of candidates that correct the same poses alike, (objective, solution) each, the one to take and why:
-        with held-out rows the one whose errors there sum to least in noise units (:func:`row_changes`' units),
-        else the simpler: fewer values, then the catalogue's order."""
+    def _preference(self, members) -> tuple[list, str]:
+        """Candidates that correct the same poses alike, (effect, objective, solution) each, in the order they are
+        preferred, and why the first: with held-out rows by the sum of their errors there in noise units
+        (:func:`row_changes`' units, the noise of the group's fits, :meth:`judged_noise`), else the simpler first:
+        fewer values, then the catalogue's order."""
         if self._held_errors is not None:
             sigma_pos, sigma_rot = self.judged_noise(*(fitted_scales(pose_errors_of(o, x.x)) for _, o, x in members))
             scores = []
@@ -393,10 +451,11 @@ class Judge:
                 scores.append(float(np.sum(errors.position_m)) / sigma_pos + (
                     float(np.sum(errors.rotation_rad)) / sigma_rot if errors.rotation_rad is not None and sigma_rot
                     else 0.0))
-            return members[int(np.argmin(scores))][0], "it predicts the held-out rows best"
+            return [members[i] for i in np.argsort(scores, kind="stable")], "it predicts the held-out rows best"
         order = [(e.n_values, self.catalogue.index(e) if e in self.catalogue else len(self.catalogue))
                  for e, _, _ in members]
-        return members[order.index(min(order))][0], "the simpler: fewest values, then the catalogue's order"
+        return ([members[i] for i in sorted(range(len(members)), key=order.__getitem__)],
+                "the simpler: fewest values, then the catalogue's order")
 
 
 #: |c| within this of 1: a joint read against its driver (J3 from the horizontal), not a transmission's ratio.
@@ -432,39 +491,3 @@ def torque_coupling_advice(effect: Effect, value: float, unit: str) -> str:
     return (f"{effect.joint} deflects by {value:.4g} {unit} x {effect.driver}'s {load} (a "
             f"parallelogram or a counterbalance links their loads): it stays in the model; evaluate applies it, "
             "and the effects file beside the corrected URDF gives it to a controller")
-
-
-#: What each joint effect is, in words, for the alternatives of an ambiguous one (:func:`ambiguity_words`).
-_WORDS = {"compliance": "a compliance", "encoder_scale": "an encoder scale", "coupling": "a coupling",
-          "backlash": "a backlash", "drift": "a drift", "sensor_scale": "the sensor's scale",
-          "thermal": "a thermal expansion", "pause_step": "a step at a pause"}
-
-
-def _words(effect: Effect) -> str:
-    """``a 2nd harmonic``, ``a backlash on the approach flank``, ``a coupling to A2``, ``a drift``."""
-    if effect.type == "cyclic":
-        return f"a {effect.harmonic}{'st' if effect.harmonic == 1 else 'nd'} harmonic"
-    text = _WORDS[effect.type]
-    if effect.source:
-        text += f" on the {effect.source} flank"
-    if effect.driver:
-        text += f" to {effect.driver}'s {'reading' if effect.type == 'coupling' else 'torque'}"
-    return text
-
-
-def ambiguity_words(taken: Effect, others: Sequence[Effect], why: str) -> str:
-    """The alternatives of an effect taken among candidates that correct the same poses alike, in words:
-    ``A2's error: a 1st or a 2nd harmonic — these poses cannot tell; move A2 over more of its range to separate
-    them; cyclic:A2:h1 is taken (…) and applied``; effects of several joints, each joint's, then to move them over
-    more of their ranges and in other combinations; effects of the sensor, to measure where they differ."""
-    effects = [taken, *others]
-    joints = list(dict.fromkeys(e.joint for e in effects))
-    what = "; or ".join((f"{joint}'s error: " if joint else "") + " or ".join(_words(e) for e in effects
-                                                                              if e.joint == joint) for joint in joints)
-    if None in joints:
-        move = "measure where they differ (at other times, temperatures or postures)"
-    elif len(joints) == 1:
-        move = f"move {joints[0]} over more of its range"
-    else:
-        move = f"move {' and '.join(str(j) for j in joints)} over more of their ranges, and in other combinations,"
-    return f"{what} — these poses cannot tell; {move} to separate them; {taken.label} is taken ({why}) and applied"
