@@ -189,7 +189,7 @@ class FitProblem:
 
     ``models``: sensitivity models by slots (:class:`KinematicsCache`), a cache shared by the
     objectives of this problem, of every problem derived from it and of any problem given the
-    same dict (its entries depend on the parameters and joint readings only, not on what a
+    same dict (an entry depends on the chain and the free parameters' slots only, nothing a
     variant changes).
     ``session_names``: the sessions of ``start.registrations`` (default, empty: those of
     ``data``); each row uses its session's (:func:`pincal.fit.sessions.session_rows`).
