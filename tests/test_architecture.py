@@ -11,6 +11,8 @@ root ``pincal`` (which re-exports the public API and so sits above everything).
 from __future__ import annotations
 
 import ast
+import dataclasses
+import importlib
 from pathlib import Path
 
 import pytest
@@ -351,3 +353,86 @@ def test_the_chain_check_catches_each_mutation():
     assert found == ["chain.set_placements(...)", "chain.set_tool(...)", "result.params.apply(...)",
                      "chain.model.jointPlacements[3] = ...", "chain.model.frames[chain.tip_frame_id].placement = ...",
                      "chain._tool = ..."]
+
+
+#: The fit problems and the model the diagnosis grows (module, class): values, frozen dataclasses.
+PROBLEM_CLASSES = (("pincal.fit.chain_calibration", "FitProblem"), ("pincal.fit.fixture_calibration", "FixtureProblem"),
+                   ("pincal.diagnosis.effect_fits", "EffectModel"))
+#: Where a problem's attribute may be set: its constructor.
+CONSTRUCTORS = ("__init__", "__post_init__")
+
+
+def problem_fields() -> set[str]:
+    """Every attribute a problem of :data:`PROBLEM_CLASSES` holds (its dataclass fields)."""
+    return {f.name for module, name in PROBLEM_CLASSES
+            for f in dataclasses.fields(getattr(importlib.import_module(module), name))}
+
+
+def problem_assignments(text: str, label: str, fields: set[str]) -> list[str]:
+    """Statements in the source ``text`` that set an attribute named in ``fields`` after construction:
+    an assignment to it on anything but ``self`` (``problem.prior = ...``, ``a, problem.sigma_pos = ...``,
+    ``problem.noise += ...``) or a ``setattr(problem, "prior", ...)`` (not on a module's ``_UPPER_CASE``
+    holder); and on ``self`` too in a method of a :data:`PROBLEM_CLASSES` class other than its constructor
+    (:data:`CONSTRUCTORS`); in the order of the source."""
+    classes = {name for _, name in PROBLEM_CLASSES}
+    tree = ast.parse(text)
+    method_of: dict[int, str] = {}  # node → the problem class's method it is in
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ClassDef) and node.name in classes:
+            for item in node.body:
+                if isinstance(item, ast.FunctionDef):
+                    method_of.update({id(inner): item.name for inner in ast.walk(item)})
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        setting: list[tuple[str, str]] = []  # (owner, attribute)
+        if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
+            pending = list(node.targets) if isinstance(node, ast.Assign) else [node.target]
+            while pending:
+                target = pending.pop()
+                if isinstance(target, (ast.Tuple, ast.List)):
+                    pending += target.elts
+                elif isinstance(target, ast.Starred):
+                    pending.append(target.value)
+                elif isinstance(target, ast.Attribute):
+                    setting.append((ast.unparse(target.value), target.attr))
+        elif (isinstance(node, ast.Call) and ast.unparse(node.func) in ("setattr", "object.__setattr__")
+              and len(node.args) > 1 and isinstance(node.args[1], ast.Constant)):
+            setting.append((ast.unparse(node.args[0]), str(node.args[1].value)))
+        for owner, attribute in setting:
+            method = method_of.get(id(node))
+            constructing = owner == "self" and (method is None or method in CONSTRUCTORS)
+            module_state = owner.lstrip("_").isupper()  # a module's own holder (a threading.local), never a problem
+            if attribute in fields and not constructing and not module_state:
+                found.append((node.lineno, f"{label}:{node.lineno}: {owner}.{attribute} = ..."))
+    return [line for _, line in sorted(found)]
+
+
+def test_problems_are_values():
+    """A fit problem is a value: everything it needs is given at construction and a variant is a new problem
+    (``with_prior``, ``with_scales``, ``rescaled``, ``dataclasses.replace``); no attribute of a problem is set,
+    swapped or restored after its constructor, anywhere in pincal (their ``models`` caches are shared dicts:
+    filling one is not setting an attribute)."""
+    for module, name in PROBLEM_CLASSES:
+        cls = getattr(importlib.import_module(module), name)
+        assert dataclasses.is_dataclass(cls) and cls.__dataclass_params__.frozen, f"{module}.{name} is not frozen"
+    fields = problem_fields()
+    found = [line for name, path in MODULES.items()
+             for line in problem_assignments(path.read_text(encoding="utf-8"), name, fields)]
+    assert not found, ("derive a new problem (problem.with_prior(...), dataclasses.replace(problem, ...)) and pass "
+                       "it on instead of setting an attribute of one:\n" + "\n".join(found))
+
+
+def test_the_problem_check_catches_each_assignment():
+    """Not vacuous: each way of setting a problem's attribute is found; a constructor's, another class's
+    ``self`` and a local name are not."""
+    text = ("class FitProblem:\n    def __post_init__(self):\n        object.__setattr__(self, 'sessions', 1)\n"
+            "        self.prior = None\n    def rescale(self, s):\n        self.sigma_pos = s\n"
+            "class Other:\n    def __init__(self):\n        self.prior = 1\n"
+            "def f(problem, model, prior):\n    prior, problem.prior = problem.prior, None\n"
+            "    problem.point_basis = b\n    model.sigma_pos, model.sigma_rot = scales\n    problem.noise += 1\n"
+            "    setattr(problem, 'registration_basis', b)\n    prior = 2\n")
+    fields = {"prior", "point_basis", "registration_basis", "sigma_pos", "sigma_rot", "noise", "sessions"}
+    found = [line.split(": ", 1)[1] for line in problem_assignments(text, "sample.py", fields)]
+    assert found == ["self.sigma_pos = ...", "problem.prior = ...", "problem.point_basis = ...",
+                     "model.sigma_pos = ...", "model.sigma_rot = ...", "problem.noise = ...",
+                     "problem.registration_basis = ..."]

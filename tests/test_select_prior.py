@@ -62,8 +62,7 @@ def test_prior_rows_jacobian_matches_finite_differences():
     chain, data, _ = _rows(10, seed=1, sigma_m=SIGMA_M, with_rotation=True)
     params = PlacementErrors(chain)
     problem = FitProblem(chain, params, data, initial_target(chain, data, fit_points=True), fit_target=True,
-                         row_weight=np.ones(data.n_rows))
-    problem.prior = prior_sigmas(params, Prior(2.0, 0.3))
+                         row_weight=np.ones(data.n_rows), prior=prior_sigmas(params, Prior(2.0, 0.3)))
     free = np.arange(0, params.size, 3)
     objective = problem.objective(free, np.zeros(params.size))
     assert isinstance(objective, PriorResidual) and objective.n_prior == free.size

@@ -103,7 +103,7 @@ def adopted_trial(trial: ConventionTrial, chain, sigma_column, inputs, held_inpu
     rows = trial.data.select(calibration.used_index)
     if rows.n_rows != inputs.q.shape[0]:
         return None
-    probe = EffectModel(chain, calibration, rows, row_weights(rows, sigma_column), replace(inputs, q=rows.q))
+    probe = EffectModel.of(chain, calibration, rows, row_weights(rows, sigma_column), replace(inputs, q=rows.q))
     objective = probe.problem([]).objective(calibration.kept, calibration.vector)
     errors, fitted = pose_errors_of(objective, calibration.solution), pose_errors_of(candidate[0], candidate[1].x)
     noise = judge.judged_noise(fitted_scales(errors), fitted_scales(fitted))

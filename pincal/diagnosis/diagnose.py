@@ -297,7 +297,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
     row_names = names[session_rows(rows, calibration.session_names)]
     conditions = search_conditions(row_time, row_names, readings, calibration.used_index)
     inputs = conditions.inputs(inputs, conditions.temperature, row_time, row_names)
-    model = EffectModel(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
+    model = EffectModel.of(chain, calibration, rows, row_weights(rows, sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
         held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference, rows.q, row_time,
@@ -409,18 +409,17 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                 convention=convention.coupling)))
         adopted.append(effect)
         # noise scales re-estimated with the effect in the model (maximum likelihood)
-        scales = model.sigma_pos, model.sigma_rot
-        model.reestimate(obj, sol)
+        reestimated = model.reestimated(obj, sol)
         try:
-            obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
-                                 [sol.x[sl] for sl in obj._effect_slices])
+            obj, sol = reestimated.fit(adopted, sol.x[: obj.blocks["effects"].start],
+                                       [sol.x[sl] for sl in obj._effect_slices])
         except CalibrationError as error:  # sparse data: with the scales re-estimated it is not determined
             adopted.pop()
-            model.sigma_pos, model.sigma_rot = scales
             rejected[effect.label] = (f"{effect.label} not adopted: its refit with the noise re-estimated "
                                       f"fails ({error}); the search stops here")
             ranking = [replace(c, verdict="refit failed, not adopted") if c.effect == effect else c for c in ranking]
             break
+        model = reestimated
         if any(e.type == "compliance" or e.source == "gravity" for e in adopted):
             # gravity torques on the refitted geometry, not the one fitted without the effects
             for _ in range(GRAVITY_REFRESHES):
@@ -435,7 +434,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                         assert held_inputs is not None  # set with the held-out rows
                         held_inputs = replace(held_inputs,
                                               gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
-                model.inputs = inputs
+                model = replace(model, inputs=inputs)
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
                                      [sol.x[sl] for sl in obj._effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x

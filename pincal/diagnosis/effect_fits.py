@@ -14,6 +14,8 @@ toward an effect that explains most of the residual is taken to convergence.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -24,6 +26,7 @@ from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import PriorResidual
 from pincal.fit.solver import Solution, solve
 from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect
 from pincal.residuals.sensor import SensorResidual
 
@@ -52,21 +55,35 @@ def fit_while_gaining(objective, x0: np.ndarray, chunk: int, tolerance: float | 
         x0, last = solution.x, now
 
 
+@dataclass(frozen=True, eq=False)
 class EffectModel:
-    """The calibrated geometry plus a list of effects, refittable on calibration rows.
+    """The calibrated geometry plus a list of effects, refittable on calibration rows: a value, its
+    variants new models (:meth:`reestimated`, ``dataclasses.replace``); :meth:`of` makes the first.
 
     Under ``--select prior`` every fit keeps the calibration's prior on the geometry
     (``calibration.prior_sigma``, eq P1 of :mod:`pincal.fit.prior`): its residual ends with
     the prior rows and its ΔBIC compares the penalised sums of squares. The effects get no
     prior (their columns are zero on the prior rows).
+
+    ``sigma_pos`` [m], ``sigma_rot`` [rad, None without orientations]: the noise scales weighting the
+    rows. ``models``: sensitivity models, a cache shared by every fit and held-out
+    evaluation of this model and of every model derived from it.
     """
 
-    def __init__(self, chain, calibration: ChainCalibration, rows: MeasurementSet, row_weight, inputs):
-        self.chain, self.calibration, self.rows, self.inputs = chain, calibration, rows, inputs
-        self.row_weight = row_weight
-        self.sigma_pos = calibration.sigma_pos_m
-        self.sigma_rot = calibration.sigma_rot_rad
-        self.models: dict = {}  # sensitivity models, shared by every fit and held-out evaluation
+    chain: KinematicChain
+    calibration: ChainCalibration
+    rows: MeasurementSet
+    row_weight: np.ndarray
+    inputs: Any
+    sigma_pos: float
+    sigma_rot: float | None
+    models: dict = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, chain: KinematicChain, calibration: ChainCalibration, rows: MeasurementSet, row_weight: np.ndarray,
+           inputs: Any) -> EffectModel:
+        """The model of ``calibration`` with no effect yet, at its noise scales."""
+        return cls(chain, calibration, rows, row_weight, inputs, calibration.sigma_pos_m, calibration.sigma_rot_rad)
 
     def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
         data = self.rows if data is None else data
@@ -77,19 +94,17 @@ class EffectModel:
             fit_target=self.calibration.fit_target, row_weight=weight,
             effects=effects, inputs=self.inputs if inputs is None else inputs, models=self.models,
             session_names=self.calibration.session_names,
+            sigma_pos=self.sigma_pos, sigma_rot=self.sigma_rot,
+            prior=self.calibration.prior_sigma,  # the geometry's prior, if any (class docstring)
+            point_basis=self.calibration.point_basis,  # a target held where the data leave it free
+            registration_basis=self.calibration.registration_basis,  # a registration rotation held
         )
-        problem.prior = self.calibration.prior_sigma  # the geometry's prior, if any (class docstring)
-        problem.point_basis = self.calibration.point_basis  # a target held where the data leave it free
-        problem.registration_basis = self.calibration.registration_basis  # a registration rotation held
-        problem.sigma_pos = self.sigma_pos
-        problem.sigma_rot = self.sigma_rot
         return problem
 
-    def reestimate(self, objective: SensorResidual, solution) -> None:
-        """Noise scales from the residuals of a fit (maximum likelihood)."""
-        problem = self.problem(objective.effects)
-        problem.rescale(objective, solution)
-        self.sigma_pos, self.sigma_rot = problem.sigma_pos, problem.sigma_rot
+    def reestimated(self, objective: SensorResidual | PriorResidual, solution) -> EffectModel:
+        """This model at the noise scales of a fit's residuals (maximum likelihood)."""
+        problem = self.problem(objective.effects).rescaled(objective, solution)
+        return replace(self, sigma_pos=problem.sigma_pos, sigma_rot=problem.sigma_rot)
 
     def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray],
             max_evaluations: int | None = None, tolerance: float | None = None, chunk: int | None = None):

@@ -23,6 +23,7 @@ to sensor rows is the residual (:mod:`pincal.residuals.sensor`), its noise scale
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import cast
 
@@ -40,6 +41,7 @@ from pincal.fit.solver import Solution, solve
 from pincal.fit.target_hold import HeldDirection, analysis_jacobian, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.model.effects import Effect, EffectInputs
 from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainParameters, NoParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
@@ -177,34 +179,52 @@ def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
     return 1.0 / relative
 
 
+@dataclass(frozen=True, eq=False)
 class FitProblem:
-    """One weighted fit of registration, target and a subset of kinematic parameters.
+    """One weighted fit of registration, target and a subset of kinematic parameters: a value.
 
-    ``models``: sensitivity models by slots (:class:`KinematicsCache`), shared by
-    the objectives of this problem and of any problem given the same dict.
-    ``session_names``: the sessions of ``start.registrations`` (default: those of
+    Everything a fit needs is given at construction; a variant is a new problem
+    (:meth:`with_scales`, :meth:`with_prior`, :meth:`rescaled`, or ``dataclasses.replace``), never
+    this one changed.
+
+    ``models``: sensitivity models by slots (:class:`KinematicsCache`), a cache shared by the
+    objectives of this problem, of every problem derived from it and of any problem given the
+    same dict (an entry depends on the chain and the free parameters' slots only, nothing a
+    variant changes).
+    ``session_names``: the sessions of ``start.registrations`` (default, empty: those of
     ``data``); each row uses its session's (:func:`pincal.fit.sessions.session_rows`).
+    ``sigma_pos`` [m], ``sigma_rot`` [rad]: the noise scales weighting the rows (``sigma_rot``
+    None without measured orientations, whatever is given).
+    ``prior``: with ``--select prior``, σ_i of every kinematic parameter (:mod:`pincal.fit.prior`, eq P1).
+    ``point_basis``: the target points' free directions (:mod:`pincal.fit.target_hold`), None: all.
+    ``registration_basis``: the registrations' free unknowns (:mod:`pincal.fit.registration_hold`), None: all.
     """
 
-    def __init__(self, chain, params, data, start: TargetEstimate, fit_target: bool, row_weight,
-                 effects=(), inputs=None, models: dict | None = None, session_names=None):
-        self.chain, self.params, self.data = chain, params, data
-        self.session_names = tuple(data.session_names if session_names is None else session_names)
-        self.sessions = session_rows(data, self.session_names)
-        self.start = start
-        self.fit_target = fit_target
-        self.row_weight = row_weight
-        self.effects = tuple(effects)
-        self.inputs = inputs
-        self.models = {} if models is None else models
-        self.sigma_pos = START_SIGMA_POS_M
-        self.sigma_rot = START_SIGMA_ROT_RAD if data.rotations is not None else None
-        # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
-        self.prior: np.ndarray | None = None
-        # the target points' free directions (pincal.fit.target_hold), None: all
-        self.point_basis: np.ndarray | None = None
-        # the registrations' free unknowns (pincal.fit.registration_hold), None: all
-        self.registration_basis: np.ndarray | None = None
+    chain: KinematicChain
+    params: ChainParameters | None
+    data: MeasurementSet
+    start: TargetEstimate
+    fit_target: bool
+    row_weight: np.ndarray
+    effects: Sequence[Effect] = ()
+    inputs: EffectInputs | None = None
+    models: dict = field(default_factory=dict)
+    session_names: tuple[str, ...] = ()
+    sigma_pos: float = START_SIGMA_POS_M
+    sigma_rot: float | None = START_SIGMA_ROT_RAD
+    prior: np.ndarray | None = None
+    point_basis: np.ndarray | None = None
+    registration_basis: np.ndarray | None = None
+    sessions: np.ndarray = field(init=False, repr=False)  # each row's session index (K,)
+
+    def __post_init__(self) -> None:
+        # frozen: the normalised and derived fields are set once, here, as a constructor's would be
+        names = tuple(self.session_names or self.data.session_names)
+        object.__setattr__(self, "session_names", names)
+        object.__setattr__(self, "effects", tuple(self.effects))
+        object.__setattr__(self, "sessions", session_rows(self.data, names))
+        if self.data.rotations is None:
+            object.__setattr__(self, "sigma_rot", None)
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
@@ -233,11 +253,16 @@ class FitProblem:
         return objective, solution
 
     def scales(self) -> tuple[float, float | None]:
-        """The noise scales weighting the rows now: positions [m], orientations [rad] (None without)."""
+        """The noise scales weighting the rows: positions [m], orientations [rad] (None without)."""
         return self.sigma_pos, self.sigma_rot
 
-    def set_scales(self, scales: tuple[float, float | None]) -> None:
-        self.sigma_pos, self.sigma_rot = scales
+    def with_scales(self, scales: tuple[float, float | None]) -> FitProblem:
+        """This problem with its rows weighted by ``scales`` (as :meth:`scales` gives them)."""
+        return replace(self, sigma_pos=scales[0], sigma_rot=scales[1])
+
+    def with_prior(self, prior: np.ndarray | None) -> FitProblem:
+        """This problem with ``prior`` (σ_i of every kinematic parameter, eq P1; None: no prior)."""
+        return replace(self, prior=prior)
 
     def log_evidence(self, objective: PriorResidual, solution: Solution) -> float:
         """Eq P3 (:func:`pincal.fit.prior.log_evidence`): rows already whitened by w_k = 1/σ_pos and
@@ -261,21 +286,22 @@ class FitProblem:
             return (slice(0, n_pos),)
         return slice(0, n_pos), slice(n_pos, n_pos + 3 * self.data.n_rows)
 
-    def rescale(self, objective: SensorResidual, solution: Solution) -> None:
-        """The noise scales from a fit's residuals (:mod:`pincal.fit.pipeline`): maximum likelihood with
-        unknown variances, sigma² = mean squared residual per kind; with a prior, eq P2 of
-        :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
+    def rescaled(self, objective: SensorResidual | PriorResidual, solution: Solution) -> FitProblem:
+        """This problem at the noise scales of a fit's residuals (:mod:`pincal.fit.pipeline`): maximum
+        likelihood with unknown variances, sigma² = mean squared residual per kind; with a prior, eq P2
+        of :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
         k, p = self.data.n_rows, self.data.n_points
         n_pos = 3 * k * p
         if isinstance(objective, PriorResidual):
-            self.sigma_pos, self.sigma_rot = reestimated_scales(solution, objective.n_prior, n_pos, self.sigma_pos,
-                                                                self.sigma_rot)
-            return
+            return self.with_scales(reestimated_scales(solution, objective.n_prior, n_pos, self.sigma_pos,
+                                                       self.sigma_rot))
         pos = solution.residual[:n_pos] * self.sigma_pos
-        self.sigma_pos = float(np.sqrt(np.mean(pos**2))) or self.sigma_pos
-        if self.sigma_rot is not None:
-            rot = solution.residual[n_pos:] * self.sigma_rot
-            self.sigma_rot = float(np.sqrt(np.mean(rot**2))) or self.sigma_rot
+        sigma_pos = float(np.sqrt(np.mean(pos**2))) or self.sigma_pos
+        sigma_rot = self.sigma_rot
+        if sigma_rot is not None:
+            rot = solution.residual[n_pos:] * sigma_rot
+            sigma_rot = float(np.sqrt(np.mean(rot**2))) or sigma_rot
+        return self.with_scales((sigma_pos, sigma_rot))
 
 
 def calibrate_chain(
@@ -386,8 +412,9 @@ def _calibrate_rows(
                          row_weight=row_weights(rows, sigma_column))
     held: tuple[HeldDirection, ...] = ()
     if not tool_known:
-        held = hold_target(problem, extra=hold)
-    rotations = hold_registration(problem)  # with the target held: what is left free is the registration's
+        held, problem = hold_target(problem, extra=hold)
+    # with the target held: what is left free is the registration's
+    rotations, problem = hold_registration(problem)
     size = params.size if params is not None else 0
     base = np.zeros(size)
     empty = np.array([], dtype=int)
@@ -401,10 +428,10 @@ def _calibrate_rows(
             "add calibration rows"
         )
     for _ in range(sigma_iterations):
-        problem.rescale(objective, solution)
+        problem = problem.rescaled(objective, solution)
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
     counter.tick()
-    problem.start = objective.estimate(solution.x)
+    problem = replace(problem, start=objective.estimate(solution.x))
     analysis: Analysis | None = None
     dropped: tuple[Dropped, ...] = ()
     if size:
@@ -417,6 +444,7 @@ def _calibrate_rows(
         analysis = Analysis(np.hstack([jac, held_cols]), kinematic_cols,
                             np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
     fit = fit_kinematics(problem, analysis, size, rows, criterion, level, sigma_iterations, counter)
+    problem = cast(FitProblem, fit.problem)  # at the scales and prior the final fit was made with
     if analysis is not None:  # what absorbs a dropped parameter: the model as it is, the target where it is
         real = jac if rows.rotations is None else full.jacobian(full.start_vector())
         dropped = dropped_parameters(real, cast(Ordering, fit.ordering), fit.kept, other_cols,

@@ -22,7 +22,7 @@ the calibration placements only.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import cast
 
 import numpy as np
@@ -192,16 +192,24 @@ def initial_fixture(chain: KinematicChain, data: FixtureData) -> tuple[FixtureEs
     return FixtureEstimate(ball, np.array(rotations), np.array(positions)), bases, lines
 
 
+@dataclass(frozen=True, eq=False)
 class FixtureProblem:
-    """Fits of eq F1 over subsets of the kinematic parameters (the interface the selection uses)."""
+    """Fits of eq F1 over subsets of the kinematic parameters (the interface the selection uses): a value,
+    its variants new problems (:meth:`with_prior`, :meth:`with_scales`, :meth:`rescaled`, ``dataclasses.replace``).
 
-    def __init__(self, chain: KinematicChain, params, data: FixtureData, start: FixtureEstimate, bases) -> None:
-        self.chain, self.params, self.data = chain, params, data
-        self.start, self.bases = start, bases
-        self.models: dict = {}
-        # --select prior: σ_i of every kinematic parameter (pincal.fit.prior, eq P1)
-        self.prior: np.ndarray | None = None
-        self.noise = 1.0  # with a prior: the residuals' noise scale σ [m] weighting its rows
+    ``models``: sensitivity models by slots, a cache shared by every problem derived from this one.
+    ``prior``: with ``--select prior``, σ_i of every kinematic parameter (:mod:`pincal.fit.prior`, eq P1).
+    ``noise``: with a prior, the residuals' noise scale σ [m] weighting its rows.
+    """
+
+    chain: KinematicChain
+    params: ChainParameters | None
+    data: FixtureData
+    start: FixtureEstimate
+    bases: list
+    models: dict = field(default_factory=dict)
+    prior: np.ndarray | None = None
+    noise: float = 1.0
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> FixtureResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
@@ -218,17 +226,24 @@ class FixtureProblem:
         """The noise scale σ [m] weighting a prior's rows (:mod:`pincal.fit.pipeline`)."""
         return (self.noise,)
 
-    def rescale(self, objective: FixtureResidual | PriorResidual, solution) -> None:
-        """σ [m]: with a prior, eq P2 from ``solution``'s data rows; without, their RMS (the residual
-        is in metres and unweighted, σ weights only a prior's rows)."""
+    def rescaled(self, objective: FixtureResidual | PriorResidual, solution) -> FixtureProblem:
+        """This problem at σ [m] from a fit: with a prior, eq P2 from ``solution``'s data rows; without,
+        their RMS (the residual is in metres and unweighted, σ weights only a prior's rows)."""
         if isinstance(objective, PriorResidual):
-            self.noise = max(effective_scale(solution.residual[: -objective.n_prior],
-                                             hat_diagonal(solution.jacobian, objective.n_prior)), SCALE_FLOOR)
-        else:  # maximum likelihood: the residual's RMS
-            self.noise = float(np.sqrt(np.mean(solution.residual**2))) or self.noise
+            return replace(self, noise=max(effective_scale(solution.residual[: -objective.n_prior],
+                                                           hat_diagonal(solution.jacobian, objective.n_prior)),
+                                           SCALE_FLOOR))
+        # maximum likelihood: the residual's RMS
+        return replace(self, noise=float(np.sqrt(np.mean(solution.residual**2))) or self.noise)
 
-    def set_scales(self, scales: tuple[float]) -> None:
-        (self.noise,) = scales
+    def with_scales(self, scales: tuple[float]) -> FixtureProblem:
+        """This problem with a prior's rows weighted by ``scales`` (as :meth:`scales` gives them)."""
+        (noise,) = scales
+        return replace(self, noise=noise)
+
+    def with_prior(self, prior: np.ndarray | None) -> FixtureProblem:
+        """This problem with ``prior`` (σ_i of every kinematic parameter, eq P1; None: no prior)."""
+        return replace(self, prior=prior)
 
     def fold_rows(self, objective) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What the prior's folds deal (:func:`pincal.fit.prior_scales.scale_folds`): each row's joint
@@ -283,8 +298,8 @@ def calibrate_fixture(
     nominal = objective.estimate(solution.x)
     nominal_rms = solution.rms
     nominal_training = metrics_of_positions(objective.ball_positions(solution.x), data)
-    problem.start = nominal
-    problem.noise = nominal_rms  # with a prior, its rows weighted by the nominal fit's noise at first (eq P1, P2)
+    # with a prior, its rows weighted by the nominal fit's noise at first (eq P1, P2)
+    problem = replace(problem, start=nominal, noise=nominal_rms)
     analysis: Analysis | None = None
     dropped: tuple[Dropped, ...] = ()
     turn = 0

@@ -51,13 +51,10 @@ def final_problem(chain: KinematicChain, result: ChainCalibration, rows: Measure
     at ``result.solution`` is that fit's objective at its solution."""
     weight = np.ones(rows.n_rows) if row_weight is None else row_weight
     assert result.start is not None  # calibrate_chain always sets it
-    problem = FitProblem(chain, result.params, rows, result.start, fit_target=result.fit_target, row_weight=weight,
-                         session_names=result.session_names)
-    problem.point_basis = result.point_basis
-    problem.registration_basis = result.registration_basis
-    problem.sigma_pos, problem.sigma_rot = result.sigma_pos_m, result.sigma_rot_rad
-    problem.prior = result.prior_sigma
-    return problem
+    return FitProblem(chain, result.params, rows, result.start, fit_target=result.fit_target, row_weight=weight,
+                      session_names=result.session_names, sigma_pos=result.sigma_pos_m,
+                      sigma_rot=result.sigma_rot_rad, prior=result.prior_sigma, point_basis=result.point_basis,
+                      registration_basis=result.registration_basis)
 
 
 def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows: MeasurementSet,

@@ -96,10 +96,22 @@ ObjectiveT = TypeVar("ObjectiveT", bound=_Blocks)
 
 
 class KindProblem(Protocol[ObjectiveT]):
-    """What a kind of measurement gives the pipeline (and :func:`select_subset`)."""
+    """What a kind of measurement gives the pipeline (and :func:`select_subset`): a value; its variants
+    (another prior, other noise scales) are new problems, which the pipeline threads through."""
 
-    params: Any  # the parameter set, None at level registration
-    prior: np.ndarray | None  # σ_i of every kinematic parameter with a prior (eq P1), set by the pipeline
+    @property
+    def params(self) -> Any:
+        """The parameter set, None at level registration."""
+        ...
+
+    @property
+    def prior(self) -> np.ndarray | None:
+        """σ_i of every kinematic parameter with a prior (eq P1), given by the pipeline (:meth:`with_prior`)."""
+        ...
+
+    def with_prior(self, prior: np.ndarray | None) -> KindProblem[ObjectiveT]:
+        """This problem with ``prior`` (None: without one)."""
+        ...
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> ObjectiveT: ...
 
@@ -110,12 +122,12 @@ class KindProblem(Protocol[ObjectiveT]):
         """The residual's noise scales now (each [m] or [rad]; None where a kind is not measured)."""
         ...
 
-    def rescale(self, objective: ObjectiveT, solution: Solution) -> None:
-        """Re-estimate the noise scales from ``solution``'s residual (with a prior: eq P2)."""
+    def rescaled(self, objective: ObjectiveT, solution: Solution) -> KindProblem[ObjectiveT]:
+        """This problem at the noise scales re-estimated from ``solution``'s residual (with a prior: eq P2)."""
         ...
 
-    def set_scales(self, scales: tuple) -> None:
-        """Weight the rows by ``scales`` (as :meth:`scales` gives them) from the next objective on."""
+    def with_scales(self, scales: tuple) -> KindProblem[ObjectiveT]:
+        """This problem with its rows weighted by ``scales`` (as :meth:`scales` gives them)."""
         ...
 
     def log_evidence(self, objective: ObjectiveT, solution: Solution) -> float:
@@ -158,6 +170,7 @@ class KinematicFit(Generic[ObjectiveT]):
         status: (n,) ``kept``, ``not selected``, ``not identifiable`` or the prior's status.
         covariance: of the columns of ``objective`` (with a prior: the posterior).
         fit_seconds: the final fit and its refits [s].
+        problem: the problem the final fit was made of (its noise scales and prior).
     """
 
     ordering: Ordering | None
@@ -171,6 +184,7 @@ class KinematicFit(Generic[ObjectiveT]):
     status: tuple[str, ...]
     covariance: np.ndarray
     fit_seconds: float
+    problem: KindProblem[ObjectiveT]
 
     @property
     def rank(self) -> int:
@@ -201,20 +215,21 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
     prior = prior_of(criterion)
     if analysis is not None and size:
         ordering = order_parameters(analysis.jacobian, analysis.kinematic, analysis.always)
-        problem.prior = None if prior is None else prior_sigmas(problem.params, prior)
+        problem = problem.with_prior(None if prior is None else prior_sigmas(problem.params, prior))
         selection, kept = select_subset(problem, ordering, base, rows, criterion, counter)
     started = time.perf_counter()
     x0 = selection.solution if (from_selection and selection is not None) else None
     what = f"{level} fit"
     objective, solution = problem.fit(kept, base, x0, what=what)
     if size:
-        objective, solution = _settle(problem, objective, solution, kept, base, what, refits)
+        problem, objective, solution = _settle(problem, objective, solution, kept, base, what, refits)
     closer = None  # the unregularised fit's position scale, where the evidence kept the prior's fixed point
     choice = None if prior is None else ScaleChoice(prior)  # the prior's scales the fit ends with
     if problem.prior is not None and kept.size:
-        objective, solution, closer = _from_the_data_scale(problem, objective, solution, kept, base, what)
+        problem, objective, solution, closer = _from_the_data_scale(problem, objective, solution, kept, base, what)
         if cast(Prior, prior).estimated:
-            objective, solution, choice = _estimated(problem, objective, solution, kept, base, what, cast(Prior, prior))
+            problem, objective, solution, choice = _estimated(problem, objective, solution, kept, base, what,
+                                                              cast(Prior, prior))
             closer = None if choice.used.estimated else closer
     fit_seconds = time.perf_counter() - started
     counter.tick()
@@ -243,25 +258,27 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
     std[kept] = std_all[kinematic]
     return KinematicFit(ordering=ordering, selection=selection, kept=kept, objective=objective, solution=solution,
                         vector=vector, std=std, std_all=std_all, status=tuple(status), covariance=covariance,
-                        fit_seconds=fit_seconds)
+                        fit_seconds=fit_seconds, problem=problem)
 
 
 def _settle(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
-            base: np.ndarray, what: str, refits: int) -> tuple[ObjectiveT, Solution]:
+            base: np.ndarray, what: str, refits: int
+            ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution]:
     """Step 3's refits: the noise scales re-estimated and the fit repeated, ``refits`` times without a
-    prior; with one, up to eq P2's fixed point (at most :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`)."""
+    prior; with one, up to eq P2's fixed point (at most :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
+    Returns the problem at the last scales (those of the last fit, or the fixed point's), and the last fit."""
     for _ in range(refits if problem.prior is None else MAX_SCALE_ITERATIONS):
         before = problem.scales()
-        problem.rescale(objective, solution)
+        problem = problem.rescaled(objective, solution)
         if problem.prior is not None and settled(before, problem.scales()):
             break  # a prior's fixed point of eq P2 (pincal.fit.prior)
         objective, solution = problem.fit(kept, base, solution.x, what=what)
-    return objective, solution
+    return problem, objective, solution
 
 
 def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution,
                          kept: np.ndarray, base: np.ndarray, what: str
-                         ) -> tuple[ObjectiveT, Solution, float | None]:
+                         ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution, float | None]:
     """Eq P2 from the data's own noise scale, kept if the evidence (eq P3) decisively prefers it.
 
     Started from the registration's scale (the nominal model's misfit), eq P2 can settle where the
@@ -273,48 +290,48 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
     too, and the fixed point with the larger evidence by more than
     :data:`pincal.fit.prior.DECISIVE_LOG_EVIDENCE` is the answer. Otherwise the prior's
     fixed point stands — under the prior the closer fit is the less probable one: deviations of
-    10 mm against its 1 mm — and the third value returned is the closer fit's position scale [m]
-    (None when it was not tried or was taken), for a note that the prior may be too narrow.
+    10 mm against its 1 mm — and the fourth value returned is the closer fit's position scale [m]
+    (None when it was not tried or was taken), for a note that the prior may be too narrow. The
+    problem returned is the one of the fit returned.
     """
-    first, first_evidence = problem.scales(), problem.log_evidence(objective, solution)
-    prior, problem.prior = problem.prior, None
+    first_evidence = problem.log_evidence(objective, solution)
     try:
-        plain = problem.objective(kept, base)  # a crawl stops at its budget: only its scale is used
+        plain_problem = problem.with_prior(None)
+        plain = plain_problem.objective(kept, base)  # a crawl stops at its budget: only its scale is used
         unregularised = solve(cast(Fittable, plain), solution.x, what=what, max_evaluations=SCALE_FIT_EVALUATIONS)
-        problem.rescale(plain, unregularised)  # the data's scale: maximum likelihood
+        data_scale = plain_problem.rescaled(plain, unregularised).scales()  # the data's: maximum likelihood
     except CalibrationError:  # not determined without the prior: the first fixed point stands
-        problem.set_scales(first)
-        return objective, solution, None
-    finally:
-        problem.prior = prior
+        return problem, objective, solution, None
     # the maximum-likelihood scale is biased low by the m − n degrees of freedom: compared unbiased
     m, n = unregularised.residual.size, unregularised.x.size
-    unbiased = [None if data is None else data * np.sqrt(m / max(m - n, 1)) for data in problem.scales()]
-    if not any(data is not None and data < DATA_SCALE_GAP * scale for data, scale in zip(unbiased, first)):
-        problem.set_scales(first)  # one basin: the fixed point already lies near the data's scale
-        return objective, solution, None
+    unbiased = [None if data is None else data * np.sqrt(m / max(m - n, 1)) for data in data_scale]
+    if not any(data is not None and data < DATA_SCALE_GAP * scale
+               for data, scale in zip(unbiased, problem.scales())):
+        return problem, objective, solution, None  # one basin: the fixed point already lies near the data's scale
     try:
-        second, second_solution = problem.fit(kept, base, unregularised.x, what=what)
-        second, second_solution = _settle(problem, second, second_solution, kept, base, what, 0)
-        better = problem.log_evidence(second, second_solution) > first_evidence + DECISIVE_LOG_EVIDENCE
+        second_problem = problem.with_scales(data_scale)
+        second, second_solution = second_problem.fit(kept, base, unregularised.x, what=what)
+        second_problem, second, second_solution = _settle(second_problem, second, second_solution, kept, base,
+                                                          what, 0)
+        better = second_problem.log_evidence(second, second_solution) > first_evidence + DECISIVE_LOG_EVIDENCE
     except CalibrationError:  # a scale near rounding level makes the prior fit singular
         better = False
     if better:
-        return second, second_solution, None
-    problem.set_scales(first)
-    return objective, solution, cast(float, unbiased[0])
+        return second_problem, second, second_solution, None
+    return problem, objective, solution, cast(float, unbiased[0])
 
 
 def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
-               base: np.ndarray, what: str, prior: Prior) -> tuple[ObjectiveT, Solution, ScaleChoice]:
+               base: np.ndarray, what: str, prior: Prior
+               ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution, ScaleChoice]:
     """The prior's scales estimated from the rows, from the MAP fit at ``prior``'s (the defaults), and
     the fit kept: the estimate's where its posterior (eq P4 + P6) is the larger and it predicts held-out
     configurations better by more than one standard error, else the defaults'
     (:mod:`pincal.fit.prior_scales`). The first estimate, from the defaults' fit, is checked by the folds
     on that fit's linearisation before any refit: where it is no better, the defaults stand at the cost
-    of one factorisation per trial. The problem's scales and prior are left at the fit kept's."""
+    of one factorisation per trial. The problem returned is the one of the fit kept (its scales and prior)."""
     kinds = parameter_kinds(problem.params)
-    first_scales, first_prior = problem.scales(), cast(np.ndarray, problem.prior)
+    first_prior = cast(np.ndarray, problem.prior)
     default = _linearised(problem, objective, solution, kinds[kept])
     start = prior.si
     present = default.present
@@ -329,22 +346,22 @@ def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution
         return gain, gain + hyperprior(np.log(sigma[present]), start[present])[0]
 
     estimate, fit = cast(Any, objective), solution  # the defaults' fit, until an estimate is refitted
+    estimated = problem
     try:
         noise, sigma = default.maximise(start, start)
         check = cross_validated(default.at_scales(sigma), default, folds)
         gain, posterior = posterior_gain(noise, sigma)
         if check.better and posterior > 0.0:  # refitted at the estimate, and checked again
-            estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base, what, kinds,
-                                                   start, first=(noise, sigma))
+            estimated, estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base,
+                                                              what, kinds, start, first=(noise, sigma))
             first_evidence = prior_log_evidence(problem.log_evidence(objective, solution), first_prior[kept])
-            gain = prior_log_evidence(problem.log_evidence(cast(Any, estimate), fit),
-                                      cast(np.ndarray, problem.prior)[kept]) - first_evidence
+            gain = prior_log_evidence(estimated.log_evidence(cast(Any, estimate), fit),
+                                      cast(np.ndarray, estimated.prior)[kept]) - first_evidence
             posterior = gain + hyperprior(np.log(sigma[present]), start[present])[0]
-            check = cross_validated(_linearised(problem, estimate, fit, kinds[kept]), default, folds)
+            check = cross_validated(_linearised(estimated, estimate, fit, kinds[kept]), default, folds)
     except CalibrationError as exc:  # a scale the fit cannot take: the defaults' fit stands
-        problem.set_scales(first_scales)
-        problem.prior = first_prior
-        return objective, solution, ScaleChoice(defaults, reason=f"the default scales: the estimate failed ({exc})")
+        return problem, objective, solution, ScaleChoice(
+            defaults, reason=f"the default scales: the estimate failed ({exc})")
     lengths, angles, zeros = sigma
     found = Prior(lengths * 1e3, float(np.degrees(angles)), float(np.degrees(zeros)), estimated=True)
     cv = (f"{check.folds}-fold cross-validated error {check.ratio:.3f} x the defaults' "
@@ -352,11 +369,9 @@ def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution
     record = (found, gain, check.ratio, check.standard_error)
     if check.better and posterior > 0.0:
         reason = f"estimated: evidence e^{gain:.3g} times the defaults', {cv}"
-        return cast(ObjectiveT, estimate), fit, ScaleChoice(found, *record, reason)
-    problem.set_scales(first_scales)
-    problem.prior = first_prior
+        return estimated, cast(ObjectiveT, estimate), fit, ScaleChoice(found, *record, reason)
     why = cv + ", not lower by one standard error" if not check.better else "posterior is not the larger"
-    return objective, solution, ScaleChoice(defaults, *record, f"the default scales: the estimate's {why}")
+    return problem, objective, solution, ScaleChoice(defaults, *record, f"the default scales: the estimate's {why}")
 
 
 def _linearised(problem: KindProblem[ObjectiveT], objective, solution: Solution, kinds: np.ndarray) -> LinearisedFit:

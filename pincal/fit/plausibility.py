@@ -368,14 +368,10 @@ def _large_corrections(result) -> list[str]:
 
 def refit_nominal(problem):
     """The nominal model's fit of a problem's rows (registration and target only, no prior),
-    from its start, at its current noise scales: (objective, solution)."""
-    prior, problem.prior = problem.prior, None
-    try:
-        size = problem.params.size if problem.params is not None else 0
-        objective = problem.objective(np.array([], dtype=int), np.zeros(size))
-        return objective, solve(objective, objective.start_vector(), what="nominal fit")
-    finally:
-        problem.prior = prior
+    from its start, at its noise scales: (objective, solution)."""
+    size = problem.params.size if problem.params is not None else 0
+    objective = problem.with_prior(None).objective(np.array([], dtype=int), np.zeros(size))
+    return objective, solve(objective, objective.start_vector(), what="nominal fit")
 
 
 def press_against_nominal(chain: KinematicChain, result, rows: MeasurementSet,

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -271,7 +272,8 @@ class LinearisedFit:
 
 def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept: np.ndarray, base: np.ndarray,
                     what: str, kinds: np.ndarray, start: np.ndarray,
-                    first: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[PriorResidual, Solution, np.ndarray]:
+                    first: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[Any, PriorResidual, Solution, np.ndarray]:
     """Rounds of eq P5 + P6 from a MAP fit of ``problem`` (:class:`pincal.fit.pipeline.KindProblem`):
     the scales maximising the linearised posterior of the scales, the fit redone at them, until they
     settle (:data:`SETTLE_TOLERANCE`, at most :data:`MAX_ROUNDS`).
@@ -282,8 +284,8 @@ def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept:
         first: the first round's maximum (noise scales, scales of the kinds), when the caller has it.
 
     Returns:
-        The last fit (its objective and solution) and the scales of the kinds it was made with
-        [SI], (3,); the problem's noise scales and ``prior`` are left at them.
+        The problem of the last fit (``problem`` at its noise scales and ``prior``), that fit (its
+        objective and solution) and the scales of the kinds it was made with [SI], (3,).
     """
     centre = sigma = np.asarray(start, dtype=float)
     for _ in range(MAX_ROUNDS):
@@ -298,11 +300,11 @@ def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept:
         if moved.max() < SETTLE_TOLERANCE:
             break  # the fit is made at the scales its own linearisation prefers
         values = iter(noise.tolist())
-        problem.set_scales(tuple(None if s is None else next(values) for s in now))
-        problem.prior = estimate[kinds]
+        problem = problem.with_scales(tuple(None if s is None else next(values) for s in now)).with_prior(
+            estimate[kinds])
         objective, solution = problem.fit(kept, base, solution.x, what=what)
         sigma = estimate
-    return objective, solution, sigma
+    return problem, objective, solution, sigma
 
 
 def scale_folds(q: np.ndarray, strata: np.ndarray, entries: np.ndarray) -> list[np.ndarray]:

@@ -34,7 +34,8 @@ orientations) meet its error: the model is checked only near the path
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -90,10 +91,11 @@ def held_rotations(jacobian: np.ndarray, registration_columns: slice, other_colu
     return tuple(held), np.column_stack(columns) if columns else np.zeros((6 * len(sessions), 0))
 
 
-def hold_registration(problem) -> tuple[HeldRotation, ...]:
+def hold_registration(problem) -> tuple[tuple[HeldRotation, ...], Any]:
     """Hold the registration rotations a problem's rows leave free (eq H1, at its start with the nominal
-    kinematics and the target held as it is): sets ``problem.registration_basis`` (a
-    :class:`pincal.fit.chain_calibration.FitProblem`); returns the held rotations."""
+    kinematics and the target held as it is): returns the held rotations and the problem (a
+    :class:`pincal.fit.chain_calibration.FitProblem`) with them held, its ``registration_basis`` the
+    registrations' free unknowns (``problem`` itself when none is held)."""
     size = 0 if problem.params is None else problem.params.size
     objective = problem.objective(np.array([], dtype=int), np.zeros(size))
     jacobian = objective.jacobian(objective.start_vector())
@@ -104,8 +106,8 @@ def hold_registration(problem) -> tuple[HeldRotation, ...]:
     held, vectors = held_rotations(jacobian, reg, others, names, problem.chain.root_link,
                                    problem.data.rotations is not None, not problem.fit_target)
     if held:
-        problem.registration_basis = scipy.linalg.null_space(vectors.T)
-    return held
+        return held, replace(problem, registration_basis=scipy.linalg.null_space(vectors.T))
+    return held, problem
 
 
 def rotation_reason(held: HeldRotation) -> str:

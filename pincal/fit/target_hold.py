@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -164,12 +165,8 @@ def _reason(group: list[HeldDirection]) -> tuple[str, str]:
 
 def _start_grams(problem) -> tuple[np.ndarray, np.ndarray]:
     """Eq T1's Gram matrices at a problem's start with the nominal kinematics (every target coordinate free)."""
-    basis, problem.point_basis = problem.point_basis, None
-    try:
-        objective = problem.objective(np.array([], dtype=int),
-                                      np.zeros(0 if problem.params is None else problem.params.size))
-    finally:
-        problem.point_basis = basis
+    objective = replace(problem, point_basis=None).objective(
+        np.array([], dtype=int), np.zeros(0 if problem.params is None else problem.params.size))
     jac = objective.jacobian(objective.start_vector())
     n_points = problem.start.points.shape[0]
     pts, reg, rot = (objective.blocks[name] for name in ("points", "registration", "rotation"))
@@ -180,10 +177,11 @@ def _start_grams(problem) -> tuple[np.ndarray, np.ndarray]:
     return shift_grams(others, shift, np.arange(others.shape[1]))
 
 
-def hold_target(problem, extra: Sequence[HeldDirection] = ()) -> tuple[HeldDirection, ...]:
+def hold_target(problem, extra: Sequence[HeldDirection] = ()) -> tuple[tuple[HeldDirection, ...], Any]:
     """Hold the directions of the target's position a problem's rows do not see (rule 1), and
-    ``extra`` (rule 2), at the tool's origin: sets ``problem.start``'s points and ``problem.point_basis``
-    (a :class:`pincal.fit.chain_calibration.FitProblem`); returns the held directions."""
+    ``extra`` (rule 2), at the tool's origin: returns the held directions and the problem (a
+    :class:`pincal.fit.chain_calibration.FitProblem`) with them held: its start's points moved to the
+    tool's origin along them and its ``point_basis`` the free directions (``problem`` itself when none is held)."""
     turns, directions = principal_turns(*_start_grams(problem))
     n_points = problem.start.points.shape[0]
     held = [HeldDirection(direction=d, turn_rad=float(t), value_m=0.0, frame=problem.chain.tip_link, points=n_points)
@@ -196,13 +194,12 @@ def hold_target(problem, extra: Sequence[HeldDirection] = ()) -> tuple[HeldDirec
             held.append(replace(more, direction=direction / np.linalg.norm(direction)))
     held = held[:3]
     if not held:
-        return ()
+        return (), problem
     held_dirs = np.column_stack([h.direction for h in held])
     _, basis = held_basis(held_dirs, problem.start.points.shape[0])
     points = problem.start.points
-    problem.start = replace(problem.start, points=points - (points @ held_dirs) @ held_dirs.T)
-    problem.point_basis = basis
-    return tuple(held)
+    start = replace(problem.start, points=points - (points @ held_dirs) @ held_dirs.T)
+    return tuple(held), replace(problem, start=start, point_basis=basis)
 
 
 def analysis_jacobian(problem, held: Sequence[HeldDirection], size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -218,15 +215,11 @@ def analysis_jacobian(problem, held: Sequence[HeldDirection], size: int) -> tupl
     corrected URDF for the same robot; tests/test_frame_invariance.py). Positions alone are analysed
     where they were measured: without orientations, the lever is what lets them see a rotation.
     """
-    start = problem.start
     if problem.data.rotations is not None:
-        problem.start = replace(start, points=np.zeros_like(start.points))
-    try:
-        objective = problem.objective(np.arange(size), np.zeros(size))
-        jacobian = objective.jacobian(objective.start_vector())
-        return jacobian, held_columns(problem, held, size) if held else np.zeros((jacobian.shape[0], 0))
-    finally:
-        problem.start = start
+        problem = replace(problem, start=replace(problem.start, points=np.zeros_like(problem.start.points)))
+    objective = problem.objective(np.arange(size), np.zeros(size))
+    jacobian = objective.jacobian(objective.start_vector())
+    return jacobian, held_columns(problem, held, size) if held else np.zeros((jacobian.shape[0], 0))
 
 
 def held_columns(problem, held: Sequence[HeldDirection], size: int) -> np.ndarray:
@@ -234,13 +227,9 @@ def held_columns(problem, held: Sequence[HeldDirection], size: int) -> np.ndarra
     at ``problem``'s start with all ``size`` kinematic parameters free."""
     directions = np.column_stack([h.direction for h in held])
     common, _ = held_basis(directions, problem.start.points.shape[0])
-    free_basis, problem.point_basis = problem.point_basis, common
-    try:
-        objective = problem.objective(np.arange(size), np.zeros(size))
-        return objective.jacobian(objective.start_vector())[:, objective.blocks["points"]] * np.sqrt(
-            problem.start.points.shape[0])
-    finally:
-        problem.point_basis = free_basis
+    objective = replace(problem, point_basis=common).objective(np.arange(size), np.zeros(size))
+    return objective.jacobian(objective.start_vector())[:, objective.blocks["points"]] * np.sqrt(
+        problem.start.points.shape[0])
 
 
 def weak_target(result, problem) -> tuple[HeldDirection, ...]:
