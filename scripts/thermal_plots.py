@@ -52,14 +52,14 @@ def _residuals(result, kind: str) -> tuple[np.ndarray, np.ndarray]:
     objective, x = result.objective, result.solution_x
     index = next(i for i, (effect, _, _) in enumerate(result.effects) if effect.type == kind)
     without = x.copy()
-    without[objective._effect_slices[index]] = 0.0
+    without[objective.effect_slices[index]] = 0.0
     return tuple((objective.g - objective.predicted_points(v))[:, 0, :] for v in (without, x))
 
 
 def _thermal(folder: Path, out: Path) -> Path:
     result, _ = _diagnosed(folder)
     objective, x = result.objective, result.solution_x
-    _, _, target, world = objective._state(x)
+    _, _, target, world = objective.state(x)
     omega, _ = objective.row_frames(target)
     radial = world[:, 0, :] @ np.asarray(omega).T  # base origin → point, in the sensor frame [m]
     length = np.linalg.norm(radial, axis=1)

@@ -30,7 +30,7 @@ class Fit:
     """A candidate's fit as the judge reads it: its effect's value moves the measured points by 100 × its value
     in noise units (far above :data:`NEGLIGIBLE`); ``errors`` on its own rows, ``held`` on the held-out rows."""
 
-    _effect_slices = [slice(0, 1)]
+    effect_slices = [slice(0, 1)]
     G = None  # the size of its change is judged on positions
 
     def __init__(self, held: PoseErrors, errors: PoseErrors | None = None) -> None:

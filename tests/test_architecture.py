@@ -310,6 +310,54 @@ def test_the_public_name_check_catches_a_private_import(tmp_path):
     assert len(bad) == 2 and all("pincal.fit.solver" in line for line in bad)
 
 
+def private_attributes_by_room(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """The underscore attributes each room defines: ``self._x = …`` and methods or class attributes
+    ``_x`` in its modules' classes (dunder names aside)."""
+    out: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        found = out.setdefault(room(name), set())
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef):
+                for item in node.body:
+                    if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                        found.add(item.name)
+                    elif isinstance(item, (ast.Assign, ast.AnnAssign)):
+                        targets = item.targets if isinstance(item, ast.Assign) else [item.target]
+                        found.update(t.id for t in targets if isinstance(t, ast.Name))
+            elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store) and \
+                    isinstance(node.value, ast.Name) and node.value.id == "self":
+                found.add(node.attr)
+    return {r: {n for n in names if n.startswith("_") and not n.startswith("__")} for r, names in out.items()}
+
+
+def private_attribute_reads(modules: dict[str, Path], defined: dict[str, set[str]]) -> list[str]:
+    """Reads ``x._name`` (x not ``self`` or ``cls``) of an underscore attribute that only other rooms define:
+    another layer's internals, reached through an object instead of an import."""
+    bad = []
+    for name, path in modules.items():
+        own = defined.get(room(name), set())
+        elsewhere = set().union(*(names for r, names in defined.items() if r != room(name)))
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Attribute) and node.attr in elsewhere - own and not (
+                    isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+                bad.append(f"{name}:{node.lineno} reads {node.attr}, private to another room")
+    return bad
+
+
+def test_no_module_reads_another_rooms_private_attributes():
+    """Across rooms only public names are used: imports (above) and attributes read off objects alike."""
+    assert private_attribute_reads(MODULES, private_attributes_by_room(MODULES)) == []
+
+
+def test_the_private_attribute_check_catches_a_read(tmp_path):
+    planted = tmp_path / "verdicts.py"
+    planted.write_text("def f(objective):\n    return objective._hidden_slices[-1]\n", encoding="utf-8")
+    defined = {"residuals": {"_hidden_slices"}, "diagnosis": set()}
+    bad = private_attribute_reads({"pincal.diagnosis.verdicts": planted}, defined)
+    assert len(bad) == 1 and "_hidden_slices" in bad[0]
+    assert private_attribute_reads({"pincal.residuals.sensor": planted}, defined) == []  # its own room's
+
+
 #: Calls that change a chain in place (pincal.model.chain.KinematicChain).
 CHAIN_MUTATORS = ("set_placements", "set_tool")
 #: Pieces of an assignment target that write into a chain's Pinocchio model or its tool.

@@ -379,7 +379,7 @@ def test_each_effect_says_how_far_it_moves_the_target(kuka_urdf):
     (change,) = result.target_changes
     x = result.solution_x
     zeroed = x.copy()
-    zeroed[result.objective._effect_slices[0]] = 0.0
+    zeroed[result.objective.effect_slices[0]] = 0.0
     moved = np.linalg.norm(result.objective.predicted_points(x) - result.objective.predicted_points(zeroed), axis=2)
     assert change.rms_m == pytest.approx(np.sqrt(np.mean(moved**2)), rel=0.01)
     assert change.max_m == pytest.approx(moved.max(), rel=0.01)

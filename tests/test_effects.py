@@ -162,7 +162,7 @@ def test_effect_columns_are_the_jacobian_columns_an_added_effect_brings(kuka_cha
     for effect, block in zip(added, columns):
         extended = objective(present + [effect])
         full = extended.jacobian(np.concatenate([x, np.zeros(effect.n_values)]))
-        assert_close(block, full[:, extended._effect_slices[-1]], 1e-12, effect.label)
+        assert_close(block, full[:, extended.effect_slices[-1]], 1e-12, effect.label)
 
 
 

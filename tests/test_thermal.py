@@ -248,16 +248,16 @@ def test_expansion_and_steps_in_the_sensor_residual_match_finite_differences(kuk
             probe = objective(effects, np.stack([np.eye(3)] * k))
             x = probe.start_vector() + rng.normal(0, 0.01, probe.n_free)
             x[probe.blocks["effects"]] = rng.normal(0, 1e-2, probe.blocks["effects"].stop - probe.blocks["effects"].start)
-            poses, _, target, _ = probe._state(x)
+            poses, _, target, _ = probe.state(x)
             near = (probe.row_frames(target)[0] @ poses.tool_rotations @ target.rotation
                     @ np.stack([pin.exp3(rng.normal(0, 0.3, 3)) for _ in q]))
             full = objective(effects, near)
             assert_close(full.jacobian(x), numeric_jacobian(full.residual, x), 1e-6, f"sessions {sessions}")
             without = objective(effects[:4] + effects[5:], near)  # pause 1 as a candidate
-            y = np.delete(x, np.arange(3) + full._effect_slices[4].start)
+            y = np.delete(x, np.arange(3) + full.effect_slices[4].start)
             columns = without.effect_columns(y, [effects[4]])[0]
             added = objective(effects[:4] + effects[5:] + [effects[4]], near)
-            brought = added.jacobian(np.concatenate([y, np.zeros(3)]))[:, added._effect_slices[-1]]
+            brought = added.jacobian(np.concatenate([y, np.zeros(3)]))[:, added.effect_slices[-1]]
             assert_close(columns, brought, 1e-12, "pause step candidate")
 
 

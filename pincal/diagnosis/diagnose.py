@@ -349,7 +349,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                 naming = score.condition > SCREEN_CONDITION  # a fit that tells whether the geometry absorbs it
                 try:
                     obj, sol = model.fit(adopted + [effect], start[: current_objective.blocks["effects"].start],
-                                         [start[sl] for sl in current_objective._effect_slices]
+                                         [start[sl] for sl in current_objective.effect_slices]
                                          + [score.step[current_x.size:]], tolerance=CANDIDATE_TOLERANCE,
                                          chunk=NAMING_EVALUATIONS if naming else None)
                 except CalibrationError:
@@ -394,7 +394,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         before_held = heldout_errors(model, current_objective, current_x, heldout, held_inputs)
         driver, driver_label, joint_residual, fitted = partial_residual(effect, obj, sol, inputs, chain)
         unit = shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic")
-        coupling = None if trial is None else convention_for(effect, float(sol.x[obj._effect_slices[-1]][0]), corrected)
+        coupling = None if trial is None else convention_for(effect, float(sol.x[obj.effect_slices[-1]][0]), corrected)
         try:
             found = None if coupling is None else adopted_trial(trial(coupling), chain, sigma_column, inputs,
                                                                 held_inputs, (obj, sol), before_held, judge)
@@ -412,7 +412,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
         reestimated = model.reestimated(obj, sol)
         try:
             obj, sol = reestimated.fit(adopted, sol.x[: obj.blocks["effects"].start],
-                                       [sol.x[sl] for sl in obj._effect_slices])
+                                       [sol.x[sl] for sl in obj.effect_slices])
         except CalibrationError as error:  # sparse data: with the scales re-estimated it is not determined
             adopted.pop()
             rejected[effect.label] = (f"{effect.label} not adopted: its refit with the noise re-estimated "
@@ -436,13 +436,13 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
                                               gravity=effect_inputs(chain, heldout, payload_kg, point).gravity)
                 model = replace(model, inputs=inputs)
                 obj, sol = model.fit(adopted, sol.x[: obj.blocks["effects"].start],
-                                     [sol.x[sl] for sl in obj._effect_slices])
+                                     [sol.x[sl] for sl in obj.effect_slices])
         current_objective, current_solution, current_x = obj, sol, sol.x
         current_bic = bic(sol.residual, sol.x.size, n_prior_rows(obj))
         counter.tick()
         steps.append(Step(
-            effect=effect, values=sol.x[obj._effect_slices[-1]],
-            std=standard_deviations(obj, sol)[obj._effect_slices[-1]],
+            effect=effect, values=sol.x[obj.effect_slices[-1]],
+            std=standard_deviations(obj, sol)[obj.effect_slices[-1]],
             delta_bic=float(delta), calibration_before=before_cal, calibration_after=pose_errors_of(obj, sol.x),
             heldout_before=before_held,
             heldout_after=heldout_errors(model, obj, sol.x, heldout, held_inputs),
@@ -471,7 +471,7 @@ def _diagnose(chain, calibration, data, heldout, sigma_column, payload_kg, time,
     final_solution = solve(current_objective, current_x, what="final fit")
     final_std = standard_deviations(current_objective, final_solution)  # the posterior's under a prior
     effects = tuple(
-        (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective._effect_slices)
+        (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective.effect_slices)
     )
     freedom = residual_freedom(current_objective, final_solution)
     unexplained = remaining_structure(model, adopted, current_objective, final_solution, chain, freedom)

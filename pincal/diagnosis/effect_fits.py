@@ -116,7 +116,7 @@ class EffectModel:
         x0 = np.zeros(objective.n_params)
         n_core = x_start.size
         x0[:n_core] = x_start
-        for sl, value in zip(objective._effect_slices, values_start):
+        for sl, value in zip(objective.effect_slices, values_start):
             x0[sl] = value
         if chunk is not None:
             return objective, fit_while_gaining(objective, x0, chunk, tolerance)
@@ -129,8 +129,8 @@ def pose_errors_of(objective: SensorResidual | PriorResidual, x: np.ndarray) -> 
     position = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
     rotation = None
     if objective.G is not None:
-        poses, _, target, _ = objective._state(x)
-        relative = objective._orientation_error(poses, target)
+        poses, _, target, _ = objective.state(x)
+        relative = objective.orientation_error(poses, target)
         rotation = np.linalg.norm(Rotation.from_matrix(relative).as_rotvec(), axis=1)
     return PoseErrors(position_m=position, rotation_rad=rotation)
 

@@ -55,7 +55,7 @@ def remaining_structure(model, adopted, objective, solution, chain, freedom) -> 
             continue
         try:
             _, sol = model.fit(adopted + generic, solution.x[: objective.blocks["effects"].start],
-                               [solution.x[sl] for sl in objective._effect_slices]
+                               [solution.x[sl] for sl in objective.effect_slices]
                                + [np.zeros(e.n_values) for e in generic],
                                max_evaluations=GENERIC_EVALUATIONS)
         except CalibrationError:
@@ -93,8 +93,8 @@ def partial_residual(effect, objective, solution, inputs, chain):
         return None, "", None, None
     j = chain.joint_names.index(effect.joint)
     basis = joint_basis(effect, inputs, j)
-    fitted = basis @ solution.x[objective._effect_slices[-1]]
-    _, sens, target, world = objective._state(solution.x)
+    fitted = basis @ solution.x[objective.effect_slices[-1]]
+    _, sens, target, world = objective.state(solution.x)
     residual = objective.predicted_points(solution.x) - objective.g  # (K, P, 3)
     omega, _ = objective.row_frames(target)  # (3, 3), or (K, 3, 3) with several sessions
 

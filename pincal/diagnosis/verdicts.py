@@ -164,7 +164,7 @@ def _largest_change(objective: SensorResidual, x: np.ndarray) -> float:
     in units of that coordinate's noise (the whitened residual's columns times the effect's values),
     the noise taken as at least :data:`NOISE_FLOOR`."""
     data = getattr(objective, "objective", objective)  # a prior-wrapped objective's sensor residual
-    sl = data._effect_slices[-1]
+    sl = data.effect_slices[-1]
     change = np.abs(objective.jacobian(x)[:, sl] @ x[sl])
     k, n_points = data.g.shape[:2]
     noise = np.concatenate([np.repeat(1.0 / data.w, 3 * n_points)] + ([np.repeat(1.0 / data.v, 3)]
@@ -215,7 +215,7 @@ def target_changes(objective: SensorResidual, x: np.ndarray) -> list[TargetChang
     n_pos = 3 * k * n_points
     with_all = objective.residual(x)
     out = []
-    for sl in data._effect_slices:
+    for sl in data.effect_slices:
         without = x.copy()
         without[sl] = 0.0
         change = with_all - objective.residual(without)
@@ -299,7 +299,7 @@ class Judge:
         for rank, (delta, effect, obj, sol) in enumerate(tried):
             if rank >= SHOWN and (chosen is not None or delta >= EVIDENCE):
                 break
-            sl = obj._effect_slices[-1]
+            sl = obj.effect_slices[-1]
             value, std = sol.x[sl], standard_deviations(obj, sol)[sl]
             held = self.held(effect, obj, sol.x)
             verdict = "not significant"
@@ -362,7 +362,7 @@ class Judge:
                 return (f"{other.label} fits almost as well (ΔBIC {other_delta:.1f}) with a basis correlated "
                         f"{correlation:+.2f}: the data cannot tell a drift from a step at a pause; the step is "
                         "named"), None
-            sl = obj._effect_slices[-1]
+            sl = obj.effect_slices[-1]
             if not self._unphysical(other, sol.x[sl], standard_deviations(obj, sol)[sl], obj, sol):
                 members.append((other, obj, sol))
         taken, _ = self._decision(members)

@@ -167,7 +167,7 @@ class SensorResidual(Objective):
         self.registration_basis = None
         if registration_basis is not None and fit_registration:
             self.registration_basis = np.asarray(registration_basis, dtype=float).reshape(6 * self.n_sessions, -1)
-        self._effect_slices = []
+        self.effect_slices = []
         sizes = {
             "kinematic": n_kin,
             "registration": (6 * self.n_sessions if self.registration_basis is None
@@ -184,7 +184,7 @@ class SensorResidual(Objective):
         self.n_params = offset
         first = self.blocks["effects"].start
         for effect in self.effects:
-            self._effect_slices.append(slice(first, first + effect.n_values))
+            self.effect_slices.append(slice(first, first + effect.n_values))
             first += effect.n_values
         # the last state computed: (x, the kinematics it came from, the state)
         self._memo: tuple[np.ndarray, tuple, tuple] | None = None
@@ -267,12 +267,12 @@ class SensorResidual(Objective):
     def effect_values(self, x: npt.ArrayLike) -> list[np.ndarray]:
         """Values of each effect at ``x``."""
         x = np.asarray(x, dtype=float)
-        return [x[sl] for sl in self._effect_slices]
+        return [x[sl] for sl in self.effect_slices]
 
     def _sensor_terms(self, x: np.ndarray, target: TargetEstimate | None = None) -> tuple[float, np.ndarray]:
         """Sensor scale s and drift offset t_k u (K, 3) at ``x``, plus the pause steps d_k of ``target`` (eq T2)."""
         scale, drift = 0.0, np.zeros((self.g.shape[0], 3))
-        for effect, sl in zip(self.effects, self._effect_slices):
+        for effect, sl in zip(self.effects, self.effect_slices):
             if effect.type == "sensor_scale":
                 scale = float(x[sl][0])
             elif effect.type == "drift":
@@ -282,7 +282,7 @@ class SensorResidual(Objective):
             drift = drift + target.conditions.steps
         return scale, drift
 
-    def _state(self, x: npt.ArrayLike):
+    def state(self, x: npt.ArrayLike):
         """Tool poses, sensitivities, target and target points in the base frame at ``x``
         (the last one is kept: least_squares asks for the residual and the Jacobian at the same x)."""
         x = np.asarray(x, dtype=float)
@@ -290,7 +290,7 @@ class SensorResidual(Objective):
         if self.effects:
             assert self.inputs is not None  # effects need their inputs (__init__)
             shifts = np.zeros_like(self.inputs.q)
-            for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
+            for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
                 if basis is not None:
                     shifts[:, j] += basis @ x[sl]
             q = self.inputs.q + shifts
@@ -308,7 +308,7 @@ class SensorResidual(Objective):
     def predicted_points(self, x: npt.ArrayLike) -> np.ndarray:
         """Model points in the sensor frame (K, P, 3) [m]: (1 + s)(Omega y + tau + t u)."""
         x = np.asarray(x, dtype=float)
-        _, _, target, world = self._state(x)
+        _, _, target, world = self.state(x)
         return self._sensed(x, target, world)
 
     def _sensed(self, x: np.ndarray, target: TargetEstimate, world: np.ndarray) -> np.ndarray:
@@ -320,11 +320,11 @@ class SensorResidual(Objective):
 
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)
-        poses, _, target, world = self._state(x)
+        poses, _, target, world = self.state(x)
         position = (self._sensed(x, target, world) - self.g) * self.w[:, None, None]
         parts = [position.reshape(-1)]
         if self.G is not None:
-            relative = self._orientation_error(poses, target)
+            relative = self.orientation_error(poses, target)
             logs = log3(relative) * self.v[:, None]
             parts.append(logs.reshape(-1))
         return np.concatenate(parts)
@@ -362,14 +362,14 @@ class SensorResidual(Objective):
         blocks = np.zeros((k, size, size))
         blocks[:, :n_pos, :n_pos] = -self.w[:, None, None] * np.eye(n_pos)
         if self.G is not None:
-            poses, _, target, _ = self._state(x)
-            relative = self._orientation_error(poses, target)
+            poses, _, target, _ = self.state(x)
+            relative = self.orientation_error(poses, target)
             jlog = jlog3(relative)
             turn = jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1)
             blocks[:, n_pos:, n_pos:] = -self.v[:, None, None] * turn
         return blocks
 
-    def _orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
+    def orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
         """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
         omega, _ = self.row_frames(target)
         assert self.G is not None  # called only with orientations
@@ -405,11 +405,11 @@ class SensorResidual(Objective):
                     rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
                 else:
                     rows_pos[:, p, :, pts] = rotated @ self.point_basis[3 * p : 3 * p + 3]
-        for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self._effect_slices):
+        for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self.effect_slices):
             if effect.type != "sensor_scale":
                 rows_pos[..., sl] = self._effect_position_columns(lin, effect, j, basis)
         rows_pos *= 1.0 + lin["scale"]  # every term is scaled by the sensor's (1 + s)
-        for effect, sl in zip(self.effects, self._effect_slices):
+        for effect, sl in zip(self.effects, self.effect_slices):
             if effect.type == "sensor_scale":
                 rows_pos[..., sl] = lin["sensed"][..., None]
         rows_pos *= self.w[:, None, None, None]
@@ -451,7 +451,7 @@ class SensorResidual(Objective):
         scale and the sensed points (1 + s excluded); with orientations, E_k, Jlog3(E_k)
         and Jlog3(E_k) E_kᵀ G_kᵀ Omega ("left", K × 3 × 3); with ``joints``, the chain
         joints' point columns d(point)/d(q_j) (K, P, 3, N) and turns (K, 3, N)."""
-        state = self._state(x)
+        state = self.state(x)
         poses, sens, target, world = state
         omega, _ = self.row_frames(target)
         omega_t = np.swapaxes(omega, -1, -2)
@@ -464,7 +464,7 @@ class SensorResidual(Objective):
             "sensed": self._registered(target, world) + drift[:, None, :],
         }
         if self.G is not None:
-            relative = self._orientation_error(poses, target)
+            relative = self.orientation_error(poses, target)
             lin["jlog"] = jlog3(relative)
             lin["left"] = lin["jlog"] @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
         if joints:
@@ -505,7 +505,7 @@ class SensorResidual(Objective):
             rows[:, :, reg] = self._in_basis(columns)
         if rot.stop > rot.start:
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
-        for j, basis, sl in zip(self._effect_joint, self._effect_basis, self._effect_slices):
+        for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
             if basis is not None:
                 rows[:, :, sl] = lin["joint_turns"][:, :, j, None] * basis[:, None, :]
         rows *= self.v[:, None, None]
