@@ -128,3 +128,12 @@ def test_harmonics_are_named_with_english_ordinals():
         "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "101st", "111th"]
     words = ambiguity_words(Effect("cyclic", "A2", harmonic=1), [Effect("cyclic", "A2", harmonic=2)], "why")
     assert words.startswith("A2's error: a 1st harmonic or a 2nd harmonic — these poses cannot tell")
+
+
+def test_the_member_taken_from_below_the_shown_candidates_is_listed_adopted(monkeypatch):
+    """The best-ΔBIC candidate hands over to a member of its group ranked below the candidates the step shows
+    (here one shown): the adopted one is still in the step's table (REPORT.json steps[].candidates), adopted."""
+    monkeypatch.setattr(verdicts, "SHOWN", 1)
+    verdict, chosen, _ = ranked(judge_of(BEFORE), [(-50.0, FOLLOWS, SPLIT, None), (-48.0, SCALE, EVEN, None)])
+    assert chosen == SCALE and verdict[SCALE] == "adopted"
+    assert verdict[FOLLOWS].startswith(f"{SCALE.label} corrects the same poses the same way")

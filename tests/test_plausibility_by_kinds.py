@@ -64,7 +64,7 @@ def test_a_value_is_judged_in_the_unit_its_joints_kinds_give(judge, effect, unit
     assert effect_unit(effect, judge.chain.joint_kinds) == unit
 
     def verdict(value: float) -> str:
-        return judge.rejection(effect, np.array([value]), -50.0, [(-50.0, effect, None, None)], None, [])
+        return judge.judged(effect, np.array([value]), -50.0, [(-50.0, effect, None, None)], [])[0]
 
     assert OUTSIDE in verdict(implausible)
     assert OUTSIDE not in verdict(plausible), verdict(plausible)

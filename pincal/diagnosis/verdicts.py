@@ -319,6 +319,12 @@ class Judge:
                         rejected[effect.label] = (
                             f"{effect.label}: ΔBIC {delta:.1f} but {verdict}{REJECTED}")
             ranking.append(Candidate(effect, value, std, float(delta), held, verdict))
+        if chosen is not None and all(c.effect is not chosen[1] for c in ranking):
+            # taken for a better-ranked candidate that corrects alike, from below the ones shown: listed too
+            delta, effect, obj, sol = chosen
+            sl = obj.effect_slices[-1]
+            ranking.append(Candidate(effect, sol.x[sl], standard_deviations(obj, sol)[sl], float(delta),
+                                     self.held(effect, obj, sol.x), "adopted"))
         # what is shown (the first eight), the competitors a check compared (within 6 of
         # the candidate checked) and, when nothing is adopted, every significant candidate
         cut = tried[SHOWN - 1][0] if len(tried) >= SHOWN else np.inf
@@ -326,13 +332,9 @@ class Judge:
             cut = max(cut, max(compared) + 6.0)
         if chosen is None:
             cut = max(cut, EVIDENCE)
+        else:
+            cut = max(cut, chosen[0])
         return ranking, chosen, rejected, cut
-
-    def rejection(self, effect, value, delta, tried, held, compared: list, objective=None, solution=None,
-                  std=None) -> str:
-        """'adopted', or why the best significant candidate is not (:meth:`judged`'s verdict; ``held`` unused:
-        its held-out errors are the judge's)."""
-        return self.judged(effect, value, delta, tried, compared, objective, solution, std)[0]
 
     def judged(self, effect, value, delta, tried, compared: list, objective=None, solution=None,
                std=None) -> tuple[str, Effect | None]:

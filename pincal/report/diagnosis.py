@@ -43,11 +43,12 @@ def compliance_words(joint: str, value: float, unit: str) -> str:
     load, stiffness = ("gravity force", "N/m") if force else ("gravity torque", "N·m/rad")
     if value == 0.0:
         return f"{joint}: c = 0 {unit}"
-    way = ("gives way under its load, as a gearbox's or a link's elasticity does" if value < 0 else
-           "leans against its load, as a spring or a counterbalance the URDF lacks would make it")
+    what = (f"a stiffness of {1.0 / abs(value):.3g} {stiffness}: it gives way under its load, as a gearbox's or a "
+            "link's elasticity does" if value < 0 else
+            f"c > 0: it moves against the {load} the URDF predicts (an overcompensating counterbalance or spring, "
+            "or the URDF's masses wrong), no stiffness")
     return (f"{joint} is at its reading + c x its {load} (what holds it against gravity, as Pinocchio computes "
-            f"it), so c < 0 is a joint that sags: here c = {value:.3g} {unit}, a stiffness of "
-            f"{1.0 / abs(value):.3g} {stiffness}; it {way}")
+            f"it), so c < 0 is a joint that sags: here c = {value:.3g} {unit}, {what}")
 
 
 def diagnosis_report(

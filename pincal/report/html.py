@@ -176,7 +176,8 @@ def _registration_notes(evaluation: dict | None) -> list[str]:
         notes.append(f"drift not extrapolated: {held} row(s) outside the time span it was fitted on are evaluated "
                      f"with it {at}")
     before = (evaluation or {}).get("before")
-    if isinstance(before, dict):  # evaluate's before -> after, which registers the nominal URDF to these rows
+    if isinstance(before, dict) and isinstance(before.get("position_rms_mm"), (int, float)):
+        # evaluate's before -> after, which registers the nominal URDF to these rows
         notes.append(f"before: {before['position_rms_mm']:.3f} mm RMS — the nominal URDF with its registration and "
                      "target fitted to these rows (evaluate's before -> after; the nominal geometry of the "
                      "calibration rows is registered to those)")
