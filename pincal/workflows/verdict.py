@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.cli.settings import CalibrateSettings, default_selection
 from pincal.errors import CalibrationError
 from pincal.fit.plausibility import UNMODELLED_CAUSES, Finding, tip_link_findings, tip_link_verdict, unmodelled_reason
 from pincal.fit.prior import Prior
@@ -37,6 +36,7 @@ from pincal.outputs import file_sha256
 from pincal.report.effects_file import remove_effects_file
 from pincal.report.model import Finding as FindingJson
 from pincal.report.model import findings_json
+from pincal.workflows.settings import CalibrateSettings, default_selection
 
 __all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withholding", "withhold", "urdf_line",
            "write_checked_urdf", "unmodelled_notes", "diagnose_command"]
