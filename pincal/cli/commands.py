@@ -364,7 +364,7 @@ def _run_report(args: argparse.Namespace) -> int:
 
 
 def _run_example(args: argparse.Namespace) -> int:
-    from pincal.cli.example import EXAMPLES, copy_example
+    from pincal.workflows.example import EXAMPLES, copy_example
 
     target, files = copy_example(args.name, args.out)
     print(f"wrote {target}: {EXAMPLES[args.name]}")

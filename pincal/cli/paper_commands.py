@@ -1,6 +1,6 @@
 """What ``pincal simulate``, ``demo`` and ``study`` print: the commands of the paper's experiment
 (Franaszek & Marvel 2022) and its simulation study, over :mod:`pincal.workflows.simulation`,
-:mod:`pincal.cli.demo` and :mod:`pincal.study.run`."""
+:mod:`pincal.workflows.demo` and :mod:`pincal.study.run`."""
 
 from __future__ import annotations
 
@@ -29,8 +29,8 @@ def simulate_command(args: argparse.Namespace) -> int:
 
 
 def demo_command(args: argparse.Namespace) -> int:
-    from pincal.cli.demo import run_demo
     from pincal.simulation.paper import SimulationSettings
+    from pincal.workflows.demo import run_demo
 
     settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=args.seed)
     print("KUKA LWR 4+ (Table 1), ground truth = Table 1 + large deviations (Table 2),")

@@ -266,15 +266,15 @@ def evaluate_files(
         index[members] = s
         if reported is None:
             q, drift = corrections.get("q"), corrections.get("drift")
-            sigma_pos = report.noise.get("sigma_pos_mm")
-            sigma_rot = report.noise.get("sigma_rot_deg")
+            sigma_pos_mm = report.noise.get("sigma_pos_mm")
+            sigma_rot_deg = report.noise.get("sigma_rot_deg")
             registration = register_session(
                 chain, data.select(members), report.points, report.rotation,
                 q=None if q is None else q[members], sensor_scale=corrections.get("sensor_scale", 0.0),
                 drift=None if drift is None else drift[members],
                 conditions=None if applied.conditions is None else applied.conditions.select(members),
-                sigma_pos_m=sigma_pos / 1000.0 if sigma_pos else 1e-3,
-                sigma_rot_rad=np.radians(sigma_rot) if sigma_rot else 1e-3,
+                sigma_pos_m=sigma_pos_mm / 1000.0 if sigma_pos_mm else 1e-3,
+                sigma_rot_rad=np.radians(sigma_rot_deg) if sigma_rot_deg else 1e-3,
             )
             reported = (REESTIMATED, registration, registration)
         sources.append(reported[0])

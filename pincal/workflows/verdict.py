@@ -153,12 +153,12 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
     )
 
 
-def unmodelled_notes(result, reach: float, stated_sigma_pos_m: float | None, command: str | None = None
+def unmodelled_notes(result, reach_m: float, stated_sigma_pos_m: float | None, command: str | None = None
                      ) -> list[str]:
-    """The note on a model ``result`` (of a robot of ``reach`` [m]) that likely lacks an effect
+    """The note on a model ``result`` (of a robot of ``reach_m`` [m]) that likely lacks an effect
     (:func:`pincal.fit.plausibility.unmodelled_reason`), or none: with the ``pincal diagnose`` ``command``
     to run (calibrate's), else (diagnose's final model) that the effects diagnose tries do not explain it."""
-    reason = unmodelled_reason(result, reach, stated_sigma_pos_m)
+    reason = unmodelled_reason(result, reach_m, stated_sigma_pos_m)
     if reason is None:
         return []
     if command is None:
