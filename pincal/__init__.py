@@ -36,6 +36,16 @@ _DEFINED_IN = {
     "pincal.model.parameter_sets": ("JointOffsets", "PlacementErrors"),
     "pincal.model.sensor": ("Registration",),
     "pincal.simulation.paper": ("SimulatedExperiment", "SimulationSettings", "simulate_experiment"),
+    # the file-level jobs of the commands, each taking paths and a settings value
+    "pincal.workflows.settings": ("CalibrateSettings", "DiagnoseSettings", "EvaluateSettings"),
+    "pincal.workflows.calibration": ("CalibrationRun", "calibrate_files"),
+    "pincal.workflows.diagnosis": ("DiagnoseRun", "diagnose_files"),
+    "pincal.workflows.evaluation": ("Evaluation", "SessionEvaluation", "evaluate_files"),
+    "pincal.workflows.fixture": ("FixtureRun", "FixtureEvaluation", "calibrate_fixture_files",
+                                 "evaluate_fixture_files"),
+    "pincal.workflows.preparation": ("PlanRun", "plan_files", "urdf_from_dh_file"),
+    "pincal.workflows.extract": ("BagRead", "extract_file"),
+    "pincal.workflows.simulation": ("simulate_to_directory",),
 }
 
 if TYPE_CHECKING:  # what static analysers see; at run time the names come from __getattr__
@@ -85,6 +95,19 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         SimulationSettings,
         simulate_experiment,
     )
+    from pincal.workflows.calibration import CalibrationRun, calibrate_files
+    from pincal.workflows.diagnosis import DiagnoseRun, diagnose_files
+    from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files
+    from pincal.workflows.extract import BagRead, extract_file
+    from pincal.workflows.fixture import (
+        FixtureEvaluation,
+        FixtureRun,
+        calibrate_fixture_files,
+        evaluate_fixture_files,
+    )
+    from pincal.workflows.preparation import PlanRun, plan_files, urdf_from_dh_file
+    from pincal.workflows.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
+    from pincal.workflows.simulation import simulate_to_directory
 
 __all__ = [
     "__version__",
@@ -146,6 +169,26 @@ __all__ = [
     "read_bag",
     "extract_postures",
     "PlateauSettings",
+    "CalibrateSettings",
+    "DiagnoseSettings",
+    "EvaluateSettings",
+    "CalibrationRun",
+    "calibrate_files",
+    "DiagnoseRun",
+    "diagnose_files",
+    "Evaluation",
+    "SessionEvaluation",
+    "evaluate_files",
+    "FixtureRun",
+    "FixtureEvaluation",
+    "calibrate_fixture_files",
+    "evaluate_fixture_files",
+    "PlanRun",
+    "plan_files",
+    "urdf_from_dh_file",
+    "BagRead",
+    "extract_file",
+    "simulate_to_directory",
 ]
 
 _DEFINED_IN.update({"pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),

@@ -219,9 +219,9 @@ def test_evaluate_refuses_a_urdf_the_report_does_not_describe(tmp_path, simulate
 
 
 def test_reloaded_corrected_urdf_reproduces_calibrated_fk(tmp_path, simulated, kuka_urdf):
-    from pincal.cli.settings import CalibrateSettings
-    from pincal.cli.workflows import calibrate_files
     from pincal.measurements.csv_v1 import read_measurements
+    from pincal.workflows.calibration import calibrate_files
+    from pincal.workflows.settings import CalibrateSettings
 
     tool = json.loads((simulated / "truth.json").read_text())["tool"]
     pose = pose_from_xyz_rpy(tool["xyz_m"], tool["rpy_rad"])

@@ -57,7 +57,7 @@ def test_every_blas_the_run_loads_gets_one_thread():
     calibrate's modules load comes after it. The processes ask for 4 BLAS threads (``OPENBLAS_NUM_THREADS``),
     so the limit shows on a 1-core machine too; the same modules loaded without it keep more than one."""
     template = ("import json, contextlib\nfrom threadpoolctl import threadpool_info\nfrom pincal.cli import commands\n"
-                "with {limit}:\n    import pincal.cli.workflows\n"
+                "with {limit}:\n    import pincal.workflows.calibration\n"
                 "    pools = [(i['filepath'], i['num_threads'])\n"
                 "             for i in threadpool_info() if i['user_api'] == 'blas']\n"
                 "print(json.dumps(pools))")

@@ -15,8 +15,8 @@ import pytest
 import tomllib
 
 from pincal.cli.commands import main
-from pincal.cli.example import EXAMPLES, dataset_folder
 from pincal.robots import example_robot_data_urdf
+from pincal.workflows.example import EXAMPLES, dataset_folder
 
 ROOT = Path(__file__).resolve().parent.parent
 DATASETS = ROOT / "pincal" / "datasets"

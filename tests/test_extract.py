@@ -18,6 +18,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
+from pincal.errors import MeasurementError
 from pincal.measurements.bags import POINT, TF, TRANSFORM, read_bag, write_bag
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.measurements.plateaus import extract_postures, still_stretches
@@ -337,3 +338,22 @@ def test_a_joint_named_as_a_column_is_refused(chain, tmp_path, capsys, name):
     assert main(["extract", str(bag), "--joints", "/joint_states", "--pose", recording.measurements[0].topic,
                  "--out", str(out)]) == 2
     assert f"joint '{name}' has the name of a column" in _only_line(capsys) and not out.exists()
+
+
+def test_the_python_workflow_writes_what_the_command_writes(small_bag, tmp_path, capsys):
+    """``pincal.extract_file`` (the job behind ``pincal extract``) writes the command's file byte for byte,
+    prints nothing, and a recording that leaves no posture raises with nothing written."""
+    from pincal import PlateauSettings, extract_file
+
+    by_command, by_call = tmp_path / "command.csv", tmp_path / "call.csv"
+    assert main(["extract", str(small_bag), "--joints", "/joint_states", "--pose", "/tracker/pose",
+                 "--out", str(by_command)]) == 0
+    capsys.readouterr()
+    read, extraction = extract_file(small_bag, "/joint_states", ["/tracker/pose"], by_call, pose=True)
+    assert capsys.readouterr() == ("", "")
+    assert by_call.read_bytes() == by_command.read_bytes()
+    assert extraction.data is not None and extraction.data.n_rows == 4 and read.joints.topic == "/joint_states"
+    none = tmp_path / "none.csv"
+    with pytest.raises(MeasurementError, match="no static posture left to write"):
+        extract_file(small_bag, "/joint_states", ["/tracker/pose"], none, PlateauSettings(min_still=10.0), pose=True)
+    assert not none.exists()

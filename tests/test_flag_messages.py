@@ -21,11 +21,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 #: listed here (pincal/report/, pincal/model/ …) is shared, and its flags are checked against every command.
 PRINTED_BY = {
     "cli/extract.py": {"extract"},
+    "workflows/extract.py": {"extract"},
     "measurements/bags.py": {"extract"},
     "measurements/plateaus.py": {"extract"},
-    "cli/evaluation.py": {"evaluate"},
+    "workflows/evaluation.py": {"evaluate"},
     "cli/fixture.py": {"calibrate", "evaluate"},
-    "cli/settings.py": {"calibrate", "diagnose", "evaluate", "plan"},
+    "workflows/fixture.py": {"calibrate", "evaluate"},
+    "workflows/settings.py": {"calibrate", "diagnose", "evaluate", "plan"},
     "measurements/couplings.py": {"calibrate", "diagnose", "evaluate"},
     "planning/": {"plan"},
     "diagnosis/": {"diagnose"},

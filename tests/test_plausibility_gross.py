@@ -1,5 +1,5 @@
 """No garbage URDF by default, and a note where something is unmodelled (pincal.fit.plausibility,
-pincal.cli.verdict).
+pincal.workflows.verdict).
 
 A model that misses its rows by more than 5 % of the robot's reach — x and y swapped, two joint
 columns swapped, another robot's URDF (an industrial arm of 2.2 m) — is no correction of the robot:
@@ -25,8 +25,6 @@ from conftest import unaccepted_flags
 
 from pincal.cli.commands import EXIT_WARNING, main
 from pincal.cli.parser import build_parser
-from pincal.cli.settings import CalibrateSettings
-from pincal.cli.verdict import diagnose_command
 from pincal.fit.plausibility import NOTE_NOISE_RATIO, gross_misfit, unmodelled_reason
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
@@ -40,6 +38,8 @@ from pincal.report.effects_file import effects_path
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.cells import measure_truth, sensor_at
 from pincal.simulation.sensor import random_configurations
+from pincal.workflows.settings import CalibrateSettings
+from pincal.workflows.verdict import diagnose_command
 
 SIGMA_POS_MM = 0.02
 TOOL = (0.03, -0.02, 0.18, 0.0, 0.0, 0.0)  # the target on the flange [m, rad]

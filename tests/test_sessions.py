@@ -19,7 +19,6 @@ from conftest import assert_close, numeric_jacobian
 from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
-from pincal.cli.evaluation import REESTIMATED, SessionEvaluation
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.sessions import initial_target, register_session, session_pose_errors
@@ -36,6 +35,7 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.sensor import measure, random_configurations
+from pincal.workflows.evaluation import REESTIMATED, SessionEvaluation
 
 URDF = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 TIP = "tool0"

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from pincal.cli.commands import main
-from pincal.cli.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
 from pincal.errors import PincalError
 from pincal.fit.prior import Prior
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from pincal.workflows.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
 
 TOOL = np.eye(4)
 
@@ -74,10 +74,10 @@ def test_settings_are_frozen_values_with_the_commands_defaults():
 
 
 def test_a_call_of_the_former_signature_is_refused_by_name(tmp_path):
-    from pincal.cli.evaluation import evaluate_files
-    from pincal.cli.workflows import calibrate_files
+    from pincal.workflows.calibration import calibrate_files
+    from pincal.workflows.evaluation import evaluate_files
 
-    with pytest.raises(TypeError, match="calibrate_files\\(\\) takes a pincal.cli.settings.CalibrateSettings"):
+    with pytest.raises(TypeError, match="calibrate_files\\(\\) takes a pincal.workflows.settings.CalibrateSettings"):
         calibrate_files("a.urdf", "d.csv", "o.urdf", "r.json", "tip")  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="EvaluateSettings after the paths, got bool"):
         evaluate_files("a.urdf", "r.json", "d.csv", True)  # type: ignore[arg-type]

@@ -288,8 +288,8 @@ def test_evaluate_gives_each_row_the_steps_of_its_segment_or_the_nearest():
     """A row takes the steps of the pauses of its session before it: in a gap, the segment before; before
     the first fitted row, the first segment; after the last, the last — those two counted as outside, and
     said once; a row of a re-estimated registration (None) takes the session nearest its median time."""
-    from pincal.cli.conditions import applied_conditions
     from pincal.measurements.data import MeasurementSet
+    from pincal.workflows.conditions import applied_conditions
 
     time = np.array([-50.0, 0.0, 500.0, 4000.0, 9000.0, 20000.0])
     data = MeasurementSet(joint_names=("j",), q=np.zeros((6, 1)), points=np.zeros((6, 1, 3)), rotations=None,
@@ -333,7 +333,7 @@ def test_report_forms_and_the_flags():
         assert back == effect and np.array_equal(read, values)
     assert effect_to_dict(Effect("pause_step", pause=2), np.zeros(3))["pause"] == 2
     assert value_unit("thermal") == "1/K" and Effect("pause_step", pause=1).label == "pause_step:1"
-    from pincal.cli.settings import DiagnoseSettings
+    from pincal.workflows.settings import DiagnoseSettings
 
     with pytest.raises(PincalError, match="--pause-s must be a positive number of seconds"):
         DiagnoseSettings(tip_link="flange", pause_s=float("nan"))

@@ -90,10 +90,10 @@ def test_a_time_or_sigma_column_in_some_session_files_only_is_named(tmp_path):
 def test_a_pause_or_span_whose_session_is_not_a_name_is_refused_by_its_key(key, index, session):
     """A REPORT.json `pauses` or `pause_spans_s` entry whose session is not a name would apply to no row
     (str(3) = '3' names no session): refused in one line naming the key; the well-formed report applies."""
-    from pincal.cli.conditions import applied_conditions
     from pincal.measurements.data import MeasurementSet
     from pincal.model.drift import read_time_spans
     from pincal.model.effects import Effect
+    from pincal.workflows.conditions import applied_conditions
 
     time = np.array([0.0, 500.0, 4000.0])
     data = MeasurementSet(joint_names=("j",), q=np.zeros((3, 1)), points=np.zeros((3, 1, 3)), rotations=None,
@@ -143,9 +143,9 @@ def test_temperature_column_for_a_report_without_thermal_expansion_is_refused():
     """evaluate --temperature-column on a report without a thermal effect would change nothing: refused in one
     line naming the flag and the report, as evaluate refuses --nominal without --fixture (with --fixture:
     tests/test_fixture.py). Without the flag, or with a thermal effect, it applies."""
-    from pincal.cli.conditions import applied_conditions
     from pincal.measurements.data import MeasurementSet
     from pincal.model.effects import Effect
+    from pincal.workflows.conditions import applied_conditions
 
     data = MeasurementSet(joint_names=("j",), q=np.zeros((2, 1)), points=np.zeros((2, 1, 3)), rotations=None,
                           roles=np.array(["validation"] * 2, dtype=object), lines=np.arange(2, 4),

@@ -1,5 +1,5 @@
-"""The ``pincal`` command line and the file-level workflows behind it (read, fit,
-write, check). The top layer: nothing in pincal imports it.
+"""The ``pincal`` command line: it parses the arguments, runs one workflow of
+:mod:`pincal.workflows` and prints what it returns. The top layer: nothing in pincal imports it.
 """
 
 from pincal.cli.commands import console, main

@@ -75,11 +75,11 @@ def selection_criterion(args: argparse.Namespace) -> str:
     select = args.select
     level = getattr(args, "level", None) or ("dh" if getattr(args, "method", None) is not None else None)
     if level in ("registration", "dh") and (select == "prior" or scale is not None):
-        from pincal.cli.settings import no_prior
+        from pincal.workflows.settings import no_prior
 
         raise no_prior("--select prior" if select == "prior" else "--prior-scale", level)
     if select is None:  # the default: the prior wherever kinematic parameters are fitted (docs/defaults.md)
-        from pincal.cli.settings import default_selection
+        from pincal.workflows.settings import default_selection
 
         select = str(default_selection(level))
     if select != "prior":

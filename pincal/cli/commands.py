@@ -1,10 +1,10 @@
-"""The ``pincal`` command line: a thin layer over :mod:`pincal.cli.workflows`.
+"""The ``pincal`` command line: a thin layer over :mod:`pincal.workflows`.
 
 The arguments are defined in :mod:`pincal.cli.parser`. Every user error is
 printed as one line ``pincal: error: ...`` with exit code 2; ``pincal
 evaluate`` exits 1 when a threshold is exceeded; ``calibrate`` and ``diagnose``
 exit 3 when their model misses its rows grossly and the corrected URDF is
-withheld (:mod:`pincal.cli.verdict`), and any of the three with ``--strict``
+withheld (:mod:`pincal.workflows.verdict`), and any of the three with ``--strict``
 and a warning.
 """
 
@@ -39,7 +39,7 @@ def _print_notes(notes: Sequence[str]) -> None:
 
 def _warned(report: Mapping[str, Any], strict: bool, withheld: bool = False) -> int:
     """Print REPORT.json's ``warnings`` on stderr; the exit code: 3 with ``strict`` and a warning, or when
-    the corrected URDF was ``withheld`` (a gross misfit: pincal.cli.verdict), else 0."""
+    the corrected URDF was ``withheld`` (a gross misfit: pincal.workflows.verdict), else 0."""
     warnings = report.get("warnings") or []
     for warning in warnings:
         print(f"pincal: warning: {warning['message']}", file=sys.stderr)
@@ -48,8 +48,8 @@ def _warned(report: Mapping[str, Any], strict: bool, withheld: bool = False) -> 
 
 def _run_calibrate(args: argparse.Namespace) -> int:
     from pincal.cli.progress import progress_bar
-    from pincal.cli.settings import CalibrateSettings
-    from pincal.cli.workflows import calibrate_files
+    from pincal.workflows.calibration import calibrate_files
+    from pincal.workflows.settings import CalibrateSettings
 
     if args.fixture is not None:  # socket-fixture data, no sensor
         from pincal.cli.fixture import run_calibrate
@@ -96,7 +96,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         print(before_after)
     for session in several:
         print(f"{'  session ' + session.name:24s} {error_columns(session.errors)}")
-    from pincal.cli.verdict import urdf_line
+    from pincal.workflows.verdict import urdf_line
 
     print(urdf_line(args.out, run.withheld, run.reload_error))
     print(f"wrote {args.report}")
@@ -151,7 +151,7 @@ def _registration_text(registration) -> str:
 
 def _description_inputs(args: argparse.Namespace) -> list:
     """The run's URDF and, for a .xacro, the files it includes: outputs must overwrite none of them."""
-    from pincal.cli.paths import description_inputs
+    from pincal.workflows.paths import description_inputs
 
     return description_inputs(args.urdf, args.xacro_args)
 
@@ -159,7 +159,7 @@ def _description_inputs(args: argparse.Namespace) -> list:
 def _check_html(html, *inputs, outputs=()) -> None:
     """Refuse an ``--html`` path that is an input or another output, before the run."""
     if html is not None:
-        from pincal.cli.paths import refuse_overwrite
+        from pincal.workflows.paths import refuse_overwrite
 
         refuse_overwrite(html, *[i for i in inputs if i is not None], outputs=[o for o in outputs if o is not None])
 
@@ -202,8 +202,8 @@ def _print_chain_summary(run) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    from pincal.cli.settings import EvaluateSettings
-    from pincal.cli.workflows import evaluate_files
+    from pincal.workflows.evaluation import evaluate_files
+    from pincal.workflows.settings import EvaluateSettings
 
     if args.fixture is not None:
         from pincal.cli.fixture import run_evaluate
@@ -240,8 +240,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
               "fitted to these rows; after: the calibrated model, registrations as above)")
     document = evaluation.as_dict()  # evaluate --json; its warnings are printed and shown as such
     if args.json:
-        from pincal.cli.paths import refuse_overwrite
         from pincal.report.document import write_evaluation
+        from pincal.workflows.paths import refuse_overwrite
 
         refuse_overwrite(args.json, *_description_inputs(args), args.report, args.data)
         write_evaluation(args.json, document)
@@ -274,9 +274,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 def _run_diagnose(args: argparse.Namespace) -> int:
     from pincal.cli.level_table import prior_scale_line
     from pincal.cli.progress import progress_bar
-    from pincal.cli.settings import DiagnoseSettings
-    from pincal.cli.workflows import diagnose_files
     from pincal.model.thermal import shown
+    from pincal.workflows.diagnosis import diagnose_files
+    from pincal.workflows.settings import DiagnoseSettings
 
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
     settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
@@ -342,7 +342,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
             print(line)
     for path in run.plots:
         print(f"wrote {path}")
-    from pincal.cli.verdict import urdf_line
+    from pincal.workflows.verdict import urdf_line
 
     print(f"{urdf_line(args.out, run.withheld)}\n"
           f"wrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
@@ -352,9 +352,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
 
 
 def _run_report(args: argparse.Namespace) -> int:
-    from pincal.cli.paths import refuse_overwrite
     from pincal.report.html import write_html
     from pincal.report.reading import PAGE_KINDS, load_report
+    from pincal.workflows.paths import refuse_overwrite
 
     document = load_report(args.document, PAGE_KINDS)
     refuse_overwrite(args.out, args.document)
@@ -364,7 +364,7 @@ def _run_report(args: argparse.Namespace) -> int:
 
 
 def _run_example(args: argparse.Namespace) -> int:
-    from pincal.cli.example import EXAMPLES, copy_example
+    from pincal.workflows.example import EXAMPLES, copy_example
 
     target, files = copy_example(args.name, args.out)
     print(f"wrote {target}: {EXAMPLES[args.name]}")
@@ -379,8 +379,8 @@ def _run_example(args: argparse.Namespace) -> int:
 
 
 def _run_urdf_from_dh(args: argparse.Namespace) -> int:
-    from pincal.cli.preparation import urdf_from_dh_file
     from pincal.model.dh.urdf import DH_BASE_LINK, DH_FLANGE_LINK
+    from pincal.workflows.preparation import urdf_from_dh_file
 
     run = urdf_from_dh_file(args.table, args.convention, args.out, name=args.name, degrees=args.degrees,
                             flange=args.flange)

@@ -1,6 +1,6 @@
 """What ``pincal simulate``, ``demo`` and ``study`` print: the commands of the paper's experiment
-(Franaszek & Marvel 2022) and its simulation study, over :mod:`pincal.cli.workflows`,
-:mod:`pincal.cli.demo` and :mod:`pincal.study.run`."""
+(Franaszek & Marvel 2022) and its simulation study, over :mod:`pincal.workflows.simulation`,
+:mod:`pincal.workflows.demo` and :mod:`pincal.study.run`."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ __all__ = ["simulate_command", "demo_command", "study_command"]
 def simulate_command(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from pincal.cli.workflows import simulate_to_directory
     from pincal.simulation.paper import SimulationSettings
+    from pincal.workflows.simulation import simulate_to_directory
 
     settings = SimulationSettings(sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, seed=args.seed)
     experiment, truth = simulate_to_directory(args.out, args.deviations, settings, effects=args.effect)
@@ -29,8 +29,8 @@ def simulate_command(args: argparse.Namespace) -> int:
 
 
 def demo_command(args: argparse.Namespace) -> int:
-    from pincal.cli.demo import run_demo
     from pincal.simulation.paper import SimulationSettings
+    from pincal.workflows.demo import run_demo
 
     settings = SimulationSettings(sigma_pos_mm=0.055, sigma_rot_deg=0.055, seed=args.seed)
     print("KUKA LWR 4+ (Table 1), ground truth = Table 1 + large deviations (Table 2),")
@@ -51,10 +51,10 @@ def demo_command(args: argparse.Namespace) -> int:
 
 
 def study_command(args: argparse.Namespace) -> int:
-    from pincal.cli.paths import ensure_directory
     from pincal.cli.progress import progress_bar
     from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
     from pincal.study.run import StudyConfig, run_study, write_study
+    from pincal.workflows.paths import ensure_directory
 
     ensure_directory(args.out)  # before the run, not after it
     config = StudyConfig(levels=args.levels, repeats=args.reps, restarts=args.restarts,

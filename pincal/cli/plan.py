@@ -1,5 +1,5 @@
 """``pincal plan``: what it prints — the choice, the prediction against random choices, what is
-identifiable and the visiting order (the planning itself: :func:`pincal.cli.preparation.plan_files`)."""
+identifiable and the visiting order (the planning itself: :func:`pincal.workflows.preparation.plan_files`)."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ __all__ = ["run_plan", "print_plan_summary"]
 
 def run_plan(args: argparse.Namespace) -> int:
     """``pincal plan``: choose, write PLAN.csv and PLAN.json, print the summary; the exit code."""
-    from pincal.cli.preparation import plan_files
     from pincal.cli.progress import progress_bar
     from pincal.planning.planner import PlanSettings
+    from pincal.workflows.preparation import plan_files
 
     settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
                             sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,

@@ -4,5 +4,5 @@
 socket-fixture sessions of a KUKA LBR iiwa 14 and a Franka Panda; ``lwr_bag``: a simulated KUKA
 LWR 4+ session recorded as a ROS 2 bag (``scripts/make_example_bag.py``), for ``pincal extract``. In
 a clone they are also under ``data/`` (a link to this folder); after ``pip install``, ``pincal
-example NAME --out DIR`` copies one out (:mod:`pincal.cli.example`).
+example NAME --out DIR`` copies one out (:mod:`pincal.workflows.example`).
 """

@@ -1,4 +1,4 @@
-"""PLAN.csv and PLAN.json, the files of ``pincal plan`` (its workflow: :mod:`pincal.cli.preparation`).
+"""PLAN.csv and PLAN.json, the files of ``pincal plan`` (its workflow: :mod:`pincal.workflows.preparation`).
 
 PLAN.csv has one row per chosen configuration in visiting order: the joint
 columns (CSV v1 names, rad or m), then ``priority`` (1 = the configuration

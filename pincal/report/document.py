@@ -20,7 +20,7 @@ Keys promised to users (never renamed, only extended):
 * ``fit``: stages, row counts and the errors (eq 24) on the calibration rows;
 * ``urdf_sha256``: SHA-256 of the corrected URDF written with the report (the
   bytes written; of a URDF withheld for a gross misfit, the bytes ``--force``
-  writes: :mod:`pincal.cli.verdict`), so ``pincal evaluate`` can tell the pair
+  writes: :mod:`pincal.workflows.verdict`), so ``pincal evaluate`` can tell the pair
   apart from a URDF of another run;
 * ``xacro_args``: ``{NAME: VALUE}`` the ``.xacro`` URDF was expanded with
   (``--xacro-arg``; ``{}`` for a URDF file or the xacro's defaults);

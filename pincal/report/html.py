@@ -138,7 +138,7 @@ def _summary(doc: dict, evaluation: dict | None) -> dict[str, Any]:
 def evaluated_sessions(evaluation: dict | None) -> list[dict[str, Any]]:
     """Each evaluated session (``evaluate --json`` ``sessions``): its rows, where its registration
     came from, and — re-estimated — its residuals, degrees of freedom left and the factor
-    sqrt((N − 6) / N) its errors understate the true error by (pincal/cli/evaluation.py)."""
+    sqrt((N − 6) / N) its errors understate the true error by (pincal/workflows/evaluation.py)."""
     out = []
     for entry in (evaluation or {}).get("sessions") or []:
         if not isinstance(entry, dict):

@@ -30,7 +30,7 @@ and ``drift`` in ``--json`` records it.
 
 A ``thermal`` expansion and ``pause_step`` effects are never extrapolated either: a row outside
 the fitted temperature range is held at its nearer end, a row outside the fitted time span takes
-its nearest segment (:mod:`pincal.cli.conditions`).
+its nearest segment (:mod:`pincal.workflows.conditions`).
 
 Re-estimated means only its 6 parameters, with the model and the target fixed
 (:func:`pincal.fit.sessions.register_session`), on the evaluated rows: those
@@ -50,8 +50,6 @@ from typing import cast
 
 import numpy as np
 
-from pincal.cli.conditions import applied_conditions
-from pincal.cli.settings import EvaluateSettings, expect
 from pincal.errors import PincalError
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.plausibility import Finding, check_evaluation
@@ -72,6 +70,8 @@ from pincal.report.document import ReportModel, read_report
 from pincal.report.model import TimeSpanJson, errors_json, findings_json, registration_pair
 from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationJson, PauseStepUse, ThermalUse
 from pincal.report.sessions import session_errors
+from pincal.workflows.conditions import applied_conditions
+from pincal.workflows.settings import EvaluateSettings, expect
 
 __all__ = [
     "REESTIMATED", "REGISTRATION_PARAMETERS", "MIN_THRESHOLD_DOF", "THE_REGISTRATION", "HELD_DRIFT",
@@ -157,7 +157,7 @@ class Evaluation:
     # and its URDF; None where the report's sources.urdf is not readable here (before -> after)
     nominal_rms_mm: float | None = None
     nominal_urdf: str | None = None
-    thermal: ThermalUse | None = None  # how the report's thermal expansion was applied (pincal.cli.conditions)
+    thermal: ThermalUse | None = None  # how the report's thermal expansion was applied (pincal.workflows.conditions)
     pause_steps: PauseStepUse | None = None  # ... and its pause steps
     warnings: tuple[Finding, ...] = ()  # the evaluated error against the calibration's (check_evaluation)
 
@@ -195,7 +195,7 @@ def evaluate_files(
 ) -> Evaluation:
     """Eq 24 on every non-CPA row of ``data_path`` with the model of a report, each
     session through the registration the module's rule gives it (``settings``:
-    :class:`pincal.cli.settings.EvaluateSettings`; None: its defaults).
+    :class:`pincal.workflows.settings.EvaluateSettings`; None: its defaults).
 
     When the report records the SHA-256 of the URDF written with it
     (``urdf_sha256``), ``urdf`` must be that file — a run killed between
@@ -266,15 +266,15 @@ def evaluate_files(
         index[members] = s
         if reported is None:
             q, drift = corrections.get("q"), corrections.get("drift")
-            sigma_pos = report.noise.get("sigma_pos_mm")
-            sigma_rot = report.noise.get("sigma_rot_deg")
+            sigma_pos_mm = report.noise.get("sigma_pos_mm")
+            sigma_rot_deg = report.noise.get("sigma_rot_deg")
             registration = register_session(
                 chain, data.select(members), report.points, report.rotation,
                 q=None if q is None else q[members], sensor_scale=corrections.get("sensor_scale", 0.0),
                 drift=None if drift is None else drift[members],
                 conditions=None if applied.conditions is None else applied.conditions.select(members),
-                sigma_pos_m=sigma_pos / 1000.0 if sigma_pos else 1e-3,
-                sigma_rot_rad=np.radians(sigma_rot) if sigma_rot else 1e-3,
+                sigma_pos_m=sigma_pos_mm / 1000.0 if sigma_pos_mm else 1e-3,
+                sigma_rot_rad=np.radians(sigma_rot_deg) if sigma_rot_deg else 1e-3,
             )
             reported = (REESTIMATED, registration, registration)
         sources.append(reported[0])

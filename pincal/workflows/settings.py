@@ -4,7 +4,7 @@ The command line builds one of these from its flags (:mod:`pincal.cli.commands`)
 build one directly. Every check of the flags' meaning together — a level and a method, a prior
 at a level without kinematic parameters, a stated noise — is made here, when the object is
 made, with the one-line message the command prints; the workflows of
-:mod:`pincal.cli.workflows` take the object and the paths and check nothing of it again.
+:mod:`pincal.workflows` take the object and the paths and check nothing of it again.
 ``plan`` has its own (:class:`pincal.planning.planner.PlanSettings`).
 """
 
@@ -39,7 +39,7 @@ def expect(settings, kind: type, function: str) -> None:
     """Refuse, with a TypeError naming the class, a workflow call whose ``settings`` is not a ``kind``
     (a script written for the former signature, which took each setting as its own argument)."""
     if not isinstance(settings, kind):
-        raise TypeError(f"{function}() takes a pincal.cli.settings.{kind.__name__} after the paths, got "
+        raise TypeError(f"{function}() takes a pincal.workflows.settings.{kind.__name__} after the paths, got "
                         f"{type(settings).__name__} (changed in this version: build the settings object)")
 
 

@@ -8,13 +8,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pincal.cli.evaluation import evaluate_files
-from pincal.cli.settings import CalibrateSettings
-from pincal.cli.workflows import calibrate_files, simulate_to_directory
 from pincal.fit.metrics import PoseErrors, pose_errors
 from pincal.fit.registration import register_orientations, register_points
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
+from pincal.workflows.calibration import calibrate_files
+from pincal.workflows.evaluation import evaluate_files
+from pincal.workflows.settings import CalibrateSettings
+from pincal.workflows.simulation import simulate_to_directory
 
 if TYPE_CHECKING:
     from pincal.simulation.paper import SimulatedExperiment, SimulationSettings

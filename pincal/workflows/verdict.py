@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.cli.settings import CalibrateSettings, default_selection
 from pincal.errors import CalibrationError
 from pincal.fit.plausibility import UNMODELLED_CAUSES, Finding, tip_link_findings, tip_link_verdict, unmodelled_reason
 from pincal.fit.prior import Prior
@@ -37,6 +36,7 @@ from pincal.outputs import file_sha256
 from pincal.report.effects_file import remove_effects_file
 from pincal.report.model import Finding as FindingJson
 from pincal.report.model import findings_json
+from pincal.workflows.settings import CalibrateSettings, default_selection
 
 __all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withholding", "withhold", "urdf_line",
            "write_checked_urdf", "unmodelled_notes", "diagnose_command"]
@@ -153,12 +153,12 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
     )
 
 
-def unmodelled_notes(result, reach: float, stated_sigma_pos_m: float | None, command: str | None = None
+def unmodelled_notes(result, reach_m: float, stated_sigma_pos_m: float | None, command: str | None = None
                      ) -> list[str]:
-    """The note on a model ``result`` (of a robot of ``reach`` [m]) that likely lacks an effect
+    """The note on a model ``result`` (of a robot of ``reach_m`` [m]) that likely lacks an effect
     (:func:`pincal.fit.plausibility.unmodelled_reason`), or none: with the ``pincal diagnose`` ``command``
     to run (calibrate's), else (diagnose's final model) that the effects diagnose tries do not explain it."""
-    reason = unmodelled_reason(result, reach, stated_sigma_pos_m)
+    reason = unmodelled_reason(result, reach_m, stated_sigma_pos_m)
     if reason is None:
         return []
     if command is None:

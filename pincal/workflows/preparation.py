@@ -1,7 +1,7 @@
 """File-level workflows of the commands that come before a calibration: urdf-from-dh and plan.
 
 Each function takes paths and options, checks the outputs
-(:func:`pincal.cli.paths.refuse_overwrite`), does the whole job and returns
+(:func:`pincal.workflows.paths.refuse_overwrite`), does the whole job and returns
 what happened; :mod:`pincal.cli.commands` prints it.
 """
 
@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.cli.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.errors import PincalError
 from pincal.fit.plausibility import tip_link_findings
 from pincal.measurements.couplings import ReadingCoupling, corrected_angles, readings_of
@@ -26,6 +25,7 @@ from pincal.planning.collisions import Clearance, check_clearance
 from pincal.planning.files import PlanJson, PlanSources, plan_document, write_plan_csv, write_plan_json
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
 from pincal.progress import Progress, Stages
+from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 
 __all__ = ["urdf_from_dh_file", "PlanRun", "plan_files"]
 

@@ -1,0 +1,178 @@
+"""``pincal diagnose``'s job: calibrate as a :class:`~pincal.workflows.settings.DiagnoseSettings`
+says, search the residuals for effects the geometry lacks (:func:`pincal.diagnosis.diagnose.diagnose`),
+write the final model's URDF, effects.yaml, REPORT.json and plots (:func:`diagnose_files`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from pincal._version import __version__
+from pincal.errors import PincalError
+from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+from pincal.fit.plausibility import calibration_findings, reach_m
+from pincal.fit.sessions import session_rows
+from pincal.measurements.couplings import apply_couplings
+from pincal.measurements.csv_v1 import read_measurements, read_sessions
+from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
+from pincal.model.description import xacro_arguments
+from pincal.model.drift import TIME_COLUMNS, time_column
+from pincal.progress import Progress, Stages
+from pincal.report.diagnosis import diagnosis_report
+from pincal.report.document import chain_head, fit_rows, write_report
+from pincal.report.effects_file import effects_path, write_effects_file
+from pincal.report.model import Sources, couplings_part, level_choice_part
+from pincal.report.model_diagnosis import DiagnosisReport
+from pincal.report.row_errors import diagnosis_row_errors
+from pincal.report.sessions import drift_spans, session_entries
+from pincal.workflows.calibration import unfitted_sessions
+from pincal.workflows.paths import (
+    description_inputs,
+    ensure_directory,
+    input_paths,
+    refuse_overwrite,
+    refuse_overwrite_matching,
+)
+from pincal.workflows.settings import DiagnoseSettings, expect
+from pincal.workflows.verdict import judged, unmodelled_notes, withhold, write_checked_urdf
+
+if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
+    from pincal.diagnosis.diagnose import Diagnosis
+    from pincal.fit.level_choice import LevelChoice
+
+__all__ = ["DiagnoseRun", "diagnose_files"]
+
+
+@dataclass(frozen=True)
+class DiagnoseRun:
+    """Outcome of :func:`diagnose_files` (``effects_file``: the effects.yaml written beside the URDF, or None;
+    ``withheld``: the final model misses its rows grossly, the URDF and effects.yaml were not written)."""
+
+    calibration: ChainCalibration
+    diagnosis: Diagnosis
+    report: DiagnosisReport
+    notes: list[str]
+    plots: list[Path]
+    seconds: float
+    level_choice: LevelChoice | None = None
+    effects_file: Path | None = None
+    withheld: bool = False
+
+
+def diagnose_files(
+    urdf: str | Path,
+    data_path: str | Path | Sequence[str | Path],
+    out_urdf: str | Path,
+    report_path: str | Path,
+    settings: DiagnoseSettings,
+    validation_path: str | Path | None = None,
+    plots_dir: str | Path | None = None,
+    progress: Progress | None = None,
+) -> DiagnoseRun:
+    """Calibrate as ``settings`` say, search the residuals for missing effects, write the corrected
+    URDF, the report (with ``effects``), the plots (into ``plots_dir``; None: none) and, with effects or
+    couplings, the effects.yaml beside the URDF (:mod:`pincal.report.effects_file`); held-out
+    rows from ``validation_path``.
+    ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
+    Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
+    expect(settings, DiagnoseSettings, "diagnose_files")
+    tip_link, level, tool_pose, xacro_args = settings.tip_link, settings.level, settings.tool_pose, settings.xacro_args
+    sigma_column, selection, payload_kg = settings.sigma_column, settings.criterion, settings.payload_kg
+    time_column_name, sigma_pos_m = settings.time_column, settings.sigma_pos_m
+    from pincal.diagnosis.conditions import read_readings
+    from pincal.diagnosis.diagnose import diagnose
+    from pincal.fit.level_choice import choose_level
+
+    urdf, data_paths, out_urdf, report_path = Path(urdf), input_paths(data_path), Path(out_urdf), Path(report_path)
+    inputs = [*description_inputs(urdf, xacro_args), *data_paths] + ([Path(validation_path)] if validation_path else [])
+    refuse_overwrite(out_urdf, *inputs)
+    refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
+    if plots_dir is not None:  # the names pincal.diagnosis.plots gives its figures
+        refuse_overwrite_matching(plots_dir, "diagnose_*.png", *inputs)
+    if level == "dh":
+        raise PincalError("diagnose works on --level registration, offsets or full")
+    started = time.perf_counter()
+    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
+    # readings taken against another joint corrected (eq C1) before the joint limits are judged
+    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings, chain.other_branch_joints)
+    heldout = held_time = None
+    if validation_path:
+        heldout, held_notes = read_measurements(validation_path, chain.joint_specs, settings.couplings,
+                                                 chain.other_branch_joints)
+        notes += held_notes
+        held_time = time_column(heldout, time_column_name)
+    readings = read_readings(data, heldout, settings.temperature_column, settings.pause_s)  # thermal, pauses
+    nominal_placements = chain.placements()
+    stages = Stages(progress)
+    choice = None
+    if level == "auto":  # the geometric level by cross-validation of the geometric calibration
+        choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
+                              selection=selection, progress=stages.next())
+        level = choice.chosen
+    # the geometric calibration, made again by diagnose on readings it corrects (a joint read against another)
+    recalibrate = partial(calibrate_chain, chain, level=level, tool_known=tool_pose is not None,
+                          sigma_column=sigma_column, selection=selection, refit_offered=False)
+    calibration = recalibrate(data, progress=stages.next())
+    notes += unfitted_sessions(data, calibration.session_names)
+    row_time = time_column(data, time_column_name)
+    diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
+                         payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next(),
+                         readings=readings, recalibrate=recalibrate, couplings=settings.couplings,
+                         stated_sigma_pos_m=sigma_pos_m)
+    # the final model: on the readings corrected by the conventions diagnose found, from their calibration
+    data, calibration = apply_couplings(data, diagnosis.couplings), diagnosis.calibration or calibration
+    heldout = None if heldout is None else apply_couplings(heldout, diagnosis.couplings)
+    final = diagnosis.final_calibration()  # the model with its effects, as the report and its checks see it
+    used = data.select(calibration.used_index)
+    with chain.placed(final.chain_placements):  # judged: the final model, with the effects it adopted
+        verdict = judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
+                                                                 press_of=calibration, diagnosed=True), settings.force)
+        notes += verdict.notes + unmodelled_notes(final, reach_m(chain, used.q), sigma_pos_m)
+    _, urdf_sha256 = write_checked_urdf(
+        urdf, out_urdf, chain, final.chain_placements, nominal_placements, data.q,
+        f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
+        f"{', '.join(p.name for p in data_paths)}. "
+        "Registration, tool and effects (which a URDF cannot carry): see the report.", xacro_args,
+        keep=not verdict.withheld,
+    )
+    if verdict.withheld:
+        notes += withhold(out_urdf)
+    sources: Sources = {"urdf": str(urdf),
+                        "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
+                        "corrected_urdf": str(out_urdf),
+                        "validation": None if validation_path is None else str(validation_path)}
+    plots = []
+    if plots_dir is not None:
+        from pincal.diagnosis.plots import plot_diagnosis  # matplotlib only when drawing
+
+        plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
+    with chain.placed(final.chain_placements):  # the report describes the final model
+        head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
+        report = diagnosis_report(
+            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=verdict.warnings,
+            sessions=session_entries(final.session_names, final.target.registrations, used,
+                                     session_rows(used, final.session_names), diagnosis.calibration_errors),
+            time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)
+            row_errors=diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
+                                            (" + ".join(str(p) for p in data_paths),
+                                             None if validation_path is None else str(validation_path))),
+            urdf_sha256=urdf_sha256, xacro_args=dict(xacro_arguments(xacro_args)),
+            level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
+            couplings=couplings_part((*settings.couplings, *diagnosis.couplings)),
+        )
+    # what the URDF cannot carry, for a controller (nothing beside a withheld URDF)
+    effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)
+    write_report(report_path, report)
+    return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice,
+                       effects_file, verdict.withheld)
+
+
+def _time_name(data: MeasurementSet) -> str | None:
+    return next((n for n in TIME_COLUMNS if n in data.extra), None)

@@ -1,0 +1,84 @@
+"""``pincal extract``'s job: a ROS bag's joint and measurement topics read
+(:mod:`pincal.measurements.bags`), its static postures cut (:mod:`pincal.measurements.plateaus`) and
+written as CSV v1, whole or not at all, never over an input.
+
+In two steps, so a caller can say what was read before the cut (which may refuse the recording's
+clocks): :func:`read_bag_file`, then :func:`write_postures`; :func:`extract_file` runs both.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from pincal.errors import MeasurementError
+from pincal.measurements.bags import JointStream, MeasurementStream, read_bag
+from pincal.measurements.csv_v1 import write_measurements
+from pincal.measurements.plateaus import Extraction, PlateauSettings, extract_postures
+from pincal.workflows.paths import refuse_overwrite
+
+__all__ = ["BagRead", "bag_files", "read_bag_file", "no_rows_error", "write_postures", "extract_file"]
+
+
+@dataclass(frozen=True)
+class BagRead:
+    """What :func:`read_bag_file` read: the bag, its joint stream, its measurement streams and a note
+    for each thing left out or taken from the recorder (messages skipped, samples dropped, receive times)."""
+
+    bag: Path
+    joints: JointStream
+    streams: list[MeasurementStream]
+    notes: list[str]
+
+
+def bag_files(bag: Path) -> list[Path]:
+    """The bag and, for a rosbag2 folder, its files: the output must be none of them."""
+    return [bag, *sorted(p for p in bag.rglob("*") if p.is_file())] if bag.is_dir() else [bag]
+
+
+def read_bag_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out: str | Path, *, pose: bool,
+                  joint_names: Sequence[str] | None = None) -> BagRead:
+    """Read ``joints_topic`` and the measurement ``topics`` (one pose topic with ``pose``, else point
+    topics) of ``bag``, after refusing an ``out`` that is one of the bag's files."""
+    bag = Path(bag)
+    refuse_overwrite(out, *bag_files(bag))
+    joints, streams = read_bag(bag, joints_topic, topics, pose=pose, joint_names=joint_names)
+    notes = [f"{joints.topic}: {joints.skipped} message(s) left out (positions and names of different "
+             "length, or before every joint was read)"] if joints.skipped else []
+    notes += [f"{s.topic}: {s.dropped} sample(s) without a finite value left out" for s in streams if s.dropped]
+    clocks = [(joints.topic, joints.clock), *((s.topic, s.clock) for s in streams)]
+    notes += [f"{topic}: stamps are not set; the recorder's receive times are used"
+              for topic, clock in clocks if clock == "receive"]
+    return BagRead(bag, joints, streams, notes)
+
+
+def no_rows_error(read: BagRead, extraction: Extraction) -> MeasurementError:
+    """The error of a recording that leaves no static posture (nothing written)."""
+    return MeasurementError(f"{read.bag}: no static posture left to write ({len(extraction.refused)} stop(s) "
+                            "refused, listed above); nothing written")
+
+
+def write_postures(read: BagRead, out: str | Path, settings: PlateauSettings) -> Extraction:
+    """Cut the static postures of ``read`` as ``settings`` say and write them to ``out`` (CSV v1); a
+    recording that leaves none writes nothing (``extraction.data`` is None: see :func:`no_rows_error`)."""
+    extraction = extract_postures(read.joints, read.streams, settings, source=str(read.bag))
+    if extraction.data is not None:
+        write_measurements(out, extraction.data)
+    return extraction
+
+
+def extract_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out: str | Path,
+            settings: PlateauSettings | None = None, *, pose: bool,
+            joint_names: Sequence[str] | None = None) -> tuple[BagRead, Extraction]:
+    """``pincal extract`` in one call: :func:`read_bag_file`, then :func:`write_postures` (``settings`` None:
+    the defaults of :class:`~pincal.measurements.plateaus.PlateauSettings`, ``pincal extract``'s).
+
+    Raises:
+        MeasurementError: the recording leaves no static posture (nothing written); a bad bag or topic.
+    """
+    read = read_bag_file(bag, joints_topic, topics, out, pose=pose, joint_names=joint_names)
+    extraction = write_postures(read, out, settings or PlateauSettings())
+    if extraction.data is None:
+        raise no_rows_error(read, extraction)
+    return read, extraction
