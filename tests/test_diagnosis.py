@@ -236,7 +236,7 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
     candidate in full, and each screened ΔBIC lies within its margin of the full fit's."""
     from pathlib import Path
 
-    import pincal.diagnosis.diagnose as module
+    import pincal.diagnosis.steps as module
     from pincal.diagnosis.screening import SCREEN_INSEPARABLE, SCREEN_MARGIN
     from pincal.robots import example_robot_data_urdf
 
