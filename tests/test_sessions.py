@@ -554,6 +554,12 @@ def test_reestimated_sessions_report_their_degrees_of_freedom(calibrated, truth,
         assert "measure at least 4 rows" in err  # 4 point rows: 12 residuals, 6 left
     write_measurements(tmp_path / "four.csv", _session(truth, "D", 4, 12, "validation"))
     assert main([*args, str(tmp_path / "four.csv"), "--max-pos-mm", "1"]) == 0
+    # positions only: --max-rot-deg refused in one line before any output is written
+    capsys.readouterr()
+    assert main([*args, str(tmp_path / "four.csv"), "--max-rot-deg", "1", "--json", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--max-rot-deg needs orientation columns" in err
+    assert not (tmp_path / "r.json").exists()
     # reported registrations leave all their residuals: no dof, thresholds as ever
     assert main([*args, str(tmp_path / "three.csv"), "--fixed-registration", "--json", str(tmp_path / "f.json")]) == 0
     assert json.loads((tmp_path / "f.json").read_text())["sessions"][0]["registration_dof"] is None

@@ -30,6 +30,8 @@ TOOL = np.eye(4)
         (lambda: CalibrateSettings("tip", level="dh"), "the paper's methods (--level dh) need the tool"),
         (lambda: CalibrateSettings("tip", level="dh", tool_pose=TOOL, sigma_pos_mm=0.1),
          "--sigma-pos applies to --level registration, offsets, full or auto"),
+        (lambda: CalibrateSettings("tip", level="dh", tool_pose=TOOL, force=True),
+         "--force applies to --level registration, offsets, full or auto"),
         (lambda: CalibrateSettings("tip", level="registration", selection=Prior()),
          "--select prior does not apply to --level registration (it fits no kinematic parameter)"),
         (lambda: CalibrateSettings("tip", level="dh", tool_pose=TOOL, selection="prior"),

@@ -220,6 +220,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
                   if value is not None]
     if thresholds and evaluation.threshold_problem():
         raise PincalError(f"{args.data}: {thresholds[0]}: {evaluation.threshold_problem()}")
+    if args.max_rot_deg is not None and evaluation.errors.rotation is None:  # before any output is written
+        raise PincalError(f"{args.data}: --max-rot-deg needs orientation columns qx,qy,qz,qw")
     _print_notes(evaluation.notes)
     errors = evaluation.errors
     for session in evaluation.sessions:
@@ -260,11 +262,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     failed = []
     if args.max_pos_mm is not None and errors.position.max > args.max_pos_mm:
         failed.append(f"max position error {errors.position.max:.4f} mm > {args.max_pos_mm} mm")
-    if args.max_rot_deg is not None:
-        if errors.rotation is None:
-            raise PincalError(f"{args.data}: --max-rot-deg needs orientation columns qx,qy,qz,qw")
-        if errors.rotation.max > args.max_rot_deg:
-            failed.append(f"max orientation error {errors.rotation.max:.4f} deg > {args.max_rot_deg} deg")
+    if args.max_rot_deg is not None and errors.rotation is not None and errors.rotation.max > args.max_rot_deg:
+        failed.append(f"max orientation error {errors.rotation.max:.4f} deg > {args.max_rot_deg} deg")
     for line in failed:
         print(f"pincal: FAIL: {line}", file=sys.stderr)
     warned = _warned(document, args.strict)

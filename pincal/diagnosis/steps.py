@@ -56,7 +56,7 @@ from pincal.residuals.sensor import SensorResidual
 __all__ = [
     "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "NAMING_EVALUATIONS", "Step", "CandidateFit", "Trial", "Search",
     "State", "Judgement", "Restart", "Refitted", "screen_candidates", "fit_candidate", "judge_candidates", "adopt",
-    "refit", "refresh_gravity", "search_step", "placements_of",
+    "refit", "refresh_gravity", "search_step", "placements_of", "judged",
 ]
 
 #: Refits with gravity torques recomputed on the refitted geometry.

@@ -69,8 +69,8 @@ def write_postures(read: BagRead, out: str | Path, settings: PlateauSettings) ->
 
 
 def extract_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out: str | Path,
-            settings: PlateauSettings | None = None, *, pose: bool,
-            joint_names: Sequence[str] | None = None) -> tuple[BagRead, Extraction]:
+                 settings: PlateauSettings | None = None, *, pose: bool,
+                 joint_names: Sequence[str] | None = None) -> tuple[BagRead, Extraction]:
     """``pincal extract`` in one call: :func:`read_bag_file`, then :func:`write_postures` (``settings`` None:
     the defaults of :class:`~pincal.measurements.plateaus.PlateauSettings`, ``pincal extract``'s).
 

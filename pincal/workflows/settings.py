@@ -177,6 +177,9 @@ class CalibrateSettings(_FitSettings):
         if self.level == "dh" and self.sigma_pos_mm is not None:
             raise PincalError("--sigma-pos applies to --level registration, offsets, full or auto (the plausibility "
                               "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
+        if self.level == "dh" and self.force:
+            raise PincalError("--force applies to --level registration, offsets, full or auto (the plausibility "
+                              "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
         _positive("--weight", self.weight)
         self._resolve()
 
