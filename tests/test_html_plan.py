@@ -181,3 +181,13 @@ def test_joint_limits_are_the_robots_not_a_transmissions():
                           ["torso_lift_joint", "arm_1_joint"])
     assert limits["torso_lift_joint"][0] == "prismatic" and None not in limits["torso_lift_joint"][1:]
     assert limits["arm_1_joint"][0] == "revolute" and None not in limits["arm_1_joint"][1:]
+
+
+def test_the_prior_scales_the_fit_used_are_among_the_page_s_facts():
+    """REPORT.json's identifiability.selection.prior_scale, as the console's 'prior scales:' line says it."""
+    document = _document({"calibrated geometry": 1.0})
+    document["identifiability"] = {"selection": {"criterion": "prior", "prior_scale": {
+        "translation_mm": 10.0, "rotation_deg": 0.433, "joint_zero_deg": 10.0, "estimated": True, "reason": "r"}}}
+    page = render_html(document)
+    assert "prior scales" in page and "lengths 10 mm, angles 0.433°, joint zeros 10° (estimated)" in page
+    assert "prior scales" not in render_html(_document({"calibrated geometry": 1.0}))  # none without a prior

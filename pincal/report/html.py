@@ -33,6 +33,7 @@ from pincal.palette import CALIBRATED, FLAG, LEGEND, NOMINAL, model_colour
 from pincal.report import figures
 from pincal.report.fixture_html import fixture_section
 from pincal.report.plan_html import is_plan, plan_context
+from pincal.report.prior_scale import prior_scale_line
 from pincal.report.sections import (
     change_text,
     effects_section,
@@ -236,6 +237,9 @@ def _facts(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
                                          f"{evaluation.get('urdf') or '—'})")))
     if sources.get("corrected_urdf"):
         facts.append(("corrected URDF", str(sources["corrected_urdf"])))
+    scales = prior_scale_line((doc.get("identifiability") or {}).get("selection"))
+    if scales:  # the scales the prior held the parameters to, and whether the rows chose them
+        facts.append(("prior scales", scales.removeprefix("prior scales: ")))
     noise = doc.get("noise") or {}
     if noise.get("sigma_pos_mm") is not None:
         text = f"{num(noise['sigma_pos_mm'], 3)} mm per axis"
