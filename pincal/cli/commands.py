@@ -57,10 +57,9 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         report, withheld = run_calibrate(args)
         return _warned(report, args.strict, withheld)
     level = args.level or ("dh" if args.method is not None else "full")
-    for flag, given in (("--strict", args.strict), ("--force", args.force)):
-        if level == "dh" and given:
-            raise PincalError(f"{flag} applies to --level registration, offsets, full or auto (the plausibility "
-                              "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
+    if level == "dh" and args.strict:  # --force at level dh: CalibrateSettings refuses it
+        raise PincalError("--strict applies to --level registration, offsets, full or auto (the plausibility "
+                          "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
     settings = CalibrateSettings(
         tip_link=args.tip_link, level=level, method=args.method,
         weight=1.0 if args.weight is None else args.weight,  # None: not given (refused with --fixture)
