@@ -485,3 +485,13 @@ def test_the_problem_check_catches_each_assignment():
     assert found == ["self.sigma_pos = ...", "problem.prior = ...", "problem.point_basis = ...",
                      "model.sigma_pos = ...", "model.sigma_rot = ...", "problem.noise = ...",
                      "problem.registration_basis = ..."]
+
+
+def test_level_literals_agree():
+    """The command levels extend the any-chain levels, in the same order (each a Literal type)."""
+    from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS
+    from pincal.workflows.settings import CALIBRATE_LEVELS, DIAGNOSE_LEVELS
+
+    assert CHAIN_LEVELS == ("registration", *LEVELS)
+    assert CALIBRATE_LEVELS == (*CHAIN_LEVELS, "auto", "dh")
+    assert DIAGNOSE_LEVELS == (*CHAIN_LEVELS, "auto")

@@ -63,7 +63,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import cast
+from typing import Literal, cast
 
 import numpy as np
 import scipy.linalg
@@ -75,12 +75,15 @@ from pincal.measurements.data import MeasurementSet
 from pincal.progress import Counter
 
 __all__ = [
+    "SelectionCriterion",
     "SELECTION_CRITERIA", "SELECTION_TOLERANCE", "SAFETY", "MAX_CONDITION", "MAX_CURVATURE_RATIO", "CURVATURE_STEP",
     "NestedFits", "information_criterion", "nested_fits", "curvature_ratios", "refine", "select_subset",
 ]
 
-#: How the number of identifiable kinematic parameters kept is chosen.
-SELECTION_CRITERIA = {
+#: How the number of identifiable kinematic parameters kept is chosen (``--select``).
+SelectionCriterion = Literal["aic", "bic", "press", "all", "prior"]
+#: Each :data:`SelectionCriterion` in words.
+SELECTION_CRITERIA: dict[SelectionCriterion, str] = {
     "aic": "Akaike information criterion m ln(RSS/m) + 2n on the calibration rows",
     "bic": "Bayesian information criterion m ln(RSS/m) + n ln(m) on the calibration rows",
     "press": "linearised leave-one-row-out cross-validation (PRESS) on the calibration rows",
@@ -421,7 +424,7 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
                                f"{rows.n_rows} row(s); add calibration rows or use a lower --level")
     sizes = [n for n in range(rank + 1) if exact.get(n) is not None or (n not in exact and np.isfinite(linear[n]))]
     selection = Selection(
-        criterion=SELECTION_CRITERIA[criterion],
+        criterion=SELECTION_CRITERIA[cast(SelectionCriterion, criterion)],
         sizes=tuple(sizes),
         # sizes holds only the exact scores that are not None
         scores=tuple(float(cast(float, exact[n])) if n in exact else float(linear[n]) for n in sizes),

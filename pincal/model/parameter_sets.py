@@ -20,7 +20,7 @@ slot twists; identity where the parameters are the slot coordinates).
 
 from __future__ import annotations
 
-from typing import cast
+from typing import Literal, cast, get_args
 
 import numpy as np
 import pinocchio as pin
@@ -31,6 +31,7 @@ from pincal.model.sensitivity import ParameterSlot
 
 __all__ = [
     "joint_motion", "ChainParameters", "JointOffsets", "PlacementErrors", "NoParameters", "LEVELS", "CHAIN_LEVELS",
+    "ChainLevel", "ParameterLevel",
 ]
 
 _AXES = ("x", "y", "z")
@@ -163,7 +164,14 @@ class NoParameters(ChainParameters):
         return [p.copy() for p in self.nominal_placements]
 
 
-LEVELS = {"offsets": JointOffsets, "full": PlacementErrors}
-#: The levels of a calibration of any chain: the registration alone (nothing of the URDF fitted), then
+#: A level that fits kinematic parameters of any chain (a key of :data:`LEVELS`).
+ParameterLevel = Literal["offsets", "full"]
+#: A level of a calibration of any chain: the registration alone (nothing of the URDF fitted), then
 #: the parameter sets of :data:`LEVELS`.
-CHAIN_LEVELS = ("registration", *LEVELS)
+ChainLevel = Literal["registration", "offsets", "full"]
+
+LEVELS: dict[ParameterLevel, type[JointOffsets] | type[PlacementErrors]] = {
+    "offsets": JointOffsets, "full": PlacementErrors,
+}
+#: The values of :data:`ChainLevel`, in order.
+CHAIN_LEVELS: tuple[ChainLevel, ...] = get_args(ChainLevel)

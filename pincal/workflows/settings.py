@@ -11,26 +11,28 @@ made, with the one-line message the command prints; the workflows of
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import cast
+from typing import Literal, cast, get_args
 
 import numpy as np
 
 from pincal.errors import PincalError
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
-from pincal.model.parameter_sets import CHAIN_LEVELS  # not from fit/: evaluate's settings need no fit module
 from pincal.model.thermal import PAUSE_S
 
 __all__ = [
-    "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "METHODS", "expect", "no_prior", "default_selection", "CalibrateSettings",
-    "DiagnoseSettings", "EvaluateSettings",
+    "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "CalibrateLevel", "DiagnoseLevel", "METHODS", "expect", "no_prior",
+    "default_selection", "CalibrateSettings", "DiagnoseSettings", "EvaluateSettings",
 ]
 
 #: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
 #: (the paper's Methods 1–3 on a DH-described chain).
-CALIBRATE_LEVELS = (*CHAIN_LEVELS, "auto", "dh")
+CalibrateLevel = Literal["registration", "offsets", "full", "auto", "dh"]
 #: ``diagnose --level``: the geometry under the effects.
-DIAGNOSE_LEVELS = (*CHAIN_LEVELS, "auto")
+DiagnoseLevel = Literal["registration", "offsets", "full", "auto"]
+#: The values of :data:`CalibrateLevel` and :data:`DiagnoseLevel`, in order.
+CALIBRATE_LEVELS: tuple[CalibrateLevel, ...] = get_args(CalibrateLevel)
+DIAGNOSE_LEVELS: tuple[DiagnoseLevel, ...] = get_args(DiagnoseLevel)
 #: The paper's methods (``--method``); 2 when ``--level dh`` names none.
 METHODS = (1, 2, 3)
 
