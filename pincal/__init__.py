@@ -46,6 +46,8 @@ _DEFINED_IN = {
     "pincal.workflows.preparation": ("PlanRun", "plan_files", "urdf_from_dh_file"),
     "pincal.workflows.extract": ("BagRead", "extract_file"),
     "pincal.workflows.simulation": ("simulate_to_directory",),
+    "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
+    "pincal.report.html": ("render_html", "write_html"),  # imports jinja2 and matplotlib
 }
 
 if TYPE_CHECKING:  # what static analysers see; at run time the names come from __getattr__
@@ -85,11 +87,13 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         DHDeviations,
         DHTable,
     )
+    from pincal.model.dh.urdf import dh_robot_from_urdf, urdf_from_dh
     from pincal.model.parameter_sets import JointOffsets, PlacementErrors
     from pincal.model.sensor import Registration
     from pincal.paper.methods import PaperCalibration, calibrate_paper
     from pincal.paper.ml_estimator import MLCalibration, calibrate_ml
     from pincal.paper.noise_limit import PredictedErrors, predicted_errors
+    from pincal.report.html import render_html, write_html
     from pincal.simulation.paper import (
         SimulatedExperiment,
         SimulationSettings,
@@ -191,12 +195,10 @@ __all__ = [
     "simulate_to_directory",
 ]
 
-_DEFINED_IN.update({"pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),
-                    "pincal.report.html": ("render_html", "write_html")})  # yourdfpy; jinja2, matplotlib
 _ON_FIRST_USE = {name: module for module, names in _DEFINED_IN.items() for name in names}
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     if name in _ON_FIRST_USE:
         import importlib
 
