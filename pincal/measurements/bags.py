@@ -26,14 +26,21 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pincal.errors import MeasurementError, did_you_mean
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys.store import Typestore
 
 __all__ = [
     "JOINT_STATE", "POSE", "TRANSFORM", "POINT", "TF", "POSE_TYPES", "TF_PREFIX", "TF_STATIC", "STORAGES",
@@ -121,7 +128,7 @@ class _Samples:
     frame: str | None = None
 
 
-def _seconds(stamp) -> float:
+def _seconds(stamp: Any) -> float:  # a builtin_interfaces/msg/Time, a class rosbags makes at run time
     return stamp.sec + stamp.nanosec * 1e-9
 
 
@@ -133,7 +140,7 @@ def _clock(samples: _Samples) -> tuple[np.ndarray, str]:
     return np.asarray(samples.received, dtype=float), "receive"
 
 
-def _reader(path: Path):
+def _reader(path: Path) -> tuple[AnyReader, tuple[type[Exception], ...]]:
     """A rosbags AnyReader on ``path`` (not yet open) and the errors rosbags raises on a bad bag."""
     from rosbags.highlevel import AnyReader, AnyReaderError
     from rosbags.serde import SerdeError
@@ -152,7 +159,7 @@ def _tf_child(spec: str) -> str | None:
     return spec[len(TF_PREFIX):].strip("/") if spec.startswith(TF_PREFIX) else None
 
 
-def _connections(reader, path: Path, spec: str, flag: str, accepted: Sequence[str]) -> list:
+def _connections(reader: AnyReader, path: Path, spec: str, flag: str, accepted: Sequence[str]) -> list[Connection]:
     """The connections of ``spec`` (a topic or tf:CHILD), their type checked against ``accepted``."""
     if _tf_child(spec) is not None:
         found = [c for c in reader.connections if c.msgtype == TF and c.topic != TF_STATIC]
@@ -170,7 +177,7 @@ def _connections(reader, path: Path, spec: str, flag: str, accepted: Sequence[st
     return [c for c in reader.connections if c.topic == spec]
 
 
-def _pose_of(message, msgtype: str) -> tuple[Any, tuple[float, ...], tuple[float, ...] | None]:
+def _pose_of(message: Any, msgtype: str) -> tuple[Any, tuple[float, ...], tuple[float, ...] | None]:
     """(header, position, quaternion or None) of a PoseStamped, TransformStamped or PointStamped."""
     if msgtype == POINT:
         p = message.point
@@ -182,7 +189,8 @@ def _pose_of(message, msgtype: str) -> tuple[Any, tuple[float, ...], tuple[float
     return message.header, (p.x, p.y, p.z), (r.x, r.y, r.z, r.w)
 
 
-def _joint_arrays(samples: _Samples, path: Path, topic: str, wanted: Sequence[str] | None):
+def _joint_arrays(samples: _Samples, path: Path, topic: str,
+                  wanted: Sequence[str] | None) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     """Forward-filled (N, J) readings of the JointState samples ``(names, positions)``."""
     seen: dict[str, int] = {}
     for names, _ in samples.values:
@@ -214,7 +222,7 @@ def _joint_arrays(samples: _Samples, path: Path, topic: str, wanted: Sequence[st
 
 
 def read_bag(
-    path: str | os.PathLike,
+    path: str | os.PathLike[str],
     joints_topic: str,
     measurements: Sequence[str],
     *,
@@ -266,8 +274,8 @@ def read_bag(
     return joints, out
 
 
-def _read_messages(reader, path: Path, joints_topic: str, measurements: Sequence[str], flag: str,
-                   accepted: Sequence[str]):
+def _read_messages(reader: AnyReader, path: Path, joints_topic: str, measurements: Sequence[str], flag: str,
+                   accepted: Sequence[str]) -> tuple[_Samples, dict[str, _Samples], set[str], int, dict[str, str]]:
     """The samples of the joint topic and of each measurement, read in one pass over the bag."""
     streams = {joints_topic: _connections(reader, path, joints_topic, "--joints", (JOINT_STATE,))}
     for spec in measurements:
@@ -278,7 +286,7 @@ def _read_messages(reader, path: Path, joints_topic: str, measurements: Sequence
     tf_frames: set[str] = set()
     joint_skips = 0
     for connection, received_ns, raw in reader.messages(connections=list(chosen.values())):
-        message = reader.deserialize(raw, connection.msgtype)
+        message: Any = reader.deserialize(raw, connection.msgtype)  # of a class rosbags makes at run time
         received = received_ns * 1e-9
         if connection.msgtype == JOINT_STATE:
             if len(message.position) != len(message.name) or not message.name:
@@ -342,14 +350,14 @@ def _measurement_stream(path: Path, spec: str, msgtype: str, s: _Samples, pose: 
                              int(np.sum(~good)))
 
 
-def _stamp(typestore, seconds: float):
+def _stamp(typestore: Typestore, seconds: float) -> Any:
     sec = int(np.floor(seconds))
     nanosec = min(int(round((seconds - sec) * 1e9)), 999_999_999)
     return typestore.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def write_bag(
-    path: str | os.PathLike,
+    path: str | os.PathLike[str],
     joints: JointStream,
     measurements: Sequence[MeasurementStream],
     storage: str = "sqlite3",
@@ -388,13 +396,13 @@ def write_bag(
     rng = np.random.default_rng(shuffle_seed)
     seq = {"seq": 0} if ros1 else {}
 
-    def header(seconds: float, frame: str):
+    def header(seconds: float, frame: str) -> Any:  # messages: classes the typestore makes at run time
         return types["std_msgs/msg/Header"](**seq, stamp=_stamp(store, seconds), frame_id=frame)
 
-    def vector(name: str, values) -> Any:
+    def vector(name: str, values: Iterable[float]) -> Any:
         return types[name](*map(float, values))
 
-    def measurement(stream: MeasurementStream, k: int):
+    def measurement(stream: MeasurementStream, k: int) -> Any:
         head, p = header(stream.stamps[k], stream.frame), stream.positions[k]
         q = stream.quaternions[k] if stream.quaternions is not None else (0.0, 0.0, 0.0, 1.0)
         if stream.msgtype == POINT:
@@ -408,7 +416,7 @@ def write_bag(
                                          rotation=vector("geometry_msgs/msg/Quaternion", q)))
         return types[TF](transforms=[transform]) if stream.msgtype == TF else transform
 
-    def joint_state(k: int):
+    def joint_state(k: int) -> Any:
         order = rng.permutation(len(joints.names)) if shuffle_seed is not None else np.arange(len(joints.names))
         empty = np.zeros(0)
         return types[JOINT_STATE](header=header(joints.stamps[k], ""), name=[joints.names[i] for i in order],
@@ -434,7 +442,7 @@ def write_bag(
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _writer(path: Path, storage: str, compress: bool):
+def _writer(path: Path, storage: str, compress: bool) -> Writer1 | Writer2:
     if storage == "ros1":
         from rosbags.rosbag1 import Writer as Writer1
 

@@ -150,7 +150,7 @@ class CsvTable:
 
 
 def read_table(
-    path: str | os.PathLike,
+    path: str | os.PathLike[str],
     *,
     rows_are: str = "robot configuration",
     error_type: type[PincalError] = MeasurementError,
@@ -215,7 +215,7 @@ def read_table(
     return table
 
 
-def _encoding_hint(path: str | os.PathLike) -> str:
+def _encoding_hint(path: str | os.PathLike[str]) -> str:
     """`` (it is UTF-16)`` when the file starts with a UTF-16 or UTF-32 byte order mark, else empty."""
     try:
         with open(path, "rb") as handle:
@@ -251,7 +251,7 @@ def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec], other_branches: 
     return q
 
 
-def read_joint_columns(path: str | os.PathLike, joints: Sequence[JointSpec], other_branches: Sequence[str] = ()
+def read_joint_columns(path: str | os.PathLike[str], joints: Sequence[JointSpec], other_branches: Sequence[str] = ()
                        ) -> tuple[np.ndarray, np.ndarray]:
     """The joint readings of a CSV table: the joint columns of format v1, every other column ignored.
 
@@ -357,13 +357,13 @@ def _read_extras(table: CsvTable, names: Sequence[str]) -> tuple[dict[str, np.nd
     return kept, ignored
 
 
-def read_extra_columns(path: str | os.PathLike, joint_names: Sequence[str]) -> dict[str, np.ndarray]:
+def read_extra_columns(path: str | os.PathLike[str], joint_names: Sequence[str]) -> dict[str, np.ndarray]:
     """The numeric extra columns of a CSV table, as :func:`read_measurements` keeps them (name -> (K,))."""
     table = read_table(path)
     return _read_extras(table, [n for n in table.names if not is_reserved(n, joint_names)])[0]
 
 
-def file_columns(paths: Sequence[str | os.PathLike], joint_names: Sequence[str]
+def file_columns(paths: Sequence[str | os.PathLike[str]], joint_names: Sequence[str]
                  ) -> list[tuple[str, dict[str, np.ndarray]]]:
     """(file, its numeric extra columns) of each file of several sessions, before the join keeps only
     the columns every file has (``joint_names``: the joint columns)."""
@@ -389,7 +389,7 @@ def _limit_notes(
 
 
 def read_measurements(
-    path: str | os.PathLike, joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
+    path: str | os.PathLike[str], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
     other_branches: Sequence[str] = (),
 ) -> tuple[MeasurementSet, list[str]]:
     """Read and validate a measurement file (format v1).
@@ -433,7 +433,7 @@ def read_measurements(
 
 
 def read_sessions(
-    paths: Sequence[str | os.PathLike], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
+    paths: Sequence[str | os.PathLike[str]], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
     other_branches: Sequence[str] = (),
 ) -> tuple[MeasurementSet, list[str]]:
     """Read one or several measurement files as the sessions of one calibration.
@@ -470,7 +470,7 @@ def read_sessions(
     return join_sets(sets), notes
 
 
-def write_measurements(path: str | os.PathLike, data: MeasurementSet) -> None:
+def write_measurements(path: str | os.PathLike[str], data: MeasurementSet) -> None:
     """Write ``data`` in format v1, exactly readable back by :func:`read_measurements`.
 
     Columns: joints, ``x,y,z`` (one point) or ``x1,y1,z1,...``, ``qx,qy,qz,qw`` if

@@ -10,6 +10,7 @@ from pathlib import PurePath
 from types import MappingProxyType
 
 import numpy as np
+import numpy.typing as npt
 
 from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mean
 
@@ -59,7 +60,7 @@ class JointSpec:
             )
 
 
-def _frozen(values, dtype) -> np.ndarray:
+def _frozen(values: npt.ArrayLike, dtype: npt.DTypeLike) -> np.ndarray:
     """Return a read-only copy of ``values`` as an array of ``dtype``."""
     out = np.array(values, dtype=dtype, copy=True)
     out.flags.writeable = False
@@ -77,7 +78,7 @@ def default_session_name(source: str) -> str:
     return PurePath(source).stem or str(source)
 
 
-def reported_session(value, where: str, key: str) -> str:
+def reported_session(value: object, where: str, key: str) -> str:
     """The ``session`` of a REPORT.json entry of ``key`` (``time_spans_s``, ``pause_spans_s``, ``pauses``).
 
     Raises:

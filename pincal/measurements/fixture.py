@@ -145,7 +145,7 @@ class FixtureData:
 # --- the fixture file ------------------------------------------------------------------
 
 
-def read_fixture(path: str | os.PathLike) -> Fixture:
+def read_fixture(path: str | os.PathLike[str]) -> Fixture:
     """Read a fixture file: ``point,x,y,z`` rows or ``point_a,point_b,distance`` rows [m].
 
     Raises:
@@ -235,7 +235,7 @@ def _checked(table: CsvTable, names: list[str], points: np.ndarray) -> Fixture:
 
 
 def read_fixture_data(
-    paths: str | os.PathLike | Sequence[str | os.PathLike], joints: Sequence[JointSpec], fixture: Fixture
+    paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], joints: Sequence[JointSpec], fixture: Fixture
 ) -> FixtureData:
     """Read socket-fixture data files (see the module docstring).
 

@@ -332,7 +332,10 @@ def _alignment_costs(joints: JointStream, measurements: Sequence[MeasurementStre
     return costs, used
 
 
-def _window_mean(stream: MeasurementStream, start: float, end: float):
+_Window = tuple[np.ndarray | None, float, np.ndarray | None, float | None, int]  # what _window_mean returns
+
+
+def _window_mean(stream: MeasurementStream, start: float, end: float) -> _Window:
     """Mean position, spreads (sum of squared deviations [m²], RMS angle [rad]), rotation mean and
     count of the samples of ``stream`` stamped in [start, end]."""
     inside = (stream.stamps >= start) & (stream.stamps <= end)
@@ -381,7 +384,9 @@ def extract_postures(joints: JointStream, measurements: Sequence[MeasurementStre
                        f"still for {t[b] - t[a]:.2f} s < --min-still {settings.min_still:g} s")
                for a, b in short if not any(a <= c and d <= b for c, d in stops)]
     pose = measurements[0].quaternions is not None
-    rows: list[tuple] = []
+    # per posture: q, positions, rotation, spread [mm], spread [rad], samples, window [s]
+    rows: list[tuple[np.ndarray, list[np.ndarray | None], np.ndarray | None, float, float | None, int,
+                     tuple[float, float]]] = []
     for a, b in stops:
         start, end = float(t[a]), float(t[b])
         if end - start < settings.min_still:
@@ -410,7 +415,7 @@ def extract_postures(joints: JointStream, measurements: Sequence[MeasurementStre
         return Extraction(None, tuple(refused), offset, len(stops))
     extra = {"spread_mm": np.array([r[3] for r in rows])}
     if pose:
-        extra["spread_deg"] = np.degrees([r[4] for r in rows])
+        extra["spread_deg"] = np.degrees(np.array([r[4] for r in rows], dtype=float))  # pose rows: every angle set
     extra.update(samples=np.array([r[5] for r in rows], dtype=float), t_start_robot=np.array([r[6][0] for r in rows]),
                  t_end_robot=np.array([r[6][1] for r in rows]))
     data = MeasurementSet(

@@ -232,23 +232,24 @@ def _parse_xml(raw: bytes, source: str) -> etree._Element:
 
 
 _XACRO_LOCK = threading.Lock()  # xacro keeps its state in module globals
-_CACHE: dict[tuple[str, tuple[tuple[str, str], ...]], tuple[tuple, bytes, tuple[str, ...]]] = {}
+_Stamps = tuple[tuple[str, str | None], ...]  # (file, SHA-256 of its bytes or None when unreadable)
+_CACHE: dict[tuple[str, tuple[tuple[str, str], ...]], tuple[_Stamps, bytes, tuple[str, ...]]] = {}
 _CACHE_SIZE = 8
 
 
-class _RecordingArgs(dict):
+class _RecordingArgs(dict[str, str]):
     """xacro's argument table that remembers which names the description asked for."""
 
     def __init__(self, pairs: Iterable[tuple[str, str]]) -> None:
         super().__init__(pairs)
         self.asked: set[str] = set()
 
-    def __getitem__(self, key):
+    def __getitem__(self, key: str) -> str:
         self.asked.add(key)
         return super().__getitem__(key)
 
-    def __contains__(self, key) -> bool:
-        self.asked.add(key)
+    def __contains__(self, key: object) -> bool:
+        self.asked.add(str(key))  # xacro asks by name
         return super().__contains__(key)
 
 
@@ -259,7 +260,7 @@ def _xacro_version() -> str:
         return "(unknown version)"
 
 
-def _stamps(files: Iterable[str]) -> tuple:
+def _stamps(files: Iterable[str]) -> _Stamps:
     """(file, SHA-256 of its bytes) of every file an expansion read: the cache holds while they are unchanged.
 
     Contents, not modification times: a file rewritten within the clock's resolution
@@ -290,7 +291,7 @@ def _expand_cached(
         return xml, notes, _included(stamped[0], key[0])
 
 
-def _included(stamps: tuple, top: str) -> tuple[Path, ...]:
+def _included(stamps: _Stamps, top: str) -> tuple[Path, ...]:
     return tuple(Path(name) for name, _ in stamps if name != top)
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -58,7 +59,7 @@ class TimeSpan:
     last: float
     mean: float
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, str | float]:
         return {"session": self.session, "first": self.first, "last": self.last, "mean": self.mean}
 
 
@@ -75,7 +76,7 @@ def time_spans(time: npt.ArrayLike, sessions: npt.ArrayLike) -> tuple[TimeSpan, 
     return tuple(spans)
 
 
-def read_time_spans(entries, where: str, key: str = "time_spans_s") -> tuple[TimeSpan, ...] | None:
+def read_time_spans(entries: Any, where: str, key: str = "time_spans_s") -> tuple[TimeSpan, ...] | None:
     """REPORT.json ``time_spans_s`` (a list of :meth:`TimeSpan.as_dict`) back; None if absent.
 
     Raises:

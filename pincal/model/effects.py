@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -328,13 +329,13 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
         ) from None
 
 
-def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict:
+def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict[str, object]:
     """REPORT.json form: {"type", "joint", "value"}; cyclic gives harmonic, sin, cos;
     backlash adds source, coupling (and a compliance driven by another joint's torque) its driver;
     drift's value is [vx, vy, vz] in m/s; a pause step's [dx, dy, dz] in m, with its ``pause``."""
     values = np.atleast_1d(np.asarray(values, dtype=float))
     std = None if std is None else np.atleast_1d(np.asarray(std, dtype=float))
-    out: dict = {"type": effect.type, "joint": effect.joint}
+    out: dict[str, object] = {"type": effect.type, "joint": effect.joint}
     if effect.type == "cyclic":
         out.update(harmonic=effect.harmonic, sin=float(values[0]), cos=float(values[1]))
         if std is not None:
@@ -353,7 +354,7 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
     return out
 
 
-def effect_from_dict(entry: dict) -> tuple[Effect, np.ndarray]:
+def effect_from_dict(entry: Any) -> tuple[Effect, np.ndarray]:
     """Inverse of :func:`effect_to_dict`."""
     try:
         kind = entry["type"]

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
@@ -14,7 +16,7 @@ __all__ = ["ROTATION_TOLERANCE", "checked_array", "checked_rotations", "Registra
 ROTATION_TOLERANCE = 1e-6  # max |R^T R - I| accepted for a rotation matrix
 
 
-def checked_array(x, shape_tail: tuple, name: str, min_count: int = 0) -> np.ndarray:
+def checked_array(x: npt.ArrayLike, shape_tail: tuple[int, ...], name: str, min_count: int = 0) -> np.ndarray:
     a = np.asarray(x, dtype=float)
     if a.ndim != 1 + len(shape_tail) or a.shape[1:] != shape_tail:
         raise CalibrationError(f"{name} must have shape (K, {', '.join(map(str, shape_tail))}), got {a.shape}")
@@ -25,7 +27,7 @@ def checked_array(x, shape_tail: tuple, name: str, min_count: int = 0) -> np.nda
     return a
 
 
-def checked_rotations(x, name: str, min_count: int = 1) -> np.ndarray:
+def checked_rotations(x: npt.ArrayLike, name: str, min_count: int = 1) -> np.ndarray:
     r = checked_array(x, (3, 3), name, min_count)
     if np.abs(r.transpose(0, 2, 1) @ r - np.eye(3)).max() > ROTATION_TOLERANCE or np.any(np.linalg.det(r) < 0):
         raise CalibrationError(f"{name} contains a matrix that is not a proper rotation")
@@ -39,28 +41,28 @@ class Registration:
     rotation: np.ndarray  # (3,3) proper rotation Ω
     translation: np.ndarray  # (3,) τ [m]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         rot = checked_rotations(np.reshape(self.rotation, (1, 3, 3)), "rotation")[0].copy()
         tr = checked_array(np.reshape(self.translation, (1, 3)), (3,), "translation")[0].copy()
         rot.flags.writeable = tr.flags.writeable = False
         object.__setattr__(self, "rotation", rot)
         object.__setattr__(self, "translation", tr)
 
-    def apply_points(self, points) -> np.ndarray:
+    def apply_points(self, points: npt.ArrayLike) -> np.ndarray:
         """Map robot-base points (..., 3) [m] to sensor coordinates: Ω t + τ."""
         return np.asarray(points, dtype=float) @ self.rotation.T + self.translation
 
-    def apply_rotations(self, rotations) -> np.ndarray:
+    def apply_rotations(self, rotations: npt.ArrayLike) -> np.ndarray:
         """Map robot-base orientations (..., 3, 3) to sensor orientations: Ω R."""
         return self.rotation @ np.asarray(rotations, dtype=float)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, list[float]]:
         """JSON-ready form: ``{"rotation_xyzw": [x, y, z, w], "translation_m": [x, y, z]}``."""
         quat = Rotation.from_matrix(self.rotation).as_quat()  # scalar-last
         return {"rotation_xyzw": [float(v) for v in quat], "translation_m": [float(v) for v in self.translation]}
 
     @classmethod
-    def from_dict(cls, d) -> Registration:
+    def from_dict(cls, d: Any) -> Registration:
         """Inverse of :meth:`as_dict`."""
         try:
             quat = np.asarray(d["rotation_xyzw"], dtype=float)

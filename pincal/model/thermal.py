@@ -52,6 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -112,11 +113,11 @@ class TemperatureRange:
         values = np.asarray(temperature, dtype=float)
         return np.clip(values, self.low, self.high) - self.mean, (values < self.low) | (values > self.high)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, float]:
         return {"min": self.low, "max": self.high, "mean": self.mean}
 
     @classmethod
-    def read(cls, entry, where: str) -> TemperatureRange:
+    def read(cls, entry: Any, where: str) -> TemperatureRange:
         """REPORT.json ``temperature_range_c`` back.
 
         Raises:
@@ -147,11 +148,11 @@ class Pause:
     before: float
     after: float
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, int | str | float]:
         return {"pause": self.number, "session": self.session, "before_s": self.before, "after_s": self.after}
 
     @classmethod
-    def read(cls, entries, where: str) -> tuple[Pause, ...]:
+    def read(cls, entries: Any, where: str) -> tuple[Pause, ...]:
         """REPORT.json ``pauses`` back.
 
         Raises:
@@ -209,7 +210,7 @@ class RowConditions:
         """f_k (K,), or None."""
         return None if self.expansion is None else 1.0 + self.expansion
 
-    def select(self, rows) -> RowConditions:
+    def select(self, rows: np.ndarray | slice) -> RowConditions:  # indices, a mask (K,) or a slice
         return RowConditions(None if self.expansion is None else self.expansion[rows],
                              None if self.steps is None else self.steps[rows])
 

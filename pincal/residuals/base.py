@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import CalibrationError
-from pincal.model.sensitivity import Sensitivity, SensitivityModel, ToolPoses
+from pincal.model.sensitivity import ParameterSlot, Sensitivity, SensitivityModel, ToolPoses
 
 __all__ = ["pair_indices", "ParameterSet", "KinematicsCache", "Objective"]
 
@@ -60,7 +60,7 @@ class KinematicsCache:
         free: npt.ArrayLike,
         base: npt.ArrayLike,
         q: npt.ArrayLike,
-        models: dict | None = None,
+        models: dict[tuple[ParameterSlot, ...], SensitivityModel] | None = None,
     ) -> None:
         self.params = params
         self.free = np.asarray(free, dtype=int)
@@ -75,7 +75,7 @@ class KinematicsCache:
             models[key] = SensitivityModel(params.chain, key)
         self.model = models[key]
         # the last few results with their inputs (bytes of x, shape and bytes of q, the tool), newest last
-        self._recent: list[tuple[tuple, tuple[ToolPoses, Sensitivity]]] = []
+        self._recent: list[tuple[tuple[bytes, tuple[int, ...], bytes, bytes], tuple[ToolPoses, Sensitivity]]] = []
 
     def full_vector(self, x: npt.ArrayLike) -> np.ndarray:
         """The flat parameter vector with ``x`` in the free slots."""

@@ -53,43 +53,34 @@ from pincal.model.effects import (
     joint_basis,
     sensed_points,
 )
+from pincal.model.sensitivity import Sensitivity, ToolPoses
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions, row_conditions
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.conditions import condition_columns, point_columns
+from pincal.residuals.sensor_values import SensorState, TargetEstimate
 from pincal.residuals.so3 import jlog3, log3, skew
 
+# TargetEstimate: defined in sensor_values, listed here too for the code that imports it from here
 __all__ = ["REGISTRATION_NAMES", "TargetEstimate", "SensorResidual"]
 
 #: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
 
 
-@dataclass(frozen=True)
-class TargetEstimate:
-    """Registration and target geometry at a parameter vector.
+@dataclass
+class _Linearisation:
+    """What the Jacobian blocks share at one x (:meth:`SensorResidual._linearisation`)."""
 
-    Attributes:
-        registration: sensor_T_base (of the first session when there are several).
-        points: target points in the tool frame [m], (P, 3).
-        rotation: target rotation R_T in the tool frame, (3, 3).
-        registrations: sensor_T_base of each session (default: ``(registration,)``);
-            when given, ``registration`` is set to its first.
-        conditions: each row's thermal expansion and pause step at these values, or None.
-    """
-
-    registration: Registration
-    points: np.ndarray
-    rotation: np.ndarray
-    registrations: tuple[Registration, ...] = ()
-    conditions: RowConditions | None = None
-
-    def __post_init__(self) -> None:
-        if self.registrations:
-            object.__setattr__(self, "registrations", tuple(self.registrations))
-            object.__setattr__(self, "registration", self.registrations[0])
-        else:
-            object.__setattr__(self, "registrations", (self.registration,))
+    state: SensorState
+    omega: np.ndarray  # each row's Omega, (3, 3) or (K, 3, 3)
+    offsets: np.ndarray  # the target points' offsets from the tool origin in the sensor frame (K, P, 3) [m]
+    scale: float  # sensor scale s
+    sensed: np.ndarray  # sensed points, (1 + s) excluded (K, P, 3) [m]
+    jlog: np.ndarray | None = None  # with orientations: Jlog3(E_k) (K, 3, 3)
+    left: np.ndarray | None = None  # with orientations: Jlog3(E_k) E_kᵀ G_kᵀ Omega (K, 3, 3)
+    joint_points: np.ndarray | None = None  # with joints: d(point)/d(q_j) (K, P, 3, N)
+    joint_turns: np.ndarray | None = None  # with joints and orientations: (K, 3, N)
 
 
 class SensorResidual(Objective):
@@ -187,7 +178,7 @@ class SensorResidual(Objective):
             self.effect_slices.append(slice(first, first + effect.n_values))
             first += effect.n_values
         # the last state computed: (x, the kinematics it came from, the state)
-        self._memo: tuple[np.ndarray, tuple, tuple] | None = None
+        self._memo: tuple[np.ndarray, tuple[ToolPoses, Sensitivity], SensorState] | None = None
 
     @property
     def n_free(self) -> int:
@@ -249,7 +240,7 @@ class SensorResidual(Objective):
         translations = np.stack([r.translation for r in target.registrations])
         return rotations[self.sessions], translations[self.sessions]
 
-    def _session_blocks(self, target: TargetEstimate):
+    def _session_blocks(self, target: TargetEstimate) -> list[tuple[int, slice | np.ndarray, Registration]]:
         """(session, its rows, its registration): all rows as one slice with one session."""
         if self.n_sessions == 1:
             return [(0, slice(None), target.registration)]
@@ -282,7 +273,7 @@ class SensorResidual(Objective):
             drift = drift + target.conditions.steps
         return scale, drift
 
-    def state(self, x: npt.ArrayLike):
+    def state(self, x: npt.ArrayLike) -> SensorState:
         """Tool poses, sensitivities, target and target points in the base frame at ``x``
         (the last one is kept: least_squares asks for the residual and the Jacobian at the same x)."""
         x = np.asarray(x, dtype=float)
@@ -369,7 +360,7 @@ class SensorResidual(Objective):
             blocks[:, n_pos:, n_pos:] = -self.v[:, None, None] * turn
         return blocks
 
-    def orientation_error(self, poses, target: TargetEstimate) -> np.ndarray:
+    def orientation_error(self, poses: ToolPoses, target: TargetEstimate) -> np.ndarray:
         """E_k = G_kᵀ Omega R_k R_T, (K, 3, 3)."""
         omega, _ = self.row_frames(target)
         assert self.G is not None  # called only with orientations
@@ -378,7 +369,7 @@ class SensorResidual(Objective):
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)
         lin = self._linearisation(x, joints=any(b is not None for b in self._effect_basis))
-        poses, sens, target, world = lin["state"]
+        poses, sens, target, world = lin.state
         k, n_points = world.shape[:2]
         omega, _ = self.row_frames(target)
         rows_pos = np.zeros((k, n_points, 3, self.n_params))
@@ -408,10 +399,10 @@ class SensorResidual(Objective):
         for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self.effect_slices):
             if effect.type != "sensor_scale":
                 rows_pos[..., sl] = self._effect_position_columns(lin, effect, j, basis)
-        rows_pos *= 1.0 + lin["scale"]  # every term is scaled by the sensor's (1 + s)
+        rows_pos *= 1.0 + lin.scale  # every term is scaled by the sensor's (1 + s)
         for effect, sl in zip(self.effects, self.effect_slices):
             if effect.type == "sensor_scale":
-                rows_pos[..., sl] = lin["sensed"][..., None]
+                rows_pos[..., sl] = lin.sensed[..., None]
         rows_pos *= self.w[:, None, None, None]
         blocks = [rows_pos.reshape(-1, self.n_params)]
         if self.G is not None:
@@ -433,19 +424,20 @@ class SensorResidual(Objective):
             # a joint effect's columns need the effect inputs: the caller gives them
             basis = joint_basis(effect, cast(EffectInputs, self.inputs), j) if effect.type in JOINT_EFFECTS else None
             if effect.type == "sensor_scale":
-                position = lin["sensed"][..., None]
+                position = lin.sensed[..., None]
             else:
-                position = self._effect_position_columns(lin, effect, j, basis) * (1.0 + lin["scale"])
+                position = self._effect_position_columns(lin, effect, j, basis) * (1.0 + lin.scale)
             parts = [(position * self.w[:, None, None, None]).reshape(-1, effect.n_values)]
             if self.G is not None:
                 rotation = np.zeros((len(self.G), 3, effect.n_values))
                 if basis is not None:
-                    rotation = lin["joint_turns"][:, :, j, None] * basis[:, None, :]
+                    assert lin.joint_turns is not None  # a joint effect's, linearised with joints and orientations
+                    rotation = lin.joint_turns[:, :, j, None] * basis[:, None, :]
                 parts.append((rotation * self.v[:, None, None]).reshape(-1, effect.n_values))
             out.append(np.vstack(parts))
         return out
 
-    def _linearisation(self, x: np.ndarray, joints: bool) -> dict:
+    def _linearisation(self, x: np.ndarray, joints: bool) -> _Linearisation:
         """What the Jacobian blocks share at ``x``: the state; the target points'
         offsets from the tool origin in the sensor frame (K, P, 3); the sensor
         scale and the sensed points (1 + s excluded); with orientations, E_k, Jlog3(E_k)
@@ -456,45 +448,49 @@ class SensorResidual(Objective):
         omega, _ = self.row_frames(target)
         omega_t = np.swapaxes(omega, -1, -2)
         scale, drift = self._sensor_terms(x, target)
-        lin = {
-            "state": state,
-            "omega": omega,
-            "offsets": (world - sens.origin[:, None, :]) @ omega_t,
-            "scale": scale,
-            "sensed": self._registered(target, world) + drift[:, None, :],
-        }
+        lin = _Linearisation(
+            state=state,
+            omega=omega,
+            offsets=(world - sens.origin[:, None, :]) @ omega_t,
+            scale=scale,
+            sensed=self._registered(target, world) + drift[:, None, :],
+        )
         if self.G is not None:
             relative = self.orientation_error(poses, target)
-            lin["jlog"] = jlog3(relative)
-            lin["left"] = lin["jlog"] @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
+            jlog = jlog3(relative)
+            lin.jlog, lin.left = jlog, jlog @ relative.transpose(0, 2, 1) @ self.G.transpose(0, 2, 1) @ omega
         if joints:
-            lin["joint_points"] = point_columns(sens.joint_linear @ omega_t, sens.joint_angular @ omega_t,
-                                                lin["offsets"])
+            assert sens.joint_angular is not None and sens.joint_linear is not None  # SensitivityModel sets them
+            joint_points = point_columns(sens.joint_linear @ omega_t, sens.joint_angular @ omega_t, lin.offsets)
             if target.conditions is not None and target.conditions.factor is not None:  # eq T1
-                lin["joint_points"] *= target.conditions.factor[:, None, None, None]
-            if self.G is not None:
-                lin["joint_turns"] = lin["left"] @ sens.joint_angular.transpose(0, 2, 1)
+                joint_points *= target.conditions.factor[:, None, None, None]
+            lin.joint_points = joint_points
+            if lin.left is not None:  # with orientations
+                lin.joint_turns = lin.left @ sens.joint_angular.transpose(0, 2, 1)
         return lin
 
-    def _effect_position_columns(self, lin: dict, effect: Effect, j: int, basis: np.ndarray | None) -> np.ndarray:
+    def _effect_position_columns(self, lin: _Linearisation, effect: Effect, j: int,
+                                 basis: np.ndarray | None) -> np.ndarray:
         """d(sensed point)/d(effect values) before the sensor scale and weights, (K, P, 3, n_values)."""
-        k, n_points = lin["offsets"].shape[:2]
+        k, n_points = lin.offsets.shape[:2]
         if basis is not None:  # joint shift: the joint's column times the basis
-            return lin["joint_points"][:, :, :, j, None] * basis[:, None, None, :]
+            assert lin.joint_points is not None  # a joint effect's lin is made with joints
+            return lin.joint_points[:, :, :, j, None] * basis[:, None, None, :]
         if effect.type == "drift":
             assert self.inputs is not None and self.inputs.time is not None  # drift is offered only with a time column
             return np.broadcast_to(self.inputs.time[:, None, None, None] * np.eye(3), (k, n_points, 3, 3))
         if effect.type in ("thermal", "pause_step"):  # thermal and pause steps have their inputs (offered with them)
-            return condition_columns(effect, cast(EffectInputs, self.inputs), lin["state"][3], lin["omega"])
+            return condition_columns(effect, cast(EffectInputs, self.inputs), lin.state[3], lin.omega)
         return np.zeros((k, n_points, 3, effect.n_values))
 
-    def _orientation_jacobian(self, x, lin: dict) -> np.ndarray:
-        poses, sens, target, _ = lin["state"]
-        jlog = lin["jlog"]  # (K, 3, 3)
+    def _orientation_jacobian(self, x: np.ndarray, lin: _Linearisation) -> np.ndarray:
+        poses, sens, target, _ = lin.state
+        jlog, left = lin.jlog, lin.left  # (K, 3, 3) each
+        assert jlog is not None and left is not None  # called with orientations
         rows = np.zeros((len(jlog), 3, self.n_params))
         kin, reg, rot = self.blocks["kinematic"], self.blocks["registration"], self.blocks["rotation"]
         # world angular velocity w of R_k: d log E = Jlog3(E) Eᵀ G_kᵀ Omega w ("left" w)
-        rows[:, :, kin] = np.einsum("kij,knj->kin", lin["left"], sens.angular)
+        rows[:, :, kin] = np.einsum("kij,knj->kin", left, sens.angular)
         tool = poses.tool_rotations @ target.rotation  # R_k R_T
         if reg.stop > reg.start:
             values = self._registration_values(x)
@@ -507,7 +503,8 @@ class SensorResidual(Objective):
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
         for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
             if basis is not None:
-                rows[:, :, sl] = lin["joint_turns"][:, :, j, None] * basis[:, None, :]
+                assert lin.joint_turns is not None  # a joint effect's lin is made with joints
+                rows[:, :, sl] = lin.joint_turns[:, :, j, None] * basis[:, None, :]
         rows *= self.v[:, None, None]
         return rows.reshape(-1, self.n_params)
 

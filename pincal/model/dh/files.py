@@ -65,7 +65,7 @@ MAX_LENGTH_M = MAX_POSITION
 MAX_PRISMATIC_M = JOINT_SANITY["prismatic"][0]
 
 
-def _read_rows(path: str | os.PathLike) -> CsvTable:
+def _read_rows(path: str | os.PathLike[str]) -> CsvTable:
     """The table's cells (header names case-insensitive), with every required column present."""
     table = read_table(path, rows_are="joint", error_type=ModelError, lowercase=True)
     missing = [c for c in REQUIRED_COLUMNS if c not in table.names]
@@ -77,7 +77,7 @@ def _read_rows(path: str | os.PathLike) -> CsvTable:
     return table
 
 
-def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False) -> tuple[DHRobot, list[str]]:
+def read_dh_csv(path: str | os.PathLike[str], convention: str, degrees: bool = False) -> tuple[DHRobot, list[str]]:
     """Read a DH table file (see the module docstring for its columns).
 
     Args:
@@ -96,7 +96,10 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
     check_convention(convention)  # before reading the table
     table = _read_rows(path)
     to_rad = math.radians if degrees else float
-    columns: dict[str, list] = {c: [] for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS}
+    names: list[str] = []
+    kinds: list[str] = []
+    columns: dict[str, list[float]] = {c: [] for c in ("a", "alpha", "d", "theta", "lower", "upper", "velocity",
+                                                       "effort")}
     seen: dict[str, int] = {}
     defaulted_limits: list[str] = []
     defaulted_velocity: list[str] = []
@@ -164,8 +167,8 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
             defaulted_velocity.append(name)
         if row["effort"] is None:
             defaulted_effort.append(name)
-        columns["joint"].append(name)
-        columns["type"].append(kind)
+        names.append(name)
+        kinds.append(kind)
         columns["alpha"].append(to_rad(row["alpha"]))
         columns["theta"].append(to_rad(row["theta"]))
         columns["a"].append(row["a"])
@@ -175,8 +178,8 @@ def read_dh_csv(path: str | os.PathLike, convention: str, degrees: bool = False)
         columns["velocity"].append(DEFAULT_VELOCITY if row["velocity"] is None else row["velocity"])
         columns["effort"].append(DEFAULT_EFFORT if row["effort"] is None else row["effort"])
     robot = DHRobot(
-        convention=convention, names=tuple(columns["joint"]), alpha=columns["alpha"], a=columns["a"],
-        theta=columns["theta"], d=columns["d"], types=tuple(columns["type"]), lower=columns["lower"],
+        convention=convention, names=tuple(names), alpha=columns["alpha"], a=columns["a"],
+        theta=columns["theta"], d=columns["d"], types=tuple(kinds), lower=columns["lower"],
         upper=columns["upper"], velocity=columns["velocity"], effort=columns["effort"],
     )
     return robot, _notes(table, defaulted_limits, defaulted_velocity, defaulted_effort)

@@ -16,6 +16,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +25,9 @@ from pincal.errors import ModelError, PincalError
 from pincal.model.dh.robot import DEFAULT_LIMITS, DH_JOINT_TYPES, DHRobot
 from pincal.model.dh.table import DHTable, dh_chain_from_origins
 from pincal.model.urdf import load_urdf, write_urdf_with_origins
+
+if TYPE_CHECKING:
+    import yourdfpy
 
 __all__ = [
     "DH_BASE_LINK", "DH_FLANGE_LINK", "DH_FLANGE_JOINT", "dh_link_name", "DH_SHAPE_TOLERANCE", "apply_dh_table",
@@ -271,7 +275,7 @@ def dh_robot_from_urdf(
     """
     urdf = load_urdf(urdf_path)
     by_child = {joint.child: joint for joint in urdf.robot.joints}
-    chain: list = []  # yourdfpy joints, flange first
+    chain: list[yourdfpy.Joint] = []  # flange first
     link = DH_FLANGE_LINK
     while link != DH_BASE_LINK:
         if link not in by_child:
