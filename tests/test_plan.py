@@ -475,3 +475,15 @@ def test_cli_existing_data_must_match_the_measure(tmp_path, capsys):
                  "--existing", TRAIN, "--measure", "point")
     err = capsys.readouterr().err
     assert code == 2 and "measure 4 point(s)" in err, err
+
+
+def test_sensor_kinds_of_measure_and_their_refusal():
+    """``--measure``'s forms give the sensor kinds of ``SENSOR_KINDS``, each; a kind outside them is refused."""
+    from pincal.cli.arguments import measure
+    from pincal.measurements.data import SENSOR_KINDS
+
+    models = [measure(text) for text in ("point", "points:3", "pose")]
+    assert tuple(m.kind for m in models) == SENSOR_KINDS
+    assert [m.n_points for m in models] == [1, 3, 1]
+    with pytest.raises(PincalError, match="sensor kind 'marker'"):
+        SensorModel("marker", 1)  # type: ignore[arg-type]  # what the Literal forbids, at run time

@@ -110,7 +110,7 @@ def measure(text: str) -> SensorModel:
         )
     from pincal.planning.information import SensorModel  # the planner's modules: a valid --measure
 
-    return SensorModel("points", int(match[1])) if match else SensorModel(text, 1)
+    return SensorModel("points", int(match[1])) if match else SensorModel("pose" if text == "pose" else "point", 1)
 
 
 def target_points(text: str) -> np.ndarray:

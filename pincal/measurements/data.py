@@ -8,6 +8,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import PurePath
 from types import MappingProxyType
+from typing import Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +18,7 @@ from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mea
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
     "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
+    "SensorKind", "SENSOR_KINDS",
 ]
 
 ROLES = ("cpa", "calibration", "validation")
@@ -25,6 +27,12 @@ ROLE_COLUMN = "role"
 #: Optional text column naming each row's session (one registration per session).
 SESSION_COLUMN = "session"
 QUAT_COLUMNS = ("qx", "qy", "qz", "qw")
+
+#: What a sensor reports per row: ``point`` (one point), ``points`` (several points of one rigid
+#: target) or ``pose`` (one point and the target's orientation, :data:`QUAT_COLUMNS`).
+SensorKind = Literal["point", "points", "pose"]
+#: The values of :data:`SensorKind`, in order.
+SENSOR_KINDS: tuple[SensorKind, ...] = get_args(SensorKind)
 
 
 #: Largest plausible |joint value| per kind [rad or m], with the unit mistake it hints at.

@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from pincal.errors import PincalError
 from pincal.fit.prior import prior_sigmas
+from pincal.measurements.data import SENSOR_KINDS, SensorKind
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.parameter_sets import LEVELS, NoParameters
@@ -64,8 +65,12 @@ class SensorModel:
         n_points: points per configuration.
     """
 
-    kind: str
+    kind: SensorKind
     n_points: int
+
+    def __post_init__(self) -> None:
+        if self.kind not in SENSOR_KINDS:
+            raise PincalError(f"sensor kind '{self.kind}': use one of {', '.join(SENSOR_KINDS)}")
 
     @property
     def has_rotation(self) -> bool:
