@@ -21,6 +21,7 @@ from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import RowWeights
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.chain import simulate_chain
 from pincal.simulation.paper import SimulationSettings
@@ -121,7 +122,7 @@ def test_sensor_residual_jacobian_matches_finite_differences():
     )
     rotations = np.stack([pin.exp3(rng.normal(size=3)) for _ in q])
     objective = SensorResidual(cache, rng.normal(size=(6, 4, 3)), rotations, start,
-                               position_weight=rng.uniform(0.5, 2, 6), rotation_weight=3.0)
+                               RowWeights(position=rng.uniform(0.5, 2, 6), rotation=3.0))
     x = objective.start_vector() + rng.normal(0, 0.05, objective.n_free)
     # central differences, step 1e-6: truncation ~1e-12 × third derivatives of O(10),
     # rounding ~1e-16 × |r| ≈ 10 / 1e-6 = 1e-9; 1e-6 is far above both, far below O(1) entries

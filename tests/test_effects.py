@@ -22,6 +22,7 @@ from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 
 ALL_EFFECTS = [
     Effect("compliance", "lwr_joint_2"),
@@ -45,8 +46,8 @@ def test_sensor_residual_jacobian_with_every_effect(kuka_chain):
     start = TargetEstimate(Registration(pin.exp3(rng.normal(size=3)), rng.normal(size=3)),
                            rng.normal(0, 0.1, (2, 3)), pin.exp3(rng.normal(size=3)))
     rotations = np.stack([pin.exp3(rng.normal(size=3)) for _ in q])
-    objective = SensorResidual(cache, rng.normal(size=(9, 2, 3)), rotations, start, effects=ALL_EFFECTS,
-                               inputs=inputs, rotation_weight=2.0)
+    objective = SensorResidual(cache, rng.normal(size=(9, 2, 3)), rotations, start, RowWeights(rotation=2.0),
+                               effects=ModelledEffects(ALL_EFFECTS, inputs))
     x = objective.start_vector() + rng.normal(0, 0.01, objective.n_free)
     x[objective.blocks["effects"]] = rng.normal(0, 1e-3, objective.blocks["effects"].stop - objective.blocks["effects"].start)
     # central differences, step 1e-6: truncation ~1e-12 × third derivatives, rounding
@@ -152,8 +153,8 @@ def test_effect_columns_are_the_jacobian_columns_an_added_effect_brings(kuka_cha
 
     def objective(effects):
         cache = KinematicsCache(params, free, base, q)
-        return SensorResidual(cache, points, rotations, start, effects=effects, inputs=inputs,
-                              position_weight=weights, rotation_weight=2.0)
+        return SensorResidual(cache, points, rotations, start, RowWeights(position=weights, rotation=2.0),
+                              effects=ModelledEffects(effects, inputs))
 
     fit = objective(present)
     x = fit.start_vector() + rng.normal(0, 0.01, fit.n_free)

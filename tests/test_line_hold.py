@@ -20,6 +20,7 @@ import lxml.html
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
@@ -34,8 +35,8 @@ from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual
+from pincal.residuals.sensor_values import FittedBlocks, RowWeights
 from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
-from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres
 SIGMA_ROT_RAD = np.radians(0.003)  # its 6D probe
@@ -208,8 +209,8 @@ def test_a_held_registration_rotation_has_the_finite_difference_jacobian(industr
     held[6:9, 1] = np.array([0.0, 0.6, 0.8])
     basis = scipy.linalg.null_space(held.T)
     sessions = np.arange(12) % 2
-    objective = SensorResidual(cache, rows.points, rows.rotations, start, rotation_weight=2.0, sessions=sessions,
-                               registration_basis=basis)
+    objective = SensorResidual(cache, rows.points, rows.rotations, start, RowWeights(rotation=2.0),
+                               FittedBlocks(registration_basis=basis), sessions=sessions)
     assert objective.blocks["registration"].stop - objective.blocks["registration"].start == 10
     x = objective.start_vector() + rng.normal(0, 0.05, objective.n_free)
     assert_close(objective.jacobian(x), numeric_jacobian(objective.residual, x), 1e-6, "held rotations")

@@ -34,6 +34,7 @@ from pincal.paper.methods import ABSORBED, CALIBRATED, calibrate_paper
 from pincal.paper.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 from pincal.residuals.tool_pose import tool_pose_residual
 from pincal.robots import KUKA_FLANGE_LINK
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
@@ -84,8 +85,8 @@ def _target_residual(chain, rng, k=5):
     weights = rng.uniform(0.5, 2.0, k), rng.uniform(0.5, 2.0, k)
 
     def moved(g, rot):
-        return SensorResidual(cache, g, rot, start, *weights, effects=[Effect("drift"), Effect("sensor_scale")],
-                              inputs=inputs)
+        return SensorResidual(cache, g, rot, start, RowWeights(*weights),
+                              effects=ModelledEffects([Effect("drift"), Effect("sensor_scale")], inputs))
 
     objective = moved(rng.normal(size=(k, 2, 3)), np.stack([pin.exp3(rng.normal(size=3)) for _ in q]))
     x = objective.start_vector() + rng.normal(0, 0.01, objective.n_free)

@@ -33,6 +33,7 @@ from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import RowWeights
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.sensor import measure, random_configurations
 from pincal.workflows.evaluation import REESTIMATED, SessionEvaluation
@@ -93,8 +94,8 @@ def test_multi_session_jacobian_matches_finite_differences():
     start = TargetEstimate(registrations[0], rng.normal(0, 0.1, (2, 3)), pin.exp3(rng.normal(size=3)), registrations)
     rotations = np.stack([pin.exp3(rng.normal(size=3)) for _ in q])
     sessions = np.array([0, 1, 2, 0, 1, 2, 2, 1, 0])
-    objective = SensorResidual(cache, rng.normal(size=(9, 2, 3)), rotations, start, rotation_weight=2.0,
-                               position_weight=rng.uniform(0.5, 2.0, 9), sessions=sessions)
+    objective = SensorResidual(cache, rng.normal(size=(9, 2, 3)), rotations, start,
+                               RowWeights(position=rng.uniform(0.5, 2.0, 9), rotation=2.0), sessions=sessions)
     assert objective.blocks["registration"].stop - objective.blocks["registration"].start == 18
     x = objective.start_vector() + rng.normal(0, 0.05, objective.n_free)
     jac = objective.jacobian(x)
@@ -118,7 +119,7 @@ def test_multi_session_jacobian_matches_finite_differences():
                     g[k, c // 3, c % 3] += h
                 else:
                     turned[k] = pin.exp3(h * np.eye(3)[c - 6]) @ turned[k]
-                return SensorResidual(cache, g, turned, start, rotation_weight=2.0, position_weight=objective.w,
+                return SensorResidual(cache, g, turned, start, RowWeights(position=objective.w, rotation=2.0),
                                       sessions=sessions).residual(x)
 
             expected = np.zeros(rows.size)

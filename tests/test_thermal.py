@@ -49,6 +49,7 @@ from pincal.model.thermal import (
 )
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 from pincal.simulation.cells import measure_truth, sensor_at
 from pincal.simulation.sensor import random_configurations, simulated_conditions, warm_up
 
@@ -242,8 +243,9 @@ def test_expansion_and_steps_in_the_sensor_residual_match_finite_differences(kuk
             points = rng.normal(size=(k, 2, 3))
 
             def objective(chosen, rotations):
-                return SensorResidual(KinematicsCache(params, free, base, q), points, rotations, start, effects=chosen,
-                                      inputs=inputs, rotation_weight=2.0, sessions=sessions, conditions=fixed)
+                return SensorResidual(KinematicsCache(params, free, base, q), points, rotations, start,
+                                      RowWeights(rotation=2.0), effects=ModelledEffects(chosen, inputs, fixed),
+                                      sessions=sessions)
 
             probe = objective(effects, np.stack([np.eye(3)] * k))
             x = probe.start_vector() + rng.normal(0, 0.01, probe.n_free)

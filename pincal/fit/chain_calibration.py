@@ -46,6 +46,7 @@ from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainParameters, N
 from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights
 
 __all__ = [
     "START_SIGMA_POS_M", "START_SIGMA_ROT_RAD", "ChainCalibration", "row_weights", "FitProblem", "calibrate_chain",
@@ -142,11 +143,9 @@ class ChainCalibration:
             np.zeros((k, n_points, 3)),
             np.tile(np.eye(3), (k, 1, 1)) if self.sigma_rot_rad is not None else None,
             self.start,
-            fit_points=self.fit_target,
-            fit_rotation=self.fit_target,
+            fitted=FittedBlocks(points=self.fit_target, rotation=self.fit_target, point_basis=self.point_basis,
+                                registration_basis=self.registration_basis),
             sessions=np.zeros(k, dtype=int),
-            point_basis=self.point_basis,
-            registration_basis=self.registration_basis,
         )
         jac = objective.jacobian(self.solution)[: 3 * k * n_points]
         variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
@@ -234,15 +233,11 @@ class FitProblem:
             self.data.points,
             self.data.rotations,
             self.start,
-            position_weight=self.row_weight / self.sigma_pos,
-            rotation_weight=self.row_weight / (self.sigma_rot or 1.0),
-            fit_points=self.fit_target,
-            fit_rotation=self.fit_target,
-            effects=self.effects,
-            inputs=self.inputs,
+            RowWeights(self.row_weight / self.sigma_pos, self.row_weight / (self.sigma_rot or 1.0)),
+            FittedBlocks(points=self.fit_target, rotation=self.fit_target, point_basis=self.point_basis,
+                         registration_basis=self.registration_basis),
+            ModelledEffects(self.effects, self.inputs),
             sessions=self.sessions,
-            point_basis=self.point_basis,
-            registration_basis=self.registration_basis,
         )
         return objective if self.prior is None else PriorResidual(objective, self.prior[free])
 

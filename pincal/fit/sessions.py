@@ -50,6 +50,7 @@ from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights
 from pincal.residuals.so3 import log3
 
 __all__ = [
@@ -355,8 +356,8 @@ def register_session(
     cache = KinematicsCache(NoParameters(chain), np.array([], dtype=int), np.zeros(0), q)
     objective = SensorResidual(
         cache, sensed, data.rotations, TargetEstimate(start, points, np.asarray(rotation, dtype=float)),
-        position_weight=1.0 / sigma_pos_m, rotation_weight=1.0 / sigma_rot_rad,
-        fit_points=False, fit_rotation=False, conditions=expanded,
+        RowWeights(1.0 / sigma_pos_m, 1.0 / sigma_rot_rad), FittedBlocks(points=False, rotation=False),
+        ModelledEffects(conditions=expanded),
     )
     solution = solve(objective, objective.start_vector(), what="session registration")
     return objective.estimate(solution.x).registration

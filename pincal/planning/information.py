@@ -37,6 +37,7 @@ from pincal.model.sensor import Registration
 from pincal.planning.defaults import PLAN_LEVELS
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import FittedBlocks, RowWeights
 
 __all__ = [
     "PLAN_LEVELS", "DEFAULT_TARGET_CENTRE_M", "DEFAULT_TARGET_RADIUS_M", "SensorModel", "default_target_points",
@@ -192,8 +193,8 @@ class MeasurementModel:
         start = TargetEstimate(Registration(np.eye(3), np.zeros(3)), self.points, self.target_rotation)
         objective = SensorResidual(
             cache, world, rotations, start,
-            position_weight=1.0 / self.sigma_pos_m, rotation_weight=1.0 / self.sigma_rot_rad,
-            fit_points=not self.tool_known, fit_rotation=not self.tool_known,
+            RowWeights(1.0 / self.sigma_pos_m, 1.0 / self.sigma_rot_rad),
+            FittedBlocks(points=not self.tool_known, rotation=not self.tool_known),
         )
         jac = objective.jacobian(objective.start_vector())
         return jac[objective.row_indices()]

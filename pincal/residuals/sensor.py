@@ -55,10 +55,10 @@ from pincal.model.effects import (
 )
 from pincal.model.sensitivity import Sensitivity, ToolPoses
 from pincal.model.sensor import Registration
-from pincal.model.thermal import RowConditions, row_conditions
+from pincal.model.thermal import row_conditions
 from pincal.residuals.base import KinematicsCache, Objective
 from pincal.residuals.conditions import condition_columns, point_columns
-from pincal.residuals.sensor_values import SensorState, TargetEstimate
+from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights, SensorState, TargetEstimate
 from pincal.residuals.so3 import jlog3, log3, skew
 
 # TargetEstimate: defined in sensor_values, listed here too for the code that imports it from here
@@ -91,18 +91,13 @@ class SensorResidual(Objective):
         sensor_points: measured points g_kp [m], (K, P, 3).
         sensor_rotations: measured target orientations G_k, (K, 3, 3), or None.
         start: registration, points and target rotation to start from.
-        position_weight: w_k [1/m], scalar or (K,).
-        rotation_weight: v_k [1/rad], scalar or (K,).
-        fit_registration / fit_points / fit_rotation: which blocks are unknown.
+        weights: w_k [1/m] and v_k [1/rad] (:class:`~pincal.residuals.sensor_values.RowWeights`; default: 1).
+        fitted: which blocks are unknown, in which directions
+            (:class:`~pincal.residuals.sensor_values.FittedBlocks`; default: all, in every direction).
+        effects: the effects fitted, their inputs, and fixed per-row changes they add to
+            (:class:`~pincal.residuals.sensor_values.ModelledEffects`; default: none).
         sessions: (K,) each row's session, an index into ``start.registrations``;
             needed when there are several (default: every row in session 0).
-        point_basis: (3P, b) orthonormal columns: the points' unknowns are b values z with
-            m = start.points + basis z (the directions outside the basis held at the start's
-            values, :mod:`pincal.fit.target_hold`); default: the 3P coordinates themselves.
-        registration_basis: (6S, b) orthonormal columns: the registrations' unknowns (phi_s, tau_s of
-            each session) are b values z, (phi, tau) = (0, start's tau) + basis z (the rotations outside
-            it held at the start's, :mod:`pincal.fit.registration_hold`); default: the 6S themselves.
-        conditions: fixed per-row changes (a report's, :mod:`pincal.model.thermal`) its effects add to.
     """
 
     def __init__(
@@ -111,20 +106,19 @@ class SensorResidual(Objective):
         sensor_points: npt.ArrayLike,
         sensor_rotations: npt.ArrayLike | None,
         start: TargetEstimate,
-        position_weight: npt.ArrayLike = 1.0,
-        rotation_weight: npt.ArrayLike = 1.0,
-        fit_registration: bool = True,
-        fit_points: bool = True,
-        fit_rotation: bool = True,
-        effects: Sequence[Effect] = (),
-        inputs: EffectInputs | None = None,
+        weights: RowWeights | None = None,
+        fitted: FittedBlocks | None = None,
+        effects: ModelledEffects | None = None,
         sessions: npt.ArrayLike | None = None,
-        point_basis: npt.ArrayLike | None = None,
-        conditions: RowConditions | None = None,
-        registration_basis: npt.ArrayLike | None = None,
     ) -> None:
         super().__init__(cache)
-        self.effects = tuple(effects)
+        weights = RowWeights() if weights is None else weights
+        fitted = FittedBlocks() if fitted is None else fitted
+        effects = ModelledEffects() if effects is None else effects
+        inputs, conditions = effects.inputs, effects.conditions
+        fit_registration, fit_points, fit_rotation = fitted.registration, fitted.points, fitted.rotation
+        point_basis, registration_basis = fitted.point_basis, fitted.registration_basis
+        self.effects = tuple(effects.effects)
         self.inputs = inputs
         self.conditions = conditions
         self._conditional = conditions is not None or any(e.type in ("thermal", "pause_step") for e in self.effects)
@@ -149,8 +143,8 @@ class SensorResidual(Objective):
         if self.sessions.shape != (k,) or np.any((self.sessions < 0) | (self.sessions >= self.n_sessions)):
             raise ValueError(f"sessions must be ({k},) indices below {self.n_sessions}")
         self._session_rows = [np.flatnonzero(self.sessions == s) for s in range(self.n_sessions)]
-        self.w = np.broadcast_to(np.asarray(position_weight, dtype=float), (k,)).copy()
-        self.v = np.broadcast_to(np.asarray(rotation_weight, dtype=float), (k,)).copy()
+        self.w = np.broadcast_to(np.asarray(weights.position, dtype=float), (k,)).copy()
+        self.v = np.broadcast_to(np.asarray(weights.rotation, dtype=float), (k,)).copy()
         n_kin = len(cache.free)
         self.point_basis = None
         if point_basis is not None and fit_points:

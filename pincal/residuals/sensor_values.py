@@ -1,17 +1,73 @@
-"""The values a sensor residual (:mod:`pincal.residuals.sensor`) starts from and gives: the registration and
-target geometry at a parameter vector, and the state of one evaluation."""
+"""The values a sensor residual (:mod:`pincal.residuals.sensor`) is made of and gives: the weights of its rows,
+which of its blocks are fitted, the effects it models, the registration and target geometry at a parameter
+vector, and the state of one evaluation."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
+from pincal.model.effects import Effect, EffectInputs
 from pincal.model.sensitivity import Sensitivity, ToolPoses
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 
-__all__ = ["TargetEstimate", "SensorState"]
+__all__ = ["RowWeights", "FittedBlocks", "ModelledEffects", "TargetEstimate", "SensorState"]
+
+
+@dataclass(frozen=True)
+class RowWeights:
+    """The weight of each row's residuals: its measurement noise's inverse, so position and orientation need
+    no ad-hoc scale.
+
+    Attributes:
+        position: w_k = 1/sigma_pos,k [1/m], a scalar or (K,).
+        rotation: v_k = 1/sigma_rot,k [1/rad], a scalar or (K,).
+    """
+
+    position: npt.ArrayLike = 1.0
+    rotation: npt.ArrayLike = 1.0
+
+
+@dataclass(frozen=True)
+class FittedBlocks:
+    """Which blocks of a sensor residual's unknowns are fitted, and in which directions.
+
+    Attributes:
+        registration / points / rotation: whether the registrations, the target points and the target
+            rotation are unknown (else held at the start's).
+        point_basis: (3P, b) orthonormal columns: the points' unknowns are b values z with
+            m = start.points + basis z (the directions outside the basis held at the start's
+            values, :mod:`pincal.fit.target_hold`); default: the 3P coordinates themselves.
+        registration_basis: (6S, b) orthonormal columns: the registrations' unknowns (phi_s, tau_s of
+            each session) are b values z, (phi, tau) = (0, start's tau) + basis z (the rotations outside
+            it held at the start's, :mod:`pincal.fit.registration_hold`); default: the 6S themselves.
+    """
+
+    registration: bool = True
+    points: bool = True
+    rotation: bool = True
+    point_basis: npt.ArrayLike | None = None
+    registration_basis: npt.ArrayLike | None = None
+
+
+@dataclass(frozen=True)
+class ModelledEffects:
+    """The unmodelled effects a sensor residual fits (:mod:`pincal.model.effects`), what they act on, and the
+    fixed per-row changes they add to.
+
+    Attributes:
+        effects: the effects, their values unknowns of the fit.
+        inputs: their inputs (gravity torques, time ...); needed when there are effects.
+        conditions: fixed per-row thermal expansion and pause steps (a report's, :mod:`pincal.model.thermal`).
+    """
+
+    effects: Sequence[Effect] = ()
+    inputs: EffectInputs | None = None
+    conditions: RowConditions | None = None
 
 
 @dataclass(frozen=True)

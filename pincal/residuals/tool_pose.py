@@ -9,6 +9,7 @@ from pincal.errors import CalibrationError
 from pincal.model.sensor import Registration
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import FittedBlocks, RowWeights
 
 __all__ = ["tool_pose_residual"]
 
@@ -63,8 +64,6 @@ def tool_pose_residual(
         points.reshape(k, 1, 3),
         rotations,
         start,
-        position_weight=1.0 / sigma_position_m,
-        rotation_weight=1.0 / sigma_rotation_rad,
-        fit_points=False,
-        fit_rotation=False,
+        RowWeights(1.0 / sigma_position_m, 1.0 / sigma_rotation_rad),
+        FittedBlocks(points=False, rotation=False),
     )
