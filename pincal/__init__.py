@@ -19,7 +19,7 @@ _DEFINED_IN = {
     "pincal.fit.level_choice": ("LevelChoice", "choose_fixture_level", "choose_level"),
     "pincal.fit.socket_metrics": ("FixtureMetrics", "fixture_metrics"),
     "pincal.fit.metrics": ("ErrorSummary", "PoseErrors", "pose_errors"),
-    "pincal.paper.ml_estimator": ("MLCalibration", "calibrate_ml"),
+    "pincal.paper.ml_estimator": ("MLCalibration", "MLSettings", "calibrate_ml"),
     "pincal.paper.noise_limit": ("PredictedErrors", "predicted_errors"),
     "pincal.paper.methods": ("PaperCalibration", "calibrate_paper"),
     "pincal.fit.registration": ("register_orientations", "register_points"),
@@ -91,7 +91,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.model.parameter_sets import JointOffsets, PlacementErrors
     from pincal.model.sensor import Registration
     from pincal.paper.methods import PaperCalibration, calibrate_paper
-    from pincal.paper.ml_estimator import MLCalibration, calibrate_ml
+    from pincal.paper.ml_estimator import MLCalibration, MLSettings, calibrate_ml
     from pincal.paper.noise_limit import PredictedErrors, predicted_errors
     from pincal.report.html import render_html, write_html
     from pincal.simulation.paper import (
@@ -119,6 +119,7 @@ __all__ = [
     "ChainCalibration",
     "JointOffsets",
     "MLCalibration",
+    "MLSettings",
     "PlacementErrors",
     "PredictedErrors",
     "calibrate_chain",

@@ -32,7 +32,7 @@ from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import DEFAULT_TOOL_RPY, DEFAULT_TOOL_XYZ
-from pincal.simulation.recording import RecordingSettings, simulate_recording
+from pincal.simulation.recording import RecordingSettings, RecordingTopics, SessionEvents, simulate_recording
 from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,7 +57,8 @@ def main() -> None:
     held_out = random_configurations(chain, rng, VALIDATION)
     with chain.placed(TABLE2_SMALL.apply(KUKA_LWR4_DH).joint_origins()):
         recording = simulate_recording(chain, postures, DEFAULT_REGISTRATION, SETTINGS, pose=True,
-                                       holds={SHORT: 1.0}, shaken={SHAKEN: 0.0025}, topics=["/mocap/tool/pose"])
+                                       events=SessionEvents(holds={SHORT: 1.0}, shaken={SHAKEN: 0.0025}),
+                                       topics=RecordingTopics(["/mocap/tool/pose"]))
         sigma = SETTINGS.tracker_noise_m / np.sqrt(150), SETTINGS.tracker_noise_rad / np.sqrt(150)
         validation = measure(chain, held_out, DEFAULT_REGISTRATION, rng, *sigma, "validation")
     joints = recording.joints

@@ -87,6 +87,7 @@ from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.cells import (
     INDUSTRIAL_6R_START,
     INDUSTRIAL_6R_TABLE,
+    ToolPath,
     constant_orientation_path,
     measure_truth,
     sensor_at,
@@ -262,18 +263,18 @@ def simulate(scenario: Scenario, urdf: Path, tip: str):
         q, q_test = (spread_configurations(chain, rng, scenario.rows, scenario.joint_range),
                      spread_configurations(chain, rng, held_out, scenario.held_out_range or scenario.joint_range))
     elif scenario.heights == 1:  # one path: held out at its other points
-        path = dict(kind=scenario.motion, count=scenario.rows, centre=np.array([1.2, 0.0, 0.5]), rotation=DOWN,
-                    q_start=START_6R, heights=1)
-        q, q_test = constant_orientation_path(chain, **path), constant_orientation_path(chain, **path, rows_per_line=37)
+        path = ToolPath(scenario.motion, scenario.rows, np.array([1.2, 0.0, 0.5]), heights=1)
+        q, q_test = (constant_orientation_path(chain, p, DOWN, START_6R)
+                     for p in (path, replace(path, rows_per_line=37)))
     elif scenario.motion == "cpa":  # one joint at a time from the start posture, as tests/test_read_against.py
         span = np.radians(60.0)
         q, q_test = (cpa_configurations(START_6R - span + offset, START_6R + span + offset, count, start=START_6R)
                      for count, offset in ((scenario.rows // 6, 0.0), (scenario.rows // 12, np.radians(13.0))))
     else:
         centre = np.array([1.2, 0.0, 0.5])
-        q = constant_orientation_path(chain, scenario.motion, scenario.rows, centre, DOWN, START_6R)
-        q_test = constant_orientation_path(chain, scenario.motion, scenario.rows, centre + [0.0, 0.05, 0.05], DOWN,
-                                           START_6R)
+        q = constant_orientation_path(chain, ToolPath(scenario.motion, scenario.rows, centre), DOWN, START_6R)
+        q_test = constant_orientation_path(chain, ToolPath(scenario.motion, scenario.rows, centre + [0.0, 0.05, 0.05]),
+                                           DOWN, START_6R)
     options = dict(points=np.array(scenario.points), with_rotation=scenario.sigma_rot_deg is not None,
                    target_rotation=target[:3, :3])
     if scenario.tool_known:  # the same robot program; the sensor measures the tool frame itself

@@ -311,7 +311,7 @@ def test_diagnose_holds_the_heldout_drift_as_evaluate_does(diagnosed, kuka_urdf,
 
 def test_heldout_inputs_keep_their_own_time_for_the_approach_flanks(kuka_chain):
     """held_sessions changes only the drift's time: the flanks follow the rows' own times."""
-    from pincal.model.effects import Effect, effect_inputs, joint_basis
+    from pincal.model.effects import Effect, RowContext, effect_inputs, joint_basis
 
     rng = np.random.default_rng(3)
     q = rng.uniform(-1.0, 1.0, (6, len(kuka_chain.joint_names)))
@@ -322,9 +322,9 @@ def test_heldout_inputs_keep_their_own_time_for_the_approach_flanks(kuka_chain):
             self.q, self.n_rows = q, len(q)
 
     context = rng.uniform(-1.0, 1.0, (4, len(kuka_chain.joint_names)))
-    plain = effect_inputs(kuka_chain, Rows(q), 0.0, None, time, 15.0, context, fitted_time)
-    held = effect_inputs(kuka_chain, Rows(q), 0.0, None, time, 15.0, context, fitted_time,
-                         held_sessions=(np.zeros(6, dtype=int), np.zeros(4, dtype=int)))
+    plain = effect_inputs(kuka_chain, Rows(q), 0.0, None, time, 15.0, RowContext(context, fitted_time))
+    held = effect_inputs(kuka_chain, Rows(q), 0.0, None, time, 15.0,
+                         RowContext(context, fitted_time, (np.zeros(6, dtype=int), np.zeros(4, dtype=int))))
     np.testing.assert_array_equal(held.time, [5.0 - 15.0, 25.0 - 15.0, 0.0, 0.0, 0.0, 0.0])  # mean 15 s outside
     np.testing.assert_array_equal(held.time[:2], plain.time[:2])
     flank = Effect("backlash", kuka_chain.joint_names[1], source="approach")

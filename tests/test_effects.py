@@ -13,6 +13,7 @@ from pincal.model.effects import (
     FLANK_GAP_S,
     Effect,
     EffectInputs,
+    RowContext,
     approach_flank,
     effect_inputs,
     gravity_torques,
@@ -96,28 +97,28 @@ def test_approach_flank_follows_interleaved_rows_of_another_set(kuka_chain):
                           roles=np.array(["validation"] * 2, dtype=object), lines=np.arange(2, 4))
     cal = MeasurementSet(joint_names=kuka_chain.joint_names, q=q, points=np.zeros((3, 1, 3)), rotations=None,
                          roles=np.array(["calibration"] * 3, dtype=object), lines=np.arange(2, 5))
-    inputs = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
-                           context_time=np.array([10.0, 30.0]))
+    inputs = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]),
+                           context=RowContext(held.q, np.array([10.0, 30.0])))
     from pincal.model.effects import joint_basis
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), inputs, 5)[:, 0]
     assert flank.tolist() == [0.0, -1.0, 1.0]  # 0.5 -> 0.2 goes down, 0.1 -> 0.3 goes up
     # rows of another day (spans apart: 100 h before) set no flank: the first row's stays 0, the others
     # follow their own rows, as without them (the README's TIAGo split: diagnose's fit then does not
     # depend on the held-out file, and evaluate on the calibration rows says what diagnose said)
-    days_before = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
-                                context_time=np.array([10.0, 30.0]) - 3.6e5)
+    days_before = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]),
+                                context=RowContext(held.q, np.array([10.0, 30.0]) - 3.6e5))
     assert days_before.context_q is None
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), days_before, 5)[:, 0]
     assert flank.tolist() == [0.0, 1.0, 1.0]
     # rows just before (10 s, not interleaved) are the same motion: 0.1 -> 0.0 reaches the first row from above
-    just_before = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
-                                context_time=np.array([-20.0, -10.0]))
+    just_before = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]),
+                                context=RowContext(held.q, np.array([-20.0, -10.0])))
     flank = joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), just_before, 5)[:, 0]
     assert flank.tolist() == [-1.0, 1.0, 1.0]
     # and up to FLANK_GAP_S (half an hour) away; beyond it, unknown
     for gap, first in ((FLANK_GAP_S, -1.0), (FLANK_GAP_S + 1.0, 0.0)):
-        apart = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]), context_q=held.q,
-                              context_time=np.array([-10.0 - gap, -gap]))
+        apart = effect_inputs(kuka_chain, cal, time=np.array([0.0, 20.0, 40.0]),
+                              context=RowContext(held.q, np.array([-10.0 - gap, -gap])))
         assert joint_basis(Effect("backlash", "lwr_joint_6", source="approach"), apart, 5)[0, 0] == first, gap
 
 

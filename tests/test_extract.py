@@ -25,7 +25,7 @@ from pincal.measurements.plateaus import extract_postures, still_stretches
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
-from pincal.simulation.recording import RecordingSettings, simulate_recording
+from pincal.simulation.recording import RecordingSettings, SessionEvents, simulate_recording
 from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations
 
 OFFSET = -0.3456  # tracker stamp - joint stamp [s]: more than the 0.5 s trim away from its opposite
@@ -54,7 +54,7 @@ def awkward(chain):
     start = DROPPED * (SETTINGS.hold_s + SETTINGS.move_s) - (SETTINGS.hold_s - 1.0)  # after the short stop
     dropout = (start, start + SETTINGS.hold_s - 0.54)  # the averaging window ends 0.49 s before the hold does
     recording = _record(chain, random_configurations(chain, np.random.default_rng(11), 12), pose=True,
-                        holds={SHORT: 1.0}, shaken={SHAKEN: 0.003}, dropouts=[dropout])
+                        events=SessionEvents(holds={SHORT: 1.0}, shaken={SHAKEN: 0.003}, dropouts=[dropout]))
     pose = recording.measurements[0]
     signs = np.where(np.arange(len(pose.stamps)) % 2, -1.0, 1.0)[:, None]
     return replace(recording, measurements=[replace(pose, quaternions=pose.quaternions * signs)])

@@ -28,9 +28,9 @@ from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
-from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
 from conftest import INDUSTRIAL_ARM_START
+from pincal.simulation.sensor import random_configurations
 
 RELATIVE = 1e-9
 TARGET = np.array([[0.035, -0.02, 0.21]])
@@ -65,8 +65,8 @@ def _rows(urdf, kind, seed):
     if kind == "random":
         q = random_configurations(chain, rng, 40)
     else:  # a raster at constant orientation: the target is held (pincal.fit.target_hold, rule 1)
-        q = constant_orientation_path(chain, "raster", 120, np.array([1.2, 0.0, 0.5]), np.diag([-1.0, 1.0, -1.0]),
-                                      INDUSTRIAL_ARM_START)
+        q = constant_orientation_path(chain, ToolPath("raster", 120, np.array([1.2, 0.0, 0.5])),
+                                      np.diag([-1.0, 1.0, -1.0]), INDUSTRIAL_ARM_START)
     data = measure_truth(params, truth, q, sensor_at(4.2), rng, 20e-6, np.radians(0.003), points=TARGET)
     return chain, data
 

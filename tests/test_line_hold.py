@@ -20,7 +20,6 @@ import lxml.html
 import numpy as np
 import pytest
 import scipy.linalg
-from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
@@ -36,7 +35,8 @@ from pincal.model.parameter_sets import PlacementErrors
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual
 from pincal.residuals.sensor_values import FittedBlocks, RowWeights
-from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
+from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
+from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres
 SIGMA_ROT_RAD = np.radians(0.003)  # its 6D probe
@@ -51,9 +51,9 @@ def _line(urdf, with_rotation: bool, tool_known: bool, kind: str = "line", seed:
     """One path at constant orientation (2 passes of 50 rows) and its other points (37 a pass) held out;
     the target known (the chain's tool, measured as itself) or not (measured at TOOL, estimated)."""
     plain = KinematicChain.from_urdf(urdf, "flange")
-    path = dict(kind=kind, count=100, centre=np.array([1.2, 0.0, 0.5]), rotation=DOWN, q_start=INDUSTRIAL_ARM_START,
-                heights=1)
-    q, q_test = constant_orientation_path(plain, **path), constant_orientation_path(plain, **path, rows_per_line=37)
+    path = ToolPath(kind, 100, np.array([1.2, 0.0, 0.5]), heights=1)
+    q, q_test = (constant_orientation_path(plain, p, DOWN, INDUSTRIAL_ARM_START)
+                 for p in (path, replace(path, rows_per_line=37)))
     chain = KinematicChain.from_urdf(urdf, "flange", tool=TOOL if tool_known else None)
     params = PlacementErrors(chain)
     rng = np.random.default_rng(seed)

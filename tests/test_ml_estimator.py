@@ -31,7 +31,7 @@ from pincal.model.dh.table import (
 from pincal.model.effects import Effect, EffectInputs
 from pincal.model.sensor import Registration
 from pincal.paper.methods import ABSORBED, CALIBRATED, calibrate_paper
-from pincal.paper.ml_estimator import KEPT_NOMINAL, MLCalibration, calibrate_ml
+from pincal.paper.ml_estimator import KEPT_NOMINAL, MLCalibration, MLSettings, calibrate_ml
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.sensor_values import ModelledEffects, RowWeights
@@ -177,7 +177,7 @@ def test_alpha_n_is_identified_with_the_tool_known(kuka_urdf, kuka_chain):
     result, errors, _ = _run(kuka_urdf, experiment)
     assert abs(result.table.alpha[6] - experiment.truth.alpha[6]) < 1e-9
     assert errors.position_m.max() < 1e-8 and errors.rotation_rad.max() < 1e-8
-    kept, kept_errors, _ = _run(kuka_urdf, experiment, fit_alpha_n=False)
+    kept, kept_errors, _ = _run(kuka_urdf, experiment, settings=MLSettings(fit_alpha_n=False))
     assert kept.status[6] == KEPT_NOMINAL and kept.table.alpha[6] == KUKA_LWR4_DH.alpha[6]
     # noise-free: a model that can fit gives 1e-8 (above); keeping alpha_7 0.4 deg off
     # must leave a misfit, here required at a quarter of that, 0.1 deg, far above 1e-8
@@ -280,7 +280,7 @@ def test_positions_only_and_bad_sigmas_are_refused(kuka_urdf, noisy_large_experi
 
 
 def test_withheld_orientations_do_not_enter_the_fit(kuka_urdf, noisy_large_experiment):
-    """withhold_orientations=("cpa",) gives the CPA rows orientation weight 0: turning their measured
+    """MLSettings(withhold_orientations=("cpa",)) gives the CPA rows orientation weight 0: turning their measured
     orientations at random changes nothing, bit for bit, with the sigmas given or estimated (sigma_a from
     the calibration rows alone), while the same turn changes the ML estimate that uses them. Passing
     Method 2's result as the start reproduces the estimator's own start exactly."""
@@ -295,7 +295,8 @@ def test_withheld_orientations_do_not_enter_the_fit(kuka_urdf, noisy_large_exper
     assert np.array_equal(given.table.to_vector(), own.table.to_vector())
     for sigmas in ((0.05, 0.05), (None, None)):
         kept, withheld = (
-            calibrate_ml(chain, d, *sigmas, start=method2, withhold_orientations=("cpa",)) for d in (data, scrambled)
+            calibrate_ml(chain, d, *sigmas, start=method2, settings=MLSettings(withhold_orientations=("cpa",)))
+            for d in (data, scrambled)
         )
         assert np.array_equal(kept.table.to_vector(), withheld.table.to_vector())
         assert kept.sigma_rot_deg == withheld.sigma_rot_deg and np.isfinite(kept.sigma_rot_deg)
@@ -303,6 +304,7 @@ def test_withheld_orientations_do_not_enter_the_fit(kuka_urdf, noisy_large_exper
     used = calibrate_ml(chain, scrambled, 0.05, 0.05, start=method2)
     assert not np.array_equal(used.table.to_vector(), kept.table.to_vector())
     with pytest.raises(CalibrationError, match="every row's are withheld"):
-        calibrate_ml(chain, data, 0.05, 0.05, start=method2, withhold_orientations=("cpa", "calibration"))
+        calibrate_ml(chain, data, 0.05, 0.05, start=method2,
+                     settings=MLSettings(withhold_orientations=("cpa", "calibration")))
     with pytest.raises(CalibrationError, match="must be Method 2's"):
         calibrate_ml(chain, data, 0.05, 0.05, start=calibrate_paper(chain, data, method=1, nominal=KUKA_LWR4_DH))

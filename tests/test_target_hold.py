@@ -29,7 +29,7 @@ from pincal.fit.target_hold import MAX_TARGET_STD_M, NO_TURN_RAD, principal_turn
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
-from pincal.simulation.cells import constant_orientation_path, measure_truth, sensor_at
+from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
 from conftest import INDUSTRIAL_ARM_START
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres (15 µm + 6 µm/m)
@@ -46,9 +46,9 @@ def _cell(urdf, kind, count, seed, turn_rad=0.0, with_rotation=True):
     rng = np.random.default_rng(seed)
     truth = rng.normal(0.0, 3e-4, params.size)
     tracker = sensor_at(4.2)
-    q = constant_orientation_path(chain, kind, count, np.array([1.2, 0.0, 0.5]), DOWN, INDUSTRIAL_ARM_START,
-                                  turn_rad=turn_rad, rng=rng)
-    q_test = constant_orientation_path(chain, kind, count // 2, np.array([1.2, 0.05, 0.55]), DOWN,
+    q = constant_orientation_path(chain, ToolPath(kind, count, np.array([1.2, 0.0, 0.5])), DOWN,
+                                  INDUSTRIAL_ARM_START, turn_rad=turn_rad, rng=rng)
+    q_test = constant_orientation_path(chain, ToolPath(kind, count // 2, np.array([1.2, 0.05, 0.55])), DOWN,
                                        INDUSTRIAL_ARM_START, turn_rad=turn_rad, rng=rng)
     common = dict(points=TARGET, with_rotation=with_rotation)
     calibration = measure_truth(params, truth, q, tracker, rng, SIGMA_POS_M, SIGMA_ROT_RAD, **common)

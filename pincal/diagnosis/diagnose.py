@@ -81,7 +81,7 @@ from pincal.fit.solver import solve
 from pincal.measurements.couplings import ReadingCoupling, apply_couplings
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import HARMONICS, Effect, EffectInputs, effect_inputs
+from pincal.model.effects import HARMONICS, Effect, EffectInputs, RowContext, effect_inputs
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor import SensorResidual
 
@@ -270,7 +270,8 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
             f"they have {heldout.n_points} point(s){' and orientations' if heldout.has_orientation else ''}"
         )
     inputs = effect_inputs(chain, rows, payload_kg, point, row_time,
-                           context_q=None if heldout is None else heldout.q, context_time=heldout_time)
+                           context=None if heldout is None or heldout_time is None
+                           else RowContext(heldout.q, heldout_time))
     names = np.asarray(calibration.session_names, dtype=object)  # each row's session, for its pauses
     row_names = names[session_rows(rows, calibration.session_names)]
     conditions = search_conditions(row_time, row_names, readings, calibration.used_index)
@@ -278,9 +279,11 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
     model = EffectModel.of(chain, calibration, rows, row_weights(rows, settings.sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
-        held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference, rows.q, row_time,
-                                    held_sessions=(session_rows(heldout, calibration.session_names),  # as evaluate
-                                                   session_rows(rows, calibration.session_names)))
+        held_inputs = effect_inputs(chain, heldout, payload_kg, point, heldout_time, reference,
+                                    None if row_time is None else RowContext(
+                                        rows.q, row_time,
+                                        held_sessions=(session_rows(heldout, calibration.session_names),  # as evaluate
+                                                       session_rows(rows, calibration.session_names))))
         held_inputs = conditions.inputs(held_inputs, readings.heldout_temperature, heldout_time,
                                         names[session_rows(heldout, calibration.session_names)])
     pool = list(settings.candidates)

@@ -51,7 +51,7 @@ from pincal.model.sensor import Registration
 __all__ = [
     "JOINT_EFFECTS", "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
     "FLANK_GAP_S",
-    "Effect", "EffectInputs", "gravity_torques", "effect_inputs", "approach_flank",
+    "Effect", "EffectInputs", "RowContext", "gravity_torques", "effect_inputs", "approach_flank",
     "sensed_points", "joint_basis", "joint_shifts", "parse_effect", "effect_to_dict", "effect_from_dict",
 ]
 
@@ -158,6 +158,24 @@ class EffectInputs:
     pauses: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class RowContext:
+    """Other rows of the same session as the rows :func:`effect_inputs` is given (e.g. held-out rows between
+    calibration rows, or the calibration rows of held-out ones).
+
+    Attributes:
+        q: their joint readings (M, N) [rad or m], for approach flanks.
+        time: their times (M,) [s].
+        held_sessions: (the session of each row (K,), of each context row (M,)) when the context rows are
+            the rows a drift is fitted on and the rows are held out: these take the drift's time as
+            ``evaluate`` does (:func:`held_times`); None otherwise.
+    """
+
+    q: npt.ArrayLike
+    time: npt.ArrayLike
+    held_sessions: tuple[npt.ArrayLike, npt.ArrayLike] | None = None
+
+
 def gravity_torques(
     chain: KinematicChain, q: np.ndarray, payload_kg: float = 0.0, payload_point: np.ndarray | None = None
 ) -> np.ndarray:
@@ -181,21 +199,20 @@ def effect_inputs(
     payload_point: np.ndarray | None = None,
     time: np.ndarray | None = None,
     time_reference: float | None = None,
-    context_q: np.ndarray | None = None,
-    context_time: np.ndarray | None = None,
-    held_sessions: tuple[np.ndarray, np.ndarray] | None = None,
+    context: RowContext | None = None,
 ) -> EffectInputs:
     """Gravity torques, time (minus ``time_reference``, default its mean) and
-    time order of the rows of ``data``. ``context_q`` (M, N) with
-    ``context_time`` (M,) [s] are the joint readings of other rows of the same
-    session, interleaved in time or next to them, for approach flanks (readings only); context further than
-    :data:`FLANK_GAP_S` from the rows' time span (another day) is left out: the motion in between is unknown,
-    the first flank 0.
+    time order of the rows of ``data``. ``context`` holds the joint readings and times of other rows of the
+    same session, interleaved in time or next to them, for approach flanks (readings only); context further
+    than :data:`FLANK_GAP_S` from the rows' time span (another day) is left out: the motion in between is
+    unknown, the first flank 0.
 
-    ``held_sessions`` = (the session of each row (K,), of each context row (M,)):
-    the context rows are the rows a drift is fitted on, and these rows (held-out
-    rows) take the drift's time as ``evaluate`` does (:func:`held_times`):
-    outside their session's span of context rows, its mean time."""
+    With ``context.held_sessions`` the context rows are the rows a drift is fitted on, and these rows
+    (held-out rows) take the drift's time as ``evaluate`` does (:func:`held_times`): outside their
+    session's span of context rows, its mean time."""
+    context_q = None if context is None else np.asarray(context.q, dtype=float)
+    context_time = None if context is None else np.asarray(context.time, dtype=float)
+    held_sessions = None if context is None else context.held_sessions
     order = np.arange(data.n_rows) if time is None else np.argsort(time, kind="stable")
     if time is not None and time_reference is None:
         time_reference = float(np.mean(time))

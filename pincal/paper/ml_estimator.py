@@ -57,14 +57,14 @@ from pincal.residuals.sensor import REGISTRATION_NAMES, SensorResidual
 from pincal.residuals.tool_pose import tool_pose_residual
 
 __all__ = [
-    "METHOD", "KEPT_NOMINAL", "SIGMA_FLOOR", "MAX_ITERATIONS", "RATIO_TOLERANCE", "MLCalibration",
+    "METHOD", "KEPT_NOMINAL", "SIGMA_FLOOR", "MAX_ITERATIONS", "RATIO_TOLERANCE", "MLSettings", "MLCalibration",
     "ml_parameter_indices", "variance_components", "calibrate_ml",
 ]
 
 #: Value of :attr:`PaperCalibration.method` for this estimator.
 METHOD = "ml"
 
-#: Status of alpha_N when ``fit_alpha_n=False``.
+#: Status of alpha_N when :attr:`MLSettings.fit_alpha_n` is False.
 KEPT_NOMINAL = "not estimated: kept at its nominal value"
 
 #: Smallest noise scale the variance estimate may return [m] or [rad]; noise-free
@@ -73,6 +73,21 @@ SIGMA_FLOOR = 1e-10
 
 MAX_ITERATIONS = 30
 RATIO_TOLERANCE = 1e-6  # relative change of sigma_p / sigma_a that ends the iteration
+
+
+@dataclass(frozen=True)
+class MLSettings:
+    """What the ML estimator fits and of which rows (:func:`calibrate_ml`).
+
+    Attributes:
+        fit_alpha_n: estimate alpha_N too (identifiable with a known tool).
+        withhold_orientations: roles (``cpa``, ``calibration``) whose rows enter
+            with their positions only (orientation weight 0), e.g. ``("cpa",)``
+            for the paper's position-only CPA.
+    """
+
+    fit_alpha_n: bool = True
+    withhold_orientations: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -135,8 +150,7 @@ def calibrate_ml(
     sigma_rot_deg: float | None = None,
     nominal: DHTable | None = None,
     *,
-    fit_alpha_n: bool = True,
-    withhold_orientations: tuple[str, ...] = (),
+    settings: MLSettings | None = None,
     start: PaperCalibration | None = None,
     models: dict | None = None,
 ) -> MLCalibration:
@@ -150,10 +164,8 @@ def calibrate_ml(
         sigma_rot_deg: σ_a, orientation noise per component [deg]; estimated if None.
         nominal: the default table (read from the chain's placements if None);
             eps_1 and d_1 (and alpha_N if not fitted) keep its values.
-        fit_alpha_n: estimate alpha_N too (identifiable with a known tool).
-        withhold_orientations: roles (``cpa``, ``calibration``) whose rows enter
-            with their positions only (orientation weight 0), e.g. ``("cpa",)``
-            for the paper's position-only CPA.
+        settings: whether alpha_N is fitted, and rows whose orientations are withheld
+            (:class:`MLSettings`; default: alpha_N fitted, no orientation withheld).
         start: Method 2's result on the same ``data`` (from
             :func:`pincal.paper.methods.calibrate_paper`), the fit's start;
             computed if None. Its nominal table is the nominal one.
@@ -166,6 +178,8 @@ def calibrate_ml(
             not positive, too few rows, a start that is not Method 2's or whose
             nominal is not ``nominal``, or parameters the data cannot determine.
     """
+    settings = MLSettings() if settings is None else settings
+    fit_alpha_n, withhold_orientations = settings.fit_alpha_n, settings.withhold_orientations
     for value, name in ((sigma_pos_mm, "sigma_pos_mm"), (sigma_rot_deg, "sigma_rot_deg")):
         if value is not None and not value > 0:
             raise CalibrationError(f"ML estimator: {name} must be positive, got {value}")

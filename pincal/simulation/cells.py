@@ -11,6 +11,8 @@ Jacobian, each pose started from the previous one, as a controller interpolates.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
@@ -23,7 +25,7 @@ from pincal.simulation.sensor import measure
 
 __all__ = [
     "IK_TOLERANCE", "IK_MAX_STEP", "IK_DAMPING", "IK_ITERATIONS", "PATHS", "INDUSTRIAL_6R_TABLE", "INDUSTRIAL_6R_START",
-    "inverse_kinematics", "path_positions", "constant_orientation_path", "sensor_at", "measure_truth",
+    "inverse_kinematics", "path_positions", "ToolPath", "constant_orientation_path", "sensor_at", "measure_truth",
 ]
 
 #: Pose error [m, rad] at which the inverse kinematics stops: far below any sensor's noise.
@@ -111,15 +113,37 @@ def path_positions(kind: str, count: int, centre: np.ndarray, size_m: float, row
     return out
 
 
-def constant_orientation_path(chain: KinematicChain, kind: str, count: int, centre: np.ndarray,
-                              rotation: np.ndarray, q_start: np.ndarray, size_m: float = 0.6,
-                              turn_rad: float = 0.0, rng: np.random.Generator | None = None,
-                              rows_per_line: int = 50, heights: int = 3) -> np.ndarray:
-    """Joint readings (count, N) of the chain's tool moving along :func:`path_positions` (``rows_per_line``,
-    ``heights``) with its orientation ``rotation`` held (in the chain's current — the controller's —
-    model), each commanded orientation turned by a random rotation vector of ``turn_rad`` RMS per axis
-    (0: exactly constant, as a controller holds it)."""
-    positions = path_positions(kind, count, centre, size_m, rows_per_line, heights)
+@dataclass(frozen=True)
+class ToolPath:
+    """A path of the tool's positions, :func:`path_positions`'s arguments.
+
+    Attributes:
+        kind: one of :data:`PATHS`.
+        count: positions along it.
+        centre: its centre in the root frame (3,) [m].
+        size_m: its extent [m].
+        rows_per_line: positions per pass.
+        heights: passes stepped in z (``line``, ``arc``).
+    """
+
+    kind: str
+    count: int
+    centre: np.ndarray
+    size_m: float = 0.6
+    rows_per_line: int = 50
+    heights: int = 3
+
+    def positions(self) -> np.ndarray:
+        """The tool positions (count, 3) [m]."""
+        return path_positions(self.kind, self.count, self.centre, self.size_m, self.rows_per_line, self.heights)
+
+
+def constant_orientation_path(chain: KinematicChain, path: ToolPath, rotation: np.ndarray, q_start: np.ndarray,
+                              turn_rad: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
+    """Joint readings (count, N) of the chain's tool moving along ``path`` with its orientation ``rotation``
+    held (in the chain's current — the controller's — model), each commanded orientation turned by a random
+    rotation vector of ``turn_rad`` RMS per axis (0: exactly constant, as a controller holds it)."""
+    positions, count = path.positions(), path.count
     turns = np.zeros((count, 3)) if not turn_rad else (rng or np.random.default_rng(0)).normal(0.0, turn_rad,
                                                                                                 (count, 3))
     q = inverse_kinematics(chain, rotation, positions[0], q_start)

@@ -25,7 +25,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
 from pincal.simulation.sensor import measure
 
-__all__ = ["RecordingSettings", "Recording", "simulate_recording"]
+__all__ = ["RecordingSettings", "SessionEvents", "RecordingTopics", "Recording", "simulate_recording"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,35 @@ class RecordingSettings:
     jitter_s: float = 0.002
     start_s: float = 1.7e9
     seed: int = 0
+
+
+@dataclass(frozen=True)
+class SessionEvents:
+    """What disturbs a simulated session, by posture index or time.
+
+    Attributes:
+        holds: hold time [s] of the postures named (others: ``RecordingSettings.hold_s``): a short stop.
+        shaken: amplitude [m] of a 2 Hz shake of the measured target during the hold of the
+            postures named; the joints hold still.
+        dropouts: stretches of time since the start [s] in which the tracker sends nothing.
+    """
+
+    holds: Mapping[int, float] | None = None
+    shaken: Mapping[int, float] | None = None
+    dropouts: Sequence[tuple[float, float]] = ()
+
+
+@dataclass(frozen=True)
+class RecordingTopics:
+    """The topics a simulated recording is written on.
+
+    Attributes:
+        measurements: the measurement topics (default ``/tracker/pose`` or ``/tracker/marker1``, …).
+        joints: the JointState topic.
+    """
+
+    measurements: Sequence[str] | None = None
+    joints: str = "/joint_states"
 
 
 @dataclass(frozen=True)
@@ -101,11 +130,8 @@ def simulate_recording(
     *,
     points: np.ndarray | None = None,
     pose: bool = False,
-    holds: Mapping[int, float] | None = None,
-    shaken: Mapping[int, float] | None = None,
-    dropouts: Sequence[tuple[float, float]] = (),
-    topics: Sequence[str] | None = None,
-    joint_topic: str = "/joint_states",
+    events: SessionEvents | None = None,
+    topics: RecordingTopics | None = None,
 ) -> Recording:
     """Simulate the recording of a session visiting ``postures`` (K, N) in order.
 
@@ -114,12 +140,13 @@ def simulate_recording(
         registration: the true sensor_T_base.
         points: target points in the tool frame (P, 3) [m] (default the tool origin); with ``pose``
             the one point's frame is measured (position and orientation).
-        holds: hold time [s] of the postures named (others: ``settings.hold_s``): a short stop.
-        shaken: amplitude [m] of a 2 Hz shake of the measured target during the hold of the
-            postures named; the joints hold still.
-        dropouts: stretches of time since the start [s] in which the tracker sends nothing.
-        topics: the measurement topics (default ``/tracker/pose`` or ``/tracker/marker1``, …).
+        events: short stops, shakes of the target and tracker dropouts (:class:`SessionEvents`; default none).
+        topics: the topics written on (:class:`RecordingTopics`; default ``/joint_states`` and
+            ``/tracker/pose`` or ``/tracker/marker1``, …).
     """
+    events = SessionEvents() if events is None else events
+    holds, shaken, dropouts = events.holds, events.shaken, events.dropouts
+    topics = RecordingTopics() if topics is None else topics
     rng = np.random.default_rng(settings.seed)
     postures = np.asarray(postures, dtype=float)
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
@@ -144,17 +171,17 @@ def simulate_recording(
         return mean + rng.exponential(settings.jitter_s, count)
 
     start = settings.start_s
-    joints = JointStream(joint_topic, chain.joint_names, start + t_joint, readings,
+    joints = JointStream(topics.joints, chain.joint_names, start + t_joint, readings,
                          start + t_joint + delays(settings.joint_delay_s, len(t_joint)))
     stamps = start + t_tracker + settings.clock_offset_s
     received = start + t_tracker + delays(settings.tracker_delay_s, len(t_tracker))
     if pose:
         assert seen.rotations is not None  # measured with orientations
-        names = list(topics or ["/tracker/pose"])
+        names = list(topics.measurements or ["/tracker/pose"])
         streams = [MeasurementStream(names[0], POSE, stamps, received, sensed[:, 0],
                                      Rotation.from_matrix(seen.rotations).as_quat(), "tracker")]
     else:
-        names = list(topics or [f"/tracker/marker{p + 1}" for p in range(len(points))])
+        names = list(topics.measurements or [f"/tracker/marker{p + 1}" for p in range(len(points))])
         streams = [MeasurementStream(names[p], POINT, stamps, received, sensed[:, p], None, "tracker")
                    for p in range(len(points))]
     return Recording(joints, streams, postures, start + windows, np.array(truth.points), truth.rotations)

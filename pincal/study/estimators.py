@@ -21,7 +21,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, DHTable
 from pincal.model.sensor import Registration
 from pincal.paper.methods import PaperCalibration, calibrate_paper
-from pincal.paper.ml_estimator import calibrate_ml
+from pincal.paper.ml_estimator import MLSettings, calibrate_ml
 from pincal.paper.noise_limit import PredictedErrors, predicted_errors
 from pincal.simulation.paper import SimulatedExperiment
 
@@ -133,7 +133,7 @@ def ml_without_cpa_orientations(
     """The ML estimator with the orientations of the ``withhold`` rows left out (an ablation).
 
     :func:`pincal.paper.ml_estimator.calibrate_ml` with known noise and
-    ``withhold_orientations=withhold``: with the default, the CPA rows are
+    ``MLSettings(withhold_orientations=withhold)``: with the default, the CPA rows are
     positions only, as in the paper. ``withhold=()`` is the ML estimator itself.
 
     Args:
@@ -152,7 +152,7 @@ def ml_without_cpa_orientations(
         positions and orientations).
     """
     result = calibrate_ml(
-        chain, data, sigma_pos_mm, sigma_rot_deg, nominal, withhold_orientations=withhold, start=start,
-        models=models
+        chain, data, sigma_pos_mm, sigma_rot_deg, nominal, settings=MLSettings(withhold_orientations=withhold),
+        start=start, models=models
     )
     return result.table, result.registration_position

@@ -63,7 +63,7 @@ from pincal.measurements.data import (
 from pincal.model.chain import KinematicChain
 from pincal.model.description import RobotDescription, read_description
 from pincal.model.drift import drift_offsets, read_time_spans, time_column
-from pincal.model.effects import effect_from_dict, effect_inputs, joint_shifts
+from pincal.model.effects import RowContext, effect_from_dict, effect_inputs, joint_shifts
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
@@ -446,7 +446,8 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
                           "values, and time_s, one finite time [s] per row; rewrite the report with pincal diagnose")
     inputs = effect_inputs(chain, data, payload, points.mean(axis=0), row_time,
                            time_reference=reference if row_time is not None else None,
-                           context_q=context_q, context_time=context_time)
+                           context=None if context_q is None or context_time is None
+                           else RowContext(context_q, context_time))
     q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
     out: dict = {"q": q}
     drift: DriftUse | None = None
