@@ -352,7 +352,7 @@ def large_session(path: Path, rows: int = 2500, seed: int = 11) -> dict:
     from pincal.model.chain import KinematicChain
     from pincal.model.parameter_sets import PlacementErrors
     from pincal.robots import example_robot_data_urdf
-    from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure
+    from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure
 
     chain = KinematicChain.from_urdf(example_robot_data_urdf(_UR5_URDF), _UR5_TIP)
     params = PlacementErrors(chain)
@@ -370,8 +370,9 @@ def large_session(path: Path, rows: int = 2500, seed: int = 11) -> dict:
     q[:, 4] += rng.normal(0.0, _WRIST_JITTER_RAD, rows)
     nominal = chain.placements()
     params.apply(truth)
-    data = measure(chain, q, DEFAULT_REGISTRATION, rng, 20e-6, np.radians(0.002), "calibration",
-                   points=np.array([[0.03, -0.02, 0.12]]), with_rotation=True)
+    data = measure(chain, q, DEFAULT_REGISTRATION, rng,
+                   SimulatedSensor(20e-6, np.radians(0.002), points=np.array([[0.03, -0.02, 0.12]]),
+                                   with_rotation=True), "calibration")
     chain.set_placements(nominal)
     write_measurements(path, data)
     # the condition number the user's data has: every identifiable parameter, at the nominal model

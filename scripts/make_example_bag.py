@@ -33,7 +33,7 @@ from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import DEFAULT_TOOL_RPY, DEFAULT_TOOL_XYZ
 from pincal.simulation.recording import RecordingSettings, RecordingTopics, SessionEvents, simulate_recording
-from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure, random_configurations
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = 2024
@@ -60,7 +60,7 @@ def main() -> None:
                                        events=SessionEvents(holds={SHORT: 1.0}, shaken={SHAKEN: 0.0025}),
                                        topics=RecordingTopics(["/mocap/tool/pose"]))
         sigma = SETTINGS.tracker_noise_m / np.sqrt(150), SETTINGS.tracker_noise_rad / np.sqrt(150)
-        validation = measure(chain, held_out, DEFAULT_REGISTRATION, rng, *sigma, "validation")
+        validation = measure(chain, held_out, DEFAULT_REGISTRATION, rng, SimulatedSensor(*sigma), "validation")
     joints = recording.joints
     joints = replace(joints, positions=np.round(joints.positions / ENCODER_STEP) * ENCODER_STEP)
     pose = recording.measurements[0]

@@ -58,11 +58,7 @@ from pincal.planning.information import MeasurementModel, SensorModel
 from pincal.planning.planner import WORKSPACE_SIZE, PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.chain import truth_error_mm
-from pincal.simulation.sensor import (
-    DEFAULT_REGISTRATION,
-    measure,
-    random_configurations,
-)
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure, random_configurations
 
 POINT = np.array([[0.05, 0.0, 0.07]])  # the test's marker 1 [m]
 PROBE = np.array([[0.045, -0.043, 0.118]])  # scripts/plan_vs_random.py's 6D probe [m]
@@ -165,8 +161,9 @@ def realised(chain: KinematicChain, count: int, n: int, seeds: int = 8) -> dict:
         for kind, found in errors.items():
             q = plan.q if kind == "planned" else candidates[rng.choice(len(candidates), n, replace=False)]
             params.apply(truth)
-            data = measure(chain, q, DEFAULT_REGISTRATION, rng, SIGMA_POS_M, SIGMA_ROT_RAD, "calibration",
-                           points=POINT, with_rotation=False)
+            data = measure(chain, q, DEFAULT_REGISTRATION, rng,
+                           SimulatedSensor(SIGMA_POS_M, SIGMA_ROT_RAD, points=POINT, with_rotation=False),
+                           "calibration")
             chain.set_placements(nominal)
             result = calibrate_chain(chain, data, "full")
             found.append(_heldout_mm(chain, params, truth, result, heldout_q))

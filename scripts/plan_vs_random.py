@@ -37,11 +37,7 @@ from pincal.planning.information import SensorModel
 from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.chain import truth_error_mm
-from pincal.simulation.sensor import (
-    DEFAULT_REGISTRATION,
-    measure,
-    random_configurations,
-)
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure, random_configurations
 
 SELECTION = "prior"  # calibrate's default at level full (docs/defaults.md), and plan's there
 TARGET = np.array([[0.045, -0.043, 0.118]])
@@ -70,7 +66,8 @@ def run(count: int, seeds: int) -> dict:
         pair = []
         for q in (plan.q, candidates[rng.choice(len(candidates), count, replace=False)]):
             params.apply(truth)
-            data = measure(chain, q, DEFAULT_REGISTRATION, rng, 1e-4, np.radians(0.1), "calibration", points=TARGET)
+            data = measure(chain, q, DEFAULT_REGISTRATION, rng, SimulatedSensor(1e-4, np.radians(0.1), points=TARGET),
+                           "calibration")
             chain.set_placements(nominal)
             result = calibrate_chain(chain, data, "full", selection=SELECTION)
             pair.append(heldout_mm(chain, params, truth, result, heldout))

@@ -93,7 +93,7 @@ from pincal.simulation.cells import (
     sensor_at,
 )
 from pincal.simulation.fixture import ball_and_jacobian, simulate_fixture
-from pincal.simulation.sensor import cpa_configurations, random_configurations
+from pincal.simulation.sensor import SimulatedSensor, cpa_configurations, random_configurations
 
 #: The bound of the issue: held-out within 1.3× the noise-limited prediction (level full).
 BOUND = 1.3
@@ -287,8 +287,9 @@ def simulate(scenario: Scenario, urdf: Path, tip: str):
     if scenario.read_against:  # the controller reads A3 from the horizontal: A3 − A2
         actual[:, 2] += q[:, 1]
         actual_test[:, 2] += q_test[:, 1]
-    calibration = measure_truth(params, truth, actual, sensor, rng, sigma_p, sigma_a, **options)
-    test = measure_truth(params, truth, actual_test, sensor, rng, sigma_p, sigma_a, "validation", **options)
+    measured = SimulatedSensor(sigma_p, sigma_a, **options)
+    calibration = measure_truth(params, truth, actual, sensor, rng, measured)
+    test = measure_truth(params, truth, actual_test, sensor, rng, measured, "validation")
     return chain, replace(calibration, q=q), replace(test, q=q_test)
 
 

@@ -37,7 +37,7 @@ from pincal.simulation.cells import measure_truth
 from pincal.simulation.chain import SimulationSettings, simulate_chain
 from pincal.simulation.paper import SimulationSettings as PaperSettings
 from pincal.simulation.paper import simulate_experiment
-from pincal.simulation.sensor import DEFAULT_REGISTRATION, random_configurations
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedEffects, SimulatedSensor, random_configurations
 
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 PANDA = example_robot_data_urdf("panda_description/urdf/panda.urdf")
@@ -95,8 +95,9 @@ def test_the_level_choice_and_diagnose_leave_the_chain(experiment):
     truth = np.random.default_rng(3).normal(0.0, 1e-3, params.size)
     rng = np.random.default_rng(6)
     scale = [(Effect("encoder_scale", "elbow_joint"), np.array([2e-3]))]
-    rows = measure_truth(params, truth, random_configurations(chain, rng, 40), DEFAULT_REGISTRATION, rng, 2e-5,
-                         0.0, points=POINTS, with_rotation=False, effects=scale)
+    rows = measure_truth(params, truth, random_configurations(chain, rng, 40), DEFAULT_REGISTRATION, rng,
+                         SimulatedSensor(2e-5, 0.0, points=POINTS, with_rotation=False),
+                         effects=SimulatedEffects(effects=scale))
     calibration = calibrate_chain(chain, rows, "full")
     diagnosis = diagnose(chain, calibration, rows, candidates=[Effect("encoder_scale", "elbow_joint"),
                                                                 Effect("compliance", "shoulder_lift_joint")])

@@ -30,7 +30,7 @@ from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
 NOISE_M = 20e-6
 BOUND_MM = 1.3 * np.sqrt(3) * NOISE_M * 1000.0
@@ -47,7 +47,8 @@ def test_the_flag_reads_joint_factor_and_driver():
 def test_eq_c1_takes_every_driver_as_read(industrial_arm_urdf):
     chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
     data = measure_truth(PlacementErrors(chain), np.zeros(PlacementErrors(chain).size),
-                         np.arange(12.0).reshape(2, 6) / 10, sensor_at(3.0), np.random.default_rng(0), 0.0, 0.0)
+                         np.arange(12.0).reshape(2, 6) / 10, sensor_at(3.0), np.random.default_rng(0),
+                         SimulatedSensor(0.0, 0.0))
     couplings = [parse_coupling("A3=-1*A2"), parse_coupling("A2=0.5*A3")]  # each from the readings, in any order
     for order in (couplings, couplings[::-1]):
         q = apply_couplings(data, order).q
@@ -72,8 +73,8 @@ def horizontal_j3(industrial_arm_urdf, tmp_path_factory):
         read = random_configurations(chain, rng, count)
         actual = read.copy()
         actual[:, 2] += read[:, 1]  # the reading of A3 is A3 - A2
-        rows = measure_truth(params, truth, actual, sensor_at(3.0), rng, NOISE_M, np.radians(0.003), role,
-                             points=np.array([[0.03, 0.0, 0.1]]))
+        rows = measure_truth(params, truth, actual, sensor_at(3.0), rng,
+                             SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])), role)
         write_measurements(folder / name, replace(rows, q=read))
         paths.append(folder / name)
     return industrial_arm_urdf, *paths
@@ -230,7 +231,8 @@ def test_joint_limits_are_judged_on_the_corrected_angles(industrial_arm_urdf, tm
     actual = read.copy()
     actual[:, 2] += read[:, 1]
     params = PlacementErrors(chain)
-    rows = measure_truth(params, np.zeros(params.size), actual, sensor_at(3.0), np.random.default_rng(0), 0.0, 0.0)
+    rows = measure_truth(params, np.zeros(params.size), actual, sensor_at(3.0), np.random.default_rng(0),
+                         SimulatedSensor(0.0, 0.0))
     write_measurements(tmp_path / "rows.csv", replace(rows, q=read))
     _, raw_notes = read_measurements(tmp_path / "rows.csv", chain.joint_specs)
     data, notes = read_measurements(tmp_path / "rows.csv", chain.joint_specs, [parse_coupling("A3=-1*A2")])

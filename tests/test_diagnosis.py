@@ -393,13 +393,14 @@ def test_effects_that_need_gravity_are_named_untestable_without_inertias(industr
     of the parallel A2, A3 (a compliance driven by the neighbour's torque)."""
     from pincal.model.parameter_sets import PlacementErrors
     from pincal.simulation.cells import measure_truth, sensor_at
-    from pincal.simulation.sensor import random_configurations
+    from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
     chain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
     params = PlacementErrors(chain)
     rng = np.random.default_rng(3)
     rows = measure_truth(params, rng.normal(0.0, 3e-4, params.size), random_configurations(chain, rng, 40),
-                         sensor_at(3.0), rng, 20e-6, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]))
+                         sensor_at(3.0), rng,
+                         SimulatedSensor(20e-6, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
     result = diagnose(chain, calibrate_chain(chain, rows, "full", selection="prior"), rows)
     (note,) = [n for n in result.notes if n.startswith("cannot be tested")]
     assert note.startswith("cannot be tested, 14 candidate(s): no gravity torque") and "--payload-kg" in note

@@ -31,7 +31,7 @@ from pincal.report.effects_file import effects_document
 from pincal.report.sections import effects_section
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedEffects, SimulatedSensor, random_configurations
 
 TIAGO = example_robot_data_urdf("tiago_description/robots/tiago.urdf")
 TIP = "wrist_ft_tool_link"
@@ -62,8 +62,9 @@ def cell(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("effect_units")
     for count, role, name in ((80, "calibration", "cal.csv"), (30, "validation", "val.csv")):
         q = random_configurations(chain, rng, count)
-        rows = measure_truth(params, truth, q, sensor_at(3.0), rng, 20e-6, 0.0, role,
-                             points=np.array([[0.0, 0.0, 0.05]]), effects=[(SAG, np.array([SAG_VALUE]))])
+        rows = measure_truth(params, truth, q, sensor_at(3.0), rng,
+                             SimulatedSensor(20e-6, 0.0, points=np.array([[0.0, 0.0, 0.05]])), role,
+                             effects=SimulatedEffects(effects=[(SAG, np.array([SAG_VALUE]))]))
         write_measurements(folder / name, rows)
     return folder
 

@@ -29,7 +29,7 @@ from pincal.report.document import read_report
 from pincal.report.effects_file import SCHEMA, effects_path, read_effects_file, write_effects_file
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedEffects, SimulatedSensor, random_configurations
 
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 SAME_RAD = 1e-12
@@ -52,8 +52,9 @@ def cell(chain, tmp_path_factory):
     for count, role, name in ((150, "calibration", "cal.csv"), (60, "validation", "val.csv")):
         q = random_configurations(chain, rng, count)
         q[:, 1:3] = rng.uniform(-np.pi / 2, np.pi / 2, (count, 2))  # J3 − J2 within J3's limits (±π)
-        rows = measure_truth(params, truth, q, sensor_at(3.0), rng, 20e-6, np.radians(0.003), role,
-                             points=np.array([[0.03, 0.0, 0.1]]), effects=hidden)
+        rows = measure_truth(params, truth, q, sensor_at(3.0), rng,
+                             SimulatedSensor(20e-6, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])), role,
+                             effects=SimulatedEffects(effects=hidden))
         read = q.copy()
         read[:, 2] -= q[:, 1]  # the controller reads the elbow from the horizontal
         write_measurements(folder / name, replace(rows, q=read))
@@ -155,7 +156,7 @@ def _rows(chain, q):
     """Rows of readings ``q`` (their targets unused: shifts depend on the readings only)."""
     from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure
 
-    return measure(chain, q, DEFAULT_REGISTRATION, np.random.default_rng(0), 0.0, 0.0, "calibration")
+    return measure(chain, q, DEFAULT_REGISTRATION, np.random.default_rng(0), SimulatedSensor(0.0, 0.0), "calibration")
 
 
 def test_a_file_that_is_not_one_is_refused_in_one_line(tmp_path):

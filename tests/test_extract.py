@@ -26,7 +26,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.recording import RecordingSettings, SessionEvents, simulate_recording
-from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure, random_configurations
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure, random_configurations
 
 OFFSET = -0.3456  # tracker stamp - joint stamp [s]: more than the 0.5 s trim away from its opposite
 SETTINGS = RecordingSettings(clock_offset_s=OFFSET, seed=5)
@@ -210,10 +210,10 @@ def test_bag_to_calibrate_to_evaluate_matches_the_csv_it_was_made_from(chain, tm
     settings = replace(SETTINGS, hold_s=2.5, move_s=1.0)
     recording = _record(chain, postures, settings, pose=True)
     with chain.placed(TABLE2_LARGE.apply(KUKA_LWR4_DH).joint_origins()):
-        write_measurements(tmp_path / "source.csv", measure(chain, postures, DEFAULT_REGISTRATION, rng, 0, 0,
-                                                            "calibration"))
-        write_measurements(tmp_path / "held_out.csv", measure(chain, held_out, DEFAULT_REGISTRATION, rng, 0, 0,
-                                                              "validation"))
+        write_measurements(tmp_path / "source.csv", measure(chain, postures, DEFAULT_REGISTRATION, rng,
+                                                            SimulatedSensor(0, 0), "calibration"))
+        write_measurements(tmp_path / "held_out.csv", measure(chain, held_out, DEFAULT_REGISTRATION, rng,
+                                                              SimulatedSensor(0, 0), "validation"))
     bag = _bag(tmp_path, recording, "mcap")
     assert main(["extract", str(bag), "--joints", "/joint_states", "--pose", "/tracker/pose",
                  "--out", str(tmp_path / "bag.csv")]) == 0

@@ -18,7 +18,7 @@ from pincal.fit.level_choice import choose_level
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
 
 @pytest.mark.parametrize("selection, sigma_column", [("prior", None), ("aic", None), ("prior", "sigma")],
@@ -28,8 +28,8 @@ def test_linearised_folds_agree_with_refits(industrial_arm_urdf, monkeypatch, se
     params = PlacementErrors(chain)
     rng = np.random.default_rng(31)
     truth = rng.normal(0.0, 3e-4, params.size)
-    rows = measure_truth(params, truth, random_configurations(chain, rng, 120), sensor_at(4.0), rng, 20e-6,
-                         np.radians(0.003), points=np.array([[0.035, -0.02, 0.21]]))
+    rows = measure_truth(params, truth, random_configurations(chain, rng, 120), sensor_at(4.0), rng,
+                         SimulatedSensor(20e-6, np.radians(0.003), points=np.array([[0.035, -0.02, 0.21]])))
     if sigma_column:  # rows of unequal noise, weighted by it: half of them twice as noisy as stated
         sigma = np.where(np.arange(rows.n_rows) % 2 == 0, 0.02, 0.04)
         rows = replace(rows, extra={**rows.extra, "sigma": sigma})
@@ -53,7 +53,8 @@ def test_a_level_that_cannot_be_fitted_at_scale_is_no_candidate(industrial_arm_u
     params = PlacementErrors(chain)
     rng = np.random.default_rng(32)
     rows = measure_truth(params, rng.normal(0.0, 3e-4, params.size), random_configurations(chain, rng, 120),
-                         sensor_at(4.0), rng, 20e-6, np.radians(0.003), points=np.array([[0.035, -0.02, 0.21]]))
+                         sensor_at(4.0), rng,
+                         SimulatedSensor(20e-6, np.radians(0.003), points=np.array([[0.035, -0.02, 0.21]])))
     monkeypatch.setattr(level_choice, "LINEARISED_FROM_ROWS", 100)
     real = fold_update.calibrate_chain
 

@@ -30,7 +30,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
 from conftest import INDUSTRIAL_ARM_START
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
 RELATIVE = 1e-9
 TARGET = np.array([[0.035, -0.02, 0.21]])
@@ -67,7 +67,8 @@ def _rows(urdf, kind, seed):
     else:  # a raster at constant orientation: the target is held (pincal.fit.target_hold, rule 1)
         q = constant_orientation_path(chain, ToolPath("raster", 120, np.array([1.2, 0.0, 0.5])),
                                       np.diag([-1.0, 1.0, -1.0]), INDUSTRIAL_ARM_START)
-    data = measure_truth(params, truth, q, sensor_at(4.2), rng, 20e-6, np.radians(0.003), points=TARGET)
+    data = measure_truth(params, truth, q, sensor_at(4.2), rng,
+                         SimulatedSensor(20e-6, np.radians(0.003), points=TARGET))
     return chain, data
 
 
@@ -119,13 +120,15 @@ def test_a_target_offset_changes_only_the_target(industrial_arm_urdf, offset):
     rng = np.random.default_rng(13)
     truth = rng.normal(0.0, 3e-4, params.size)
     q = random_configurations(chain, rng, 40)
-    rows = [measure_truth(params, truth, q, sensor_at(4.2), np.random.default_rng(0), 0.0, 0.0, points=points)
+    rows = [measure_truth(params, truth, q, sensor_at(4.2), np.random.default_rng(0),
+                          SimulatedSensor(0.0, 0.0, points=points))
             for points in (TARGET, TARGET + offset)]
     (near, p_near, e_near), (far, p_far, e_far) = (_outcome(chain, data) for data in rows)
     assert near.kept.tolist() == far.kept.tolist() and near.status == far.status
     assert np.abs(p_near - p_far).max() <= RELATIVE * max(1.0, np.abs(p_near).max())
     for errors in (e_near.position_m, e_near.rotation_rad, e_far.position_m, e_far.rotation_rad):
         assert np.abs(errors).max() <= RELATIVE  # both exact, in every row
-    noisy = [measure_truth(params, truth, q, sensor_at(4.2), np.random.default_rng(1), 20e-6, np.radians(0.003),
-                           points=points) for points in (TARGET, TARGET + offset)]
+    noisy = [measure_truth(params, truth, q, sensor_at(4.2), np.random.default_rng(1),
+                           SimulatedSensor(20e-6, np.radians(0.003), points=points))
+             for points in (TARGET, TARGET + offset)]
     assert len({tuple(calibrate_chain(chain, data, "full", selection="prior").kept) for data in noisy}) == 1

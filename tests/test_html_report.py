@@ -365,15 +365,15 @@ def _ur5_rows(name: str, rows: int, seed: int, role: str = "calibration"):
     from scipy.spatial.transform import Rotation
 
     from pincal.model.sensor import Registration
-    from pincal.simulation.sensor import measure, random_configurations
+    from pincal.simulation.sensor import SimulatedSensor, measure, random_configurations
 
     chain = KinematicChain.from_urdf(UR5, "tool0")
     rng = np.random.default_rng(seed)
     angles, shift = SENSORS[name]
     sensor = Registration(Rotation.from_euler("ZYX", angles, degrees=True).as_matrix(), np.array(shift))
     sigma = 5e-5 if role == "validation" else 0.0
-    return measure(chain, random_configurations(chain, rng, rows), sensor, rng, sigma, 0.0, role,
-                   points=np.array([[0.03, -0.02, 0.08]]), with_rotation=False)
+    return measure(chain, random_configurations(chain, rng, rows), sensor, rng,
+                   SimulatedSensor(sigma, 0.0, points=np.array([[0.03, -0.02, 0.08]]), with_rotation=False), role)
 
 
 def _page(html: str):

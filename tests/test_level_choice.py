@@ -39,11 +39,7 @@ from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.fixture import simulate_fixture
-from pincal.simulation.sensor import (
-    DEFAULT_REGISTRATION,
-    measure,
-    random_configurations,
-)
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure, random_configurations
 
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 PANDA = example_robot_data_urdf("panda_description/urdf/panda.urdf")
@@ -60,7 +56,8 @@ def _ur5_rows(kind: str, rows: int, seed: int, sigma_m: float, registration=DEFA
     params = (JointOffsets if kind == "offsets" else PlacementErrors)(chain)
     params.apply(rng.normal(0.0, 1e-3, params.size))
     q = random_configurations(chain, rng, rows)
-    data = measure(chain, q, registration, rng, sigma_m, 0.0, "calibration", points=POINT, with_rotation=False)
+    data = measure(chain, q, registration, rng, SimulatedSensor(sigma_m, 0.0, points=POINT, with_rotation=False),
+                   "calibration")
     return data if name is None else replace(data, source=f"{name}.csv", sessions=None, files=None)
 
 
@@ -227,8 +224,8 @@ def test_a_session_whose_absence_leaves_too_few_rows_is_one_line():
     def session(rows, seed, name):
         rng = np.random.default_rng(seed)
         q = random_configurations(chain, rng, rows)
-        data = measure(chain, q, DEFAULT_REGISTRATION, rng, 1e-4, 0.0, "calibration", points=markers,
-                       with_rotation=False)
+        data = measure(chain, q, DEFAULT_REGISTRATION, rng,
+                       SimulatedSensor(1e-4, 0.0, points=markers, with_rotation=False), "calibration")
         return replace(data, source=f"{name}.csv", sessions=None, files=None)
 
     data = join_sets([session(20, 1, "rest"), session(2, 2, "pair")])

@@ -36,6 +36,7 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual
 from pincal.residuals.sensor_values import FittedBlocks, RowWeights
 from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
+from pincal.simulation.sensor import SimulatedSensor
 from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres
@@ -60,10 +61,9 @@ def _line(urdf, with_rotation: bool, tool_known: bool, kind: str = "line", seed:
     truth = rng.normal(0.0, 3e-4, params.size)
     target = dict(points=np.zeros((1, 3)), target_rotation=np.eye(3)) if tool_known else dict(
         points=TOOL[None, :3, 3], target_rotation=TOOL[:3, :3])
-    common = dict(with_rotation=with_rotation, **target)
-    rows = measure_truth(params, truth, q, sensor_at(4.2), rng, SIGMA_POS_M, SIGMA_ROT_RAD, **common)
-    test = measure_truth(params, truth, q_test, sensor_at(4.2), rng, SIGMA_POS_M, SIGMA_ROT_RAD, "validation",
-                         **common)
+    sensor = SimulatedSensor(SIGMA_POS_M, SIGMA_ROT_RAD, with_rotation=with_rotation, **target)
+    rows = measure_truth(params, truth, q, sensor_at(4.2), rng, sensor)
+    test = measure_truth(params, truth, q_test, sensor_at(4.2), rng, sensor, "validation")
     return chain, rows, test
 
 

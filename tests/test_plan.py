@@ -42,11 +42,7 @@ from pincal.planning.ordering import approach_balance, move_times, short_tour
 from pincal.planning.planner import PlanSettings, plan_measurements
 from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf, kuka_lwr4plus_urdf
 from pincal.simulation.chain import truth_error_mm
-from pincal.simulation.sensor import (
-    DEFAULT_REGISTRATION,
-    measure,
-    random_configurations,
-)
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure, random_configurations
 
 ROOT = Path(__file__).resolve().parent.parent
 TIAGO_DATA = ROOT / "data" / "tiago_mocap"
@@ -112,8 +108,9 @@ def test_planned_configurations_calibrate_as_predicted_and_beat_random(robot, se
         for kind in errors:
             q = plan.q if kind == "planned" else candidates[rng.choice(len(candidates), count, replace=False)]
             params.apply(truth)
-            data = measure(chain, q, DEFAULT_REGISTRATION, rng, 1e-4, np.radians(0.1), "calibration",
-                           points=points, with_rotation=sensor.has_rotation)
+            data = measure(chain, q, DEFAULT_REGISTRATION, rng,
+                           SimulatedSensor(1e-4, np.radians(0.1), points=points, with_rotation=sensor.has_rotation),
+                           "calibration")
             chain.set_placements(nominal)
             result = calibrate_chain(chain, data, "full", selection=selection)
             errors[kind].append(_heldout_mm(chain, params, truth, result, points, heldout_q))

@@ -25,7 +25,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.sensor import Registration
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
 SIGMA_POS_MM = 0.02
 
@@ -37,8 +37,9 @@ def rows(industrial_arm_urdf):
     rng = np.random.default_rng(21)
     truth = rng.normal(0.0, 3e-4, params.size)
     q = random_configurations(chain, rng, 60)
-    return measure_truth(params, truth, q, sensor_at(4.2), rng, SIGMA_POS_MM / 1000, np.radians(0.003),
-                         points=np.array([[0.03, -0.02, 0.18]]))
+    return measure_truth(params, truth, q, sensor_at(4.2), rng,
+                         SimulatedSensor(SIGMA_POS_MM / 1000, np.radians(0.003),
+                                         points=np.array([[0.03, -0.02, 0.18]])))
 
 
 def _swapped(data):
@@ -136,8 +137,9 @@ def test_a_calibration_that_predicts_worse_than_nominal_is_caught(industrial_arm
     params = PlacementErrors(chain)
     rng = np.random.default_rng(3)
     q = random_configurations(chain, rng, 16)
-    data = measure_truth(params, np.zeros(params.size), q, sensor_at(4.2), rng, 1e-3, np.radians(0.05),
-                         points=np.array([[0.03, -0.02, 0.18]]), with_rotation=False)  # 48 coordinates, 30 unknowns
+    data = measure_truth(params, np.zeros(params.size), q, sensor_at(4.2), rng,
+                         SimulatedSensor(1e-3, np.radians(0.05), points=np.array([[0.03, -0.02, 0.18]]),
+                                         with_rotation=False))  # 48 coordinates, 30 unknowns
     nominal = chain.placements()
     result = calibrate_chain(chain, data, "full", selection="all")
     chain.set_placements(nominal)

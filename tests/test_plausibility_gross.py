@@ -37,7 +37,7 @@ from pincal.outputs import file_sha256
 from pincal.report.effects_file import effects_path
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedEffects, SimulatedSensor, random_configurations
 from pincal.workflows.settings import CalibrateSettings
 from pincal.workflows.verdict import diagnose_command
 
@@ -63,8 +63,9 @@ def arm(industrial_arm_urdf, tmp_path_factory):
     rng = np.random.default_rng(29)
     truth = rng.normal(0.0, 3e-4, params.size)
     q = random_configurations(chain, rng, 40)
-    rows = measure_truth(params, truth, q, sensor_at(4.2), rng, SIGMA_POS_MM / 1000, np.radians(0.003),
-                         points=np.array([TOOL[:3]]), with_rotation=False)
+    rows = measure_truth(params, truth, q, sensor_at(4.2), rng,
+                         SimulatedSensor(SIGMA_POS_MM / 1000, np.radians(0.003), points=np.array([TOOL[:3]]),
+                                         with_rotation=False))
     folder = tmp_path_factory.mktemp("other_arm")
     (folder / "other.csv").write_text(OTHER_ARM_TABLE, encoding="utf-8")
     urdf_from_dh_table(folder / "other.csv", "modified", folder / "other.urdf", degrees=True)
@@ -212,8 +213,8 @@ def sagging_ur5(tmp_path_factory):
     truth = rng.normal(0.0, 3e-4, params.size)
     sag = [(Effect("compliance", "elbow_joint", driver="shoulder_lift_joint"), np.array([4e-5]))]
     rows = measure_truth(params, truth, random_configurations(chain, rng, 40), sensor_at(3.0), rng,
-                         SIGMA_POS_MM / 1000, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]), effects=sag,
-                         with_rotation=False)
+                         SimulatedSensor(SIGMA_POS_MM / 1000, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]),
+                                         with_rotation=False), effects=SimulatedEffects(effects=sag))
     folder = tmp_path_factory.mktemp("ur5")
     write_measurements(folder / "ur5.csv", rows)
     return urdf, folder / "ur5.csv"

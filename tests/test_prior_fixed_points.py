@@ -20,7 +20,7 @@ from pincal.fit.prior import Prior, log_evidence
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
 NOISE_M = 20e-6
 FLOOR_M = 2 * np.sqrt(3) * NOISE_M
@@ -48,8 +48,8 @@ def _rows(industrial_arm_urdf, scale):
     rng = np.random.default_rng(5)
     truth = rng.normal(0.0, scale, params.size)
     q = random_configurations(chain, rng, 10)
-    return chain, measure_truth(params, truth, q, sensor_at(3.0), rng, NOISE_M, np.radians(0.003),
-                                points=np.array([[0.03, 0.0, 0.1]]))
+    return chain, measure_truth(params, truth, q, sensor_at(3.0), rng,
+                                SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
 
 
 def test_a_trapped_fixed_point_is_left_for_the_datas(industrial_arm_urdf):
@@ -78,8 +78,8 @@ def test_a_well_specified_prior_gets_no_note(industrial_arm_urdf):
     for seed in range(6):
         rng = np.random.default_rng(seed)
         truth = rng.normal(0.0, 3e-4, params.size)
-        data = measure_truth(params, truth, random_configurations(chain, rng, 8), sensor_at(3.0), rng, NOISE_M,
-                             np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]))
+        data = measure_truth(params, truth, random_configurations(chain, rng, 8), sensor_at(3.0), rng,
+                             SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
         result = calibrate_chain(chain, data, "full", selection="prior")
         assert not any("without the prior" in note for note in result.selection.notes), seed
 
@@ -114,7 +114,7 @@ def test_rows_fitted_to_rounding_leave_the_prior_its_weight(industrial_arm_urdf)
     params = PlacementErrors(chain)
     rng = np.random.default_rng(3)
     truth = rng.normal(0.0, 3e-4, params.size)
-    data = measure_truth(params, truth, random_configurations(chain, rng, 6), sensor_at(3.0), rng, NOISE_M,
-                         np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]]))
+    data = measure_truth(params, truth, random_configurations(chain, rng, 6), sensor_at(3.0), rng,
+                         SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
     result = calibrate_chain(chain, data, "full", selection="prior")
     assert result.sigma_pos_m == SCALE_FLOOR and result.rms_m < FLOOR_M

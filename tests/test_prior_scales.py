@@ -21,7 +21,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedSensor, random_configurations
 
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 NOISE_M = 20e-6  # a laser tracker's noise per axis
@@ -133,8 +133,9 @@ def ur5_rows():
     q = random_configurations(chain, np.random.default_rng(11), 60)
 
     def rows(truth, seed):
-        return measure_truth(params, truth, q, sensor_at(3.0), np.random.default_rng(seed), NOISE_M,
-                             np.radians(0.003), points=np.array([[0.02, 0.01, 0.05]]), with_rotation=True)
+        return measure_truth(params, truth, q, sensor_at(3.0), np.random.default_rng(seed),
+                             SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.02, 0.01, 0.05]]),
+                                             with_rotation=True))
 
     kept = calibrate_chain(chain, rows(np.zeros(params.size), 0), "full", selection=Prior(1.0, 0.5)).kept
     return chain, params, kept, parameter_kinds(params), rows
@@ -183,8 +184,8 @@ def _industrial_rows(industrial_arm_urdf, scale: float, rows: int = 10, seed: in
     rng = np.random.default_rng(seed)
     truth = rng.normal(0.0, scale, params.size)
     q = random_configurations(chain, rng, rows)
-    return chain, measure_truth(params, truth, q, sensor_at(3.0), rng, NOISE_M, np.radians(0.003),
-                                points=np.array([[0.03, 0.0, 0.1]]))
+    return chain, measure_truth(params, truth, q, sensor_at(3.0), rng,
+                                SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
 
 
 def test_deviations_ten_times_the_old_prior_are_fitted_to_the_noise(industrial_arm_urdf):
@@ -226,10 +227,9 @@ def test_noise_free_rows_recover_the_truth_with_estimated_scales(industrial_arm_
     rng = np.random.default_rng(4)
     truth = rng.normal(0.0, 3e-3, params.size)
     q = random_configurations(chain, rng, 30)
-    options = dict(points=np.array([[0.03, 0.0, 0.1]]))
-    data = measure_truth(params, truth, q, sensor_at(3.0), rng, 0.0, 0.0, **options)
-    test = measure_truth(params, truth, random_configurations(chain, rng, 20), sensor_at(3.0), rng, 0.0, 0.0,
-                         **options)
+    sensor = SimulatedSensor(0.0, 0.0, points=np.array([[0.03, 0.0, 0.1]]))
+    data = measure_truth(params, truth, q, sensor_at(3.0), rng, sensor)
+    test = measure_truth(params, truth, random_configurations(chain, rng, 20), sensor_at(3.0), rng, sensor)
     result = calibrate_chain(chain, data, "full", selection="prior")
     target = result.target
     from pincal.fit.metrics import pose_errors

@@ -27,7 +27,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, parse_effect
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import INDUSTRIAL_6R_START, measure_truth, sensor_at
-from pincal.simulation.sensor import cpa_configurations
+from pincal.simulation.sensor import SimulatedEffects, SimulatedSensor, cpa_configurations
 
 NOISE_M = 20e-6
 BOUND_MM = 1.3 * np.sqrt(3) * NOISE_M * 1000.0
@@ -49,8 +49,9 @@ def _cell(urdf, seed: int, read_against: bool = False, effects=(), start=INDUSTR
         actual = read.copy()
         if read_against:
             actual[:, 2] += read[:, 1]  # the controller reads A3 from the horizontal: A3 − A2
-        rows = measure_truth(params, truth, actual, sensor_at(4.0), rng, NOISE_M, 0.0, role, points=REFLECTORS,
-                             with_rotation=False, effects=list(effects))
+        rows = measure_truth(params, truth, actual, sensor_at(4.0), rng,
+                             SimulatedSensor(NOISE_M, 0.0, points=REFLECTORS, with_rotation=False), role,
+                             effects=SimulatedEffects(effects=list(effects)))
         sets.append(replace(rows, q=read))
     return chain, sets[0], sets[1]
 

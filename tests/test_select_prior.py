@@ -25,6 +25,8 @@ from pincal.robots import example_robot_data_urdf
 from pincal.simulation.fixture import simulate_fixture
 from pincal.simulation.sensor import (
     DEFAULT_REGISTRATION,
+    SimulatedEffects,
+    SimulatedSensor,
     measure,
     random_configurations,
 )
@@ -42,11 +44,11 @@ def _rows(rows: int, seed: int, sigma_m: float, kind=PlacementErrors, error=1e-4
     rng = np.random.default_rng(seed)
     params = kind(chain)
     params.apply(rng.normal(0.0, error, params.size))
-    train = measure(chain, random_configurations(chain, rng, rows), DEFAULT_REGISTRATION, rng, sigma_m,
-                    1e-4 if with_rotation else 0.0, "calibration", points=POINT, with_rotation=with_rotation,
-                    effects=effects)
-    test = measure(chain, random_configurations(chain, rng, 50), DEFAULT_REGISTRATION, rng, 0.0, 0.0,
-                   "calibration", points=POINT, with_rotation=False)
+    train = measure(chain, random_configurations(chain, rng, rows), DEFAULT_REGISTRATION, rng,
+                    SimulatedSensor(sigma_m, 1e-4 if with_rotation else 0.0, points=POINT, with_rotation=with_rotation),
+                    "calibration", effects=SimulatedEffects(effects=effects))
+    test = measure(chain, random_configurations(chain, rng, 50), DEFAULT_REGISTRATION, rng,
+                   SimulatedSensor(0.0, 0.0, points=POINT, with_rotation=False), "calibration")
     chain.set_placements(nominal)
     return chain, train, test
 

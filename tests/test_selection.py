@@ -22,7 +22,7 @@ from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.robots import example_robot_data_urdf
-from pincal.simulation.sensor import DEFAULT_REGISTRATION, measure
+from pincal.simulation.sensor import DEFAULT_REGISTRATION, SimulatedSensor, measure
 
 TIAGO_TRAIN = Path(__file__).resolve().parent.parent / "data" / "tiago_mocap" / "qualisys_2021-11-30_static_postures.csv"
 
@@ -181,8 +181,9 @@ def _straight_wrist_session(rows=300, seed=5):
     q[:, 4] += rng.normal(0.0, 5e-8, len(q))
     nominal = chain.placements()
     params.apply(truth)
-    data = measure(chain, q, DEFAULT_REGISTRATION, rng, 20e-6, np.radians(0.002), "calibration",
-                   points=np.array([[0.03, -0.02, 0.12]]), with_rotation=True)
+    data = measure(chain, q, DEFAULT_REGISTRATION, rng,
+                   SimulatedSensor(20e-6, np.radians(0.002), points=np.array([[0.03, -0.02, 0.12]]),
+                                   with_rotation=True), "calibration")
     chain.set_placements(nominal)
     return chain, data
 
@@ -243,8 +244,8 @@ def test_rows_that_leave_nothing_for_the_kinematics_are_one_line(tmp_path, capsy
     ur5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
     chain = KinematicChain.from_urdf(ur5, "tool0")
     rng = np.random.default_rng(2)
-    data = measure(chain, rng.uniform(-2.0, 2.0, (3, 6)), DEFAULT_REGISTRATION, rng, 1e-4, 0.0, "calibration",
-                   points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False)
+    data = measure(chain, rng.uniform(-2.0, 2.0, (3, 6)), DEFAULT_REGISTRATION, rng,
+                   SimulatedSensor(1e-4, 0.0, points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False), "calibration")
     write_measurements(tmp_path / "three.csv", data)
     for select in ("aic", "prior"):
         code = main(["calibrate", str(ur5), str(tmp_path / "three.csv"), "--tip-link", "tool0", "--level", "full",
@@ -261,7 +262,7 @@ def test_as_many_residuals_as_unknowns_calibrates_with_a_degree_of_freedom_left(
     curvature check runs on the prefixes that remain, not on all 18)."""
     chain = KinematicChain.from_urdf(example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf"), "tool0")
     rng = np.random.default_rng(3)
-    data = measure(chain, rng.uniform(-2.0, 2.0, (9, 6)), DEFAULT_REGISTRATION, rng, 5e-5, 0.0, "calibration",
-                   points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False)
+    data = measure(chain, rng.uniform(-2.0, 2.0, (9, 6)), DEFAULT_REGISTRATION, rng,
+                   SimulatedSensor(5e-5, 0.0, points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False), "calibration")
     result = calibrate_chain(chain, data, "full", selection="aic")
     assert result.rank == 18 and len(result.kept) <= 17

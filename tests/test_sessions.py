@@ -35,7 +35,7 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.sensor_values import RowWeights
 from pincal.robots import example_robot_data_urdf
-from pincal.simulation.sensor import measure, random_configurations
+from pincal.simulation.sensor import SimulatedSensor, measure, random_configurations
 from pincal.workflows.evaluation import REESTIMATED, SessionEvaluation
 
 URDF = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
@@ -68,8 +68,8 @@ def truth():
 
 def _session(truth, name, rows, seed, role="calibration"):
     rng = np.random.default_rng(seed)
-    data = measure(truth, random_configurations(truth, rng, rows), PLACEMENTS[name], rng, 0.0, 0.0, role,
-                   points=POINT, with_rotation=False)
+    data = measure(truth, random_configurations(truth, rng, rows), PLACEMENTS[name], rng,
+                   SimulatedSensor(0.0, 0.0, points=POINT, with_rotation=False), role)
     return replace(data, sessions=np.full(rows, name, dtype=object))
 
 
@@ -454,8 +454,8 @@ TARGET_ROTATION = Rotation.from_euler("xyz", [10, -20, 30], degrees=True).as_mat
 
 def _session6d(truth, name, rows, seed, role="calibration"):
     rng = np.random.default_rng(seed)
-    data = measure(truth, random_configurations(truth, rng, rows), PLACEMENTS[name], rng, 0.0, 0.0, role,
-                   points=POINT, target_rotation=TARGET_ROTATION, with_rotation=True)
+    data = measure(truth, random_configurations(truth, rng, rows), PLACEMENTS[name], rng,
+                   SimulatedSensor(0.0, 0.0, points=POINT, target_rotation=TARGET_ROTATION, with_rotation=True), role)
     return replace(data, sessions=np.full(rows, name, dtype=object))
 
 

@@ -30,6 +30,7 @@ from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
+from pincal.simulation.sensor import SimulatedSensor
 from conftest import INDUSTRIAL_ARM_START
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres (15 µm + 6 µm/m)
@@ -50,9 +51,9 @@ def _cell(urdf, kind, count, seed, turn_rad=0.0, with_rotation=True):
                                   INDUSTRIAL_ARM_START, turn_rad=turn_rad, rng=rng)
     q_test = constant_orientation_path(chain, ToolPath(kind, count // 2, np.array([1.2, 0.05, 0.55])), DOWN,
                                        INDUSTRIAL_ARM_START, turn_rad=turn_rad, rng=rng)
-    common = dict(points=TARGET, with_rotation=with_rotation)
-    calibration = measure_truth(params, truth, q, tracker, rng, SIGMA_POS_M, SIGMA_ROT_RAD, **common)
-    test = measure_truth(params, truth, q_test, tracker, rng, SIGMA_POS_M, SIGMA_ROT_RAD, "validation", **common)
+    sensor = SimulatedSensor(SIGMA_POS_M, SIGMA_ROT_RAD, points=TARGET, with_rotation=with_rotation)
+    calibration = measure_truth(params, truth, q, tracker, rng, sensor)
+    test = measure_truth(params, truth, q_test, tracker, rng, sensor, "validation")
     return chain, calibration, test
 
 

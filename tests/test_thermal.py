@@ -51,7 +51,13 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations, simulated_conditions, warm_up
+from pincal.simulation.sensor import (
+    SimulatedEffects,
+    SimulatedSensor,
+    random_configurations,
+    simulated_conditions,
+    warm_up,
+)
 
 NOISE_M = 20e-6
 BOUND_MM = 1.3 * np.sqrt(3) * NOISE_M * 1000.0
@@ -78,9 +84,12 @@ def _cell(urdf, folder, alpha: float = 0.0, step=None, seed: int = 21):
     temperature = warm_up(time)
     effects = ([(Effect("thermal"), np.array([alpha]))] if alpha else []) + (
         [(Effect("pause_step", pause=1), np.asarray(step))] if step is not None else [])
-    rows = measure_truth(params, truth, q, sensor_at(3.0), rng, NOISE_M, np.radians(0.003), "calibration",
-                         points=np.array([[0.03, 0.0, 0.1]]), time=time, temperature=temperature,
-                         conditions=simulated_conditions(effects, temperature, stepped))
+    rows = measure_truth(params, truth, q, sensor_at(3.0), rng,
+                         SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])),
+                         "calibration",
+                         effects=SimulatedEffects(time=time,
+                                                  conditions=simulated_conditions(effects, temperature, stepped),
+                                                  temperature=temperature))
     folder.mkdir(parents=True, exist_ok=True)
     write_measurements(folder / "cal.csv", rows.select(~held))
     write_measurements(folder / "val.csv", replace(rows.select(held), roles=np.full(N_VAL, "validation", dtype=object)))

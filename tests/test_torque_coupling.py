@@ -23,7 +23,7 @@ from pincal.model.effects import Effect, effect_from_dict, effect_to_dict, parse
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.cells import measure_truth, sensor_at
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import SimulatedEffects, SimulatedSensor, random_configurations
 
 NOISE_M = 20e-6
 BOUND_MM = 1.3 * np.sqrt(3) * NOISE_M * 1000.0
@@ -55,8 +55,9 @@ def _cell(chain, hidden):
     params = PlacementErrors(chain)
     rng = np.random.default_rng(21)
     truth = rng.normal(0.0, 3e-4, params.size)
-    return [measure_truth(params, truth, random_configurations(chain, rng, count), sensor_at(3.0), rng, NOISE_M,
-                          np.radians(0.003), role, points=np.array([[0.03, 0.0, 0.1]]), effects=hidden)
+    return [measure_truth(params, truth, random_configurations(chain, rng, count), sensor_at(3.0), rng,
+                          SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])), role,
+                          effects=SimulatedEffects(effects=hidden))
             for count, role in ((150, "calibration"), (60, "validation"))]
 
 

@@ -21,7 +21,7 @@ from pincal.errors import PincalError
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
-from pincal.simulation.sensor import measure
+from pincal.simulation.sensor import SimulatedEffects, SimulatedSensor, measure
 
 __all__ = [
     "IK_TOLERANCE", "IK_MAX_STEP", "IK_DAMPING", "IK_ITERATIONS", "PATHS", "INDUSTRIAL_6R_TABLE", "INDUSTRIAL_6R_START",
@@ -165,11 +165,12 @@ def sensor_at(distance_m: float, bearing_deg: float = 20.0, height_m: float = -0
     return Registration(rotation=rotation, translation=translation)
 
 
-def measure_truth(params, truth: np.ndarray, q: np.ndarray, registration, rng: np.random.Generator,
-                  sigma_pos_m: float, sigma_rot_rad: float, role: str = "calibration", **options) -> MeasurementSet:
+def measure_truth(params, truth: np.ndarray, q: np.ndarray, registration: Registration,
+                  rng: np.random.Generator, sensor: SimulatedSensor, role: str = "calibration",
+                  effects: SimulatedEffects | None = None) -> MeasurementSet:
     """What the sensor reports at readings ``q`` when the robot's geometry is ``truth`` (a vector of the
     parameter set ``params``): :func:`pincal.simulation.sensor.measure` with the chain's placements set to
-    the truth and restored after (``options``: points, target_rotation, with_rotation, effects, time)."""
+    the truth and restored after."""
     chain = params.chain
     with chain.placed(params.placements(np.asarray(truth, dtype=float))):
-        return measure(chain, q, registration, rng, sigma_pos_m, sigma_rot_rad, role, **options)
+        return measure(chain, q, registration, rng, sensor, role, effects)

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -13,6 +12,7 @@ from pincal.model.sensor import Registration
 from pincal.simulation.paper import SimulationSettings
 from pincal.simulation.sensor import (
     DEFAULT_REGISTRATION,
+    SimulatedSensor,
     measure,
     random_configurations,
 )
@@ -63,10 +63,11 @@ def simulate_chain(
     with chain.placed(params.placements(truth)):
         q_cal = random_configurations(chain, rng, settings.n_calibration)
         q_val = random_configurations(chain, rng, settings.n_validation)
-        common: dict[str, Any] = dict(points=points, target_rotation=target_rotation, with_rotation=with_rotation)
-        cal = measure(chain, q_cal, registration, rng, sigma_p, sigma_a, "calibration", **common)
+        sensor = SimulatedSensor(sigma_p, sigma_a, points, target_rotation, with_rotation)
+        cal = measure(chain, q_cal, registration, rng, sensor, "calibration")
         scale = 1.0 if settings.validation_noise else 0.0
-        val = measure(chain, q_val, registration, rng, sigma_p * scale, sigma_a * scale, "validation", **common)
+        val = measure(chain, q_val, registration, rng, replace(sensor, sigma_pos_m=sigma_p * scale,
+                                                               sigma_rot_rad=sigma_a * scale), "validation")
     return ChainExperiment(cal, val, np.asarray(truth, dtype=float), registration, np.asarray(points), target_rotation)
 
 

@@ -28,6 +28,8 @@ from pincal.model.effects import (
 from pincal.model.sensor import Registration
 from pincal.simulation.sensor import (
     DEFAULT_REGISTRATION,
+    SimulatedEffects,
+    SimulatedSensor,
     cpa_configurations,
     measure,
     random_configurations,
@@ -135,10 +137,10 @@ def simulate_experiment(
         parts = [slice(0, cut[0]), slice(cut[0], cut[1]), slice(cut[1], None)]
         val_scale = 1.0 if settings.validation_noise else 0.0
         cpa, cal, val = (
-            measure(chain, q, registration, rng, sigma_p * noise, sigma_a * noise, role, effects=effects,
-                    time=_part(times, p.start, p.stop), shifts=_part(shifts, p.start, p.stop),
-                    conditions=None if conditions is None else conditions.select(p),
-                    temperature=_part(temperature, p.start, p.stop))
+            measure(chain, q, registration, rng, SimulatedSensor(sigma_p * noise, sigma_a * noise), role,
+                    SimulatedEffects(effects, time=_part(times, p.start, p.stop), shifts=_part(shifts, p.start, p.stop),
+                                     conditions=None if conditions is None else conditions.select(p),
+                                     temperature=_part(temperature, p.start, p.stop)))
             for q, p, role, noise in zip((q_cpa, q_cal, q_val), parts, ("cpa", "calibration", "validation"),
                                          (1.0, 1.0, val_scale)))
     assert cpa.rotations is not None and cal.rotations is not None  # measured with orientations (measure's default)

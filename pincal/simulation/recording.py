@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from pincal.measurements.bags import POINT, POSE, JointStream, MeasurementStream
 from pincal.model.chain import KinematicChain
 from pincal.model.sensor import Registration
-from pincal.simulation.sensor import measure
+from pincal.simulation.sensor import SimulatedSensor, measure
 
 __all__ = ["RecordingSettings", "SessionEvents", "RecordingTopics", "Recording", "simulate_recording"]
 
@@ -159,13 +159,15 @@ def simulate_recording(
     t_tracker = np.arange(rng.uniform(0, 1.0 / settings.tracker_rate_hz), duration, 1.0 / settings.tracker_rate_hz)
     for start, end in dropouts:
         t_tracker = t_tracker[(t_tracker < start) | (t_tracker > end)]
-    seen = measure(chain, path(t_tracker), registration, rng, settings.tracker_noise_m, settings.tracker_noise_rad,
-                   "calibration", points=points, with_rotation=pose)
+    seen = measure(chain, path(t_tracker), registration, rng,
+                   SimulatedSensor(settings.tracker_noise_m, settings.tracker_noise_rad, points, with_rotation=pose),
+                   "calibration")
     sensed = np.array(seen.points)
     for k, amplitude in (shaken or {}).items():
         inside = (t_tracker >= windows[k, 0]) & (t_tracker <= windows[k, 1])
         sensed[inside, :, 0] += amplitude * np.sin(2 * np.pi * 2.0 * t_tracker[inside])[:, None]
-    truth = measure(chain, postures, registration, rng, 0.0, 0.0, "calibration", points=points, with_rotation=pose)
+    truth = measure(chain, postures, registration, rng, SimulatedSensor(0.0, 0.0, points, with_rotation=pose),
+                    "calibration")
 
     def delays(mean: float, count: int) -> np.ndarray:
         return mean + rng.exponential(settings.jitter_s, count)

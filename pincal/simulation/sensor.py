@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -22,7 +22,8 @@ from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 
 __all__ = [
-    "DEFAULT_REGISTRATION", "cpa_configurations", "measure", "simulated_shifts", "perfect_measurements",
+    "DEFAULT_REGISTRATION", "cpa_configurations", "SimulatedSensor", "SimulatedEffects", "measure", "simulated_shifts",
+    "perfect_measurements",
     "random_configurations", "REFERENCE_C", "TEMPERATURE_COLUMN", "warm_up", "simulated_conditions",
 ]
 
@@ -52,48 +53,76 @@ def cpa_configurations(lower: np.ndarray, upper: np.ndarray, per_joint: int,
     return np.vstack(rows)
 
 
+@dataclass(frozen=True)
+class SimulatedSensor:
+    """What the simulated sensor measures, and how noisily (eq 20–22).
+
+    Attributes:
+        sigma_pos_m: std of each measured coordinate [m].
+        sigma_rot_rad: std of each ZYX angle of a measured orientation [rad].
+        points: target points in the tool frame (P, 3) [m]; default: the tool origin.
+        target_rotation: the measured frame's rotation in the tool frame (default identity).
+        with_rotation: also report orientations.
+    """
+
+    sigma_pos_m: float
+    sigma_rot_rad: float
+    points: np.ndarray | None = None
+    target_rotation: np.ndarray | None = None
+    with_rotation: bool = True
+
+
+@dataclass(frozen=True)
+class SimulatedEffects:
+    """Unmodelled effects acting on the robot and sensor of a simulation, and what they depend on.
+
+    Attributes:
+        effects: the effects with their values (see :mod:`pincal.model.effects`); the readings are
+            written unchanged, the sensor sees the shifted joints.
+        time: row times [s], written as the extra column ``time``; drift grows with it from t = 0.
+        shifts: joint shifts of these rows (K, N) when computed over a longer sequence (approach
+            flanks depend on the previous row); default: computed from these rows alone
+            (:func:`simulated_shifts`).
+        conditions: the rows' thermal expansion and pause steps (:func:`simulated_conditions`), or None.
+        temperature: row temperatures [°C], written as the extra column :data:`TEMPERATURE_COLUMN`.
+    """
+
+    effects: Sequence[tuple[Effect, np.ndarray]] = ()
+    time: np.ndarray | None = None
+    shifts: np.ndarray | None = None
+    conditions: RowConditions | None = None
+    temperature: np.ndarray | None = None
+
+
 def measure(
     chain: KinematicChain,
     q: np.ndarray,
     registration: Registration,
     rng: np.random.Generator,
-    sigma_pos_m: float,
-    sigma_rot_rad: float,
+    sensor: SimulatedSensor,
     role: str,
-    points: np.ndarray | None = None,
-    target_rotation: np.ndarray | None = None,
-    with_rotation: bool = True,
-    effects: Sequence[tuple[Effect, np.ndarray]] = (),
-    time: np.ndarray | None = None,
-    shifts: np.ndarray | None = None,
-    conditions: RowConditions | None = None,
-    temperature: np.ndarray | None = None,
+    effects: SimulatedEffects | None = None,
 ) -> MeasurementSet:
     """What the simulated sensor reports at configurations ``q`` (eq 20–22).
 
     Args:
-        points: target points in the tool frame (P, 3) [m]; default: the tool origin.
-        target_rotation: the measured frame's rotation in the tool frame (default identity).
-        with_rotation: also report orientations.
-        effects: unmodelled effects acting on the robot and sensor, with their
-            values (see :mod:`pincal.model.effects`); the readings ``q`` are written
-            unchanged, the sensor sees the shifted joints.
-        time: row times [s], written as the extra column ``time``; drift grows
-            with it from t = 0.
-        shifts: joint shifts of these rows (K, N) when computed over a longer
-            sequence (approach flanks depend on the previous row); default:
-            computed from these rows alone (:func:`simulated_shifts`).
-        conditions: the rows' thermal expansion and pause steps (:func:`simulated_conditions`), or None.
-        temperature: row temperatures [°C], written as the extra column :data:`TEMPERATURE_COLUMN`.
+        sensor: what it measures and its noise (:class:`SimulatedSensor`).
+        role: each row's role.
+        effects: unmodelled effects and their inputs (:class:`SimulatedEffects`; default: none).
     """
+    sigma_pos_m, sigma_rot_rad = sensor.sigma_pos_m, sensor.sigma_rot_rad
+    points, target_rotation, with_rotation = sensor.points, sensor.target_rotation, sensor.with_rotation
+    simulated = SimulatedEffects() if effects is None else effects
+    time, shifts, temperature = simulated.time, simulated.shifts, simulated.temperature
+    conditions = simulated.conditions
     actual = np.asarray(q, dtype=float)
     scale = 0.0
     drift: np.ndarray | None = np.zeros((len(q), 3))
-    if effects:
+    if simulated.effects:
         if shifts is None:
-            shifts = simulated_shifts(chain, actual, effects, time)
+            shifts = simulated_shifts(chain, actual, simulated.effects, time)
         actual = actual + shifts
-        for effect, value in effects:
+        for effect, value in simulated.effects:
             if effect.type == "sensor_scale":
                 scale = float(value[0])
             elif effect.type == "drift":

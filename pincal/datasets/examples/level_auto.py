@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +57,8 @@ from pincal.model.effects import parse_effect
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.sensor import (
     DEFAULT_REGISTRATION,
+    SimulatedEffects,
+    SimulatedSensor,
     measure,
     random_configurations,
 )
@@ -191,9 +194,10 @@ def simulated_case(robot: str, rows: int, seed: int) -> tuple[dict[str, float], 
     effects = [parse_effect(f"compliance:{joint}:5e-6") for joint in stiff]
     q_train = random_configurations(chain, rng, rows)
     q_test = random_configurations(chain, rng, 200)
-    common = {"points": FLANGE_POINT, "with_rotation": False, "effects": effects}
-    train = measure(chain, q_train, DEFAULT_REGISTRATION, rng, SIGMA_M, 0.0, "calibration", **common)
-    test = measure(chain, q_test, DEFAULT_REGISTRATION, rng, 0.0, 0.0, "calibration", **common)
+    sensor, compliance = SimulatedSensor(SIGMA_M, 0.0, FLANGE_POINT, with_rotation=False), SimulatedEffects(effects)
+    train = measure(chain, q_train, DEFAULT_REGISTRATION, rng, sensor, "calibration", compliance)
+    test = measure(chain, q_test, DEFAULT_REGISTRATION, rng, replace(sensor, sigma_pos_m=0.0), "calibration",
+                   compliance)
     chain.set_placements(nominal)  # the nominal robot is what is calibrated
     choice = choose_level(chain, train, **SELECT)
     held = {}
