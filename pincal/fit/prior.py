@@ -77,6 +77,7 @@ if TYPE_CHECKING:  # annotations only: the settings import this module for Prior
     from pincal.model.dh.parameters import DHParameterSet
     from pincal.model.effects import Effect
     from pincal.model.parameter_sets import ChainParameters
+    from pincal.residuals.base import Objective
     from pincal.residuals.fixture import FixtureResidual
     from pincal.residuals.sensor import SensorResidual
 
@@ -333,7 +334,7 @@ def log_evidence(jacobian: np.ndarray, residual: np.ndarray, log_variances: floa
     return float(-0.5 * (log_variances + residual @ residual + logdet))
 
 
-def standard_deviations(objective: object, solution: Solution) -> np.ndarray:
+def standard_deviations(objective: Objective | PriorResidual, solution: Solution) -> np.ndarray:
     """Standard deviations of a fit's unknowns: the posterior's (:func:`posterior`) for a MAP fit
     (:class:`PriorResidual`), else the solver's (n,)."""
     if not isinstance(objective, PriorResidual):
@@ -342,7 +343,7 @@ def standard_deviations(objective: object, solution: Solution) -> np.ndarray:
     return np.sqrt(np.clip(np.diag(covariance), 0.0, None))
 
 
-def data_rows(jacobian: np.ndarray, objective: object) -> np.ndarray:
+def data_rows(jacobian: np.ndarray, objective: Objective | PriorResidual) -> np.ndarray:
     """The data rows of a fit's Jacobian: without a :class:`PriorResidual`'s prior rows."""
     return jacobian[: jacobian.shape[0] - objective.n_prior] if isinstance(objective, PriorResidual) else jacobian
 
