@@ -14,11 +14,11 @@ from pincal.errors import CalibrationError, MeasurementError, ModelError, Pincal
 #: module is imported on its first use (PEP 562 ``__getattr__`` below), so the command line and each
 #: study worker load only what they run (``pincal calibrate`` neither the planner nor the diagnosis).
 _DEFINED_IN = {
-    "pincal.fit.chain_calibration": ("ChainCalibration", "calibrate_chain"),
+    "pincal.fit.chain_calibration": ("ChainCalibration", "ChainFitOptions", "calibrate_chain"),
     "pincal.fit.fixture_calibration": ("FixtureCalibration", "calibrate_fixture"),
     "pincal.fit.level_choice": ("LevelChoice", "choose_fixture_level", "choose_level"),
     "pincal.fit.socket_metrics": ("FixtureMetrics", "fixture_metrics"),
-    "pincal.fit.metrics": ("ErrorSummary", "PoseErrors", "pose_errors"),
+    "pincal.fit.metrics": ("ErrorSummary", "PoseErrors", "RowCorrections", "pose_errors"),
     "pincal.paper.ml_estimator": ("MLCalibration", "MLSettings", "calibrate_ml"),
     "pincal.paper.noise_limit": ("PredictedErrors", "predicted_errors"),
     "pincal.paper.methods": ("PaperCalibration", "calibrate_paper"),
@@ -51,10 +51,10 @@ _DEFINED_IN = {
 }
 
 if TYPE_CHECKING:  # what static analysers see; at run time the names come from __getattr__
-    from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+    from pincal.fit.chain_calibration import ChainCalibration, ChainFitOptions, calibrate_chain
     from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
     from pincal.fit.level_choice import LevelChoice, choose_fixture_level, choose_level
-    from pincal.fit.metrics import ErrorSummary, PoseErrors, pose_errors
+    from pincal.fit.metrics import ErrorSummary, PoseErrors, RowCorrections, pose_errors
     from pincal.fit.registration import register_orientations, register_points
     from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
     from pincal.measurements.bags import read_bag
@@ -117,6 +117,7 @@ __all__ = [
     "__version__",
     "CalibrationError",
     "ChainCalibration",
+    "ChainFitOptions",
     "JointOffsets",
     "MLCalibration",
     "MLSettings",
@@ -157,6 +158,7 @@ __all__ = [
     "PincalError",
     "PoseErrors",
     "Registration",
+    "RowCorrections",
     "SimulatedExperiment",
     "SimulationSettings",
     "TABLE2_LARGE",

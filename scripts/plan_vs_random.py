@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.prior import Prior
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
@@ -69,7 +69,7 @@ def run(count: int, seeds: int) -> dict:
             data = measure(chain, q, DEFAULT_REGISTRATION, rng, SimulatedSensor(1e-4, np.radians(0.1), points=TARGET),
                            "calibration")
             chain.set_placements(nominal)
-            result = calibrate_chain(chain, data, "full", selection=SELECTION)
+            result = calibrate_chain(chain, data, "full", ChainFitOptions(selection=SELECTION))
             pair.append(heldout_mm(chain, params, truth, result, heldout))
             chain.set_placements(nominal)
         planned.append(pair[0])

@@ -71,7 +71,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
+from pincal.fit.chain_calibration import CHAIN_LEVELS, ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture, initial_fixture
 from pincal.fit.level_choice import fixture_heldout_error
 from pincal.fit.metrics import pose_errors
@@ -422,7 +422,8 @@ def run(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELEC
     rows = []
     for level in scenario.levels:
         started = time.perf_counter()
-        result = calibrate_chain(chain, calibration, level, tool_known=scenario.tool_known, selection=selection)
+        options = ChainFitOptions(tool_known=scenario.tool_known, selection=selection)
+        result = calibrate_chain(chain, calibration, level, options)
         seconds = time.perf_counter() - started
         target = result.target
         with chain.placed(result.chain_placements):

@@ -26,7 +26,7 @@ from matplotlib.figure import Figure
 
 from pincal.diagnosis.conditions import read_readings
 from pincal.diagnosis.diagnose import diagnose
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
 from pincal.model.drift import time_column
@@ -41,7 +41,7 @@ def _diagnosed(folder: Path):
                                      tool=pose_from_xyz_rpy(DEFAULT_TOOL_XYZ, DEFAULT_TOOL_RPY))
     data, _ = read_measurements(folder / "calibration.csv", chain.joint_specs)
     held, _ = read_measurements(folder / "validation.csv", chain.joint_specs)
-    calibration = calibrate_chain(chain, data, "full", tool_known=True)
+    calibration = calibrate_chain(chain, data, "full", ChainFitOptions(tool_known=True))
     result = diagnose(chain, calibration, data, heldout=held, time=time_column(data), heldout_time=time_column(held),
                       readings=read_readings(data, held, None))
     return result, time_column(data)[calibration.used_index]

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.measurements.data import MeasurementSet
@@ -50,7 +50,7 @@ def tiago() -> tuple[KinematicChain, MeasurementSet, MeasurementSet]:
 def heldout_rms(chain: KinematicChain, train: MeasurementSet, held_out: MeasurementSet, rows) -> float:
     """Calibrate on the training rows ``rows`` (level full, every identifiable parameter) and return
     marker 1's position RMS on the held-out day [mm]."""
-    result = calibrate_chain(chain, train.select(np.sort(np.asarray(rows))), "full", selection="all")
+    result = calibrate_chain(chain, train.select(np.sort(np.asarray(rows))), "full", ChainFitOptions(selection="all"))
     with chain.placed(result.chain_placements):
         errors = pose_errors(chain, held_out, result.target.registration, result.target.registration,
                              points=result.target.points)

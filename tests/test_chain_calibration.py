@@ -14,7 +14,7 @@ from conftest import assert_close, numeric_jacobian
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.pipeline import NOT_IDENTIFIABLE
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import JointOffsets, PlacementErrors
@@ -98,7 +98,7 @@ def test_noisy_heldout_error_matches_noise_limited_prediction(robot, points):
         settings = SimulationSettings(sigma_pos_mm=0.1, n_calibration=80, n_validation=40, seed=seed,
                                       validation_noise=False)
         experiment = simulate_chain(params, truth, points, settings)
-        result = calibrate_chain(chain, experiment.calibration, "full", selection="all")
+        result = calibrate_chain(chain, experiment.calibration, "full", ChainFitOptions(selection="all"))
         observed.append(np.mean(_heldout_error(chain, result, experiment) ** 2))
         predicted.append(result.predicted_point_rms(chain, experiment.validation.q) ** 2)
     observed, predicted = np.array(observed), np.array(predicted)
@@ -160,7 +160,7 @@ def test_outlier_rows_are_reported_and_removed_only_when_asked():
     kept = calibrate_chain(chain, bad, "offsets")
     assert [line for line, _ in kept.outliers] == [int(data.lines[7])]
     assert kept.removed_lines == () and len(kept.rows_used) == 50
-    cleaned = calibrate_chain(chain, bad, "offsets", reject_outliers=True)
+    cleaned = calibrate_chain(chain, bad, "offsets", ChainFitOptions(reject_outliers=True))
     assert cleaned.removed_lines == (int(data.lines[7]),) and len(cleaned.rows_used) == 49
     # Without the bad row only noise is left: n rows × 3 components, sigma 0.1 mm,
     # p <= identifiable offsets + registration 6 + target point 3 unknowns, so

@@ -18,7 +18,7 @@ from test_select_prior import _fixture_data
 
 from pincal.diagnosis.diagnose import diagnose
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.level_choice import choose_level
 from pincal.fit.metrics import pose_errors
@@ -70,9 +70,9 @@ def _same(a, b) -> bool:
 def test_a_calibration_leaves_the_chain_and_returns_its_model(experiment, with_outliers, level, selection):
     chain = KinematicChain.from_urdf(UR5, "tool0")
     before = chain.placements()
-    refit = calibrate_chain(chain, with_outliers, level, selection=selection, reject_outliers=True)
+    refit = calibrate_chain(chain, with_outliers, level, ChainFitOptions(selection=selection, reject_outliers=True))
     assert len(refit.removed_lines) == 2 and _same(chain.placements(), before)  # the second fit starts at nominal
-    result = calibrate_chain(chain, experiment.calibration, level, selection=selection)
+    result = calibrate_chain(chain, experiment.calibration, level, ChainFitOptions(selection=selection))
     assert _same(chain.placements(), before)
     expected = before if result.params is None else result.params.placements(result.vector)
     assert _same(result.chain_placements, expected)

@@ -17,7 +17,7 @@ import pinocchio as pin
 import pytest
 
 from pincal.cli.commands import main
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
@@ -85,7 +85,7 @@ def _calibrate(path):
     truth = np.random.default_rng(0).normal(0.0, 1e-3, params.size)
     settings = SimulationSettings(n_calibration=max(40, 8 * chain.n_joints), n_validation=30, seed=1)
     experiment = simulate_chain(params, truth, np.array([[0.02, -0.01, 0.05]]), settings, with_rotation=True)
-    result = calibrate_chain(chain, experiment.calibration, "full", selection="all")
+    result = calibrate_chain(chain, experiment.calibration, "full", ChainFitOptions(selection="all"))
     target = result.target
     with chain.placed(result.chain_placements):
         return chain, pose_errors(chain, experiment.validation, target.registration, target.registration,

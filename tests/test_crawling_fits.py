@@ -14,7 +14,7 @@ from test_selection import _straight_wrist_session
 import pincal.diagnosis.diagnose as diagnosis
 import pincal.diagnosis.effect_fits as effect_fits
 import pincal.fit.pipeline as pipeline
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.solver import solve
 
 
@@ -37,11 +37,11 @@ def test_the_data_scale_fit_of_a_prior_calibration_stops_at_its_budget(monkeypat
     SCALE_FIT_EVALUATIONS, and a budget twice as large gives the same calibration, bit for bit."""
     chain, data = _straight_wrist_session()
     fits = _counting(monkeypatch, pipeline)
-    first = calibrate_chain(chain, data, "full", selection="prior")
+    first = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     assert fits and max(n for _, n, _ in fits) <= pipeline.SCALE_FIT_EVALUATIONS
     assert any(not converged for _, _, converged in fits)  # the session does crawl
     monkeypatch.setattr(pipeline, "SCALE_FIT_EVALUATIONS", 2 * pipeline.SCALE_FIT_EVALUATIONS)
-    second = calibrate_chain(chain, data, "full", selection="prior")
+    second = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     assert np.array_equal(first.vector, second.vector) and np.array_equal(first.std, second.std, equal_nan=True)
     assert (first.sigma_pos_m, first.sigma_rot_rad) == (second.sigma_pos_m, second.sigma_rot_rad)
 
@@ -52,7 +52,7 @@ def test_a_candidate_whose_naming_fit_crawls_is_named_absorbed(monkeypatch):
     first chunk of NAMING_EVALUATIONS gains far less than GAIN_PER_CHUNK of BIC, so it stops there and
     is named as absorbed by the geometry, not ranked."""
     chain, data = _straight_wrist_session(600, seed=11)
-    calibration = calibrate_chain(chain, data, "full", selection="aic")
+    calibration = calibrate_chain(chain, data, "full", ChainFitOptions(selection="aic"))
     fits = _counting(monkeypatch, effect_fits)
     result = diagnosis.diagnose(chain, calibration, data)
     crawled = [n for what, n, converged in fits if not converged]

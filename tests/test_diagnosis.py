@@ -17,7 +17,7 @@ from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
 from pincal.diagnosis.held_out import HELD_OUT_Z
 from pincal.diagnosis.verdicts import CRITERION, NEGLIGIBLE
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.measurements.couplings import apply_couplings, parse_coupling
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
@@ -42,7 +42,7 @@ def _run(kuka_urdf, effect_text, seed=3):
     experiment = simulate_experiment(chain, KUKA_LWR4_DH, OFFSETS_ONLY, SimulationSettings(seed=seed, **SETTINGS),
                                      effects=effects)
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
-    calibration = calibrate_chain(chain, experiment.calibration, "offsets", tool_known=True)
+    calibration = calibrate_chain(chain, experiment.calibration, "offsets", ChainFitOptions(tool_known=True))
     time = time_column(experiment.calibration)
     candidates = candidate_effects(chain, time is not None) + [e for e, _ in effects if e.type == "coupling"]
     result = diagnose(chain, calibration, experiment.calibration, heldout=experiment.validation,
@@ -353,7 +353,7 @@ def test_a_joint_read_against_another_is_named_and_corrected_in_the_data(kuka_ur
     advised = parse_coupling("lwr_joint_3=-1*lwr_joint_2")  # the advice, as --coupling applies it
     corrected = [apply_couplings(rows, [advised]) for rows in (experiment.calibration, experiment.validation)]
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
-    calibration = calibrate_chain(chain, corrected[0], "offsets", tool_known=True)
+    calibration = calibrate_chain(chain, corrected[0], "offsets", ChainFitOptions(tool_known=True))
     again = diagnose(chain, calibration, corrected[0], heldout=corrected[1],  # the default catalogue
                      time=time_column(corrected[0]), heldout_time=time_column(corrected[1]))
     bound = 1 + 3 * np.sqrt(1 / effect_free.objective.n_free)
@@ -401,7 +401,7 @@ def test_effects_that_need_gravity_are_named_untestable_without_inertias(industr
     rows = measure_truth(params, rng.normal(0.0, 3e-4, params.size), random_configurations(chain, rng, 40),
                          sensor_at(3.0), rng,
                          SimulatedSensor(20e-6, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
-    result = diagnose(chain, calibrate_chain(chain, rows, "full", selection="prior"), rows)
+    result = diagnose(chain, calibrate_chain(chain, rows, "full", ChainFitOptions(selection="prior")), rows)
     (note,) = [n for n in result.notes if n.startswith("cannot be tested")]
     assert note.startswith("cannot be tested, 14 candidate(s): no gravity torque") and "--payload-kg" in note
     assert "compliance:A2" in note and "backlash:A6:gravity" in note

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from pincal.fit import level_choice
+from pincal.fit.chain_calibration import ChainFitOptions
 from pincal.fit.level_choice import choose_level
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
@@ -34,9 +35,9 @@ def test_linearised_folds_agree_with_refits(industrial_arm_urdf, monkeypatch, se
         sigma = np.where(np.arange(rows.n_rows) % 2 == 0, 0.02, 0.04)
         rows = replace(rows, extra={**rows.extra, "sigma": sigma})
     monkeypatch.setattr(level_choice, "LINEARISED_FROM_ROWS", 10**9)
-    refits = choose_level(chain, rows, selection=selection, sigma_column=sigma_column)
+    refits = choose_level(chain, rows, ChainFitOptions(selection=selection, sigma_column=sigma_column))
     monkeypatch.setattr(level_choice, "LINEARISED_FROM_ROWS", 100)
-    steps = choose_level(chain, rows, selection=selection, sigma_column=sigma_column)
+    steps = choose_level(chain, rows, ChainFitOptions(selection=selection, sigma_column=sigma_column))
     assert "Gauss–Newton" in steps.scheme and "Gauss–Newton" not in refits.scheme
     for exact, step in zip(refits.scores, steps.scores):
         assert exact.level == step.level
@@ -59,10 +60,10 @@ def test_a_level_that_cannot_be_fitted_at_scale_is_no_candidate(industrial_arm_u
     real = fold_update.calibrate_chain
 
     def failing(at):
-        def calibrate(chain, rows, level, **options):
+        def calibrate(chain, rows, level, options):
             if level == at:
                 raise CalibrationError("the solver gave up")
-            return real(chain, rows, level, **options)
+            return real(chain, rows, level, options)
         return calibrate
 
     monkeypatch.setattr(fold_update, "calibrate_chain", failing("full"))

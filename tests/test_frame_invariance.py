@@ -24,7 +24,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
@@ -131,4 +131,5 @@ def test_a_target_offset_changes_only_the_target(industrial_arm_urdf, offset):
     noisy = [measure_truth(params, truth, q, sensor_at(4.2), np.random.default_rng(1),
                            SimulatedSensor(20e-6, np.radians(0.003), points=points))
              for points in (TARGET, TARGET + offset)]
-    assert len({tuple(calibrate_chain(chain, data, "full", selection="prior").kept) for data in noisy}) == 1
+    prior = ChainFitOptions(selection="prior")
+    assert len({tuple(calibrate_chain(chain, data, "full", prior).kept) for data in noisy}) == 1

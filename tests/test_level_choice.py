@@ -296,7 +296,7 @@ def test_tiago_level_auto_under_the_prior_is_within_ten_percent_of_the_best_fixe
     """The bound --level auto is held to (never more than 10 % worse on held-out data than the best fixed level),
     on the real TIAGo sessions: choose on 2021-11-30 by CV only, then marker-1 RMS on 2021-11-26 with
     the training registration (examples/level_auto.py; README, "Choosing the level")."""
-    from pincal.fit.chain_calibration import calibrate_chain
+    from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
     from pincal.fit.metrics import pose_errors
     from pincal.fit.prior import Prior
     from pincal.measurements.csv_v1 import read_measurements
@@ -306,10 +306,10 @@ def test_tiago_level_auto_under_the_prior_is_within_ten_percent_of_the_best_fixe
                                      "wrist_ft_tool_link")
     train, _ = read_measurements(data / "qualisys_2021-11-30_static_postures.csv", chain.joint_specs)
     test, _ = read_measurements(data / "qualisys_2021-11-26_static_postures.csv", chain.joint_specs)
-    choice = choose_level(chain, train, selection=Prior())
+    choice = choose_level(chain, train, ChainFitOptions(selection=Prior()))
     held = {}
     for level in ("registration", "offsets", "full"):
-        result = calibrate_chain(chain, train, level, selection=Prior())
+        result = calibrate_chain(chain, train, level, ChainFitOptions(selection=Prior()))
         registration = result.target.registration
         with chain.placed(result.chain_placements):
             marker1 = pose_errors(chain, test, registration, registration,

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.fit.plausibility import check_calibration
 from pincal.fit.registration import register_line
@@ -86,7 +86,7 @@ def test_one_line_holds_what_the_rows_leave_free_and_predicts_the_path(industria
     orientations fixes it, positions alone never do —; the rows along the line within 1.3× the prediction; the
     plausibility warning 'path' exactly when something was held."""
     chain, rows, test = _line(industrial_arm_urdf, with_rotation, tool_known)
-    result = calibrate_chain(chain, rows, "full", tool_known=tool_known, selection="prior")
+    result = calibrate_chain(chain, rows, "full", ChainFitOptions(tool_known=tool_known, selection="prior"))
     assert len(result.held_rotations) == rotations_held and len(result.held) == (0 if tool_known else 3)
     for held in result.held_rotations:
         assert abs(held.axis[0]) == pytest.approx(1.0) and held.seen <= LINE_RATIO  # the path runs along base x
@@ -105,7 +105,7 @@ def test_one_arc_at_constant_orientation_predicts_the_path(industrial_arm_urdf, 
     nothing is held about an axis; what the rows leave free of the target is held as for a line; the rows
     along the arc within 1.3× the noise-limited prediction."""
     chain, rows, test = _line(industrial_arm_urdf, with_rotation, tool_known, kind="arc")
-    result = calibrate_chain(chain, rows, "full", tool_known=tool_known, selection="prior")
+    result = calibrate_chain(chain, rows, "full", ChainFitOptions(tool_known=tool_known, selection="prior"))
     assert result.held_rotations == () and len(result.held) == (0 if tool_known else 3)
     measured, predicted = _held_out(chain, result, test)
     assert 1.0 / BOUND <= measured / predicted <= BOUND
@@ -154,7 +154,7 @@ def test_one_line_end_to_end_calibrate_diagnose_and_evaluate(industrial_arm_urdf
 
 
 def _outcome(chain, data):
-    result = calibrate_chain(chain, data, "full", selection="prior")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     with chain.placed(result.chain_placements):
         errors = pose_errors(chain, data, result.target.registration, result.target.registration,
                              points=result.target.points, target_rotation=result.target.rotation)
@@ -187,8 +187,8 @@ def test_moving_the_sensor_changes_nothing(industrial_arm_urdf, with_rotation):
         assert np.abs(moved - placements).max() <= (1e-9 if with_rotation else 1e-7) * scale
     if not with_rotation:
         shift = np.array([-7.0, 9.0, 2.5])
-        result = calibrate_chain(chain, rows, "full", selection="prior")
-        moved = calibrate_chain(chain, _moved(rows, tilted, shift), "full", selection="prior")
+        result = calibrate_chain(chain, rows, "full", ChainFitOptions(selection="prior"))
+        moved = calibrate_chain(chain, _moved(rows, tilted, shift), "full", ChainFitOptions(selection="prior"))
         measured, _ = _held_out(chain, result, test)
         moved_measured, _ = _held_out(chain, moved, _moved(test, tilted, shift))
         assert moved_measured == pytest.approx(measured, rel=0.01)

@@ -25,7 +25,7 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.errors import PincalError
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.prior import Prior
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain
@@ -112,7 +112,7 @@ def test_planned_configurations_calibrate_as_predicted_and_beat_random(robot, se
                            SimulatedSensor(1e-4, np.radians(0.1), points=points, with_rotation=sensor.has_rotation),
                            "calibration")
             chain.set_placements(nominal)
-            result = calibrate_chain(chain, data, "full", selection=selection)
+            result = calibrate_chain(chain, data, "full", ChainFitOptions(selection=selection))
             errors[kind].append(_heldout_mm(chain, params, truth, result, points, heldout_q))
             chain.set_placements(nominal)
     predicted = plan.prediction.mean_position_mm

@@ -18,7 +18,7 @@ import pytest
 from conftest import unaccepted_flags
 
 from pincal.cli.commands import EXIT_WARNING, main
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.plausibility import MAX_SENSOR_DISTANCE_M, check_calibration, press_against_nominal
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
@@ -141,7 +141,7 @@ def test_a_calibration_that_predicts_worse_than_nominal_is_caught(industrial_arm
                          SimulatedSensor(1e-3, np.radians(0.05), points=np.array([[0.03, -0.02, 0.18]]),
                                          with_rotation=False))  # 48 coordinates, 30 unknowns
     nominal = chain.placements()
-    result = calibrate_chain(chain, data, "full", selection="all")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="all"))
     chain.set_placements(nominal)
     calibrated, before = press_against_nominal(chain, result, data)
     assert calibrated > before

@@ -13,7 +13,7 @@ from test_select_prior import SIGMA_M, UR5, _fixture_data, _heldout_m, _rows
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import diagnose
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.prior import PRIOR_STATUS, SCALE_RANGE, Prior, prior_sigmas
 from pincal.measurements.csv_v1 import write_measurements
@@ -28,9 +28,9 @@ def test_diagnose_keeps_the_prior_of_the_calibration():
     diagnose's fit is the calibration's."""
     chain, train, test = _rows(9, seed=3, sigma_m=SIGMA_M)
     nominal = chain.placements()
-    unregularised = _heldout_m(chain, calibrate_chain(chain, train, "full", selection="all"), test)
+    unregularised = _heldout_m(chain, calibrate_chain(chain, train, "full", ChainFitOptions(selection="all")), test)
     chain.set_placements(nominal)
-    calibration = calibrate_chain(chain, train, "full", selection="prior")
+    calibration = calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior"))
     held = _heldout_m(chain, calibration, test)
     assert calibration.prior_sigma is not None
     diagnosis = diagnose(chain, calibration, train, heldout=test, candidates=[])
@@ -77,9 +77,9 @@ def test_jacobian_condition_is_the_data_rows():
     condition number; the data rows' one moves only with the solution (seen 0.08 %)."""
     chain, train, _ = _rows(12, seed=5, sigma_m=SIGMA_M)
     nominal = chain.placements()
-    every = calibrate_chain(chain, train, "full", selection="all")
+    every = calibrate_chain(chain, train, "full", ChainFitOptions(selection="all"))
     chain.set_placements(nominal)
-    tight = calibrate_chain(chain, train, "full", selection=Prior(1e-3, 1e-3))
+    tight = calibrate_chain(chain, train, "full", ChainFitOptions(selection=Prior(1e-3, 1e-3)))
     assert np.array_equal(every.kept, tight.kept)
     assert tight.condition == pytest.approx(every.condition, rel=0.05)
 
@@ -167,14 +167,14 @@ def test_diagnose_bic_counts_the_data_rows_not_the_prior_rows():
     assert bic(np.concatenate([data, prior]), 7, n_prior=20) != bic(np.concatenate([data, prior]), 7)
     # and in diagnose: on these effect-free rows nothing is adopted (ΔBIC −9.0 > −10) ...
     chain, train, _ = _rows(25, seed=3, sigma_m=SIGMA_M)
-    calibration = calibrate_chain(chain, train, "full", selection="prior")
+    calibration = calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior"))
     candidates = [Effect("encoder_scale", "wrist_2_joint")]
     diagnosis = diagnose(chain, calibration, train, candidates=candidates)
     assert [step.effect.label for step in diagnosis.steps] == []
     # ... while the same rows with that effect hidden in them (2e-3, ~20 sigma at the tool) adopt it:
     # the search can adopt here, so "nothing" above is the criterion's verdict
     chain, hidden, _ = _rows(25, seed=3, sigma_m=SIGMA_M, effects=[(candidates[0], np.array([2e-3]))])
-    calibration = calibrate_chain(chain, hidden, "full", selection="prior")
+    calibration = calibrate_chain(chain, hidden, "full", ChainFitOptions(selection="prior"))
     diagnosis = diagnose(chain, calibration, hidden, candidates=candidates)
     assert [step.effect.label for step in diagnosis.steps] == [candidates[0].label]
 
@@ -185,14 +185,15 @@ def test_diagnose_does_not_test_effects_the_residual_freedom_cannot_carry():
     this seed, a refit failed with 'the data do not determine all 31 parameters'. Fitting e values to
     noise lowers BIC by m ln(1 − e/d) + e ln m in expectation; below the −10 cut nothing is tested."""
     chain, train, _ = _rows(9, seed=18, sigma_m=SIGMA_M)
-    calibration = calibrate_chain(chain, train, "full", selection=Prior(1.0, 0.5))  # the scales of that case
+    # the scales of that case
+    calibration = calibrate_chain(chain, train, "full", ChainFitOptions(selection=Prior(1.0, 0.5)))
     diagnosis = diagnose(chain, calibration, train)
     assert not diagnosis.steps
     untested = [note for note in diagnosis.notes if note.startswith("not tested,")]
     assert len(untested) == 1 and "residual degrees of freedom" in untested[0]
     # the scales estimated from these rows (0.06 mm, 0.005 deg: the truth's 0.1 mm / 0.1 mrad) leave more
     # residual freedom; the candidates are tested and none is adopted
-    assert not diagnose(chain, calibrate_chain(chain, train, "full", selection="prior"), train).steps
+    assert not diagnose(chain, calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior")), train).steps
     # the vertical shoulder pan feels no gravity torque: its compliance cannot be tested (more rows would not
     # help), not "not tested"
     assert "compliance:shoulder_pan_joint" not in untested[0]

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import multivariate_normal
 
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.prior import Prior, log_evidence
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import PlacementErrors
@@ -54,7 +54,7 @@ def _rows(industrial_arm_urdf, scale):
 
 def test_a_trapped_fixed_point_is_left_for_the_datas(industrial_arm_urdf):
     chain, data = _rows(industrial_arm_urdf, 3e-3)
-    result = calibrate_chain(chain, data, "full", selection="prior")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     assert result.rms_m < FLOOR_M  # the trapped fixed point: 2.3 mm
     assert not any("without the prior" in note for note in result.selection.notes)
 
@@ -63,10 +63,10 @@ def test_a_prior_too_narrow_for_the_robot_is_named(industrial_arm_urdf):
     """10 mm / 10 mrad deviations: under the 1 mm prior the evidence keeps the prior's fixed point (the
     closer fit's θᵀΛθ is ~900), and the note names the way out, which then reaches the noise floor."""
     chain, data = _rows(industrial_arm_urdf, 1e-2)
-    narrow = calibrate_chain(chain, data, "full", selection=Prior(1.0, 0.5))  # the fixed default of old
+    narrow = calibrate_chain(chain, data, "full", ChainFitOptions(selection=Prior(1.0, 0.5)))  # the old fixed default
     assert narrow.rms_m > 100 * FLOOR_M
     assert any("--prior-scale" in note and "--select aic" in note for note in narrow.selection.notes)
-    wide = calibrate_chain(chain, data, "full", selection=Prior(30.0, 3.0))
+    wide = calibrate_chain(chain, data, "full", ChainFitOptions(selection=Prior(30.0, 3.0)))
     assert wide.rms_m < FLOOR_M
 
 
@@ -80,7 +80,7 @@ def test_a_well_specified_prior_gets_no_note(industrial_arm_urdf):
         truth = rng.normal(0.0, 3e-4, params.size)
         data = measure_truth(params, truth, random_configurations(chain, rng, 8), sensor_at(3.0), rng,
                              SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
-        result = calibrate_chain(chain, data, "full", selection="prior")
+        result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
         assert not any("without the prior" in note for note in result.selection.notes), seed
 
 
@@ -100,7 +100,7 @@ def test_a_failing_second_start_keeps_the_first_fixed_point(industrial_arm_urdf,
 
     monkeypatch.setattr(pipeline, "_settle", failing_second)
     chain, data = _rows(industrial_arm_urdf, 3e-3)
-    result = calibrate_chain(chain, data, "full", selection=Prior(1.0, 0.5))  # fixed: no estimate to move it
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection=Prior(1.0, 0.5)))  # fixed: no estimate
     assert len(calls) == 2 and result.rms_m > 10 * FLOOR_M  # the trapped fixed point, kept
 
 
@@ -116,5 +116,5 @@ def test_rows_fitted_to_rounding_leave_the_prior_its_weight(industrial_arm_urdf)
     truth = rng.normal(0.0, 3e-4, params.size)
     data = measure_truth(params, truth, random_configurations(chain, rng, 6), sensor_at(3.0), rng,
                          SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])))
-    result = calibrate_chain(chain, data, "full", selection="prior")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     assert result.sigma_pos_m == SCALE_FLOOR and result.rms_m < FLOOR_M

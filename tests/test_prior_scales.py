@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from pincal.cli.commands import main
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.prior import KINDS, Prior, parameter_kinds
 from pincal.fit.prior_defaults import ESTIMATE_BOUNDS
 from pincal.fit.prior_scales import LinearisedFit, bounds_si, hyperprior
@@ -137,7 +137,8 @@ def ur5_rows():
                              SimulatedSensor(NOISE_M, np.radians(0.003), points=np.array([[0.02, 0.01, 0.05]]),
                                              with_rotation=True))
 
-    kept = calibrate_chain(chain, rows(np.zeros(params.size), 0), "full", selection=Prior(1.0, 0.5)).kept
+    fixed = ChainFitOptions(selection=Prior(1.0, 0.5))
+    kept = calibrate_chain(chain, rows(np.zeros(params.size), 0), "full", fixed).kept
     return chain, params, kept, parameter_kinds(params), rows
 
 
@@ -149,7 +150,7 @@ def ur5_known_scales(ur5_rows):
     scales = np.array([2e-3, np.radians(0.2), np.radians(0.4)])
     truth = np.zeros(params.size)
     truth[kept] = np.random.default_rng(12).normal(0.0, scales[kinds[kept]])
-    return kept, kinds, scales, calibrate_chain(chain, rows(truth, 13), "full", selection="prior")
+    return kept, kinds, scales, calibrate_chain(chain, rows(truth, 13), "full", ChainFitOptions(selection="prior"))
 
 
 def test_estimated_scales_recover_known_scales_within_their_sampling_error(ur5_known_scales):
@@ -192,8 +193,8 @@ def test_deviations_ten_times_the_old_prior_are_fitted_to_the_noise(industrial_a
     """10 mm / 10 mrad placement errors, 10 6D rows: the old fixed 1 mm / 0.5° prior stays at its trapped
     fixed point (misfit > 100 × the noise's), the estimated scales reach the noise and are adopted."""
     chain, data = _industrial_rows(industrial_arm_urdf, 1e-2)
-    old = calibrate_chain(chain, data, "full", selection=Prior(1.0, 0.5))
-    new = calibrate_chain(chain, data, "full", selection="prior")
+    old = calibrate_chain(chain, data, "full", ChainFitOptions(selection=Prior(1.0, 0.5)))
+    new = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     assert old.rms_m > 100 * FLOOR_M
     assert new.rms_m < FLOOR_M and new.selection.prior_scale["estimated"]
     assert new.selection.prior_scale["translation_mm"] > 3.0
@@ -211,11 +212,12 @@ def test_a_kind_the_rows_put_at_zero_does_not_collapse(ur5_rows, monkeypatch):
     truth[kept] = np.random.default_rng(14).normal(0.0, 3e-4, kept.size)
     truth[kinds == 2] = 0.0
     data = rows(truth, 15)
-    estimate = calibrate_chain(chain, data, "full", selection="prior").selection.prior_scale["estimate"]
+    prior = ChainFitOptions(selection="prior")
+    estimate = calibrate_chain(chain, data, "full", prior).selection.prior_scale["estimate"]
     assert 0.01 < estimate["joint_zero_deg"] < 0.5
     assert ESTIMATE_BOUNDS[0][0] < estimate["translation_mm"] < ESTIMATE_BOUNDS[0][1]
     monkeypatch.setattr(prior_scales, "HYPERPRIOR_SPREAD", 1e9)
-    estimate = calibrate_chain(chain, data, "full", selection="prior").selection.prior_scale["estimate"]
+    estimate = calibrate_chain(chain, data, "full", prior).selection.prior_scale["estimate"]
     assert estimate["joint_zero_deg"] == pytest.approx(ESTIMATE_BOUNDS[2][0], rel=1e-6)
 
 
@@ -230,7 +232,7 @@ def test_noise_free_rows_recover_the_truth_with_estimated_scales(industrial_arm_
     sensor = SimulatedSensor(0.0, 0.0, points=np.array([[0.03, 0.0, 0.1]]))
     data = measure_truth(params, truth, q, sensor_at(3.0), rng, sensor)
     test = measure_truth(params, truth, random_configurations(chain, rng, 20), sensor_at(3.0), rng, sensor)
-    result = calibrate_chain(chain, data, "full", selection="prior")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     target = result.target
     from pincal.fit.metrics import pose_errors
 
@@ -274,7 +276,7 @@ def test_tiago_keeps_the_default_scales_its_own_folds_do_not_prefer_the_estimate
                                      "wrist_ft_tool_link")
     train, _ = read_measurements(root / "data" / "tiago_mocap" / "qualisys_2021-11-30_static_postures.csv",
                                  chain.joint_specs)
-    scale = calibrate_chain(chain, train, "full", selection="prior").selection.prior_scale
+    scale = calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior")).selection.prior_scale
     assert not scale["estimated"] and (scale["translation_mm"], scale["rotation_deg"]) == (1.0, 0.5)
     assert scale["estimate"]["translation_mm"] > 3.0 and scale["log_bayes_factor"] > 10
     assert scale["cv_ratio"] > 1.0 - scale["cv_standard_error"]
@@ -287,7 +289,7 @@ def test_folds_at_scale_choose_their_scales_without_their_held_out_rows(industri
     from pincal.fit.level_choice import sensor_folds
 
     chain, data = _industrial_rows(industrial_arm_urdf, 3e-4, rows=60, seed=8)
-    result = calibrate_chain(chain, data, "full", selection="prior")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     assert "estimate" in result.selection.prior_scale
     seen = []
     real = fold_update.chosen_scales

@@ -19,7 +19,7 @@ from pincal.cli import progress as progress_module
 from pincal.cli.commands import main
 from pincal.cli.progress import LOG_INTERVAL_S, TERMINAL_DELAY_S, progress_bar
 from pincal.diagnosis.diagnose import MAX_EFFECTS, NO_TORQUE, candidate_effects, diagnose
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
 from pincal.model.drift import time_column
@@ -184,7 +184,7 @@ def test_calibration_reports_each_fit_once(compliance):
     """One call per fit: the registration, each subset the selection refits (pincal.fit.selection), the fit."""
     chain, experiment = compliance
     calls = Calls()
-    result = calibrate_chain(chain, experiment.calibration, "full", tool_known=True, progress=calls)
+    result = calibrate_chain(chain, experiment.calibration, "full", ChainFitOptions(tool_known=True), progress=calls)
     assert_promised(calls)
     fits = len(result.selection.refitted) + 2
     assert calls[-1] == (fits, fits)
@@ -193,7 +193,7 @@ def test_calibration_reports_each_fit_once(compliance):
 
 def test_diagnose_reports_every_step(compliance):
     chain, experiment = compliance
-    calibration = calibrate_chain(chain, experiment.calibration, "offsets", tool_known=True)
+    calibration = calibrate_chain(chain, experiment.calibration, "offsets", ChainFitOptions(tool_known=True))
     calls = Calls()
     result = diagnose(chain, calibration, experiment.calibration, time=time_column(experiment.calibration),
                       progress=calls)

@@ -21,7 +21,7 @@ import yaml
 from pincal.cli.commands import main
 from pincal.diagnosis.diagnose import diagnose
 from pincal.diagnosis.effect_fits import fit_while_gaining
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.measurements.csv_v1 import write_measurements
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, parse_effect
@@ -122,7 +122,7 @@ def two_harmonics(industrial_arm_urdf):
     start[1] = 0.0
     chain, calibration, heldout = _cell(industrial_arm_urdf, 3, effects=[parse_effect("cyclic:A2:1:0.002:0.002")],
                                         start=start, span_deg=[60, 25, 60, 60, 60, 60])
-    return chain, calibration, heldout, calibrate_chain(chain, calibration, "full", selection="prior")
+    return chain, calibration, heldout, calibrate_chain(chain, calibration, "full", ChainFitOptions(selection="prior"))
 
 
 ALIKE = {Effect("cyclic", "A2", harmonic=1), Effect("cyclic", "A2", harmonic=2), Effect("coupling", "A3", driver="A2")}

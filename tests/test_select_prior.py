@@ -9,7 +9,7 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import FitProblem, calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, FitProblem, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.level_choice import RULE, RULE_PRIOR, choose_level, one_standard_error
 from pincal.fit.metrics import pose_errors
@@ -94,7 +94,7 @@ def test_prior_scales_are_in_each_parameters_unit():
 def test_noise_free_data_recovers_the_truth_under_the_default_prior():
     """Noise-free rows: σ_pos shrinks towards rounding, so the prior's weight vanishes against the data."""
     chain, train, test = _rows(20, seed=3, sigma_m=0.0, error=1e-3)
-    result = calibrate_chain(chain, train, "full", selection="prior")
+    result = calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior"))
     # rounding and solver tolerance leave ~1e-12 m; 1e-9 m is far above that, far below the 1 mm errors
     assert _heldout_m(chain, result, test) < 1e-9
     scale = result.selection.prior_scale  # the scales used: estimated from the rows, or the defaults kept
@@ -105,9 +105,9 @@ def test_noise_free_data_recovers_the_truth_under_the_default_prior():
 def test_a_huge_prior_scale_is_the_select_all_fit():
     chain, train, _ = _rows(30, seed=4, sigma_m=SIGMA_M)
     nominal = chain.placements()
-    every = calibrate_chain(chain, train, "full", selection="all")
+    every = calibrate_chain(chain, train, "full", ChainFitOptions(selection="all"))
     chain.set_placements(nominal)
-    wide = calibrate_chain(chain, train, "full", selection=Prior(1e6, 1e6))  # km and 10^6 degrees
+    wide = calibrate_chain(chain, train, "full", ChainFitOptions(selection=Prior(1e6, 1e6)))  # km and 10^6 degrees
     assert np.array_equal(every.kept, wide.kept) and every.status == wide.status
     assert all(s == KEPT or s.startswith("not determined") for s in wide.status)
     determined = np.isfinite(every.std)
@@ -119,7 +119,8 @@ def test_a_huge_prior_scale_is_the_select_all_fit():
 
 def test_prior_dominated_parameters_are_flagged_and_not_reported_as_measured():
     chain, train, _ = _rows(12, seed=5, sigma_m=SIGMA_M)
-    result = calibrate_chain(chain, train, "full", selection=Prior(1e-3, 1e-3))  # 1 µm, 0.001°: the prior decides
+    # 1 µm, 0.001°: the prior decides
+    result = calibrate_chain(chain, train, "full", ChainFitOptions(selection=Prior(1e-3, 1e-3)))
     weak = [i for i, s in enumerate(result.status) if s == PRIOR_STATUS]
     assert weak and len(weak) == len(result.kept)
     assert any("determined mainly by the prior" in note for note in result.notes)
@@ -134,7 +135,7 @@ def test_noise_scale_counts_the_effective_parameters_on_sparse_data():
     ratios = []
     for seed in range(4):
         chain, train, _ = _rows(12, seed=10 + seed, sigma_m=SIGMA_M)
-        ratios.append(calibrate_chain(chain, train, "full", selection="prior").sigma_pos_m / SIGMA_M)
+        ratios.append(calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior")).sigma_pos_m / SIGMA_M)
     assert 0.7 < np.mean(ratios) < 1.4
 
 
@@ -186,7 +187,7 @@ def test_richest_level_within_one_standard_error_under_priors():
 
 def test_level_auto_uses_the_prior_in_its_fits_and_says_its_rule():
     chain, train, _ = _rows(15, seed=8, sigma_m=SIGMA_M)
-    choice = choose_level(chain, train, selection=Prior(2.0, 0.25), folds=5)
+    choice = choose_level(chain, train, ChainFitOptions(selection=Prior(2.0, 0.25)), folds=5)
     assert choice.selection == "prior" and choice.as_dict()["rule"] == RULE_PRIOR != RULE
     # every fold of the full level kept every identifiable parameter (no subset selection)
     assert len(set(choice.scores[-1].kept)) == 1

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.selection import curvature_ratios, nested_fits, refine
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain
@@ -157,7 +157,7 @@ def test_tiago_selection_is_that_of_refitting_every_subset(level, criterion):
     chain = KinematicChain.from_urdf(example_robot_data_urdf("tiago_description/robots/tiago.urdf"),
                                      "wrist_ft_tool_link")
     data, _ = read_measurements(TIAGO_TRAIN, chain.joint_specs)
-    result = calibrate_chain(chain, data, level, selection=criterion)
+    result = calibrate_chain(chain, data, level, ChainFitOptions(selection=criterion))
     assert result.selection.chosen == SWEEP_CHOICE[level, criterion]
     assert result.selection.chosen in result.selection.refitted
     assert len(result.selection.refitted) < result.rank + 1  # not every subset refitted
@@ -217,7 +217,7 @@ def test_press_is_undefined_not_a_crash_when_a_row_has_leverage_one():
     chain = KinematicChain.from_urdf(example_robot_data_urdf("tiago_description/robots/tiago.urdf"),
                                      "wrist_ft_tool_link")
     data, _ = read_measurements(TIAGO_TRAIN, chain.joint_specs)
-    result = calibrate_chain(chain, data.select(np.arange(data.n_rows) < 6), "full", selection="press")
+    result = calibrate_chain(chain, data.select(np.arange(data.n_rows) < 6), "full", ChainFitOptions(selection="press"))
     assert result.selection.chosen in result.selection.refitted
 
 
@@ -264,5 +264,5 @@ def test_as_many_residuals_as_unknowns_calibrates_with_a_degree_of_freedom_left(
     rng = np.random.default_rng(3)
     data = measure(chain, rng.uniform(-2.0, 2.0, (9, 6)), DEFAULT_REGISTRATION, rng,
                    SimulatedSensor(5e-5, 0.0, points=np.array([[0.0, 0.0, 0.1]]), with_rotation=False), "calibration")
-    result = calibrate_chain(chain, data, "full", selection="aic")
+    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="aic"))
     assert result.rank == 18 and len(result.kept) <= 17

@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 from pincal.cli.commands import main
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.metrics import RowCorrections, pose_errors
 from pincal.fit.sessions import initial_target, register_session, session_pose_errors
 from pincal.measurements.csv_v1 import (
     read_measurements,
@@ -31,6 +32,7 @@ from pincal.measurements.data import join_sets
 from pincal.model.chain import KinematicChain
 from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.sensor import Registration
+from pincal.model.thermal import RowConditions
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.sensor_values import RowWeights
@@ -564,6 +566,26 @@ def test_reestimated_sessions_report_their_degrees_of_freedom(calibrated, truth,
     # reported registrations leave all their residuals: no dof, thresholds as ever
     assert main([*args, str(tmp_path / "three.csv"), "--fixed-registration", "--json", str(tmp_path / "f.json")]) == 0
     assert json.loads((tmp_path / "f.json").read_text())["sessions"][0]["registration_dof"] is None
+
+
+def test_each_session_meets_the_corrections_of_its_own_rows(truth):
+    """Through several sessions' registrations, eq 24 corrects each row by its own joint values, drift and
+    thermal terms (RowCorrections.select): the errors are one session's at a time with its rows' corrections."""
+    data = join_sets([_session(truth, "A", 5, 1), _session(truth, "B", 5, 2)])
+    rng = np.random.default_rng(4)
+    k = data.n_rows
+    q, drift = data.q + rng.normal(0.0, 1e-3, data.q.shape), rng.normal(0.0, 1e-4, (k, 3))
+    expansion, steps = rng.normal(0.0, 1e-4, k), rng.normal(0.0, 1e-4, (k, 3))
+    corrections = RowCorrections(q, 2e-4, drift, RowConditions(expansion, steps))
+    registrations = [PLACEMENTS["A"], PLACEMENTS["B"]]
+    both = session_pose_errors(truth, data, data.session_index, registrations, points=POINT, corrections=corrections)
+    for s, registration in enumerate(registrations):
+        rows = np.flatnonzero(data.session_index == s)
+        own = RowCorrections(q[rows], 2e-4, drift[rows], RowConditions(expansion[rows], steps[rows]))
+        alone = pose_errors(truth, data.select(rows), registration, registration, POINT, corrections=own)
+        assert np.array_equal(both.position_m[rows], alone.position_m)
+    plain = session_pose_errors(truth, data, data.session_index, registrations, points=POINT)
+    assert plain.position_m.max() < EXACT < both.position_m.min()  # the corrections moved every row
 
 
 def test_the_stated_factor_is_what_a_reestimated_registration_leaves(truth):

@@ -17,7 +17,7 @@ import pytest
 
 from pincal.diagnosis.diagnose import candidate_effects, diagnose
 from pincal.errors import PincalError
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, effect_from_dict, effect_to_dict, parse_effect
 from pincal.model.parameter_sets import PlacementErrors
@@ -70,7 +70,7 @@ def test_diagnose_offers_it_between_parallel_neighbours_only(ur5):
 @pytest.mark.parametrize("hidden", [[(HIDDEN, np.array([VALUE]))], []], ids=["hidden", "clean"])
 def test_a_hidden_torque_coupling_is_named_measured_and_removed(ur5, hidden):
     calibration, heldout = _cell(ur5, hidden)
-    fitted = calibrate_chain(ur5, calibration, "full", selection="prior")  # the CLI's default for full
+    fitted = calibrate_chain(ur5, calibration, "full", ChainFitOptions(selection="prior"))  # the CLI's default for full
     result = diagnose(ur5, fitted, calibration, heldout=heldout)
     driven = [(e, v, s) for e, v, s in result.effects if e.type == "compliance" and e.driver]
     assert result.heldout_errors is not None and result.heldout_errors.position.rms < BOUND_MM

@@ -33,29 +33,25 @@ from pincal.errors import CalibrationError, did_you_mean
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
-from pincal.fit.prior import PriorResidual, data_rows, log_evidence, reestimated_scales
+from pincal.fit.prior import Prior, PriorResidual, data_rows
 from pincal.fit.registration_hold import HeldRotation, hold_registration, rotation_reason
-from pincal.fit.selection import SELECTION_CRITERIA
-from pincal.fit.sessions import check_registrable, initial_target, rows_at, session_rows
-from pincal.fit.solver import Solution, solve
+from pincal.fit.selection import SELECTION_CRITERIA, SelectionCriterion
+from pincal.fit.sensor_problem import START_SIGMA_POS_M, START_SIGMA_ROT_RAD, FitProblem
+from pincal.fit.sessions import check_registrable, initial_target, rows_at
 from pincal.fit.target_hold import HeldDirection, analysis_jacobian, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import Effect, EffectInputs
-from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainParameters, NoParameters
+from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainLevel, ChainParameters, NoParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
-from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights
+from pincal.residuals.sensor_values import FittedBlocks
 
 __all__ = [
-    "START_SIGMA_POS_M", "START_SIGMA_ROT_RAD", "ChainCalibration", "row_weights", "FitProblem", "calibrate_chain",
+    "START_SIGMA_POS_M", "START_SIGMA_ROT_RAD", "ChainCalibration", "ChainFitOptions", "row_weights", "FitProblem",
+    "calibrate_chain",
 ]
 
-#: Starting noise scales for weighting positions against orientations; both
-#: are re-estimated from the residuals (maximum likelihood with unknown variances).
-START_SIGMA_POS_M = 1e-3
-START_SIGMA_ROT_RAD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -92,7 +88,7 @@ class ChainCalibration:
             rotations held and the registrations' free unknowns (:mod:`pincal.fit.registration_hold`).
     """
 
-    level: str
+    level: ChainLevel
     params: ChainParameters | None
     vector: np.ndarray
     std: np.ndarray
@@ -178,165 +174,51 @@ def row_weights(data: MeasurementSet, sigma_column: str | None) -> np.ndarray:
     return 1.0 / relative
 
 
-@dataclass(frozen=True, eq=False)
-class FitProblem:
-    """One weighted fit of registration, target and a subset of kinematic parameters: a value.
+@dataclass(frozen=True)
+class ChainFitOptions:
+    """How :func:`calibrate_chain` fits (and :func:`pincal.fit.level_choice.choose_level` each level): a value.
 
-    Everything a fit needs is given at construction; a variant is a new problem
-    (:meth:`with_scales`, :meth:`with_prior`, :meth:`rescaled`, or ``dataclasses.replace``), never
-    this one changed.
-
-    ``models``: sensitivity models by slots (:class:`KinematicsCache`), a cache shared by the
-    objectives of this problem, of every problem derived from it and of any problem given the
-    same dict (an entry depends on the chain and the free parameters' slots only, nothing a
-    variant changes).
-    ``session_names``: the sessions of ``start.registrations`` (default, empty: those of
-    ``data``); each row uses its session's (:func:`pincal.fit.sessions.session_rows`).
-    ``sigma_pos`` [m], ``sigma_rot`` [rad]: the noise scales weighting the rows (``sigma_rot``
-    None without measured orientations, whatever is given).
-    ``prior``: with ``--select prior``, σ_i of every kinematic parameter (:mod:`pincal.fit.prior`, eq P1).
-    ``point_basis``: the target points' free directions (:mod:`pincal.fit.target_hold`), None: all.
-    ``registration_basis``: the registrations' free unknowns (:mod:`pincal.fit.registration_hold`), None: all.
-    """
-
-    chain: KinematicChain
-    params: ChainParameters | None
-    data: MeasurementSet
-    start: TargetEstimate
-    fit_target: bool
-    row_weight: np.ndarray
-    effects: Sequence[Effect] = ()
-    inputs: EffectInputs | None = None
-    models: dict = field(default_factory=dict)
-    session_names: tuple[str, ...] = ()
-    sigma_pos: float = START_SIGMA_POS_M
-    sigma_rot: float | None = START_SIGMA_ROT_RAD
-    prior: np.ndarray | None = None
-    point_basis: np.ndarray | None = None
-    registration_basis: np.ndarray | None = None
-    sessions: np.ndarray = field(init=False, repr=False)  # each row's session index (K,)
-
-    def __post_init__(self) -> None:
-        # frozen: the normalised and derived fields are set once, here, as a constructor's would be
-        names = tuple(self.session_names or self.data.session_names)
-        object.__setattr__(self, "session_names", names)
-        object.__setattr__(self, "effects", tuple(self.effects))
-        object.__setattr__(self, "sessions", session_rows(self.data, names))
-        if self.data.rotations is None:
-            object.__setattr__(self, "sigma_rot", None)
-
-    def objective(self, free: np.ndarray, base: np.ndarray) -> SensorResidual | PriorResidual:
-        params = self.params if self.params is not None else NoParameters(self.chain)
-        cache = KinematicsCache(params, free, base, self.data.q, self.models)
-        objective = SensorResidual(
-            cache,
-            self.data.points,
-            self.data.rotations,
-            self.start,
-            RowWeights(self.row_weight / self.sigma_pos, self.row_weight / (self.sigma_rot or 1.0)),
-            FittedBlocks(points=self.fit_target, rotation=self.fit_target, point_basis=self.point_basis,
-                         registration_basis=self.registration_basis),
-            ModelledEffects(self.effects, self.inputs),
-            sessions=self.sessions,
-        )
-        return objective if self.prior is None else PriorResidual(objective, self.prior[free])
-
-    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
-        objective = self.objective(free, base)
-        x0 = objective.start_vector() if x0 is None else x0
-        solution = solve(objective, x0, what=what)
-        return objective, solution
-
-    def scales(self) -> tuple[float, float | None]:
-        """The noise scales weighting the rows: positions [m], orientations [rad] (None without)."""
-        return self.sigma_pos, self.sigma_rot
-
-    def with_scales(self, scales: tuple[float, float | None]) -> FitProblem:
-        """This problem with its rows weighted by ``scales`` (as :meth:`scales` gives them)."""
-        return replace(self, sigma_pos=scales[0], sigma_rot=scales[1])
-
-    def with_prior(self, prior: np.ndarray | None) -> FitProblem:
-        """This problem with ``prior`` (σ_i of every kinematic parameter, eq P1; None: no prior)."""
-        return replace(self, prior=prior)
-
-    def log_evidence(self, objective: PriorResidual, solution: Solution) -> float:
-        """Eq P3 (:func:`pincal.fit.prior.log_evidence`): rows already whitened by w_k = 1/σ_pos and
-        v_k = 1/σ_rot (times each row's weight, the same for every scale)."""
-        data = objective.objective
-        log_variances = -2.0 * 3 * data.g.shape[1] * np.sum(np.log(data.w))
-        if data.G is not None:
-            log_variances -= 2.0 * 3 * np.sum(np.log(data.v))
-        return log_evidence(solution.jacobian, solution.residual, float(log_variances))
-
-    def fold_rows(self, objective) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """What the prior's folds deal (:func:`pincal.fit.prior_scales.scale_folds`): each row's joint
-        readings (K, N), its session (K,) and its entries in ``objective``'s residual (K, b)."""
-        data = getattr(objective, "objective", objective)  # the sensor residual inside a prior-wrapped one
-        return self.data.q, self.data.session_index, data.row_indices()
-
-    def scale_rows(self, objective) -> tuple[slice, ...]:
-        """The data rows each noise scale of :meth:`scales` weights (positions, then orientations if measured)."""
-        n_pos = 3 * self.data.n_rows * self.data.n_points
-        if self.sigma_rot is None:
-            return (slice(0, n_pos),)
-        return slice(0, n_pos), slice(n_pos, n_pos + 3 * self.data.n_rows)
-
-    def rescaled(self, objective: SensorResidual | PriorResidual, solution: Solution) -> FitProblem:
-        """This problem at the noise scales of a fit's residuals (:mod:`pincal.fit.pipeline`): maximum
-        likelihood with unknown variances, sigma² = mean squared residual per kind; with a prior, eq P2
-        of :mod:`pincal.fit.prior` (the effective degrees of freedom)."""
-        k, p = self.data.n_rows, self.data.n_points
-        n_pos = 3 * k * p
-        if isinstance(objective, PriorResidual):
-            return self.with_scales(reestimated_scales(solution, objective.n_prior, n_pos, self.sigma_pos,
-                                                       self.sigma_rot))
-        pos = solution.residual[:n_pos] * self.sigma_pos
-        sigma_pos = float(np.sqrt(np.mean(pos**2))) or self.sigma_pos
-        sigma_rot = self.sigma_rot
-        if sigma_rot is not None:
-            rot = solution.residual[n_pos:] * sigma_rot
-            sigma_rot = float(np.sqrt(np.mean(rot**2))) or sigma_rot
-        return self.with_scales((sigma_pos, sigma_rot))
-
-
-def calibrate_chain(
-    chain: KinematicChain,
-    data: MeasurementSet,
-    level: str,
-    tool_known: bool = False,
-    sigma_column: str | None = None,
-    reject_outliers: bool = False,
-    sigma_iterations: int = 2,
-    selection: str = "aic",
-    progress: Progress | None = None,
-    refit_offered: bool = True,
-) -> ChainCalibration:
-    """Calibrate ``chain`` at ``level`` on the non-validation rows of ``data``.
-
-    Args:
-        chain: the chain; its tool is the target frame. If ``tool_known``, the
-            tool is the measured point (and frame) and is not estimated;
+    Attributes:
+        tool_known: the chain's tool is the measured point (and frame) and is not estimated;
             otherwise the target points are estimated in the tool frame.
-        data: measurements (rows with role ``validation`` are not used).
-        level: one of :data:`CHAIN_LEVELS`.
         sigma_column: extra column holding a per-row noise scale [mm] (weights).
         reject_outliers: refit without the rows flagged as outliers.
+        sigma_iterations: refits re-estimating the position/orientation noise scales (with a
+            prior: up to eq P2's fixed point instead, :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
         selection: criterion choosing how many identifiable parameters to keep
             (:data:`SELECTION_CRITERIA`); ``"prior"`` (or a :class:`pincal.fit.prior.Prior`
             with its scales) keeps all of them in a MAP fit.
-        sigma_iterations: refits re-estimating the position/orientation noise scales (with a
-            prior: up to eq P2's fixed point instead, :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
-        progress: ``progress(done, total)`` after the registration, each subset scored, the fit.
         refit_offered: whether the caller can refit without outliers (``calibrate --reject-outliers``);
             else (``diagnose``) the outlier note says to check the rows instead.
+    """
+
+    tool_known: bool = False
+    sigma_column: str | None = None
+    reject_outliers: bool = False
+    sigma_iterations: int = 2
+    selection: SelectionCriterion | Prior = "aic"
+    refit_offered: bool = True
+
+
+def calibrate_chain(chain: KinematicChain, data: MeasurementSet, level: ChainLevel,
+                    options: ChainFitOptions = ChainFitOptions(), progress: Progress | None = None
+                    ) -> ChainCalibration:
+    """Calibrate ``chain`` at ``level`` on the non-validation rows of ``data``.
+
+    Args:
+        chain: the chain; its tool is the target frame (see :attr:`ChainFitOptions.tool_known`).
+        data: measurements (rows with role ``validation`` are not used).
+        level: one of :data:`CHAIN_LEVELS`.
+        options: how to fit (:class:`ChainFitOptions`; default: AIC, two noise-scale refits).
+        progress: ``progress(done, total)`` after the registration, each subset scored, the fit.
 
     The chain is not changed: the calibrated model is the result's ``chain_placements`` (evaluate
     it with ``chain.placed(result.chain_placements)``).
     """
     if level not in CHAIN_LEVELS:
         raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
-    if selection not in SELECTION_CRITERIA:
-        raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{selection}'")
+    if options.selection not in SELECTION_CRITERIA:
+        raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{options.selection}'")
     started = time.perf_counter()
     index = np.flatnonzero(data.roles != "validation")  # rows of ``data`` in the fit
     rows = data.select(index)
@@ -345,7 +227,7 @@ def calibrate_chain(
             f"{data.source}: {rows.n_rows} calibration row(s) (rows with role 'validation' are not used); "
             "a calibration needs at least 3"
         )
-    if tool_known and rows.n_points != 1:
+    if options.tool_known and rows.n_points != 1:
         raise CalibrationError(
             f"{data.source}: a known --tool is one point; this file has {rows.n_points} points "
             "per row — leave out --tool to estimate the target's points"
@@ -357,12 +239,10 @@ def calibrate_chain(
     removed: list[int] = []
     counter = Counter(progress)
     for attempt in range(2):
-        result, point_errors = _calibrate_rows(
-            chain, params, rows, level, tool_known, sigma_column, sigma_iterations, selection, counter
-        )
+        result, point_errors = _calibrate_rows(chain, params, rows, level, options, counter)
         outliers = find_outliers(point_errors, index)  # (row of ``data``, robust score)
         flagged = [k for k, _ in outliers]
-        if not (reject_outliers and outliers and attempt == 0):
+        if not (options.reject_outliers and outliers and attempt == 0):
             break
         removed = flagged
         keep = ~np.isin(index, removed)
@@ -372,7 +252,7 @@ def calibrate_chain(
     if flagged and not removed:
         notes.append(
             f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
-            + ("rerun with --reject-outliers to refit without them" if refit_offered else
+            + ("rerun with --reject-outliers to refit without them" if options.refit_offered else
                "they stay in the fit: check them and remove the bad ones from the file (an effect found "
                "later may explain the others)")
         )
@@ -390,21 +270,21 @@ def calibrate_chain(
     )
 
 
-def _calibrate_rows(
-    chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion, counter: Counter,
-    hold: tuple[HeldDirection, ...] = (),
-) -> tuple[ChainCalibration, np.ndarray]:
+def _calibrate_rows(chain: KinematicChain, params: ChainParameters | None, rows: MeasurementSet, level: ChainLevel,
+                    options: ChainFitOptions, counter: Counter, hold: tuple[HeldDirection, ...] = ()
+                    ) -> tuple[ChainCalibration, np.ndarray]:
     """One calibration of ``rows``; returns the result (without the outlier
     bookkeeping) and each target point's distance from the model (K, P) [m].
     ``counter`` counts the registration fits, each subset scored and the final fits as one each.
     ``hold``: target directions to hold besides those the rows leave free (:mod:`pincal.fit.target_hold`);
     a calibration whose target comes out weakly determined is done again with those held."""
+    tool_known = options.tool_known
     nominal = chain.placements()
     start = initial_target(chain, rows, fit_points=not tool_known)
     if tool_known:
         start = replace(start, points=np.zeros((1, 3)), rotation=np.eye(3))
     problem = FitProblem(chain, params, rows, start, fit_target=not tool_known,
-                         row_weight=row_weights(rows, sigma_column))
+                         row_weight=row_weights(rows, options.sigma_column))
     held: tuple[HeldDirection, ...] = ()
     if not tool_known:
         held, problem = hold_target(problem, extra=hold)
@@ -422,7 +302,7 @@ def _calibrate_rows(
             f"the registration and target alone take {solution.x.size}: none is left for the kinematics; "
             "add calibration rows"
         )
-    for _ in range(sigma_iterations):
+    for _ in range(options.sigma_iterations):
         problem = problem.rescaled(objective, solution)
         objective, solution = problem.fit(empty, base, solution.x, what="registration")
     counter.tick()
@@ -438,7 +318,7 @@ def _calibrate_rows(
         jac, held_cols = analysis_jacobian(problem, held, size)
         analysis = Analysis(np.hstack([jac, held_cols]), kinematic_cols,
                             np.concatenate([other_cols, full.n_params + np.arange(held_cols.shape[1])]))
-    fit = fit_kinematics(problem, analysis, size, rows, criterion, level, sigma_iterations, counter)
+    fit = fit_kinematics(problem, analysis, rows, options.selection, level, options.sigma_iterations, counter)
     problem = cast(FitProblem, fit.problem)  # at the scales and prior the final fit was made with
     if analysis is not None:  # what absorbs a dropped parameter: the model as it is, the target where it is
         real = jac if rows.rotations is None else full.jacobian(full.start_vector())
@@ -482,18 +362,18 @@ def _calibrate_rows(
         prior_sigma=problem.prior,
         held=held,
         point_basis=problem.point_basis,
-        chain_placements=tuple(params.placements(fit.vector)) if size else tuple(nominal),
+        chain_placements=tuple(params.placements(fit.vector)) if params is not None and size else tuple(nominal),
         held_rotations=rotations,
         registration_basis=problem.registration_basis,
     )
-    weak = () if tool_known or hold else weak_target(result, problem)
+    weak = () if tool_known or hold else weak_target(problem, kept, covariance)
     if weak:  # the kinematics took what the target was left to explain: again, with it held
-        return _calibrate_rows(chain, params, rows, level, tool_known, sigma_column, sigma_iterations, criterion,
-                               counter, hold=weak)
+        return _calibrate_rows(chain, params, rows, level, options, counter, hold=weak)
     return result, point_errors
 
 
-def _column_names(objective: SensorResidual | PriorResidual, params, kept: np.ndarray, sessions=()) -> list[str]:
+def _column_names(objective: SensorResidual | PriorResidual, params: ChainParameters | None, kept: np.ndarray,
+                  sessions: Sequence[str] = ()) -> list[str]:
     names = [params.info[i].name for i in kept] if params is not None else []
     if objective.registration_basis is not None:  # the free unknowns of a held rotation (registration_hold)
         names += [f"registration.free{i + 1}" for i in range(objective.registration_basis.shape[1])]

@@ -32,15 +32,16 @@ from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
-from pincal.fit.prior import SCALE_FLOOR, PriorResidual, data_rows, effective_scale, hat_diagonal, log_evidence
+from pincal.fit.prior import SCALE_FLOOR, Prior, PriorResidual, data_rows, effective_scale, hat_diagonal, log_evidence
 from pincal.fit.registration import register_points
-from pincal.fit.selection import SELECTION_CRITERIA
+from pincal.fit.selection import SELECTION_CRITERIA, SelectionCriterion
 from pincal.fit.socket_metrics import FixtureMetrics, metrics_of_positions
-from pincal.fit.solver import solve
+from pincal.fit.solver import Solution, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
-from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainParameters, NoParameters
+from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainLevel, ChainParameters, NoParameters
+from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.fixture import FixtureEstimate, FixtureResidual, rotation_basis
 
@@ -109,7 +110,7 @@ class FixtureCalibration:
             them (:class:`pincal.residuals.fixture.FixtureResidual`).
     """
 
-    level: str
+    level: ChainLevel
     params: ChainParameters | None
     vector: np.ndarray
     std: np.ndarray
@@ -152,7 +153,8 @@ class FixtureCalibration:
         return float(np.sqrt(variance.sum() / data.n_rows))
 
 
-def initial_fixture(chain: KinematicChain, data: FixtureData) -> tuple[FixtureEstimate, list[np.ndarray], list]:
+def initial_fixture(chain: KinematicChain, data: FixtureData
+                    ) -> tuple[FixtureEstimate, list[np.ndarray], list[np.ndarray | None]]:
     """Ball centre and placement poses from the chain as it is (pivot calibration, then the poses).
 
     Returns:
@@ -170,7 +172,8 @@ def initial_fixture(chain: KinematicChain, data: FixtureData) -> tuple[FixtureEs
         a[row, :, 3 + 3 * g : 6 + 3 * g] = -np.eye(3)
     solution = np.linalg.lstsq(a.reshape(3 * k, -1), -poses.tool_positions.reshape(-1), rcond=None)[0]
     ball, centres = solution[:3], solution[3:].reshape(-1, 3)
-    rotations, positions, bases, lines = [], [], [], []
+    rotations, positions, bases = [], [], []
+    lines: list[np.ndarray | None] = []
     for s in range(len(data.placements)):
         mine = labels // len(data.fixture.names) == s
         f = data.fixture.points[labels[mine] % len(data.fixture.names)]
@@ -206,8 +209,8 @@ class FixtureProblem:
     params: ChainParameters | None
     data: FixtureData
     start: FixtureEstimate
-    bases: list
-    models: dict = field(default_factory=dict)
+    bases: list[np.ndarray]
+    models: dict[tuple[ParameterSlot, ...], SensitivityModel] = field(default_factory=dict)
     prior: np.ndarray | None = None
     noise: float = 1.0
 
@@ -217,7 +220,8 @@ class FixtureProblem:
         objective = FixtureResidual(cache, self.data.placement, self.data.socket_points, self.bases, self.start)
         return objective if self.prior is None else PriorResidual(objective, self.prior[free], self.noise)
 
-    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None, what: str = "fit"):
+    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,
+            what: str = "fit") -> tuple[FixtureResidual | PriorResidual, Solution]:
         objective = self.objective(free, base)
         solution = solve(objective, objective.start_vector() if x0 is None else x0, what=what)
         return objective, solution
@@ -226,7 +230,7 @@ class FixtureProblem:
         """The noise scale σ [m] weighting a prior's rows (:mod:`pincal.fit.pipeline`)."""
         return (self.noise,)
 
-    def rescaled(self, objective: FixtureResidual | PriorResidual, solution) -> FixtureProblem:
+    def rescaled(self, objective: FixtureResidual | PriorResidual, solution: Solution) -> FixtureProblem:
         """This problem at σ [m] from a fit: with a prior, eq P2 from ``solution``'s data rows; without,
         their RMS (the residual is in metres and unweighted, σ weights only a prior's rows)."""
         if isinstance(objective, PriorResidual):
@@ -236,31 +240,32 @@ class FixtureProblem:
         # maximum likelihood: the residual's RMS
         return replace(self, noise=float(np.sqrt(np.mean(solution.residual**2))) or self.noise)
 
-    def with_scales(self, scales: tuple[float]) -> FixtureProblem:
+    def with_scales(self, scales: tuple[float | None, ...]) -> FixtureProblem:
         """This problem with a prior's rows weighted by ``scales`` (as :meth:`scales` gives them)."""
         (noise,) = scales
-        return replace(self, noise=noise)
+        return replace(self, noise=cast(float, noise))  # the one scale, of the ball centres: always measured
 
     def with_prior(self, prior: np.ndarray | None) -> FixtureProblem:
         """This problem with ``prior`` (σ_i of every kinematic parameter, eq P1; None: no prior)."""
         return replace(self, prior=prior)
 
-    def fold_rows(self, objective) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def fold_rows(self, objective: FixtureResidual | PriorResidual) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What the prior's folds deal (:func:`pincal.fit.prior_scales.scale_folds`): each row's joint
         readings (K, N), its placement and socket as one stratum (K,), its three residual entries (K, 3)."""
         data = self.data
         strata = data.placement * len(data.fixture.names) + data.socket
         return data.q, strata, np.arange(3 * data.n_rows).reshape(data.n_rows, 3)
 
-    def scale_rows(self, objective) -> tuple[slice, ...]:
+    def scale_rows(self, objective: FixtureResidual | PriorResidual) -> tuple[slice, ...]:
         """The data rows the noise scale of :meth:`scales` weights: every ball-centre coordinate."""
         return (slice(0, 3 * self.data.n_rows),)
 
-    def log_evidence(self, objective: PriorResidual, solution) -> float:
+    def log_evidence(self, objective: FixtureResidual | PriorResidual, solution: Solution) -> float:
         """Eq P3 (:func:`pincal.fit.prior.log_evidence`) with the rows [m] divided by σ."""
-        rows = solution.residual.size - objective.n_prior
-        return log_evidence(solution.jacobian / objective.noise, solution.residual / objective.noise,
-                            rows * 2.0 * np.log(objective.noise))
+        prior = cast(PriorResidual, objective)  # eq P3 is of a MAP fit
+        rows = solution.residual.size - prior.n_prior
+        return log_evidence(solution.jacobian / prior.noise, solution.residual / prior.noise,
+                            rows * 2.0 * np.log(prior.noise))
 
     def rows_view(self) -> MeasurementSet:
         """The rows as one-point measurements (the socket in its fixture frame), for the selection's bookkeeping."""
@@ -271,7 +276,7 @@ class FixtureProblem:
 
 
 def calibrate_fixture(
-    chain: KinematicChain, data: FixtureData, level: str, selection: str = "aic"
+    chain: KinematicChain, data: FixtureData, level: ChainLevel, selection: SelectionCriterion | Prior = "aic"
 ) -> FixtureCalibration:
     """Calibrate ``chain`` at ``level`` from the socket-fixture rows ``data``.
 
@@ -307,8 +312,7 @@ def calibrate_fixture(
         full = problem.objective(np.arange(size), base)
         jac, turn = _identifiability_jacobian(full)
         analysis = Analysis(jac, np.arange(size), np.arange(size, jac.shape[1]))
-    fit = fit_kinematics(problem, analysis, size, problem.rows_view(), selection, level, refits=0,
-                         from_selection=False)
+    fit = fit_kinematics(problem, analysis, problem.rows_view(), selection, level, refits=0, from_selection=False)
     if analysis is not None:
         names = column_names(full, params, np.arange(size), data) + [f"root_frame.r{a}" for a in "xyz"][:turn]
         dropped = dropped_parameters(analysis.jacobian, cast(Ordering, fit.ordering), fit.kept, analysis.always, names)
@@ -371,8 +375,8 @@ def _identifiability_jacobian(full: FixtureResidual | PriorResidual) -> tuple[np
     return np.hstack([jac, turn]), 3
 
 
-def _placements(objective: FixtureResidual, x: np.ndarray, covariance: np.ndarray, data: FixtureData,
-                lines: list) -> tuple[PlacementEstimate, ...]:
+def _placements(objective: FixtureResidual | PriorResidual, x: np.ndarray, covariance: np.ndarray, data: FixtureData,
+                lines: list[np.ndarray | None]) -> tuple[PlacementEstimate, ...]:
     """Socket centres (with their spread, propagated from the fit's covariance) and the
     determined part of each placement's pose."""
     estimate = objective.estimate(x)
@@ -403,7 +407,8 @@ def _placements(objective: FixtureResidual, x: np.ndarray, covariance: np.ndarra
     return tuple(out)
 
 
-def column_names(objective: FixtureResidual | PriorResidual, params, kept: np.ndarray, data: FixtureData) -> list[str]:
+def column_names(objective: FixtureResidual | PriorResidual, params: ChainParameters | None, kept: np.ndarray,
+                 data: FixtureData) -> list[str]:
     """Names of the objective's columns: kinematic, ``ball.x`` …, ``placement[P].x`` …, ``placement[P].turn1`` …"""
     names = [params.info[i].name for i in kept] if params is not None else []
     names += [f"ball.{a}" for a in "xyz"]

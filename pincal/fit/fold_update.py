@@ -30,11 +30,12 @@ from typing import cast
 import numpy as np
 
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import ChainCalibration, FitProblem, calibrate_chain, row_weights
+from pincal.fit.chain_calibration import ChainCalibration, ChainFitOptions, FitProblem, calibrate_chain, row_weights
 from pincal.fit.prior import Prior, PriorResidual, parameter_kinds, prior_of
 from pincal.fit.prior_scales import LinearisedFit, chosen_scales
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import ChainLevel, ChainParameters
 from pincal.progress import Counter
 
 __all__ = ["LINEARISED_FROM_ROWS", "final_problem", "linearised_fold_errors", "linearised_levels"]
@@ -79,7 +80,7 @@ def linearised_fold_errors(chain: KinematicChain, result: ChainCalibration, rows
         prior = cast(PriorResidual, objective)  # an estimated prior's fit carries its rows
         linear = LinearisedFit.of(prior, result.solution, jacobian, residual, problem.scale_rows(prior),
                                   [s for s in problem.scales() if s is not None],
-                                  parameter_kinds(result.params)[result.kept])
+                                  parameter_kinds(cast(ChainParameters, result.params))[result.kept])  # a MAP fit's
         m, kin = residual.size - prior.n_prior, prior.blocks["kinematic"]
     out = []
     for test in tests:
@@ -111,9 +112,9 @@ def _estimated_prior(result: ChainCalibration, prior: Prior | None) -> np.ndarra
 
 
 def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequence[np.ndarray],
-                      levels: Sequence[str], counter: Counter, options: dict
-                      ) -> list[tuple[str, list[float], list[int], list[str]]]:
-    """Every level's fit of all ``rows`` (``options``: those of :func:`calibrate_chain`), then eq L1 for
+                      levels: Sequence[ChainLevel], counter: Counter, options: ChainFitOptions
+                      ) -> list[tuple[ChainLevel, list[float], list[int], list[str]]]:
+    """Every level's fit of all ``rows`` (``options``: how :func:`calibrate_chain` fits), then eq L1 for
     each fold's held-out rows ``tests``: (level, fold errors [mm], kept per fold, failures) per level.
     As with refits, the first level must fit (else one line); a later one that cannot is no candidate
     (NaN errors)."""
@@ -121,7 +122,7 @@ def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequen
     counter.expect(len(levels))
     for level in levels:
         try:
-            result = calibrate_chain(chain, rows, level, **options)
+            result = calibrate_chain(chain, rows, level, options)
         except CalibrationError as exc:
             if level == levels[0]:
                 raise CalibrationError(f"--level auto: the {rows.n_rows} rows cannot be calibrated even at "
@@ -130,7 +131,7 @@ def linearised_levels(chain: KinematicChain, rows: MeasurementSet, tests: Sequen
             continue
         finally:
             counter.tick()
-        errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options["sigma_column"]),
-                                        prior_of(options.get("selection", "aic")))
+        errors = linearised_fold_errors(chain, result, rows, tests, row_weights(rows, options.sigma_column),
+                                        prior_of(options.selection))
         out.append((level, [e * 1000.0 for e in errors], [len(result.kept)] * len(tests), []))
     return out

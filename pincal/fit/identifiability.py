@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import scipy.linalg
@@ -247,4 +247,4 @@ class Selection:
     notes: tuple[str, ...] = field(default=())
     refitted: tuple[int, ...] = ()
     solution: np.ndarray | None = field(default=None, compare=False, repr=False)
-    prior_scale: dict[str, float] | None = None  # --select prior: its scales (pincal.fit.prior)
+    prior_scale: dict[str, Any] | None = None  # --select prior: its scales (pincal.fit.prior)

@@ -51,22 +51,27 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import CHAIN_LEVELS, calibrate_chain
+from pincal.fit.chain_calibration import CHAIN_LEVELS, ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.fold_update import LINEARISED_FROM_ROWS, linearised_levels
 from pincal.fit.folds import DEFAULT_FOLDS, SAME_CONFIGURATION_RAD, SEED, configuration_keys, row_folds
 from pincal.fit.metrics import pose_errors
+from pincal.fit.prior import Prior
+from pincal.fit.selection import SelectionCriterion
 from pincal.fit.sessions import register_session, where
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.fixture import MIN_ROWS_PER_SOCKET, FixtureData
 from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import ChainLevel
 from pincal.progress import Counter, Progress
 
 __all__ = [
@@ -117,14 +122,14 @@ class LevelScore:
         failures: why a fold's fit failed, one text per failure.
     """
 
-    level: str
+    level: ChainLevel
     fold_errors_mm: tuple[float, ...]
     kept: tuple[int, ...]
     cv_error_mm: float
     standard_error_mm: float
     failures: tuple[str, ...] = ()
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         finite = np.isfinite(self.cv_error_mm)
         return {
             "level": self.level,
@@ -158,14 +163,14 @@ class LevelChoice:
     error: str
     folds: tuple[Fold, ...]
     scores: tuple[LevelScore, ...]
-    lowest: str
-    chosen: str
+    lowest: ChainLevel
+    chosen: ChainLevel
     threshold_mm: float
-    selection: str
+    selection: SelectionCriterion | Prior
     seconds: float
     rule: str = RULE
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """REPORT.json's ``level_choice``."""
         return {
             "rule": self.rule,
@@ -209,7 +214,7 @@ def one_standard_error(errors: npt.ArrayLike, standard_errors: npt.ArrayLike,
     return lowest, chosen, threshold
 
 
-def _score(level: str, errors: list[float], kept: list[int], failures: list[str]) -> LevelScore:
+def _score(level: ChainLevel, errors: list[float], kept: list[int], failures: list[str]) -> LevelScore:
     values = np.array(errors, dtype=float)
     ok = np.all(np.isfinite(values))
     mean = float(values.mean()) if ok else np.inf
@@ -217,7 +222,8 @@ def _score(level: str, errors: list[float], kept: list[int], failures: list[str]
     return LevelScore(level, tuple(values.tolist()), tuple(kept), mean, se, tuple(failures))
 
 
-def _choice(scheme, error, folds, scores, selection, started) -> LevelChoice:
+def _choice(scheme: str, error: str, folds: Sequence[Fold], scores: Sequence[LevelScore],
+            selection: SelectionCriterion | Prior, started: float) -> LevelChoice:
     richest = selection == "prior"
     lowest, chosen, threshold = one_standard_error([s.cv_error_mm for s in scores],
                                                    [s.standard_error_mm for s in scores], richest)
@@ -225,7 +231,9 @@ def _choice(scheme, error, folds, scores, selection, started) -> LevelChoice:
                        threshold, selection, time.perf_counter() - started, RULE_PRIOR if richest else RULE)
 
 
-def _cross_validate(folds, levels, fit_and_score, counter: Counter) -> list[LevelScore]:
+def _cross_validate(folds: Sequence[Fold], levels: Sequence[ChainLevel],
+                    fit_and_score: Callable[[ChainLevel, Fold], tuple[float, int]], counter: Counter
+                    ) -> list[LevelScore]:
     """e_f of every level on every fold; ``fit_and_score(level, fold)`` → (e_f [m], kept)."""
     counter.expect(len(folds) * len(levels))
     scores = []
@@ -299,18 +307,16 @@ def sensor_folds(data: MeasurementSet, folds: int = DEFAULT_FOLDS, seed: int = S
 def choose_level(
     chain: KinematicChain,
     data: MeasurementSet,
-    tool_known: bool = False,
-    sigma_column: str | None = None,
-    reject_outliers: bool = False,
-    selection: str = "aic",
-    levels: tuple[str, ...] = CHAIN_LEVELS,
+    options: ChainFitOptions | None = None,
+    levels: tuple[ChainLevel, ...] = CHAIN_LEVELS,
     folds: int = DEFAULT_FOLDS,
     seed: int = SEED,
     progress: Progress | None = None,
 ) -> LevelChoice:
     """Choose the level of a sensor calibration by cross-validation (module docstring).
 
-    The options are those of :func:`pincal.fit.chain_calibration.calibrate_chain`;
+    ``options``: how each level is fitted (:func:`pincal.fit.chain_calibration.calibrate_chain`'s; default
+    :class:`pincal.fit.chain_calibration.ChainFitOptions`'s);
     rows with role ``validation`` are not used. The chain's placements are the
     same on return as on entry. ``progress`` ticks once per fit (levels × folds).
 
@@ -318,13 +324,13 @@ def choose_level(
         CalibrationError: folds that cannot be formed or fitted (one line saying what to do).
     """
     started = time.perf_counter()
+    options = ChainFitOptions() if options is None else options
     rows = data.select(np.flatnonzero(data.roles != "validation"))
     scheme, fold_list = sensor_folds(rows, folds, seed)
     several = len(rows.session_names) > 1
 
-    def fit_and_score(level: str, fold: Fold) -> tuple[float, int]:
-        result = calibrate_chain(chain, rows.select(fold.train), level, tool_known=tool_known,
-                                 sigma_column=sigma_column, reject_outliers=reject_outliers, selection=selection)
+    def fit_and_score(level: ChainLevel, fold: Fold) -> tuple[float, int]:
+        result = calibrate_chain(chain, rows.select(fold.train), level, options)
         test = rows.select(fold.test)
         target = result.target
         registration = target.registrations[0]
@@ -337,19 +343,19 @@ def choose_level(
                                  target_rotation=target.rotation)
         return float(np.sqrt(np.mean(errors.position_m**2))), len(result.kept)
 
-    if several or reject_outliers or rows.n_rows < LINEARISED_FROM_ROWS:
+    if several or options.reject_outliers or rows.n_rows < LINEARISED_FROM_ROWS:
         scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress))
     else:  # many rows: one fit per level, each fold by one Gauss–Newton step (pincal.fit.fold_update, eq L1)
-        scores = _linearised(chain, rows, fold_list, levels, Counter(progress),
-                             dict(tool_known=tool_known, sigma_column=sigma_column, selection=selection))
+        scores = _linearised(chain, rows, fold_list, levels, Counter(progress), options)
         scheme += f", scored from the fit of all {rows.n_rows} rows by one Gauss–Newton step per fold (eq L1)"
     error = ("RMS distance of the held-out rows' target points from the model's [mm], "
              + ("each held-out session through its own registration re-estimated from its rows (6 parameters)"
                 if several else "through the training fit's registration (one session)"))
-    return _choice(scheme, error, fold_list, scores, selection, started)
+    return _choice(scheme, error, fold_list, scores, options.selection, started)
 
 
-def _linearised(chain, rows, folds, levels, counter: Counter, options) -> list[LevelScore]:
+def _linearised(chain: KinematicChain, rows: MeasurementSet, folds: Sequence[Fold], levels: Sequence[ChainLevel],
+                counter: Counter, options: ChainFitOptions) -> list[LevelScore]:
     """Eq L1 of :mod:`pincal.fit.fold_update` for every level (its fit of all rows, then each fold)."""
     return [_score(*entry) for entry in linearised_levels(chain, rows, [fold.test for fold in folds], levels,
                                                           counter, options)]
@@ -389,8 +395,8 @@ def fixture_heldout_error(chain: KinematicChain, data: FixtureData, ball: npt.Ar
     return np.array(out)
 
 
-def placement_error(chain: KinematicChain, data: FixtureData, level: str, placement: str,
-                    selection: str = "aic") -> tuple[float, int]:
+def placement_error(chain: KinematicChain, data: FixtureData, level: ChainLevel, placement: str,
+                    selection: SelectionCriterion | Prior = "aic") -> tuple[float, int]:
     """Placement ``placement`` of ``data`` predicted by the calibration (``level``, ``selection``) of the
     others: (its :func:`fixture_heldout_error` [m], the kinematic parameters kept). Level
     ``registration`` is the nominal model with the ball centre fitted on the others.
@@ -453,8 +459,8 @@ def fixture_folds(data: FixtureData, folds: int = DEFAULT_FOLDS, seed: int = SEE
 def choose_fixture_level(
     chain: KinematicChain,
     data: FixtureData,
-    selection: str = "aic",
-    levels: tuple[str, ...] = CHAIN_LEVELS,
+    selection: SelectionCriterion | Prior = "aic",
+    levels: tuple[ChainLevel, ...] = CHAIN_LEVELS,
     folds: int = DEFAULT_FOLDS,
     seed: int = SEED,
     progress: Progress | None = None,
@@ -467,7 +473,7 @@ def choose_fixture_level(
     scheme, fold_list = fixture_folds(data, folds, seed)
     several = len(data.placements) > 1
 
-    def fit_and_score(level: str, fold: Fold) -> tuple[float, int]:
+    def fit_and_score(level: ChainLevel, fold: Fold) -> tuple[float, int]:
         if several:
             return placement_error(chain, data, level, fold.name, selection)
         result = calibrate_fixture(chain, fixture_rows(data, fold.train), level, selection=selection)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -22,7 +23,7 @@ from pincal.model.effects import sensed_points
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 
-__all__ = ["ErrorSummary", "PoseErrors", "pose_errors"]
+__all__ = ["ErrorSummary", "PoseErrors", "RowCorrections", "pose_errors"]
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ class ErrorSummary:
             unit=unit,
         )
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, float]:
         return {f"mean_{self.unit}": self.mean, f"rms_{self.unit}": self.rms, f"max_{self.unit}": self.max}
 
 
@@ -79,13 +80,36 @@ class PoseErrors:
             return None
         return ErrorSummary.of(np.degrees(self.rotation_rad), "deg")
 
-    def as_dict(self) -> dict:
-        out = {"rows": self.n_rows, "position": self.position.as_dict()}
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"rows": self.n_rows, "position": self.position.as_dict()}
         if self.position_m.shape[1] > 1:
             out["position_per_point"] = [self.point(p).as_dict() for p in range(self.position_m.shape[1])]
         if self.rotation is not None:
             out["orientation"] = self.rotation.as_dict()
         return out
+
+
+@dataclass(frozen=True)
+class RowCorrections:
+    """What a report's effects change in the model of each row (:mod:`pincal.model.effects`): a value.
+
+    Attributes:
+        q: joint values to use instead of the readings (the readings corrected by effects), (K, N).
+        sensor_scale / drift: sensor effects: the model point is (1 + s)(Omega x + tau + drift_k),
+            ``drift`` the offset of each row [m], (K, 3).
+        conditions: each row's thermal expansion and pause step (eq T1–T2 of :mod:`pincal.model.thermal`).
+    """
+
+    q: np.ndarray | None = None
+    sensor_scale: float = 0.0
+    drift: np.ndarray | None = None
+    conditions: RowConditions | None = None
+
+    def select(self, rows: np.ndarray) -> RowCorrections:
+        """The corrections of the rows ``rows`` (indices) alone."""
+        return RowCorrections(None if self.q is None else np.asarray(self.q)[rows], self.sensor_scale,
+                              None if self.drift is None else np.asarray(self.drift)[rows],
+                              None if self.conditions is None else self.conditions.select(rows))
 
 
 def pose_errors(
@@ -95,11 +119,8 @@ def pose_errors(
     registration_orientation: Registration,
     points: npt.ArrayLike | None = None,
     target_rotation: npt.ArrayLike | None = None,
-    q: npt.ArrayLike | None = None,
-    sensor_scale: float = 0.0,
-    drift: npt.ArrayLike | None = None,
+    corrections: RowCorrections = RowCorrections(),
     tool_poses: tuple[np.ndarray, np.ndarray] | None = None,
-    conditions: RowConditions | None = None,
 ) -> PoseErrors:
     """Eq 24 on every row of ``data``.
 
@@ -109,14 +130,13 @@ def pose_errors(
         registration_position / registration_orientation: Registrations 1 and 2.
         points: target points in the tool frame [m], (P, 3); default: the tool origin.
         target_rotation: R_T, the target's rotation in the tool frame (default identity).
-        q: joint values to use instead of the readings (readings corrected by effects).
-        sensor_scale / drift: sensor effects: the model point is
-            (1 + s)(Omega x + tau + drift_j) (see :mod:`pincal.model.effects`).
+        corrections: the rows' joint values and sensor terms as a report's effects correct them
+            (default: none).
         tool_poses: ``chain.tool_poses`` of the rows' joint values when the caller has
-            them (errors of one chain through several registrations share them); ``q``
+            them (errors of one chain through several registrations share them); ``corrections.q``
             is then not used.
-        conditions: each row's thermal expansion and pause step (eq T1–T2 of :mod:`pincal.model.thermal`).
     """
+    q, drift, conditions = corrections.q, corrections.drift, corrections.conditions
     if tool_poses is None:
         tool_poses = chain.tool_poses(data.q if q is None else q)
     tool_rotations, tool_positions = tool_poses
@@ -124,7 +144,7 @@ def pose_errors(
     world = points_in_base(tool_positions, tool_rotations, points)
     if conditions is not None:
         world, drift = conditions.world(world), conditions.offsets(drift)
-    predicted = sensed_points(registration_position, world, sensor_scale, drift)
+    predicted = sensed_points(registration_position, world, corrections.sensor_scale, drift)
     position = np.linalg.norm(predicted - data.points, axis=2)
     rotation = None
     if data.rotations is not None:

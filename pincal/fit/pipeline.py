@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Generic, Protocol, TypeVar, cast
+from typing import Generic, cast
 
 import numpy as np
 
@@ -53,9 +53,11 @@ from pincal.fit.prior_scales import (
     prior_log_evidence,
     scale_folds,
 )
-from pincal.fit.selection import select_subset
-from pincal.fit.solver import Fittable, Solution, gram, solve
+from pincal.fit.problem import KindProblem, ObjectiveT, Refit
+from pincal.fit.selection import SelectionCriterion, select_subset
+from pincal.fit.solver import Solution, gram, solve
 from pincal.measurements.data import MeasurementSet
+from pincal.model.parameter_sets import ChainLevel, ChainParameters
 from pincal.progress import Counter
 
 __all__ = [
@@ -84,64 +86,6 @@ class Dropped:
     index: int
     reason: str
     absorbed_into: tuple[tuple[str, float], ...]
-
-
-class _Blocks(Protocol):
-    blocks: dict[str, slice]  # the unknowns' blocks; "kinematic": the free kinematic parameters
-
-
-#: A kind's objective: its residual over the free kinematic parameters and the always-estimated part
-#: (with a prior, :class:`pincal.fit.prior.PriorResidual` wrapping it).
-ObjectiveT = TypeVar("ObjectiveT", bound=_Blocks)
-
-
-class KindProblem(Protocol[ObjectiveT]):
-    """What a kind of measurement gives the pipeline (and :func:`select_subset`): a value; its variants
-    (another prior, other noise scales) are new problems, which the pipeline threads through."""
-
-    @property
-    def params(self) -> Any:
-        """The parameter set, None at level registration."""
-        ...
-
-    @property
-    def prior(self) -> np.ndarray | None:
-        """σ_i of every kinematic parameter with a prior (eq P1), given by the pipeline (:meth:`with_prior`)."""
-        ...
-
-    def with_prior(self, prior: np.ndarray | None) -> KindProblem[ObjectiveT]:
-        """This problem with ``prior`` (None: without one)."""
-        ...
-
-    def objective(self, free: np.ndarray, base: np.ndarray) -> ObjectiveT: ...
-
-    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,
-            what: str = "fit") -> tuple[ObjectiveT, Solution]: ...
-
-    def scales(self) -> tuple:
-        """The residual's noise scales now (each [m] or [rad]; None where a kind is not measured)."""
-        ...
-
-    def rescaled(self, objective: ObjectiveT, solution: Solution) -> KindProblem[ObjectiveT]:
-        """This problem at the noise scales re-estimated from ``solution``'s residual (with a prior: eq P2)."""
-        ...
-
-    def with_scales(self, scales: tuple) -> KindProblem[ObjectiveT]:
-        """This problem with its rows weighted by ``scales`` (as :meth:`scales` gives them)."""
-        ...
-
-    def log_evidence(self, objective: ObjectiveT, solution: Solution) -> float:
-        """Eq P3 of :mod:`pincal.fit.prior` for a MAP fit of this problem."""
-        ...
-
-    def scale_rows(self, objective: ObjectiveT) -> tuple[slice, ...]:
-        """The data rows each noise scale of :meth:`scales` weights (those not None, in order)."""
-        ...
-
-    def fold_rows(self, objective: ObjectiveT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Each row's joint readings (K, N), stratum (K,) and residual entries (K, b), for the prior's
-        folds (:func:`pincal.fit.prior_scales.scale_folds`)."""
-        ...
 
 
 @dataclass(frozen=True)
@@ -192,14 +136,13 @@ class KinematicFit(Generic[ObjectiveT]):
         return 0 if self.ordering is None else self.ordering.rank
 
 
-def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, size: int, rows: MeasurementSet,
-                   criterion: str, level: str, refits: int, counter: Counter | None = None,
-                   from_selection: bool = True) -> KinematicFit[ObjectiveT]:
+def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, rows: MeasurementSet,
+                   criterion: SelectionCriterion | Prior, level: ChainLevel, refits: int,
+                   counter: Counter | None = None, from_selection: bool = True) -> KinematicFit[ObjectiveT]:
     """Steps 1–4 of the module docstring on ``problem`` (its start: the nominal kinematics' fit).
 
     Args:
         analysis: the Jacobian to order on (None when there are no kinematic parameters).
-        size: how many kinematic parameters the level has.
         rows: the problem's rows as measurements (the selection's bookkeeping).
         criterion: the selection criterion (:data:`pincal.fit.selection.SELECTION_CRITERIA`)
             or a :class:`pincal.fit.prior.Prior`.
@@ -210,26 +153,27 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
             selection's looser tolerance) rather than from the problem's start.
     """
     counter = Counter(None) if counter is None else counter
+    params = problem.params  # every variant of the problem has the same
+    size = params.size if params is not None else 0  # how many kinematic parameters the level has
     base, kept = np.zeros(size), np.array([], dtype=int)
     ordering, selection = None, None
     prior = prior_of(criterion)
-    if analysis is not None and size:
+    if analysis is not None and params is not None and size:
         ordering = order_parameters(analysis.jacobian, analysis.kinematic, analysis.always)
-        problem = problem.with_prior(None if prior is None else prior_sigmas(problem.params, prior))
+        problem = problem.with_prior(None if prior is None else prior_sigmas(params, prior))
         selection, kept = select_subset(problem, ordering, base, rows, criterion, counter)
     started = time.perf_counter()
     x0 = selection.solution if (from_selection and selection is not None) else None
-    what = f"{level} fit"
-    objective, solution = problem.fit(kept, base, x0, what=what)
+    refit = Refit(kept, base, f"{level} fit")
+    objective, solution = refit.of(problem, x0)
     if size:
-        problem, objective, solution = _settle(problem, objective, solution, kept, base, what, refits)
+        problem, objective, solution = _settle(problem, objective, solution, refit, refits)
     closer = None  # the unregularised fit's position scale, where the evidence kept the prior's fixed point
     choice = None if prior is None else ScaleChoice(prior)  # the prior's scales the fit ends with
     if problem.prior is not None and kept.size:
-        problem, objective, solution, closer = _from_the_data_scale(problem, objective, solution, kept, base, what)
+        problem, objective, solution, closer = _from_the_data_scale(problem, objective, solution, refit)
         if cast(Prior, prior).estimated:
-            problem, objective, solution, choice = _estimated(problem, objective, solution, kept, base, what,
-                                                              cast(Prior, prior))
+            problem, objective, solution, choice = _estimated(problem, objective, solution, refit, cast(Prior, prior))
             closer = None if choice.used.estimated else closer
     fit_seconds = time.perf_counter() - started
     counter.tick()
@@ -248,12 +192,12 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
         # a PriorResidual is fitted only with a prior: problem.prior and prior are set
         covariance, weak, selection = map_outcome(jac, solution.residual, objective, kept,
                                                   cast(np.ndarray, problem.prior), selection,
-                                                  problem.params, cast(ScaleChoice, choice))
+                                                  cast(ChainParameters, params), cast(ScaleChoice, choice))
         std_all = np.sqrt(np.diag(covariance))
         status[weak] = PRIOR_STATUS
         if closer is not None:
             selection = replace(selection, notes=selection.notes + (_prior_too_narrow(
-                kept.size, closer, problem.scales()[0], cast(Prior, prior)),))
+                kept.size, closer, cast(float, problem.scales()[0]), cast(Prior, prior)),))  # positions: measured
     std = np.full(size, np.nan)
     std[kept] = std_all[kinematic]
     return KinematicFit(ordering=ordering, selection=selection, kept=kept, objective=objective, solution=solution,
@@ -261,8 +205,7 @@ def fit_kinematics(problem: KindProblem[ObjectiveT], analysis: Analysis | None, 
                         fit_seconds=fit_seconds, problem=problem)
 
 
-def _settle(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
-            base: np.ndarray, what: str, refits: int
+def _settle(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, refit: Refit, refits: int
             ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution]:
     """Step 3's refits: the noise scales re-estimated and the fit repeated, ``refits`` times without a
     prior; with one, up to eq P2's fixed point (at most :data:`pincal.fit.prior.MAX_SCALE_ITERATIONS`).
@@ -272,12 +215,11 @@ def _settle(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: S
         problem = problem.rescaled(objective, solution)
         if problem.prior is not None and settled(before, problem.scales()):
             break  # a prior's fixed point of eq P2 (pincal.fit.prior)
-        objective, solution = problem.fit(kept, base, solution.x, what=what)
+        objective, solution = refit.of(problem, solution.x)
     return problem, objective, solution
 
 
-def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution,
-                         kept: np.ndarray, base: np.ndarray, what: str
+def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, refit: Refit
                          ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution, float | None]:
     """Eq P2 from the data's own noise scale, kept if the evidence (eq P3) decisively prefers it.
 
@@ -297,22 +239,22 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
     first_evidence = problem.log_evidence(objective, solution)
     try:
         plain_problem = problem.with_prior(None)
-        plain = plain_problem.objective(kept, base)  # a crawl stops at its budget: only its scale is used
-        unregularised = solve(cast(Fittable, plain), solution.x, what=what, max_evaluations=SCALE_FIT_EVALUATIONS)
+        plain = plain_problem.objective(refit.kept, refit.base)  # a crawl stops at its budget: only its scale is used
+        unregularised = solve(plain, solution.x, what=refit.what, max_evaluations=SCALE_FIT_EVALUATIONS)
         data_scale = plain_problem.rescaled(plain, unregularised).scales()  # the data's: maximum likelihood
     except CalibrationError:  # not determined without the prior: the first fixed point stands
         return problem, objective, solution, None
     # the maximum-likelihood scale is biased low by the m − n degrees of freedom: compared unbiased
     m, n = unregularised.residual.size, unregularised.x.size
     unbiased = [None if data is None else data * np.sqrt(m / max(m - n, 1)) for data in data_scale]
-    if not any(data is not None and data < DATA_SCALE_GAP * scale
+    # a kind measured (a scale not None) has its scale in both
+    if not any(data is not None and data < DATA_SCALE_GAP * cast(float, scale)
                for data, scale in zip(unbiased, problem.scales())):
         return problem, objective, solution, None  # one basin: the fixed point already lies near the data's scale
     try:
         second_problem = problem.with_scales(data_scale)
-        second, second_solution = second_problem.fit(kept, base, unregularised.x, what=what)
-        second_problem, second, second_solution = _settle(second_problem, second, second_solution, kept, base,
-                                                          what, 0)
+        second, second_solution = refit.of(second_problem, unregularised.x)
+        second_problem, second, second_solution = _settle(second_problem, second, second_solution, refit, 0)
         better = second_problem.log_evidence(second, second_solution) > first_evidence + DECISIVE_LOG_EVIDENCE
     except CalibrationError:  # a scale near rounding level makes the prior fit singular
         better = False
@@ -321,16 +263,15 @@ def _from_the_data_scale(problem: KindProblem[ObjectiveT], objective: ObjectiveT
     return problem, objective, solution, cast(float, unbiased[0])
 
 
-def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, kept: np.ndarray,
-               base: np.ndarray, what: str, prior: Prior
-               ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution, ScaleChoice]:
+def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, refit: Refit,
+               prior: Prior) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution, ScaleChoice]:
     """The prior's scales estimated from the rows, from the MAP fit at ``prior``'s (the defaults), and
     the fit kept: the estimate's where its posterior (eq P4 + P6) is the larger and it predicts held-out
     configurations better by more than one standard error, else the defaults'
     (:mod:`pincal.fit.prior_scales`). The first estimate, from the defaults' fit, is checked by the folds
     on that fit's linearisation before any refit: where it is no better, the defaults stand at the cost
     of one factorisation per trial. The problem returned is the one of the fit kept (its scales and prior)."""
-    kinds = parameter_kinds(problem.params)
+    kinds, kept = parameter_kinds(cast(ChainParameters, problem.params)), refit.kept  # a MAP fit has parameters
     first_prior = cast(np.ndarray, problem.prior)
     default = _linearised(problem, objective, solution, kinds[kept])
     start = prior.si
@@ -345,17 +286,17 @@ def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution
                                                                          start[present]]))[0]
         return gain, gain + hyperprior(np.log(sigma[present]), start[present])[0]
 
-    estimate, fit = cast(Any, objective), solution  # the defaults' fit, until an estimate is refitted
+    estimate, fit = objective, solution  # the defaults' fit, until an estimate is refitted
     estimated = problem
     try:
         noise, sigma = default.maximise(start, start)
         check = cross_validated(default.at_scales(sigma), default, folds)
         gain, posterior = posterior_gain(noise, sigma)
         if check.better and posterior > 0.0:  # refitted at the estimate, and checked again
-            estimated, estimate, fit, sigma = estimate_scales(problem, cast(Any, objective), solution, kept, base,
-                                                              what, kinds, start, first=(noise, sigma))
+            estimated, estimate, fit, sigma = estimate_scales(problem, objective, solution, refit, kinds, start,
+                                                              first=(noise, sigma))
             first_evidence = prior_log_evidence(problem.log_evidence(objective, solution), first_prior[kept])
-            gain = prior_log_evidence(estimated.log_evidence(cast(Any, estimate), fit),
+            gain = prior_log_evidence(estimated.log_evidence(estimate, fit),
                                       cast(np.ndarray, estimated.prior)[kept]) - first_evidence
             posterior = gain + hyperprior(np.log(sigma[present]), start[present])[0]
             check = cross_validated(_linearised(estimated, estimate, fit, kinds[kept]), default, folds)
@@ -369,15 +310,17 @@ def _estimated(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution
     record = (found, gain, check.ratio, check.standard_error)
     if check.better and posterior > 0.0:
         reason = f"estimated: evidence e^{gain:.3g} times the defaults', {cv}"
-        return estimated, cast(ObjectiveT, estimate), fit, ScaleChoice(found, *record, reason)
+        return estimated, estimate, fit, ScaleChoice(found, *record, reason)
     why = cv + ", not lower by one standard error" if not check.better else "posterior is not the larger"
     return problem, objective, solution, ScaleChoice(defaults, *record, f"the default scales: the estimate's {why}")
 
 
-def _linearised(problem: KindProblem[ObjectiveT], objective, solution: Solution, kinds: np.ndarray) -> LinearisedFit:
+def _linearised(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution,
+                kinds: np.ndarray) -> LinearisedFit:
     """Eq P5's linearisation of ``problem``'s MAP fit (``objective`` at ``solution``) at its noise scales now."""
     present = [s for s in problem.scales() if s is not None]
-    return LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds)
+    # a problem with a prior fits a PriorResidual (eq P1)
+    return LinearisedFit.at(cast(PriorResidual, objective), solution, problem.scale_rows(objective), present, kinds)
 
 
 def _prior_too_narrow(n_kept: int, closer_m: float, scale_m: float, prior: Prior) -> str:

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -41,8 +42,11 @@ import numpy.typing as npt
 from pincal.errors import CalibrationError
 from pincal.fit.level_choice import LevelChoice, placement_error
 from pincal.fit.plausibility import Finding
+from pincal.fit.prior import Prior
+from pincal.fit.selection import SelectionCriterion
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
+from pincal.model.parameter_sets import ChainLevel
 
 __all__ = [
     "PREDICTED_ERROR", "PlacementPrediction", "PlacementCheck", "worse_bound", "predictions", "check_placements",
@@ -95,7 +99,7 @@ class PlacementPrediction:
         """Predicted worse than by the nominal model, beyond the noise of its rows (:func:`worse_bound`)."""
         return bool(np.isfinite(self.ratio) and self.ratio > self.bound)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         finite = np.isfinite(self.ratio)
         return {"placement": self.placement, "rows": self.rows,
                 "nominal_mm": float(self.nominal_mm) if np.isfinite(self.nominal_mm) else None,
@@ -108,14 +112,14 @@ class PlacementPrediction:
 class PlacementCheck:
     """Leave-one-placement-out of a calibration at ``level`` (module docstring)."""
 
-    level: str
+    level: ChainLevel
     placements: tuple[PlacementPrediction, ...]
 
     @property
     def worse(self) -> tuple[PlacementPrediction, ...]:
         return tuple(p for p in self.placements if p.worse)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """REPORT.json's ``fixture.held_out_placements``."""
         return {"scheme": "leave-one-placement-out", "level": self.level, "error": PREDICTED_ERROR,
                 "rule": "warned when calibrated / nominal > 1 + 2/sqrt(2 rows) (two standard errors of an RMS)",
@@ -132,7 +136,8 @@ def predictions(data: FixtureData, calibrated_m: npt.ArrayLike, nominal_m: npt.A
                                      float(nominal[s]), failures[s]) for s, name in enumerate(data.placements))
 
 
-def _from_choice(choice: LevelChoice | None, level: str, data: FixtureData) -> tuple[list, list, list] | None:
+def _from_choice(choice: LevelChoice | None, level: ChainLevel, data: FixtureData
+                 ) -> tuple[list[float], list[float], list[str | None]] | None:
     """The fold errors [m] of ``level`` and of the nominal model (and the failures) that ``--level auto``
     already computed on these placements, or None when it did not."""
     if choice is None or [f.name for f in choice.folds] != list(data.placements):
@@ -147,7 +152,8 @@ def _from_choice(choice: LevelChoice | None, level: str, data: FixtureData) -> t
             failures)
 
 
-def check_placements(chain: KinematicChain, data: FixtureData, level: str, selection: str = "aic",
+def check_placements(chain: KinematicChain, data: FixtureData, level: ChainLevel,
+                     selection: SelectionCriterion | Prior = "aic",
                      choice: LevelChoice | None = None) -> PlacementCheck | None:
     """Leave-one-placement-out of a calibration of ``data`` at ``level`` with ``selection`` (module
     docstring); None with fewer than two placements or at level ``registration`` (the nominal model:

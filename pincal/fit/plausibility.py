@@ -73,17 +73,20 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
-from pincal.fit.chain_calibration import row_weights
+from pincal.fit.chain_calibration import ChainCalibration, row_weights
 from pincal.fit.fold_update import final_problem
 from pincal.fit.identifiability import press_of_blocks
-from pincal.fit.prior import PRIOR_STATUS
+from pincal.fit.prior import PRIOR_STATUS, PriorResidual
 from pincal.fit.registration_hold import path_warning
-from pincal.fit.solver import solve
+from pincal.fit.sensor_problem import FitProblem
+from pincal.fit.solver import Solution, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "MAX_RMS_M", "MAX_NOISE_RATIO", "MAX_SENSOR_DISTANCE_M", "MAX_TRANSLATION_M", "MAX_ROTATION_RAD", "DATA_CAUSES",
@@ -188,7 +191,7 @@ def gross_misfit(rms_m: float, reach: float, what: str = "the calibrated model")
                    f"correction of this robot: the data are not of it as described")
 
 
-def noise_ratio(result, stated_sigma_pos_m: float | None) -> float | None:
+def noise_ratio(result: ChainCalibration, stated_sigma_pos_m: float | None) -> float | None:
     """The residual per axis — the RMS point residual ``result.rms_m`` / sqrt(3), the noise the model
     leaves — over the sensor's stated noise ``stated_sigma_pos_m`` [m] per axis; None without a stated
     noise, or at level ``registration``, whose residual holds the robot's own geometric errors (module
@@ -199,7 +202,7 @@ def noise_ratio(result, stated_sigma_pos_m: float | None) -> float | None:
     return float(result.rms_m / np.sqrt(3.0) / stated_sigma_pos_m)
 
 
-def unmodelled_reason(result, reach: float, stated_sigma_pos_m: float | None) -> str | None:
+def unmodelled_reason(result: ChainCalibration, reach: float, stated_sigma_pos_m: float | None) -> str | None:
     """Why ``result`` (a chain calibration on rows of a robot of ``reach`` [m]) likely lacks an effect, in
     words; None when nothing says so, at level ``registration`` (its residual holds the geometry's own
     errors) and for a gross misfit (a data problem: :func:`gross_misfit`).
@@ -229,7 +232,7 @@ def _likely(gross: bool, diagnosed: bool) -> str:
             f"none, check: {causes}")
 
 
-def check_calibration(chain: KinematicChain, result, rows: MeasurementSet,
+def check_calibration(chain: KinematicChain, result: ChainCalibration, rows: MeasurementSet,
                       stated_sigma_pos_m: float | None = None, press: tuple[float, float] | None = None,
                       diagnosed: bool = False) -> list[Finding]:
     """The findings on a :class:`pincal.fit.chain_calibration.ChainCalibration` of ``rows``.
@@ -351,11 +354,13 @@ def check_evaluation(evaluated_rms_m: float, calibration_rms_m: float | None,
                     f"{moved}. See each row's error by file line: --html REPORT.html")]
 
 
-def _large_corrections(result) -> list[str]:
+def _large_corrections(result: ChainCalibration) -> list[str]:
     """Names and values of kept parameters beyond :data:`MAX_TRANSLATION_M` / :data:`MAX_ROTATION_RAD`."""
     params = result.params
-    out = []
-    for i in range(params.size if params is not None else 0):
+    out: list[str] = []
+    if params is None:
+        return out
+    for i in range(params.size):
         if result.status[i] not in ("calibrated", PRIOR_STATUS):
             continue
         value, unit = float(result.vector[i]), params.info[i].unit
@@ -366,7 +371,7 @@ def _large_corrections(result) -> list[str]:
     return out
 
 
-def refit_nominal(problem):
+def refit_nominal(problem: FitProblem) -> tuple[SensorResidual | PriorResidual, Solution]:
     """The nominal model's fit of a problem's rows (registration and target only, no prior),
     from its start, at its noise scales: (objective, solution)."""
     size = problem.params.size if problem.params is not None else 0
@@ -374,7 +379,7 @@ def refit_nominal(problem):
     return objective, solve(objective, objective.start_vector(), what="nominal fit")
 
 
-def press_against_nominal(chain: KinematicChain, result, rows: MeasurementSet,
+def press_against_nominal(chain: KinematicChain, result: ChainCalibration, rows: MeasurementSet,
                           row_weight: np.ndarray | None = None) -> tuple[float, float] | None:
     """(calibrated, nominal) leave-one-row-out PRESS of a calibration of ``rows`` (the rows it was
     fitted on), in the final fit's weighted units; None at level ``registration`` (nothing to compare).
@@ -395,14 +400,14 @@ def press_against_nominal(chain: KinematicChain, result, rows: MeasurementSet,
             press_of_blocks(solution.jacobian, solution.residual[:n_data], blocks))
 
 
-def _data_objective(objective):
+def _data_objective(objective: SensorResidual | PriorResidual) -> SensorResidual:
     """The sensor objective inside a prior-wrapped one."""
-    return getattr(objective, "objective", objective)
+    return cast(SensorResidual, getattr(objective, "objective", objective))
 
 
-def calibration_findings(chain: KinematicChain, result, rows: MeasurementSet, sigma_column: str | None = None,
-                         stated_sigma_pos_m: float | None = None, press_of=None, diagnosed: bool = False
-                         ) -> list[Finding]:
+def calibration_findings(chain: KinematicChain, result: ChainCalibration, rows: MeasurementSet,
+                         sigma_column: str | None = None, stated_sigma_pos_m: float | None = None,
+                         press_of: ChainCalibration | None = None, diagnosed: bool = False) -> list[Finding]:
     """Every finding on a calibration of ``rows`` (the rows it was fitted on): :func:`check_calibration`
     (``diagnosed``: ``result`` is diagnose's final model) with the leave-one-row-out comparison of
     ``press_of`` (default ``result``) against nominal."""

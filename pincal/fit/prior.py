@@ -55,9 +55,12 @@ model) is not presented as measured.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Selection
@@ -69,6 +72,14 @@ from pincal.fit.prior_defaults import (
     SCALE_RANGE,
 )
 from pincal.fit.solver import Solution, gram
+
+if TYPE_CHECKING:  # annotations only: the settings import this module for Prior, and need no residual loaded
+    from pincal.model.dh.parameters import DHParameterSet
+    from pincal.model.effects import Effect
+    from pincal.model.parameter_sets import ChainParameters
+    from pincal.residuals.base import Objective
+    from pincal.residuals.fixture import FixtureResidual
+    from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "DEFAULT_TRANSLATION_MM", "DEFAULT_ROTATION_DEG", "DEFAULT_JOINT_ZERO_DEG", "KINDS", "PRIOR_DOMINATED",
@@ -133,7 +144,7 @@ class Prior(str):
     estimated: bool
 
     def __new__(cls, translation_mm: float | None = None, rotation_deg: float | None = None,
-                joint_zero_deg: float | None = None, estimated: bool | None = None):
+                joint_zero_deg: float | None = None, estimated: bool | None = None) -> Prior:
         if estimated is None:
             estimated = translation_mm is None and rotation_deg is None and joint_zero_deg is None
         translation_mm = DEFAULT_TRANSLATION_MM if translation_mm is None else translation_mm
@@ -153,18 +164,18 @@ class Prior(str):
         out.joint_zero_deg, out.estimated = float(joint_zero_deg), bool(estimated)
         return out
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type[Prior], tuple[float, float, float, bool]]:
         return type(self), (self.translation_mm, self.rotation_deg, self.joint_zero_deg, self.estimated)
 
-    def _key(self) -> tuple:
+    def _key(self) -> tuple[float, float, float, bool]:
         return self.translation_mm, self.rotation_deg, self.joint_zero_deg, self.estimated
 
-    def __eq__(self, other) -> bool:
+    def __eq__(self, other: object) -> bool:
         if isinstance(other, Prior):
             return self._key() == other._key()
         return str.__eq__(self, other)
 
-    def __ne__(self, other) -> bool:
+    def __ne__(self, other: object) -> bool:
         return not self == other
 
     __hash__ = str.__hash__
@@ -200,7 +211,7 @@ def prior_of(selection: str) -> Prior | None:
     return selection if isinstance(selection, Prior) else Prior()
 
 
-def parameter_kinds(params) -> np.ndarray:
+def parameter_kinds(params: ChainParameters | DHParameterSet) -> np.ndarray:
     """The kind of every parameter of ``params`` (indices into :data:`KINDS`), (n,): 0 a length (a
     translation, a prismatic joint's zero; unit m), 2 a joint zero (a rotation about the axis of the
     revolute or continuous joint it belongs to — ``PlacementErrors``' r-axis along it, ``JointOffsets``,
@@ -222,12 +233,12 @@ def parameter_kinds(params) -> np.ndarray:
     return out
 
 
-def kind_sigmas(params, scales_si) -> np.ndarray:
+def kind_sigmas(params: ChainParameters | DHParameterSet, scales_si: npt.ArrayLike) -> np.ndarray:
     """σ_i of every parameter of ``params`` from the scales of :data:`KINDS` in SI units (m, rad, rad), (n,)."""
     return np.asarray(scales_si, dtype=float)[parameter_kinds(params)]
 
 
-def prior_sigmas(params, prior: Prior) -> np.ndarray:
+def prior_sigmas(params: ChainParameters | DHParameterSet, prior: Prior) -> np.ndarray:
     """σ_i of every parameter of ``params`` in its own unit (m or rad), (n,): the prior's scales
     (an estimated prior's start)."""
     return kind_sigmas(params, prior.si)
@@ -244,36 +255,45 @@ class PriorResidual:
     Every other attribute is the data objective's.
     """
 
-    def __init__(self, objective, sigma: np.ndarray, noise: float = 1.0) -> None:
+    def __init__(self, objective: SensorResidual | FixtureResidual, sigma: np.ndarray, noise: float = 1.0) -> None:
         self.objective = objective
         self.noise = float(noise)
         self.weight = noise / np.asarray(sigma, dtype=float)
         self.n_prior = self.weight.size
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         return getattr(self.objective, name)
 
-    def residual(self, x) -> np.ndarray:
+    @property
+    def blocks(self) -> dict[str, slice]:
+        """The data objective's blocks of unknowns (the prior adds rows, no unknowns)."""
+        return self.objective.blocks
+
+    def start_vector(self) -> np.ndarray:
+        return self.objective.start_vector()
+
+    def residual(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)
         return np.concatenate([self.objective.residual(x), self.weight * x[self.objective.blocks["kinematic"]]])
 
-    def jacobian(self, x) -> np.ndarray:
+    def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         data = self.objective.jacobian(x)
         rows = np.zeros((self.weight.size, data.shape[1]))
         kin = self.objective.blocks["kinematic"]
         rows[:, kin] = np.diag(self.weight)
         return np.vstack([data, rows])
 
-    def effect_columns(self, x, effects) -> list[np.ndarray]:
+    def effect_columns(self, x: npt.ArrayLike, effects: Sequence[Effect]) -> list[np.ndarray]:
         """The data objective's effect columns with zero prior rows appended: effects
-        (``pincal diagnose``) have no prior, (m + n_prior, n_values) each."""
+        (``pincal diagnose``) have no prior, (m + n_prior, n_values) each. Effects act on sensor rows."""
         return [np.vstack([block, np.zeros((self.n_prior, block.shape[1]))])
-                for block in self.objective.effect_columns(x, effects)]
+                for block in cast("SensorResidual", self.objective).effect_columns(x, effects)]
 
 
-def settled(before, after) -> bool:
+def settled(before: Sequence[float | None], after: Sequence[float | None]) -> bool:
     """Whether every noise scale (None where absent) changed by less than :data:`SCALE_TOLERANCE` relative."""
-    return all(a is None or abs(a - b) <= SCALE_TOLERANCE * b for b, a in zip(before, after))
+    # a scale is None before wherever it is after (a kind not measured)
+    return all(a is None or abs(a - cast(float, b)) <= SCALE_TOLERANCE * cast(float, b) for b, a in zip(before, after))
 
 
 def hat_diagonal(jacobian: np.ndarray, n_prior: int) -> np.ndarray:
@@ -314,7 +334,7 @@ def log_evidence(jacobian: np.ndarray, residual: np.ndarray, log_variances: floa
     return float(-0.5 * (log_variances + residual @ residual + logdet))
 
 
-def standard_deviations(objective, solution: Solution) -> np.ndarray:
+def standard_deviations(objective: Objective | PriorResidual, solution: Solution) -> np.ndarray:
     """Standard deviations of a fit's unknowns: the posterior's (:func:`posterior`) for a MAP fit
     (:class:`PriorResidual`), else the solver's (n,)."""
     if not isinstance(objective, PriorResidual):
@@ -323,7 +343,7 @@ def standard_deviations(objective, solution: Solution) -> np.ndarray:
     return np.sqrt(np.clip(np.diag(covariance), 0.0, None))
 
 
-def data_rows(jacobian: np.ndarray, objective) -> np.ndarray:
+def data_rows(jacobian: np.ndarray, objective: Objective | PriorResidual) -> np.ndarray:
     """The data rows of a fit's Jacobian: without a :class:`PriorResidual`'s prior rows."""
     return jacobian[: jacobian.shape[0] - objective.n_prior] if isinstance(objective, PriorResidual) else jacobian
 
@@ -370,13 +390,13 @@ def _finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
 
 
-def prior_scale(choice: ScaleChoice) -> dict:
+def prior_scale(choice: ScaleChoice) -> dict[str, Any]:
     """REPORT.json ``identifiability.selection.prior_scale``: the scales a fit was made with
     (``translation_mm``, ``rotation_deg``, ``joint_zero_deg``), whether they are the data's estimate
     (``estimated``), why (``reason``), and with an estimate its scales, Bayes factor and
     cross-validation against the default scales."""
     used = choice.used
-    out: dict = {**used.as_dict(), "estimated": used.estimated, "reason": choice.reason}
+    out: dict[str, Any] = {**used.as_dict(), "estimated": used.estimated, "reason": choice.reason}
     if choice.estimate is not None:
         out["estimate"] = choice.estimate.as_dict()
         out["log_bayes_factor"] = _finite(choice.log_bayes_factor)
@@ -386,7 +406,8 @@ def prior_scale(choice: ScaleChoice) -> dict:
 
 
 def map_outcome(jacobian: np.ndarray, residual: np.ndarray, objective: PriorResidual, kept: np.ndarray,
-                sigma: np.ndarray, selection: Selection | None, params, choice: ScaleChoice):
+                sigma: np.ndarray, selection: Selection | None, params: ChainParameters | DHParameterSet,
+                choice: ScaleChoice) -> tuple[np.ndarray, np.ndarray, Selection]:
     """What a MAP fit reports: the posterior covariance of its unknowns, the kept parameters
     (indices of ``params``) determined mainly by the prior, and the selection with the
     effective number of kinematic parameters as its value and a note naming those parameters.

@@ -58,9 +58,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import cast
 
 import numpy as np
+import numpy.typing as npt
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import minimize
 
@@ -68,6 +69,7 @@ from pincal.errors import CalibrationError
 from pincal.fit.folds import DEFAULT_FOLDS, configuration_keys, row_folds
 from pincal.fit.prior import SCALE_FLOOR, PriorResidual
 from pincal.fit.prior_defaults import ESTIMATE_BOUNDS
+from pincal.fit.problem import KindProblem, ObjectiveT, Refit
 from pincal.fit.solver import Solution, gram
 
 __all__ = [
@@ -108,7 +110,7 @@ def prior_log_evidence(data_evidence: float, sigma: np.ndarray) -> float:
     return float(data_evidence - np.sum(np.log(np.asarray(sigma, dtype=float))))
 
 
-def _factor(a: np.ndarray):
+def _factor(a: np.ndarray) -> tuple[tuple[np.ndarray, bool], np.ndarray]:
     """Cholesky factor of ``a`` scaled to a unit diagonal, and the scale: a = S F Fᵀ S."""
     scale = 1.0 / np.sqrt(np.maximum(np.diag(a), np.finfo(float).tiny))
     try:
@@ -143,7 +145,7 @@ class LinearisedFit:
     sigma: np.ndarray
 
     @classmethod
-    def at(cls, objective: PriorResidual, solution: Solution, row_groups: tuple[slice, ...], noise,
+    def at(cls, objective: PriorResidual, solution: Solution, row_groups: tuple[slice, ...], noise: npt.ArrayLike,
            kinds: np.ndarray) -> LinearisedFit:
         """Of a MAP fit: its data rows (divided by the objective's ``noise`` weight: whitened) in the
         ``row_groups`` of the noise scales ``noise`` now, its kinematic unknowns of ``kinds``."""
@@ -151,7 +153,7 @@ class LinearisedFit:
 
     @classmethod
     def of(cls, objective: PriorResidual, x: np.ndarray, jacobian: np.ndarray, residual: np.ndarray,
-           row_groups: tuple[slice, ...], noise, kinds: np.ndarray) -> LinearisedFit:
+           row_groups: tuple[slice, ...], noise: npt.ArrayLike, kinds: np.ndarray) -> LinearisedFit:
         """As :meth:`at`, from the objective's unknowns ``x``, Jacobian and residual there (prior rows last)."""
         m = residual.size - objective.n_prior
         group = np.full(m, -1)
@@ -195,7 +197,8 @@ class LinearisedFit:
                 np.bincount(self.group, self.residual**2, self.noise.size),
                 np.bincount(self.group, minlength=self.noise.size).astype(float))
 
-    def evidence(self, u: np.ndarray, groups=None) -> tuple[float, np.ndarray]:
+    def evidence(self, u: np.ndarray, groups: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[float, np.ndarray]:
         """Eq P4 by P5 and its gradient at u = (ln ρ_k for each noise kind, ln σ_j [SI] for each
         :attr:`present` kind) (module docstring); ``groups``: :meth:`_groups`, computed once by the caller."""
         grams, gradients, squares, rows = self._groups() if groups is None else groups
@@ -239,7 +242,7 @@ class LinearisedFit:
 
         groups = self._groups()
 
-        def negative(u):
+        def negative(u: np.ndarray) -> tuple[float, np.ndarray]:
             value, grad = self.evidence(u, groups)
             prior, prior_grad = hyperprior(u[self.noise.size:], centre[present])
             return -(value + prior), -np.concatenate([grad[: self.noise.size], grad[self.noise.size:] + prior_grad])
@@ -270,15 +273,16 @@ class LinearisedFit:
         return np.array(out)
 
 
-def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept: np.ndarray, base: np.ndarray,
-                    what: str, kinds: np.ndarray, start: np.ndarray,
-                    first: tuple[np.ndarray, np.ndarray] | None = None
-                    ) -> tuple[Any, PriorResidual, Solution, np.ndarray]:
-    """Rounds of eq P5 + P6 from a MAP fit of ``problem`` (:class:`pincal.fit.pipeline.KindProblem`):
+def estimate_scales(problem: KindProblem[ObjectiveT], objective: ObjectiveT, solution: Solution, refit: Refit,
+                    kinds: np.ndarray, start: np.ndarray, first: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[KindProblem[ObjectiveT], ObjectiveT, Solution, np.ndarray]:
+    """Rounds of eq P5 + P6 from a MAP fit of ``problem`` (:class:`pincal.fit.problem.KindProblem`):
     the scales maximising the linearised posterior of the scales, the fit redone at them, until they
     settle (:data:`SETTLE_TOLERANCE`, at most :data:`MAX_ROUNDS`).
 
     Args:
+        objective, solution: the MAP fit (a :class:`pincal.fit.prior.PriorResidual` and its solution).
+        refit: the kept kinematic parameters and how the pipeline refits them.
         kinds: the kind of every kinematic parameter of the problem (:func:`pincal.fit.prior.parameter_kinds`), (n,).
         start: the scales of the kinds the fit was made with [m, rad, rad], (3,), the hyperprior's centre.
         first: the first round's maximum (noise scales, scales of the kinds), when the caller has it.
@@ -292,7 +296,8 @@ def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept:
         now = problem.scales()
         present = np.array([s for s in now if s is not None])
         if first is None:
-            model = LinearisedFit.at(objective, solution, problem.scale_rows(objective), present, kinds[kept])
+            model = LinearisedFit.at(cast(PriorResidual, objective), solution, problem.scale_rows(objective), present,
+                                     kinds[refit.kept])
             noise, estimate = model.maximise(sigma, centre)
         else:
             (noise, estimate), first = first, None
@@ -302,7 +307,7 @@ def estimate_scales(problem, objective: PriorResidual, solution: Solution, kept:
         values = iter(noise.tolist())
         problem = problem.with_scales(tuple(None if s is None else next(values) for s in now)).with_prior(
             estimate[kinds])
-        objective, solution = problem.fit(kept, base, solution.x, what=what)
+        objective, solution = refit.of(problem, solution.x)
         sigma = estimate
     return problem, objective, solution, sigma
 

@@ -11,6 +11,7 @@ rotation about it: :func:`register_line` states which. All take τ from eq 19,
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
@@ -25,7 +26,7 @@ __all__ = ["VERTICAL_LINE", "register_points", "mean_rotation", "register_orient
 VERTICAL_LINE = 1e-6
 
 
-def _weights(weights, k: int) -> np.ndarray:
+def _weights(weights: npt.ArrayLike | None, k: int) -> np.ndarray:
     if weights is None:
         return np.full(k, 1.0 / k)
     w = np.asarray(weights, dtype=float)
@@ -40,12 +41,14 @@ def _project_to_so3(m: np.ndarray) -> np.ndarray:
     return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt)) or 1.0]) @ vt
 
 
-def _translation(rotation, robot_points, sensor_points, w) -> np.ndarray:
+def _translation(rotation: np.ndarray, robot_points: np.ndarray, sensor_points: np.ndarray, w: np.ndarray
+                 ) -> np.ndarray:
     """Eq 19: τ = ḡ − Ω t̄ with (weighted) centroids ḡ, t̄ [m]."""
     return w @ sensor_points - rotation @ (w @ robot_points)
 
 
-def register_points(robot_points, sensor_points, weights=None) -> Registration:
+def register_points(robot_points: npt.ArrayLike, sensor_points: npt.ArrayLike,
+                    weights: npt.ArrayLike | None = None) -> Registration:
     """Registration 1: Ω by the SVD method of Arun et al. (1987), τ by eq 19.
 
     Args:
@@ -81,7 +84,8 @@ def register_points(robot_points, sensor_points, weights=None) -> Registration:
     return Registration(rotation, _translation(rotation, t, g, w))
 
 
-def mean_rotation(rotations, weights=None, tol=1e-14, max_iter=100) -> np.ndarray:
+def mean_rotation(rotations: npt.ArrayLike, weights: npt.ArrayLike | None = None, tol: float = 1e-14,
+                  max_iter: int = 100) -> np.ndarray:
     """Riemannian (geodesic L2) mean of rotations, Moakher (2002).
 
     Minimises Σ w_k ‖log(Ω^T M_k)‖² by the fixed-point iteration
@@ -112,12 +116,14 @@ def mean_rotation(rotations, weights=None, tol=1e-14, max_iter=100) -> np.ndarra
     raise CalibrationError(f"mean rotation did not converge in {max_iter} iterations (last step {step:.3g} rad)")
 
 
-def register_orientations(robot_rotations, sensor_rotations, robot_points, sensor_points) -> Registration:
+def register_orientations(robot_rotations: npt.ArrayLike, sensor_rotations: npt.ArrayLike | None,
+                          robot_points: npt.ArrayLike, sensor_points: npt.ArrayLike) -> Registration:
     """Registration 2: Ω = Riemannian mean of G_k R_k^T (Moakher 2002), τ by eq 19.
 
     Args:
         robot_rotations: (K, 3, 3) model orientations R_k in the robot base.
-        sensor_rotations: (K, 3, 3) measured orientations G_k in the sensor frame.
+        sensor_rotations: (K, 3, 3) measured orientations G_k in the sensor frame (None, rows
+            without orientations, is refused as of the wrong shape).
         robot_points: (L, 3) points t_l in robot-base coordinates [m], L >= 1:
             the orientations fix Ω, so eq 19 needs only the points' centroid (one
             6D row registers a session, where Registration 1 needs 3 points not on
@@ -140,7 +146,8 @@ def register_orientations(robot_rotations, sensor_rotations, robot_points, senso
     return Registration(rotation, _translation(rotation, t, g, np.full(len(t), 1.0 / len(t))))
 
 
-def register_line(robot_points, sensor_points, reference=None) -> Registration:
+def register_line(robot_points: npt.ArrayLike, sensor_points: npt.ArrayLike,
+                  reference: npt.ArrayLike | None = None) -> Registration:
     """Ω and τ of points on one line, which leave Ω's rotation about it free: Ω is one of the rotations
     that turn the robot points' line onto the sensed points' (l, l_g: the lines' directions, the
     principal axes of the centred points, l_g signed so that the points run along it in the same order),

@@ -35,11 +35,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 import scipy.linalg
 
+from pincal.fit.sensor_problem import FitProblem
 from pincal.fit.sessions import LINE_RATIO
 from pincal.fit.target_hold import describe_direction, shift_grams
 
@@ -91,11 +91,10 @@ def held_rotations(jacobian: np.ndarray, registration_columns: slice, other_colu
     return tuple(held), np.column_stack(columns) if columns else np.zeros((6 * len(sessions), 0))
 
 
-def hold_registration(problem) -> tuple[tuple[HeldRotation, ...], Any]:
+def hold_registration(problem: FitProblem) -> tuple[tuple[HeldRotation, ...], FitProblem]:
     """Hold the registration rotations a problem's rows leave free (eq H1, at its start with the nominal
-    kinematics and the target held as it is): returns the held rotations and the problem (a
-    :class:`pincal.fit.chain_calibration.FitProblem`) with them held, its ``registration_basis`` the
-    registrations' free unknowns (``problem`` itself when none is held)."""
+    kinematics and the target held as it is): returns the held rotations and the problem with them held,
+    its ``registration_basis`` the registrations' free unknowns (``problem`` itself when none is held)."""
     size = 0 if problem.params is None else problem.params.size
     objective = problem.objective(np.array([], dtype=int), np.zeros(size))
     jacobian = objective.jacobian(objective.start_vector())

@@ -69,7 +69,9 @@ import numpy as np
 import scipy.linalg
 
 from pincal.errors import CalibrationError
-from pincal.fit.identifiability import LEVERAGE_FLOOR, Selection, press
+from pincal.fit.identifiability import LEVERAGE_FLOOR, Ordering, Selection, press
+from pincal.fit.prior import Prior
+from pincal.fit.problem import KindProblem, ObjectiveT
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
 from pincal.progress import Counter
@@ -136,8 +138,9 @@ class NestedFits:
     projected: np.ndarray
     residual: np.ndarray
 
-    def scores(self, criterion: str) -> np.ndarray:
-        """The criterion of every prefix: ``aic``, ``bic`` or ``press`` (inf where not feasible)."""
+    def scores(self, criterion: SelectionCriterion | Prior) -> np.ndarray:
+        """The criterion of every prefix: ``aic``, ``bic`` or ``press`` (inf where not feasible; any other
+        criterion scores as ``aic``)."""
         unknowns = self.n_always + np.arange(self.rss.size)
         if criterion == "press":
             if self.press is None:
@@ -155,7 +158,8 @@ class NestedFits:
         return self.residual - self.q[:, :size] @ self.projected[:size]
 
 
-def information_criterion(rss: np.ndarray | float, m: int, unknowns: np.ndarray | int, per_unknown: float):
+def information_criterion(rss: np.ndarray | float, m: int, unknowns: np.ndarray | int,
+                          per_unknown: float) -> np.ndarray:
     """m ln(RSS / m) + per_unknown · unknowns: AIC with 2 per unknown, BIC with ln m."""
     return m * np.log(np.asarray(rss, dtype=float) / m) + per_unknown * np.asarray(unknowns, dtype=float)
 
@@ -350,8 +354,9 @@ def refine(
     return (min(fitted, key=fitted.__getitem__) if fitted else None), exact
 
 
-def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, criterion: str,
-                  counter: Counter | None = None) -> tuple[Selection, np.ndarray]:
+def select_subset(problem: KindProblem[ObjectiveT], ordering: Ordering, base: np.ndarray, rows: MeasurementSet,
+                  criterion: SelectionCriterion | Prior, counter: Counter | None = None
+                  ) -> tuple[Selection, np.ndarray]:
     """Choose how many of the ordered identifiable parameters to keep.
 
     ``aic``: Akaike's information criterion m ln(RSS/m) + 2n (Akaike 1974), which
@@ -367,7 +372,7 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
     counter = Counter(None) if counter is None else counter
     rank = ordering.rank
     block = 3 * rows.n_points + (3 if rows.rotations is not None else 0)
-    fitted: dict[int, tuple] = {}  # size -> (kept, x, objective) of each refitted subset
+    fitted: dict[int, tuple[np.ndarray, np.ndarray, ObjectiveT]] = {}  # size -> (kept, x, objective) of each refit
     notes: list[str] = []
 
     def refit(sizes: list[int]) -> dict[int, float | None]:
@@ -424,7 +429,7 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
                                f"{rows.n_rows} row(s); add calibration rows or use a lower --level")
     sizes = [n for n in range(rank + 1) if exact.get(n) is not None or (n not in exact and np.isfinite(linear[n]))]
     selection = Selection(
-        criterion=SELECTION_CRITERIA[cast(SelectionCriterion, criterion)],
+        criterion=SELECTION_CRITERIA["prior" if isinstance(criterion, Prior) else criterion],
         sizes=tuple(sizes),
         # sizes holds only the exact scores that are not None
         scores=tuple(float(cast(float, exact[n])) if n in exact else float(linear[n]) for n in sizes),
@@ -436,7 +441,8 @@ def select_subset(problem, ordering, base: np.ndarray, rows: MeasurementSet, cri
     return selection, np.sort(ordering.order[:chosen])
 
 
-def _first_undetermined(fits, objective, x0: np.ndarray, jac: np.ndarray, columns: list[int], linear: np.ndarray):
+def _first_undetermined(fits: NestedFits, objective: ObjectiveT, x0: np.ndarray, jac: np.ndarray, columns: list[int],
+                        linear: np.ndarray) -> tuple[int, float] | None:
     """The smallest prefix with ρ_j >= 1 (eq S3) and its ρ, or None;
     one Jacobian evaluation per prefix, smallest first, up to that one."""
 
@@ -450,7 +456,8 @@ def _first_undetermined(fits, objective, x0: np.ndarray, jac: np.ndarray, column
     return next(((size, ratio) for size, ratio in ratios.items() if ratio >= MAX_CURVATURE_RATIO), None)
 
 
-def _warm_start(objective, previous, kept: np.ndarray) -> np.ndarray:
+def _warm_start(objective: ObjectiveT, previous: tuple[np.ndarray, np.ndarray, ObjectiveT],
+                kept: np.ndarray) -> np.ndarray:
     """Start a larger subset from the previous subset's solution."""
     prev_kept, prev_x, prev_objective = previous
     x0 = objective.start_vector()

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import CalibrationError
-from pincal.fit.metrics import PoseErrors, pose_errors
+from pincal.fit.metrics import PoseErrors, RowCorrections, pose_errors
 from pincal.fit.registration import (
     mean_rotation,
     register_line,
@@ -294,12 +294,13 @@ def _spreads(points: np.ndarray) -> np.ndarray:
     return np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(len(points))
 
 
-def _target_rotation(rot: np.ndarray, data: MeasurementSet, registrations) -> np.ndarray:
+def _target_rotation(rot: np.ndarray, data: MeasurementSet, registrations: Sequence[Registration | None]
+                     ) -> np.ndarray:
     """R_T: the mean of R_kᵀ Omega_sᵀ G_k over the rows of the sessions registered so far (Moakher)."""
     assert data.rotations is not None  # called only for rows with orientations
     rows: slice | np.ndarray
     if len(registrations) == 1:
-        omega, rows = registrations[0].rotation, slice(None)
+        omega, rows = cast(Registration, registrations[0]).rotation, slice(None)  # one session: registered
     else:
         index = data.session_index
         rows = np.flatnonzero(np.array([r is not None for r in registrations])[index])  # in row order
@@ -313,12 +314,9 @@ def register_session(
     data: MeasurementSet,
     points: npt.ArrayLike,
     rotation: npt.ArrayLike,
-    q: npt.ArrayLike | None = None,
-    sensor_scale: float = 0.0,
-    drift: npt.ArrayLike | None = None,
+    corrections: RowCorrections | None = None,
     sigma_pos_m: float = 1e-3,
     sigma_rot_rad: float = 1e-3,
-    conditions: RowConditions | None = None,
 ) -> Registration:
     """sensor_T_base of rows measured in a session the calibration has not seen.
 
@@ -330,20 +328,22 @@ def register_session(
     rotation (fewer than 3, or on one line) and the rows have orientations, from
     Registration 2 with the target rotation fixed (:func:`start_registration`: one
     6D row suffices). Sensor effects of a report are undone first:
-    g' = g / (1 + s) − drift_k − d_k; a thermal expansion scales the model's points (``conditions``,
+    g' = g / (1 + s) − drift_k − d_k; a thermal expansion scales the model's points (``corrections.conditions``,
     eq T1–T2 of :mod:`pincal.model.thermal`).
 
     Args:
-        q: joint values to use instead of the readings (corrected by effects), (K, N).
-        drift: the drift offset t_k u of each row [m], (K, 3).
+        corrections: the rows' joint values corrected by effects (K, N), the sensor scale s, the drift
+            offset t_k u of each row [m] (K, 3) and the thermal conditions (default: none).
 
     Raises:
         CalibrationError: rows that cannot determine a registration (:func:`check_registrable`).
     """
     check_registrable(data)
-    q = data.q if q is None else np.asarray(q, dtype=float)
-    sensed = data.points / (1.0 + sensor_scale)
-    offsets = drift if conditions is None else conditions.offsets(drift)
+    corrections = RowCorrections() if corrections is None else corrections
+    conditions = corrections.conditions
+    q = data.q if corrections.q is None else np.asarray(corrections.q, dtype=float)
+    sensed = data.points / (1.0 + corrections.sensor_scale)
+    offsets = corrections.drift if conditions is None else conditions.offsets(corrections.drift)
     if offsets is not None:
         sensed = sensed - np.asarray(offsets, dtype=float)[:, None, :]
     expanded = None if conditions is None or conditions.expansion is None else RowConditions(conditions.expansion)
@@ -371,10 +371,7 @@ def session_pose_errors(
     orientations: Sequence[Registration] | None = None,
     points: npt.ArrayLike | None = None,
     target_rotation: npt.ArrayLike | None = None,
-    q: npt.ArrayLike | None = None,
-    sensor_scale: float = 0.0,
-    drift: npt.ArrayLike | None = None,
-    conditions: RowConditions | None = None,
+    corrections: RowCorrections | None = None,
 ) -> PoseErrors:
     """Eq 24 on every row of ``data``, each through its session's registrations.
 
@@ -382,23 +379,20 @@ def session_pose_errors(
         sessions: (K,) each row's index into ``positions`` / ``orientations``.
         positions / orientations: Registrations 1 and 2 of each session
             (``orientations`` default: ``positions``).
-        points, target_rotation, q, sensor_scale, drift, conditions: as :func:`pincal.fit.metrics.pose_errors`.
+        points, target_rotation, corrections: as :func:`pincal.fit.metrics.pose_errors`.
     """
     orientations = positions if orientations is None else orientations
-    options: dict[str, Any] = {"points": points, "target_rotation": target_rotation, "sensor_scale": sensor_scale}
+    corrections = RowCorrections() if corrections is None else corrections
     if len(positions) == 1:
-        return pose_errors(chain, data, positions[0], orientations[0], q=q, drift=drift, conditions=conditions,
-                           **options)
+        return pose_errors(chain, data, positions[0], orientations[0], points, target_rotation, corrections)
     sessions = np.asarray(sessions, dtype=np.intp)
     position = np.full((data.n_rows, 1 if points is None else np.atleast_2d(points).shape[0]), np.nan)
     rotation = None if data.rotations is None else np.full(data.n_rows, np.nan)
     for s, (reg_position, reg_orientation) in enumerate(zip(positions, orientations)):
         rows = np.flatnonzero(sessions == s)
         if rows.size:
-            errors = pose_errors(chain, data.select(rows), reg_position, reg_orientation,
-                                 q=None if q is None else np.asarray(q)[rows],
-                                 drift=None if drift is None else np.asarray(drift)[rows],
-                                 conditions=None if conditions is None else conditions.select(rows), **options)
+            errors = pose_errors(chain, data.select(rows), reg_position, reg_orientation, points, target_rotation,
+                                 corrections.select(rows))
             position[rows] = errors.position_m
             if rotation is not None:
                 rotation[rows] = errors.rotation_rad

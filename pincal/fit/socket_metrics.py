@@ -16,6 +16,7 @@ p̄_i the mean of the rows in socket i of one placement:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -46,7 +47,7 @@ class PlacementMetrics:
     pairs: tuple[tuple[str, str, float, float], ...]
     squared_spread_mm2: float
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {
             "placement": self.placement,
             "rows": self.rows,
@@ -72,7 +73,7 @@ class FixtureMetrics:
         errors = [abs(c - f) for p in self.placements for _, _, c, f in p.pairs]
         return float(np.mean(errors))
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {
             "consistency_mm": self.consistency_mm,
             "distortion_mm": self.distortion_mm,

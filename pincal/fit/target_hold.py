@@ -38,10 +38,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 import scipy.linalg
+
+from pincal.fit.sensor_problem import FitProblem
 
 __all__ = [
     "NO_TURN_RAD", "MAX_TARGET_STD_M", "HeldDirection", "shift_grams", "principal_turns", "turn_along", "held_basis",
@@ -163,7 +164,7 @@ def _reason(group: list[HeldDirection]) -> tuple[str, str]:
     return f"the tool's orientation turns by {shown}° RMS across {where}: {why}", advice
 
 
-def _start_grams(problem) -> tuple[np.ndarray, np.ndarray]:
+def _start_grams(problem: FitProblem) -> tuple[np.ndarray, np.ndarray]:
     """Eq T1's Gram matrices at a problem's start with the nominal kinematics (every target coordinate free)."""
     objective = replace(problem, point_basis=None).objective(
         np.array([], dtype=int), np.zeros(0 if problem.params is None else problem.params.size))
@@ -177,11 +178,12 @@ def _start_grams(problem) -> tuple[np.ndarray, np.ndarray]:
     return shift_grams(others, shift, np.arange(others.shape[1]))
 
 
-def hold_target(problem, extra: Sequence[HeldDirection] = ()) -> tuple[tuple[HeldDirection, ...], Any]:
+def hold_target(problem: FitProblem, extra: Sequence[HeldDirection] = ()
+                ) -> tuple[tuple[HeldDirection, ...], FitProblem]:
     """Hold the directions of the target's position a problem's rows do not see (rule 1), and
-    ``extra`` (rule 2), at the tool's origin: returns the held directions and the problem (a
-    :class:`pincal.fit.chain_calibration.FitProblem`) with them held: its start's points moved to the
-    tool's origin along them and its ``point_basis`` the free directions (``problem`` itself when none is held)."""
+    ``extra`` (rule 2), at the tool's origin: returns the held directions and the problem with them held:
+    its start's points moved to the tool's origin along them and its ``point_basis`` the free directions
+    (``problem`` itself when none is held)."""
     turns, directions = principal_turns(*_start_grams(problem))
     n_points = problem.start.points.shape[0]
     held = [HeldDirection(direction=d, turn_rad=float(t), value_m=0.0, frame=problem.chain.tip_link, points=n_points)
@@ -202,7 +204,7 @@ def hold_target(problem, extra: Sequence[HeldDirection] = ()) -> tuple[tuple[Hel
     return tuple(held), replace(problem, start=start, point_basis=basis)
 
 
-def analysis_jacobian(problem, held: Sequence[HeldDirection], size: int) -> tuple[np.ndarray, np.ndarray]:
+def analysis_jacobian(problem: FitProblem, held: Sequence[HeldDirection], size: int) -> tuple[np.ndarray, np.ndarray]:
     """The Jacobian the identifiability analysis orders (:func:`pincal.fit.identifiability.order_parameters`)
     with all ``size`` kinematic parameters free, at ``problem``'s start, and the held directions' columns
     (:func:`held_columns`; (m, 0) without).
@@ -222,7 +224,7 @@ def analysis_jacobian(problem, held: Sequence[HeldDirection], size: int) -> tupl
     return jacobian, held_columns(problem, held, size) if held else np.zeros((jacobian.shape[0], 0))
 
 
-def held_columns(problem, held: Sequence[HeldDirection], size: int) -> np.ndarray:
+def held_columns(problem: FitProblem, held: Sequence[HeldDirection], size: int) -> np.ndarray:
     """The residual's change per unit common shift of the target points along each held direction (m, h),
     at ``problem``'s start with all ``size`` kinematic parameters free."""
     directions = np.column_stack([h.direction for h in held])
@@ -232,18 +234,18 @@ def held_columns(problem, held: Sequence[HeldDirection], size: int) -> np.ndarra
         problem.start.points.shape[0])
 
 
-def weak_target(result, problem) -> tuple[HeldDirection, ...]:
+def weak_target(problem: FitProblem, kept: np.ndarray, covariance: np.ndarray) -> tuple[HeldDirection, ...]:
     """Rule 2: the principal directions of the estimated target's common position whose standard
-    deviation in ``result`` (a ChainCalibration: its covariance) exceeds :data:`MAX_TARGET_STD_M`,
-    each with the turn the rows gave it (eq T1 at the problem's start)."""
+    deviation in a fit of ``problem`` (its ``kept`` kinematic parameters, its unknowns' ``covariance``)
+    exceeds :data:`MAX_TARGET_STD_M`, each with the turn the rows gave it (eq T1 at the problem's start)."""
     size = 0 if problem.params is None else problem.params.size
-    objective = problem.objective(result.kept, np.zeros(size))
+    objective = problem.objective(kept, np.zeros(size))
     pts = objective.blocks["points"]
-    if pts.stop == pts.start or result.covariance.size == 0:
+    if pts.stop == pts.start or covariance.size == 0:
         return ()
-    n_points = result.target.points.shape[0]
-    basis = np.eye(3 * n_points) if result.point_basis is None else result.point_basis
-    covariance = basis @ result.covariance[pts, pts] @ basis.T  # of the points' 3P coordinates [m²]
+    n_points = problem.start.points.shape[0]
+    basis = np.eye(3 * n_points) if problem.point_basis is None else problem.point_basis
+    covariance = basis @ covariance[pts, pts] @ basis.T  # of the points' 3P coordinates [m²]
     mean = np.tile(np.eye(3), (1, n_points)) / n_points  # the points' common position
     values, directions = np.linalg.eigh(mean @ covariance @ mean.T)
     std = np.sqrt(np.clip(values, 0.0, None))

@@ -16,7 +16,7 @@ __all__ = ["ROTATION_TOLERANCE", "checked_array", "checked_rotations", "Registra
 ROTATION_TOLERANCE = 1e-6  # max |R^T R - I| accepted for a rotation matrix
 
 
-def checked_array(x: npt.ArrayLike, shape_tail: tuple[int, ...], name: str, min_count: int = 0) -> np.ndarray:
+def checked_array(x: npt.ArrayLike | None, shape_tail: tuple[int, ...], name: str, min_count: int = 0) -> np.ndarray:
     a = np.asarray(x, dtype=float)
     if a.ndim != 1 + len(shape_tail) or a.shape[1:] != shape_tail:
         raise CalibrationError(f"{name} must have shape (K, {', '.join(map(str, shape_tail))}), got {a.shape}")
@@ -27,7 +27,7 @@ def checked_array(x: npt.ArrayLike, shape_tail: tuple[int, ...], name: str, min_
     return a
 
 
-def checked_rotations(x: npt.ArrayLike, name: str, min_count: int = 1) -> np.ndarray:
+def checked_rotations(x: npt.ArrayLike | None, name: str, min_count: int = 1) -> np.ndarray:
     r = checked_array(x, (3, 3), name, min_count)
     if np.abs(r.transpose(0, 2, 1) @ r - np.eye(3)).max() > ROTATION_TOLERANCE or np.any(np.linalg.det(r) < 0):
         raise CalibrationError(f"{name} contains a matrix that is not a proper rotation")

@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from pincal.errors import PincalError, did_you_mean
-from pincal.fit.chain_calibration import calibrate_chain
+from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.prior import Prior, prior_of
-from pincal.fit.selection import SELECTION_CRITERIA
+from pincal.fit.selection import SELECTION_CRITERIA, SelectionCriterion
 from pincal.fit.sessions import initial_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
@@ -90,7 +90,7 @@ class PlanSettings:
     seed: int = 0
     workspace_size: int = WORKSPACE_SIZE
     random_draws: int = RANDOM_DRAWS
-    selection: str = "aic"
+    selection: SelectionCriterion | Prior = "aic"
 
     @property
     def prior(self) -> Prior | None:
@@ -317,8 +317,8 @@ def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: 
                               f"but --measure is {sensor.label}; plan for what the sensor sees")
         recorded_q, recorded_sessions = rows.q, rows.sessions
         if settings.level in CHAIN_LEVELS:
-            result = calibrate_chain(chain, rows, settings.level, tool_known=settings.tool_known,
-                                     selection=settings.selection)
+            result = calibrate_chain(chain, rows, settings.level,
+                                     ChainFitOptions(tool_known=settings.tool_known, selection=settings.selection))
             target, linearised = result.target, result.chain_placements
             if sigma_pos is None:  # each sigma not given is estimated from the recorded rows
                 sigma_pos, pos_source = result.sigma_pos_m, f"estimated from {existing.source}"

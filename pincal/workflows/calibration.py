@@ -10,13 +10,13 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from pincal._version import __version__
 from pincal.errors import PincalError
-from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+from pincal.fit.chain_calibration import ChainCalibration, ChainFitOptions, calibrate_chain
 from pincal.fit.metrics import PoseErrors, pose_errors
 from pincal.fit.plausibility import calibration_findings, reach_m
 from pincal.fit.sessions import check_registrable, session_pose_errors, session_rows, where
@@ -25,6 +25,7 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
 from pincal.model.dh.parameters import DHParameterSet
+from pincal.model.parameter_sets import ChainLevel
 from pincal.progress import Progress, Stages
 from pincal.report.document import chain_head, chain_report, fit_rows, paper_report, write_report
 from pincal.report.effects_file import effects_path, write_effects_file
@@ -148,16 +149,15 @@ def calibrate_files(
     else:
         start = time.perf_counter()
         stages = Stages(progress)
+        options = ChainFitOptions(tool_known=tool_pose is not None, sigma_column=sigma_column,
+                                  reject_outliers=reject_outliers, selection=selection)
         if level == "auto":
             from pincal.fit.level_choice import choose_level
 
-            choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
-                                  reject_outliers=reject_outliers, selection=selection, progress=stages.next())
+            choice = choose_level(chain, data, options, progress=stages.next())
             level = choice.chosen
-        fitted = calibrate_chain(
-            chain, data, level, tool_known=tool_pose is not None, sigma_column=sigma_column,
-            reject_outliers=reject_outliers, selection=selection, progress=stages.next(),
-        )
+        # registration, offsets or full: CalibrateSettings checked the level, and auto chose one of them
+        fitted = calibrate_chain(chain, data, cast(ChainLevel, level), options, progress=stages.next())
         seconds = time.perf_counter() - start
         placements = fitted.chain_placements
         with chain.placed(placements):

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from pincal._version import __version__
 from pincal.errors import PincalError
-from pincal.fit.chain_calibration import ChainCalibration, calibrate_chain
+from pincal.fit.chain_calibration import ChainCalibration, ChainFitOptions, calibrate_chain
 from pincal.fit.plausibility import calibration_findings, reach_m
 from pincal.fit.sessions import session_rows
 from pincal.measurements.couplings import apply_couplings
@@ -23,6 +23,7 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
 from pincal.model.drift import TIME_COLUMNS, time_column
+from pincal.model.parameter_sets import ChainLevel
 from pincal.progress import Progress, Stages
 from pincal.report.diagnosis import diagnosis_report
 from pincal.report.document import chain_head, fit_rows, write_report
@@ -112,13 +113,14 @@ def diagnose_files(
     nominal_placements = chain.placements()
     stages = Stages(progress)
     choice = None
+    options = ChainFitOptions(tool_known=tool_pose is not None, sigma_column=sigma_column, selection=selection)
     if level == "auto":  # the geometric level by cross-validation of the geometric calibration
-        choice = choose_level(chain, data, tool_known=tool_pose is not None, sigma_column=sigma_column,
-                              selection=selection, progress=stages.next())
+        choice = choose_level(chain, data, options, progress=stages.next())
         level = choice.chosen
-    # the geometric calibration, made again by diagnose on readings it corrects (a joint read against another)
-    recalibrate = partial(calibrate_chain, chain, level=level, tool_known=tool_pose is not None,
-                          sigma_column=sigma_column, selection=selection, refit_offered=False)
+    # the geometric calibration, made again by diagnose on readings it corrects (a joint read against another);
+    # the level: registration, offsets or full (refused above otherwise), or the one auto chose
+    recalibrate = partial(calibrate_chain, chain, level=cast(ChainLevel, level),
+                          options=replace(options, refit_offered=False))
     calibration = recalibrate(data, progress=stages.next())
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)

@@ -51,7 +51,7 @@ from typing import cast
 import numpy as np
 
 from pincal.errors import PincalError
-from pincal.fit.metrics import PoseErrors
+from pincal.fit.metrics import PoseErrors, RowCorrections
 from pincal.fit.plausibility import Finding, check_evaluation
 from pincal.fit.sessions import register_session, session_pose_errors
 from pincal.measurements.csv_v1 import read_measurements, read_table
@@ -257,7 +257,7 @@ def evaluate_files(
                                  data, (held, group), settings.temperature_column, report_path)
     notes += applied.notes
     if applied.conditions is not None:  # thermal expansion, pause steps (eq T1-T2 of pincal.model.thermal)
-        corrections["conditions"] = applied.conditions
+        corrections = replace(corrections, conditions=applied.conditions)
     if drift_use is not None and drift_use["rows_held"]:
         notes.append(_drift_note(data_path, drift_use))
     index = np.empty(data.n_rows, dtype=np.intp)
@@ -265,14 +265,10 @@ def evaluate_files(
     for s, (_, members, reported) in enumerate(plan):
         index[members] = s
         if reported is None:
-            q, drift = corrections.get("q"), corrections.get("drift")
             sigma_pos_mm = report.noise.get("sigma_pos_mm")
             sigma_rot_deg = report.noise.get("sigma_rot_deg")
             registration = register_session(
-                chain, data.select(members), report.points, report.rotation,
-                q=None if q is None else q[members], sensor_scale=corrections.get("sensor_scale", 0.0),
-                drift=None if drift is None else drift[members],
-                conditions=None if applied.conditions is None else applied.conditions.select(members),
+                chain, data.select(members), report.points, report.rotation, corrections.select(members),
                 sigma_pos_m=sigma_pos_mm / 1000.0 if sigma_pos_mm else 1e-3,
                 sigma_rot_rad=np.radians(sigma_rot_deg) if sigma_rot_deg else 1e-3,
             )
@@ -281,7 +277,7 @@ def evaluate_files(
         positions.append(reported[1])
         orientations.append(reported[2])
     errors = session_pose_errors(chain, data, index, positions, orientations, points=report.points,
-                                 target_rotation=report.rotation, **corrections)
+                                 target_rotation=report.rotation, corrections=corrections)
     per_row = 3 * data.n_points + (3 if data.has_orientation else 0)  # scalar residuals of a row
     sessions = tuple(
         SessionEvaluation(name, len(members), positions[s], orientations[s], sources[s],
@@ -407,7 +403,7 @@ def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarr
 
 
 def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray,
-                        held: tuple[np.ndarray, np.ndarray], report_path) -> tuple[dict, DriftUse | None]:
+                        held: tuple[np.ndarray, np.ndarray], report_path) -> tuple[RowCorrections, DriftUse | None]:
     """Joint readings corrected by the report's effects, and its sensor terms; with a
     drift, how it was applied (``rows_applied`` inside the fitted span of the session
     ``held`` = (names (K,), evaluated sessions (K,)) gives each row
@@ -415,7 +411,7 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
     """
     entries = effects.get("effects", [])
     if not entries:
-        return {}, None
+        return RowCorrections(), None
     parsed = [effect_from_dict(e) for e in entries]
     has_drift = any(e.type == "drift" for e, _ in parsed)
     reference = effects.get("time_reference_s")
@@ -449,11 +445,11 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
                            context=None if context_q is None or context_time is None
                            else RowContext(context_q, context_time))
     q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
-    out: dict = {"q": q}
+    out = RowCorrections(q)
     drift: DriftUse | None = None
     for effect, value in parsed:
         if effect.type == "sensor_scale":
-            out["sensor_scale"] = float(value[0])
+            out = replace(out, sensor_scale=float(value[0]))
         elif effect.type == "drift":
             if value.size != 3:
                 raise PincalError(f"{report_path}: a drift's value is [vx, vy, vz] in m/s; it has {value.size} "
@@ -461,7 +457,7 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: di
             time = np.full(data.n_rows, np.nan) if row_time is None else row_time  # None: no spans, offset 0
             assert reference is not None  # has_drift: checked to be a finite number above
             offsets = drift_offsets(time, value, float(reference), spans, held[0], held[1])
-            out["drift"] = offsets.offsets
+            out = replace(out, drift=offsets.offsets)
             outside = ~offsets.inside
             drift = {"velocity_m_per_s": value.tolist(), "time_column": effects.get("time_column"),
                      "time_reference_s": reference,

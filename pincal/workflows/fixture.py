@@ -44,6 +44,7 @@ from pincal.measurements.couplings import corrected_angles, couplings_from_repor
 from pincal.measurements.fixture import Fixture, read_fixture, read_fixture_data
 from pincal.model.chain import KinematicChain
 from pincal.model.description import is_xacro, xacro_arguments
+from pincal.model.parameter_sets import ChainLevel
 from pincal.outputs import file_sha256
 from pincal.report.document import write_report
 from pincal.report.effects_file import effects_path, write_effects_file
@@ -135,9 +136,10 @@ def calibrate_fixture_files(
     if level == "auto":  # leave-one-placement-out (or folds of rows) on the calibration data
         choice = choose_fixture_level(chain, data, selection=selection)
         level = choice.chosen
-    result = calibrate_fixture(chain, data, level, selection=selection)
+    chain_level = cast(ChainLevel, level)  # registration, offsets or full: dh is refused above, auto chose one
+    result = calibrate_fixture(chain, data, chain_level, selection=selection)
     # each placement predicted by the level's fit of the others, against the nominal model's (plausibility)
-    check = check_placements(chain, data, level, selection, choice)
+    check = check_placements(chain, data, chain_level, selection, choice)
     warnings, notes = placement_findings(check)
     notes += [note for note in [one_placement_note(data)] if note is not None]
     # eq F1's residual per coordinate, as a point distance: the sensor path's RMS point residual

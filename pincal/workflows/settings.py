@@ -11,7 +11,7 @@ made, with the one-line message the command prints; the workflows of
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, cast, get_args
+from typing import TYPE_CHECKING, Literal, cast, get_args
 
 import numpy as np
 
@@ -19,6 +19,9 @@ from pincal.errors import PincalError
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.model.thermal import PAUSE_S
+
+if TYPE_CHECKING:
+    from pincal.fit.selection import SelectionCriterion
 
 __all__ = [
     "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "CalibrateLevel", "DiagnoseLevel", "METHODS", "expect", "no_prior",
@@ -107,9 +110,9 @@ class _FitSettings:
         object.__setattr__(self, "couplings", tuple(self.couplings))
 
     @property
-    def criterion(self) -> str:
-        """``selection`` as the fits take it: resolved when the settings are made, never None."""
-        return cast(str, self.selection)
+    def criterion(self) -> SelectionCriterion | Prior:
+        """``selection`` as the fits take it: resolved and checked when the settings are made, never None."""
+        return cast("SelectionCriterion | Prior", self.selection)
 
     @property
     def sigma_pos_m(self) -> float | None:

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from pincal import (
+    ChainFitOptions,
     JointOffsets,
     KinematicChain,
     PlacementErrors,
@@ -90,12 +91,13 @@ def tiago() -> str:
     test, _ = read_measurements(data / "qualisys_2021-11-26_static_postures.csv", chain.joint_specs)
     novel = np.abs(test.q[:, None, :] - train.q[None, :, :]).max(axis=2).min(axis=1) > 0.02
     started = time.perf_counter()
-    choice = choose_level(chain, train, **SELECT)
+    choice = choose_level(chain, train, ChainFitOptions(**SELECT))
     seconds = time.perf_counter() - started
-    others = [choose_level(chain, train, seed=seed, **SELECT) for seed in range(1, 6)]  # other deals of the folds
+    # other deals of the folds
+    others = [choose_level(chain, train, ChainFitOptions(**SELECT), seed=seed) for seed in range(1, 6)]
     held, held_novel, kept = {}, {}, {}
     for level in LEVELS:
-        result = calibrate_chain(chain, train, level, **SELECT)
+        result = calibrate_chain(chain, train, level, ChainFitOptions(**SELECT))
         registration = result.target.registration
         with chain.placed(result.chain_placements):
             errors = pose_errors(chain, test, registration, registration, points=result.target.points)
@@ -199,10 +201,10 @@ def simulated_case(robot: str, rows: int, seed: int) -> tuple[dict[str, float], 
     test = measure(chain, q_test, DEFAULT_REGISTRATION, rng, replace(sensor, sigma_pos_m=0.0), "calibration",
                    compliance)
     chain.set_placements(nominal)  # the nominal robot is what is calibrated
-    choice = choose_level(chain, train, **SELECT)
+    choice = choose_level(chain, train, ChainFitOptions(**SELECT))
     held = {}
     for level in LEVELS:
-        result = calibrate_chain(chain, train, level, **SELECT)
+        result = calibrate_chain(chain, train, level, ChainFitOptions(**SELECT))
         registration = result.target.registration
         with chain.placed(result.chain_placements):
             errors = pose_errors(chain, test, registration, registration, points=result.target.points)

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from pincal import KinematicChain, calibrate_chain, pose_errors, read_measurements
+from pincal import ChainFitOptions, KinematicChain, calibrate_chain, pose_errors, read_measurements
 from pincal.robots import example_robot_data_urdf
 
 # data/ beside examples/: a clone's, or `pincal example NAME` (absolute: a clone's examples/ is a link)
@@ -36,7 +36,8 @@ def run_level(level: str, selection: str = "prior") -> dict:
     train, _ = read_measurements(TRAIN, chain.joint_specs)
     held_out, _ = read_measurements(HELD_OUT, chain.joint_specs)
     started = time.perf_counter()
-    result = calibrate_chain(chain, train, level, selection=selection if level != "registration" else "aic")
+    options = ChainFitOptions(selection=selection if level != "registration" else "aic")
+    result = calibrate_chain(chain, train, level, options)
     seconds = time.perf_counter() - started
     registration, points = result.target.registration, result.target.points
 
