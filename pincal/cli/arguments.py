@@ -10,7 +10,7 @@ import argparse
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from pincal.errors import PincalError
 from pincal.fit.prior_defaults import SCALE_RANGE
@@ -19,6 +19,8 @@ from pincal.model.dh.conventions import MAX_ANGLE_RAD
 if TYPE_CHECKING:
     import numpy as np
 
+    from pincal.fit.prior import Prior
+    from pincal.fit.selection import SelectionCriterion
     from pincal.planning.information import SensorModel
 
 __all__ = [
@@ -63,7 +65,7 @@ def prior_scale(text: str) -> tuple[float, ...]:
     return tuple(values)
 
 
-def selection_criterion(args: argparse.Namespace) -> str:
+def selection_criterion(args: argparse.Namespace) -> SelectionCriterion | Prior:
     """``--select`` as the fits take it: with ``prior``, a :class:`pincal.fit.prior.Prior` of ``--prior-scale``.
 
     Raises:
@@ -85,7 +87,7 @@ def selection_criterion(args: argparse.Namespace) -> str:
     if select != "prior":
         if scale is not None:
             raise PincalError(f"--prior-scale applies to --select prior only (got --select {select})")
-        return select
+        return cast("SelectionCriterion", select)  # one of --select's choices, or the default
     from pincal.fit.prior import Prior
 
     return Prior(*scale) if scale is not None else Prior()
