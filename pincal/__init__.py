@@ -41,6 +41,8 @@ _DEFINED_IN = {
     "pincal.workflows.calibration": ("CalibrationRun", "calibrate_files"),
     "pincal.workflows.diagnosis": ("DiagnoseRun", "diagnose_files"),
     "pincal.workflows.evaluation": ("Evaluation", "SessionEvaluation", "evaluate_files"),
+    "pincal.workflows.evaluation_outputs": ("EvaluateOutputs", "EvaluateRun", "ThresholdFailure", "evaluate_and_write"),
+    "pincal.workflows.report_page": ("report_file",),
     "pincal.workflows.fixture": ("FixtureRun", "FixtureEvaluation", "calibrate_fixture_files",
                                  "evaluate_fixture_files"),
     "pincal.workflows.preparation": ("PlanRun", "plan_files", "urdf_from_dh_file"),
@@ -102,6 +104,12 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.workflows.calibration import CalibrationRun, calibrate_files
     from pincal.workflows.diagnosis import DiagnoseRun, diagnose_files
     from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files
+    from pincal.workflows.evaluation_outputs import (
+        EvaluateOutputs,
+        EvaluateRun,
+        ThresholdFailure,
+        evaluate_and_write,
+    )
     from pincal.workflows.extract import BagRead, extract_file
     from pincal.workflows.fixture import (
         FixtureEvaluation,
@@ -110,6 +118,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         evaluate_fixture_files,
     )
     from pincal.workflows.preparation import PlanRun, plan_files, urdf_from_dh_file
+    from pincal.workflows.report_page import report_file
     from pincal.workflows.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
     from pincal.workflows.simulation import simulate_to_directory
 
@@ -186,6 +195,11 @@ __all__ = [
     "Evaluation",
     "SessionEvaluation",
     "evaluate_files",
+    "EvaluateOutputs",
+    "EvaluateRun",
+    "ThresholdFailure",
+    "evaluate_and_write",
+    "report_file",
     "FixtureRun",
     "FixtureEvaluation",
     "calibrate_fixture_files",

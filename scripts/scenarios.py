@@ -446,11 +446,12 @@ def run(scenario: Scenario, urdf: Path, tip: str, selection: str = DEFAULT_SELEC
 def run_diagnose(chain, calibration, test, sigma: float, selection: str) -> dict:
     """``diagnose`` at level full with the held-out rows (as ``--validation``): its held-out RMS, which evaluate of
     its report gives, against sqrt(3 σ² + e²) of its final model on the held-out rows read as it corrects them."""
-    from pincal.diagnosis.diagnose import diagnose
+    from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
 
     started = time.perf_counter()
     recalibrate = partial(calibrate_chain, chain, level="full", selection=selection, refit_offered=False)
-    found = diagnose(chain, recalibrate(calibration), calibration, heldout=test, recalibrate=recalibrate)
+    found = diagnose(chain, recalibrate(calibration), calibration, heldout=test,
+                     options=DiagnoseOptions(recalibrate=recalibrate))
     final = found.final_calibration()
     estimation = final.predicted_point_rms(chain, apply_couplings(test, found.couplings).q) * 1000.0
     held_out = found.heldout_errors.position.rms

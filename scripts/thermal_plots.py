@@ -25,7 +25,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from pincal.diagnosis.conditions import read_readings
-from pincal.diagnosis.diagnose import diagnose
+from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
 from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.model.chain import KinematicChain, pose_from_xyz_rpy
@@ -42,8 +42,9 @@ def _diagnosed(folder: Path):
     data, _ = read_measurements(folder / "calibration.csv", chain.joint_specs)
     held, _ = read_measurements(folder / "validation.csv", chain.joint_specs)
     calibration = calibrate_chain(chain, data, "full", ChainFitOptions(tool_known=True))
-    result = diagnose(chain, calibration, data, heldout=held, time=time_column(data), heldout_time=time_column(held),
-                      readings=read_readings(data, held, None))
+    result = diagnose(chain, calibration, data, heldout=held,
+                      options=DiagnoseOptions(time=time_column(data), heldout_time=time_column(held),
+                                              readings=read_readings(data, held, None)))
     return result, time_column(data)[calibration.used_index]
 
 

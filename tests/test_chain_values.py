@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from test_select_prior import _fixture_data
 
-from pincal.diagnosis.diagnose import diagnose
+from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
@@ -99,8 +99,8 @@ def test_the_level_choice_and_diagnose_leave_the_chain(experiment):
                          SimulatedSensor(2e-5, 0.0, points=POINTS, with_rotation=False),
                          effects=SimulatedEffects(effects=scale))
     calibration = calibrate_chain(chain, rows, "full")
-    diagnosis = diagnose(chain, calibration, rows, candidates=[Effect("encoder_scale", "elbow_joint"),
-                                                                Effect("compliance", "shoulder_lift_joint")])
+    diagnosis = diagnose(chain, calibration, rows, options=DiagnoseOptions(candidates=[
+        Effect("encoder_scale", "elbow_joint"), Effect("compliance", "shoulder_lift_joint")]))
     assert _same(chain.placements(), before)
     assert [e.label for e, _, _ in diagnosis.effects] == [Effect("encoder_scale", "elbow_joint").label]
     assert not _same(diagnosis.chain_placements, calibration.chain_placements)  # the refitted geometry

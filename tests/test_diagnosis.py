@@ -14,7 +14,7 @@ import pytest
 from conftest import unaccepted_flags
 
 from pincal.cli.commands import main
-from pincal.diagnosis.diagnose import candidate_effects, diagnose, parallel_neighbours
+from pincal.diagnosis.diagnose import DiagnoseOptions, candidate_effects, diagnose, parallel_neighbours
 from pincal.diagnosis.held_out import HELD_OUT_Z
 from pincal.diagnosis.verdicts import CRITERION, NEGLIGIBLE
 from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
@@ -46,7 +46,8 @@ def _run(kuka_urdf, effect_text, seed=3):
     time = time_column(experiment.calibration)
     candidates = candidate_effects(chain, time is not None) + [e for e, _ in effects if e.type == "coupling"]
     result = diagnose(chain, calibration, experiment.calibration, heldout=experiment.validation,
-                      time=time, heldout_time=time_column(experiment.validation), candidates=candidates)
+                      options=DiagnoseOptions(time=time, heldout_time=time_column(experiment.validation),
+                                              candidates=candidates))
     return result, effects
 
 
@@ -248,7 +249,8 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
         rows, _ = read_measurements(data / "qualisys_2021-11-30_static_postures.csv", chain.joint_specs)
         held, _ = read_measurements(data / "qualisys_2021-11-26_static_postures.csv", chain.joint_specs)
         calibration = calibrate_chain(chain, rows, "full")
-        return diagnose(chain, calibration, rows, heldout=held, time=time_column(rows), heldout_time=time_column(held))
+        return diagnose(chain, calibration, rows, heldout=held,
+                        options=DiagnoseOptions(time=time_column(rows), heldout_time=time_column(held)))
 
     screened = run()
     scores, full = [], {}
@@ -291,7 +293,7 @@ def test_screening_refits_every_candidate_that_matters(monkeypatch):
 def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment):
     """A candidate list that is empty after filtering (a drift without a time column)
     ends the search with nothing adopted, not with an error (review finding)."""
-    from pincal.diagnosis.diagnose import diagnose
+    from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
     from pincal.fit.chain_calibration import calibrate_chain
     from pincal.model.chain import KinematicChain
     from pincal.model.effects import Effect
@@ -300,7 +302,7 @@ def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment
     chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
     data = noisy_large_experiment.calibration
     geometry = calibrate_chain(chain, data, "offsets")
-    result = diagnose(chain, geometry, data, candidates=[Effect("drift")])
+    result = diagnose(chain, geometry, data, options=DiagnoseOptions(candidates=[Effect("drift")]))
     assert [step.effect for step in result.steps] == []
 
 
@@ -355,7 +357,7 @@ def test_a_joint_read_against_another_is_named_and_corrected_in_the_data(kuka_ur
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     calibration = calibrate_chain(chain, corrected[0], "offsets", ChainFitOptions(tool_known=True))
     again = diagnose(chain, calibration, corrected[0], heldout=corrected[1],  # the default catalogue
-                     time=time_column(corrected[0]), heldout_time=time_column(corrected[1]))
+                     options=DiagnoseOptions(time=time_column(corrected[0]), heldout_time=time_column(corrected[1])))
     bound = 1 + 3 * np.sqrt(1 / effect_free.objective.n_free)
     assert again.heldout_errors.position.rms <= bound * effect_free.heldout_errors.position.rms
 

@@ -11,7 +11,7 @@ import pytest
 from test_select_prior import SIGMA_M, UR5, _fixture_data, _heldout_m, _rows
 
 from pincal.cli.commands import main
-from pincal.diagnosis.diagnose import diagnose
+from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
@@ -33,7 +33,7 @@ def test_diagnose_keeps_the_prior_of_the_calibration():
     calibration = calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior"))
     held = _heldout_m(chain, calibration, test)
     assert calibration.prior_sigma is not None
-    diagnosis = diagnose(chain, calibration, train, heldout=test, candidates=[])
+    diagnosis = diagnose(chain, calibration, train, heldout=test, options=DiagnoseOptions(candidates=[]))
     kin = diagnosis.objective.blocks["kinematic"]
     std = calibration.std[calibration.kept]
     # the same MAP problem refitted from its solution: it moves by the solvers' stopping tolerance
@@ -169,13 +169,13 @@ def test_diagnose_bic_counts_the_data_rows_not_the_prior_rows():
     chain, train, _ = _rows(25, seed=3, sigma_m=SIGMA_M)
     calibration = calibrate_chain(chain, train, "full", ChainFitOptions(selection="prior"))
     candidates = [Effect("encoder_scale", "wrist_2_joint")]
-    diagnosis = diagnose(chain, calibration, train, candidates=candidates)
+    diagnosis = diagnose(chain, calibration, train, options=DiagnoseOptions(candidates=candidates))
     assert [step.effect.label for step in diagnosis.steps] == []
     # ... while the same rows with that effect hidden in them (2e-3, ~20 sigma at the tool) adopt it:
     # the search can adopt here, so "nothing" above is the criterion's verdict
     chain, hidden, _ = _rows(25, seed=3, sigma_m=SIGMA_M, effects=[(candidates[0], np.array([2e-3]))])
     calibration = calibrate_chain(chain, hidden, "full", ChainFitOptions(selection="prior"))
-    diagnosis = diagnose(chain, calibration, hidden, candidates=candidates)
+    diagnosis = diagnose(chain, calibration, hidden, options=DiagnoseOptions(candidates=candidates))
     assert [step.effect.label for step in diagnosis.steps] == [candidates[0].label]
 
 

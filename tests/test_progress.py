@@ -18,7 +18,7 @@ import tqdm.std
 from pincal.cli import progress as progress_module
 from pincal.cli.commands import main
 from pincal.cli.progress import LOG_INTERVAL_S, TERMINAL_DELAY_S, progress_bar
-from pincal.diagnosis.diagnose import MAX_EFFECTS, NO_TORQUE, candidate_effects, diagnose
+from pincal.diagnosis.diagnose import MAX_EFFECTS, NO_TORQUE, DiagnoseOptions, candidate_effects, diagnose
 from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_SMALL, DHDeviations, DHTable
@@ -195,8 +195,8 @@ def test_diagnose_reports_every_step(compliance):
     chain, experiment = compliance
     calibration = calibrate_chain(chain, experiment.calibration, "offsets", ChainFitOptions(tool_known=True))
     calls = Calls()
-    result = diagnose(chain, calibration, experiment.calibration, time=time_column(experiment.calibration),
-                      progress=calls)
+    result = diagnose(chain, calibration, experiment.calibration,
+                      options=DiagnoseOptions(time=time_column(experiment.calibration)), progress=calls)
     assert_promised(calls)
     assert len(result.steps) >= 1
     # each step announces one unit per candidate offered and one for the adoption (the step that adopts

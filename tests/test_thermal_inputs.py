@@ -169,7 +169,7 @@ def test_the_evaluate_page_says_which_thermal_and_pause_corrections_its_rows_too
     a page without them says neither."""
     from pincal.fit.metrics import PoseErrors
     from pincal.report.html import render_html
-    from pincal.report.row_errors import evaluation_document
+    from pincal.report.row_errors import EvaluatedRows, evaluation_document
 
     errors = PoseErrors(np.full((4, 1), 3e-5), None)
     thermal = {"alpha_per_k": 1.2e-5, "temperature_column": "temperature_c", "rows_applied": 3, "rows_held": 1,
@@ -180,10 +180,12 @@ def test_the_evaluate_page_says_which_thermal_and_pause_corrections_its_rows_too
             "against 23.1 °C: 3 row(s) inside the fitted range 20–25.4 °C, 1 outside it held at its nearer end",
             "pause steps applied (eq T2): 2 row(s) after a pause of their session (pause 1 of session 'cal') take its "
             "registration step")
-    shown = evaluation_document("d.urdf", "v.csv", errors, [2, 3, 4, 5], thermal=thermal, pause_steps=steps)
+    rows = EvaluatedRows([2, 3, 4, 5])
     alone = dict(errors.as_dict(), skipped_cpa_rows=0, sessions=[], drift=None, thermal=thermal, pause_steps=steps)
+    shown = evaluation_document("d.urdf", "v.csv", errors, alone, rows)  # the evaluate --json document
     for page in map(html.unescape, (render_html({}, evaluation=shown), render_html(alone))):
         for line in said:
             assert line in page, line
-    bare = render_html({}, evaluation=evaluation_document("d.urdf", "v.csv", errors, [2, 3, 4, 5]))
+    plain = dict(errors.as_dict(), skipped_cpa_rows=0, sessions=[], drift=None)
+    bare = render_html({}, evaluation=evaluation_document("d.urdf", "v.csv", errors, plain, rows))
     assert "thermal expansion applied" not in bare and "pause steps applied" not in bare

@@ -14,7 +14,7 @@ import argparse
 import gc
 import sys
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from pincal.cli.arguments import selection_criterion
 from pincal.cli.error_table import HEADER, error_columns, point_rows
@@ -24,6 +24,8 @@ from pincal.errors import PincalError
 
 if TYPE_CHECKING:
     from contextlib import AbstractContextManager
+
+    from pincal.workflows.settings import CalibrateLevel
 
 __all__ = ["EXIT_THRESHOLD", "EXIT_USAGE", "EXIT_WARNING", "main", "console"]
 
@@ -56,7 +58,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
 
         report, withheld = run_calibrate(args)
         return _warned(report, args.strict, withheld)
-    level = args.level or ("dh" if args.method is not None else "full")
+    level = cast("CalibrateLevel", args.level or ("dh" if args.method is not None else "full"))  # --level's choices
     if level == "dh" and args.strict:  # --force at level dh: CalibrateSettings refuses it
         raise PincalError("--strict applies to --level registration, offsets, full or auto (the plausibility "
                           "checks of pincal.fit.plausibility), not to the paper's methods; drop it")
@@ -163,13 +165,12 @@ def _check_html(html, *inputs, outputs=()) -> None:
         refuse_overwrite(html, *[i for i in inputs if i is not None], outputs=[o for o in outputs if o is not None])
 
 
-def _write_html(html, document: Mapping[str, Any], base, evaluation: dict | None = None, source=None) -> None:
-    """Write the HTML page of ``document`` (``--html``); ``base``: the report's folder;
-    ``source``: the report file read (named in errors)."""
+def _write_html(html, document: Mapping[str, Any], base) -> None:
+    """Write the HTML page of ``document`` (``--html``); ``base``: the report's folder."""
     if html is not None:
         from pincal.report.html import write_html
 
-        write_html(html, document, evaluation=evaluation, base=base, source=source)
+        write_html(html, document, base=base)
         print(f"wrote {html}")
 
 
@@ -201,7 +202,7 @@ def _print_chain_summary(run) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    from pincal.workflows.evaluation import evaluate_files
+    from pincal.workflows.evaluation_outputs import EvaluateOutputs, evaluate_and_write
     from pincal.workflows.settings import EvaluateSettings
 
     if args.fixture is not None:
@@ -210,17 +211,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         return _warned(run_evaluate(args), args.strict)
     if args.nominal is not None:
         raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
-    _check_html(args.html, *_description_inputs(args), args.report, args.data, outputs=[args.json])
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
                                 fixed_registration=args.fixed_registration, new_session=args.new_session,
-                                temperature_column=args.temperature_column)
-    evaluation = evaluate_files(args.urdf, args.report, args.data, settings)
-    thresholds = [flag for flag, value in (("--max-pos-mm", args.max_pos_mm), ("--max-rot-deg", args.max_rot_deg))
-                  if value is not None]
-    if thresholds and evaluation.threshold_problem():
-        raise PincalError(f"{args.data}: {thresholds[0]}: {evaluation.threshold_problem()}")
-    if args.max_rot_deg is not None and evaluation.errors.rotation is None:  # before any output is written
-        raise PincalError(f"{args.data}: --max-rot-deg needs orientation columns qx,qy,qz,qw")
+                                temperature_column=args.temperature_column, max_pos_mm=args.max_pos_mm,
+                                max_rot_deg=args.max_rot_deg)
+    run = evaluate_and_write(args.urdf, args.report, args.data, settings, EvaluateOutputs(args.json, args.html))
+    evaluation = run.evaluation
     _print_notes(evaluation.notes)
     errors = evaluation.errors
     for session in evaluation.sessions:
@@ -239,34 +235,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         print(f"before -> after, these rows, RMS position: {evaluation.nominal_rms_mm:.3f} -> "
               f"{errors.position.rms:.3f} mm (before: {evaluation.nominal_urdf}, its registration and target "
               "fitted to these rows; after: the calibrated model, registrations as above)")
-    document = evaluation.as_dict()  # evaluate --json; its warnings are printed and shown as such
-    if args.json:
-        from pincal.report.document import write_evaluation
-        from pincal.workflows.paths import refuse_overwrite
-
-        refuse_overwrite(args.json, *_description_inputs(args), args.report, args.data)
-        write_evaluation(args.json, document)
-        print(f"wrote {args.json}")
-    if args.html is not None:
-        from pincal.report.reading import PAGE_KINDS, load_report
-        from pincal.report.row_errors import evaluation_document
-
-        shown = evaluation_document(str(args.urdf), str(args.data), errors, evaluation.lines, evaluation.n_skipped_cpa,
-                                    files=evaluation.files, sessions=evaluation.row_sessions,
-                                    registrations=[s.as_dict() for s in evaluation.sessions], drift=evaluation.drift,
-                                    thermal=evaluation.thermal, pause_steps=evaluation.pause_steps,
-                                    warnings=document["warnings"], before=document.get("before"))
-        _write_html(args.html, load_report(args.report, PAGE_KINDS), args.report.parent, evaluation=shown,
-                    source=args.report)
-    failed = []
-    if args.max_pos_mm is not None and errors.position.max > args.max_pos_mm:
-        failed.append(f"max position error {errors.position.max:.4f} mm > {args.max_pos_mm} mm")
-    if args.max_rot_deg is not None and errors.rotation is not None and errors.rotation.max > args.max_rot_deg:
-        failed.append(f"max orientation error {errors.rotation.max:.4f} deg > {args.max_rot_deg} deg")
-    for line in failed:
-        print(f"pincal: FAIL: {line}", file=sys.stderr)
-    warned = _warned(document, args.strict)
-    return warned or (EXIT_THRESHOLD if failed else 0)  # implausible data first: a FAIL on them means little
+    for path in run.written:
+        print(f"wrote {path}")
+    for failure in run.failed:
+        print(f"pincal: FAIL: {failure.text}", file=sys.stderr)
+    warned = _warned(run.document, args.strict)  # its warnings are printed and shown as such
+    return warned or (EXIT_THRESHOLD if run.failed else 0)  # implausible data first: a FAIL on them means little
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
@@ -350,14 +324,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
 
 
 def _run_report(args: argparse.Namespace) -> int:
-    from pincal.report.html import write_html
-    from pincal.report.reading import PAGE_KINDS, load_report
-    from pincal.workflows.paths import refuse_overwrite
+    from pincal.workflows.report_page import report_file
 
-    document = load_report(args.document, PAGE_KINDS)
-    refuse_overwrite(args.out, args.document)
-    write_html(args.out, document, base=args.document.parent, source=args.document)
-    print(f"wrote {args.out}")
+    print(f"wrote {report_file(args.document, args.out)}")
     return 0
 
 

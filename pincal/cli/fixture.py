@@ -1,9 +1,9 @@
 """What ``pincal calibrate --fixture`` and ``pincal evaluate --fixture`` print: socket-fixture data, no sensor.
 
 The jobs themselves — the calibration, the evaluation of placements the fit has not seen, the
-corrected URDF and REPORT.json — are :mod:`pincal.workflows.fixture`, which prints nothing; this
-module refuses the flags of sensor data, runs them, prints the metrics and each placement left out,
-and writes the ``--html`` pages (:mod:`pincal.report.fixture_html`).
+corrected URDF and REPORT.json, evaluate's ``--json`` and ``--html`` — are :mod:`pincal.workflows.fixture`,
+which prints nothing; this module refuses the flags of sensor data, runs them, prints the metrics and each
+placement left out, and writes calibrate's ``--html`` page (:mod:`pincal.report.fixture_html`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import argparse
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -21,12 +21,12 @@ from pincal.cli.level_table import held_by_prior, level_choice_lines, prior_scal
 from pincal.errors import PincalError
 from pincal.fit.placement_check import PlacementPrediction
 from pincal.fit.socket_metrics import FixtureMetrics
-from pincal.report.document import write_evaluation
 from pincal.report.effects_file import written_line
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
+from pincal.workflows.evaluation_outputs import EvaluateOutputs
 from pincal.workflows.fixture import calibrate_fixture_files, evaluate_fixture_files, fixture_paths
 from pincal.workflows.paths import description_inputs, refuse_overwrite
-from pincal.workflows.settings import CalibrateSettings
+from pincal.workflows.settings import CalibrateLevel, CalibrateSettings
 
 __all__ = ["CALIBRATE_SENSOR_ONLY", "EVALUATE_SENSOR_ONLY", "run_calibrate", "run_evaluate"]
 
@@ -51,11 +51,11 @@ def _refuse(args: argparse.Namespace, flags: dict[str, str]) -> None:
                           "ball centre is estimated); drop " + ("it" if len(given) == 1 else "them"))
 
 
-def _write_html(html: Path | None, document: Mapping[str, Any], base: Path, evaluation: dict | None = None) -> None:
+def _write_html(html: Path | None, document: Mapping[str, Any], base: Path) -> None:
     if html is not None:
         from pincal.report.html import write_html
 
-        write_html(html, document, evaluation=evaluation, base=base)
+        write_html(html, document, base=base)
         print(f"wrote {html}")
 
 
@@ -64,15 +64,15 @@ def run_calibrate(args: argparse.Namespace) -> tuple[FixtureReport, bool]:
     the report (whose ``warnings`` the caller prints and turns into ``--strict``'s exit code) and whether
     the corrected URDF was withheld (exit 3)."""
     _refuse(args, CALIBRATE_SENSOR_ONLY)
-    level = args.level or "full"
-    if level == "dh":
+    asked = cast(CalibrateLevel, args.level or "full")  # one of --level's choices
+    if asked == "dh":
         raise PincalError("--level dh (the paper's methods) needs a sensor; use registration, offsets or full "
                           "with --fixture")
     xacro_args = getattr(args, "xacro_args", ()) or ()
     if args.html is not None:  # before the fit, as every other output
         refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *fixture_paths(args.data),
                          outputs=[args.out, args.report])
-    settings = CalibrateSettings(args.tip_link, level=level, selection=selection_criterion(args), xacro_args=xacro_args,
+    settings = CalibrateSettings(args.tip_link, level=asked, selection=selection_criterion(args), xacro_args=xacro_args,
                                  couplings=args.coupling or (), force=args.force)
     run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.out, args.report, settings)
     result, report = run.result, run.report
@@ -141,23 +141,15 @@ def run_evaluate(args: argparse.Namespace) -> FixtureEvaluationJson:
     """``pincal evaluate CORRECTED.urdf REPORT.json DATA... --fixture FIXTURE.csv [--nominal URDF]``: prints the
     metrics, returns the ``--json`` document (whose ``warnings`` the caller prints, as for ``run_calibrate``)."""
     _refuse(args, EVALUATE_SENSOR_ONLY)
-    outputs = [Path(o) for o in (args.json, args.html) if o is not None]
     evaluation = evaluate_fixture_files(args.urdf, args.report, args.data, args.fixture, nominal_urdf=args.nominal,
                                         allow_other_urdf=args.allow_other_urdf,
-                                        xacro_args=getattr(args, "xacro_args", ()) or (), outputs=outputs)
+                                        xacro_args=getattr(args, "xacro_args", ()) or (),
+                                        outputs=EvaluateOutputs(args.json, args.html))
     for note in evaluation.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     _print_metrics("evaluated placements" + (" (not held out)" if evaluation.not_held_out else ""),
                    evaluation.before, evaluation.after)
     _print_predictions("held-out placements", evaluation.held_out)
-    document = evaluation.as_dict()
-    if args.json:
-        write_evaluation(args.json, document)
-        print(f"wrote {args.json}")
-    if args.html is not None:
-        from pincal.report.reading import PAGE_KINDS, load_report
-
-        shown = {"urdf": str(args.urdf), "data": ", ".join(str(p) for p in fixture_paths(args.data)),
-                 "fixture": document, "warnings": document["warnings"]}
-        _write_html(args.html, load_report(args.report, PAGE_KINDS), Path(args.report).parent, evaluation=shown)
-    return document
+    for path in evaluation.written:
+        print(f"wrote {path}")
+    return evaluation.as_dict()

@@ -28,12 +28,15 @@ import numpy as np
 
 from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
 from pincal.diagnosis.held_out import fitted_scales, held_out_verdict
+from pincal.diagnosis.screening import FitObjective
 from pincal.diagnosis.verdicts import Judge
 from pincal.fit.chain_calibration import ChainCalibration, row_weights
 from pincal.fit.metrics import PoseErrors
+from pincal.fit.solver import Solution
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.measurements.data import MeasurementSet
-from pincal.model.effects import Effect
+from pincal.model.chain import KinematicChain
+from pincal.model.effects import Effect, EffectInputs
 
 __all__ = ["CONVENTION_RANGE", "ConventionTrial", "convention_for", "chi_square", "adopted_trial",
            "read_against_words"]
@@ -92,8 +95,10 @@ def read_against_words(coupling: ReadingCoupling) -> str:
             "under couplings, and evaluate corrects its rows the same way")
 
 
-def adopted_trial(trial: ConventionTrial, chain, sigma_column, inputs, held_inputs, candidate, before_held,
-                  judge: Judge) -> tuple[ConventionTrial, PoseErrors, PoseErrors | None] | None:
+def adopted_trial(trial: ConventionTrial, chain: KinematicChain, sigma_column: str | None,
+                  inputs: EffectInputs, held_inputs: EffectInputs | None, candidate: tuple[FitObjective, Solution],
+                  before_held: PoseErrors | None, judge: Judge
+                  ) -> tuple[ConventionTrial, PoseErrors, PoseErrors | None] | None:
     """The trial with its errors on the corrected calibration and held-out rows, when it is adopted: its geometry
     fits the calibration rows better than the coupling's own fit ``candidate`` (objective, solution), both in
     the noise units the step's ``judge`` takes from the models that fit (:meth:`Judge.judged_noise`,
@@ -109,8 +114,11 @@ def adopted_trial(trial: ConventionTrial, chain, sigma_column, inputs, held_inpu
     noise = judge.judged_noise(fitted_scales(errors), fitted_scales(fitted))
     if chi_square(errors, *noise) >= chi_square(fitted, *noise):
         return None
-    held = None if trial.heldout is None else heldout_errors(probe, objective, calibration.solution, trial.heldout,
-                                                             replace(held_inputs, q=trial.heldout.q))
-    if held is not None and held_out_verdict(before_held, held, *noise) != "adopted":
-        return None
+    held = None
+    if trial.heldout is not None:
+        assert held_inputs is not None and before_held is not None  # both of the held-out rows, given with them
+        held = heldout_errors(probe, objective, calibration.solution, trial.heldout,
+                              replace(held_inputs, q=trial.heldout.q))
+        if held is not None and held_out_verdict(before_held, held, *noise) != "adopted":
+            return None
     return trial, errors, held

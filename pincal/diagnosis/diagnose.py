@@ -58,7 +58,7 @@ from pincal.diagnosis.catalogue import PARALLEL_AXES_RAD, candidate_effects, par
 from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
 from pincal.diagnosis.conventions import ConventionTrial, read_against_words
 from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
-from pincal.diagnosis.screening import GENERIC_NOT_RUN, bic, n_prior_rows, residual_freedom, testable
+from pincal.diagnosis.screening import GENERIC_NOT_RUN, FitObjective, bic, n_prior_rows, residual_freedom, testable
 from pincal.diagnosis.steps import (
     CANDIDATE_TOLERANCE,
     GRAVITY_REFRESHES,
@@ -83,11 +83,10 @@ from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.effects import HARMONICS, Effect, EffectInputs, RowContext, effect_inputs
 from pincal.progress import Counter, Progress
-from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "MAX_EFFECTS", "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "PARALLEL_AXES_RAD", "Step", "Diagnosis",
-    "parallel_neighbours", "candidate_effects", "diagnose",
+    "parallel_neighbours", "candidate_effects", "DiagnoseOptions", "diagnose",
     "NO_TORQUE", "NAMING_EVALUATIONS", "Recalibration",
 ]
 
@@ -123,7 +122,7 @@ class Diagnosis:
     steps: tuple[Step, ...]
     last_candidates: tuple[Candidate, ...]
     unexplained: str | None
-    objective: SensorResidual
+    objective: FitObjective
     solution_x: np.ndarray
     inputs: EffectInputs
     time_reference: float | None
@@ -154,21 +153,42 @@ class Diagnosis:
                        chain_placements=self.chain_placements)
 
 
+@dataclass(frozen=True)
+class DiagnoseOptions:
+    """What the caller of :func:`diagnose` fixes for the whole search, besides the chain and the rows.
+
+    Attributes:
+        sigma_column: the row-weight column used by the calibration.
+        payload_kg: point mass at the target for gravity torques [kg].
+        time / heldout_time: row times [s] of the calibration / held-out rows, or None.
+        candidates: effects to try (None: :func:`candidate_effects`; thermal and pause steps where allowed).
+        readings: the rows' temperatures and the pause rule (default: no temperature, pauses of 1800 s).
+        recalibrate: the geometric calibration of rows as the given calibration was made (its level, selection,
+            weights), to test a coupling as a joint read against another (:mod:`pincal.diagnosis.conventions`);
+            None: such a coupling stays an effect, its advice naming ``--coupling``.
+        couplings: the couplings the rows were corrected by (``--coupling``): their joints are not corrected again.
+        stated_sigma_pos_m: the sensor's position noise per axis [m] when stated (``--sigma-pos``): the scale
+            of the held-out test (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`).
+    """
+
+    sigma_column: str | None = None
+    payload_kg: float = 0.0
+    time: np.ndarray | None = field(default=None, compare=False)
+    heldout_time: np.ndarray | None = field(default=None, compare=False)
+    candidates: Sequence[Effect] | None = None
+    readings: Readings = field(default_factory=Readings)
+    recalibrate: Callable[[MeasurementSet], ChainCalibration] | None = None
+    couplings: Sequence[ReadingCoupling] = ()
+    stated_sigma_pos_m: float | None = None
+
+
 def diagnose(
     chain: KinematicChain,
     calibration: ChainCalibration,
     data: MeasurementSet,
     heldout: MeasurementSet | None = None,
-    sigma_column: str | None = None,
-    payload_kg: float = 0.0,
-    time: np.ndarray | None = None,
-    heldout_time: np.ndarray | None = None,
-    candidates: Sequence[Effect] | None = None,
+    options: DiagnoseOptions | None = None,
     progress: Progress | None = None,
-    readings: Readings | None = None,
-    recalibrate: Callable[[MeasurementSet], ChainCalibration] | None = None,
-    couplings: Sequence[ReadingCoupling] = (),
-    stated_sigma_pos_m: float | None = None,
 ) -> Diagnosis:
     """Search the calibrated model's residuals for missing effects (module docstring).
 
@@ -181,26 +201,20 @@ def diagnose(
         data: the measurement set it was calibrated on.
         heldout: held-out rows to report (and veto) on, in the registration of
             their calibrated session (the only one, or the one their ``session`` names).
-        sigma_column: the row-weight column used by the calibration.
-        payload_kg: point mass at the target for gravity torques [kg].
-        time / heldout_time: row times [s] of ``data`` / ``heldout``, or None.
-        candidates: effects to try (default: :func:`candidate_effects`; thermal and pause steps where allowed).
+        options: the row weights, payload, times, candidates, readings, recalibration, couplings and stated
+            noise (:class:`DiagnoseOptions`; None: its defaults).
         progress: ``progress(done, total)`` (:mod:`pincal.progress`): each step counts
             one unit per candidate offered (refitted or screened out) and one for
             adopting the best; the final fit and the search for remaining structure one.
-        readings: the rows' temperatures and the pause rule (default: no temperature, pauses of 1800 s).
-        recalibrate: the geometric calibration of rows as ``calibration`` was made (its level, selection,
-            weights), to test a coupling as a joint read against another (:mod:`pincal.diagnosis.conventions`);
-            None: such a coupling stays an effect, its advice naming ``--coupling``.
-        couplings: the couplings ``data`` and ``heldout`` were corrected by (``--coupling``): their joints
-            are not corrected again.
-        stated_sigma_pos_m: the sensor's position noise per axis [m] when stated (``--sigma-pos``): the scale
-            of the held-out test (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`).
     """
+    options = DiagnoseOptions() if options is None else options
+    candidates = options.candidates
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
         candidates = candidate_effects(chain, True)
     nominal, counter = chain.placements(), Counter(progress)
-    settings = _Settings(sigma_column, payload_kg, tuple(candidates), readings or Readings(), stated_sigma_pos_m)
+    settings = replace(options, candidates=tuple(candidates))
+    recalibrate, couplings, time, heldout_time = (options.recalibrate, options.couplings, options.time,
+                                                  options.heldout_time)
     applied: tuple[ReadingCoupling, ...] = ()
     earlier: tuple[Step, ...] = ()
     while True:
@@ -235,20 +249,9 @@ class Recalibration:
             return ConventionTrial(coupling, self.recalibrate(rows), rows, held)
 
 
-@dataclass(frozen=True)
-class _Settings:
-    """What the caller of :func:`diagnose` fixes for every pass (its docstring)."""
-
-    sigma_column: str | None
-    payload_kg: float
-    candidates: tuple[Effect, ...]
-    readings: Readings
-    stated_pos: float | None
-
-
 def _prepare(chain: KinematicChain, calibration: ChainCalibration,
              sets: tuple[MeasurementSet, MeasurementSet | None], times: tuple[np.ndarray | None, np.ndarray | None],
-             settings: _Settings, trial: Callable[[ReadingCoupling], ConventionTrial] | None,
+             settings: DiagnoseOptions, trial: Callable[[ReadingCoupling], ConventionTrial] | None,
              corrected: frozenset[str], earlier: tuple[Step, ...]) -> tuple[Search, State]:
     """One pass's search and its start: the calibration rows of ``sets`` (calibration, held-out rows) and
     ``times`` [s], their effect inputs and conditions, the candidates that can be tested, the model of
@@ -286,7 +289,7 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
                                                        session_rows(rows, calibration.session_names))))
         held_inputs = conditions.inputs(held_inputs, readings.heldout_temperature, heldout_time,
                                         names[session_rows(heldout, calibration.session_names)])
-    pool = list(settings.candidates)
+    pool = list(settings.candidates or ())
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
     pool += [e for e in conditions.candidates if e not in pool]
@@ -295,8 +298,8 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
     untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
                   and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
     search = Search(chain, calibration, rows, heldout, tuple(e for e in pool if e not in untestable),
-                    tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_pos, trial, corrected,
-                    conditions, reference)
+                    tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_sigma_pos_m, trial,
+                    corrected, conditions, reference)
     objective, solution = model.fit([], calibration.solution, [])
     return search, State(model, held_inputs, objective, solution,
                          bic(solution.residual, solution.x.size, n_prior_rows(objective)), steps=earlier)

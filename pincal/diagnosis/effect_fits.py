@@ -15,22 +15,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pincal.diagnosis.screening import bic, n_prior_rows
+from pincal.diagnosis.screening import FitObjective, bic, n_prior_rows
 from pincal.fit.chain_calibration import ChainCalibration, FitProblem
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import PriorResidual
 from pincal.fit.solver import Solution, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import Effect
-from pincal.residuals.sensor import SensorResidual
+from pincal.model.effects import Effect, EffectInputs
+from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 
-__all__ = ["GAIN_PER_CHUNK", "EffectModel", "fit_while_gaining", "pose_errors_of", "heldout_errors"]
+__all__ = ["GAIN_PER_CHUNK", "CandidateFit", "EffectModel", "fit_while_gaining", "pose_errors_of", "heldout_errors"]
 
 #: Least BIC gain of a chunk of evaluations for a budgeted fit to go on (eq F1): one unit of BIC. A crawl
 #: gains ~1e-4 per 50 evaluations (the UR5 wrist's cyclic terms of tests/test_crawling_fits.py: 3 599.6001
@@ -39,7 +38,7 @@ __all__ = ["GAIN_PER_CHUNK", "EffectModel", "fit_while_gaining", "pose_errors_of
 GAIN_PER_CHUNK = 1.0
 
 
-def fit_while_gaining(objective, x0: np.ndarray, chunk: int, tolerance: float | None = None) -> Solution:
+def fit_while_gaining(objective: FitObjective, x0: np.ndarray, chunk: int, tolerance: float | None = None) -> Solution:
     """:func:`solve` in chunks of ``chunk`` evaluations, from ``x0``, while each chunk gains at least
     :data:`GAIN_PER_CHUNK` of BIC (eq F1) and the total stays within scipy's own budget (100 per unknown);
     the last chunk's solution (``converged`` False when it stopped gaining before converging)."""
@@ -53,6 +52,17 @@ def fit_while_gaining(objective, x0: np.ndarray, chunk: int, tolerance: float | 
         if solution.converged or last - now < GAIN_PER_CHUNK or spent >= 100 * x0.size:
             return solution
         x0, last = solution.x, now
+
+
+class CandidateFit(NamedTuple):
+    """A candidate's full fit beside the geometry: its ΔBIC against the fit it extends, the effect, the objective
+    of the adopted effects and it (``effect`` last), its solution (the tuple
+    :meth:`pincal.diagnosis.verdicts.Judge.rank` ranks)."""
+
+    delta_bic: float
+    effect: Effect
+    objective: FitObjective
+    solution: Solution
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,18 +84,19 @@ class EffectModel:
     calibration: ChainCalibration
     rows: MeasurementSet
     row_weight: np.ndarray
-    inputs: Any
+    inputs: EffectInputs
     sigma_pos: float
     sigma_rot: float | None
-    models: dict = field(default_factory=dict)
+    models: dict[tuple[ParameterSlot, ...], SensitivityModel] = field(default_factory=dict)
 
     @classmethod
     def of(cls, chain: KinematicChain, calibration: ChainCalibration, rows: MeasurementSet, row_weight: np.ndarray,
-           inputs: Any) -> EffectModel:
+           inputs: EffectInputs) -> EffectModel:
         """The model of ``calibration`` with no effect yet, at its noise scales."""
         return cls(chain, calibration, rows, row_weight, inputs, calibration.sigma_pos_m, calibration.sigma_rot_rad)
 
-    def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None, inputs=None) -> FitProblem:
+    def problem(self, effects: Sequence[Effect], data: MeasurementSet | None = None,
+                inputs: EffectInputs | None = None) -> FitProblem:
         data = self.rows if data is None else data
         weight = self.row_weight if data is self.rows else np.ones(data.n_rows)
         assert self.calibration.start is not None  # calibrate_chain always sets it
@@ -101,13 +112,14 @@ class EffectModel:
         )
         return problem
 
-    def reestimated(self, objective: SensorResidual | PriorResidual, solution) -> EffectModel:
+    def reestimated(self, objective: FitObjective, solution: Solution) -> EffectModel:
         """This model at the noise scales of a fit's residuals (maximum likelihood)."""
         problem = self.problem(objective.effects).rescaled(objective, solution)
         return replace(self, sigma_pos=problem.sigma_pos, sigma_rot=problem.sigma_rot)
 
     def fit(self, effects: Sequence[Effect], x_start: np.ndarray, values_start: Sequence[np.ndarray],
-            max_evaluations: int | None = None, tolerance: float | None = None, chunk: int | None = None):
+            max_evaluations: int | None = None, tolerance: float | None = None, chunk: int | None = None
+            ) -> tuple[FitObjective, Solution]:
         """Fit geometry, registration, target and ``effects`` from a start: at most ``max_evaluations``, or
         in chunks of ``chunk`` while they gain (:func:`fit_while_gaining`)."""
         problem = self.problem(effects)
@@ -124,7 +136,7 @@ class EffectModel:
         return objective, solution
 
 
-def pose_errors_of(objective: SensorResidual | PriorResidual, x: np.ndarray) -> PoseErrors:
+def pose_errors_of(objective: FitObjective, x: np.ndarray) -> PoseErrors:
     """Point errors (and orientation errors with 6D data) of a fit on its own rows (eq 24)."""
     position = np.linalg.norm(objective.predicted_points(x) - objective.g, axis=2)
     rotation = None
@@ -135,9 +147,9 @@ def pose_errors_of(objective: SensorResidual | PriorResidual, x: np.ndarray) -> 
     return PoseErrors(position_m=position, rotation_rad=rotation)
 
 
-def heldout_errors(model: EffectModel, objective: SensorResidual | PriorResidual, x: np.ndarray,
+def heldout_errors(model: EffectModel, objective: FitObjective, x: np.ndarray,
                    heldout: MeasurementSet | None,
-                   held_inputs) -> PoseErrors | None:
+                   held_inputs: EffectInputs | None) -> PoseErrors | None:
     """The errors of the fit (``objective`` at ``x``) on held-out rows (None without them), each in its
     calibrated session's registration."""
     if heldout is None:

@@ -19,16 +19,20 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg
 
-from pincal.fit.prior import hat_diagonal
+from pincal.fit.prior import PriorResidual, hat_diagonal
 from pincal.fit.selection import information_criterion
 from pincal.fit.solver import Solution, gram, thin_qr
 from pincal.model.effects import Effect
 from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
-    "SCREEN_MARGIN", "SCREEN_CONDITION", "SCREEN_INSEPARABLE", "Score", "Linearisation", "screen", "may_reach",
-    "n_prior_rows", "GENERIC_NOT_RUN", "residual_freedom", "testable", "bic",
+    "FitObjective", "SCREEN_MARGIN", "SCREEN_CONDITION", "SCREEN_INSEPARABLE", "Score", "Linearisation", "screen",
+    "may_reach", "n_prior_rows", "GENERIC_NOT_RUN", "residual_freedom", "testable", "bic",
 ]
+
+#: The objective of an effect fit: the sensor residual, with the prior rows of eq P1 appended under
+#: ``--select prior`` (:class:`pincal.fit.prior.PriorResidual`, which answers for it otherwise).
+FitObjective = SensorResidual | PriorResidual
 
 #: A screened candidate may reach a cut unless its linearised ΔBIC is worse by more
 #: than SCREEN_MARGIN[0] + SCREEN_MARGIN[1] · |ΔBIC| (the linearisation error, with room).
@@ -97,7 +101,7 @@ class Linearisation:
         return scores
 
 
-def screen(objective: SensorResidual, solution: Solution, effects: Sequence[Effect],
+def screen(objective: FitObjective, solution: Solution, effects: Sequence[Effect],
            current_bic: float) -> list[tuple[Effect, Score]]:
     """The linearised test of adding each effect to the fit (``objective`` at
     ``solution``), best first; equal scores keep the order of ``effects``."""
@@ -111,7 +115,7 @@ def may_reach(linear_delta: float, cut: float) -> bool:
     return linear_delta - (SCREEN_MARGIN[0] + SCREEN_MARGIN[1] * abs(linear_delta)) <= cut
 
 
-def n_prior_rows(objective) -> int:
+def n_prior_rows(objective: FitObjective) -> int:
     """Rows of the prior in ``objective``'s residual (0 without ``--select prior``)."""
     return int(getattr(objective, "n_prior", 0))
 
@@ -122,7 +126,7 @@ GENERIC_NOT_RUN = ("the generic joint-angle check (linear + harmonics per joint)
                    "residual degrees of freedom to test it; add rows")
 
 
-def residual_freedom(objective, solution: Solution) -> tuple[int, float]:
+def residual_freedom(objective: FitObjective, solution: Solution) -> tuple[int, float]:
     """(m, d) of a fit: its data rows m and residual degrees of freedom d = m − tr H (m − n without
     a prior; under ``--select prior`` the hat matrix's trace, eq P2 of :mod:`pincal.fit.prior`)."""
     n_prior = n_prior_rows(objective)

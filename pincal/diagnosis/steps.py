@@ -26,10 +26,11 @@ import numpy as np
 
 from pincal.diagnosis.conditions import ConditionSearch
 from pincal.diagnosis.conventions import ConventionTrial, adopted_trial, convention_for
-from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
+from pincal.diagnosis.effect_fits import CandidateFit, EffectModel, heldout_errors, pose_errors_of
 from pincal.diagnosis.screening import (
     SCREEN_CONDITION,
     SCREEN_INSEPARABLE,
+    FitObjective,
     Score,
     bic,
     may_reach,
@@ -51,7 +52,6 @@ from pincal.model.chain import KinematicChain
 from pincal.model.effect_units import shift_unit
 from pincal.model.effects import Effect, EffectInputs, effect_inputs
 from pincal.progress import Counter
-from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "NAMING_EVALUATIONS", "Step", "CandidateFit", "Trial", "Search",
@@ -104,16 +104,6 @@ class Step:
     convention: ReadingCoupling | None = None
 
 
-class CandidateFit(NamedTuple):
-    """A candidate's full fit beside the geometry: its ΔBIC against the fit it extends, the effect, the objective
-    of the adopted effects and it (``effect`` last), its solution (the tuple :meth:`Judge.rank` ranks)."""
-
-    delta_bic: float
-    effect: Effect
-    objective: SensorResidual
-    solution: Solution
-
-
 @dataclass(frozen=True)
 class Trial:
     """What fitting a candidate gave: its ``fit``, or None — too many values for the residual degrees of freedom
@@ -158,7 +148,7 @@ class State:
 
     model: EffectModel
     held_inputs: EffectInputs | None
-    objective: SensorResidual
+    objective: FitObjective
     solution: Solution
     bic: float
     adopted: tuple[Effect, ...] = ()
@@ -195,7 +185,7 @@ class Refitted(NamedTuple):
 
     model: EffectModel
     held_inputs: EffectInputs | None
-    objective: SensorResidual
+    objective: FitObjective
     solution: Solution
 
 
@@ -293,7 +283,7 @@ def refit(state: State, fit: CandidateFit) -> Refitted:
     return Refitted(model, state.held_inputs, obj, sol)
 
 
-def placements_of(calibration: ChainCalibration, objective: SensorResidual, x: np.ndarray) -> Sequence[np.ndarray]:
+def placements_of(calibration: ChainCalibration, objective: FitObjective, x: np.ndarray) -> Sequence[np.ndarray]:
     """The chain placements (4×4 each) of the geometry of a fit of ``calibration``'s parameters at ``x``."""
     if calibration.params is None:
         return calibration.chain_placements

@@ -10,13 +10,26 @@ effect, its component-plus-residual against its driver, for the plots.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
-from pincal.diagnosis.screening import SCREEN_CONDITION, Linearisation, bic, may_reach, n_prior_rows, testable
+from pincal.diagnosis.effect_fits import EffectModel
+from pincal.diagnosis.screening import (
+    SCREEN_CONDITION,
+    FitObjective,
+    Linearisation,
+    bic,
+    may_reach,
+    n_prior_rows,
+    testable,
+)
 from pincal.diagnosis.verdicts import EVIDENCE
 from pincal.errors import CalibrationError
+from pincal.fit.solver import Solution
+from pincal.model.chain import KinematicChain
 from pincal.model.effect_units import load_unit, shift_unit
-from pincal.model.effects import HARMONICS, JOINT_EFFECTS, Effect, joint_basis
+from pincal.model.effects import HARMONICS, JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 
 __all__ = ["GENERIC_EVALUATIONS", "remaining_structure", "partial_residual"]
 
@@ -27,7 +40,8 @@ __all__ = ["GENERIC_EVALUATIONS", "remaining_structure", "partial_residual"]
 GENERIC_EVALUATIONS = 20
 
 
-def remaining_structure(model, adopted, objective, solution, chain, freedom) -> str | None:
+def remaining_structure(model: EffectModel, adopted: list[Effect], objective: FitObjective, solution: Solution,
+                        chain: KinematicChain, freedom: tuple[int, float]) -> str | None:
     """Fit a generic joint-space correction per joint; report strong evidence of structure
     (``model``: the search's model, whose ``fit(effects, x0, values, max_evaluations)`` refits).
 
@@ -77,7 +91,7 @@ _DRIVERS = {
 }
 
 
-def _load_label(chain, driver: str | None, joint: str) -> str:
+def _load_label(chain: KinematicChain, driver: str | None, joint: str) -> str:
     """The axis label of a gravity load: a joint's own (``driver`` None) or ``driver``'s, a torque [N·m] of
     a revolute joint, a force [N] of a prismatic one (:mod:`pincal.model.effect_units`)."""
     force = chain.joint_kinds[joint if driver is None else driver] == "prismatic"
@@ -85,20 +99,22 @@ def _load_label(chain, driver: str | None, joint: str) -> str:
     return f"{'gravity force' if force else 'gravity torque'} {subject} [{load_unit(force)}]"
 
 
-def partial_residual(effect, objective, solution, inputs, chain):
+def partial_residual(effect: Effect, objective: FitObjective, solution: Solution, inputs: EffectInputs,
+                     chain: KinematicChain) -> tuple[np.ndarray | None, str, np.ndarray | None, np.ndarray | None]:
     """Component-plus-residual of a joint effect: per row, the fitted shift plus the
     remaining residual of the fit expressed as a shift of that joint (least
     squares on the joint's Jacobian column), against the effect's driver."""
     if effect.type not in JOINT_EFFECTS:
         return None, "", None, None
-    j = chain.joint_names.index(effect.joint)
+    joint = cast(str, effect.joint)  # every joint effect names its joint
+    j = chain.joint_names.index(joint)
     basis = joint_basis(effect, inputs, j)
     fitted = basis @ solution.x[objective.effect_slices[-1]]
     _, sens, target, world = objective.state(solution.x)
     residual = objective.predicted_points(solution.x) - objective.g  # (K, P, 3)
     omega, _ = objective.row_frames(target)  # (3, 3), or (K, 3, 3) with several sessions
 
-    def sensed(v):  # base-frame velocities (K, 3) in each row's sensor frame
+    def sensed(v: np.ndarray) -> np.ndarray:  # base-frame velocities (K, 3) in each row's sensor frame
         return v @ omega.T if omega.ndim == 2 else np.einsum("kij,kj->ki", omega, v)
 
     column = np.stack([sensed(sens.joint_point_velocity(world[:, p, :])[:, j, :])
@@ -107,13 +123,13 @@ def partial_residual(effect, objective, solution, inputs, chain):
     r = residual.reshape(len(residual), -1)
     shift = fitted - np.einsum("ki,ki->k", a, r) / np.maximum(np.einsum("ki,ki->k", a, a), 1e-300)
     if effect.type == "backlash" and effect.source == "gravity":  # shift = value · sign(tau_j): a step at 0
-        driver, label = inputs.gravity[:, j], _load_label(chain, None, effect.joint)
+        driver, label = inputs.gravity[:, j], _load_label(chain, None, joint)
     elif effect.type == "backlash":
         driver, label = basis[:, 0], "approach direction (flank: −1 from above, +1 from below)"
     elif effect.type == "compliance":  # its own torque, or its driver's (a gravity-torque coupling)
-        driver, label = basis[:, 0], _load_label(chain, effect.driver, effect.joint)
+        driver, label = basis[:, 0], _load_label(chain, effect.driver, joint)
     elif effect.type == "coupling":
-        reading = shift_unit(chain.joint_kinds[effect.driver] == "prismatic")
+        reading = shift_unit(chain.joint_kinds[cast(str, effect.driver)] == "prismatic")  # a coupling names it
         driver, label = basis[:, 0], f"reading of {effect.driver} [{reading}]"
     else:
         driver, label = inputs.q[:, j], _DRIVERS[effect.type]

@@ -32,7 +32,7 @@ from typing import cast
 import numpy as np
 
 from pincal.diagnosis.ambiguity import ambiguity_words
-from pincal.diagnosis.effect_fits import pose_errors_of
+from pincal.diagnosis.effect_fits import CandidateFit, pose_errors_of
 from pincal.diagnosis.held_out import (
     HELD_OUT_LEVEL,
     HELD_OUT_Z,
@@ -41,13 +41,14 @@ from pincal.diagnosis.held_out import (
     fitted_scales,
     held_out_verdict,
 )
+from pincal.diagnosis.screening import FitObjective
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import standard_deviations
+from pincal.fit.solver import Solution
 from pincal.model.chain import KinematicChain
 from pincal.model.effect_units import effect_unit
 from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis
 from pincal.model.thermal import implausible
-from pincal.residuals.sensor import SensorResidual
 
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "REJECTED",
@@ -112,6 +113,18 @@ SHOWN = 8
 REJECTED = "; reported, not adopted"
 
 
+#: A candidate judged among those that correct the same poses alike: the effect, and its fit's objective and
+#: solution (None: not fitted in full).
+Member = tuple[Effect, "FitObjective | None", "Solution | None"]
+
+
+def _fit_of(member: Member) -> tuple[FitObjective, Solution]:
+    """A member's fit: every candidate the held-out rows judge was fitted in full."""
+    _, objective, solution = member
+    assert objective is not None and solution is not None
+    return objective, solution
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One effect tried at one step.
@@ -159,7 +172,7 @@ def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> boo
     return bool(magnitude <= limit)
 
 
-def _largest_change(objective: SensorResidual, x: np.ndarray) -> float:
+def _largest_change(objective: FitObjective, x: np.ndarray) -> float:
     """The largest change the last effect of ``objective`` makes to a measured coordinate at ``x``,
     in units of that coordinate's noise (the whitened residual's columns times the effect's values),
     the noise taken as at least :data:`NOISE_FLOOR`."""
@@ -199,14 +212,14 @@ class TargetChange:
             text += f", turns it {1e3 * self.rms_rad:.3g} mrad RMS ({1e3 * self.max_rad:.3g} at most)"
         return text
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, float]:
         """REPORT.json ``target_change`` of an effect: mm and mrad."""
         mrad = ({} if self.rms_rad is None or self.max_rad is None
                 else {"rms_mrad": 1e3 * self.rms_rad, "max_mrad": 1e3 * self.max_rad})
         return {"rms_mm": 1e3 * self.rms_m, "max_mm": 1e3 * self.max_m, **mrad}
 
 
-def target_changes(objective: SensorResidual, x: np.ndarray) -> list[TargetChange]:
+def target_changes(objective: FitObjective, x: np.ndarray) -> list[TargetChange]:
     """The :class:`TargetChange` of each effect of ``objective`` at ``x``: the measured rows' residual at ``x``
     against the residual with that effect's values zeroed, the rows' weights undone (metres; the
     orientation residuals' difference [rad])."""
@@ -252,8 +265,8 @@ class Judge:
     """
 
     def __init__(self, inputs: EffectInputs, chain: KinematicChain,
-                 held_errors: Callable[[SensorResidual, np.ndarray], PoseErrors] | None,
-                 current_objective: SensorResidual, current_x: np.ndarray,
+                 held_errors: Callable[[FitObjective, np.ndarray], PoseErrors] | None,
+                 current_objective: FitObjective, current_x: np.ndarray,
                  noise: tuple[float, float | None] = (1.0, None), stated_pos: float | None = None,
                  catalogue: Sequence[Effect] = ()) -> None:
         self.inputs, self.chain, self._held_errors, self.noise = inputs, chain, held_errors, noise
@@ -267,7 +280,7 @@ class Judge:
         self._held: dict[Effect, PoseErrors] = {}
         self._before: PoseErrors | None = None
 
-    def held(self, effect: Effect, objective: SensorResidual, x: np.ndarray) -> float | None:
+    def held(self, effect: Effect, objective: FitObjective, x: np.ndarray) -> float | None:
         """Held-out RMS [mm] of a candidate's fit (its errors computed once per candidate)."""
         if self._held_errors is None:
             return None
@@ -290,11 +303,15 @@ class Judge:
             self._before = self._held_errors(self.current_objective, self.current_x)
         return self._before
 
-    def rank(self, tried):
+    def rank(self, tried: Sequence[CandidateFit]
+             ) -> tuple[list[Candidate], CandidateFit | None, dict[str, str], float]:
         """(ranking, chosen, rejected notes, cut): ``tried`` holds (ΔBIC, effect,
         objective, solution) best first; the ranking covers the candidates shown
         and judged. Any candidate whose ΔBIC is above ``cut`` would change none of it."""
-        ranking, chosen, rejected, compared = [], None, {}, []
+        ranking: list[Candidate] = []
+        chosen: CandidateFit | None = None
+        rejected: dict[str, str] = {}
+        compared: list[float] = []
         fits = {t[1]: t for t in tried}
         for rank, (delta, effect, obj, sol) in enumerate(tried):
             if rank >= SHOWN and (chosen is not None or delta >= EVIDENCE):
@@ -336,8 +353,9 @@ class Judge:
             cut = max(cut, chosen[0])
         return ranking, chosen, rejected, cut
 
-    def judged(self, effect, value, delta, tried, compared: list, objective=None, solution=None,
-               std=None) -> tuple[str, Effect | None]:
+    def judged(self, effect: Effect, value: np.ndarray, delta: float, tried: Sequence[CandidateFit],
+               compared: list[float], objective: FitObjective | None = None, solution: Solution | None = None,
+               std: np.ndarray | None = None) -> tuple[str, Effect | None]:
         """(verdict, the candidate to adopt): 'adopted' and ``effect``, or why the best significant candidate is
         not adopted and the one that corrects the same poses alike adopted instead, or None (``compared`` gains
         ``delta`` when the candidate was compared with its competitors; ``objective`` and ``solution``: the
@@ -376,12 +394,13 @@ class Judge:
         return self._verdicts[effect] + (f"; the held-out test refuses {others} too (the same correction)"
                                          if others else ""), None
 
-    def _held_out(self, effect: Effect, objective, solution) -> str:
+    def _held_out(self, effect: Effect, objective: FitObjective | None, solution: Solution | None) -> str:
         """The held-out test's verdict of a candidate's fit (:func:`held_out_verdict`, judged in the noise of the
         current model and of its own fit, :meth:`judged_noise`), once per candidate; 'adopted' without held-out
         rows."""
         if self._held_errors is None:
             return "adopted"
+        assert objective is not None and solution is not None  # a candidate the held-out rows judge was fitted
         if effect not in self._verdicts:
             self.held(effect, objective, solution.x)
             fitted = () if objective is None else (fitted_scales(pose_errors_of(objective, solution.x)),)
@@ -389,7 +408,7 @@ class Judge:
                                                       *self.judged_noise(*fitted))
         return self._verdicts[effect]
 
-    def _decision(self, members) -> tuple[Effect | None, str]:
+    def _decision(self, members: Sequence[Member]) -> tuple[Effect | None, str]:
         """The candidate taken of a group that corrects the same poses alike ((effect, objective, solution) each)
         and why: the most preferred (:meth:`_preference`) that the held-out test adopts (:meth:`_held_out`), else
         None; the others are the taken's alternatives. The first candidate judged of a group decides it, and the
@@ -420,7 +439,8 @@ class Judge:
                 f"poses cannot tell them apart, and {taken.label} is preferred ({self._ambiguous[taken][2]})"
                 + ("" if own == "adopted" else f"; this one: {own}"))
 
-    def _unphysical(self, effect, value, std, objective, solution) -> str | None:
+    def _unphysical(self, effect: Effect, value: np.ndarray, std: np.ndarray | None, objective: FitObjective | None,
+                    solution: Solution | None) -> str | None:
         """Why a candidate cannot be adopted whatever its competitors (out of physical range, too small to matter,
         acting as an offset), or None."""
         reason = None if std is None else implausible(effect, value, std)
@@ -429,7 +449,7 @@ class Judge:
         if not _plausible(effect, value, self.chain):
             return (f"its value {np.round(value, 6).tolist()} is outside the physical range "
                     "(a stand-in for something else)")
-        if objective is not None:
+        if objective is not None and solution is not None:  # fitted in full (given together)
             largest = _largest_change(objective, solution.x)
             if largest < NEGLIGIBLE:
                 return (f"it changes no measured coordinate by more than {largest:.2g} of its noise (below "
@@ -439,15 +459,16 @@ class Judge:
             return "its basis barely changes over the rows, so it acts as a joint offset"
         return None
 
-    def _preference(self, members) -> tuple[list, str]:
+    def _preference(self, members: Sequence[Member]) -> tuple[list[Member], str]:
         """Candidates that correct the same poses alike, (effect, objective, solution) each, in the order they are
         preferred, and why the first: with held-out rows by the sum of their errors there in noise units
         (:func:`row_changes`' units, the noise of the group's fits, :meth:`judged_noise`), else the simpler first:
         fewer values, then the catalogue's order."""
         if self._held_errors is not None:
-            sigma_pos, sigma_rot = self.judged_noise(*(fitted_scales(pose_errors_of(o, x.x)) for _, o, x in members))
+            fits = [_fit_of(member) for member in members]
+            sigma_pos, sigma_rot = self.judged_noise(*(fitted_scales(pose_errors_of(o, x.x)) for o, x in fits))
             scores = []
-            for effect, objective, solution in members:
+            for (effect, _, _), (objective, solution) in zip(members, fits):
                 self.held(effect, objective, solution.x)
                 errors = self._held[effect]
                 scores.append(float(np.sum(errors.position_m)) / sigma_pos + (

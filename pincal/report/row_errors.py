@@ -30,6 +30,7 @@ calibration starts from.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -39,8 +40,8 @@ from pincal.fit.outliers import robust_scores
 from pincal.fit.registration import register_orientations, register_points
 from pincal.fit.sessions import session_pose_errors, session_rows
 from pincal.measurements.data import MeasurementSet, default_session_name
-from pincal.report.model import Finding, RowErrorModel, RowErrorSet, errors_json
-from pincal.report.model_evaluation import DriftUse, EvaluatedSession, EvaluationBefore, PauseStepUse, ThermalUse
+from pincal.report.model import RowErrorModel, RowErrorSet, errors_json
+from pincal.report.model_evaluation import EvaluationJson
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "NOMINAL", "CALIBRATED", "WITH_EFFECTS", "row_error_set", "chain_row_errors", "paper_row_errors",
-    "diagnosis_row_errors", "evaluation_document",
+    "diagnosis_row_errors", "EvaluatedRows", "evaluation_document",
 ]
 
 NOMINAL = "nominal geometry"
@@ -163,32 +164,39 @@ def diagnosis_row_errors(
     return sets
 
 
+@dataclass(frozen=True)
+class EvaluatedRows:
+    """The rows ``evaluate`` was run on, one entry each: its file line, file and session (in the data)."""
+
+    lines: Sequence[int] = ()
+    files: Sequence[str] | None = None
+    sessions: Sequence[str] | None = None
+
+
 def evaluation_document(
-    urdf: str, data: str, errors: PoseErrors, lines: Sequence[int], skipped_cpa: int = 0,
-    files: Sequence[str] | None = None, sessions: Sequence[str] | None = None,
-    registrations: Sequence[EvaluatedSession] = (), drift: DriftUse | None = None,
-    thermal: ThermalUse | None = None, pause_steps: PauseStepUse | None = None,
-    warnings: Sequence[Finding] = (), before: EvaluationBefore | None = None,
+    urdf: str, data: str, errors: PoseErrors, document: EvaluationJson, rows: EvaluatedRows | None = None,
 ) -> dict[str, Any]:
     """What ``evaluate --html`` shows beside the report: the evaluated files, the eq 24
-    summary (as ``evaluate --json`` writes it), the evaluated rows by file line (and
-    each row's file and session), and ``sessions``: each evaluated session's entry of
-    ``evaluate --json`` (its registration's source, ``registration_reestimated``,
-    ``residuals`` and ``registration_dof``); ``drift``: how the report's drift was
-    applied (``evaluate --json`` ``drift``), or None; ``thermal`` / ``pause_steps``: how its thermal
-    expansion and pause steps were (``evaluate --json``'s keys), or None; ``warnings``: its plausibility
-    findings (``evaluate --json`` ``warnings``); ``before``: the nominal URDF on these rows, registered to
-    them (``evaluate --json`` ``before``), or None."""
+    summary (as ``evaluate --json`` writes it), the evaluated ``rows`` by file line (and
+    each row's file and session), and from ``document`` (``evaluate --json``'s): ``sessions``, each
+    evaluated session's entry (its registration's source, ``registration_reestimated``,
+    ``residuals`` and ``registration_dof``); ``drift``: how the report's drift was applied, or None;
+    ``thermal`` / ``pause_steps``: how its thermal expansion and pause steps were, where applied;
+    ``warnings``: its plausibility findings; ``before``: the nominal URDF on these rows, registered to
+    them, where known; ``skipped_cpa_rows``."""
+    before, thermal, pause_steps = document.get("before"), document.get("thermal"), document.get("pause_steps")
+    rows = EvaluatedRows() if rows is None else rows
+    lines = rows.lines
     return {
-        "warnings": list(warnings),
+        "warnings": list(document.get("warnings", [])),
         **({} if before is None else {"before": before}),
-        "drift": drift,
+        "drift": document["drift"],
         **({} if thermal is None else {"thermal": thermal}),
         **({} if pause_steps is None else {"pause_steps": pause_steps}),
         "urdf": urdf,
         "data": data,
-        "errors": {**errors.as_dict(), "skipped_cpa_rows": skipped_cpa},
-        "sessions": list(registrations),
-        "row_errors": ([row_error_set("evaluated", data, lines, [("reported model", errors)], files, sessions)]
-                       if len(lines) else []),
+        "errors": {**errors.as_dict(), "skipped_cpa_rows": document["skipped_cpa_rows"]},
+        "sessions": list(document["sessions"]),
+        "row_errors": ([row_error_set("evaluated", data, lines, [("reported model", errors)], rows.files,
+                                      rows.sessions)] if len(lines) else []),
     }

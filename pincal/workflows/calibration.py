@@ -35,7 +35,15 @@ from pincal.report.sessions import session_entries, session_errors
 from pincal.workflows.evaluation import SessionEvaluation
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.settings import CalibrateSettings, expect
-from pincal.workflows.verdict import Verdict, diagnose_command, judged, unmodelled_notes, withhold, write_checked_urdf
+from pincal.workflows.verdict import (
+    UrdfWrite,
+    Verdict,
+    diagnose_command,
+    judged,
+    unmodelled_notes,
+    withhold,
+    write_checked_urdf,
+)
 
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
     from pincal.fit.level_choice import LevelChoice
@@ -108,7 +116,8 @@ def calibrate_files(
     ``progress(done, total)`` counts the fits of those levels (:mod:`pincal.progress`).
     """
     expect(settings, CalibrateSettings, "calibrate_files")
-    level, tool_pose, xacro_args = settings.level, settings.tool_pose, settings.xacro_args
+    level: str = settings.level  # "auto" becomes the level cross-validation chooses
+    tool_pose, xacro_args = settings.tool_pose, settings.xacro_args
     sigma_column, reject_outliers, selection = settings.sigma_column, settings.reject_outliers, settings.criterion
     tool_parent, method = settings.tip_link, settings.paper_method
     urdf, data_paths = Path(urdf), input_paths(data_path)
@@ -185,11 +194,11 @@ def calibrate_files(
         what = f"level {level}"
         if choice is not None:
             what += ", chosen by --level auto"
-    reload_error, urdf_sha256 = write_checked_urdf(
-        urdf, out_urdf, chain, placements, nominal_placements, data.q,
-        f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and {', '.join(p.name for p in data_paths)}. "
-        "Registration and tool: see the report.", xacro_args, keep=not verdict.withheld,
-    )
+    comment = (f"Calibrated by pincal {__version__} ({what}) from {urdf.name} and "
+               f"{', '.join(p.name for p in data_paths)}. Registration and tool: see the report.")
+    reload_error, urdf_sha256 = write_checked_urdf(UrdfWrite(urdf, out_urdf, comment, xacro_args,
+                                                             keep=not verdict.withheld),
+                                                   chain, placements, nominal_placements, data.q)
     if verdict.withheld:
         removed = withhold(out_urdf)
         notes, report_notes = notes + removed, report_notes + removed

@@ -9,9 +9,10 @@ held rows, and counted in ``--json`` (``thermal``, ``pause_steps``).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import cast
+from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -51,9 +52,9 @@ class AppliedConditions:
     notes: tuple[str, ...] = ()
 
 
-def applied_conditions(parsed: Sequence[tuple[Effect, np.ndarray]], effects: dict, data: MeasurementSet,
+def applied_conditions(parsed: Sequence[tuple[Effect, np.ndarray]], effects: Mapping[str, Any], data: MeasurementSet,
                        held: tuple[np.ndarray, np.ndarray], temperature_name: str | None,
-                       report_path) -> AppliedConditions:
+                       report_path: str | Path) -> AppliedConditions:
     """The :class:`AppliedConditions` of the report's effects ``parsed`` (its keys ``effects``) on ``data``;
     ``held`` = (each row's reported session name, or None for a re-estimated registration; each row's evaluated
     session) as for a drift; ``temperature_name``: ``--temperature-column`` (None: the report's).
@@ -77,8 +78,8 @@ def applied_conditions(parsed: Sequence[tuple[Effect, np.ndarray]], effects: dic
     return AppliedConditions(conditions, thermal, pause_steps, tuple(notes))
 
 
-def _thermal(notes: list[str], alpha: float, effects: dict, data: MeasurementSet, name: str | None,
-             report_path) -> tuple[np.ndarray, ThermalUse]:
+def _thermal(notes: list[str], alpha: float, effects: Mapping[str, Any], data: MeasurementSet, name: str | None,
+             report_path: str | Path) -> tuple[np.ndarray, ThermalUse]:
     """α (T_k − T_ref) of each row, held inside the fitted range, and its use; ``notes`` gains its note."""
     fitted = TemperatureRange.read(effects.get("temperature_range_c"), str(report_path))
     name = name or effects.get("temperature_column")
@@ -102,8 +103,9 @@ def _thermal(notes: list[str], alpha: float, effects: dict, data: MeasurementSet
     return alpha * change, use
 
 
-def _steps(notes: list[str], stepping, effects: dict, data: MeasurementSet, held,
-           report_path) -> tuple[np.ndarray, PauseStepUse]:
+def _steps(notes: list[str], stepping: Sequence[tuple[Effect, np.ndarray]], effects: Mapping[str, Any],
+           data: MeasurementSet, held: tuple[np.ndarray, np.ndarray], report_path: str | Path
+           ) -> tuple[np.ndarray, PauseStepUse]:
     """d_k of each row (K, 3) [m] (:data:`NEAREST_SEGMENT`) and its use; ``notes`` gains its note."""
     where = str(report_path)
     pauses = Pause.read(effects.get("pauses"), where)

@@ -41,7 +41,7 @@ from pincal.workflows.paths import (
     refuse_overwrite_matching,
 )
 from pincal.workflows.settings import DiagnoseSettings, expect
-from pincal.workflows.verdict import judged, unmodelled_notes, withhold, write_checked_urdf
+from pincal.workflows.verdict import UrdfWrite, judged, unmodelled_notes, withhold, write_checked_urdf
 
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
     from pincal.diagnosis.diagnose import Diagnosis
@@ -83,11 +83,12 @@ def diagnose_files(
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
     expect(settings, DiagnoseSettings, "diagnose_files")
-    tip_link, level, tool_pose, xacro_args = settings.tip_link, settings.level, settings.tool_pose, settings.xacro_args
+    tip_link, tool_pose, xacro_args = settings.tip_link, settings.tool_pose, settings.xacro_args
+    level: str = settings.level  # "auto" becomes the level cross-validation chooses
     sigma_column, selection, payload_kg = settings.sigma_column, settings.criterion, settings.payload_kg
     time_column_name, sigma_pos_m = settings.time_column, settings.sigma_pos_m
     from pincal.diagnosis.conditions import read_readings
-    from pincal.diagnosis.diagnose import diagnose
+    from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
     from pincal.fit.level_choice import choose_level
 
     urdf, data_paths, out_urdf, report_path = Path(urdf), input_paths(data_path), Path(out_urdf), Path(report_path)
@@ -113,21 +114,21 @@ def diagnose_files(
     nominal_placements = chain.placements()
     stages = Stages(progress)
     choice = None
-    options = ChainFitOptions(tool_known=tool_pose is not None, sigma_column=sigma_column, selection=selection)
+    fit_options = ChainFitOptions(tool_known=tool_pose is not None, sigma_column=sigma_column, selection=selection)
     if level == "auto":  # the geometric level by cross-validation of the geometric calibration
-        choice = choose_level(chain, data, options, progress=stages.next())
+        choice = choose_level(chain, data, fit_options, progress=stages.next())
         level = choice.chosen
     # the geometric calibration, made again by diagnose on readings it corrects (a joint read against another);
     # the level: registration, offsets or full (refused above otherwise), or the one auto chose
     recalibrate = partial(calibrate_chain, chain, level=cast(ChainLevel, level),
-                          options=replace(options, refit_offered=False))
+                          options=replace(fit_options, refit_offered=False))
     calibration = recalibrate(data, progress=stages.next())
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
-    diagnosis = diagnose(chain, calibration, data, heldout=heldout, sigma_column=sigma_column,
-                         payload_kg=payload_kg, time=row_time, heldout_time=held_time, progress=stages.next(),
-                         readings=readings, recalibrate=recalibrate, couplings=settings.couplings,
-                         stated_sigma_pos_m=sigma_pos_m)
+    options = DiagnoseOptions(sigma_column=sigma_column, payload_kg=payload_kg, time=row_time, heldout_time=held_time,
+                              readings=readings, recalibrate=recalibrate, couplings=settings.couplings,
+                              stated_sigma_pos_m=sigma_pos_m)
+    diagnosis = diagnose(chain, calibration, data, heldout, options, progress=stages.next())
     # the final model: on the readings corrected by the conventions diagnose found, from their calibration
     data, calibration = apply_couplings(data, diagnosis.couplings), diagnosis.calibration or calibration
     heldout = None if heldout is None else apply_couplings(heldout, diagnosis.couplings)
@@ -137,13 +138,11 @@ def diagnose_files(
         verdict = judged(chain, data_paths, calibration_findings(chain, final, used, sigma_column, sigma_pos_m,
                                                                  press_of=calibration, diagnosed=True), settings.force)
         notes += verdict.notes + unmodelled_notes(final, reach_m(chain, used.q), sigma_pos_m)
-    _, urdf_sha256 = write_checked_urdf(
-        urdf, out_urdf, chain, final.chain_placements, nominal_placements, data.q,
-        f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
-        f"{', '.join(p.name for p in data_paths)}. "
-        "Registration, tool and effects (which a URDF cannot carry): see the report.", xacro_args,
-        keep=not verdict.withheld,
-    )
+    comment = (f"Calibrated by pincal {__version__} (diagnose, level {level}) from {urdf.name} and "
+               f"{', '.join(p.name for p in data_paths)}. "
+               "Registration, tool and effects (which a URDF cannot carry): see the report.")
+    _, urdf_sha256 = write_checked_urdf(UrdfWrite(urdf, out_urdf, comment, xacro_args, keep=not verdict.withheld),
+                                        chain, final.chain_placements, nominal_placements, data.q)
     if verdict.withheld:
         notes += withhold(out_urdf)
     sources: Sources = {"urdf": str(urdf),

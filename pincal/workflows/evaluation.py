@@ -44,9 +44,10 @@ refused when a re-estimated session has fewer than :data:`MIN_THRESHOLD_DOF`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -88,6 +89,9 @@ MIN_THRESHOLD_DOF = 6
 #: The session a report without ``sessions`` holds a drift in: no session name (not None, which is
 #: a re-estimated registration): :func:`drift_offsets` takes the span nearest the rows (its only one).
 THE_REGISTRATION = ""
+#: One session of the evaluated rows as the module's rule plans it: its name, its rows, and (source, Registration 1,
+#: Registration 2, reported session name) of the reported registration it uses, or None: re-estimated.
+SessionPlan = tuple[str, np.ndarray, "tuple[str, Registration, Registration, str] | None"]
 #: How rows outside the fitted time spans are evaluated (``drift.held_rule`` in ``--json``).
 HELD_DRIFT = ("drift not extrapolated: a row outside the time span it was fitted on in its registration's session "
               "uses the drift at that session's mean time (no drift term for a one-session fit); a re-estimated "
@@ -272,10 +276,12 @@ def evaluate_files(
                 sigma_pos_m=sigma_pos_mm / 1000.0 if sigma_pos_mm else 1e-3,
                 sigma_rot_rad=np.radians(sigma_rot_deg) if sigma_rot_deg else 1e-3,
             )
-            reported = (REESTIMATED, registration, registration)
-        sources.append(reported[0])
-        positions.append(reported[1])
-        orientations.append(reported[2])
+            used = (REESTIMATED, registration, registration)
+        else:
+            used = reported[:3]
+        sources.append(used[0])
+        positions.append(used[1])
+        orientations.append(used[2])
     errors = session_pose_errors(chain, data, index, positions, orientations, points=report.points,
                                  target_rotation=report.rotation, corrections=corrections)
     per_row = 3 * data.n_points + (3 if data.has_orientation else 0)  # scalar residuals of a row
@@ -314,7 +320,7 @@ def _check_pair(description: RobotDescription, urdf: str | Path, report: ReportM
 
 
 def _nominal_rms(report: ReportModel, report_path: str | Path, data: MeasurementSet,
-                 xacro_args) -> tuple[float | None, str | None]:
+                 xacro_args: Sequence[tuple[str, str]]) -> tuple[float | None, str | None]:
     """The "before" of evaluate's before -> after: the RMS point error [mm] of the URDF the calibration
     started from (REPORT.json ``sources.urdf``, as given or beside the report) on ``data``, with its
     registration and target fitted to these rows — as calibrate's before line on its own rows; (None,
@@ -354,7 +360,8 @@ def _same_path(a: str | Path, b: str | Path) -> bool:
 
 
 def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarray, fixed: str | None,
-                   new_session: bool, report_path, data_path) -> tuple[list, list[str]]:
+                   new_session: bool, report_path: str | Path, data_path: str | Path
+                   ) -> tuple[list[SessionPlan], list[str]]:
     """The module's rule: (session name, its rows, (source, Registration 1, Registration 2,
     reported session name or None) or None to re-estimate) for each session of ``data``, and the notes it gives.
 
@@ -402,8 +409,9 @@ def _registrations(report: ReportModel, data: MeasurementSet, labelled: np.ndarr
     return plan, []
 
 
-def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: dict, points: np.ndarray,
-                        held: tuple[np.ndarray, np.ndarray], report_path) -> tuple[RowCorrections, DriftUse | None]:
+def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: Mapping[str, Any], points: np.ndarray,
+                        held: tuple[np.ndarray, np.ndarray], report_path: str | Path
+                        ) -> tuple[RowCorrections, DriftUse | None]:
     """Joint readings corrected by the report's effects, and its sensor terms; with a
     drift, how it was applied (``rows_applied`` inside the fitted span of the session
     ``held`` = (names (K,), evaluated sessions (K,)) gives each row
@@ -476,7 +484,7 @@ def _duration(seconds: float) -> str:
     return f"{seconds:.3g} s"
 
 
-def _drift_note(data_path, drift: DriftUse) -> str:
+def _drift_note(data_path: str | Path, drift: DriftUse) -> str:
     """The one note on rows a drift was not extrapolated to (``drift`` from :func:`_effect_corrections`)."""
     held = drift["rows_held"]
     total = held + drift["rows_applied"]

@@ -10,8 +10,9 @@ nothing re-estimated — and of the nominal URDF with the ball centre fitted to
 it ("before"), when that URDF is at hand. Both judge placements the model has
 not seen against the nominal model (:mod:`pincal.fit.placement_check`: calibrate
 leaves each out in turn, evaluate takes the evaluated ones), their warnings in
-REPORT.json / ``--json`` ``warnings`` for ``--strict``. What the commands print, their ``--html``
-pages and the refusal of a sensor's flags: :mod:`pincal.cli.fixture`.
+REPORT.json / ``--json`` ``warnings`` for ``--strict``; evaluate writes its ``--json`` and ``--html`` as the
+sensor path does (:mod:`pincal.workflows.evaluation_outputs`). What the commands print, calibrate's ``--html``
+page and the refusal of a sensor's flags: :mod:`pincal.cli.fixture`.
 """
 
 
@@ -57,9 +58,10 @@ from pincal.report.model_fixture import (
     fixture_metrics_json,
 )
 from pincal.report.reading import load_report
+from pincal.workflows.evaluation_outputs import EvaluateOutputs, write_outputs
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 from pincal.workflows.settings import CalibrateSettings, expect
-from pincal.workflows.verdict import withhold, withholding, write_checked_urdf
+from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_checked_urdf
 
 __all__ = ["SAME_FIXTURE_M", "FixtureRun", "calibrate_fixture_files", "FixtureEvaluation", "evaluate_fixture_files",
            "fixture_paths"]
@@ -70,8 +72,9 @@ __all__ = ["SAME_FIXTURE_M", "FixtureRun", "calibrate_fixture_files", "FixtureEv
 SAME_FIXTURE_M = 1e-9
 
 
-def fixture_paths(data) -> list[Path]:
-    return [Path(p) for p in (data if isinstance(data, (list, tuple)) else [data])]
+def fixture_paths(data: str | Path | Sequence[str | Path]) -> list[Path]:
+    paths = data if isinstance(data, (list, tuple)) else [cast(str | Path, data)]
+    return [Path(p) for p in paths]
 
 
 @dataclass(frozen=True)
@@ -118,7 +121,8 @@ def calibrate_fixture_files(
     sensor += ["reject_outliers"] if settings.reject_outliers else []
     if sensor or settings.level == "dh":
         raise PincalError(f"socket-fixture data have no sensor: {', '.join(sensor) or 'level dh'} do(es) not apply")
-    tip_link, level, selection, xacro_args = settings.tip_link, settings.level, settings.criterion, settings.xacro_args
+    tip_link, selection, xacro_args = settings.tip_link, settings.criterion, settings.xacro_args
+    level: str = settings.level  # "auto" becomes the level cross-validation chooses
 
     urdf, fixture_path, out_urdf, report_path = Path(urdf), Path(fixture_path), Path(out_urdf), Path(report_path)
     data_paths = fixture_paths(data_paths)
@@ -149,11 +153,10 @@ def calibrate_fixture_files(
     sources: Sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
                         "corrected_urdf": str(out_urdf)}
     names = ", ".join(p.name for p in data_paths)
-    reload_error, urdf_sha256 = write_checked_urdf(
-        urdf, out_urdf, chain, result.chain_placements, nominal_placements, data.q,
-        f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
-        f"{fixture_path.name}. Ball centre and placements: see the report.", xacro_args, keep=not withheld,
-    )
+    comment = (f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
+               f"{fixture_path.name}. Ball centre and placements: see the report.")
+    reload_error, urdf_sha256 = write_checked_urdf(UrdfWrite(urdf, out_urdf, comment, xacro_args, keep=not withheld),
+                                                   chain, result.chain_placements, nominal_placements, data.q)
     if withheld:
         notes += withhold(out_urdf)
     with chain.placed(result.chain_placements):
@@ -182,6 +185,7 @@ class FixtureEvaluation:
     not_held_out: tuple[str, ...] = ()
     held_out: tuple[PlacementPrediction, ...] = ()
     warnings: tuple[Finding, ...] = ()
+    written: tuple[Path, ...] = ()  # the outputs written (--json first, then --html)
 
     def as_dict(self) -> FixtureEvaluationJson:
         """``pincal evaluate --fixture --json``."""
@@ -244,7 +248,7 @@ def evaluate_fixture_files(
     nominal_urdf: str | Path | None = None,
     allow_other_urdf: bool = False,
     xacro_args: Sequence[tuple[str, str]] = (),
-    outputs: Sequence[str | Path] = (),
+    outputs: EvaluateOutputs | None = None,
 ) -> FixtureEvaluation:
     """Consistency and distortion of a fixture calibration on socket-fixture data.
 
@@ -254,8 +258,10 @@ def evaluate_fixture_files(
     The fixture file must have the calibration's sockets and distances (to
     :data:`SAME_FIXTURE_M`). ``xacro_args`` apply to whichever URDF is a ``.xacro``
     (the nominal found through the report gets the report's ``xacro_args``).
-    ``outputs``: the files the caller will write; each is checked against every input
-    (the URDFs, what a xacro includes, the report, the fixture and data files) first.
+    ``outputs``: ``--json`` (:meth:`FixtureEvaluation.as_dict`) and ``--html`` (the report's page with the
+    evaluation beside it), written whole once the evaluation is done
+    (:func:`pincal.workflows.evaluation_outputs.write_outputs`); each is checked first against every input
+    (the URDFs, what a xacro includes, the report, the fixture and data files) and the other.
     """
     urdf, report_path, fixture_path = Path(urdf), Path(report_path), Path(fixture_path)
     data_paths = fixture_paths(data_paths)
@@ -286,14 +292,16 @@ def evaluate_fixture_files(
         raise PincalError("--xacro-arg applies to a .xacro URDF, and neither the evaluated nor the nominal URDF "
                           "is one; drop --xacro-arg")
 
-    def args_of(path: Path) -> tuple:
+    def args_of(path: Path) -> tuple[tuple[str, str], ...]:
         return (nominal_args if path == nominal else tuple(xacro_args)) if is_xacro(path) else ()
 
     inputs = [*description_inputs(urdf, args_of(urdf)), report_path, fixture_path, *data_paths, *candidates]
     if nominal is not None:
         inputs += description_inputs(nominal, args_of(nominal))
-    for n, output in enumerate(outputs):
-        refuse_overwrite(output, *inputs, outputs=[o for m, o in enumerate(outputs) if m != n])
+    outputs = EvaluateOutputs() if outputs is None else outputs
+    written = [o for o in (outputs.json, outputs.html) if o is not None]
+    for n, output in enumerate(written):
+        refuse_overwrite(output, *inputs, outputs=[o for m, o in enumerate(written) if m != n])
     fixture = read_fixture(fixture_path)
     _check_same_fixture(fixture, document, fixture_path, report_path)
     chain = KinematicChain.from_urdf(urdf, tip, xacro_args=args_of(urdf) or None)
@@ -318,4 +326,8 @@ def evaluate_fixture_files(
         before = fixture_metrics(nominal_chain, data, nominal_ball)
         nominal_error = fixture_heldout_error(nominal_chain, data, nominal_ball)
     held_out = tuple(p for p in predictions(data, predicted, nominal_error) if p.placement not in seen)
-    return FixtureEvaluation(after, before, notes, seen, held_out, tuple(evaluation_findings(held_out, why)))
+    evaluation = FixtureEvaluation(after, before, notes, seen, held_out, tuple(evaluation_findings(held_out, why)))
+    metrics = evaluation.as_dict()  # --json
+    shown = {"urdf": str(urdf), "data": ", ".join(str(p) for p in data_paths), "fixture": metrics,
+             "warnings": metrics["warnings"]}  # the evaluation beside the report on the page
+    return replace(evaluation, written=write_outputs(outputs, metrics, report_path, shown))

@@ -10,17 +10,19 @@ made, with the one-line message the command prints; the workflows of
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, cast, get_args
 
 import numpy as np
+import numpy.typing as npt
 
 from pincal.errors import PincalError
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.model.thermal import PAUSE_S
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the fit's selection module is imported only when a selection is checked
     from pincal.fit.selection import SelectionCriterion
 
 __all__ = [
@@ -40,7 +42,7 @@ DIAGNOSE_LEVELS: tuple[DiagnoseLevel, ...] = get_args(DiagnoseLevel)
 METHODS = (1, 2, 3)
 
 
-def expect(settings, kind: type, function: str) -> None:
+def expect(settings: object, kind: type, function: str) -> None:
     """Refuse, with a TypeError naming the class, a workflow call whose ``settings`` is not a ``kind``
     (a script written for the former signature, which took each setting as its own argument)."""
     if not isinstance(settings, kind):
@@ -66,7 +68,7 @@ def _selection(selection: str, level: str) -> None:
         raise no_prior("--select prior", level)
 
 
-def _tool(tool_pose) -> np.ndarray | None:
+def _tool(tool_pose: npt.ArrayLike | None) -> np.ndarray | None:
     """A read-only copy of the pose (the caller's array may change; these settings may not)."""
     if tool_pose is None:
         return None
@@ -77,13 +79,13 @@ def _tool(tool_pose) -> np.ndarray | None:
     return pose
 
 
-def default_selection(level: str | None) -> str:
+def default_selection(level: str | None) -> SelectionCriterion | Prior:
     """The commands' default ``--select``: the prior wherever kinematic parameters are fitted
     (offsets, full, auto; docs/defaults.md), AIC at registration and dh."""
     return "aic" if level in ("registration", "dh") else Prior()
 
 
-def _xacro(args) -> tuple[tuple[str, str], ...]:
+def _xacro(args: Iterable[tuple[object, object]]) -> tuple[tuple[str, str], ...]:
     return tuple((str(k), str(v)) for k, v in args)
 
 
@@ -91,8 +93,8 @@ class _FitSettings:
     """What calibrate's and diagnose's settings share: the selection, the stated noise, the tool
     and the xacro arguments, resolved and checked the same way (attributes of the dataclasses)."""
 
-    level: str
-    selection: str | None
+    level: CalibrateLevel
+    selection: SelectionCriterion | Prior | None
     sigma_pos_mm: float | None
     tool_pose: np.ndarray | None
     xacro_args: tuple[tuple[str, str], ...]
@@ -154,13 +156,13 @@ class CalibrateSettings(_FitSettings):
     """
 
     tip_link: str
-    level: str = "full"
+    level: CalibrateLevel = "full"
     method: int | None = None
     weight: float = 1.0
     tool_pose: np.ndarray | None = field(default=None, compare=False)
     sigma_column: str | None = None
     reject_outliers: bool = False
-    selection: str | None = None
+    selection: SelectionCriterion | Prior | None = None
     sigma_pos_mm: float | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
     couplings: tuple[ReadingCoupling, ...] = ()
@@ -216,10 +218,10 @@ class DiagnoseSettings(_FitSettings):
     """
 
     tip_link: str
-    level: str = "full"
+    level: DiagnoseLevel = "full"
     tool_pose: np.ndarray | None = field(default=None, compare=False)
     sigma_column: str | None = None
-    selection: str | None = None
+    selection: SelectionCriterion | Prior | None = None
     payload_kg: float = 0.0
     time_column: str | None = None
     sigma_pos_mm: float | None = None
@@ -251,9 +253,13 @@ class EvaluateSettings:
         new_session: re-estimate the registration of every session of the data.
         temperature_column: the column of row temperatures [°C] (None: the report's, else the first of
             :data:`pincal.model.thermal.TEMPERATURE_COLUMNS` present).
+        max_pos_mm: the largest position error the robot may show [mm] (``--max-pos-mm``), or None: not judged.
+        max_rot_deg: the largest orientation error [deg] (``--max-rot-deg``), or None. Both are judged by
+            :func:`pincal.workflows.evaluation_outputs.evaluate_and_write`; :func:`evaluate_files` measures only.
 
     Raises:
-        PincalError: ``fixed_registration`` and ``new_session`` together.
+        PincalError: ``fixed_registration`` and ``new_session`` together; a threshold that is negative or
+            not finite.
     """
 
     allow_other_urdf: bool = False
@@ -261,8 +267,13 @@ class EvaluateSettings:
     fixed_registration: str | None = None
     new_session: bool = False
     temperature_column: str | None = None
+    max_pos_mm: float | None = None
+    max_rot_deg: float | None = None
 
     def __post_init__(self) -> None:
         if self.fixed_registration is not None and self.new_session:
             raise PincalError("--fixed-registration and --new-session exclude each other; give one")
+        for flag, value in (("--max-pos-mm", self.max_pos_mm), ("--max-rot-deg", self.max_rot_deg)):
+            if value is not None and not (np.isfinite(value) and value >= 0):
+                raise PincalError(f"{flag} must be a non-negative number, got {value}")
         object.__setattr__(self, "xacro_args", _xacro(self.xacro_args))

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import ChainCalibration
 from pincal.fit.plausibility import UNMODELLED_CAUSES, Finding, tip_link_findings, tip_link_verdict, unmodelled_reason
 from pincal.fit.prior import Prior
 from pincal.measurements.csv_v1 import file_columns
@@ -39,7 +40,7 @@ from pincal.report.model import findings_json
 from pincal.workflows.settings import CalibrateSettings, default_selection
 
 __all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withholding", "withhold", "urdf_line",
-           "write_checked_urdf", "unmodelled_notes", "diagnose_command"]
+           "UrdfWrite", "write_checked_urdf", "unmodelled_notes", "diagnose_command"]
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
@@ -105,20 +106,33 @@ class _Withheld(Exception):
     """Raised by a withheld URDF's check once it passed: cancels the write (:func:`pincal.outputs.replacing`)."""
 
 
+@dataclass(frozen=True)
+class UrdfWrite:
+    """A corrected URDF to write: from ``source`` (the URDF or ``.xacro`` calibrated, expanded with
+    ``xacro_args``) to ``destination``, with ``comment`` at its top; ``keep`` False: checked and hashed but
+    not put in place (a withheld URDF; ``destination`` is left as it was)."""
+
+    source: Path
+    destination: Path
+    comment: str
+    xacro_args: Sequence[tuple[str, str]] = ()
+    keep: bool = True
+
+
 def write_checked_urdf(
-    source: Path, destination: Path, chain: KinematicChain, placements, nominal_placements, q: np.ndarray,
-    comment: str, xacro_args: Sequence[tuple[str, str]] = (), keep: bool = True,
+    write: UrdfWrite, chain: KinematicChain, placements: Sequence[np.ndarray],
+    nominal_placements: Sequence[np.ndarray], q: np.ndarray,
 ) -> tuple[float, str]:
-    """Write the URDF of ``chain`` with ``placements`` (a calibration's ``chain_placements``),
-    checking before it replaces ``destination`` that reloading it reproduces that model's tool
-    poses at ``q`` to :data:`RELOAD_TOLERANCE` (a failed check leaves the old file); a ``.xacro``
-    source is expanded with ``xacro_args``. The chain is left as it was. ``keep`` False: the file is
-    checked and hashed but not put in place (a withheld URDF; ``destination`` is left as it was).
+    """Write the URDF of ``chain`` with ``placements`` (a calibration's ``chain_placements``) as ``write``
+    says, checking before it replaces ``write.destination`` that reloading it reproduces that model's tool
+    poses at ``q`` to :data:`RELOAD_TOLERANCE` (a failed check leaves the old file). The chain is left as
+    it was.
 
     Returns:
         The largest difference [m, -] and the SHA-256 (hex) of the bytes written
         (the report's ``urdf_sha256``).
     """
+    destination, keep = write.destination, write.keep
     checked: list[float] = []
     digest: list[str] = []
 
@@ -135,8 +149,8 @@ def write_checked_urdf(
 
     with chain.placed(placements):
         try:
-            write_corrected_urdf(source, destination, chain, nominal_placements, comment=comment, verify=verify,
-                                 xacro_args=xacro_args)
+            write_corrected_urdf(write.source, destination, chain, nominal_placements, comment=write.comment,
+                                 verify=verify, xacro_args=write.xacro_args)
         except _Withheld:
             pass
     return checked[-1], digest[-1]
@@ -153,8 +167,8 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
     )
 
 
-def unmodelled_notes(result, reach_m: float, stated_sigma_pos_m: float | None, command: str | None = None
-                     ) -> list[str]:
+def unmodelled_notes(result: ChainCalibration, reach_m: float, stated_sigma_pos_m: float | None,
+                     command: str | None = None) -> list[str]:
     """The note on a model ``result`` (of a robot of ``reach_m`` [m]) that likely lacks an effect
     (:func:`pincal.fit.plausibility.unmodelled_reason`), or none: with the ``pincal diagnose`` ``command``
     to run (calibrate's), else (diagnose's final model) that the effects diagnose tries do not explain it."""
