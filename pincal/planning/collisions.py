@@ -67,7 +67,7 @@ class Clearance:
     pairs_checked: int
     pairs_ignored: tuple[str, ...]
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, object]:
         return {
             "min_distance_m": self.min_distance_m,
             "refused": int(self.in_collision + self.too_close),
@@ -87,7 +87,7 @@ def has_collision_geometry(urdf: str | Path, xacro_args: Sequence[tuple[str, str
 
 
 def _geometry(urdf: Path, chain: KinematicChain, xacro_args: Sequence[tuple[str, str]] = (),
-              package_dirs: Mapping[str, Path] | None = None):
+              package_dirs: Mapping[str, Path] | None = None) -> tuple[pin.Model, pin.GeometryModel]:
     """Chain model and collision geometry reduced like :class:`KinematicChain` does (a ``.xacro`` is
     expanded in memory with ``xacro_args``; ``package://`` meshes found as :mod:`pincal.model.packages` says)."""
     text = with_resolved_meshes(read_description(urdf, xacro_args).text, urdf, package_dirs)

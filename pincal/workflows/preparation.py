@@ -244,5 +244,5 @@ def _existing_source(paths: list[Path]) -> str | list[str] | None:
     return None if not paths else str(paths[0]) if len(paths) == 1 else [str(p) for p in paths]
 
 
-def _text(path) -> str | None:
+def _text(path: str | Path | None) -> str | None:
     return None if path is None else str(path)
