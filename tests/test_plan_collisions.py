@@ -79,6 +79,16 @@ def test_refused_candidates_have_two_links_intersecting_and_kept_ones_none():
     assert np.array_equal(~clearance.allowed, np.array(intersecting))
 
 
+def test_links_touching_at_zero_are_ignored_even_a_few_nanometres_apart():
+    """Kinova: coal puts its base and link 1 6e-9 m apart at zero, yet in collision at every configuration;
+    the pair is in contact at zero by the collision test, so it is ignored and not every candidate refused."""
+    urdf = example_robot_data_urdf("kinova_description/robots/kinova.urdf")
+    chain = KinematicChain.from_urdf(urdf, "j2s6s200_end_effector")
+    clearance = check_clearance(urdf, chain, sample_candidates(chain, 40, seed=1), 0.0)
+    assert "j2s6s200_link_base_0~j2s6s200_link_1_0" in clearance.pairs_ignored
+    assert 0 <= clearance.in_collision < 20
+
+
 def test_a_urdf_without_collision_geometry_is_planned_with_a_note(tmp_path, capsys):
     code, doc = _plan(tmp_path, "kuka", kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
     captured = capsys.readouterr()

@@ -6,12 +6,11 @@ coal underneath) and reduced to the chain like the kinematic model: every
 joint off the chain is locked at its neutral value, so links that never move
 relative to each other share a joint and are not paired. As in an SRDF's
 "default"/"adjacent" pairs, pairs closer than the clearance at the zero
-configuration (clipped into the joint limits), or in contact there — adjacent
-links touch or overlap there —, are ignored. A candidate is refused when any
-remaining pair is closer than the clearance (coal's collision test with a
-security margin: distance < margin); with a clearance of 0, when two links
-intersect. coal reports the distance of intersecting meshes as 0, not as a
-negative depth, so "in contact" is a distance <= 0.
+configuration (clipped into the joint limits), or in contact there (coal's
+collision test without margin) — adjacent links touch or overlap there —, are
+ignored. A candidate is refused when any remaining pair is closer than the
+clearance (coal's collision test with a security margin: distance < margin);
+with a clearance of 0, when two links are in contact.
 """
 
 from __future__ import annotations
@@ -123,10 +122,15 @@ def check_clearance(
     data, geometry_data = model.createData(), geometry.createData()
     zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])
     pin.computeDistances(model, data, geometry, geometry_data, chain.configurations(zero)[0])
+    # in contact: as the collision test that refuses candidates says, not by the distance, which coal
+    # gives as 0 for intersecting meshes and as a few nanometres for some that touch (Kinova's base and
+    # link 1: 6e-9 m, yet in collision at every configuration)
+    pin.computeCollisions(model, data, geometry, geometry_data, chain.configurations(zero)[0], False)
     names = [o.name for o in geometry.geometryObjects]
     keep, ignored = [], []
-    for pair, result in zip(geometry.collisionPairs, geometry_data.distanceResults):
-        if result.min_distance < min_distance or result.min_distance <= 0.0:  # closer, or in contact
+    for pair, result, contact in zip(geometry.collisionPairs, geometry_data.distanceResults,
+                                     geometry_data.collisionResults):
+        if result.min_distance < min_distance or contact.isCollision():  # closer, or in contact
             ignored.append(f"{names[pair.first]}~{names[pair.second]}")
         else:
             keep.append(pair)
