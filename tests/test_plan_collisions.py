@@ -10,6 +10,7 @@ PLAN.json and the console say each joint's range and where it comes from.
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pinocchio as pin
@@ -101,6 +102,19 @@ def test_a_urdf_without_collision_geometry_is_planned_with_a_note(tmp_path, caps
     assert code == 2 and "no <collision> geometry" in capsys.readouterr().err
 
 
+def test_meshes_not_found_for_the_default_check_say_how_to_plan_without_it(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    urdf = tmp_path / "ur5.urdf"  # away from its package: its package:// meshes are found nowhere
+    shutil.copy(UR5, urdf)
+    code, _ = _plan(tmp_path, "lost", urdf, "tool0")
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "collision mesh" in err and "--package-dir" in err and "or plan --no-collision-check" in err
+    code, doc = _plan(tmp_path, "unchecked", urdf, "tool0", "--no-collision-check")
+    assert code == 0 and doc["candidates"]["collision_check"] == "off"
+
+
 def test_no_collision_check_and_min_distance_are_refused_together(tmp_path, capsys):
     with pytest.raises(SystemExit) as caught:
         _plan(tmp_path, "both", UR5, "tool0", "--no-collision-check", "--min-distance", "0.01")
@@ -144,6 +158,16 @@ def test_the_sampled_ranges_are_said_and_recorded(ur5_runs, tmp_path, capsys):
     note = [line for line in captured.err.splitlines() if "wider than one turn" in line]
     assert len(note) == 1 and "shoulder_pan_joint, shoulder_lift_joint, wrist_1_joint" in note[0], captured.err
     assert "elbow_joint" not in note[0] and "up to 720 deg" in note[0]
+
+
+def test_the_plan_page_says_how_the_candidates_were_checked_and_drawn(ur5_runs, tmp_path):
+    """``pincal report PLAN.json``: its facts name the collision check and each joint's range."""
+    document = tmp_path / "PLAN.json"
+    document.write_text(json.dumps(ur5_runs["default"][1]))
+    assert main(["report", str(document), "--out", str(tmp_path / "PLAN.html")]) == 0
+    page = (tmp_path / "PLAN.html").read_text()
+    assert "<dt>collision check</dt><dd>self-collision</dd>" in page
+    assert "shoulder_pan_joint -360 to 360 deg" in page and "(URDF limits)" in page
 
 
 def test_continuous_joints_are_drawn_over_one_turn():

@@ -31,20 +31,12 @@ from pincal.model.description import read_description
 from pincal.model.packages import with_resolved_meshes
 from pincal.progress import Counter, Progress
 
-__all__ = ["CollisionCheck", "COLLISION_CHECKS", "Clearance", "check_clearance", "has_collision_geometry"]
+__all__ = ["CollisionCheck", "Clearance", "check_clearance", "has_collision_geometry"]
 
 #: How a plan's candidates were checked: for self-collision (the default where the URDF has collision
 #: geometry), for a clearance (``--min-distance``), not at all (``--no-collision-check``), or not for want of
 #: geometry (the URDF has no ``<collision>``).
 CollisionCheck = Literal["self-collision", "min-distance", "off", "no collision geometry"]
-#: What each :data:`CollisionCheck` means, in words.
-COLLISION_CHECKS: dict[str, str] = {
-    "self-collision": "candidates with two links intersecting refused",
-    "min-distance": "candidates with two links closer than --min-distance refused",
-    "off": "not checked (--no-collision-check)",
-    "no collision geometry": "not checked: the URDF has no <collision> geometry",
-}
-
 
 @dataclass(frozen=True)
 class Clearance:
