@@ -310,10 +310,14 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--sigma-pos", type=positive, metavar="MM", help="sensor noise per axis [mm] "
                       "(default: from --existing, else 0.055)")
     plan.add_argument("--sigma-rot", type=positive, metavar="DEG", help="orientation noise [deg] (pose)")
-    plan.add_argument("--min-distance", type=non_negative, metavar="M",
-                      help="refuse candidates in self-collision or with links closer than M metres")
+    collision = plan.add_mutually_exclusive_group()
+    collision.add_argument("--min-distance", type=non_negative, metavar="M",
+                           help="refuse candidates with links closer than M metres (default: those in "
+                                "self-collision, where the URDF has collision geometry)")
+    collision.add_argument("--no-collision-check", action="store_true",
+                           help="do not check the candidates for self-collision")
     plan.add_argument("--package-dir", type=package_dir, action="append", default=[], metavar="NAME=DIR",
-                      help="folder of ROS package NAME for package://NAME/... meshes of --min-distance (repeat for "
+                      help="folder of ROS package NAME for package://NAME/... collision meshes (repeat for "
                            "several; else ROS_PACKAGE_PATH, the ament index, the folders above the URDF)")
     _add_coupling(plan)
     _add_xacro_arg(plan)

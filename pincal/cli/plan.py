@@ -8,25 +8,25 @@ import sys
 
 from pincal.cli.arguments import selection_criterion
 
-__all__ = ["run_plan", "print_plan_summary"]
+__all__ = ["run_plan", "print_plan_summary", "print_candidates"]
 
 
 def run_plan(args: argparse.Namespace) -> int:
     """``pincal plan``: choose, write PLAN.csv and PLAN.json, print the summary; the exit code."""
     from pincal.cli.progress import progress_bar
     from pincal.planning.planner import PlanSettings
-    from pincal.workflows.preparation import plan_files
+    from pincal.workflows.preparation import PlanInputs, plan_files
 
     settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
                             sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,
                             tool_known=args.tool is not None, seed=args.seed, alternate=args.alternate,
                             selection=selection_criterion(args))
+    inputs = PlanInputs(tool_pose=args.tool, candidates_path=args.candidates, sample=args.sample,
+                        existing_path=args.existing, workspace_path=args.workspace, min_distance_m=args.min_distance,
+                        collision_check=not args.no_collision_check, xacro_args=args.xacro_args,
+                        package_dirs=dict(args.package_dir), couplings=args.coupling or ())
     with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
-        run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, tool_pose=args.tool,
-                         candidates_path=args.candidates, sample=args.sample, existing_path=args.existing,
-                         workspace_path=args.workspace, min_distance=args.min_distance, xacro_args=args.xacro_args,
-                         package_dirs=dict(args.package_dir), couplings=args.coupling or (),
-                         progress=progress)
+        run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, inputs, progress=progress)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     print_plan_summary(run)
@@ -42,11 +42,7 @@ def print_plan_summary(run) -> None:
           f"(level {settings['level']}, measure {settings['measure']}, noise {plan.sigma_pos_mm:.4g} mm"
           + ("" if plan.sigma_rot_deg is None else f", {plan.sigma_rot_deg:.4g} deg")
           + f", {plan.sigma_source}); {plan.swaps} exchange swaps, {plan.seconds:.2f} s")
-    if run.clearance is not None:
-        c = run.clearance
-        print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
-              f"self-collision, {c.too_close} closer than {c.min_distance_m:g} m ({c.pairs_checked} link pairs "
-              f"checked, {len(c.pairs_ignored)} ignored as closer at the zero configuration)")
+    print_candidates(run)
     others = len(plan.estimated) - len(plan.identifiable)
     shown = ", ".join(plan.not_identifiable[:6]) + (", ..." if len(plan.not_identifiable) > 6 else "")
     print(f"identifiable: {len(plan.identifiable)} kinematic parameters (+ {others} registration/target); "
@@ -80,3 +76,22 @@ def print_plan_summary(run) -> None:
             corr = "n/a" if balance.correlation is None else f"{balance.correlation:+.2f}"
             print(f"  {balance.joint}: {balance.from_below} from below, {balance.from_above} from above, "
                   f"flank-position correlation {corr}")
+
+
+def print_candidates(run) -> None:
+    """Each joint's range of the candidates and where it comes from, and what the collision check refused."""
+    sample = run.document["settings"]["sample"]
+    print(f"candidates: {run.n_candidates} " + (f"drawn uniformly (seed {run.plan.settings.seed}) within:"
+                                                 if sample is not None else "read from the file, spanning:"))
+    width = max((len(r.joint) for r in run.ranges), default=0)
+    for r in run.ranges:
+        print(f"  {r.joint:<{width}}  {r.lower:9.2f} .. {r.upper:8.2f} {r.unit}  ({r.source})")
+    if run.clearance is not None:
+        c = run.clearance
+        closer = "" if c.min_distance_m == 0.0 else f", {c.too_close} closer than {c.min_distance_m:g} m"
+        ignored = "in contact" if c.min_distance_m == 0.0 else "closer"
+        print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
+              f"self-collision{closer} ({c.pairs_checked} link pairs checked, {len(c.pairs_ignored)} ignored as "
+              f"{ignored} at the zero configuration)")
+    elif run.collision_check == "off":
+        print("not checked for self-collision (--no-collision-check)")

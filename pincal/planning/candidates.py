@@ -1,4 +1,5 @@
-"""Candidate configurations: drawn within the URDF's joint limits, or read from a file.
+"""Candidate configurations: drawn within the URDF's joint limits, or read from a file, and the range
+of each joint they span (what ``pincal plan`` says it sampled).
 
 A candidate file is CSV with a header and one row per configuration; the joint
 columns are named as in CSV v1 (the URDF joint names; rad, m for prismatic
@@ -7,7 +8,9 @@ joints); any other column is ignored, so a measurement file serves as is.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, TypedDict
 
 import numpy as np
 
@@ -15,10 +18,11 @@ from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.csv_v1 import read_joint_columns
 from pincal.model.chain import KinematicChain
 from pincal.planning.defaults import DEFAULT_SAMPLE, WORKSPACE_SIZE
-from pincal.simulation.sensor import random_configurations
+from pincal.simulation.sensor import random_configurations, sampling_limits
 
 __all__ = [
     "LIMIT_SLACK", "DEFAULT_SAMPLE", "WORKSPACE_SIZE", "sample_candidates", "read_candidates", "check_within_limits",
+    "RangeSource", "JointRangeJson", "JointRange", "joint_ranges",
 ]
 
 #: Readings this far outside a limit are accepted as on it [rad or m]: a joint driven to its
@@ -64,3 +68,61 @@ def check_within_limits(q: np.ndarray, chain: KinematicChain, source: str, lines
                 f"joint limits [{joint.lower:.6g}, {joint.upper:.6g}] {unit} ({outside.size} row(s)); "
                 "remove or correct those rows"
             )
+
+
+#: Where a joint's range comes from: the URDF's ``<limit>``, one turn for a continuous joint (no limit to
+#: read), or the candidates of a file (the span of their readings).
+RangeSource = Literal["URDF limits", "continuous: one turn", "candidate file"]
+
+
+class JointRangeJson(TypedDict):
+    """A joint's range of the candidates (PLAN.json ``candidates.joint_ranges``), in the joint's unit."""
+
+    joint: str
+    kind: str
+    unit: str
+    lower: float
+    upper: float
+    source: RangeSource
+
+
+@dataclass(frozen=True)
+class JointRange:
+    """The range one joint's candidates were drawn from (or span, read from a file).
+
+    Attributes:
+        joint / kind: the joint and its kind (revolute, continuous, prismatic).
+        lower / upper: the range [deg, mm for a prismatic joint].
+        source: where it comes from (:data:`RangeSource`).
+    """
+
+    joint: str
+    kind: str
+    lower: float
+    upper: float
+    source: RangeSource
+
+    @property
+    def unit(self) -> str:
+        return "mm" if self.kind == "prismatic" else "deg"
+
+    def as_dict(self) -> JointRangeJson:
+        return {"joint": self.joint, "kind": self.kind, "unit": self.unit, "lower": self.lower, "upper": self.upper,
+                "source": self.source}
+
+
+def joint_ranges(chain: KinematicChain, read: np.ndarray | None = None) -> tuple[JointRange, ...]:
+    """Each joint's range of the candidates: drawn (``read`` None) within :func:`pincal.simulation.sensor.
+    sampling_limits` (the URDF's limits, one turn for a continuous joint), else the span of the ``read``
+    candidates (K, N) [rad or m]; in deg (mm for a prismatic joint)."""
+    if read is None:
+        lower, upper = sampling_limits(chain)
+    else:
+        lower, upper = np.min(read, axis=0), np.max(read, axis=0)
+    out = []
+    for n, joint in enumerate(chain.joints):
+        scale = 1000.0 if joint.kind == "prismatic" else 180.0 / np.pi
+        source: RangeSource = ("candidate file" if read is not None
+                               else "continuous: one turn" if joint.kind == "continuous" else "URDF limits")
+        out.append(JointRange(joint.name, joint.kind, float(lower[n] * scale), float(upper[n] * scale), source))
+    return tuple(out)

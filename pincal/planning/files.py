@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TypedDict, cast
 
@@ -22,16 +23,18 @@ from pincal.errors import PincalError
 from pincal.measurements.couplings import CouplingJson
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.outputs import file_sha256, replacing, write_text
-from pincal.planning.collisions import Clearance
+from pincal.planning.candidates import JointRange, JointRangeJson
+from pincal.planning.collisions import Clearance, CollisionCheck
 from pincal.planning.design import CRITERIA
 
 if TYPE_CHECKING:  # annotations only: the REPORT.json loader reads PLAN.json without the planner's imports
-    from pincal.planning.planner import Plan, PlanSettings
+    from pincal.planning.planner import Plan
 
 __all__ = [
     "PLAN_VERSION", "PlanSources", "PlanChain", "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",
     "PredictionJson", "RandomPrediction", "PlanPredicted", "PlanIdentifiability", "ClearanceJson", "PlanCandidates",
-    "BalanceJson", "PlanOrder", "Addition", "PlanJson", "write_plan_csv", "write_plan_json", "plan_document",
+    "BalanceJson", "PlanOrder", "Addition", "PlanJson", "CandidatePool", "write_plan_csv", "write_plan_json",
+    "plan_document",
 ]
 
 PLAN_VERSION = 1
@@ -145,9 +148,15 @@ class ClearanceJson(TypedDict):
 
 
 class PlanCandidates(TypedDict):
+    """The candidates: how many, how many the collision check left (``collision_check``: how they were
+    checked; ``clearance``: its counts, null when not checked), and the range of each joint they were drawn
+    from or span (``joint_ranges``, deg or mm)."""
+
     count: int
     usable: int
     clearance: ClearanceJson | None
+    collision_check: CollisionCheck
+    joint_ranges: list[JointRangeJson]
 
 
 class BalanceJson(TypedDict):
@@ -236,19 +245,37 @@ def _prediction(prediction) -> PredictionJson | None:
     return None if prediction is None else cast(PredictionJson, prediction.as_dict())
 
 
+@dataclass(frozen=True)
+class CandidatePool:
+    """The candidates a plan chose from, as PLAN.json describes them.
+
+    Attributes:
+        labels: each candidate's line in its file, or its index in the sample, (K,).
+        ranges: each joint's range of the candidates (:func:`pincal.planning.candidates.joint_ranges`).
+        collision_check: how they were checked for collisions.
+        clearance: the check's outcome (None when not checked).
+        sample: how many were drawn (None: read from a file).
+    """
+
+    labels: np.ndarray
+    ranges: tuple[JointRange, ...]
+    collision_check: CollisionCheck
+    clearance: Clearance | None = None
+    sample: int | None = None
+
+
 def plan_document(
     plan: Plan,
     chain: KinematicChain,
-    settings: PlanSettings,
     sources: PlanSources,
-    labels: np.ndarray,
-    n_candidates: int,
-    clearance: Clearance | None,
+    pool: CandidatePool,
     tool_pose: np.ndarray | None,
-    sample: int | None,
     plan_csv_sha256: str | None = None,
 ) -> PlanJson:
-    """The PLAN.json document; ``plan_csv_sha256`` names the PLAN.csv it describes (its bytes' SHA-256)."""
+    """The PLAN.json document of ``plan`` (its settings: ``plan.settings``) chosen from ``pool``;
+    ``plan_csv_sha256`` names the PLAN.csv it describes (its bytes' SHA-256)."""
+    settings, labels, clearance = plan.settings, pool.labels, pool.clearance
+    n_candidates = len(labels)
     ratio = None
     if plan.prediction is not None and plan.random is not None and np.isfinite(plan.random.mean_position_mm):
         ratio = plan.prediction.mean_position_mm / plan.random.mean_position_mm
@@ -277,7 +304,7 @@ def plan_document(
             "tool": tool,
             "target_points_m": plan.target_points.tolist(),
             "seed": settings.seed,
-            "sample": sample,
+            "sample": pool.sample,
         },
         "criterion": {"name": plan.criterion, "definition": CRITERIA[plan.criterion], "value": plan.criterion_value},
         "predicted": {
@@ -305,6 +332,8 @@ def plan_document(
             "count": n_candidates,
             "usable": n_candidates if clearance is None else int(clearance.allowed.sum()),
             "clearance": None if clearance is None else cast(ClearanceJson, clearance.as_dict()),
+            "collision_check": pool.collision_check,
+            "joint_ranges": [r.as_dict() for r in pool.ranges],
         },
         "order": {
             "method": "balanced approach directions" if settings.alternate else "short travel",

@@ -9,11 +9,7 @@ import numpy as np
 
 from pincal.report.model import (
     ChainHead,
-    CouplingsPart,
-    Finding,
-    LevelChoicePart,
     PoseErrorsJson,
-    RowErrorSet,
     SessionEntry,
     errors_json,
 )
@@ -28,6 +24,7 @@ from pincal.report.model_diagnosis import (
     TargetChangeJson,
     TimeSpansPart,
 )
+from pincal.report.record import ReportRecord
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
@@ -57,19 +54,16 @@ def diagnosis_report(
     payload_kg: float,
     time_column: str | None,
     *,
-    warnings: list[Finding],
     sessions: list[SessionEntry],
     time_spans: TimeSpansPart,
-    row_errors: list[RowErrorSet],
-    urdf_sha256: str,
-    xacro_args: dict[str, str],
-    level_choice: LevelChoicePart,
     plots: list[str],
-    couplings: CouplingsPart | None = None,
+    record: ReportRecord,
 ) -> DiagnosisReport:
     """Build the REPORT.json document of ``diagnose``: the final model's :func:`~pincal.report.document.chain_head`
     (its errors: ``diagnosis.calibration_errors``), with the ``effects`` and the ``diagnosis`` section;
-    ``time_spans``: :func:`pincal.report.sessions.drift_spans`."""
+    ``time_spans``: :func:`pincal.report.sessions.drift_spans`; ``record``: what the run records beside the fit
+    (:class:`pincal.report.record.ReportRecord`)."""
+    couplings = record.couplings
     from pincal.diagnosis.verdicts import CRITERION, coupling_advice, torque_coupling_advice
     from pincal.model.effect_units import effect_unit
     from pincal.model.effects import effect_to_dict
@@ -114,7 +108,7 @@ def diagnosis_report(
             entry["advice"] = compliance_words(str(effect.joint), float(values[0]), effect_unit(effect, kinds))
     return {
         **head,
-        "warnings": warnings,
+        "warnings": record.warnings,
         "sessions": sessions,
         "effects": effects,
         "payload_kg": payload_kg,
@@ -123,10 +117,10 @@ def diagnosis_report(
         "approach_context": context,
         "diagnosis": section,
         **time_spans,
-        "row_errors": row_errors,
-        "urdf_sha256": urdf_sha256,
-        "xacro_args": xacro_args,
-        **level_choice,
+        "row_errors": record.row_errors,
+        "urdf_sha256": record.urdf_sha256,
+        "xacro_args": record.xacro_args,
+        **record.level_choice,
         **(couplings or {}),
         **_conditions(diagnosis),
     }

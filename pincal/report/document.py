@@ -58,16 +58,12 @@ from pincal.report.model import (
     CalibrationReport,
     ChainHead,
     ChainJson,
-    CouplingsPart,
-    Finding,
     FitRows,
     Identifiability,
-    LevelChoicePart,
     NotDetermined,
     PaperReport,
     Parameter,
     PriorScale,
-    RowErrorSet,
     SelectionJson,
     SessionEntry,
     Sources,
@@ -78,6 +74,7 @@ from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 from pincal.report.reading import load_report, value_at
+from pincal.report.record import ReportRecord
 
 if TYPE_CHECKING:
     from pincal.fit.chain_calibration import ChainCalibration
@@ -101,18 +98,16 @@ def _number(value: float) -> float | None:
 def paper_report(
     result: PaperCalibration,
     params: DHParameterSet,
-    tool_parent: str,
     tool_pose: np.ndarray,
     calibration_errors: PoseErrors,
     n_rows: FitRows,
     sources: Sources,
     notes: list[str],
     *,
-    row_errors: list[RowErrorSet],
-    urdf_sha256: str,
-    xacro_args: dict[str, str],
+    record: ReportRecord,
 ) -> PaperReport:
-    """Build the REPORT.json document of a paper-method calibration."""
+    """Build the REPORT.json document of a paper-method calibration; the tool's parent link is the chain's tip
+    (``params.chain.tip_link``), ``record`` gives ``row_errors``, ``urdf_sha256`` and ``xacro_args``."""
     # imported here: `pincal calibrate --level full` does not load the paper's methods
     from pincal.paper.methods import CALIBRATED, FROM_CPA
 
@@ -147,7 +142,7 @@ def paper_report(
         },
         "parameters": parameters,
         "registration": registration_pair(result.registration_position, result.registration_orientation),
-        "tool": {"parent_link": tool_parent, "xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()},
+        "tool": {"parent_link": params.chain.tip_link, "xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()},
         "fit": {
             "rows": n_rows,
             "stages": [
@@ -164,9 +159,9 @@ def paper_report(
             "calibration_errors": errors_json(calibration_errors),
         },
         "notes": list(result.notes) + list(notes),
-        "row_errors": row_errors,
-        "urdf_sha256": urdf_sha256,
-        "xacro_args": xacro_args,
+        "row_errors": record.row_errors,
+        "urdf_sha256": record.urdf_sha256,
+        "xacro_args": record.xacro_args,
     }
 
 
@@ -462,26 +457,16 @@ def chain_head(
     }
 
 
-def chain_report(
-    head: ChainHead,
-    *,
-    warnings: list[Finding],
-    sessions: list[SessionEntry],
-    row_errors: list[RowErrorSet],
-    level_choice: LevelChoicePart,
-    urdf_sha256: str,
-    xacro_args: dict[str, str],
-    couplings: CouplingsPart | None = None,
-) -> CalibrationReport:
+def chain_report(head: ChainHead, *, sessions: list[SessionEntry], record: ReportRecord) -> CalibrationReport:
     """Build the REPORT.json document of a calibration at level registration/offsets/full from its
-    :func:`chain_head`; ``level_choice``: :func:`pincal.report.model.level_choice_part`."""
+    :func:`chain_head`, its ``sessions`` and what ``record`` says of the run."""
     return {
         **head,
-        "warnings": warnings,
+        "warnings": record.warnings,
         "sessions": sessions,
-        "row_errors": row_errors,
-        **level_choice,
-        "urdf_sha256": urdf_sha256,
-        "xacro_args": xacro_args,
-        **(couplings or {}),
+        "row_errors": record.row_errors,
+        **record.level_choice,
+        "urdf_sha256": record.urdf_sha256,
+        "xacro_args": record.xacro_args,
+        **(record.couplings or {}),
     }

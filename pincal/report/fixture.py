@@ -43,9 +43,10 @@ from pincal.fit.placement_check import PlacementCheck
 from pincal.measurements.fixture import FixtureData
 from pincal.model.chain import KinematicChain
 from pincal.report.document import REPORT_VERSION, chain_summary, identifiability_report, parameters_report
-from pincal.report.model import CouplingsPart, Finding, LevelChoicePart, Sources
+from pincal.report.model import Sources
 from pincal.report.model_fixture import FixturePlacement, FixtureReport, HeldOutPlacements, fixture_metrics_json
 from pincal.report.reading import value_at
+from pincal.report.record import ReportRecord
 
 __all__ = ["TURN_NOT_DETERMINED", "fixture_report", "read_fixture_block"]
 
@@ -61,17 +62,13 @@ def fixture_report(
     notes: list[str],
     nominal_urdf_sha256: str,
     *,
-    level_choice: LevelChoicePart,
-    xacro_args: dict[str, str],
-    urdf_sha256: str,
-    couplings: CouplingsPart | None = None,
-    warnings: list[Finding] | None = None,
+    record: ReportRecord,
     held_out: PlacementCheck | None = None,
 ) -> FixtureReport:
     """Build the REPORT.json document of a socket-fixture calibration (``chain`` placed as calibrated);
-    ``level_choice``: :func:`pincal.report.model.level_choice_part`; ``couplings``:
-    :func:`pincal.report.model.couplings_part` of ``--coupling``; ``warnings``: the plausibility findings
-    (:func:`pincal.report.model.findings_json`); ``held_out``: the leave-one-placement-out check."""
+    ``record``: its level choice, xacro arguments, the corrected URDF's SHA-256, the couplings and the
+    plausibility findings (:func:`pincal.report.model.findings_json`), no row errors;
+    ``held_out``: the leave-one-placement-out check."""
     fixture = data.fixture
     ball = result.ball.tolist()
     return {
@@ -113,11 +110,11 @@ def fixture_report(
             "held_out_placements": None if held_out is None else cast(HeldOutPlacements, held_out.as_dict()),
         },
         "notes": list(result.notes) + list(notes),
-        "warnings": list(warnings or []),
-        **level_choice,
-        "xacro_args": xacro_args,
-        "urdf_sha256": urdf_sha256,
-        **(couplings or {}),
+        "warnings": list(record.warnings),
+        **record.level_choice,
+        "xacro_args": record.xacro_args,
+        "urdf_sha256": record.urdf_sha256,
+        **(record.couplings or {}),
     }
 
 

@@ -156,6 +156,13 @@ def plan_context(document: dict[str, Any], base: Path, figures) -> dict[str, Any
     candidates = document.get("candidates") or {}
     if candidates:
         facts.append(("candidates", f"{candidates.get('usable')} usable of {candidates.get('count')}"))
+        if candidates.get("collision_check"):  # a PLAN.json written before the key was has none
+            facts.append(("collision check", str(candidates["collision_check"])))
+        ranges = [r for r in candidates.get("joint_ranges") or [] if isinstance(r, dict)]
+        if ranges:
+            facts.append(("joint ranges", "; ".join(
+                f"{r.get('joint')} {num(r.get('lower'), 4)} to {num(r.get('upper'), 4)} {r.get('unit')}"
+                for r in ranges) + f" ({', '.join(dict.fromkeys(str(r.get('source')) for r in ranges))})"))
     order = document.get("order") or {}
     if order:
         facts.append(("order", f"{order.get('method')}, {num(order.get('travel_s'), 3)} s of moves"))

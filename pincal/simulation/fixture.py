@@ -21,6 +21,7 @@ from scipy.optimize import least_squares
 from pincal.errors import CalibrationError
 from pincal.measurements.fixture import Fixture, FixtureData, check_placements
 from pincal.model.chain import KinematicChain
+from pincal.simulation.sensor import sampling_limits
 
 __all__ = ["IK_TOLERANCE", "IK_ATTEMPTS", "IK_EVALUATIONS", "reach", "simulate_fixture", "ball_and_jacobian"]
 
@@ -51,8 +52,7 @@ def reach(chain: KinematicChain, target: npt.ArrayLike, ball: npt.ArrayLike, rng
         CalibrationError: no start of :data:`IK_ATTEMPTS` reached the target.
     """
     target, ball = np.asarray(target, dtype=float), np.asarray(ball, dtype=float)
-    lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
-    upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    lower, upper = sampling_limits(chain)
     margin = 0.02 * (upper - lower)  # starts away from the stops
     for _ in range(IK_ATTEMPTS):
         start = rng.uniform(lower + margin, upper - margin)

@@ -23,8 +23,8 @@ from pincal.model.thermal import RowConditions
 
 __all__ = [
     "DEFAULT_REGISTRATION", "cpa_configurations", "SimulatedSensor", "SimulatedEffects", "measure", "simulated_shifts",
-    "perfect_measurements",
-    "random_configurations", "REFERENCE_C", "TEMPERATURE_COLUMN", "warm_up", "simulated_conditions",
+    "perfect_measurements", "random_configurations", "sampling_limits", "REFERENCE_C", "TEMPERATURE_COLUMN", "warm_up",
+    "simulated_conditions",
 ]
 
 #: The temperature at which a simulated robot's URDF lengths hold [°C]: ISO 1's reference temperature.
@@ -203,8 +203,16 @@ def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registrati
     )
 
 
-def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
-    """Joint readings drawn uniformly within the limits (±pi for continuous joints), (count, N)."""
+def sampling_limits(chain: KinematicChain) -> tuple[np.ndarray, np.ndarray]:
+    """The range configurations are drawn from: each joint's URDF limits, one turn (±pi) for a continuous
+    joint, which has none [rad or m], (N,) lower and upper."""
     lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
     upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    return lower, upper
+
+
+def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
+    """Joint readings drawn uniformly within the limits (±pi for continuous joints, :func:`sampling_limits`),
+    (count, N)."""
+    lower, upper = sampling_limits(chain)
     return rng.uniform(lower, upper, (count, len(lower)))

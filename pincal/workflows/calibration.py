@@ -30,6 +30,7 @@ from pincal.progress import Progress, Stages
 from pincal.report.document import chain_head, chain_report, fit_rows, paper_report, write_report
 from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import CalibrationReport, PaperReport, Sources, couplings_part, level_choice_part
+from pincal.report.record import ReportRecord
 from pincal.report.row_errors import chain_row_errors, paper_row_errors
 from pincal.report.sessions import session_entries, session_errors
 from pincal.workflows.evaluation import SessionEvaluation
@@ -206,14 +207,14 @@ def calibrate_files(
     report: PaperReport | CalibrationReport
     if paper is not None:
         assert tool_pose is not None  # CalibrateSettings: level dh needs the tool
-        report = paper_report(paper, params, tool_parent, tool_pose, errors, n_rows, sources, notes,
-                              row_errors=row_errors, urdf_sha256=urdf_sha256, xacro_args=xacro)
+        report = paper_report(paper, params, tool_pose, errors, n_rows, sources, notes,
+                              record=ReportRecord(urdf_sha256, xacro, row_errors))
     else:
         with chain.placed(placements):  # the report describes the calibrated model
+            record = ReportRecord(urdf_sha256, xacro, row_errors, warnings=verdict.warnings,
+                                  level_choice=level_choice_part(choice), couplings=couplings_part(settings.couplings))
             report = chain_report(chain_head(fitted, chain, tool_parent, errors, n_rows, sources, report_notes),
-                                  warnings=verdict.warnings, sessions=entries, row_errors=row_errors,
-                                  level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256, xacro_args=xacro,
-                                  couplings=couplings_part(settings.couplings))
+                                  sessions=entries, record=record)
     # the couplings, which a URDF cannot carry, beside the URDF (none beside a withheld one)
     effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)

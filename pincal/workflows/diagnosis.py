@@ -30,6 +30,7 @@ from pincal.report.document import chain_head, fit_rows, write_report
 from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import Sources, couplings_part, level_choice_part
 from pincal.report.model_diagnosis import DiagnosisReport
+from pincal.report.record import ReportRecord
 from pincal.report.row_errors import diagnosis_row_errors
 from pincal.report.sessions import drift_spans, session_entries
 from pincal.workflows.calibration import unfitted_sessions
@@ -156,17 +157,18 @@ def diagnose_files(
         plots = plot_diagnosis(diagnosis, ensure_directory(plots_dir))
     with chain.placed(final.chain_placements):  # the report describes the final model
         head = chain_head(final, chain, tip_link, diagnosis.calibration_errors, fit_rows(data.roles), sources, notes)
+        row_errors = diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
+                                          (" + ".join(str(p) for p in data_paths),
+                                           None if validation_path is None else str(validation_path)))
+        record = ReportRecord(urdf_sha256, dict(xacro_arguments(xacro_args)), row_errors, warnings=verdict.warnings,
+                              level_choice=level_choice_part(choice),
+                              couplings=couplings_part((*settings.couplings, *diagnosis.couplings)))
         report = diagnosis_report(
-            head, diagnosis, payload_kg, time_column_name or _time_name(data), warnings=verdict.warnings,
+            head, diagnosis, payload_kg, time_column_name or _time_name(data),
             sessions=session_entries(final.session_names, final.target.registrations, used,
                                      session_rows(used, final.session_names), diagnosis.calibration_errors),
             time_spans=drift_spans(diagnosis, row_time, calibration, used),  # where a drift holds (evaluate)
-            row_errors=diagnosis_row_errors(chain, nominal_placements, data, heldout, calibration, diagnosis,
-                                            (" + ".join(str(p) for p in data_paths),
-                                             None if validation_path is None else str(validation_path))),
-            urdf_sha256=urdf_sha256, xacro_args=dict(xacro_arguments(xacro_args)),
-            level_choice=level_choice_part(choice), plots=[str(p) for p in plots],
-            couplings=couplings_part((*settings.couplings, *diagnosis.couplings)),
+            plots=[str(p) for p in plots], record=record,
         )
     # what the URDF cannot carry, for a controller (nothing beside a withheld URDF)
     effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)

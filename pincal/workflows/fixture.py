@@ -58,6 +58,7 @@ from pincal.report.model_fixture import (
     fixture_metrics_json,
 )
 from pincal.report.reading import load_report
+from pincal.report.record import ReportRecord
 from pincal.workflows.evaluation_outputs import EvaluateOutputs, write_outputs
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 from pincal.workflows.settings import CalibrateSettings, expect
@@ -160,11 +161,10 @@ def calibrate_fixture_files(
     if withheld:
         notes += withhold(out_urdf)
     with chain.placed(result.chain_placements):
-        report = fixture_report(result, chain, data, sources, notes, file_sha256(urdf),
-                                level_choice=level_choice_part(choice), urdf_sha256=urdf_sha256,
-                                xacro_args=dict(xacro_arguments(xacro_args)),  # evaluate --fixture rebuilds with them
-                                couplings=couplings_part(settings.couplings), warnings=findings_json(warnings),
-                                held_out=check)
+        record = ReportRecord(urdf_sha256, dict(xacro_arguments(xacro_args)),  # evaluate --fixture rebuilds with them
+                              warnings=findings_json(warnings), level_choice=level_choice_part(choice),
+                              couplings=couplings_part(settings.couplings))
+        report = fixture_report(result, chain, data, sources, notes, file_sha256(urdf), record=record, held_out=check)
     # the couplings, which a URDF cannot carry (none beside a withheld URDF)
     effects_file = None if withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)

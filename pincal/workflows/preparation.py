@@ -1,8 +1,8 @@
 """File-level workflows of the commands that come before a calibration: urdf-from-dh and plan.
 
-Each function takes paths and options, checks the outputs
-(:func:`pincal.workflows.paths.refuse_overwrite`), does the whole job and returns
-what happened; :mod:`pincal.cli.commands` prints it.
+Each function takes paths and options (plan: a :class:`PlanSettings` and a :class:`PlanInputs`
+value), checks the outputs (:func:`pincal.workflows.paths.refuse_overwrite`), does the whole job and
+returns what happened; :mod:`pincal.cli.commands` prints it.
 """
 
 from __future__ import annotations
@@ -13,21 +13,28 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.errors import PincalError
+from pincal.errors import ModelError, PincalError
 from pincal.fit.plausibility import tip_link_findings
 from pincal.measurements.couplings import ReadingCoupling, corrected_angles, readings_of
 from pincal.measurements.csv_v1 import file_columns, read_sessions
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
 from pincal.model.dh.conversion import DHUrdf, urdf_from_dh_table
-from pincal.planning.candidates import DEFAULT_SAMPLE, read_candidates, sample_candidates
-from pincal.planning.collisions import Clearance, check_clearance
-from pincal.planning.files import PlanJson, PlanSources, plan_document, write_plan_csv, write_plan_json
+from pincal.planning.candidates import DEFAULT_SAMPLE, JointRange, joint_ranges, read_candidates, sample_candidates
+from pincal.planning.collisions import Clearance, CollisionCheck, check_clearance, has_collision_geometry
+from pincal.planning.files import (
+    CandidatePool,
+    PlanJson,
+    PlanSources,
+    plan_document,
+    write_plan_csv,
+    write_plan_json,
+)
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
 from pincal.progress import Progress, Stages
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 
-__all__ = ["urdf_from_dh_file", "PlanRun", "plan_files"]
+__all__ = ["urdf_from_dh_file", "PlanInputs", "PlanRun", "plan_files"]
 
 # --- urdf-from-dh ------------------------------------------------------------------------
 
@@ -54,14 +61,67 @@ def urdf_from_dh_file(
 
 
 @dataclass(frozen=True)
+class PlanInputs:
+    """What ``pincal plan`` reads beside the URDF, and how it checks the candidates (its flags).
+
+    Attributes:
+        tool_pose: the known target pose in the tip link (4, 4) [m] (``--tool``; None: estimated).
+        candidates_path: the candidate file (``--candidates``; None: ``sample`` are drawn within the limits).
+        sample: how many candidates are drawn (``--sample``), seeded by the settings' seed.
+        existing_path: measurements already recorded, a file or one per session (``--existing``).
+        couplings: joints the controller reads against another (``--coupling``, eq C1).
+        workspace_path: configurations where accuracy matters (``--workspace``).
+        min_distance_m: refuse candidates with two links closer than this [m] (``--min-distance``);
+            None: refuse those in self-collision, where the URDF has collision geometry.
+        collision_check: False: no collision check at all (``--no-collision-check``; not with
+            ``min_distance_m``).
+        xacro_args: ``NAME:=VALUE`` pairs a ``.xacro`` URDF is expanded with (``--xacro-arg``).
+        package_dirs: NAME → the folder of ROS package NAME, for ``package://`` collision meshes
+            (``--package-dir``, :mod:`pincal.model.packages`).
+
+    Raises:
+        PincalError: ``min_distance_m`` with ``collision_check`` False, or a negative ``min_distance_m``.
+    """
+
+    tool_pose: np.ndarray | None = None
+    candidates_path: str | Path | None = None
+    sample: int = DEFAULT_SAMPLE
+    existing_path: str | Path | Sequence[str | Path] | None = None
+    couplings: Sequence[ReadingCoupling] = ()
+    workspace_path: str | Path | None = None
+    min_distance_m: float | None = None
+    collision_check: bool = True
+    xacro_args: Sequence[tuple[str, str]] = ()
+    package_dirs: Mapping[str, Path] | None = None
+
+    def __post_init__(self) -> None:
+        if self.min_distance_m is not None and not self.collision_check:
+            raise PincalError("--min-distance asks for the collision check that --no-collision-check skips: "
+                              "give one of them")
+        if self.min_distance_m is not None and not self.min_distance_m >= 0.0:
+            raise PincalError(f"--min-distance {self.min_distance_m}: give a clearance of 0 m or more")
+
+    @property
+    def check(self) -> CollisionCheck:
+        """The collision check asked for (before the URDF is read: it may have no collision geometry)."""
+        return "off" if not self.collision_check else "self-collision" if self.min_distance_m is None \
+            else "min-distance"
+
+
+@dataclass(frozen=True)
 class PlanRun:
-    """Outcome of :func:`plan_files`: the plan, the PLAN.json document, the clearance check and notes."""
+    """Outcome of :func:`plan_files`: the plan, the PLAN.json document, the clearance check and notes.
+
+    ``clearance`` is None when the candidates were not checked (``collision_check`` says why),
+    ``ranges`` each joint's range of the candidates."""
 
     plan: Plan
     document: PlanJson
     clearance: Clearance | None
     n_candidates: int
     notes: list[str]
+    collision_check: CollisionCheck = "off"
+    ranges: tuple[JointRange, ...] = ()
 
 
 def plan_files(
@@ -70,53 +130,52 @@ def plan_files(
     settings: PlanSettings,
     out_csv: str | Path,
     out_json: str | Path,
-    tool_pose: np.ndarray | None = None,
-    candidates_path: str | Path | None = None,
-    sample: int = DEFAULT_SAMPLE,
-    existing_path: str | Path | Sequence[str | Path] | None = None,
-    couplings: Sequence[ReadingCoupling] = (),
-    workspace_path: str | Path | None = None,
-    min_distance: float | None = None,
-    xacro_args: Sequence[tuple[str, str]] = (),
+    inputs: PlanInputs = PlanInputs(),
     progress: Progress | None = None,
-    package_dirs: Mapping[str, Path] | None = None,
 ) -> PlanRun:
     """Plan ``settings.count`` measurements of the chain ``urdf`` → ``tip_link``; write PLAN.csv and PLAN.json.
 
-    ``settings.tool_known`` must say whether ``tool_pose`` is given. Level ``dh``
+    ``settings.tool_known`` must say whether ``inputs.tool_pose`` is given. Level ``dh``
     plans for the paper's DH parameters with the target known, so it needs
-    ``tool_pose``. A ``.xacro`` ``urdf`` is expanded in memory with ``xacro_args``. ``package_dirs``
-    (NAME → folder, ``--package-dir``) locates ``package://`` collision meshes (:mod:`pincal.model.packages`).
-    ``couplings`` (``--coupling``): joints the controller reads against another; the candidate, existing and
-    workspace files are corrected by eq C1 (:mod:`pincal.measurements.couplings`), PLAN.csv is written in
+    ``inputs.tool_pose``. A ``.xacro`` ``urdf`` is expanded in memory with ``inputs.xacro_args``.
+    The candidates are checked for self-collision where the URDF has collision geometry (a note says
+    when it has none), for a clearance with ``inputs.min_distance_m``, not at all without
+    ``inputs.collision_check`` (:mod:`pincal.planning.collisions`).
+    ``inputs.couplings`` (``--coupling``): joints the controller reads against another; the candidate, existing
+    and workspace files are corrected by eq C1 (:mod:`pincal.measurements.couplings`), PLAN.csv is written in
     the controller's readings (its inverse) and PLAN.json records them (``sources.couplings``).
-    ``progress(done, total)`` counts the clearance checks, then the search's steps
+    ``progress(done, total)`` counts the collision checks, then the search's steps
     (:func:`pincal.planning.planner.plan_measurements`).
 
     Raises:
         PincalError: an output path that is an input, the other output or a
             folder; ``dh`` without a tool; any problem of the inputs or the plan.
     """
+    tool_pose, candidates_path, workspace_path = inputs.tool_pose, inputs.candidates_path, inputs.workspace_path
+    couplings, xacro_args = inputs.couplings, inputs.xacro_args
     if settings.level == "dh" and tool_pose is None:
         raise PincalError(
             "--level dh plans for the paper's DH parameters with the target known: give --tool X,Y,Z,ROLL,PITCH,YAW "
             "(as calibrate --level dh needs), or plan --level registration|offsets|full"
         )
     urdf = Path(urdf)
-    existing_paths = [] if existing_path is None else input_paths(existing_path)
-    inputs = [*description_inputs(urdf, xacro_args),  # a xacro's included files are inputs too
-              *(Path(p) for p in (candidates_path, *existing_paths, workspace_path) if p is not None)]
-    refuse_overwrite(out_csv, *inputs)
-    refuse_overwrite(out_json, *inputs, outputs=[out_csv])
+    existing_paths = [] if inputs.existing_path is None else input_paths(inputs.existing_path)
+    sources_in = [*description_inputs(urdf, xacro_args),  # a xacro's included files are inputs too
+                  *(Path(p) for p in (candidates_path, *existing_paths, workspace_path) if p is not None)]
+    refuse_overwrite(out_csv, *sources_in)
+    refuse_overwrite(out_json, *sources_in, outputs=[out_csv])
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
     names = chain.joint_names
     notes: list[str] = []
     if candidates_path is not None:  # a file holds the controller's readings (eq C1 with --coupling)
         candidates, labels = read_candidates(candidates_path, chain)
         candidates = corrected_angles(candidates, couplings, names)
+        ranges = joint_ranges(chain, candidates)
     else:
-        candidates = sample_candidates(chain, sample, settings.seed)
+        candidates = sample_candidates(chain, inputs.sample, settings.seed)
         labels = np.arange(len(candidates))
+        ranges = joint_ranges(chain)
+        notes += _turn_notes(ranges)
     # no calibration to judge here: whether the target moved with them is for calibrate to say (a note)
     files = [] if candidates_path is None else [candidates_path]
     existing = None
@@ -128,9 +187,13 @@ def plan_files(
     workspace = (corrected_angles(read_candidates(workspace_path, chain)[0], couplings, names)
                  if workspace_path is not None else None)
     stages = Stages(progress)
-    clearance = (check_clearance(urdf, chain, candidates, min_distance, xacro_args=xacro_args, progress=stages.next(),
-                                 package_dirs=package_dirs)
-                 if min_distance is not None else None)
+    check = inputs.check
+    if check == "self-collision" and not has_collision_geometry(urdf, xacro_args):
+        check = "no collision geometry"
+        notes.append(f"{urdf.name} has no <collision> geometry: the candidates are not checked for "
+                     "self-collision (check the plan's postures before the robot moves)")
+    clearance = _clearance(urdf, chain, candidates, check, inputs, stages.next()) if check in (
+        "self-collision", "min-distance") else None
     plan = plan_measurements(chain, candidates, settings, existing=existing, workspace=workspace,
                              allowed=None if clearance is None else clearance.allowed, progress=stages.next())
     sources: PlanSources = {"urdf": str(urdf), "candidates": _text(candidates_path),
@@ -139,10 +202,41 @@ def plan_files(
     if couplings:  # PLAN.csv in the controller's joint space: what it reads and is commanded in
         sources["couplings"] = [c.as_dict() for c in couplings]
     digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels)
-    document = plan_document(plan, chain, plan.settings, sources, labels, len(candidates), clearance, tool_pose,
-                             sample if candidates_path is None else None, plan_csv_sha256=digest)
+    pool = CandidatePool(labels, ranges, check, clearance, inputs.sample if candidates_path is None else None)
+    document = plan_document(plan, chain, sources, pool, tool_pose, plan_csv_sha256=digest)
     write_plan_json(out_json, document)
-    return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes))
+    return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes), check, ranges)
+
+
+def _clearance(urdf: Path, chain: KinematicChain, candidates: np.ndarray, check: CollisionCheck,
+               inputs: PlanInputs, progress: Progress | None) -> Clearance:
+    """The collision check of the candidates: for self-collision (a clearance of 0), or ``--min-distance``."""
+    try:
+        return check_clearance(urdf, chain, candidates, inputs.min_distance_m or 0.0, xacro_args=inputs.xacro_args,
+                               progress=progress, package_dirs=inputs.package_dirs)
+    except ModelError as exc:
+        if check != "self-collision":
+            raise
+        # checked by default, not asked for: say how to plan without it
+        raise ModelError(f"{exc}; or plan --no-collision-check without the self-collision check") from None
+
+
+#: A revolute joint whose URDF range is wider than one turn [deg] is drawn over the same posture at several
+#: readings (a UR5's ±360°), which a note points out; ranges within 1° of one turn are one turn written with
+#: a rounded π (URDFs give ±3.1416, 6.2832).
+_ONE_TURN_DEG = 360.0
+_ROUNDING_DEG = 1.0
+
+
+def _turn_notes(ranges: tuple[JointRange, ...]) -> list[str]:
+    """A note naming the joints drawn over more than one turn (their URDF ranges)."""
+    wide = [r for r in ranges if r.kind == "revolute" and r.upper - r.lower > _ONE_TURN_DEG + _ROUNDING_DEG]
+    if not wide:
+        return []
+    widest = max(r.upper - r.lower for r in wide)
+    return [f"{', '.join(r.joint for r in wide)}: URDF ranges wider than one turn (up to {widest:.0f} deg), drawn "
+            "whole, so a posture recurs at several readings; give --candidates to choose among postures you "
+            "would command"]
 
 
 def _existing_source(paths: list[Path]) -> str | list[str] | None:
