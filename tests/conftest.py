@@ -21,6 +21,32 @@ from pincal.simulation.cells import INDUSTRIAL_6R_START, INDUSTRIAL_6R_TABLE
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """A run of the suite or of a folder uses every core: pytest-xdist's ``-n auto``, whole files to a
+    worker (``--dist loadfile``), so that a module-scoped fixture is built once. ``-n N`` or ``--dist``
+    given are kept; ``-n 0``, ``-p no:xdist``, ``--pdb`` and a run of named files or tests stay in this
+    process (starting the workers, ~2 s each, costs more than one file gains)."""
+    if not config.pluginmanager.hasplugin("xdist") or hasattr(config, "workerinput"):
+        return
+    whole_folders = all(Path(arg.split("::")[0]).is_dir() for arg in config.args)
+    if config.option.numprocesses is None and whole_folders:
+        config.option.numprocesses = "auto"
+        if config.option.dist == "no":
+            config.option.dist = "loadfile"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _one_blas_thread():
+    """One BLAS thread per test process, as pincal's commands run (pincal.cli.commands): the workers
+    of a parallel run share the cores already, and a run gives the same numbers in one process or many."""
+    import scipy.linalg  # noqa: F401  (threadpoolctl limits the libraries loaded: scipy's OpenBLAS too)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
 @pytest.fixture(scope="session")
 def kuka_urdf():
     return kuka_lwr4plus_urdf()

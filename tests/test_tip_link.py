@@ -92,7 +92,7 @@ def test_a_file_of_another_branch_is_said_to_be_so(tiago_urdf):
     message = str(error.value)
     assert "missing joint column(s) head_1_joint, head_2_joint" in message
     assert "arm_1_joint, arm_2_joint" in message and "another branch" in message and "--tip-link" in message
-    assert "rename" not in message
+    assert "rename" not in message  # the guess a misspelt column gets (tests/test_did_you_mean.py)
 
 
 def test_one_misspelt_column_beside_another_branchs_keeps_the_rename_guess(tiago_urdf, tmp_path):
