@@ -9,6 +9,7 @@ import json
 import re
 from pathlib import Path
 
+import hypothesis
 import jsonschema
 import numpy as np
 import pytest
@@ -19,6 +20,11 @@ from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.cells import INDUSTRIAL_6R_START, INDUSTRIAL_6R_TABLE
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
+
+# every property test draws the same examples on every run and in every worker, and none writes an example
+# database (.hypothesis/) that parallel workers would share; a test's own settings add to these
+hypothesis.settings.register_profile("pincal", derandomize=True, database=None)
+hypothesis.settings.load_profile("pincal")
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -151,6 +157,14 @@ def unaccepted_flags(command: str, printed: str) -> list[str]:
             if match[1] not in actions[owner] and not re.search(r"\bpip install\b", before):
                 wrong.append(f"{match[1]} ({owner}): {line.strip()[:160]}")
     return wrong
+
+
+def said(stream: str, kind: str = "warning") -> list[str]:
+    """What a command printed on ``stream`` as ``pincal: KIND: …`` lines (KIND ``warning`` or ``note``), the
+    prefix removed: to compare with the ``warnings`` messages or ``notes`` of the REPORT.json it wrote, so a
+    test checks that the console says what the report holds rather than a fragment of its wording."""
+    prefix = f"pincal: {kind}: "
+    return [line.removeprefix(prefix) for line in stream.splitlines() if line.startswith(prefix)]
 
 
 def assert_close(actual, expected, atol, what=""):

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import unaccepted_flags
+from conftest import said, unaccepted_flags
 
 from pincal.cli.commands import EXIT_USAGE, EXIT_WARNING, main
 from pincal.errors import ModelError
@@ -127,7 +127,7 @@ def test_swapped_axes_warn_and_strict_exits_3_with_the_json_written(tiago, capsy
                  "--strict"]) == EXIT_WARNING
     warnings = json.loads(metrics.read_text())["warnings"]
     assert [w["code"] for w in warnings] == ["evaluation"]
-    assert f"{WARNING}{warnings[0]['message']}" in capsys.readouterr().err
+    assert said(capsys.readouterr().err) == [warnings[0]["message"]]
     assert page.read_text(encoding="utf-8").count("callout warning") == 1  # the calibration itself gave none
 
 
