@@ -9,6 +9,7 @@ import json
 import re
 from pathlib import Path
 
+import hypothesis
 import jsonschema
 import numpy as np
 import pytest
@@ -19,6 +20,37 @@ from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.cells import INDUSTRIAL_6R_START, INDUSTRIAL_6R_TABLE
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
+
+# every property test draws the same examples on every run and in every worker, and none writes an example
+# database (.hypothesis/) that parallel workers would share; a test's own settings add to these
+hypothesis.settings.register_profile("pincal", derandomize=True, database=None)
+hypothesis.settings.load_profile("pincal")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """A run of the suite or of a folder uses every core: pytest-xdist's ``-n auto``, whole files to a
+    worker (``--dist loadfile``), so that a module-scoped fixture is built once. ``-n N`` or ``--dist``
+    given are kept; ``-n 0``, ``-p no:xdist``, ``--pdb`` and a run of named files or tests stay in this
+    process (starting the workers, ~2 s each, costs more than one file gains)."""
+    if not config.pluginmanager.hasplugin("xdist") or hasattr(config, "workerinput"):
+        return
+    whole_folders = all(Path(arg.split("::")[0]).is_dir() for arg in config.args)
+    if config.option.numprocesses is None and whole_folders:
+        config.option.numprocesses = "auto"
+        if config.option.dist == "no":
+            config.option.dist = "loadfile"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _one_blas_thread():
+    """One BLAS thread per test process, as pincal's commands run (pincal.cli.commands): the workers
+    of a parallel run share the cores already, and a run gives the same numbers in one process or many."""
+    import scipy.linalg  # noqa: F401  (threadpoolctl limits the libraries loaded: scipy's OpenBLAS too)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
 
 
 @pytest.fixture(scope="session")
@@ -125,6 +157,14 @@ def unaccepted_flags(command: str, printed: str) -> list[str]:
             if match[1] not in actions[owner] and not re.search(r"\bpip install\b", before):
                 wrong.append(f"{match[1]} ({owner}): {line.strip()[:160]}")
     return wrong
+
+
+def said(stream: str, kind: str = "warning") -> list[str]:
+    """What a command printed on ``stream`` as ``pincal: KIND: …`` lines (KIND ``warning`` or ``note``), the
+    prefix removed: to compare with the ``warnings`` messages or ``notes`` of the REPORT.json it wrote, so a
+    test checks that the console says what the report holds rather than a fragment of its wording."""
+    prefix = f"pincal: {kind}: "
+    return [line.removeprefix(prefix) for line in stream.splitlines() if line.startswith(prefix)]
 
 
 def assert_close(actual, expected, atol, what=""):

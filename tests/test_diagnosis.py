@@ -32,6 +32,9 @@ OFFSETS_ONLY = DHDeviations(
 )
 SETTINGS = dict(sigma_pos_mm=0.02, sigma_rot_deg=0.02, n_cpa=8, n_calibration=80, n_validation=20,
                 validation_noise=False)
+#: How diagnose prints a candidate it reports and does not adopt (pincal.cli.commands): the test that
+#: expects such a line and the one that expects none check the same start.
+NOT_ADOPTED = "reported, not adopted: "
 
 
 def _run(kuka_urdf, effect_text, seed=3):
@@ -122,7 +125,7 @@ def test_diagnose_command_writes_effects_that_evaluate_applies(tmp_path, kuka_ur
     assert "final model: encoder_scale:lwr_joint_4 = " in printed.out
     assert " (relative): moves the target " in printed.out
     # a note on what was not tested is a note (no temperature column here), not an effect 'reported, not adopted'
-    assert "\nnote: thermal cannot be tested" in printed.out and "not adopted: thermal" not in printed.out
+    assert "\nnote: thermal cannot be tested" in printed.out and f"{NOT_ADOPTED}thermal" not in printed.out
     assert all(line.count("not adopted") <= 1 for line in printed.out.splitlines())
     # every flag its output suggests is one diagnose takes (it printed calibrate's --reject-outliers advice)
     assert "look like outliers" in printed.err and unaccepted_flags("diagnose", printed.out + printed.err) == []
@@ -332,6 +335,7 @@ def test_rounding_level_effects_are_not_adopted(tmp_path, capsys):
     assert code == 0
     assert json.loads((tmp_path / "R.json").read_text())["effects"] == []
     assert "too small to matter" in out and f"below {NEGLIGIBLE:g}" in out
+    assert any(line.startswith(NOT_ADOPTED) and "too small to matter" in line for line in out.splitlines()), out
 
 
 def test_a_joint_read_against_another_is_named_and_corrected_in_the_data(kuka_urdf, effect_free, capsys):

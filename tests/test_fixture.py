@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_close, numeric_jacobian
+from conftest import assert_close, numeric_jacobian, said
 
 from pincal.cli.commands import main
 from pincal.errors import MeasurementError
@@ -399,12 +399,16 @@ def test_evaluate_finds_the_nominal_beside_the_report_and_protects_it(iiwa_run, 
     moved.mkdir()
     for name in ("out.urdf", "REPORT.json", "fixture.csv"):
         (moved / name).write_bytes((iiwa_run / name).read_bytes())
-    assert _evaluate(moved, "raised_left.csv") == 0
+    assert _evaluate(moved, "raised_left.csv", "--json", str(tmp_path / "moved.json")) == 0
     out, err = capsys.readouterr()
-    assert "no 'before': the nominal URDF robot/iiwa14.urdf (the report's sources.urdf) is not at" in err
+    evaluated = json.loads((tmp_path / "moved.json").read_text())
+    assert evaluated["before"] is None and evaluated["after"] is not None
+    (why,) = [n for n in evaluated["notes"] if n.startswith("no 'before': ")]
+    assert "the nominal URDF robot/iiwa14.urdf (the report's sources.urdf) is not at" in why and why in err
     assert "(calibrated model only)" in out
     # nothing to judge the held-out placement against: a warning, which --strict turns into exit 3
-    assert "warning: evaluated placement(s) raised_left not checked against the nominal URDF" in err
+    assert [w["code"] for w in evaluated["warnings"]] == ["unchecked_placement"]
+    assert said(err) == [w["message"] for w in evaluated["warnings"]]
     assert _evaluate(moved, "raised_left.csv", "--strict", "--json", str(tmp_path / "strict.json")) == 3
     warned = json.loads((tmp_path / "strict.json").read_text())["warnings"]
     assert [w["code"] for w in warned] == ["unchecked_placement"]

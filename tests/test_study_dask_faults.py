@@ -143,7 +143,9 @@ def test_a_lost_remote_scheduler_stops_the_study_in_one_line_keeping_what_finish
             except (FileNotFoundError, json.JSONDecodeError, KeyError):
                 time.sleep(0.01)
         arguments = [a if a != "local" else address for a in ARGUMENTS]
-        study = start("pincal", "study", *arguments, "--out", str(out), stdout=subprocess.PIPE,
+        # --quiet: a loaded machine takes over the progress interval (10 s) per task, and the bar's lines
+        # would join the one error line on stderr
+        study = start("pincal", "study", *arguments, "--quiet", "--out", str(out), stdout=subprocess.PIPE,
                       stderr=subprocess.PIPE, text=True)
         while study.poll() is None and len(list(checkpoints.glob("*.json"))) < 2:
             assert time.monotonic() < deadline, "the study neither finished a task nor exited"

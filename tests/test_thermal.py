@@ -132,7 +132,8 @@ def test_hidden_expansion_is_named_measured_and_removed(thermal_run, capsys):
     assert effect["type"] == "thermal", doc["effects"]
     assert abs(effect["value"] - ALPHA) <= 3 * effect["std"], effect
     (final,) = [line for line in printed.splitlines() if line.startswith("final model: thermal = ")]
-    assert " µm/m/K: moves the target " in final and "turns it" not in final, final  # eq T1 turns nothing
+    assert " µm/m/K: moves the target " in final and final.endswith(" mm at most)"), final  # the move only:
+    assert "turns it" not in final, final  # eq T1 turns nothing
     with open(thermal_run / "cal.csv", newline="", encoding="utf-8") as f:
         fitted = TemperatureRange.of([float(row["temperature_c"]) for row in csv.DictReader(f)])
     assert doc["temperature_column"] == "temperature_c"
@@ -178,7 +179,7 @@ def test_evaluate_holds_a_row_beyond_the_fitted_range_at_its_end(thermal_run, ca
     assert beyond["thermal"]["rows_held"] == N_VAL and beyond["thermal"]["rows_applied"] == 0
     assert at_end["thermal"]["rows_held"] == 0
     assert err.count("thermal expansion is not extrapolated") == 1 and "up to 5 K away" in err
-    assert "not extrapolated" not in end_err
+    assert "thermal expansion is not extrapolated" not in end_err
 
 
 def test_hidden_pause_step_is_named_not_drift_and_removed(industrial_arm_urdf, tmp_path, capsys):
@@ -192,7 +193,7 @@ def test_hidden_pause_step_is_named_not_drift_and_removed(industrial_arm_urdf, t
     (pause,) = doc["pauses"]
     assert pause["after_s"] - pause["before_s"] > GAP_S and doc["pause_s"] == 1800.0
     (final,) = [line for line in printed.splitlines() if line.startswith("final model: pause_step:1 = ")]
-    assert "turns it" not in final, final  # eq T2: a translation
+    assert final.endswith(" mm at most)") and "turns it" not in final, final  # eq T2: a translation
     evaluated, _ = _evaluate(tmp_path, tmp_path / "val.csv", capsys, "e", "--html", str(tmp_path / "e.html"))
     assert evaluated["position"]["rms_mm"] < BOUND_MM
     assert evaluated["pause_steps"]["rows_in_span"] == N_VAL and evaluated["pause_steps"]["rows_outside"] == 0
@@ -210,7 +211,7 @@ def test_clean_data_adopt_neither_and_missing_columns_are_named(industrial_arm_u
     doc, _ = _diagnose(industrial_arm_urdf, tmp_path)
     assert not any(e["type"] in ("thermal", "pause_step") for e in doc["effects"]), doc["effects"]
     said = " ".join(doc["diagnosis"]["notes"])  # both offered: neither is said to be untestable
-    assert "thermal" not in said and "pause_step" not in said, said
+    assert "thermal" not in said and "pause_step" not in said, said  # as (d)'s notes say them
     with pytest.raises(AssertionError, match="no temperature column 'temperature_k'; did you mean 'temperature_c'"):
         _diagnose(industrial_arm_urdf, tmp_path, "--temperature-column", "temperature_k")
     for name in ("cal.csv", "val.csv"):  # the same rows without time and temperature
@@ -218,7 +219,9 @@ def test_clean_data_adopt_neither_and_missing_columns_are_named(industrial_arm_u
         keep = [i for i, c in enumerate(lines[0].split(",")) if c not in ("time", "temperature_c")]
         (tmp_path / name).write_text("\n".join(",".join(line.split(",")[i] for i in keep) for line in lines) + "\n",
                                      encoding="utf-8")
-    _, printed = _diagnose(industrial_arm_urdf, tmp_path)
+    doc, printed = _diagnose(industrial_arm_urdf, tmp_path)
+    said = " ".join(doc["diagnosis"]["notes"])
+    assert "thermal cannot be tested: " in said and "pause_step cannot be tested: " in said, said
     assert "thermal cannot be tested: " in printed and "--temperature-column NAME" in printed
     assert "pause_step cannot be tested: " in printed and "--time-column NAME" in printed
 

@@ -49,6 +49,8 @@ def test_a_temperature_column_in_some_session_files_only_is_named_not_dropped(tm
     (thermal,) = [n for n in search.notes if n.startswith("thermal")]
     assert thermal.startswith(f"thermal cannot be tested: {without} lack(s) the temperature column 'temperature_c'")
     assert "add it to that file" in thermal and "add a column" not in thermal
+    (generic,) = [n for n in _notes(read_sessions([without], JOINTS)[0]).notes if n.startswith("thermal")]
+    assert "add a column" in generic  # the line above is not: no file has the column
     refused = f"^{re.escape(str(without))}: no temperature column 'temperature_c', which the other session"
     with pytest.raises(PincalError, match=refused):
         _notes(data, "temperature_c")
@@ -79,6 +81,10 @@ def test_a_time_or_sigma_column_in_some_session_files_only_is_named(tmp_path):
     (timing,) = [n for n in search.notes if "pause_step" in n]
     assert timing.startswith(f"drift and pause_step cannot be tested: {without} lack(s) the time column 'time'")
     assert "add a column" not in timing
+    alone, _ = read_sessions([without], JOINTS)  # no file has a time column: the generic line
+    (generic,) = [n for n in search_conditions(None, alone.sessions.tolist(), read_readings(alone, None, None),
+                                               np.ones(alone.n_rows, bool)).notes if "pause_step" in n]
+    assert "add a column" in generic
     with pytest.raises(PincalError, match=f"^{re.escape(str(without))}: no time column 'time', which the other"):
         time_column(data, "time")
     with pytest.raises(PincalError, match=f"^{re.escape(str(without))}: no column 'sigma_mm' for --sigma-column, wh"):
