@@ -86,9 +86,11 @@ class DHRobot:
 
     if TYPE_CHECKING:  # for type checkers only: the constructor takes array-likes (__post_init__ converts them)
 
-        def __init__(self, convention: str, names: tuple[str, ...], alpha: npt.ArrayLike, a: npt.ArrayLike,
-                     theta: npt.ArrayLike, d: npt.ArrayLike, types: tuple[str, ...], lower: npt.ArrayLike,
-                     upper: npt.ArrayLike, velocity: npt.ArrayLike, effort: npt.ArrayLike) -> None: ...
+        def __init__(  # noqa: PLR0913 - the dataclass's own constructor: one argument per column of the table
+            self, convention: str, names: tuple[str, ...], alpha: npt.ArrayLike, a: npt.ArrayLike,
+            theta: npt.ArrayLike, d: npt.ArrayLike, types: tuple[str, ...], lower: npt.ArrayLike,
+            upper: npt.ArrayLike, velocity: npt.ArrayLike, effort: npt.ArrayLike,
+        ) -> None: ...
 
     def __post_init__(self) -> None:
         check_convention(self.convention)
