@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import cast
+from typing import Literal, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -56,8 +56,12 @@ from pincal.residuals.so3 import log3
 __all__ = [
     "MIN_SPREAD_M", "MIN_SPREAD_RATIO", "LINE_RATIO", "MIN_TURN_RAD", "where", "rows_at", "registration_problem",
     "check_registrable", "session_rows", "by_points", "start_registration", "initial_target", "register_session",
-    "session_pose_errors",
+    "session_pose_errors", "RegistrationStart",
 ]
+
+#: How a session's registration is started: from its points (Arun), from its orientations
+#: (Registration 2), or from points on one line (:func:`pincal.fit.registration.register_line`).
+RegistrationStart = Literal["points", "orientations", "line"]
 
 #: Measured points whose spread about a point (or off a line) is below this [m]
 #: coincide (lie on one line) for a registration: 1 µm is below the noise of any
@@ -238,7 +242,7 @@ def initial_target(
 
 
 def _start_kind(data: MeasurementSet, name: str, rows: np.ndarray, t: np.ndarray, rot: np.ndarray,
-                fit_points: bool) -> str:
+                fit_points: bool) -> RegistrationStart:
     """How :func:`initial_target` starts a session's registration: ``points`` (Arun), ``orientations``
     (Registration 2) or ``line`` (:func:`pincal.fit.registration.register_line`).
 
