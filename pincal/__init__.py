@@ -45,7 +45,8 @@ _DEFINED_IN = {
     "pincal.workflows.report_page": ("report_file",),
     "pincal.workflows.fixture": ("FixtureRun", "FixtureEvaluation", "calibrate_fixture_files",
                                  "evaluate_fixture_files"),
-    "pincal.workflows.preparation": ("PlanRun", "plan_files", "urdf_from_dh_file"),
+    "pincal.planning.planner": ("PlanSettings",),
+    "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
     "pincal.workflows.extract": ("BagRead", "extract_file"),
     "pincal.workflows.simulation": ("simulate_to_directory",),
     "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
@@ -95,6 +96,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.paper.methods import PaperCalibration, calibrate_paper
     from pincal.paper.ml_estimator import MLCalibration, MLSettings, calibrate_ml
     from pincal.paper.noise_limit import PredictedErrors, predicted_errors
+    from pincal.planning.planner import PlanSettings
     from pincal.report.html import render_html, write_html
     from pincal.simulation.paper import (
         SimulatedExperiment,
@@ -117,7 +119,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         calibrate_fixture_files,
         evaluate_fixture_files,
     )
-    from pincal.workflows.preparation import PlanRun, plan_files, urdf_from_dh_file
+    from pincal.workflows.preparation import PlanInputs, PlanRun, plan_files, urdf_from_dh_file
     from pincal.workflows.report_page import report_file
     from pincal.workflows.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
     from pincal.workflows.simulation import simulate_to_directory
@@ -204,7 +206,9 @@ __all__ = [
     "FixtureEvaluation",
     "calibrate_fixture_files",
     "evaluate_fixture_files",
+    "PlanInputs",
     "PlanRun",
+    "PlanSettings",
     "plan_files",
     "urdf_from_dh_file",
     "BagRead",

@@ -9,7 +9,9 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
-__all__ = ["PincalError", "MeasurementError", "ModelError", "CalibrationError", "LISTED", "did_you_mean"]
+__all__ = [
+    "PincalError", "MeasurementError", "ModelError", "CalibrationError", "LISTED", "did_you_mean", "expect_value",
+]
 
 
 class PincalError(Exception):
@@ -44,3 +46,12 @@ def did_you_mean(name: str, choices: Iterable[str], what: str) -> str:
     shown = ", ".join(choices[:LISTED]) + (f", … and {len(choices) - LISTED} more" if len(choices) > LISTED else "")
     guess = ("did you mean " + " or ".join(f"'{c}'" for c in close) + "? ") if close else ""
     return f"{guess}{what}: {shown or 'none'}"
+
+
+def expect_value(value: object, kind: type, function: str) -> None:
+    """Refuse, with a TypeError naming the class, a call of ``function`` whose options or settings
+    argument ``value`` is not a ``kind`` (a script written for a former signature, which took each
+    option as its own argument: a bool or a str there would fail later and obscurely)."""
+    if not isinstance(value, kind):
+        raise TypeError(f"{function}() takes a {kind.__module__}.{kind.__qualname__} where it got "
+                        f"{type(value).__name__} (changed in this version: build the {kind.__qualname__} value)")

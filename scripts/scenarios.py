@@ -449,7 +449,8 @@ def run_diagnose(chain, calibration, test, sigma: float, selection: str) -> dict
     from pincal.diagnosis.diagnose import DiagnoseOptions, diagnose
 
     started = time.perf_counter()
-    recalibrate = partial(calibrate_chain, chain, level="full", selection=selection, refit_offered=False)
+    recalibrate = partial(calibrate_chain, chain, level="full",
+                          options=ChainFitOptions(selection=selection, refit_offered=False))
     found = diagnose(chain, recalibrate(calibration), calibration, heldout=test,
                      options=DiagnoseOptions(recalibrate=recalibrate))
     final = found.final_calibration()

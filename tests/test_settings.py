@@ -81,8 +81,30 @@ def test_a_call_of_the_former_signature_is_refused_by_name(tmp_path):
 
     with pytest.raises(TypeError, match="calibrate_files\\(\\) takes a pincal.workflows.settings.CalibrateSettings"):
         calibrate_files("a.urdf", "d.csv", "o.urdf", "r.json", "tip")  # type: ignore[arg-type]
-    with pytest.raises(TypeError, match="EvaluateSettings after the paths, got bool"):
+    with pytest.raises(TypeError, match="EvaluateSettings where it got bool"):
         evaluate_files("a.urdf", "r.json", "d.csv", True)  # type: ignore[arg-type]
+
+
+def test_a_library_call_of_the_former_signature_is_refused_by_name():
+    """calibrate_chain, choose_level, diagnose and plan_files took their options one by one; a script
+    passing the former fourth (or fifth) argument gets one TypeError naming the value to build, not an
+    AttributeError from deep inside the fit."""
+    from pincal.diagnosis.diagnose import diagnose
+    from pincal.fit.chain_calibration import calibrate_chain
+    from pincal.fit.level_choice import choose_level
+    from pincal.planning.planner import PlanSettings
+    from pincal.workflows.preparation import plan_files
+
+    with pytest.raises(TypeError, match=r"calibrate_chain\(\) takes a pincal.fit.chain_calibration.ChainFitOptions "
+                                        "where it got bool"):
+        calibrate_chain(None, None, "full", True)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"choose_level\(\) takes a .*ChainFitOptions where it got str"):
+        choose_level(None, None, "w")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"diagnose\(\) takes a pincal.diagnosis.diagnose.DiagnoseOptions where it "
+                                        "got str"):
+        diagnose(None, None, None, None, "w")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"plan_files\(\) takes a .*PlanInputs where it got dict"):
+        plan_files("a.urdf", "tip", PlanSettings(count=5), "p.csv", "p.json", {})  # type: ignore[arg-type]
 
 
 def test_the_command_prints_the_settings_message(tmp_path, capsys):

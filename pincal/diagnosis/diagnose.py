@@ -72,7 +72,7 @@ from pincal.diagnosis.steps import (
 )
 from pincal.diagnosis.structure import remaining_structure
 from pincal.diagnosis.verdicts import EVIDENCE, SHOWN, Candidate, TargetChange, target_changes
-from pincal.errors import CalibrationError
+from pincal.errors import CalibrationError, expect_value
 from pincal.fit.chain_calibration import ChainCalibration, row_weights
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.prior import standard_deviations
@@ -208,6 +208,7 @@ def diagnose(
             adopting the best; the final fit and the search for remaining structure one.
     """
     options = DiagnoseOptions() if options is None else options
+    expect_value(options, DiagnoseOptions, "diagnose")
     candidates = options.candidates
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
         candidates = candidate_effects(chain, True)

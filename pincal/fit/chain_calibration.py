@@ -29,7 +29,7 @@ from typing import cast
 
 import numpy as np
 
-from pincal.errors import CalibrationError, did_you_mean
+from pincal.errors import CalibrationError, did_you_mean, expect_value
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
@@ -217,6 +217,7 @@ def calibrate_chain(chain: KinematicChain, data: MeasurementSet, level: ChainLev
     """
     if level not in CHAIN_LEVELS:
         raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
+    expect_value(options, ChainFitOptions, "calibrate_chain")
     if options.selection not in SELECTION_CRITERIA:
         raise CalibrationError(f"selection must be one of {tuple(SELECTION_CRITERIA)}, got '{options.selection}'")
     started = time.perf_counter()

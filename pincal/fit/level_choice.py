@@ -59,7 +59,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from pincal.errors import CalibrationError
+from pincal.errors import CalibrationError, expect_value
 from pincal.fit.chain_calibration import CHAIN_LEVELS, ChainFitOptions, calibrate_chain
 from pincal.fit.fixture_calibration import calibrate_fixture
 from pincal.fit.fold_update import LINEARISED_FROM_ROWS, linearised_levels
@@ -325,6 +325,7 @@ def choose_level(
     """
     started = time.perf_counter()
     options = ChainFitOptions() if options is None else options
+    expect_value(options, ChainFitOptions, "choose_level")
     rows = data.select(np.flatnonzero(data.roles != "validation"))
     scheme, fold_list = sensor_folds(rows, folds, seed)
     several = len(rows.session_names) > 1

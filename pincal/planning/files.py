@@ -147,14 +147,18 @@ class ClearanceJson(TypedDict):
     pairs_ignored_at_zero: list[str]
 
 
-class PlanCandidates(TypedDict):
-    """The candidates: how many, how many the collision check left (``collision_check``: how they were
-    checked; ``clearance``: its counts, null when not checked), and the range of each joint they were drawn
-    from or span (``joint_ranges``, deg or mm)."""
-
+class _PlanCandidatesKeys(TypedDict):
     count: int
     usable: int
     clearance: ClearanceJson | None
+
+
+class PlanCandidates(_PlanCandidatesKeys, total=False):
+    """The candidates: how many, how many the collision check left (``collision_check``: how they were
+    checked; ``clearance``: its counts, null when not checked), and the range of each joint they were drawn
+    from or span (``joint_ranges``, deg or mm). ``plan`` writes every key; a PLAN.json of an earlier
+    version lacks the last two."""
+
     collision_check: CollisionCheck
     joint_ranges: list[JointRangeJson]
 

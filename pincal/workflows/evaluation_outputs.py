@@ -6,7 +6,8 @@ evaluation), a threshold the errors cannot be judged by (a re-estimated registra
 degrees of freedom left, :meth:`Evaluation.threshold_problem`; ``max_rot_deg`` without orientations),
 a ``--json`` path that is an input, a report the page cannot be made of — then writes each output whole
 (:mod:`pincal.outputs`) and returns which thresholds the largest errors exceed. The socket fixture's
-``evaluate --fixture`` writes its outputs the same way (:func:`pincal.workflows.fixture.evaluate_fixture_and_write`).
+``evaluate --fixture`` writes its outputs the same way (:func:`pincal.workflows.fixture.evaluate_fixture_files`
+through :func:`write_outputs`).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pincal.errors import ModelError, PincalError
+from pincal.errors import ModelError, PincalError, expect_value
 from pincal.fit.plausibility import tip_link_findings
 from pincal.measurements.couplings import ReadingCoupling, corrected_angles, readings_of
 from pincal.measurements.csv_v1 import file_columns, read_sessions
@@ -151,6 +151,8 @@ def plan_files(
         PincalError: an output path that is an input, the other output or a
             folder; ``dh`` without a tool; any problem of the inputs or the plan.
     """
+    expect_value(settings, PlanSettings, "plan_files")
+    expect_value(inputs, PlanInputs, "plan_files")
     tool_pose, candidates_path, workspace_path = inputs.tool_pose, inputs.candidates_path, inputs.workspace_path
     couplings, xacro_args = inputs.couplings, inputs.xacro_args
     if settings.level == "dh" and tool_pose is None:

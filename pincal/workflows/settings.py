@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Literal, cast, get_args
 import numpy as np
 import numpy.typing as npt
 
-from pincal.errors import PincalError
+from pincal.errors import PincalError, expect_value
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.model.thermal import PAUSE_S
@@ -45,9 +45,7 @@ METHODS = (1, 2, 3)
 def expect(settings: object, kind: type, function: str) -> None:
     """Refuse, with a TypeError naming the class, a workflow call whose ``settings`` is not a ``kind``
     (a script written for the former signature, which took each setting as its own argument)."""
-    if not isinstance(settings, kind):
-        raise TypeError(f"{function}() takes a pincal.workflows.settings.{kind.__name__} after the paths, got "
-                        f"{type(settings).__name__} (changed in this version: build the settings object)")
+    expect_value(settings, kind, function)
 
 
 def no_prior(flag: str, level: str) -> PincalError:
