@@ -39,7 +39,7 @@ _DEFINED_IN = {
     # the file-level jobs of the commands, each taking paths and a settings value
     "pincal.workflows.settings": ("CalibrateSettings", "DiagnoseSettings", "EvaluateSettings"),
     "pincal.workflows.calibration": ("CalibrationRun", "calibrate_files"),
-    "pincal.workflows.diagnosis": ("DiagnoseRun", "diagnose_files"),
+    "pincal.workflows.diagnosis": ("DiagnoseOutputs", "DiagnoseRun", "diagnose_files"),
     "pincal.workflows.evaluation": ("Evaluation", "SessionEvaluation", "evaluate_files"),
     "pincal.workflows.evaluation_outputs": ("EvaluateOutputs", "EvaluateRun", "ThresholdFailure", "evaluate_and_write"),
     "pincal.workflows.report_page": ("report_file",),
@@ -104,7 +104,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         simulate_experiment,
     )
     from pincal.workflows.calibration import CalibrationRun, calibrate_files
-    from pincal.workflows.diagnosis import DiagnoseRun, diagnose_files
+    from pincal.workflows.diagnosis import DiagnoseOutputs, DiagnoseRun, diagnose_files
     from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files
     from pincal.workflows.evaluation_outputs import (
         EvaluateOutputs,
@@ -192,6 +192,7 @@ __all__ = [
     "EvaluateSettings",
     "CalibrationRun",
     "calibrate_files",
+    "DiagnoseOutputs",
     "DiagnoseRun",
     "diagnose_files",
     "Evaluation",

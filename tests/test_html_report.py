@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from pincal.cli.commands import main
+from pincal.errors import PincalError
 from pincal.fit.chain_calibration import calibrate_chain
 from pincal.fit.metrics import pose_errors
 from pincal.fit.outliers import OUTLIER_THRESHOLD
@@ -470,3 +471,22 @@ def test_a_missing_browser_skips_in_one_line_and_fails_under_ci(monkeypatch):
     monkeypatch.setenv("CI", "true")
     with pytest.raises(pytest.fail.Exception, match="CI=true: the browser tests must run"):
         _chromium()
+
+
+def test_calibrate_files_writes_the_page_after_the_report_and_refuses_an_input_before_the_run(two_files, tmp_path):
+    """The --html page is the workflow's output (pincal.workflows.report_page): written with the report by
+    calibrate_files, and an --html path that is an input refused before anything is written."""
+    from pincal.workflows.calibration import calibrate_files
+    from pincal.workflows.settings import CalibrateSettings
+
+    settings = CalibrateSettings("tool0", level="offsets")
+    run = calibrate_files(UR5, two_files / "A.csv", tmp_path / "c.urdf", tmp_path / "R.json", settings,
+                          html=tmp_path / "R.html")
+    assert run.html == tmp_path / "R.html"
+    assert "<html" in run.html.read_text() and (tmp_path / "R.json").is_file()
+    with pytest.raises(PincalError, match="is an input of this run"):
+        calibrate_files(UR5, two_files / "A.csv", tmp_path / "d.urdf", tmp_path / "S.json", settings,
+                        html=two_files / "A.csv")
+    assert not (tmp_path / "d.urdf").exists() and not (tmp_path / "S.json").exists()
+    no_page = calibrate_files(UR5, two_files / "A.csv", tmp_path / "e.urdf", tmp_path / "T.json", settings)
+    assert no_page.html is None

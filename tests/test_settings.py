@@ -83,6 +83,12 @@ def test_a_call_of_the_former_signature_is_refused_by_name(tmp_path):
         calibrate_files("a.urdf", "d.csv", "o.urdf", "r.json", "tip")  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="EvaluateSettings where it got bool"):
         evaluate_files("a.urdf", "r.json", "d.csv", True)  # type: ignore[arg-type]
+    from pincal.workflows.diagnosis import diagnose_files
+
+    with pytest.raises(TypeError, match=r"diagnose_files\(\) takes a pincal.workflows.diagnosis.DiagnoseOutputs "
+                                        "where it got str"):  # the former plots_dir, where the outputs now go
+        diagnose_files("a.urdf", "d.csv", "o.urdf", "r.json", DiagnoseSettings("tip"), None,
+                       "plots")  # type: ignore[arg-type]
 
 
 def test_a_library_call_of_the_former_signature_is_refused_by_name():

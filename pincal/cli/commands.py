@@ -69,9 +69,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
         selection=selection_criterion(args), sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args,
         couplings=args.coupling or (), force=args.force)
     method = settings.paper_method
-    _check_html(args.html, *_description_inputs(args), *args.data, outputs=[args.out, args.report])
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
-        run = calibrate_files(args.urdf, args.data, args.out, args.report, settings, progress=progress)
+        run = calibrate_files(args.urdf, args.data, args.out, args.report, settings, progress=progress, html=args.html)
     _print_notes(run.notes + list(run.result.notes))
     _print_level_choice(run.report)
     if level == "dh":
@@ -102,7 +101,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     print(urdf_line(args.out, run.withheld, run.reload_error))
     print(f"wrote {args.report}")
     _print_effects_file(run.effects_file, run.report)
-    _write_html(args.html, run.report, args.report.parent)
+    _print_written(run.html)
     return _warned(run.report, args.strict, run.withheld)
 
 
@@ -150,28 +149,10 @@ def _registration_text(registration) -> str:
             f"rotation vector ({', '.join(f'{v:.3f}' for v in turn)}) deg")
 
 
-def _description_inputs(args: argparse.Namespace) -> list:
-    """The run's URDF and, for a .xacro, the files it includes: outputs must overwrite none of them."""
-    from pincal.workflows.paths import description_inputs
-
-    return description_inputs(args.urdf, args.xacro_args)
-
-
-def _check_html(html, *inputs, outputs=()) -> None:
-    """Refuse an ``--html`` path that is an input or another output, before the run."""
-    if html is not None:
-        from pincal.workflows.paths import refuse_overwrite
-
-        refuse_overwrite(html, *[i for i in inputs if i is not None], outputs=[o for o in outputs if o is not None])
-
-
-def _write_html(html, document: Mapping[str, Any], base) -> None:
-    """Write the HTML page of ``document`` (``--html``); ``base``: the report's folder."""
-    if html is not None:
-        from pincal.report.html import write_html
-
-        write_html(html, document, base=base)
-        print(f"wrote {html}")
+def _print_written(path) -> None:
+    """``wrote PATH`` for an optional output (``--html``) that was written."""
+    if path is not None:
+        print(f"wrote {path}")
 
 
 def _print_chain_summary(run) -> None:
@@ -247,7 +228,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     from pincal.cli.level_table import prior_scale_line
     from pincal.cli.progress import progress_bar
     from pincal.model.thermal import shown
-    from pincal.workflows.diagnosis import diagnose_files
+    from pincal.workflows.diagnosis import DiagnoseOutputs, diagnose_files
     from pincal.workflows.settings import DiagnoseSettings
 
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
@@ -257,10 +238,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
                                 xacro_args=args.xacro_args, couplings=args.coupling or (),
                                 temperature_column=args.temperature_column, force=args.force,
                                 **({} if args.pause_s is None else {"pause_s": args.pause_s}))
-    _check_html(args.html, *_description_inputs(args), *args.data, args.validation, outputs=[args.out, args.report])
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         run = diagnose_files(args.urdf, args.data, args.out, args.report, settings, validation_path=args.validation,
-                             plots_dir=plots, progress=progress)
+                             outputs=DiagnoseOutputs(plots, args.html), progress=progress)
     _print_notes(run.notes + list(run.calibration.notes))
     _print_level_choice(run.report)
     diagnosis = run.diagnosis
@@ -319,7 +299,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
     print(f"{urdf_line(args.out, run.withheld)}\n"
           f"wrote {args.report} (effects: pincal evaluate applies them; a URDF cannot carry them)")
     _print_effects_file(run.effects_file, run.report)
-    _write_html(args.html, run.report, args.report.parent)
+    _print_written(run.html)
     return _warned(run.report, args.strict, run.withheld)
 
 

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Mapping, Sequence
-from pathlib import Path
+from collections.abc import Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -24,8 +23,7 @@ from pincal.fit.socket_metrics import FixtureMetrics
 from pincal.report.effects_file import written_line
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
 from pincal.workflows.evaluation_outputs import EvaluateOutputs
-from pincal.workflows.fixture import calibrate_fixture_files, evaluate_fixture_files, fixture_paths
-from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.fixture import calibrate_fixture_files, evaluate_fixture_files
 from pincal.workflows.settings import CalibrateLevel, CalibrateSettings
 
 __all__ = ["CALIBRATE_SENSOR_ONLY", "EVALUATE_SENSOR_ONLY", "run_calibrate", "run_evaluate"]
@@ -51,14 +49,6 @@ def _refuse(args: argparse.Namespace, flags: dict[str, str]) -> None:
                           "ball centre is estimated); drop " + ("it" if len(given) == 1 else "them"))
 
 
-def _write_html(html: Path | None, document: Mapping[str, Any], base: Path) -> None:
-    if html is not None:
-        from pincal.report.html import write_html
-
-        write_html(html, document, base=base)
-        print(f"wrote {html}")
-
-
 def run_calibrate(args: argparse.Namespace) -> tuple[FixtureReport, bool]:
     """``pincal calibrate URDF DATA... --fixture FIXTURE.csv --tip-link LINK``: prints the summary, returns
     the report (whose ``warnings`` the caller prints and turns into ``--strict``'s exit code) and whether
@@ -69,12 +59,10 @@ def run_calibrate(args: argparse.Namespace) -> tuple[FixtureReport, bool]:
         raise PincalError("--level dh (the paper's methods) needs a sensor; use registration, offsets or full "
                           "with --fixture")
     xacro_args = getattr(args, "xacro_args", ()) or ()
-    if args.html is not None:  # before the fit, as every other output
-        refuse_overwrite(args.html, *description_inputs(args.urdf, xacro_args), args.fixture, *fixture_paths(args.data),
-                         outputs=[args.out, args.report])
     settings = CalibrateSettings(args.tip_link, level=asked, selection=selection_criterion(args), xacro_args=xacro_args,
                                  couplings=args.coupling or (), force=args.force)
-    run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.out, args.report, settings)
+    run = calibrate_fixture_files(args.urdf, args.data, args.fixture, args.out, args.report, settings,
+                                  html=args.html)
     result, report = run.result, run.report
     level = result.level
     for note in report["notes"]:
@@ -109,7 +97,8 @@ def run_calibrate(args: argparse.Namespace) -> tuple[FixtureReport, bool]:
     print(f"wrote {args.report}")
     if run.effects_file is not None:
         print(written_line(run.effects_file, report))
-    _write_html(args.html, report, Path(args.report).parent)
+    if run.html is not None:
+        print(f"wrote {run.html}")
     return report, run.withheld
 
 

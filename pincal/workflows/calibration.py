@@ -35,6 +35,7 @@ from pincal.report.row_errors import chain_row_errors, paper_row_errors
 from pincal.report.sessions import session_entries, session_errors
 from pincal.workflows.evaluation import SessionEvaluation
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import CalibrateSettings, expect
 from pincal.workflows.verdict import (
     UrdfWrite,
@@ -70,6 +71,7 @@ class CalibrationRun:
             (:mod:`pincal.report.effects_file`).
         withheld: the model misses its rows grossly: the corrected URDF and effects.yaml were not written
             (:mod:`pincal.workflows.verdict`; ``reload_error`` is of the URDF withheld).
+        html: the report's page written (``--html``), or None.
     """
 
     result: PaperCalibration | ChainCalibration
@@ -82,6 +84,7 @@ class CalibrationRun:
     level_choice: LevelChoice | None = None
     effects_file: Path | None = None
     withheld: bool = False
+    html: Path | None = None
 
 
 def calibrate_chain_dh(
@@ -103,6 +106,7 @@ def calibrate_files(
     report_path: str | Path,
     settings: CalibrateSettings,
     progress: Progress | None = None,
+    html: str | Path | None = None,
 ) -> CalibrationRun:
     """Calibrate ``urdf`` on ``data_path`` as ``settings`` say; write the corrected URDF and the report
     (and, with ``--coupling``, the effects.yaml beside the URDF: :mod:`pincal.report.effects_file`).
@@ -115,6 +119,7 @@ def calibrate_files(
     unless ``settings.tool_pose`` is given; ``auto`` is the one of those three that cross-validation
     on the calibration rows supports (:func:`pincal.fit.level_choice.choose_level`).
     ``progress(done, total)`` counts the fits of those levels (:mod:`pincal.progress`).
+    ``html``: the report's page (``--html``, :mod:`pincal.workflows.report_page`), written after the report.
     """
     expect(settings, CalibrateSettings, "calibrate_files")
     level: str = settings.level  # "auto" becomes the level cross-validation chooses
@@ -128,6 +133,7 @@ def calibrate_files(
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
+    html = refuse_page(html, inputs, [out_urdf, report_path, effects_path(out_urdf)])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
     # readings taken against another joint corrected (eq C1) before the joint limits are judged
     data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings, chain.other_branch_joints)
@@ -216,10 +222,11 @@ def calibrate_files(
             report = chain_report(chain_head(fitted, chain, tool_parent, errors, n_rows, sources, report_notes),
                                   sessions=entries, record=record)
     # the couplings, which a URDF cannot carry, beside the URDF (none beside a withheld one)
+    page = render_page(html, report, report_path)  # made before the report is written
     effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
     return CalibrationRun(result, report, errors, notes, seconds, reload_error, session_list, choice, effects_file,
-                          verdict.withheld)
+                          verdict.withheld, write_page(html, page))
 
 
 def unfitted_sessions(data: MeasurementSet, fitted: Sequence[str]) -> list[str]:

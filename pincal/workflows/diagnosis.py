@@ -38,9 +38,11 @@ from pincal.workflows.paths import (
     description_inputs,
     ensure_directory,
     input_paths,
+    paths_in,
     refuse_overwrite,
     refuse_overwrite_matching,
 )
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import DiagnoseSettings, expect
 from pincal.workflows.verdict import UrdfWrite, judged, unmodelled_notes, withhold, write_checked_urdf
 
@@ -48,13 +50,27 @@ if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of th
     from pincal.diagnosis.diagnose import Diagnosis
     from pincal.fit.level_choice import LevelChoice
 
-__all__ = ["DiagnoseRun", "diagnose_files"]
+__all__ = ["DiagnoseOutputs", "DiagnoseRun", "diagnose_files"]
+
+
+@dataclass(frozen=True)
+class DiagnoseOutputs:
+    """What ``pincal diagnose`` writes besides the corrected URDF, REPORT.json and effects.yaml: the
+    figures (``--plots``, into ``plots_dir``: :mod:`pincal.diagnosis.plots`) and the report's page
+    (``--html``: :mod:`pincal.workflows.report_page`); None: not written."""
+
+    plots_dir: Path | None = None
+    html: Path | None = None
+
+    def __post_init__(self) -> None:
+        paths_in(self, "plots_dir", "html")
 
 
 @dataclass(frozen=True)
 class DiagnoseRun:
     """Outcome of :func:`diagnose_files` (``effects_file``: the effects.yaml written beside the URDF, or None;
-    ``withheld``: the final model misses its rows grossly, the URDF and effects.yaml were not written)."""
+    ``withheld``: the final model misses its rows grossly, the URDF and effects.yaml were not written;
+    ``html``: the report's page written, or None)."""
 
     calibration: ChainCalibration
     diagnosis: Diagnosis
@@ -65,6 +81,7 @@ class DiagnoseRun:
     level_choice: LevelChoice | None = None
     effects_file: Path | None = None
     withheld: bool = False
+    html: Path | None = None
 
 
 def diagnose_files(
@@ -74,16 +91,19 @@ def diagnose_files(
     report_path: str | Path,
     settings: DiagnoseSettings,
     validation_path: str | Path | None = None,
-    plots_dir: str | Path | None = None,
+    outputs: DiagnoseOutputs | None = None,
     progress: Progress | None = None,
 ) -> DiagnoseRun:
     """Calibrate as ``settings`` say, search the residuals for missing effects, write the corrected
-    URDF, the report (with ``effects``), the plots (into ``plots_dir``; None: none) and, with effects or
-    couplings, the effects.yaml beside the URDF (:mod:`pincal.report.effects_file`); held-out
-    rows from ``validation_path``.
+    URDF, the report (with ``effects``), with effects or couplings the effects.yaml beside the URDF
+    (:mod:`pincal.report.effects_file`), and the plots and page ``outputs`` asks for (None: neither);
+    held-out rows from ``validation_path``.
     ``progress(done, total)`` counts the calibration's fits, then the search's (:mod:`pincal.progress`).
     Several ``data_path`` files are sessions (one registration each; see :func:`calibrate_files`)."""
     expect(settings, DiagnoseSettings, "diagnose_files")
+    outputs = DiagnoseOutputs() if outputs is None else outputs
+    expect(outputs, DiagnoseOutputs, "diagnose_files")  # a folder in the former plots_dir's place: refused
+    plots_dir = outputs.plots_dir
     tip_link, tool_pose, xacro_args = settings.tip_link, settings.tool_pose, settings.xacro_args
     level: str = settings.level  # "auto" becomes the level cross-validation chooses
     sigma_column, selection, payload_kg = settings.sigma_column, settings.criterion, settings.payload_kg
@@ -99,6 +119,7 @@ def diagnose_files(
     refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     if plots_dir is not None:  # the names pincal.diagnosis.plots gives its figures
         refuse_overwrite_matching(plots_dir, "diagnose_*.png", *inputs)
+    html = refuse_page(outputs.html, inputs, [out_urdf, report_path, effects_path(out_urdf)])
     if level == "dh":
         raise PincalError("diagnose works on --level registration, offsets or full")
     started = time.perf_counter()
@@ -171,10 +192,11 @@ def diagnose_files(
             plots=[str(p) for p in plots], record=record,
         )
     # what the URDF cannot carry, for a controller (nothing beside a withheld URDF)
+    page = render_page(html, report, report_path)  # made before the report is written (the plots are)
     effects_file = None if verdict.withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
     return DiagnoseRun(calibration, diagnosis, report, notes, plots, time.perf_counter() - started, choice,
-                       effects_file, verdict.withheld)
+                       effects_file, verdict.withheld, write_page(html, page))
 
 
 def _time_name(data: MeasurementSet) -> str | None:

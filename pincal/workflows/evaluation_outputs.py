@@ -26,7 +26,7 @@ from pincal.report.model_fixture import FixtureEvaluationJson
 from pincal.report.reading import PAGE_KINDS, load_report
 from pincal.report.row_errors import EvaluatedRows, evaluation_document
 from pincal.workflows.evaluation import Evaluation, evaluate_files
-from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.paths import description_inputs, paths_in, refuse_overwrite
 from pincal.workflows.settings import EvaluateSettings, expect
 
 __all__ = ["EvaluateOutputs", "ThresholdFailure", "EvaluateRun", "evaluate_and_write", "write_outputs"]
@@ -41,10 +41,7 @@ class EvaluateOutputs:
     html: Path | None = None
 
     def __post_init__(self) -> None:
-        for name in ("json", "html"):
-            value = getattr(self, name)
-            if value is not None:
-                object.__setattr__(self, name, Path(value))
+        paths_in(self, "json", "html")
 
 
 @dataclass(frozen=True)

@@ -61,6 +61,7 @@ from pincal.report.reading import load_report
 from pincal.report.record import ReportRecord
 from pincal.workflows.evaluation_outputs import EvaluateOutputs, write_outputs
 from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import CalibrateSettings, expect
 from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_checked_urdf
 
@@ -89,6 +90,7 @@ class FixtureRun:
     effects_file: Path | None = None
     check: PlacementCheck | None = None
     withheld: bool = False
+    html: Path | None = None  # the report's page written (--html), or None
 
 
 def calibrate_fixture_files(
@@ -98,6 +100,7 @@ def calibrate_fixture_files(
     out_urdf: str | Path,
     report_path: str | Path,
     settings: CalibrateSettings,
+    html: str | Path | None = None,
 ) -> FixtureRun:
     """Calibrate ``urdf`` on socket-fixture data as ``settings`` say (its tip link carries the
     ball; level, selection, xacro arguments and ``--coupling``, eq C1 on the joint readings as for sensor
@@ -131,6 +134,7 @@ def calibrate_fixture_files(
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
+    html = refuse_page(html, inputs, [out_urdf, report_path, effects_path(out_urdf)])  # --html: the report's page
     chain = KinematicChain.from_urdf(urdf, tip_link, xacro_args=xacro_args or None)
     fixture = read_fixture(fixture_path)
     data = read_fixture_data(data_paths, chain.joint_specs, fixture)
@@ -165,10 +169,11 @@ def calibrate_fixture_files(
                               warnings=findings_json(warnings), level_choice=level_choice_part(choice),
                               couplings=couplings_part(settings.couplings))
         report = fixture_report(result, chain, data, sources, notes, file_sha256(urdf), record=record, held_out=check)
+    page = render_page(html, report, report_path)  # made before the report is written
     # the couplings, which a URDF cannot carry (none beside a withheld URDF)
     effects_file = None if withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
-    return FixtureRun(result, report, seconds, reload_error, effects_file, check, withheld)
+    return FixtureRun(result, report, seconds, reload_error, effects_file, check, withheld, write_page(html, page))
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,8 @@ from pincal.errors import PincalError
 from pincal.model.description import is_xacro, read_description
 from pincal.model.urdf import same_file
 
-__all__ = ["ensure_directory", "input_paths", "description_inputs", "refuse_overwrite", "refuse_overwrite_matching"]
+__all__ = ["ensure_directory", "input_paths", "description_inputs", "refuse_overwrite", "refuse_overwrite_matching",
+           "paths_in"]
 
 
 def ensure_directory(path: str | Path) -> Path:
@@ -85,3 +86,12 @@ def refuse_overwrite_matching(folder: str | Path, pattern: str, *inputs: str | P
         if fnmatch(path.name, pattern) and same_file(folder, path.parent):
             raise PincalError(f"{path}: is an input of this run, and {folder} gets files named {pattern}; "
                               "refusing to overwrite an input file; choose another output folder")
+
+
+def paths_in(value: object, *names: str) -> None:
+    """In a frozen outputs value's ``__post_init__``: make each named attribute that is given (not None)
+    a :class:`~pathlib.Path`, so that a caller may pass ``str``."""
+    for name in names:
+        given = getattr(value, name)
+        if given is not None:
+            object.__setattr__(value, name, Path(given))
