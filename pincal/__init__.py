@@ -47,7 +47,7 @@ _DEFINED_IN = {
                                  "evaluate_fixture_files"),
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
-    "pincal.workflows.extract": ("BagRead", "extract_file"),
+    "pincal.workflows.extract": ("BagRead", "NoPostures", "extract_file"),
     "pincal.workflows.simulation": ("simulate_to_directory",),
     "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
     "pincal.report.html": ("render_html", "write_html"),  # imports jinja2 and matplotlib
@@ -112,7 +112,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         ThresholdFailure,
         evaluate_and_write,
     )
-    from pincal.workflows.extract import BagRead, extract_file
+    from pincal.workflows.extract import BagRead, NoPostures, extract_file
     from pincal.workflows.fixture import (
         FixtureEvaluation,
         FixtureRun,
@@ -214,6 +214,7 @@ __all__ = [
     "urdf_from_dh_file",
     "BagRead",
     "extract_file",
+    "NoPostures",
     "simulate_to_directory",
 ]
 

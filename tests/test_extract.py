@@ -354,6 +354,9 @@ def test_the_python_workflow_writes_what_the_command_writes(small_bag, tmp_path,
     assert by_call.read_bytes() == by_command.read_bytes()
     assert extraction.data is not None and extraction.data.n_rows == 4 and read.joints.topic == "/joint_states"
     none = tmp_path / "none.csv"
-    with pytest.raises(MeasurementError, match="no static posture left to write"):
+    with pytest.raises(MeasurementError, match="no static posture left to write") as raised:
         extract_file(small_bag, "/joint_states", ["/tracker/pose"], none, PlateauSettings(min_still=10.0), pose=True)
     assert not none.exists()
+    # what was read and each stop refused travel with the error: the command prints them before it
+    assert raised.value.extraction.data is None and len(raised.value.extraction.refused) == 4  # type: ignore[attr-defined]
+    assert raised.value.read.joints.topic == "/joint_states"  # type: ignore[attr-defined]

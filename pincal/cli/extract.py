@@ -10,8 +10,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from pincal.measurements.plateaus import Extraction, PlateauSettings
+    from pincal.workflows.extract import BagRead
 
 __all__ = ["run_extract"]
 
@@ -22,23 +27,44 @@ def _rate(stamps: np.ndarray) -> str:
 
 def run_extract(args: argparse.Namespace) -> int:
     """Run ``pincal extract``; returns the exit code (0), raises PincalError on bad input."""
-    from pincal.measurements.plateaus import REASONS, PlateauSettings
-    from pincal.workflows.extract import no_rows_error, read_bag_file, write_postures
+    from pincal.measurements.plateaus import PlateauSettings
+    from pincal.workflows.extract import NoPostures, extract_file
 
     settings = PlateauSettings(still_tol=args.still_tol, min_still=args.min_still, trim=args.trim,
                                min_samples=args.min_samples, max_spread_mm=args.max_spread,
                                max_offset=args.max_offset, clock_offset=args.clock_offset)
     topics = [args.pose] if args.pose is not None else list(args.point)
-    read = read_bag_file(args.bag, args.joints, topics, args.out, pose=args.pose is not None,
-                         joint_names=args.joint_names)
+    try:
+        read, extraction = extract_file(args.bag, args.joints, topics, args.out, settings, pose=args.pose is not None,
+                                        joint_names=args.joint_names)
+    except NoPostures as nothing:  # what was read and each stop refused, then the error
+        _print_extraction(nothing.read, nothing.extraction, settings)
+        raise
+    _print_extraction(read, extraction, settings)
+    data = extraction.data
+    assert data is not None  # extract_file raises NoPostures otherwise
+    spread = data.extra["spread_mm"]
+    print(f"averaged over {settings.trim:g} s-trimmed windows: spread_mm median {np.median(spread):.3f}, "
+          f"max {np.max(spread):.3f}; fewest samples {int(np.min(data.extra['samples']))}")
+    print(f"wrote {args.out} ({data.n_rows} rows; columns: {len(data.joint_names)} joints, "
+          + ("x,y,z,qx,qy,qz,qw" if data.rotations is not None else "x,y,z" if data.n_points == 1
+             else f"x1,y1,z1 ... x{data.n_points},y{data.n_points},z{data.n_points}")
+          + f", role, {', '.join(data.extra)})")
+    print(f"next: pincal calibrate ROBOT.urdf {args.out} --tip-link LINK --out CORRECTED.urdf --report REPORT.json")
+    return 0
+
+
+def _print_extraction(read: BagRead, extraction: Extraction, settings: PlateauSettings) -> None:
+    """What the bag held, the clock offset, each stop refused and the count of rows."""
+    from pincal.measurements.plateaus import REASONS
+
     joints, streams = read.joints, read.streams
     for note in read.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
-    print(f"read {args.bag}: {joints.topic}: {len(joints.stamps)} readings of {len(joints.names)} joints "
+    print(f"read {read.bag}: {joints.topic}: {len(joints.stamps)} readings of {len(joints.names)} joints "
           f"({_rate(joints.stamps)}); " + "; ".join(
               f"{s.topic}: {len(s.stamps)} samples ({s.msgtype.rsplit('/', 1)[1]}, {_rate(s.stamps)}"
               + (f", frame '{s.frame}'" if s.frame else "") + ")" for s in streams))
-    extraction = write_postures(read, args.out, settings)  # written when it has rows
     offset = extraction.offset
     text = (f"clock offset: {streams[0].topic} stamps - {joints.topic} stamps = {offset.seconds:+.4f} s")
     if offset.estimated:
@@ -53,15 +79,3 @@ def run_extract(args: argparse.Namespace) -> int:
     rows = 0 if extraction.data is None else extraction.data.n_rows
     print(f"{extraction.stretches} still stretches of >= {settings.min_still:g} s (every joint within "
           f"{settings.still_tol:g}): {rows} rows; refused: {counts}")
-    if extraction.data is None:
-        raise no_rows_error(read, extraction)
-    data = extraction.data
-    spread = data.extra["spread_mm"]
-    print(f"averaged over {settings.trim:g} s-trimmed windows: spread_mm median {np.median(spread):.3f}, "
-          f"max {np.max(spread):.3f}; fewest samples {int(np.min(data.extra['samples']))}")
-    print(f"wrote {args.out} ({data.n_rows} rows; columns: {len(data.joint_names)} joints, "
-          + ("x,y,z,qx,qy,qz,qw" if data.rotations is not None else "x,y,z" if data.n_points == 1
-             else f"x1,y1,z1 ... x{data.n_points},y{data.n_points},z{data.n_points}")
-          + f", role, {', '.join(data.extra)})")
-    print(f"next: pincal calibrate ROBOT.urdf {args.out} --tip-link LINK --out CORRECTED.urdf --report REPORT.json")
-    return 0

@@ -18,7 +18,8 @@ from pincal.measurements.csv_v1 import write_measurements
 from pincal.measurements.plateaus import Extraction, PlateauSettings, extract_postures
 from pincal.workflows.paths import refuse_overwrite
 
-__all__ = ["BagRead", "bag_files", "read_bag_file", "no_rows_error", "write_postures", "extract_file"]
+__all__ = ["BagRead", "NoPostures", "bag_files", "read_bag_file", "no_rows_error", "write_postures",
+           "extract_file"]
 
 
 @dataclass(frozen=True)
@@ -53,10 +54,19 @@ def read_bag_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out
     return BagRead(bag, joints, streams, notes)
 
 
+class NoPostures(MeasurementError):
+    """A recording that leaves no static posture: nothing was written. ``read`` and ``extraction`` say
+    what was read and why each stop was refused (the command prints them before this error)."""
+
+    def __init__(self, read: BagRead, extraction: Extraction) -> None:
+        super().__init__(f"{read.bag}: no static posture left to write ({len(extraction.refused)} stop(s) "
+                         "refused, listed above); nothing written")
+        self.read, self.extraction = read, extraction
+
+
 def no_rows_error(read: BagRead, extraction: Extraction) -> MeasurementError:
-    """The error of a recording that leaves no static posture (nothing written)."""
-    return MeasurementError(f"{read.bag}: no static posture left to write ({len(extraction.refused)} stop(s) "
-                            "refused, listed above); nothing written")
+    """The error of a recording that leaves no static posture (nothing written): a :class:`NoPostures`."""
+    return NoPostures(read, extraction)
 
 
 def write_postures(read: BagRead, out: str | Path, settings: PlateauSettings) -> Extraction:
@@ -75,7 +85,8 @@ def extract_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out:
     the defaults of :class:`~pincal.measurements.plateaus.PlateauSettings`, ``pincal extract``'s).
 
     Raises:
-        MeasurementError: the recording leaves no static posture (nothing written); a bad bag or topic.
+        NoPostures: the recording leaves no static posture (nothing written; what was read and refused in it).
+        MeasurementError: a bad bag or topic.
     """
     read = read_bag_file(bag, joints_topic, topics, out, pose=pose, joint_names=joint_names)
     extraction = write_postures(read, out, settings or PlateauSettings())
