@@ -177,3 +177,28 @@ def test_continuous_joints_are_drawn_over_one_turn():
     assert [r.source for r in ranges if r.kind == "continuous"] == ["continuous: one turn"] * 3
     assert all((r.lower, r.upper) == (-180.0, 180.0) for r in ranges if r.kind == "continuous")
     assert {r.source for r in ranges if r.kind == "revolute"} == {"URDF limits"}
+
+
+def test_geometry_on_one_link_only_is_said_to_check_nothing(tmp_path, capsys):
+    """A URDF whose only <collision> is on the base: the check runs on no pair, and a note says so rather
+    than reporting a self-collision check that could refuse nothing."""
+    from lxml import etree
+
+    root = etree.parse(str(UR5)).getroot()
+    for element in list(root.iter("collision")):
+        element.getparent().remove(element)
+    base = root.find("link[@name='base_link']")
+    etree.SubElement(etree.SubElement(etree.SubElement(base, "collision"), "geometry"), "box", size="0.1 0.1 0.1")
+    urdf = tmp_path / "ur5_base_only.urdf"
+    urdf.write_bytes(etree.tostring(root))
+    code, doc = _plan(tmp_path, "base-only", urdf, "tool0")
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert doc["candidates"]["collision_check"] == "self-collision"
+    assert doc["candidates"]["clearance"]["pairs_checked"] == 0
+    notes = [line for line in captured.err.splitlines() if "in effect not checked for collision" in line]
+    assert len(notes) == 1 and "ur5_base_only.urdf" in notes[0]
+    assert notes[0].removeprefix("pincal: note: ") in doc["notes"]  # PLAN.json keeps what the console said
+    # with geometry on the moving links (the UR5 itself) no such note
+    code, _ = _plan(tmp_path, "ur5", UR5, "tool0")
+    assert code == 0 and "in effect not checked" not in capsys.readouterr().err

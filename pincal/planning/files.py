@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TypedDict, cast
@@ -275,9 +276,11 @@ def plan_document(
     pool: CandidatePool,
     tool_pose: np.ndarray | None,
     plan_csv_sha256: str | None = None,
+    notes: Sequence[str] = (),
 ) -> PlanJson:
     """The PLAN.json document of ``plan`` (its settings: ``plan.settings``) chosen from ``pool``;
-    ``plan_csv_sha256`` names the PLAN.csv it describes (its bytes' SHA-256)."""
+    ``plan_csv_sha256`` names the PLAN.csv it describes (its bytes' SHA-256); ``notes``: the run's notes
+    before the planner's (the files read, the ranges drawn, the collision check), as the console says them."""
     settings, labels, clearance = plan.settings, pool.labels, pool.clearance
     n_candidates = len(labels)
     ratio = None
@@ -352,5 +355,5 @@ def plan_document(
         ],
         "exchange_swaps": plan.swaps,
         "seconds": plan.seconds,
-        "notes": list(plan.notes),
+        "notes": [*notes, *plan.notes],
     }

@@ -196,6 +196,10 @@ def plan_files(
                      "self-collision (check the plan's postures before the robot moves)")
     clearance = _clearance(urdf, chain, candidates, check, inputs, stages.next()) if check in (
         "self-collision", "min-distance") else None
+    if clearance is not None and clearance.pairs_checked == 0:  # geometry on one link, or on links fixed together
+        notes.append(f"{urdf.name}: no two links that move relative to each other both have <collision> geometry "
+                     f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration): the candidates "
+                     "are in effect not checked for collision (check the plan's postures before the robot moves)")
     plan = plan_measurements(chain, candidates, settings, existing=existing, workspace=workspace,
                              allowed=None if clearance is None else clearance.allowed, progress=stages.next())
     sources: PlanSources = {"urdf": str(urdf), "candidates": _text(candidates_path),
@@ -205,7 +209,7 @@ def plan_files(
         sources["couplings"] = [c.as_dict() for c in couplings]
     digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels)
     pool = CandidatePool(labels, ranges, check, clearance, inputs.sample if candidates_path is None else None)
-    document = plan_document(plan, chain, sources, pool, tool_pose, plan_csv_sha256=digest)
+    document = plan_document(plan, chain, sources, pool, tool_pose, plan_csv_sha256=digest, notes=notes)
     write_plan_json(out_json, document)
     return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes), check, ranges)
 
