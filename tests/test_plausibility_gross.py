@@ -136,6 +136,10 @@ def test_a_gross_misfit_writes_the_report_not_the_urdf(arm, tmp_path, capsys, ca
     (gross,) = [w for w in doc["warnings"] if w["code"] == "gross_misfit"]
     assert "not written" in gross["message"] and "--force" in gross["message"]
     assert said(printed.err) == [w["message"] for w in doc["warnings"]]
+    # the report and its page say the path names no file of this run
+    assert doc["sources"]["corrected_urdf_withheld"] is True and doc["sources"]["corrected_urdf"] == str(out)
+    assert f"not written (withheld: see the warning; --force writes it to {out})" in \
+        (tmp_path / "REPORT.html").read_text()
     assert f"not written: {out}" in printed.out and f"wrote {out}" not in printed.out
     assert f"removed {out} and {stale_effects}" in printed.err
     assert any(f"removed {out}" in note for note in doc["notes"])
@@ -157,6 +161,7 @@ def test_force_writes_the_urdf_the_report_withheld(arm, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 0, err
     assert file_sha256(out) == json.loads(report.read_text())["urdf_sha256"] == withheld
+    assert "corrected_urdf_withheld" not in json.loads(report.read_text())["sources"]  # written: no flag
     (gross,) = [w for w in json.loads(report.read_text())["warnings"] if w["code"] == "gross_misfit"]
     assert "written all the same (--force)" in gross["message"]
 
@@ -270,6 +275,7 @@ def test_diagnose_withholds_a_gross_final_model_and_writes_a_corrected_one(arm, 
     code, out, report = _run("diagnose", arm.urdf, _xy_swapped(arm.rows), tmp_path / "swapped")
     err = capsys.readouterr().err
     assert code == EXIT_WARNING and not out.exists() and "gross_misfit" in _codes(report), err
+    assert json.loads(report.read_text())["sources"]["corrected_urdf_withheld"] is True
     assert list((tmp_path / "swapped" / "diagnose_plots").glob("*.png"))
     tool = ["--tool", ",".join(map(str, TOOL))]
     code, out, report = _run("calibrate", arm.urdf, _coupled(arm.rows), tmp_path / "coupled", *tool)

@@ -236,7 +236,9 @@ def _facts(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
         facts.append(("evaluated data", (f"{evaluation.get('data') or '—'} (evaluated model: "
                                          f"{evaluation.get('urdf') or '—'})")))
     if sources.get("corrected_urdf"):
-        facts.append(("corrected URDF", str(sources["corrected_urdf"])))
+        facts.append(("corrected URDF", f"not written (withheld: see the warning; --force writes it to "
+                                        f"{sources['corrected_urdf']})" if sources.get("corrected_urdf_withheld")
+                      else str(sources["corrected_urdf"])))
     scales = prior_scale_line((doc.get("identifiability") or {}).get("selection"))
     if scales:  # the scales the prior held the parameters to, and whether the rows chose them
         facts.append(("prior scales", scales.removeprefix("prior scales: ")))

@@ -110,10 +110,13 @@ class _SourcesKeys(TypedDict):
 
 
 class Sources(_SourcesKeys, total=False):
-    """The files the report was made from: ``validation`` (diagnose), ``fixture`` (socket fixture)."""
+    """The files the report was made from: ``validation`` (diagnose), ``fixture`` (socket fixture);
+    ``corrected_urdf_withheld``: True when the corrected URDF was not written (a gross misfit without
+    ``--force``: :mod:`pincal.workflows.verdict`); absent when it was written."""
 
     validation: str | None
     fixture: str
+    corrected_urdf_withheld: bool
 
 
 class _ChainKeys(TypedDict):

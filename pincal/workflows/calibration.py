@@ -209,6 +209,7 @@ def calibrate_files(
     if verdict.withheld:
         removed = withhold(out_urdf)
         notes, report_notes = notes + removed, report_notes + removed
+        sources["corrected_urdf_withheld"] = True  # the path names no file of this run
     xacro = dict(xacro_arguments(xacro_args))
     report: PaperReport | CalibrationReport
     if paper is not None:

@@ -171,6 +171,8 @@ def diagnose_files(
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf),
                         "validation": None if validation_path is None else str(validation_path)}
+    if verdict.withheld:
+        sources["corrected_urdf_withheld"] = True  # the path names no file of this run
     plots = []
     if plots_dir is not None:
         from pincal.diagnosis.plots import plot_diagnosis  # matplotlib only when drawing

@@ -157,6 +157,8 @@ def calibrate_fixture_files(
     seconds = time.perf_counter() - started
     sources: Sources = {"urdf": str(urdf), "data": [str(p) for p in data_paths], "fixture": str(fixture_path),
                         "corrected_urdf": str(out_urdf)}
+    if withheld:
+        sources["corrected_urdf_withheld"] = True  # the path names no file of this run
     names = ", ".join(p.name for p in data_paths)
     comment = (f"Calibrated by pincal {__version__} (socket fixture, level {level}) from {urdf.name}, {names} and "
                f"{fixture_path.name}. Ball centre and placements: see the report.")
