@@ -147,6 +147,13 @@ def test_the_sampled_ranges_are_said_and_recorded(ur5_runs, tmp_path, capsys):
     assert {r["source"] for r in spans} == {"candidate file"}
     assert spans[1]["lower"] == pytest.approx(-np.degrees(1.5)) and spans[1]["upper"] == pytest.approx(-np.degrees(1.0))
     assert "read from the file, spanning:" in captured.out and "wider than one turn" not in captured.err
+    # the elbow read against the shoulder: the span is still the file's (the readings, as PLAN.csv holds them)
+    code = main(["plan", str(UR5), "--tip-link", "tool0", "--count", "8", "--measure", "pose", "--level", "offsets",
+                 "--candidates", str(candidates), "--no-collision-check", "--coupling",
+                 "elbow_joint=-1*shoulder_lift_joint", "--out", str(out / "c.csv"), "--report", str(out / "c.json")])
+    assert code == 0, capsys.readouterr().err
+    coupled = json.loads((out / "c.json").read_text())["candidates"]["joint_ranges"]
+    assert coupled[2]["lower"] == pytest.approx(np.degrees(0.5)) and coupled[2]["upper"] == pytest.approx(np.degrees(1.0))
     out = tmp_path / "drawn"
     code = main(["plan", str(UR5), "--tip-link", "tool0", "--count", "8", "--measure", "pose", "--level", "offsets",
                  "--sample", "60", "--no-collision-check", "--out", str(out / "PLAN.csv"),

@@ -170,9 +170,9 @@ def plan_files(
     names = chain.joint_names
     notes: list[str] = []
     if candidates_path is not None:  # a file holds the controller's readings (eq C1 with --coupling)
-        candidates, labels = read_candidates(candidates_path, chain)
-        candidates = corrected_angles(candidates, couplings, names)
-        ranges = joint_ranges(chain, candidates)
+        readings, labels = read_candidates(candidates_path, chain)
+        candidates = corrected_angles(readings, couplings, names)
+        ranges = joint_ranges(chain, readings)  # the file's span as written: PLAN.csv's space too
     else:
         candidates = sample_candidates(chain, inputs.sample, settings.seed)
         labels = np.arange(len(candidates))
