@@ -53,7 +53,8 @@ def moment_compliance_words(joint: str, unit: str) -> str:
     return (f"{joint} is at its reading + the sum of each value x its load per unit of g x mass moment (the load "
             "that holds the carried links against gravity, as Pinocchio computes it, eq M2): each value is g x a "
             f"combination of the carried links' mass moments / {joint}'s stiffness [{unit}], the combinations the "
-            "rows determine (listed in combinations); a joint that sags under positive moments has negative values")
+            "rows determine (listed in combinations), x c, c < 0 for a joint that sags: a sagging joint's values have "
+            "the opposite sign to its combinations")
 
 
 def diagnosis_report(
