@@ -25,6 +25,7 @@ from pincal.model.effects import (
     effect_from_dict,
     effect_to_dict,
     gravity_torques,
+    joint_shifts,
     parse_effect,
     with_loads,
 )
@@ -134,3 +135,44 @@ def test_true_compliances_are_named_and_the_heldout_error_reaches_the_noise(mass
     floor = np.sqrt(3) * SIGMA_MM
     print(f"held-out RMS {before:.3f} -> {after:.4f} mm, floor {floor:.4f} mm")
     assert before > 2.0 and after < 1.2 * floor, (before, after, floor)
+
+
+def test_effects_yaml_carries_what_evaluate_applies(massless_runs, kuka_chain, tmp_path):
+    """The adopted effects written to effects.yaml and read back give evaluate's shifts: Σ value × load
+    (eq M2) of the moments each names, on any rows."""
+    from pincal.report.effects_file import read_effects_file, write_effects_file
+
+    diagnosis = massless_runs["with"]
+    entries = [effect_to_dict(e, v, s) for e, v, s in diagnosis.effects]
+    report = {"chain": {"joints": list(kuka_chain.joint_names), "joint_kinds": ["revolute"] * 7},
+              "tool": {"parent_link": KUKA_FLANGE_LINK, "points_m": [[0.0, 0.0, 0.0]]}, "effects": entries}
+    path = write_effects_file(tmp_path / "corrected.urdf", tmp_path / "REPORT.json", report)
+    read = read_effects_file(path)
+    assert [e for e, _ in read.effects] == [e for e, _, _ in diagnosis.effects]
+    q = _rows(4, seed=7)
+    inputs = with_loads(EffectInputs(q=q, gravity=np.zeros_like(q), time=None, order=np.arange(4)), kuka_chain)
+    shifts = joint_shifts([e for e, _ in read.effects], [v for _, v in read.effects], inputs, kuka_chain.joint_names)
+    names = moment_names(kuka_chain)
+    expected = np.zeros_like(q)
+    for effect, values, _ in diagnosis.effects:
+        j = kuka_chain.joint_names.index(effect.joint)
+        expected[:, j] += gravity_loads(kuka_chain, q)[:, j, 0, [names.index(n) for n in effect.moments]] @ values
+    np.testing.assert_allclose(shifts, expected, atol=1e-15)
+    assert np.abs(shifts).max() > 1e-3  # mrad: the shifts are there
+    from pincal.measurements.data import MeasurementSet
+    from pincal.workflows.evaluation import _effect_corrections
+
+    rows = MeasurementSet(joint_names=tuple(kuka_chain.joint_names), q=q, points=np.zeros((4, 1, 3)), rotations=None,
+                          roles=np.array(["validation"] * 4, dtype=object), lines=np.arange(2, 6))
+    corrections, _ = _effect_corrections(kuka_chain, rows, {"effects": entries}, np.zeros((1, 3)),
+                                         (np.zeros(4), np.zeros(4)), "REPORT.json")
+    np.testing.assert_allclose(corrections.q, q + expected, atol=1e-15)  # what evaluate gives the chain
+
+
+def test_masses_is_checked_once():
+    from pincal.errors import PincalError
+    from pincal.workflows.settings import DiagnoseSettings
+
+    assert DiagnoseSettings(tip_link="lwr_flange", masses="unknown").masses == "unknown"
+    with pytest.raises(PincalError, match="--masses must be one of urdf, unknown"):
+        DiagnoseSettings(tip_link="lwr_flange", masses="none")
