@@ -42,19 +42,20 @@ LOAD_COMPONENTS = ("axis", "u", "v")
 
 
 def moment_names(chain: KinematicChain) -> tuple[str, ...]:
-    """``PARAMETER:LINK`` of every static parameter of the chain's moving bodies (4 per joint, the body named by
-    the joint's child link; fixed links below it are part of it), in :func:`gravity_loads`' column order."""
+    """``PARAMETER:LINK`` of every static parameter of the model's moving bodies (4 per joint of the chain's
+    Pinocchio model, in its order; the body named by the joint's child link, fixed links below it part of it),
+    in :func:`gravity_loads`' column order."""
     model = chain.model
     links = []
-    for jid in chain.joint_ids:
+    for jid in range(1, model.njoints):
         bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == jid]
         links.append(bodies[0] if bodies else model.names[jid])
     return tuple(f"{p}:{link}" for link in links for p in MOMENT_PARAMETERS)
 
 
 def chain_mass_kg(chain: KinematicChain) -> float:
-    """The mass the URDF gives the chain's moving bodies [kg] (0: a URDF without inertias)."""
-    return float(sum(chain.model.inertias[jid].mass for jid in chain.joint_ids))
+    """The mass the URDF gives the chain model's moving bodies [kg] (0: a URDF without inertias)."""
+    return float(sum(chain.model.inertias[jid].mass for jid in range(1, chain.model.njoints)))
 
 
 def _lateral_axes(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,16 +70,19 @@ def _lateral_axes(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def gravity_loads(chain: KinematicChain, q: npt.ArrayLike) -> np.ndarray:
     """The gravity loads of every chain joint per static parameter, divided by g₀ (module docstring),
-    (K, N, 3, 4N): row k, joint i, component (:data:`LOAD_COMPONENTS`: eq M2, eq M3 about u_i, eq M3 about
-    v_i; the bending parts are zero for a prismatic joint), column of :func:`moment_names`.
-    Loads [N·m or N] = this × g₀ @ π."""
+    (K, N, 3, 4B): row k, joint i, component (:data:`LOAD_COMPONENTS`: eq M2, eq M3 about u_i, eq M3 about
+    v_i; the bending parts are zero for a prismatic joint), column of :func:`moment_names` (B the model's
+    moving bodies). Loads [N·m or N] = this × g₀ @ π.
+
+    Eq M1's sum runs over each joint's subtree, children before parents (Pinocchio numbers a child after
+    its parent): a serial chain and a tree of several tips alike."""
     model = chain.model
     data = model.createData()
     configurations = chain.configurations(q)
-    n = chain.n_joints
+    n, bodies = chain.n_joints, model.njoints - 1
     g0 = float(np.linalg.norm(model.gravity.linear)) or 1.0
     ids = chain.joint_ids
-    rows = np.zeros((len(configurations), n, 3, 4 * n))
+    rows = np.zeros((len(configurations), n, 3, 4 * bodies))
     projections = []
     for joint in chain.joints:
         u, v = _lateral_axes(np.asarray(joint.axis, dtype=float))
@@ -91,12 +95,12 @@ def gravity_loads(chain: KinematicChain, q: npt.ArrayLike) -> np.ndarray:
     for k, configuration in enumerate(configurations):
         pin.forwardKinematics(model, data, configuration)
         pin.rnea(model, data, configuration, zero, zero)  # sets each body's acceleration with gravity
-        carried = np.zeros((6, 4 * n))  # eq M1 of the joint after i, in its frame
-        for i in range(n - 1, -1, -1):
-            own = np.zeros((6, 4 * n))
-            own[:, 4 * i : 4 * i + 4] = pin.jointBodyRegressor(model, data, ids[i])[:, :4]
-            if i < n - 1:
-                own += data.liMi[ids[i + 1]].toDualActionMatrix() @ carried
-            carried = own
-            rows[k, i] = projections[i] @ carried
+        carried = np.zeros((model.njoints, 6, 4 * bodies))  # eq M1 of each joint, in its frame
+        for jid in range(model.njoints - 1, 0, -1):
+            carried[jid, :, 4 * jid - 4 : 4 * jid] += pin.jointBodyRegressor(model, data, jid)[:, :4]
+            parent = model.parents[jid]
+            if parent > 0:
+                carried[parent] += data.liMi[jid].toDualActionMatrix() @ carried[jid]
+        for i, jid in enumerate(ids):
+            rows[k, i] = projections[i] @ carried[jid]
     return rows / g0
