@@ -167,6 +167,10 @@ def test_effects_yaml_carries_what_evaluate_applies(massless_runs, kuka_chain, t
     corrections, _ = _effect_corrections(kuka_chain, rows, {"effects": entries}, np.zeros((1, 3)),
                                          (np.zeros(4), np.zeros(4)), "REPORT.json")
     np.testing.assert_allclose(corrections.q, q + expected, atol=1e-15)  # what evaluate gives the chain
+    from pincal.report.sections import _effect_value
+
+    shown, _ = _effect_value(entries[0], dict.fromkeys(kuka_chain.joint_names, "revolute"))  # the HTML report's
+    assert shown.count("mrad") == len(entries[0]["moments"]) and "N·m" not in shown
 
 
 def test_masses_is_checked_once():
