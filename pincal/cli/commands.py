@@ -236,7 +236,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),
                                 payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
                                 xacro_args=args.xacro_args, couplings=args.coupling or (),
-                                temperature_column=args.temperature_column, force=args.force,
+                                temperature_column=args.temperature_column, force=args.force, masses=args.masses,
                                 **({} if args.pause_s is None else {"pause_s": args.pause_s}))
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         run = diagnose_files(args.urdf, args.data, args.out, args.report, settings, validation_path=args.validation,
@@ -276,6 +276,8 @@ def _run_diagnose(args: argparse.Namespace) -> int:
         print(f"final model: {effect.label} = {value} {shown_unit}: {change.describe(effect)}")
         if "advice" in entry:  # what a coupling asks of the data, what a compliance's sign means
             print(f"  {entry['advice']}")
+        for words, number in zip(entry.get("combinations", ()), values):  # what a mass-moment value stands for
+            print(f"  {number:.4g} = {words}")
     from pincal.diagnosis.screening import GENERIC_NOT_RUN  # loaded already by the run
     from pincal.diagnosis.verdicts import REJECTED
 

@@ -36,6 +36,7 @@ from pincal.measurements.plateau_defaults import (
     TRIM_S,
 )
 from pincal.model.dh.conventions import DH_CONVENTIONS
+from pincal.model.masses import DEFAULT_MASSES, MASSES
 from pincal.planning.defaults import DEFAULT_SAMPLE, PLAN_LEVELS, WORKSPACE_SIZE
 
 __all__ = ["build_parser"]
@@ -242,6 +243,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_prior_scale(dia)
     dia.add_argument("--payload-kg", type=non_negative, default=0.0, metavar="KG",
                      help="point mass at the target for gravity torques (default 0)")
+    dia.add_argument("--masses", choices=MASSES, default=DEFAULT_MASSES,
+                     help="gravity loads from the URDF's inertias (urdf, the default; a URDF without any counts as "
+                          "unknown), or unknown: each compliance follows the carried links' mass moments, fitted as "
+                          "the combinations the rows determine")
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     _add_temperature(dia)

@@ -58,6 +58,7 @@ from pincal.diagnosis.catalogue import PARALLEL_AXES_RAD, candidate_effects, par
 from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
 from pincal.diagnosis.conventions import ConventionTrial, read_against_words
 from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
+from pincal.diagnosis.moment_candidates import masses_unknown, moment_compliances
 from pincal.diagnosis.screening import GENERIC_NOT_RUN, FitObjective, bic, n_prior_rows, residual_freedom, testable
 from pincal.diagnosis.steps import (
     CANDIDATE_TOLERANCE,
@@ -81,7 +82,8 @@ from pincal.fit.solver import solve
 from pincal.measurements.couplings import ReadingCoupling, apply_couplings
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import HARMONICS, Effect, EffectInputs, RowContext, effect_inputs
+from pincal.model.effects import HARMONICS, Effect, EffectInputs, RowContext, effect_inputs, with_loads
+from pincal.model.masses import Masses
 from pincal.progress import Counter, Progress
 
 __all__ = [
@@ -169,6 +171,9 @@ class DiagnoseOptions:
         couplings: the couplings the rows were corrected by (``--coupling``): their joints are not corrected again.
         stated_sigma_pos_m: the sensor's position noise per axis [m] when stated (``--sigma-pos``): the scale
             of the held-out test (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`).
+        masses: ``urdf``: gravity torques of the URDF's inertias; ``unknown``: compliances follow the carried links'
+            mass moments (:mod:`pincal.diagnosis.moment_candidates`), as they do with ``urdf`` on a URDF without
+            inertias and no payload.
     """
 
     sigma_column: str | None = None
@@ -180,6 +185,7 @@ class DiagnoseOptions:
     recalibrate: Callable[[MeasurementSet], ChainCalibration] | None = None
     couplings: Sequence[ReadingCoupling] = ()
     stated_sigma_pos_m: float | None = None
+    masses: Masses = "urdf"
 
 
 def diagnose(
@@ -280,6 +286,8 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
     row_names = names[session_rows(rows, calibration.session_names)]
     conditions = search_conditions(row_time, row_names, readings, calibration.used_index)
     inputs = conditions.inputs(inputs, conditions.temperature, row_time, row_names)
+    unknown = masses_unknown(chain, settings.masses, payload_kg)
+    inputs = with_loads(inputs, chain) if unknown else inputs  # the loads per mass moment (eq M1-M2)
     model = EffectModel.of(chain, calibration, rows, row_weights(rows, settings.sigma_column), inputs)
     held_inputs = None
     if heldout is not None:  # rows of both sets interleaved in time share their approach flanks
@@ -290,17 +298,21 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
                                                        session_rows(rows, calibration.session_names))))
         held_inputs = conditions.inputs(held_inputs, readings.heldout_temperature, heldout_time,
                                         names[session_rows(heldout, calibration.session_names)])
+        held_inputs = with_loads(held_inputs, chain) if unknown else held_inputs
     pool = list(settings.candidates or ())
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
     pool += [e for e in conditions.candidates if e not in pool]
-    # a joint no gravity torque acts on in any row (a vertical axis; a URDF without inertias): nothing to test
-    weightless = {name for j, name in enumerate(chain.joint_names) if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
-    untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
-                  and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
+    if unknown:  # compliances follow the carried links' mass moments; what needs the URDF's torques cannot be tested
+        pool, untestable = moment_compliances(pool, inputs, chain)
+    else:  # a joint no gravity torque acts on in any row (a vertical axis; no mass beyond it): nothing to test
+        weightless = {name for j, name in enumerate(chain.joint_names)
+                      if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
+        untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
+                      and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
     search = Search(chain, calibration, rows, heldout, tuple(e for e in pool if e not in untestable),
                     tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_sigma_pos_m, trial,
-                    corrected, conditions, reference)
+                    corrected, conditions, reference, unknown)
     objective, solution = model.fit([], calibration.solution, [])
     return search, State(model, held_inputs, objective, solution,
                          bic(solution.residual, solution.x.size, n_prior_rows(objective)), steps=earlier)
@@ -324,7 +336,11 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
     notes = [read_against_words(s.convention) for s in state.steps if s.convention is not None]
     notes += [text for label, text in state.rejected if label not in labels]
     untestable = search.untestable
-    if untestable:
+    if untestable and search.masses_unknown:
+        notes.append(f"cannot be tested, {len(untestable)} candidate(s): the masses are unknown (--masses unknown, or "
+                     "a URDF without inertias), and these need the URDF's gravity torques, or no mass moment loads "
+                     f"their joint in any row (an axis along gravity): {', '.join(e.label for e in untestable)}")
+    elif untestable:
         notes.append(f"cannot be tested, {len(untestable)} candidate(s): no gravity torque acts on their joints in "
                      "any row (an axis along gravity, or no mass beyond the joint in the URDF: give the links' "
                      f"inertias, or --payload-kg KG for the tool): {', '.join(e.label for e in untestable)}")

@@ -50,7 +50,7 @@ from pincal.measurements.couplings import ReadingCoupling
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.effect_units import shift_unit
-from pincal.model.effects import Effect, EffectInputs, effect_inputs
+from pincal.model.effects import Effect, EffectInputs, effect_inputs, with_loads
 from pincal.progress import Counter
 
 __all__ = [
@@ -120,7 +120,8 @@ class Search:
     calibration rows, the held-out rows, the candidates in the catalogue's order (``pool``; ``untestable``: those no
     gravity torque drives), the row-weight column, the payload [kg] at ``point`` (the target's mean, m), the
     stated position noise [m], ``trial``: the geometry calibrated again on rows corrected by a coupling (None:
-    a coupling stays an effect), the joints already corrected, the row conditions and mean row time [s]."""
+    a coupling stays an effect), the joints already corrected, the row conditions and mean row time [s], and
+    whether the masses are unknown (compliances follow mass moments, :mod:`pincal.diagnosis.moment_candidates`)."""
 
     chain: KinematicChain
     calibration: ChainCalibration
@@ -136,6 +137,7 @@ class Search:
     corrected: frozenset[str]
     conditions: ConditionSearch
     time_reference: float | None
+    masses_unknown: bool = False
 
 
 @dataclass(frozen=True)
@@ -304,10 +306,12 @@ def refresh_gravity(search: Search, refitted: Refitted, effects: list[Effect]) -
     for _ in range(GRAVITY_REFRESHES):
         with chain.placed(placements_of(calibration, obj, sol.x)):
             inputs = replace(inputs, gravity=effect_inputs(chain, search.rows, search.payload_kg, search.point).gravity)
+            inputs = inputs if inputs.loads is None else with_loads(inputs, chain)
             if heldout is not None:
                 assert held_inputs is not None  # set with the held-out rows
                 held_inputs = replace(held_inputs,
                                       gravity=effect_inputs(chain, heldout, search.payload_kg, search.point).gravity)
+                held_inputs = held_inputs if held_inputs.loads is None else with_loads(held_inputs, chain)
         model = replace(model, inputs=inputs)
         obj, sol = model.fit(effects, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj.effect_slices])
     return Refitted(model, held_inputs, obj, sol)

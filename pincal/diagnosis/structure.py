@@ -126,6 +126,9 @@ def partial_residual(effect: Effect, objective: FitObjective, solution: Solution
         driver, label = inputs.gravity[:, j], _load_label(chain, None, joint)
     elif effect.type == "backlash":
         driver, label = basis[:, 0], "approach direction (flank: −1 from above, +1 from below)"
+    elif effect.moments:  # a compliance of unknown masses: no one load drives it, its fitted deflection does
+        unit = shift_unit(chain.joint_kinds[joint] == "prismatic")
+        driver, label = fitted, f"fitted deflection of {joint} under its mass moments' load [{unit}]"
     elif effect.type == "compliance":  # its own torque, or its driver's (a gravity-torque coupling)
         driver, label = basis[:, 0], _load_label(chain, effect.driver, joint)
     elif effect.type == "coupling":

@@ -76,7 +76,8 @@ EVIDENCE = -10.0
 #: revolute joint following a prismatic reading, 1.5 / 0.1 m = 15 rad/m; a prismatic joint following a revolute
 #: reading, 1.5 × 1 m = 1.5 m/rad.
 PLAUSIBLE: dict[str, dict[str, float]] = {
-    "compliance": {"rad/(N·m)": 1e-3, "m/N": 1e-4, "rad/N": 1e-4, "m/(N·m)": 1e-3},  # 0.1 rad or m / 100 N·m, 1 kN
+    "compliance": {"rad/(N·m)": 1e-3, "m/N": 1e-4, "rad/N": 1e-4, "m/(N·m)": 1e-3,  # 0.1 rad or m / 100 N·m, 1 kN
+                   "rad": 0.1, "m": 0.1},  # unknown masses: g₀·moment/k, the same 0.1 rad or m of deflection
     "coupling": {"(relative)": 1.5, "rad/m": 15.0, "m/rad": 1.5},
     "encoder_scale": {"(relative)": 0.02},
     "cyclic": {"rad": 0.02, "m": 0.005},

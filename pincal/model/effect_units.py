@@ -5,6 +5,10 @@ drives it: a compliance's gravity load [N·m of a revolute joint's torque, N of 
 force] — its own joint's, or its ``driver``'s —, a coupling's driver reading [rad or m]. So a
 compliance is in rad/(N·m), m/N, rad/N (a revolute joint under a prismatic joint's load) or m/(N·m)
 (a prismatic joint under a revolute joint's torque).
+
+A compliance of unknown masses (``moments``) follows g₀ × mass moments instead of a load: its values are
+g₀ · (mass moment) / k, a shift [rad, or m for a prismatic joint] (:mod:`pincal.model.mass_moments`; a
+combination led by a link's mass, rather than its moment, is per metre of its lever arm: rad/m).
 """
 
 from __future__ import annotations
@@ -60,4 +64,6 @@ def effect_unit(effect: EffectJoints, kinds: Mapping[str, str]) -> str:
     def prismatic(name: str | None) -> bool:
         return kinds.get(name or "") == "prismatic"
 
+    if getattr(effect, "moments", ()):  # a compliance of unknown masses: the shift's unit (module docstring)
+        return shift_unit(prismatic(effect.joint))
     return value_unit(effect.type, prismatic(effect.joint), None if effect.driver is None else prismatic(effect.driver))

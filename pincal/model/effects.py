@@ -7,7 +7,10 @@ Each joint effect shifts the reading of one joint: actual = q_j + shift, with
   URDF's inertias, plus an optional payload mass at the target; with a ``driver`` i,
   shift = c · tau_i(q): joint j deflects under joint i's load (gravity-torque coupling: a
   parallelogram or a counterbalance links J2's and J3's loads), c [rad or m per N·m or N]
-  as j and i are revolute or prismatic (:mod:`pincal.model.effect_units`);
+  as j and i are revolute or prismatic (:mod:`pincal.model.effect_units`); with ``moments`` (masses
+  unknown) shift = Σ_b θ_b · L_jb(q), L the load of joint j per mass moment b over g₀ and θ_b =
+  g₀ · (combination b of mass moments) / k_j [rad, or m for a prismatic joint], eq M1–M2 of
+  :mod:`pincal.model.mass_moments`;
 * ``encoder_scale``  shift = s · q_j             s relative (gear-ratio error);
 * ``cyclic``         shift = a · sin(h q_j) + b · cos(h q_j), harmonic h = 1, 2 [rad];
 * ``coupling``       shift = c · q_i             c relative: joint j's reading includes −c × joint
@@ -35,8 +38,8 @@ basis (see :mod:`pincal.residuals.sensor`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -46,12 +49,13 @@ from pincal.errors import PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.drift import held_times, time_spans
+from pincal.model.mass_moments import gravity_loads, moment_names
 from pincal.model.sensor import Registration
 
 __all__ = [
     "JOINT_EFFECTS", "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
     "FLANK_GAP_S",
-    "Effect", "EffectInputs", "RowContext", "gravity_torques", "effect_inputs", "approach_flank",
+    "Effect", "EffectInputs", "RowContext", "gravity_torques", "effect_inputs", "with_loads", "approach_flank",
     "sensed_points", "joint_basis", "joint_shifts", "parse_effect", "effect_to_dict", "effect_from_dict",
 ]
 
@@ -81,6 +85,8 @@ class Effect:
         driver: for ``coupling``, the joint whose reading drives this joint's shift; for
             ``compliance``, optionally the joint whose gravity torque does (None: its own).
         pause: for ``pause_step``, the pause's number (from 1, :func:`pincal.model.thermal.find_pauses`).
+        moments: for a ``compliance`` whose masses are unknown, the mass moments (``PARAMETER:LINK`` of
+            :func:`pincal.model.mass_moments.moment_names`) whose loads it follows, one value each; () otherwise.
     """
 
     type: str
@@ -89,6 +95,7 @@ class Effect:
     source: str | None = None
     driver: str | None = None
     pause: int | None = None
+    moments: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.type not in EFFECT_TYPES:
@@ -104,9 +111,14 @@ class Effect:
             raise PincalError(f"effect '{self.type}': a coupling names, and a compliance may name, a driving joint "
                               f"other than its own; no other effect does (got joint '{self.joint}', "
                               f"driver '{self.driver}')")
+        if self.moments and (self.type != "compliance" or self.driver):
+            raise PincalError(f"effect '{self.type}': only a joint's compliance under its own load follows mass "
+                              "moments")
 
     @property
     def n_values(self) -> int:
+        if self.moments:
+            return len(self.moments)
         return {"cyclic": 2, "drift": 3, "pause_step": 3}.get(self.type, 1)
 
     @property
@@ -122,6 +134,8 @@ class Effect:
             parts.append(self.driver)
         if self.pause:
             parts.append(str(self.pause))
+        if self.moments:
+            parts.append("moments")
         return ":".join(parts)
 
 
@@ -144,6 +158,9 @@ class EffectInputs:
         joint_names: the names of the columns of ``q`` (a coupling's driver is found by name).
         temperature: T_k − T_ref of each row (K,) [K] (held inside the fitted range), or None.
         pauses: a_kp of each row and pause (K, P) (:mod:`pincal.model.thermal`, eq T2), or None.
+        loads: each joint's gravity loads per mass moment over g₀ (K, N, 3, 4N)
+            (:func:`pincal.model.mass_moments.gravity_loads`), for compliances of unknown masses; or None.
+        load_names: the mass moments of the loads' columns (:func:`pincal.model.mass_moments.moment_names`).
     """
 
     q: np.ndarray
@@ -156,6 +173,8 @@ class EffectInputs:
     joint_names: tuple[str, ...] = ()
     temperature: np.ndarray | None = None
     pauses: np.ndarray | None = None
+    loads: np.ndarray | None = None
+    load_names: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -238,6 +257,22 @@ def effect_inputs(
     )
 
 
+def with_loads(inputs: EffectInputs, chain: KinematicChain) -> EffectInputs:
+    """``inputs`` with the chain's gravity loads per mass moment at its rows (:class:`EffectInputs` ``loads``),
+    which a compliance of unknown masses follows."""
+    return replace(inputs, loads=gravity_loads(chain, inputs.q), load_names=moment_names(chain),
+                   joint_names=tuple(chain.joint_names))
+
+
+def _moment_columns(effect: Effect, inputs: EffectInputs) -> list[int]:
+    """The columns of ``inputs.loads`` a compliance of unknown masses follows (:attr:`Effect.moments`)."""
+    missing = [name for name in effect.moments if name not in inputs.load_names]
+    if inputs.loads is None or missing:
+        raise PincalError(f"effect '{effect.label}': no mass moment {', '.join(missing) or 'loads'} on the chain; "
+                          f"{did_you_mean(missing[0] if missing else '', inputs.load_names, 'mass moments')}")
+    return [inputs.load_names.index(name) for name in effect.moments]
+
+
 def approach_flank(q: np.ndarray, order: np.ndarray, min_step: float = APPROACH_MIN_STEP) -> np.ndarray:
     """sign(q[k] − q[k−1]) over rows in time order; small moves keep the previous
     flank; 0 for the first row (K,)."""
@@ -276,6 +311,8 @@ def joint_basis(effect: Effect, inputs: EffectInputs, joint: int) -> np.ndarray:
         raise PincalError(f"effect '{effect.label}': no joint '{effect.driver}' on the chain; "
                           f"{did_you_mean(effect.driver, inputs.joint_names, 'joints')}")
     driver = joint if effect.driver is None else inputs.joint_names.index(effect.driver)
+    if effect.type == "compliance" and effect.moments:
+        return cast(np.ndarray, inputs.loads)[:, joint, 0, _moment_columns(effect, inputs)]  # eq M2
     if effect.type == "compliance":
         return inputs.gravity[:, driver : driver + 1]
     if effect.type == "encoder_scale":
@@ -349,7 +386,8 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
 def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = None) -> dict[str, object]:
     """REPORT.json form: {"type", "joint", "value"}; cyclic gives harmonic, sin, cos;
     backlash adds source, coupling (and a compliance driven by another joint's torque) its driver;
-    drift's value is [vx, vy, vz] in m/s; a pause step's [dx, dy, dz] in m, with its ``pause``."""
+    drift's value is [vx, vy, vz] in m/s; a pause step's [dx, dy, dz] in m, with its ``pause``; a compliance of
+    unknown masses its ``moments`` and one value (and std) per moment."""
     values = np.atleast_1d(np.asarray(values, dtype=float))
     std = None if std is None else np.atleast_1d(np.asarray(std, dtype=float))
     out: dict[str, object] = {"type": effect.type, "joint": effect.joint}
@@ -358,7 +396,7 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
         if std is not None:
             out.update(sin_std=float(std[0]), cos_std=float(std[1]))
         return out
-    vector = effect.type in ("drift", "pause_step")
+    vector = effect.type in ("drift", "pause_step") or bool(effect.moments)
     out["value"] = values.tolist() if vector else float(values[0])
     if std is not None:
         out["std"] = std.tolist() if vector else float(std[0])
@@ -368,6 +406,8 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
         out["source"] = effect.source
     if effect.driver:
         out["driver"] = effect.driver
+    if effect.moments:
+        out["moments"] = list(effect.moments)
     return out
 
 
@@ -380,7 +420,8 @@ def effect_from_dict(entry: Any) -> tuple[Effect, np.ndarray]:
                 [float(entry["sin"]), float(entry["cos"])]
             )
         effect = Effect(kind, entry.get("joint"), source=entry.get("source"), driver=entry.get("driver"),
-                        pause=None if entry.get("pause") is None else int(entry["pause"]))
+                        pause=None if entry.get("pause") is None else int(entry["pause"]),
+                        moments=tuple(str(m) for m in entry.get("moments") or ()))
         values = np.atleast_1d(np.asarray(entry["value"], dtype=float))
         if values.shape != (effect.n_values,) or not np.isfinite(values).all():
             raise ValueError(f"'value' must be {effect.n_values} finite number(s)")

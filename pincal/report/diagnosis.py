@@ -29,7 +29,7 @@ from pincal.report.record import ReportRecord
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
 
-__all__ = ["diagnosis_report"]
+__all__ = ["diagnosis_report", "compliance_words", "moment_compliance_words"]
 
 
 def compliance_words(joint: str, value: float, unit: str) -> str:
@@ -48,6 +48,15 @@ def compliance_words(joint: str, value: float, unit: str) -> str:
             f"it), so c < 0 is a joint that sags: here c = {value:.3g} {unit}, {what}")
 
 
+def moment_compliance_words(joint: str, unit: str) -> str:
+    """A compliance of unknown masses in words, with its sign convention (:mod:`pincal.model.mass_moments`)."""
+    return (f"{joint} is at its reading + the sum of each value x its load per unit of g x mass moment (the load "
+            "that holds the carried links against gravity, as Pinocchio computes it, eq M2): each value is g x a "
+            f"combination of the carried links' mass moments / {joint}'s stiffness [{unit}], the combinations the "
+            "rows determine (listed in combinations), x c, c < 0 for a joint that sags: a sagging joint's values have "
+            "the opposite sign to its combinations")
+
+
 def diagnosis_report(
     head: ChainHead,
     diagnosis: Diagnosis,
@@ -64,6 +73,7 @@ def diagnosis_report(
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`; ``record``: what the run records beside the fit
     (:class:`pincal.report.record.ReportRecord`)."""
     couplings = record.couplings
+    from pincal.diagnosis.moment_candidates import combination_words
     from pincal.diagnosis.verdicts import CRITERION, coupling_advice, torque_coupling_advice
     from pincal.model.effect_units import effect_unit
     from pincal.model.effects import effect_to_dict
@@ -103,6 +113,10 @@ def diagnosis_report(
         elif effect.driver:  # a compliance under another joint's torque: what links them
             kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
             entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
+        elif effect.moments:  # a compliance of unknown masses: what each value stands for, its sign convention
+            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
+            entry["combinations"] = combination_words(effect, diagnosis.inputs, kinds[str(effect.joint)] == "prismatic")
+            entry["advice"] = moment_compliance_words(str(effect.joint), effect_unit(effect, kinds))
         elif effect.type == "compliance":  # its sign convention, where the value is read
             kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
             entry["advice"] = compliance_words(str(effect.joint), float(values[0]), effect_unit(effect, kinds))

@@ -75,6 +75,12 @@ def _equation(effect: Effect, entry: Mapping[str, Any]) -> str:
     values after the couplings, tau(q) the gravity torques there [N·m, or N for a prismatic joint]."""
     joint, driver = effect.joint, effect.driver or effect.joint
     head = f"actual {joint} = q[{joint}] + "
+    if effect.moments:
+        return (head + f"sum over b of value[b] x L[b](q), b each mass moment of moments (PARAMETER:LINK, m its mass, "
+                f"mx my mz its first moment in its joint frame) and L[b](q) {joint}'s gravity load per unit of it "
+                "over |g| (eq M1-M2 of pincal.model.mass_moments: Pinocchio's jointBodyRegressor after rnea at rest, "
+                f"carried to {joint} and projected on its axis); each value is g x the combination of mass moments "
+                f"named in combinations / {joint}'s stiffness (mass moments unknown)")
     if effect.type == "compliance":
         return (head + f"value x tau(q)[{driver}] (the gravity torques of Pinocchio's computeGeneralizedGravity on "
                 "the URDF's inertias, plus payload_kg at payload_point_m)")

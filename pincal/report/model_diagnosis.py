@@ -39,20 +39,25 @@ class EffectJson(_EffectKeys, total=False):
     its ``driver`` (the joint whose reading it adds, × value), a ``compliance`` the ``driver`` whose gravity
     torque it follows when not its own joint's, and, in the final model's ``effects``, the ``advice``
     diagnose prints for a coupling or a compliance (its sign convention and stiffness, with its own
-    torque); ``*std`` when estimated; ``target_change`` in the final model's ``effects``."""
+    torque); ``*std`` when estimated; ``target_change`` in the final model's ``effects``. A compliance of
+    unknown masses (``--masses unknown``, or a URDF without inertias) has ``moments`` (``PARAMETER:LINK`` whose
+    loads it follows, :mod:`pincal.model.mass_moments`), one ``value`` and ``std`` per moment [rad, or m for a
+    prismatic joint], and in the final model's ``effects`` the ``combinations`` each value stands for, in words."""
 
     harmonic: int
     sin: float
     cos: float
     sin_std: float
     cos_std: float
-    value: float | Vector3
-    std: float | Vector3
+    value: float | Vector3 | list[float]
+    std: float | Vector3 | list[float]
     source: str | None
     driver: str
     target_change: TargetChangeJson
     advice: str
     pause: int
+    moments: list[str]
+    combinations: list[str]
 
 
 class CandidateJson(EffectJson, total=False):

@@ -139,6 +139,10 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
                 f" (amplitude {num(amplitude, 3)} {unit})")
         return text, ""
     value, std = entry.get("value"), entry.get("std")
+    if entry.get("moments"):  # a compliance of unknown masses: one value per mass moment, in mrad (µm prismatic)
+        values, stds = value if isinstance(value, list) else [value], std if isinstance(std, list) else [None]
+        scale, unit = (1e6, "µm") if length else (1000.0, "mrad")
+        return ", ".join(pm(v, s, scale, unit) for v, s in zip(values, stds + [None] * len(values))), ""
     if kind in ("drift", "pause_step"):  # [vx, vy, vz] m/s; a step's [dx, dy, dz] m
         values = value if isinstance(value, list) else [value]
         stds = std if isinstance(std, list) else [None] * len(values)

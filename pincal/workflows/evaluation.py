@@ -64,7 +64,7 @@ from pincal.measurements.data import (
 from pincal.model.chain import KinematicChain
 from pincal.model.description import RobotDescription, read_description
 from pincal.model.drift import drift_offsets, read_time_spans, time_column
-from pincal.model.effects import RowContext, effect_from_dict, effect_inputs, joint_shifts
+from pincal.model.effects import RowContext, effect_from_dict, effect_inputs, joint_shifts, with_loads
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
@@ -452,6 +452,8 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: Ma
                            time_reference=reference if row_time is not None else None,
                            context=None if context_q is None or context_time is None
                            else RowContext(context_q, context_time))
+    if any(e.moments for e, _ in parsed):  # a compliance of unknown masses follows the loads per mass moment
+        inputs = with_loads(inputs, chain)
     q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
     out = RowCorrections(q)
     drift: DriftUse | None = None

@@ -20,6 +20,7 @@ import numpy.typing as npt
 from pincal.errors import PincalError, expect_value
 from pincal.fit.prior import Prior
 from pincal.measurements.couplings import ReadingCoupling
+from pincal.model.masses import DEFAULT_MASSES, MASSES, Masses
 from pincal.model.thermal import PAUSE_S
 
 if TYPE_CHECKING:  # the fit's selection module is imported only when a selection is checked
@@ -209,9 +210,11 @@ class DiagnoseSettings(_FitSettings):
         temperature_column: the column of row temperatures [°C] (None: the first of
             :data:`pincal.model.thermal.TEMPERATURE_COLUMNS` present).
         pause_s: a gap longer than this between rows of a session is a pause [s] (:mod:`pincal.model.thermal`).
+        masses: where the gravity loads come from, one of :data:`pincal.model.masses.MASSES` (``unknown``:
+            compliances follow the carried links' mass moments, as on a URDF without inertias).
 
     Raises:
-        PincalError: an unknown level or selection, a prior at level registration, a negative
+        PincalError: an unknown level, selection or masses, a prior at level registration, a negative
             payload, a noise that is not positive, a tool that is not a 4×4 pose.
     """
 
@@ -228,10 +231,13 @@ class DiagnoseSettings(_FitSettings):
     temperature_column: str | None = None
     pause_s: float = PAUSE_S
     force: bool = False
+    masses: Masses = DEFAULT_MASSES
 
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:
             raise PincalError(f"--level must be one of {', '.join(DIAGNOSE_LEVELS)}, got '{self.level}'")
+        if self.masses not in MASSES:
+            raise PincalError(f"--masses must be one of {', '.join(MASSES)}, got '{self.masses}'")
         if not (np.isfinite(self.payload_kg) and self.payload_kg >= 0):
             raise PincalError(f"--payload-kg must be a non-negative number, got {self.payload_kg}")
         if not (np.isfinite(self.pause_s) and self.pause_s > 0):
