@@ -258,7 +258,9 @@ SLOW_TESTS = (
     "tests/test_line_hold.py::test_one_arc_at_constant_orientation_predicts_the_path",
     "tests/test_chain_values.py::test_the_level_choice_and_diagnose_leave_the_chain",
     "tests/test_continuous_joints.py::test_every_serial_chain_of_example_robot_data_is_recovered",
-    "tests/test_continuous_joints.py::test_kinova_calibrate_diagnose_plan",
+    "tests/test_continuous_joints.py::test_kinova_calibrate_and_evaluate",
+    "tests/test_continuous_joints.py::test_kinova_diagnose",
+    "tests/test_continuous_joints.py::test_kinova_plan",
     "tests/test_diagnosis.py::test_diagnose_command_writes_effects_that_evaluate_applies",
     "tests/test_diagnosis.py::test_rounding_level_effects_are_not_adopted",
     "tests/test_diagnosis.py::test_screening_refits_every_candidate_that_matters",
@@ -314,8 +316,47 @@ SLOW_TESTS = (
 )
 
 
+#: The files whose longest test takes 4 s or more on a quiet 2-core machine under xdist, longest first
+#: (``pytest --durations``, 2026-11-29: docs/diagnose.md's page ~30 s ... the HTML plan ~4 s). A parallel
+#: run starts them first: each worker takes its tests from the front of its queue and an idle one steals
+#: from the back of another's, so the run ends on quick tests rather than idling a worker through a long
+#: one that happened to come last. Whole files move, in their own order, so a module-scoped fixture is
+#: still built once per worker. The order decides only when a test runs: a stale list costs seconds.
+LONGEST_FIRST = (
+    "tests/test_docs_examples.py",
+    "tests/test_study_processes.py",
+    "tests/test_plan.py",
+    "tests/test_study.py",
+    "tests/test_html_report.py",
+    "tests/test_study_dask_faults.py",
+    "tests/test_progress.py",
+    "tests/test_fold_update.py",
+    "tests/test_outputs.py",
+    "tests/test_docs.py",
+    "tests/test_thermal.py",
+    "tests/test_line_hold.py",
+    "tests/test_level_choice.py",
+    "tests/test_frame_invariance.py",
+    "tests/test_plausibility_gross.py",
+    "tests/test_tip_link.py",
+    "tests/test_drift_span.py",
+    "tests/test_extract.py",
+    "tests/test_scenarios.py",
+    "tests/test_study_reference.py",
+    "tests/test_target_hold.py",
+    "tests/test_effects_file.py",
+    "tests/test_flag_messages.py",
+    "tests/test_evaluate_console.py",
+    "tests/test_xacro.py",
+    "tests/test_html_plan.py",
+)
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         path, _, name = item.nodeid.partition("::")
         if path in SLOW_FILES or f"{path}::{name.split('[')[0]}" in SLOW_TESTS or item.nodeid in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)
+    if hasattr(config, "workerinput"):  # a worker of a parallel run: every worker collects the same order
+        rank = {path: number for number, path in enumerate(LONGEST_FIRST)}
+        items.sort(key=lambda item: rank.get(item.nodeid.partition("::")[0], len(rank)))  # stable

@@ -125,26 +125,52 @@ def test_a_limit_on_a_continuous_joint_is_refused(tmp_path, capsys):
     assert "line 2" in err and "continuous joint has no position limits" in err and err.count("\n") == 1
 
 
-def test_kinova_calibrate_diagnose_plan(tmp_path, capsys):
-    """Kinova j2s6s200 (continuous joints 1, 4, 6): the commands a revolute arm runs."""
+KINOVA_TIP = "j2s6s200_end_effector"
+
+
+@pytest.fixture(scope="module")
+def kinova(tmp_path_factory):
+    """Kinova j2s6s200 (continuous joints 1, 4, 6): its URDF and a folder holding seeded simulated
+    calibration and validation rows (``cal.csv``, ``val.csv``), shared by the commands' tests below so
+    each command runs once and a parallel run spreads them over its workers."""
     urdf = example_robot_data_urdf("kinova_description/robots/kinova.urdf")
-    tip = "j2s6s200_end_effector"
-    chain = KinematicChain.from_urdf(urdf, tip)
+    folder = tmp_path_factory.mktemp("kinova")
+    chain = KinematicChain.from_urdf(urdf, KINOVA_TIP)
     params = PlacementErrors(chain)
     truth = np.random.default_rng(2).normal(0.0, 1e-3, params.size)
     settings = SimulationSettings(n_calibration=60, n_validation=30, seed=2, sigma_pos_mm=0.02, sigma_rot_deg=0.01)
     experiment = simulate_chain(params, truth, np.array([[0.01, 0.02, 0.1]]), settings, with_rotation=True)
-    write_measurements(tmp_path / "cal.csv", experiment.calibration)
-    write_measurements(tmp_path / "val.csv", experiment.validation)
-    common = ["--tip-link", tip, "--quiet"]
-    assert main(["calibrate", str(urdf), str(tmp_path / "cal.csv"), *common, "--out", str(tmp_path / "c.urdf"),
+    write_measurements(folder / "cal.csv", experiment.calibration)
+    write_measurements(folder / "val.csv", experiment.validation)
+    return urdf, folder
+
+
+KINOVA_COMMON = ["--tip-link", KINOVA_TIP, "--quiet"]
+
+
+def test_kinova_calibrate_and_evaluate(kinova, tmp_path):
+    """The commands a revolute arm runs, on an arm with continuous joints: calibrate, evaluate ..."""
+    urdf, data = kinova
+    assert main(["calibrate", str(urdf), str(data / "cal.csv"), *KINOVA_COMMON, "--out", str(tmp_path / "c.urdf"),
                  "--report", str(tmp_path / "c.json")]) == 0
-    assert main(["evaluate", str(tmp_path / "c.urdf"), str(tmp_path / "c.json"), str(tmp_path / "val.csv"),
+    assert main(["evaluate", str(tmp_path / "c.urdf"), str(tmp_path / "c.json"), str(data / "val.csv"),
                  "--max-pos-mm", "0.2"]) == 0
-    assert main(["diagnose", str(urdf), str(tmp_path / "cal.csv"), *common, "--out", str(tmp_path / "d.urdf"),
-                 "--report", str(tmp_path / "d.json"), "--plots", str(tmp_path / "plots")]) == 0
-    assert main(["plan", str(urdf), *common, "--count", "12", "--out", str(tmp_path / "plan.csv"),
-                 "--report", str(tmp_path / "plan.json")]) == 0
     doc = json.loads((tmp_path / "c.json").read_text())
     assert doc["chain"]["joint_kinds"] == ["continuous", "revolute", "revolute", "continuous", "revolute",
                                            "continuous"]
+
+
+def test_kinova_diagnose(kinova, tmp_path):
+    """... diagnose, with its plots ..."""
+    urdf, data = kinova
+    assert main(["diagnose", str(urdf), str(data / "cal.csv"), *KINOVA_COMMON, "--out", str(tmp_path / "d.urdf"),
+                 "--report", str(tmp_path / "d.json"), "--plots", str(tmp_path / "plots")]) == 0
+
+
+def test_kinova_plan(kinova, tmp_path):
+    """... and plan, over its default 2000 candidates. Without the self-collision check: Kinova's meshes
+    cost ~10-35 ms a configuration (tens of seconds for 2000), and tests/test_plan_collisions.py checks
+    Kinova's collisions; here the point is the continuous joints' sampling and design."""
+    urdf, _ = kinova
+    assert main(["plan", str(urdf), *KINOVA_COMMON, "--count", "12", "--no-collision-check",
+                 "--out", str(tmp_path / "plan.csv"), "--report", str(tmp_path / "plan.json")]) == 0

@@ -222,7 +222,9 @@ def test_recorded_data_choose_additions_with_decreasing_predicted_error():
 
 def test_alternate_order_balances_the_approach_directions():
     chain = _chain("tiago")
-    candidates = sample_candidates(chain, 800, seed=5)
+    # 300 candidates, not 800: the choice is made twice and its cost grows with the candidates; of 300, arm_6's
+    # correlation with its approach is 0.45 in the short order and 0.02 balanced (0.47 and 0.01 of 800)
+    candidates = sample_candidates(chain, 300, seed=5)
     settings = PlanSettings(count=30, level="offsets", sensor=SensorModel("points", 4), target_points=MARKERS)
     short = plan_measurements(chain, candidates, settings)
     balanced = plan_measurements(chain, candidates, replace(settings, alternate=("arm_6_joint",)))

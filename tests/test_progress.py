@@ -260,6 +260,7 @@ def test_commands_report_progress_on_stderr_and_quiet_silences_it(simulated, tmp
     interval is set to zero, since these runs are quicker than one interval); --quiet draws nothing."""
     monkeypatch.setattr(progress_module, "LOG_INTERVAL_S", 0.0)
     monkeypatch.setattr("pincal.study.figures.start_figures", lambda *args: lambda: [])  # seconds of drawing
+    monkeypatch.setattr("pincal.diagnosis.plots.plot_diagnosis", lambda *args: [])  # uncounted, as are those
     argv = _commands(simulated, tmp_path)[label]
     assert main(argv) == 0
     captured = capsys.readouterr()
