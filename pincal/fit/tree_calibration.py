@@ -25,7 +25,7 @@ import numpy as np
 
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainFitOptions, row_weights
-from pincal.fit.identifiability import Ordering, Selection, condition_number
+from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import PriorResidual, data_rows
 from pincal.fit.problem import KindProblem
@@ -56,9 +56,10 @@ class TreeCalibration:
         status: per tree parameter, :data:`pincal.fit.pipeline.KEPT` or why it is not.
         target: the registrations (one per session) and every point (P, 3) in its own tip link [m].
         sigma_pos_m: the position noise scale estimated from the residuals [m].
-        rank, condition, selection, dropped: the identifiability of the whole tree.
+        rank, condition, selection, dropped, correlated: the identifiability of the whole tree.
         point_errors: each calibration row's distance of each point from the model [m], NaN where not seen (K, P).
         session_names: the sessions, in the order of ``target.registrations``.
+        row_sessions: each calibration row's session, an index into them (K,).
         used_index: the rows of the data in the fit (indices).
         tree_placements: each target's calibrated chain placements: the model as a value
             (``tree.placed(result.tree_placements)``).
@@ -77,8 +78,10 @@ class TreeCalibration:
     condition: float
     selection: Selection | None
     dropped: tuple[Dropped, ...]
+    correlated: tuple[tuple[str, str, float], ...]
     point_errors: np.ndarray
     session_names: tuple[str, ...]
+    row_sessions: np.ndarray
     used_index: np.ndarray
     tree_placements: TreePlacements
     notes: tuple[str, ...]
@@ -198,6 +201,7 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     names += [f"registration{'' if len(used.session_names) == 1 else f'[{n}]'}.{a}"
               for n in used.session_names for a in ("rx", "ry", "rz", "x", "y", "z")]
     names += [f"target.point{p + 1}.{a}" for p in range(rows.seen.shape[1]) for a in "xyz"]
+    columns = [names[i] for i in fit.kept] + names[size:]  # the fit's: the kept parameters, then the others
     dropped: tuple[Dropped, ...] = ()
     if analysis is not None and fit.ordering is not None:
         dropped = dropped_parameters(analysis.jacobian, cast(Ordering, fit.ordering), fit.kept, other, names)
@@ -208,7 +212,8 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         level=level, params=params, vector=fit.vector, std=fit.std, status=fit.status,
         target=tree_objective.estimate(fit.solution.x), sigma_pos_m=problem.sigma_pos, rank=fit.rank,
         condition=condition_number(data_rows(fit.solution.jacobian, objective)), selection=fit.selection,
-        dropped=dropped, point_errors=tree_objective.point_errors(fit.solution.x, weights),
+        dropped=dropped, correlated=tuple((columns[a], columns[b], c) for a, b, c in correlated_pairs(fit.covariance)),
+        row_sessions=rows.sessions, point_errors=tree_objective.point_errors(fit.solution.x, weights),
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
         notes=tuple(notes), total_seconds=time.perf_counter() - started)

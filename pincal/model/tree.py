@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from pincal.errors import ModelError, PincalError
+from pincal.measurements.data import JointSpec
 from pincal.model.chain import ChainJoint, KinematicChain
 from pincal.model.description import RobotDescription, read_description
 
@@ -125,6 +126,11 @@ class KinematicTree:
         by_name = {j.name: j for chain in chains for j in chain.joints}
         self.source = source
         self.joints: tuple[ChainJoint, ...] = tuple(by_name[n] for n in names)
+        self.n_joints = len(names)
+        self.joint_names: tuple[str, ...] = tuple(names)
+        self.joint_specs: list[JointSpec] = [j.spec for j in self.joints]
+        #: joint name → ``revolute``, ``continuous`` or ``prismatic`` (as a chain's)
+        self.joint_kinds: dict[str, str] = {j.name: j.kind for j in self.joints}
         self.targets: tuple[TreeTarget, ...] = tuple(
             TreeTarget(spec, chain, np.array([names.index(n) for n in chain.joint_names], dtype=np.intp))
             for spec, chain in zip(targets, chains))
@@ -147,12 +153,6 @@ class KinematicTree:
             reason = " ".join(str(exc).split())
             raise ModelError(f"{description.source}: Pinocchio cannot read this URDF ({reason})") from None
         return cls(model, targets, source=description.source)
-
-    # a chain's names and sizes read its ``joints`` alone: the tree's are the same properties
-    n_joints = KinematicChain.n_joints
-    joint_names = KinematicChain.joint_names
-    joint_specs = KinematicChain.joint_specs
-    joint_kinds = KinematicChain.joint_kinds
 
     @property
     def n_points(self) -> int:
