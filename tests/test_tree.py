@@ -114,3 +114,15 @@ def test_several_targets_refuse_what_they_do_not_take_yet(simulated):
         calibrate_tree(tree, data, "full", ChainFitOptions(selection="press"))
     with pytest.raises(PincalError, match="give each point 1..3 to one --tip-link"):
         calibrate_tree(KinematicTree(tree.targets[0].chain.model, parse_targets(["left_marker:1"])), data, "full")
+
+
+def test_a_partly_empty_point_and_a_point_never_seen_are_refused(simulated):
+    tree, _, _, data, _ = simulated
+    points = data.points.copy()
+    points[5, 2, 1] = np.nan  # y3 empty, x3 and z3 given
+    with pytest.raises(PincalError, match="line 7: point 3 has some of x3,y3,z3 empty"):
+        tree_rows(tree, MeasurementSet(data.joint_names, data.q, points, None, data.roles, data.lines))
+    points = data.points.copy()
+    points[:, 0] = np.nan
+    with pytest.raises(PincalError, match="point 1 is not seen in any calibration row"):
+        calibrate_tree(tree, MeasurementSet(data.joint_names, data.q, points, None, data.roles, data.lines), "full")

@@ -99,7 +99,8 @@ def tree_rows(tree: KinematicTree, data: MeasurementSet, sessions: np.ndarray | 
     its session's index in ``data``).
 
     Raises:
-        CalibrationError: orientation columns, or a file's points that are not the targets' (naming both).
+        CalibrationError: orientation columns, a file's points that are not the targets' (naming both), or a
+            point with one or two of its three cells empty (naming the file and line).
     """
     if data.rotations is not None:
         raise CalibrationError(f"{data.source}: orientation columns qx,qy,qz,qw with several --tip-link are not yet "
@@ -110,6 +111,12 @@ def tree_rows(tree: KinematicTree, data: MeasurementSet, sessions: np.ndarray | 
                                f"name point(s) {', '.join(map(str, numbers))}; give each point 1..{data.n_points} "
                                "to one --tip-link LINK:POINTS")
     seen = np.all(np.isfinite(data.points), axis=2)
+    partial = np.flatnonzero((np.any(np.isfinite(data.points), axis=2) & ~seen).ravel())
+    if partial.size:
+        k, p = divmod(int(partial[0]), data.n_points)
+        raise CalibrationError(f"{data.files[k]}, line {int(data.lines[k])}: point {p + 1} has some of "
+                               f"x{p + 1},y{p + 1},z{p + 1} empty; leave all three empty (not seen in this row) or "
+                               "give all three")
     return TreeRows(data.q, data.points, seen, data.session_index if sessions is None else sessions)
 
 
@@ -172,6 +179,11 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         raise CalibrationError(f"{data.source}: {used.n_rows} calibration row(s) (rows with role 'validation' are "
                                "not used); a calibration needs at least 3")
     rows = tree_rows(tree, used)
+    never = np.flatnonzero(~rows.seen.any(axis=0))
+    if never.size:
+        raise CalibrationError(f"{data.source}: point {never[0] + 1} is not seen in any calibration row (every cell of "
+                               f"x{never[0] + 1},y{never[0] + 1},z{never[0] + 1} empty): nothing places it; give its "
+                               "measurements or leave its --tip-link out")
     start = initial_tree_target(tree, used, rows)
     params = TreeParameters(tree, cast(ParameterLevel, level)) if level != "registration" else None
     size = 0 if params is None else int(params.size)
