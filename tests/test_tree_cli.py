@@ -20,36 +20,44 @@ TARGETS = ["--tip-link", "left_marker:1", "--tip-link", "right_marker:2,3"]
 LOCAL = [np.array([[0.01, 0.0, 0.02]]), np.array([[0.0, 0.01, 0.0], [0.03, -0.01, 0.01]])]
 
 
+def _write_rows(path, names, q, sensed, hidden=()):
+    """A CSV of rows ``q`` measuring ``sensed`` (K, 3, 3); (row, point) pairs in ``hidden`` left empty."""
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow([*names, *(f"{a}{i}" for i in (1, 2, 3) for a in "xyz")])
+        for k in range(len(q)):
+            cells = [repr(float(v)) for v in sensed[k].ravel()]
+            for row, point in hidden:
+                if row == k:
+                    cells[3 * point:3 * point + 3] = ["", "", ""]
+            writer.writerow([*(repr(float(v)) for v in q[k]), *cells])
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    """The robot, 40 noise-free rows of a perturbed one (point 2 not seen on line 5), and its calibration."""
+    """The robot, 40 noise-free rows of a perturbed one (point 2 not seen on line 5), 10 held-out rows (point 1
+    not seen on line 2), and the calibration."""
     folder = tmp_path_factory.mktemp("tree")
     urdf = folder / "robot.urdf"
     urdf.write_text(two_arm_urdf(), encoding="utf-8")
     tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(TARGETS[1::2]))
     params = TreeParameters(tree, "full")
     rng = np.random.default_rng(3)
-    q = rng.uniform(-1.2, 1.2, (40, tree.n_joints))
+    q = rng.uniform(-1.2, 1.2, (50, tree.n_joints))
     with tree.placed(params.placements(rng.normal(0.0, 1e-3, params.size))):
         world = tree.target_points(q, LOCAL)
     sensed = world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
-    data = folder / "data.csv"
-    with open(data, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow([*tree.joint_names, *(f"{a}{i}" for i in (1, 2, 3) for a in "xyz")])
-        for k in range(len(q)):
-            cells = [repr(float(v)) for v in sensed[k].ravel()]
-            if k == 3:
-                cells[3:6] = ["", "", ""]
-            writer.writerow([*(repr(float(v)) for v in q[k]), *cells])
+    data, held_out = folder / "data.csv", folder / "held_out.csv"
+    _write_rows(data, tree.joint_names, q[:40], sensed[:40], hidden=[(3, 1)])
+    _write_rows(held_out, tree.joint_names, q[40:], sensed[40:], hidden=[(0, 0)])
     out, report = folder / "out.urdf", folder / "REPORT.json"
     code = main(["calibrate", str(urdf), str(data), *TARGETS, "--select", "all", "--out", str(out),
                  "--report", str(report), "--quiet"])
-    return folder, urdf, data, out, report, code, (q, sensed)
+    return folder, urdf, data, out, report, code, (q[:40], sensed[:40]), held_out
 
 
 def test_calibrate_several_targets_writes_every_chain_and_each_targets_errors(files):
-    folder, urdf, data, out, report_path, code, (q, sensed) = files
+    folder, urdf, data, out, report_path, code, (q, sensed), _ = files
     assert code == 0
     report = json.loads(report_path.read_text(encoding="utf-8"))
     names = [p["name"] for p in report["parameters"]]
@@ -82,10 +90,20 @@ def test_commands_of_one_chain_refuse_several_tip_links(files, capsys, command, 
     assert not (folder / "o.urdf").exists() and not (folder / "p.csv").exists()
 
 
-def test_evaluate_and_the_report_page_refuse_a_trees_report(files, capsys):
-    folder, _, data, out, report, *_ = files
-    assert main(["evaluate", str(out), str(report), str(data)]) == 2
-    assert "a REPORT.json of several --tip-link, which this command does not take yet" in capsys.readouterr().err
+def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
+    folder, _, _, out, report, *_, held_out = files
+    assert main(["evaluate", str(out), str(report), str(held_out), "--max-pos-mm", "1e-6"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0] == "10 rows; registration: held_out: the report's 'data'"
+    left, right = (line.split() for line in printed[2:4])
+    assert left[:2] == ["left_marker", "9"] and right[:2] == ["right_marker", "20"]  # point 1 not seen once
+    assert float(left[-1]) < 1e-6 and float(right[-1]) < 1e-6  # noise-free rows: the truth predicted
+    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(folder / "e.json")]) == 2
+    assert "several --tip-link: evaluate --json is not yet supported" in capsys.readouterr().err
+
+
+def test_the_report_page_refuses_a_trees_report(files):
+    *_, report, _, _, _ = files
     with pytest.raises(PincalError, match="several --tip-link, which this command does not take yet"):
         load_report(report, PAGE_KINDS)  # the page's loader (pincal report, --html)
 

@@ -20,7 +20,7 @@ from pincal.cli.arguments import selection_criterion
 from pincal.cli.error_table import HEADER, error_columns, point_rows
 from pincal.cli.paper_commands import demo_command, simulate_command, study_command
 from pincal.cli.parser import build_parser
-from pincal.cli.tree import one_tip_link, run_calibrate_tree
+from pincal.cli.tree import is_tree_report, one_tip_link, run_calibrate_tree, run_evaluate_tree
 from pincal.errors import PincalError
 
 if TYPE_CHECKING:
@@ -213,6 +213,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         from pincal.cli.fixture import run_evaluate
 
         return _warned(run_evaluate(args), args.strict)
+    if is_tree_report(args.report):  # several targets on several chains
+        return run_evaluate_tree(args)
     if args.nominal is not None:
         raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,

@@ -5,13 +5,15 @@ summary printed per target (:func:`run_calibrate_tree`); the commands that take 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from pincal.cli.arguments import selection_criterion
 from pincal.errors import PincalError
 
-__all__ = ["one_tip_link", "run_calibrate_tree"]
+__all__ = ["one_tip_link", "run_calibrate_tree", "is_tree_report", "run_evaluate_tree"]
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
 _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
@@ -62,4 +64,41 @@ def run_calibrate_tree(args: argparse.Namespace) -> int:
               f"{after['position']['max_mm']:10.3f}")
     print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
+    return 0
+
+
+def is_tree_report(path: Path) -> bool:
+    """Whether ``path`` is a REPORT.json of several targets (``targets``); False for anything else, whose
+    reader then says what is wrong with it."""
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and "targets" in document and "parameters" in document
+
+
+def run_evaluate_tree(args: argparse.Namespace) -> int:
+    """``pincal evaluate CORRECTED.urdf REPORT.json DATA.csv`` of a tree's report: each target's errors; the
+    exit code (1 beyond ``--max-pos-mm``)."""
+    from pincal.workflows.settings import EvaluateSettings
+    from pincal.workflows.tree_evaluation import evaluate_tree_files
+
+    for attribute, flag in (("json", "--json"), ("html", "--html"), ("nominal", "--nominal")):
+        if getattr(args, attribute, None) is not None:
+            raise PincalError(f"several --tip-link: evaluate {flag} is not yet supported; leave it out")
+    settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
+                                fixed_registration=args.fixed_registration, new_session=args.new_session,
+                                temperature_column=args.temperature_column, max_pos_mm=args.max_pos_mm,
+                                max_rot_deg=args.max_rot_deg)
+    run = evaluate_tree_files(args.urdf, args.report, args.data, settings)
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
+    print(f"{'target (points)':32s} {'seen':>5s} {'mean':>8s} {'RMS':>8s} {'max':>8s}  [mm]")
+    for link, errors in run.targets:
+        stats = errors["position"]
+        print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
+    if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
+        print(f"FAIL: largest position error {run.max_mm:.3f} mm > --max-pos-mm {args.max_pos_mm:g}")
+        return 1
     return 0
