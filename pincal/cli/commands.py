@@ -54,9 +54,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from pincal.workflows.calibration import calibrate_files
     from pincal.workflows.settings import CalibrateSettings
 
-    if len(args.tip_link) > 1:  # several targets on several chains, one calibration
+    if isinstance(args.tip_link, list):  # several targets on several chains, one calibration
         return run_calibrate_tree(args)
-    args.tip_link = args.tip_link[0]
     if args.fixture is not None:  # socket-fixture data, no sensor
         from pincal.cli.fixture import run_calibrate
 
