@@ -29,6 +29,8 @@ _DEFINED_IN = {
     "pincal.measurements.fixture": ("Fixture", "FixtureData", "read_fixture", "read_fixture_data"),
     "pincal.measurements.data": ("JointSpec", "MeasurementSet"),
     "pincal.model.chain": ("ChainPoses", "KinematicChain", "pose_from_xyz_rpy", "xyz_rpy_from_pose"),
+    "pincal.model.tree": ("KinematicTree", "TargetSpec", "parse_targets"),
+    "pincal.fit.tree_calibration": ("TreeCalibration", "calibrate_tree"),
     "pincal.model.dh.table": ("KUKA_LWR4_DH", "TABLE2_LARGE", "TABLE2_SMALL", "DHDeviations", "DHTable"),
     "pincal.model.dh.files": ("read_dh_csv",),
     "pincal.model.dh.parameters": ("DHParameterSet",),
@@ -39,6 +41,8 @@ _DEFINED_IN = {
     # the file-level jobs of the commands, each taking paths and a settings value
     "pincal.workflows.settings": ("CalibrateSettings", "DiagnoseSettings", "EvaluateSettings"),
     "pincal.workflows.calibration": ("CalibrationRun", "calibrate_files"),
+    "pincal.workflows.tree_calibration": ("TreeCalibrationRun", "calibrate_tree_files"),
+    "pincal.workflows.tree_evaluation": ("TreeEvaluation", "evaluate_tree_files"),
     "pincal.workflows.diagnosis": ("DiagnoseOutputs", "DiagnoseRun", "diagnose_files"),
     "pincal.workflows.evaluation": ("Evaluation", "SessionEvaluation", "evaluate_files"),
     "pincal.workflows.evaluation_outputs": ("EvaluateOutputs", "EvaluateRun", "ThresholdFailure", "evaluate_and_write"),
@@ -60,6 +64,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.fit.metrics import ErrorSummary, PoseErrors, RowCorrections, pose_errors
     from pincal.fit.registration import register_orientations, register_points
     from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
+    from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
     from pincal.measurements.bags import read_bag
     from pincal.measurements.csv_v1 import (
         read_measurements,
@@ -93,6 +98,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.model.dh.urdf import dh_robot_from_urdf, urdf_from_dh
     from pincal.model.parameter_sets import JointOffsets, PlacementErrors
     from pincal.model.sensor import Registration
+    from pincal.model.tree import KinematicTree, TargetSpec, parse_targets
     from pincal.paper.methods import PaperCalibration, calibrate_paper
     from pincal.paper.ml_estimator import MLCalibration, MLSettings, calibrate_ml
     from pincal.paper.noise_limit import PredictedErrors, predicted_errors
@@ -123,6 +129,8 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.workflows.report_page import report_file
     from pincal.workflows.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
     from pincal.workflows.simulation import simulate_to_directory
+    from pincal.workflows.tree_calibration import TreeCalibrationRun, calibrate_tree_files
+    from pincal.workflows.tree_evaluation import TreeEvaluation, evaluate_tree_files
 
 __all__ = [
     "__version__",
@@ -216,6 +224,15 @@ __all__ = [
     "extract_file",
     "NoPostures",
     "simulate_to_directory",
+    "KinematicTree",
+    "TargetSpec",
+    "parse_targets",
+    "TreeCalibration",
+    "calibrate_tree",
+    "TreeCalibrationRun",
+    "calibrate_tree_files",
+    "TreeEvaluation",
+    "evaluate_tree_files",
 ]
 
 _ON_FIRST_USE = {name: module for module, names in _DEFINED_IN.items() for name in names}

@@ -114,6 +114,8 @@ def report_kind(document) -> str:
         return "FixtureReport"
     if "diagnosis" in document:
         return "DiagnosisReport"
+    if "targets" in document:
+        return "TreeReport"
     return "PaperReport" if document.get("model") == "dh" else "CalibrationReport"
 
 

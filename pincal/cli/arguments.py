@@ -24,9 +24,23 @@ if TYPE_CHECKING:
     from pincal.planning.information import SensorModel
 
 __all__ = [
-    "tool_pose", "prior_scale", "selection_criterion", "package_dir", "measure", "target_points", "xacro_arg",
-    "coupling_arg", "joint_names", "number", "non_negative", "count_or_zero", "count", "seconds", "positive",
+    "TipLinks", "tool_pose", "prior_scale", "selection_criterion", "package_dir", "measure", "target_points",
+    "xacro_arg", "coupling_arg", "joint_names", "number", "non_negative", "count_or_zero", "count", "seconds",
+    "positive",
 ]
+
+
+class TipLinks(argparse.Action):
+    """``--tip-link``, repeatable: one value stays the string it is (one chain, as ever); a second makes the
+    values a list, the targets ``LINK:POINTS`` of one calibration (:func:`pincal.model.tree.parse_targets`)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        current = getattr(namespace, self.dest, None)
+        if current is None:
+            setattr(namespace, self.dest, values)
+        else:
+            setattr(namespace, self.dest, [*([current] if isinstance(current, str) else current), values])
 
 
 def tool_pose(text: str) -> np.ndarray:

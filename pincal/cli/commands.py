@@ -20,6 +20,7 @@ from pincal.cli.arguments import selection_criterion
 from pincal.cli.error_table import HEADER, error_columns, point_rows
 from pincal.cli.paper_commands import demo_command, simulate_command, study_command
 from pincal.cli.parser import build_parser
+from pincal.cli.tree import is_tree_report, one_tip_link, run_calibrate_tree, run_evaluate_tree
 from pincal.errors import PincalError
 
 if TYPE_CHECKING:
@@ -53,6 +54,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from pincal.workflows.calibration import calibrate_files
     from pincal.workflows.settings import CalibrateSettings
 
+    if isinstance(args.tip_link, list):  # several targets on several chains, one calibration
+        return run_calibrate_tree(args)
     if args.fixture is not None:  # socket-fixture data, no sensor
         from pincal.cli.fixture import run_calibrate
 
@@ -190,6 +193,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         from pincal.cli.fixture import run_evaluate
 
         return _warned(run_evaluate(args), args.strict)
+    if is_tree_report(args.report):  # several targets on several chains
+        return run_evaluate_tree(args)
     if args.nominal is not None:
         raise PincalError("--nominal applies to socket-fixture data only (with --fixture); drop it")
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
@@ -381,6 +386,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)  # no numpy, scipy or Pinocchio yet: --help and refusals are quick
     try:
         with _blas_limited_to_one_thread():
+            if args.command in ("diagnose", "plan"):
+                args.tip_link = one_tip_link(args.command, args.tip_link)
             return _COMMANDS[args.command](args)
     except PincalError as exc:
         print(f"pincal: error: {exc}", file=sys.stderr)

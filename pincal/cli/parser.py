@@ -12,6 +12,7 @@ from pathlib import Path
 
 from pincal._version import __version__
 from pincal.cli.arguments import (
+    TipLinks,
     count,
     count_or_zero,
     coupling_arg,
@@ -166,9 +167,11 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
                      help="known pose of the measured target in the tip link [m, rad]; "
                           "without it (levels other than dh) the target is estimated")
-    cal.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK",
+    cal.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK[:POINTS]",
+                     action=TipLinks,
                      help="link at the end of the calibrated chain, carrying the target (or the ball, with "
-                          "--fixture)")
+                          "--fixture); repeat it as LINK:POINTS for several targets on several chains in one "
+                          "calibration (e.g. --tip-link right_hand:1 --tip-link left_hand:2,3: point 1 is x1,y1,z1)")
     cal.add_argument("--sigma-column", metavar="COLUMN",
                      help="extra data column with a per-row noise scale [mm]: rows are weighted by it")
     cal.add_argument("--reject-outliers", action="store_true",
@@ -230,7 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("--validation", type=Path, metavar="DATA2",
                      help="held-out measurements: errors reported before/after; an effect is adopted only if they "
                           "fit better beyond their noise (a paired test over their rows)")
-    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK",
+    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK", action=TipLinks,
                      help="link at the end of the calibrated chain, carrying the target")
     dia.add_argument("--level", choices=("registration", "offsets", "full", "auto"), default="full",
                      help="geometric model under the effects (default full; auto: chosen by cross-validation "
@@ -281,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     plan = sub.add_parser("plan", help="choose the robot configurations worth measuring, and their order")
     plan.add_argument("urdf", type=Path, help="URDF of the robot, or a .xacro")
-    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK",
+    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK", action=TipLinks,
                       help="link at the end of the calibrated chain, carrying the target")
     plan.add_argument("--count", type=count, required=True, metavar="N", help="configurations to choose")
     plan.add_argument("--out", required=True, type=Path, metavar="PLAN.csv", help="plan to write (visiting order)")

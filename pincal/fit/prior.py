@@ -80,6 +80,7 @@ if TYPE_CHECKING:  # annotations only: the settings import this module for Prior
     from pincal.residuals.base import Objective
     from pincal.residuals.fixture import FixtureResidual
     from pincal.residuals.sensor import SensorResidual
+    from pincal.residuals.tree import TreeResidual
 
 __all__ = [
     "DEFAULT_TRANSLATION_MM", "DEFAULT_ROTATION_DEG", "DEFAULT_JOINT_ZERO_DEG", "KINDS", "PRIOR_DOMINATED",
@@ -255,7 +256,8 @@ class PriorResidual:
     Every other attribute is the data objective's.
     """
 
-    def __init__(self, objective: SensorResidual | FixtureResidual, sigma: np.ndarray, noise: float = 1.0) -> None:
+    def __init__(self, objective: SensorResidual | FixtureResidual | TreeResidual, sigma: np.ndarray,
+                 noise: float = 1.0) -> None:
         self.objective = objective
         self.noise = float(noise)
         self.weight = noise / np.asarray(sigma, dtype=float)
@@ -343,7 +345,7 @@ def standard_deviations(objective: Objective | PriorResidual, solution: Solution
     return np.sqrt(np.clip(np.diag(covariance), 0.0, None))
 
 
-def data_rows(jacobian: np.ndarray, objective: Objective | PriorResidual) -> np.ndarray:
+def data_rows(jacobian: np.ndarray, objective: Objective | TreeResidual | PriorResidual) -> np.ndarray:
     """The data rows of a fit's Jacobian: without a :class:`PriorResidual`'s prior rows."""
     return jacobian[: jacobian.shape[0] - objective.n_prior] if isinstance(objective, PriorResidual) else jacobian
 

@@ -123,21 +123,21 @@ class CsvTable:
             raise self.error(f"{text!r} is not a finite number; give a number", self.lines[k], name, joint)
         return value
 
-    def numbers(self, name: str) -> np.ndarray:
-        """Column ``name`` as finite floats; an empty cell or any other text is an error."""
+    def numbers(self, name: str, blank: float | None = None) -> np.ndarray:
+        """Column ``name`` as finite floats; an empty cell is ``blank`` if given, else an error, as any other text."""
         out = np.empty(len(self.rows))
         for k in range(len(self.rows)):
             value = self.number(k, name)
-            if value is None:
+            if value is None and blank is None:
                 raise self.error("empty cell; expected a finite number", self.lines[k], name)
-            out[k] = value
+            out[k] = blank if value is None else value
         return out
 
-    def matrix(self, names: Sequence[str]) -> np.ndarray:
-        """Columns ``names`` as a (K, len(names)) float array."""
+    def matrix(self, names: Sequence[str], blank: float | None = None) -> np.ndarray:
+        """Columns ``names`` as a (K, len(names)) float array (``blank``: as :meth:`numbers`)."""
         out = np.empty((len(self.rows), len(names)))
         for i, name in enumerate(names):
-            out[:, i] = self.numbers(name)
+            out[:, i] = self.numbers(name, blank)
         return out
 
     def check_magnitude(self, name: str, values: np.ndarray, limit: float, found: str, expected: str) -> None:
@@ -390,9 +390,10 @@ def _limit_notes(
 
 def read_measurements(
     path: str | os.PathLike[str], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
-    other_branches: Sequence[str] = (),
+    other_branches: Sequence[str] = (), occlusion: bool = False,
 ) -> tuple[MeasurementSet, list[str]]:
-    """Read and validate a measurement file (format v1).
+    """Read and validate a measurement file (format v1); with ``occlusion`` (several targets), an empty cell of a
+    point is NaN (the point not seen in that row: :func:`pincal.fit.tree_calibration.tree_rows`), else an error.
 
     Args:
         path: CSV file.
@@ -415,7 +416,7 @@ def read_measurements(
     joint_names = [j.name for j in joints]
     q = corrected_angles(_joint_matrix(table, joints, other_branches), couplings, joint_names)
     point_names = _point_columns(table, joint_names)
-    points = table.matrix([c for triplet in point_names for c in triplet])
+    points = table.matrix([c for triplet in point_names for c in triplet], math.nan if occlusion else None)
     for i, name in enumerate(c for triplet in point_names for c in triplet):
         table.check_magnitude(name, points[:, i], MAX_POSITION, "millimetres", "metres")
     rotations = _read_rotations(table)
@@ -434,11 +435,11 @@ def read_measurements(
 
 def read_sessions(
     paths: Sequence[str | os.PathLike[str]], joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = (),
-    other_branches: Sequence[str] = (),
+    other_branches: Sequence[str] = (), occlusion: bool = False,
 ) -> tuple[MeasurementSet, list[str]]:
     """Read one or several measurement files as the sessions of one calibration.
 
-    One file: :func:`read_measurements` (``couplings`` and ``other_branches`` as there; its
+    One file: :func:`read_measurements` (``couplings``, ``other_branches``, ``occlusion`` as there; its
     sessions are the values of its ``session`` column, the file's stem where empty or absent).
     Several files:
     each row's session is its file's stem — or the path as given when two files
@@ -451,7 +452,7 @@ def read_sessions(
     """
     files = [Path(p) for p in paths]
     if len(files) == 1:
-        return read_measurements(files[0], joints, couplings, other_branches)
+        return read_measurements(files[0], joints, couplings, other_branches, occlusion)
     seen: dict[str, Path] = {}
     for path in files:
         key = os.path.normcase(os.path.abspath(path))
@@ -461,7 +462,7 @@ def read_sessions(
     stems = [p.stem for p in files]
     sets, notes = [], []
     for path, stem in zip(files, stems):
-        data, file_notes = read_measurements(path, joints, couplings, other_branches)
+        data, file_notes = read_measurements(path, joints, couplings, other_branches, occlusion)
         notes += file_notes
         name = stem if stems.count(stem) == 1 else str(path)
         own = default_session_name(data.source)

@@ -73,6 +73,7 @@ from pincal.report.model import (
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
+from pincal.report.model_tree import TreeReport
 from pincal.report.reading import load_report, value_at
 from pincal.report.record import ReportRecord
 
@@ -255,7 +256,8 @@ def selection_report(selection) -> SelectionJson | None:
     return out
 
 
-def write_report(path: str | Path, report: CalibrationReport | DiagnosisReport | PaperReport | FixtureReport) -> None:
+def write_report(path: str | Path,
+                 report: CalibrationReport | DiagnosisReport | PaperReport | FixtureReport | TreeReport) -> None:
     """Write ``report`` as indented JSON."""
     write_text(path, json.dumps(report, indent=2) + "\n")
 

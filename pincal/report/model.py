@@ -39,7 +39,7 @@ __all__ = [
     "CorrelatedPair", "NotDetermined", "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise",
     "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
     "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
-    "TimeSpanJson", "ChainHead", "CalibrationReport", "PaperReport",
+    "TimeSpanJson", "RunHead", "ChainHead", "CalibrationReport", "PaperReport",
     "LevelChoicePart", "errors_json", "registration_json", "registration_pair", "level_choice_part", "findings_json",
     "CouplingJson", "CouplingsPart", "couplings_part",
 ]
@@ -413,13 +413,16 @@ class TimeSpanJson(TypedDict):
 # --- the four kinds of REPORT.json ----------------------------------------------------------------
 
 
-class ChainHead(TypedDict):
+class RunHead(TypedDict):
     pincal_version: str
     report_version: int
     method: None
     level: ChainLevel
     model: Literal["joint placements"]
     sources: Sources
+
+
+class ChainHead(RunHead):
     chain: ChainJson
     parameters: list[Parameter]
     identifiability: Identifiability

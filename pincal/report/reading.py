@@ -22,12 +22,13 @@ from pincal.report.model import CalibrationReport, PaperReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
+from pincal.report.model_tree import TreeReport
 
 __all__ = [
     "KINDS", "REPORT_KINDS", "PAGE_KINDS", "ReportDocument", "Document", "document_kind", "load_report", "value_at",
 ]
 
-ReportDocument = CalibrationReport | DiagnosisReport | PaperReport | FixtureReport
+ReportDocument = CalibrationReport | DiagnosisReport | PaperReport | FixtureReport | TreeReport
 Document = ReportDocument | EvaluationJson | FixtureEvaluationJson | PlanJson
 
 #: Each kind of document pincal writes: its typed model and what it is called in a message.
@@ -36,14 +37,16 @@ KINDS: dict[str, tuple[type, str]] = {
     "diagnosis": (DiagnosisReport, "a diagnosis' REPORT.json"),
     "paper": (PaperReport, "a paper method's REPORT.json (--level dh)"),
     "fixture": (FixtureReport, "a socket-fixture calibration's REPORT.json"),
+    "tree": (TreeReport, "a REPORT.json of several --tip-link, which this command does not take yet (calibrate "
+                         "writes it; each target's errors are in it)"),
     "evaluation": (EvaluationJson, "the file of 'pincal evaluate --json'"),
     "fixture evaluation": (FixtureEvaluationJson, "the file of 'pincal evaluate --fixture --json'"),
     "plan": (PlanJson, "a PLAN.json"),
 }
 #: The kinds of REPORT.json (the schema's top level, :data:`pincal.report.schema.REPORT_KINDS`).
-REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture")
-#: The kinds :func:`pincal.report.html.render_html` lays out as a page.
-PAGE_KINDS = (*REPORT_KINDS, "evaluation", "plan")
+REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree")
+#: The kinds :func:`pincal.report.html.render_html` lays out as a page (not yet a tree's).
+PAGE_KINDS = ("calibration", "diagnosis", "paper", "fixture", "evaluation", "plan")
 
 _T = TypeVar("_T")
 _MISSING: Any = object()
@@ -52,13 +55,16 @@ _MISSING: Any = object()
 def document_kind(document: Any) -> str | None:
     """The kind (a key of :data:`KINDS`) of a JSON document, told by the keys only it has; None
     for anything else. A socket-fixture calibration's REPORT.json has ``fixture``, any other
-    ``parameters``: a diagnosis' also ``diagnosis``, a paper method's ``model`` ``"dh"``."""
+    ``parameters``: a diagnosis' also ``diagnosis``, a paper method's ``model`` ``"dh"``, one of several
+    ``--tip-link`` ``targets``."""
     if not isinstance(document, dict):
         return None
     if "plan_version" in document:
         return "plan"
     if "fixture" in document:
         return "fixture"
+    if "targets" in document and "parameters" in document:
+        return "tree"
     if "parameters" in document:
         if "diagnosis" in document:
             return "diagnosis"
@@ -112,6 +118,8 @@ def load_report(
                 "nor a PLAN.json's 'plan_version')")
     else:
         what = f"is {KINDS[kind][1]}"
+    if kind == "tree" and kind not in (hints or {}):  # its description says what to do
+        raise PincalError(f"{path}: {what}")
     raise PincalError(f"{path}: {what}; {(hints or {}).get(kind or '', hint)}")
 
 

@@ -1,0 +1,104 @@
+"""``pincal calibrate`` with several ``--tip-link LINK:POINTS``: one calibration of every target's chain, its
+summary printed per target (:func:`run_calibrate_tree`); the commands that take one chain refuse several
+``--tip-link`` with one line (:func:`one_tip_link`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from pincal.cli.arguments import selection_criterion
+from pincal.errors import PincalError
+
+__all__ = ["one_tip_link", "run_calibrate_tree", "is_tree_report", "run_evaluate_tree"]
+
+#: What the calibration of several targets does not take yet (each flag set refuses it).
+_NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
+            ("html", "--html (the HTML report)"), ("reject_outliers", "--reject-outliers"),
+            ("coupling", "--coupling"))
+
+
+def one_tip_link(command: str, tip_links: Sequence[str] | str) -> str:
+    """The one ``--tip-link`` of ``command``, which calibrates one chain; several are refused with one line."""
+    if isinstance(tip_links, str):
+        return tip_links
+    if len(tip_links) > 1:
+        raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate is (pincal calibrate "
+                          "... --tip-link LINK:POINTS --tip-link LINK:POINTS)")
+    return tip_links[0]
+
+
+def run_calibrate_tree(args: argparse.Namespace) -> int:
+    """Calibrate the targets of ``args.tip_link`` (several ``LINK:POINTS``), print each one's errors before
+    and after, write the corrected URDF and REPORT.json; the exit code."""
+    from pincal.cli.progress import progress_bar
+    from pincal.model.tree import parse_targets
+    from pincal.workflows.settings import CalibrateSettings
+    from pincal.workflows.tree_calibration import calibrate_tree_files
+
+    for attribute, flag in _NOT_YET:
+        value = getattr(args, attribute, None)
+        if value is not None and value is not False and not (isinstance(value, list) and not value):
+            raise PincalError(f"several --tip-link: {flag} is not yet supported; calibrate one --tip-link with it, "
+                              "or leave it out")
+    targets = parse_targets(args.tip_link)
+    settings = CalibrateSettings(tip_link=targets[0].link, level=args.level or "full",
+                                 sigma_column=args.sigma_column, selection=selection_criterion(args),
+                                 sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args, force=args.force)
+    with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
+        run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress)
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    result = run.result
+    size, joints = 0 if result.params is None else result.params.size, len(run.report["chain"]["joints"])
+    print(f"level {result.level}: {result.rank} of {size} parameters identifiable on {joints} joints "
+          f"({len(targets)} targets); noise {result.sigma_pos_m * 1000:.3f} mm; calibrated in {run.seconds:.2f} s")
+    print(f"{'target (points)':32s} {'seen':>5s} {'RMS before':>11s} {'RMS after':>10s} {'max after':>10s}  [mm]")
+    for target in run.report["targets"]:
+        before, after = target["nominal_errors"], target["calibration_errors"]
+        name = f"{target['tip_link']} ({','.join(map(str, target['points']))})"
+        print(f"{name:32s} {after['seen']:5d} {before['position']['rms_mm']:11.3f} {after['position']['rms_mm']:10.3f} "
+              f"{after['position']['max_mm']:10.3f}")
+    print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
+    print(f"wrote {args.report}")
+    return 0
+
+
+def is_tree_report(path: Path) -> bool:
+    """Whether ``path`` is a REPORT.json of several targets (``targets``); False for anything else, whose
+    reader then says what is wrong with it."""
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and "targets" in document and "parameters" in document
+
+
+def run_evaluate_tree(args: argparse.Namespace) -> int:
+    """``pincal evaluate CORRECTED.urdf REPORT.json DATA.csv`` of a tree's report: each target's errors; the
+    exit code (1 beyond ``--max-pos-mm``)."""
+    from pincal.workflows.settings import EvaluateSettings
+    from pincal.workflows.tree_evaluation import evaluate_tree_files
+
+    for attribute, flag in (("json", "--json"), ("html", "--html"), ("nominal", "--nominal")):
+        if getattr(args, attribute, None) is not None:
+            raise PincalError(f"several --tip-link: evaluate {flag} is not yet supported; leave it out")
+    settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
+                                fixed_registration=args.fixed_registration, new_session=args.new_session,
+                                temperature_column=args.temperature_column, max_pos_mm=args.max_pos_mm,
+                                max_rot_deg=args.max_rot_deg)
+    run = evaluate_tree_files(args.urdf, args.report, args.data, settings)
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
+    print(f"{'target (points)':32s} {'seen':>5s} {'mean':>8s} {'RMS':>8s} {'max':>8s}  [mm]")
+    for link, errors in run.targets:
+        stats = errors["position"]
+        print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
+    if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
+        print(f"FAIL: largest position error {run.max_mm:.3f} mm > --max-pos-mm {args.max_pos_mm:g}")
+        return 1
+    return 0

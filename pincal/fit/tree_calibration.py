@@ -1,0 +1,231 @@
+"""Calibration of several targets on the chains of a tree, in one fit (two arms on one torso).
+
+The rows measure P points per configuration (``x1,y1,z1 ...``); each point is carried by one
+target's tip link (:class:`pincal.model.tree.KinematicTree`), an empty cell is a point not seen
+in that row. The unknowns are those of :func:`pincal.fit.chain_calibration.calibrate_chain` over
+the whole tree: one registration per session shared by every target, each point in its tip
+link, and the tree's parameters (:class:`pincal.model.tree_parameters.TreeParameters`; a joint
+shared by several chains is one set of parameters, fitted once). After the registration, the
+steps are the one pipeline of :mod:`pincal.fit.pipeline` — identifiability ordered on the whole
+tree's Jacobian, the selection, the refits, the prior — on :class:`pincal.fit.tree_problem.TreeProblem`.
+
+Not yet: orientation columns, a known tool, ``--select press`` (leave-one-row-out over rows of
+different sizes), outlier rejection, the target and registration holds of
+:mod:`pincal.fit.target_hold` and :mod:`pincal.fit.registration_hold` (refused or noted, never
+silently different).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import cast
+
+import numpy as np
+
+from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import ChainFitOptions, row_weights
+from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
+from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
+from pincal.fit.prior import PriorResidual, data_rows
+from pincal.fit.problem import KindProblem
+from pincal.fit.registration import register_points
+from pincal.fit.sessions import registration_problem, where
+from pincal.fit.tree_problem import TreeProblem, registration_fit
+from pincal.measurements.data import MeasurementSet
+from pincal.model.parameter_sets import CHAIN_LEVELS, ChainLevel, ParameterLevel
+from pincal.model.sensor import Registration
+from pincal.model.tree import KinematicTree, TreePlacements
+from pincal.model.tree_parameters import TreeParameters
+from pincal.progress import Counter, Progress
+from pincal.residuals.sensor import TargetEstimate
+from pincal.residuals.tree import TreeResidual, TreeRows
+
+__all__ = ["TreeCalibration", "calibrate_tree", "tree_rows", "initial_tree_target"]
+
+
+@dataclass(frozen=True)
+class TreeCalibration:
+    """Outcome of :func:`calibrate_tree`.
+
+    Attributes:
+        level: ``registration``, ``offsets`` or ``full``.
+        params: the tree's parameters (None at level ``registration``).
+        vector / std: every tree parameter's value [m, rad] (zero: nominal, and where not kept) and its
+            standard deviation (NaN where not estimated), (n,).
+        status: per tree parameter, :data:`pincal.fit.pipeline.KEPT` or why it is not.
+        target: the registrations (one per session) and every point (P, 3) in its own tip link [m].
+        sigma_pos_m: the position noise scale estimated from the residuals [m].
+        rank, condition, selection, dropped, correlated: the identifiability of the whole tree.
+        point_errors: each calibration row's distance of each point from the model [m], NaN where not seen (K, P).
+        session_names: the sessions, in the order of ``target.registrations``.
+        row_sessions: each calibration row's session, an index into them (K,).
+        used_index: the rows of the data in the fit (indices).
+        tree_placements: each target's calibrated chain placements: the model as a value
+            (``tree.placed(result.tree_placements)``).
+        notes: what the user should know.
+        total_seconds: the calibration's time [s].
+    """
+
+    level: ChainLevel
+    params: TreeParameters | None
+    vector: np.ndarray
+    std: np.ndarray
+    status: tuple[str, ...]
+    target: TargetEstimate
+    sigma_pos_m: float
+    rank: int
+    condition: float
+    selection: Selection | None
+    dropped: tuple[Dropped, ...]
+    correlated: tuple[tuple[str, str, float], ...]
+    point_errors: np.ndarray
+    session_names: tuple[str, ...]
+    row_sessions: np.ndarray
+    used_index: np.ndarray
+    tree_placements: TreePlacements
+    notes: tuple[str, ...]
+    total_seconds: float
+
+    @property
+    def rms_m(self) -> float:
+        """RMS distance of the seen points from the model [m]."""
+        seen = self.point_errors[np.isfinite(self.point_errors)]
+        return float(np.sqrt(np.mean(seen**2)))
+
+
+def tree_rows(tree: KinematicTree, data: MeasurementSet, sessions: np.ndarray | None = None) -> TreeRows:
+    """The rows of ``data`` as a tree residual reads them (``sessions``: each row's registration; default:
+    its session's index in ``data``).
+
+    Raises:
+        CalibrationError: orientation columns, a file's points that are not the targets' (naming both), or a
+            point with one or two of its three cells empty (naming the file and line).
+    """
+    if data.rotations is not None:
+        raise CalibrationError(f"{data.source}: orientation columns qx,qy,qz,qw with several --tip-link are not yet "
+                               "supported; calibrate the points (drop the orientation columns) or one tip link")
+    numbers = sorted(p for t in tree.targets for p in t.spec.points)
+    if numbers != list(range(1, data.n_points + 1)):
+        raise CalibrationError(f"{data.source}: {data.n_points} measured point(s) per row, the --tip-link values "
+                               f"name point(s) {', '.join(map(str, numbers))}; give each point 1..{data.n_points} "
+                               "to one --tip-link LINK:POINTS")
+    seen = np.all(np.isfinite(data.points), axis=2)
+    partial = np.flatnonzero((np.any(np.isfinite(data.points), axis=2) & ~seen).ravel())
+    if partial.size:
+        k, p = divmod(int(partial[0]), data.n_points)
+        raise CalibrationError(f"{data.files[k]}, line {int(data.lines[k])}: point {p + 1} has some of "
+                               f"x{p + 1},y{p + 1},z{p + 1} empty; leave all three empty (not seen in this row) or "
+                               "give all three")
+    return TreeRows(data.q, data.points, seen, data.session_index if sessions is None else sessions)
+
+
+def initial_tree_target(tree: KinematicTree, data: MeasurementSet, rows: TreeRows, iterations: int = 10
+                        ) -> TargetEstimate:
+    """Registrations (one per session, Arun et al. 1987 on the seen points) and the points in their tip links
+    from the nominal model, alternated ``iterations`` times as :func:`pincal.fit.sessions.initial_target`.
+
+    Raises:
+        CalibrationError: a session whose seen points cannot fix a registration (:func:`registration_problem`).
+    """
+    poses = [t.chain.tool_poses(rows.q[:, t.columns]) for t in tree.targets]
+    owner = np.empty(rows.seen.shape[1], dtype=np.intp)
+    for t, target in enumerate(tree.targets):
+        owner[np.array(target.spec.points) - 1] = t
+    groups = [np.flatnonzero(rows.sessions == s) for s in range(len(data.session_names))]
+    for name, group in zip(data.session_names, groups):
+        problem = registration_problem(rows.points[group][rows.seen[group]], group.size, False)
+        if problem:
+            raise CalibrationError(f"{where(data, name)}: {problem}")
+    points = np.zeros((rows.seen.shape[1], 3))
+    registrations: list[Registration] = []
+    for _ in range(iterations):
+        world = np.stack([poses[owner[p]][1] + poses[owner[p]][0] @ points[p] for p in range(owner.size)], axis=1)
+        registrations = [register_points(world[group][rows.seen[group]], rows.points[group][rows.seen[group]])
+                         for group in groups]
+        omega = np.stack([r.rotation for r in registrations])[rows.sessions]  # (K, 3, 3)
+        tau = np.stack([r.translation for r in registrations])[rows.sessions]
+        local = np.einsum("kji,kpj->kpi", omega, rows.points - tau[:, None, :])  # Ωᵀ(g − τ), base frame
+        for p, carrier in enumerate(owner):
+            rotations, positions = poses[carrier]
+            mine = np.einsum("kji,kj->ki", rotations, local[:, p] - positions)
+            points[p] = mine[rows.seen[:, p]].mean(axis=0)
+    return TargetEstimate(registrations[0], points, np.eye(3), tuple(registrations))
+
+
+def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
+                   options: ChainFitOptions | None = None, progress: Progress | None = None) -> TreeCalibration:
+    """Calibrate ``tree`` at ``level`` on the non-validation rows of ``data`` (module docstring).
+
+    The tree is not changed: the calibrated model is the result's ``tree_placements``.
+
+    Raises:
+        CalibrationError: a level, option or data the tree calibration does not take yet (one line each), too
+            few rows, or a session that cannot be registered.
+    """
+    if level not in CHAIN_LEVELS:
+        raise CalibrationError(f"level must be one of {CHAIN_LEVELS}, got '{level}'")
+    options = ChainFitOptions() if options is None else options
+    for refused, flag, instead in (
+            (options.tool_known, "a known --tool", "leave it out: each target's points are estimated"),
+            (options.selection == "press", "--select press", "use aic, bic, all or prior"),
+            (options.reject_outliers, "--reject-outliers", "leave it out")):
+        if refused:
+            raise CalibrationError(f"several --tip-link: {flag} is not yet supported; {instead}")
+    started = time.perf_counter()
+    index = np.flatnonzero(data.roles != "validation")
+    used = data.select(index)
+    if used.n_rows < 3:
+        raise CalibrationError(f"{data.source}: {used.n_rows} calibration row(s) (rows with role 'validation' are "
+                               "not used); a calibration needs at least 3")
+    rows = tree_rows(tree, used)
+    never = np.flatnonzero(~rows.seen.any(axis=0))
+    if never.size:
+        raise CalibrationError(f"{data.source}: point {never[0] + 1} is not seen in any calibration row (every cell of "
+                               f"x{never[0] + 1},y{never[0] + 1},z{never[0] + 1} empty): nothing places it; give its "
+                               "measurements or leave its --tip-link out")
+    start = initial_tree_target(tree, used, rows)
+    params = TreeParameters(tree, cast(ParameterLevel, level)) if level != "registration" else None
+    size = 0 if params is None else int(params.size)
+    counter = Counter(progress)
+    counter.expect(1)
+    problem = TreeProblem(tree, params, rows, start, row_weights(used, options.sigma_column), used.session_names)
+    problem, _ = registration_fit(problem, size, options.sigma_iterations)
+    counter.tick()
+    observed, _ = np.nonzero(rows.seen)
+    analysis, full, other = None, None, np.array([], dtype=int)
+    if size:
+        full = cast(TreeResidual, problem.objective(np.arange(size), np.zeros(size)))
+        kinematic = np.arange(full.blocks["kinematic"].start, full.blocks["kinematic"].stop)
+        other = np.setdiff1d(np.arange(full.n_params), kinematic)
+        analysis = Analysis(full.jacobian(full.start_vector()), kinematic, other)
+    # the selection counts the residual's entries in blocks of 3 per (row, point) seen
+    pairs = used.select(observed)
+    pairs = MeasurementSet(pairs.joint_names, pairs.q, rows.points[rows.seen][:, None, :], None, pairs.roles,
+                           pairs.lines, source=used.source, sessions=pairs.sessions, files=pairs.files)
+    # TreeParameters has what the pipeline reads of a chain's parameter set (size, info, slots, chain)
+    kind = cast("KindProblem[TreeResidual | PriorResidual]", problem)
+    fit = fit_kinematics(kind, analysis, pairs, options.selection, level, options.sigma_iterations, counter)
+    problem = cast(TreeProblem, fit.problem)
+    objective = fit.objective
+    tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
+    names = [] if params is None else [i.name for i in params.info]
+    names += [f"registration{'' if len(used.session_names) == 1 else f'[{n}]'}.{a}"
+              for n in used.session_names for a in ("rx", "ry", "rz", "x", "y", "z")]
+    names += [f"target.point{p + 1}.{a}" for p in range(rows.seen.shape[1]) for a in "xyz"]
+    columns = [names[i] for i in fit.kept] + names[size:]  # the fit's: the kept parameters, then the others
+    dropped: tuple[Dropped, ...] = ()
+    if analysis is not None and fit.ordering is not None:
+        dropped = dropped_parameters(analysis.jacobian, cast(Ordering, fit.ordering), fit.kept, other, names)
+    weights = problem.row_weight / problem.sigma_pos
+    counter.settle()
+    notes = [] if fit.selection is None else list(fit.selection.notes)
+    return TreeCalibration(
+        level=level, params=params, vector=fit.vector, std=fit.std, status=fit.status,
+        target=tree_objective.estimate(fit.solution.x), sigma_pos_m=problem.sigma_pos, rank=fit.rank,
+        condition=condition_number(data_rows(fit.solution.jacobian, objective)), selection=fit.selection,
+        dropped=dropped, correlated=tuple((columns[a], columns[b], c) for a, b, c in correlated_pairs(fit.covariance)),
+        row_sessions=rows.sessions, point_errors=tree_objective.point_errors(fit.solution.x, weights),
+        session_names=used.session_names, used_index=index,
+        tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
+        notes=tuple(notes), total_seconds=time.perf_counter() - started)

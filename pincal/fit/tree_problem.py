@@ -1,0 +1,108 @@
+"""One weighted fit of several targets on a tree as a value: the problem the calibration pipeline
+(:mod:`pincal.fit.pipeline`) runs for :func:`pincal.fit.tree_calibration.calibrate_tree`.
+
+Its residual is :class:`pincal.residuals.tree.TreeResidual` (with a prior,
+:class:`pincal.fit.prior.PriorResidual` wrapping it); the rows are points only, so it has one
+noise scale, the positions'. Its data entries are the seen (row, point) pairs, 3 each: what
+the pipeline's scales, evidence and folds count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import cast
+
+import numpy as np
+
+from pincal.fit.prior import PriorResidual, log_evidence, reestimated_scales
+from pincal.fit.sensor_problem import START_SIGMA_POS_M
+from pincal.fit.solver import Solution, solve
+from pincal.model.sensitivity import ParameterSlot, SensitivityModel
+from pincal.model.tree import KinematicTree
+from pincal.model.tree_parameters import TreeParameters
+from pincal.residuals.sensor import TargetEstimate
+from pincal.residuals.sensor_values import RowWeights
+from pincal.residuals.tree import TreeResidual, TreeRows
+
+__all__ = ["TreeProblem"]
+
+
+@dataclass(frozen=True, eq=False)
+class TreeProblem:
+    """One weighted fit of the registrations, the points and a subset of the tree's parameters: a value.
+
+    ``rows``: the measurements; ``start``: the registrations and points to start from; ``row_weight``: each
+    row's relative weight (K,); ``sigma_pos``: the position noise scale [m]; ``prior``: σ_i of every tree
+    parameter with ``--select prior`` (eq P1); ``models``: sensitivity models shared by the variants.
+    """
+
+    tree: KinematicTree
+    params: TreeParameters | None
+    rows: TreeRows
+    start: TargetEstimate
+    row_weight: np.ndarray
+    session_names: tuple[str, ...]
+    sigma_pos: float = START_SIGMA_POS_M
+    prior: np.ndarray | None = None
+    models: dict[tuple[ParameterSlot, ...], SensitivityModel] = field(default_factory=dict)
+
+    def objective(self, free: np.ndarray, base: np.ndarray) -> TreeResidual | PriorResidual:
+        objective = TreeResidual(self.tree, self.params, free, base, self.rows, self.start,
+                                 RowWeights(self.row_weight / self.sigma_pos), self.models)
+        return objective if self.prior is None else PriorResidual(objective, self.prior[free])
+
+    def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,
+            what: str = "fit") -> tuple[TreeResidual | PriorResidual, Solution]:
+        objective = self.objective(free, base)
+        x0 = objective.start_vector() if x0 is None else x0
+        return objective, solve(objective, x0, what=what)
+
+    def scales(self) -> tuple[float | None, ...]:
+        """The noise scale weighting the rows: positions [m]."""
+        return (self.sigma_pos,)
+
+    def with_scales(self, scales: tuple[float | None, ...]) -> TreeProblem:
+        return replace(self, sigma_pos=cast(float, scales[0]))  # positions: always measured
+
+    def with_prior(self, prior: np.ndarray | None) -> TreeProblem:
+        return replace(self, prior=prior)
+
+    @property
+    def n_data(self) -> int:
+        """How many data entries the residual has: 3 per seen (row, point) pair."""
+        return 3 * int(np.count_nonzero(self.rows.seen))
+
+    def log_evidence(self, objective: TreeResidual | PriorResidual, solution: Solution) -> float:
+        """Eq P3 (:func:`pincal.fit.prior.log_evidence`) with each entry whitened by w_k = row weight / σ_pos."""
+        weights = self.row_weight / self.sigma_pos
+        log_variances = -2.0 * 3 * float(np.sum(np.log(weights)[:, None] * self.rows.seen))
+        return log_evidence(solution.jacobian, solution.residual, log_variances)
+
+    def scale_rows(self, objective: TreeResidual | PriorResidual) -> tuple[slice, ...]:
+        return (slice(0, self.n_data),)
+
+    def fold_rows(self, objective: TreeResidual | PriorResidual) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each seen pair's joint readings, session and 3 entries: pairs of one configuration share its fold
+        (:func:`pincal.fit.prior_scales.scale_folds` deals configurations)."""
+        rows, _ = np.nonzero(self.rows.seen)
+        return self.rows.q[rows], self.rows.sessions[rows], np.arange(3 * rows.size).reshape(-1, 3)
+
+    def rescaled(self, objective: TreeResidual | PriorResidual, solution: Solution) -> TreeProblem:
+        """This problem at the noise scale of a fit's residual: the mean squared weighted error over the seen
+        entries (maximum likelihood with an unknown variance); with a prior, eq P2."""
+        if isinstance(objective, PriorResidual):
+            return self.with_scales(reestimated_scales(solution, objective.n_prior, self.n_data, self.sigma_pos,
+                                                       None))
+        position = solution.residual[: self.n_data] * self.sigma_pos
+        return self.with_scales((float(np.sqrt(np.mean(position**2))) or self.sigma_pos,))
+
+
+def registration_fit(problem: TreeProblem, size: int, iterations: int) -> tuple[TreeProblem, Solution]:
+    """The registrations and points with the nominal kinematics, at the noise scale of their residual
+    (re-estimated ``iterations`` times): the pipeline's start."""
+    empty, base = np.array([], dtype=int), np.zeros(size)
+    objective, solution = problem.fit(empty, base, what="registration")
+    for _ in range(iterations):
+        problem = problem.rescaled(objective, solution)
+        objective, solution = problem.fit(empty, base, solution.x, what="registration")
+    return replace(problem, start=cast(TreeResidual, objective).estimate(solution.x)), solution

@@ -1,0 +1,56 @@
+"""REPORT.json of a calibration of several targets on a tree (:mod:`pincal.report.model_tree`), from
+:func:`pincal.fit.tree_calibration.calibrate_tree`'s result: the parameters and the identifiability as a
+chain's report words them, each target's points and errors, each session's registration."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pincal._version import __version__
+from pincal.fit.metrics import ErrorSummary
+from pincal.fit.tree_calibration import TreeCalibration
+from pincal.model.tree import KinematicTree
+from pincal.report.document import REPORT_VERSION, identifiability_report, parameters_report
+from pincal.report.model import PositionStats, Sha256, Sources, registration_pair
+from pincal.report.model_tree import TargetErrors, TargetJson, TreeReport
+
+__all__ = ["target_errors", "tree_report"]
+
+
+def target_errors(point_errors: np.ndarray, numbers: tuple[int, ...]) -> TargetErrors:
+    """A target's errors: ``point_errors`` (K, P) [m] of every point, NaN where not seen; ``numbers``: its
+    points (1-based), each seen in some row (:func:`pincal.fit.tree_calibration.tree_rows`)."""
+    mine = np.asarray(point_errors, dtype=float)[:, [p - 1 for p in numbers]] * 1000.0
+
+    def stats(values: np.ndarray) -> PositionStats:
+        return ErrorSummary.of(values[np.isfinite(values)], "mm").as_dict()  # type: ignore[return-value]
+
+    return {"seen": int(np.isfinite(mine).sum()), "position": stats(mine),
+            "position_per_point": [stats(mine[:, i]) for i in range(len(numbers))]}
+
+
+def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: KinematicTree, sources: Sources,
+                notes: list[str], digest: tuple[Sha256, dict[str, str]]) -> TreeReport:
+    """The REPORT.json of ``result`` (``nominal``: the nominal model registered to the same rows, for the
+    errors before); ``digest``: the corrected URDF's SHA-256 and the xacro arguments."""
+    targets: list[TargetJson] = [{
+        "tip_link": target.link, "points": list(target.spec.points), "joints": list(target.chain.joint_names),
+        "points_m": result.target.points[[p - 1 for p in target.spec.points]].tolist(),
+        "nominal_errors": target_errors(nominal.point_errors, target.spec.points),
+        "calibration_errors": target_errors(result.point_errors, target.spec.points),
+    } for target in tree.targets]
+    counts = [int(np.sum(result.row_sessions == s)) for s in range(len(result.session_names))]
+    return {
+        "pincal_version": __version__, "report_version": REPORT_VERSION, "method": None, "level": result.level,
+        "model": "joint placements", "sources": sources,
+        "chain": {"root_link": tree.targets[0].chain.root_link, "joints": list(tree.joint_names),
+                  "joint_kinds": [j.kind for j in tree.joints]},
+        "targets": targets,
+        "parameters": parameters_report(result),
+        "identifiability": identifiability_report(result),
+        "registration": registration_pair(result.target.registration, result.target.registration),
+        "sessions": [{"name": name, "rows": count, "registration": registration_pair(r, r)}
+                     for name, count, r in zip(result.session_names, counts, result.target.registrations)],
+        "noise": {"sigma_pos_mm": result.sigma_pos_m * 1000.0, "sigma_rot_deg": None},
+        "notes": notes, "warnings": [], "urdf_sha256": digest[0], "xacro_args": digest[1],
+    }

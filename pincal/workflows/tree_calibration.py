@@ -1,0 +1,157 @@
+"""``pincal calibrate`` with several ``--tip-link LINK:POINTS``: every target's chain in one calibration
+(:func:`calibrate_tree_files`), the corrected URDF carrying every calibrated chain and a REPORT.json with
+each target's errors (:mod:`pincal.report.model_tree`).
+
+What the single chain's run adds and a tree's does not yet: ``--level auto`` and ``dh``, a known
+``--tool``, ``--coupling``, orientation columns, the plausibility checks and effects.yaml; each is refused
+with one line, never run differently. The commands that take no tree yet refuse several ``--tip-link``
+(:func:`refuse_several`) and a tree's REPORT.json (:func:`refuse_tree_report`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+
+from pincal._version import __version__
+from pincal.errors import CalibrationError, PincalError
+from pincal.fit.chain_calibration import ChainFitOptions
+from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
+from pincal.measurements.csv_v1 import read_sessions
+from pincal.model.corrected_urdf import corrected_origins
+from pincal.model.description import xacro_arguments
+from pincal.model.parameter_sets import ChainLevel
+from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.model.urdf import write_urdf_with_origins
+from pincal.outputs import file_sha256
+from pincal.progress import Progress
+from pincal.report.document import write_report
+from pincal.report.model import Sources
+from pincal.report.model_tree import TreeReport
+from pincal.report.tree import tree_report
+from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
+from pincal.workflows.settings import CalibrateSettings
+from pincal.workflows.verdict import RELOAD_TOLERANCE
+
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "refuse_several", "refuse_tree_report"]
+
+
+@dataclass(frozen=True)
+class TreeCalibrationRun:
+    """Outcome of :func:`calibrate_tree_files`.
+
+    Attributes:
+        result: the calibration; nominal: the nominal model registered to the same rows (the errors before).
+        report: the REPORT.json written.
+        notes: the reader's notes and the fit's.
+        seconds: the calibration's wall time [s].
+        reload_error: the largest difference of any target's tool pose after reloading the written URDF [m, -].
+    """
+
+    result: TreeCalibration
+    nominal: TreeCalibration
+    report: TreeReport
+    notes: list[str]
+    seconds: float
+    reload_error: float
+
+
+def refuse_several(command: str, tip_links: Sequence[str] | str) -> str:
+    """The one ``--tip-link`` of a command that takes one chain; several are refused with one line."""
+    if isinstance(tip_links, str):
+        return tip_links
+    if len(tip_links) == 1:
+        return tip_links[0]
+    raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate is (pincal calibrate ... "
+                      "--tip-link LINK:POINTS --tip-link LINK:POINTS)")
+
+
+def refuse_tree_report(report: Mapping[str, Any], where: str, command: str) -> None:
+    """Refuse, with one line, a REPORT.json of several targets (``targets``) in a command that reads one chain's."""
+    if "targets" in report:
+        links = ", ".join(t["tip_link"] for t in report["targets"])
+        raise PincalError(f"{where}: a report of several --tip-link ({links}): not yet supported by {command}; "
+                          "its REPORT.json lists each target's errors")
+
+
+def _refused(settings: CalibrateSettings) -> None:
+    for refused, flag in ((settings.level in ("auto", "dh"), f"--level {settings.level}"),
+                          (settings.tool_pose is not None, "--tool"), (bool(settings.couplings), "--coupling")):
+        if refused:
+            raise PincalError(f"several --tip-link: {flag} is not yet supported; use --level registration, "
+                              "offsets or full without it")
+
+
+def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str | Path], out_urdf: str | Path,
+                         report_path: str | Path, targets: Sequence[TargetSpec], settings: CalibrateSettings,
+                         progress: Progress | None = None) -> TreeCalibrationRun:
+    """Calibrate every one of ``targets`` (:func:`pincal.model.tree.parse_targets` of the ``--tip-link``
+    values) on ``data_path`` in one fit, as ``settings`` say (its ``tip_link`` is not read); write the
+    corrected URDF (every calibrated chain's joint origins, checked by reloading it) and the report.
+
+    An empty cell of a point is that point not seen in the row (occlusion): only it is left out.
+    """
+    _refused(settings)
+    urdf, data_paths = Path(urdf), input_paths(data_path)
+    out_urdf, report_path = Path(out_urdf), Path(report_path)
+    inputs = [*description_inputs(urdf, settings.xacro_args), *data_paths]
+    refuse_overwrite(out_urdf, *inputs)
+    refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    tree = KinematicTree.from_urdf(urdf, targets, xacro_args=settings.xacro_args)
+    data, notes = read_sessions(data_paths, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
+    level = cast(ChainLevel, settings.level)  # refused above: auto and dh
+    start = time.perf_counter()
+    result = calibrate_tree(tree, data, level, options, progress)
+    seconds = time.perf_counter() - start
+    nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
+    comment = (f"Calibrated by pincal {__version__} (level {level}, {len(tree.targets)} targets) from {urdf.name} "
+               f"and {', '.join(p.name for p in data_paths)}. Registration and targets: see the report.")
+    reload_error, digest = _write_urdf(urdf, out_urdf, tree, result, (comment, settings.xacro_args), data.q)
+    sources: Sources = {"urdf": str(urdf),
+                        "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
+                        "corrected_urdf": str(out_urdf)}
+    notes = notes + list(result.notes)
+    report = tree_report(result, nominal, tree, sources, notes,
+                         (digest, dict(xacro_arguments(settings.xacro_args))))
+    write_report(report_path, report)
+    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error)
+
+
+def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibration,
+                text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray) -> tuple[float, str]:
+    """Write ``urdf`` with every target chain's calibrated joint origins (a joint shared by several chains has
+    the same placement in each) and return the reload check's largest difference and the file's SHA-256.
+
+    Raises:
+        CalibrationError: reloading the written file moves a target's tool beyond :data:`RELOAD_TOLERANCE`
+            (the file is then not put in place).
+    """
+    comment, xacro_args = text
+    nominal = tree.placements()
+    origins: dict[str, np.ndarray] = {}
+    with tree.placed(result.tree_placements):
+        for target, placements in zip(tree.targets, nominal):
+            origins.update(corrected_origins(urdf, target.chain, placements, xacro_args))
+        calibrated = [t.chain.tool_poses(q[:, t.columns]) for t in tree.targets]
+    checked: list[float] = []
+    digest: list[str] = []
+
+    def verify(written: Path) -> None:
+        reloaded = KinematicTree.from_urdf(written, [t.spec for t in tree.targets])
+        errors = [max(np.abs(a[0] - b[0]).max(), np.abs(a[1] - b[1]).max()) for a, b in
+                  zip(calibrated, (t.chain.tool_poses(q[:, t.columns]) for t in reloaded.targets))]
+        checked.append(float(max(errors)))
+        if checked[-1] > RELOAD_TOLERANCE:
+            raise CalibrationError(f"{out}: reloading the written URDF moves a target by {checked[-1]:.3g} "
+                                   f"(> {RELOAD_TOLERANCE:g}); not written; please report this as a bug")
+        digest.append(file_sha256(written))
+
+    write_urdf_with_origins(urdf, out, origins, comment=comment, verify=verify, xacro_args=xacro_args)
+    return checked[-1], digest[-1]
+

@@ -1,0 +1,120 @@
+"""``pincal evaluate`` of a calibration of several targets (a REPORT.json with ``targets``,
+:mod:`pincal.report.model_tree`): eq 24's position error of every point seen in every non-CPA row,
+each target's points in their tip link as reported, each row through its session's registration
+(:func:`evaluate_tree_files`).
+
+The registration of a row is the report's session's of the same name, the report's only one for rows
+of a session it has not seen (held-out rows of the same setup), or — with ``--new-session`` — each
+session of the data registered anew with the model and the points fixed (Arun et al. 1987 on the seen
+points: the least-squares rigid registration of equally weighted points). What evaluate does with one
+chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``, ``--max-rot-deg``,
+``--json``, ``--html`` — is refused in one line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+
+from pincal.errors import PincalError
+from pincal.fit.registration import register_points
+from pincal.fit.sessions import session_rows
+from pincal.fit.tree_calibration import tree_rows
+from pincal.measurements.csv_v1 import read_measurements
+from pincal.model.sensor import Registration
+from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.outputs import file_sha256
+from pincal.report.model_tree import TargetErrors
+from pincal.report.reading import load_report, value_at
+from pincal.report.tree import target_errors
+from pincal.workflows.settings import EvaluateSettings
+
+__all__ = ["TreeEvaluation", "evaluate_tree_files"]
+
+
+@dataclass(frozen=True)
+class TreeEvaluation:
+    """Outcome of :func:`evaluate_tree_files`.
+
+    Attributes:
+        targets: each target's link and its points' errors on the evaluated rows (:class:`TargetErrors`).
+        rows: how many rows were evaluated.
+        registrations: how each session of the data was registered (``session: source``).
+        max_mm: the largest error of any point [mm] (``--max-pos-mm`` judges it).
+        notes: the reader's notes and what the user should know.
+    """
+
+    targets: tuple[tuple[str, TargetErrors], ...]
+    rows: int
+    registrations: tuple[str, ...]
+    max_mm: float
+    notes: tuple[str, ...]
+
+
+def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: str | Path,
+                        settings: EvaluateSettings | None = None) -> TreeEvaluation:
+    """Eq 24's position errors of the model of a tree's report on the non-CPA rows of ``data_path``.
+
+    Raises:
+        PincalError: a setting a tree does not take yet; ``urdf`` not the file written with the report (its
+            SHA-256), unless ``settings.allow_other_urdf``; anything :func:`pincal.fit.tree_calibration.tree_rows`
+            refuses; rows of a session the report does not have while it has several (``--new-session``).
+    """
+    settings = EvaluateSettings() if settings is None else settings
+    for refused, flag in ((settings.fixed_registration is not None, "--fixed-registration"),
+                          (settings.temperature_column is not None, "--temperature-column"),
+                          (settings.max_rot_deg is not None, "--max-rot-deg (the targets are points)")):
+        if refused:
+            raise PincalError(f"several --tip-link: {flag} is not yet supported by evaluate; leave it out")
+    document = cast(dict[str, Any], load_report(report_path, ("tree",)))
+    notes: list[str] = []
+    if file_sha256(urdf) != value_at(document, "urdf_sha256", report_path):
+        if not settings.allow_other_urdf:
+            raise PincalError(f"{urdf}: not the URDF {report_path} was written with (its SHA-256 differs from the "
+                              "report's urdf_sha256); evaluate the pair calibrate wrote, or pass --allow-other-urdf if "
+                              "you changed it on purpose")
+        notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
+    targets = value_at(document, "targets", report_path, _targets)
+    tree = KinematicTree.from_urdf(urdf, [spec for spec, _ in targets], xacro_args=settings.xacro_args)
+    data, read_notes = read_measurements(data_path, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    data = data.select(data.roles != "cpa")
+    names, reported = value_at(document, "sessions", report_path, _sessions)
+    rows = tree_rows(tree, data)
+    world = tree.target_points(data.q, [points for _, points in targets])  # (K, P, 3) [m]
+    if settings.new_session:
+        registrations = [register_points(world[rows.sessions == s][rows.seen[rows.sessions == s]],
+                                         rows.points[rows.sessions == s][rows.seen[rows.sessions == s]])
+                         for s in range(len(data.session_names))]
+        sessions = rows.sessions
+        how = [f"{name}: re-estimated (--new-session)" for name in data.session_names]
+    else:
+        registrations, sessions = reported, session_rows(data, names)
+        how = [f"{name}: the report's" + ("" if name in names else f" '{names[0]}'") for name in data.session_names]
+    omega = np.stack([r.rotation for r in registrations])[sessions]
+    tau = np.stack([r.translation for r in registrations])[sessions]
+    sensed = np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :]
+    errors = np.linalg.norm(np.where(rows.seen[..., None], sensed - rows.points, np.nan), axis=2)  # (K, P) [m]
+    per_target = tuple((spec.link, target_errors(errors, spec.points)) for spec, _ in targets)
+    return TreeEvaluation(per_target, data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
+                          tuple(read_notes + notes))
+
+
+def _targets(entries: Any) -> list[tuple[TargetSpec, np.ndarray]]:
+    """REPORT.json ``targets`` as (link and points, the points in the link (P_t, 3) [m])."""
+    out = []
+    for entry in entries:
+        points = np.asarray(entry["points_m"], dtype=float).reshape(-1, 3)
+        spec = TargetSpec(str(entry["tip_link"]), tuple(int(p) for p in entry["points"]))
+        if points.shape[0] != len(spec.points):
+            raise ValueError(f"{spec.link}: {len(spec.points)} points but {points.shape[0]} positions")
+        out.append((spec, points))
+    return out
+
+
+def _sessions(entries: Any) -> tuple[list[str], list[Registration]]:
+    """REPORT.json ``sessions`` as their names and registrations (Registration 1)."""
+    return ([str(e["name"]) for e in entries],
+            [Registration.from_dict(e["registration"]["position"]) for e in entries])
