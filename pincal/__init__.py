@@ -48,6 +48,8 @@ _DEFINED_IN = {
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
     "pincal.workflows.extract": ("BagRead", "extract_file"),
+    "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
+    "pincal.workflows.detection": ("DetectSettings", "DetectRun", "detect_files"),  # imports OpenCV
     "pincal.workflows.simulation": ("simulate_to_directory",),
     "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
     "pincal.report.html": ("render_html", "write_html"),  # imports jinja2 and matplotlib
@@ -61,6 +63,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.fit.registration import register_orientations, register_points
     from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
     from pincal.measurements.bags import read_bag
+    from pincal.measurements.charuco import CharucoSpec, parse_board
     from pincal.measurements.csv_v1 import (
         read_measurements,
         read_sessions,
@@ -104,6 +107,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         simulate_experiment,
     )
     from pincal.workflows.calibration import CalibrationRun, calibrate_files
+    from pincal.workflows.detection import DetectRun, DetectSettings, detect_files
     from pincal.workflows.diagnosis import DiagnoseRun, diagnose_files
     from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files
     from pincal.workflows.evaluation_outputs import (
@@ -213,6 +217,11 @@ __all__ = [
     "urdf_from_dh_file",
     "BagRead",
     "extract_file",
+    "CharucoSpec",
+    "parse_board",
+    "DetectSettings",
+    "DetectRun",
+    "detect_files",
     "simulate_to_directory",
 ]
 

@@ -27,6 +27,7 @@ from pincal.cli.arguments import (
     xacro_arg,
 )
 from pincal.fit.prior_defaults import DEFAULT_JOINT_ZERO_DEG, DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM
+from pincal.measurements.charuco import BOARD_EXAMPLE, BOARD_FORM
 from pincal.measurements.plateau_defaults import (
     MAX_OFFSET_S,
     MAX_SPREAD_MM,
@@ -110,6 +111,20 @@ def _add_extract(sub) -> None:
     offset.add_argument("--clock-offset", type=seconds, metavar="S",
                      help="measurement stamp minus joint stamp of one instant [s], instead of estimating it")
     ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv", help="measurement CSV (v1) to write")
+
+
+def _add_detect(sub) -> None:
+    detect = sub.add_parser("detect", help="find a ChArUco board's corners in images: a camera's measurement CSV")
+    detect.add_argument("images", nargs="+", type=Path, metavar="IMAGES",
+                        help="image files (PNG, JPEG) or folders (their PNG and JPEG files, by name)")
+    detect.add_argument("--board", required=True, metavar=BOARD_FORM,
+                        help=f"the board in OpenCV's conventions: squares across and down, square and marker sides "
+                             f"[m], an OpenCV dictionary; e.g. {BOARD_EXAMPLE}")
+    detect.add_argument("--joints", required=True, type=Path, metavar="JOINTS.csv",
+                        help="an 'image' column naming each image file, then one column per URDF joint (rad; m for "
+                             "prismatic), optionally role and session")
+    detect.add_argument("--out", required=True, type=Path, metavar="DATA.csv",
+                        help="CSV to write: one row per corner found (docs/camera.md)")
 
 
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
@@ -342,6 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="folder to put NAME in (default: ./data, where the docs' commands look)")
 
     _add_extract(sub)
+    _add_detect(sub)
 
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),
