@@ -8,6 +8,7 @@ DICT_5X5_100 markers, seen 0.45-0.55 m away by a 640x480 camera (f = 600 px) wit
 from __future__ import annotations
 
 import csv
+import re
 
 import cv2
 import numpy as np
@@ -15,7 +16,9 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.errors import MeasurementError
+from pincal.measurements.camera_csv import read_corners
 from pincal.measurements.charuco import DICTIONARY_SIZES, parse_board
+from pincal.measurements.data import JointSpec
 from pincal.simulation.board_images import BoardView, render_board
 from pincal.workflows.detection import DetectSettings, detect_files
 
@@ -38,7 +41,7 @@ def _write_joints(path, names, extra_header=(), extra=()):
         writer = csv.writer(handle)
         writer.writerow(["image", *JOINTS, "role", *extra_header])
         for k, name in enumerate(names):
-            writer.writerow([name, f"{0.1 * k:.3f}", f"{-0.2 * k:.3f}", "validation" if k == 1 else "", *extra])
+            writer.writerow([name, f"{0.1 * k:.3f}", f"{0.5 - 0.2 * k:.3f}", "validation" if k == 1 else "", *extra])
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +89,7 @@ def test_joint_readings_role_and_columns_travel_with_each_corner(scene):
     rows = _rows(root / "data.csv")
     assert list(rows[0]) == ["image", "corner", "u", "v", "board_x", "board_y", "width", "height", *JOINTS, "role"]
     one = [r for r in rows if r["image"] == names[1]]
-    assert {(r["shoulder"], r["elbow"], r["role"]) for r in one} == {("0.100", "-0.200", "validation")}
+    assert {(r["shoulder"], r["elbow"], r["role"]) for r in one} == {("0.100", "0.300", "validation")}
     assert {r["role"] for r in rows if r["image"] == names[0]} == {"calibration"}
 
 
@@ -163,3 +166,37 @@ def test_corner_positions_are_opencvs():
     opencv = cv2.aruco.CharucoBoard((5, 8), 0.03, 0.022, cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
     mine = np.array([[*spec.corner_position(k), 0.0] for k in range(spec.n_corners)])
     np.testing.assert_allclose(mine, opencv.getChessboardCorners(), atol=1e-7)
+
+
+def test_the_csv_reads_back_one_configuration_per_image(scene):
+    root, _, names, run = scene
+    joints = [JointSpec("shoulder", "revolute"), JointSpec("elbow", "revolute")]
+    data, notes = read_corners(root / "data.csv", joints)
+    assert notes == [] and data.images == tuple(names[:3])
+    np.testing.assert_array_equal(data.q, [[0.0, 0.5], [0.1, 0.3], [0.2, 0.1]])
+    assert list(data.roles) == ["calibration", "validation", "calibration"] and set(data.sessions) == {"data"}
+    for k, image in enumerate(run.images[1:]):  # blank.png first, by name, and skipped
+        mine = data.image_of == k
+        np.testing.assert_array_equal(data.corners[mine], image.detection.ids)
+        np.testing.assert_allclose(data.pixels[mine], image.detection.pixels, atol=5e-5)  # written to 1e-4 px
+    np.testing.assert_array_equal(data.sizes, [[640, 480]] * 3)
+
+
+@pytest.mark.parametrize(("line", "column", "value", "message"), [
+    (3, "elbow", "0.4", "image 'view_0.png' has 0.4 here but 0.500 at line 2; the rows of one image share its elbow"),
+    (3, "corner", "0", "corner 0 of image 'view_0.png' given again (first at line 2)"),
+    (2, "u", "700", "corner at (700, "),
+    (2, "shoulder", "45", "looks like degrees"),
+])
+def test_a_csv_whose_rows_disagree_is_refused(scene, tmp_path, line, column, value, message):
+    root = scene[0]
+    with open(root / "data.csv", newline="") as handle:
+        rows = list(csv.reader(handle))
+    rows[line - 1][rows[0].index(column)] = value
+    edited = tmp_path / "edited.csv"
+    with open(edited, "w", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+    joints = [JointSpec("shoulder", "revolute"), JointSpec("elbow", "revolute")]
+    with pytest.raises(MeasurementError, match=re.escape(f"{edited}: line {line}")) as caught:
+        read_corners(edited, joints)
+    assert message in str(caught.value)

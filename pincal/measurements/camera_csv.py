@@ -23,24 +23,35 @@ reprojected), and each image shows its own subset of the board: a row per corner
 and no columns that depend on the board's size, a corner can be dropped by deleting its line, and an
 error of the fit can name the line of the corner. The rows of one image share its name, size, joint
 readings, role and session: the image is the robot configuration, as one row is in format v1.
+:func:`read_corners` reads DATA.csv back as a :class:`CornerSet`, checking that they do.
 """
 
 from __future__ import annotations
 
 import csv
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path, PurePath
+
+import numpy as np
 
 from pincal.errors import MeasurementError
 from pincal.measurements.charuco import CharucoSpec
-from pincal.measurements.csv_v1 import read_table
-from pincal.measurements.data import DEFAULT_ROLE, ROLE_COLUMN, ROLES, SESSION_COLUMN
+from pincal.measurements.csv_v1 import (
+    CsvTable,
+    _joint_matrix,
+    _read_extras,
+    _read_roles,
+    _read_sessions,
+    read_table,
+)
+from pincal.measurements.data import DEFAULT_ROLE, ROLE_COLUMN, ROLES, SESSION_COLUMN, JointSpec
 from pincal.measurements.images import CornerDetection
 from pincal.outputs import replacing
 
-__all__ = ["IMAGE_COLUMN", "CORNER_COLUMNS", "JointReadings", "read_joint_readings", "write_corners"]
+__all__ = ["IMAGE_COLUMN", "CORNER_COLUMNS", "JointReadings", "read_joint_readings", "write_corners", "CornerSet",
+           "read_corners"]
 
 #: JOINTS.csv's and DATA.csv's column naming each image.
 IMAGE_COLUMN = "image"
@@ -147,3 +158,118 @@ def write_corners(path: str | os.PathLike[str], readings: JointReadings,
     except OSError as exc:
         raise MeasurementError(f"{path}: cannot write file ({exc.strerror or exc})") from None
     return written
+
+
+@dataclass(frozen=True, eq=False)
+class CornerSet:
+    """DATA.csv read: K images (the robot configurations) and the M corners they show.
+
+    Attributes:
+        joint_names: N joint names, the column order of ``q``.
+        images: each image's name (K,).
+        q: each image's joint readings (K, N) [rad; m for prismatic joints].
+        roles: each image's role (K,) object array.
+        sessions: each image's session (K,) object array (the file's stem where the file names none).
+        sizes: each image's (width, height) (K, 2) [px].
+        image_of: each corner's image, an index into ``images`` (M,).
+        corners: each corner's OpenCV id (M,).
+        pixels: each corner's (u, v) (M, 2) [px].
+        board_points: each corner on the board (M, 3) [m], z = 0.
+        lines: each corner's line in the file (M,).
+        extra: numeric extra columns, one value per image (K,) each.
+        source: the file.
+    """
+
+    joint_names: tuple[str, ...]
+    images: tuple[str, ...]
+    q: np.ndarray
+    roles: np.ndarray
+    sessions: np.ndarray
+    sizes: np.ndarray
+    image_of: np.ndarray
+    corners: np.ndarray
+    pixels: np.ndarray
+    board_points: np.ndarray
+    lines: np.ndarray
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)
+    source: str = "<memory>"
+
+
+def _same_per_image(table: CsvTable, first: np.ndarray, values: np.ndarray, name: str) -> None:
+    """Refuse a cell of column ``name`` that differs from the first row of its image (``first``: that row)."""
+    differs = np.flatnonzero(values != values[first])
+    if differs.size:
+        k = differs[0]
+        here, there = (table.cell(row, name) or "(empty)" for row in (k, first[k]))
+        raise table.error(f"image '{table.cell(k, IMAGE_COLUMN)}' has {here} here but {there} "
+                          f"at line {table.lines[first[k]]}; the rows of one image share its {name}",
+                          table.lines[k], name)
+
+
+def read_corners(path: str | os.PathLike[str], joints: Sequence[JointSpec]) -> tuple[CornerSet, list[str]]:
+    """Read DATA.csv (see the module's docstring), as ``pincal detect`` writes it.
+
+    Args:
+        path: the file.
+        joints: the joints each image's readings must give, in the order of the returned ``q``.
+
+    Returns:
+        The corners, grouped by image in the order the images first appear, and notes (ignored columns).
+
+    Raises:
+        MeasurementError: naming the file, line and column: a missing column, a joint reading in degrees
+            or millimetres, rows of one image that disagree (joints, size, role, session), a corner given
+            twice for one image, a corner outside its image.
+    """
+    table = read_table(path, rows_are="corner")
+    missing = [n for n in (IMAGE_COLUMN, *CORNER_COLUMNS) if n not in table.names]
+    if missing:
+        raise table.error(f"missing column(s) {', '.join(missing)}; a camera's DATA.csv (pincal detect) has "
+                          f"{IMAGE_COLUMN}, {', '.join(CORNER_COLUMNS)}, the joint columns and role", table.header_line)
+    names = table.cells(IMAGE_COLUMN)
+    first_row: dict[str, int] = {}
+    for k, name in enumerate(names):
+        first_row.setdefault(name, k)
+    order = list(first_row)
+    index = {name: i for i, name in enumerate(order)}
+    image_of = np.array([index[n] for n in names], dtype=int)
+    first = np.array([first_row[n] for n in names], dtype=int)  # each row's image's first row
+    joint_names = [j.name for j in joints]
+    q = _joint_matrix(table, joints)
+    roles, sessions = _read_roles(table), _read_sessions(table)
+    numbers = {name: table.numbers(name) for name in CORNER_COLUMNS}
+    for name in ("corner", "width", "height"):
+        lowest = 0 if name == "corner" else 1
+        bad = np.flatnonzero((numbers[name] != np.round(numbers[name])) | (numbers[name] < lowest))
+        if bad.size:
+            raise table.error(f"{numbers[name][bad[0]]:g} is not a {'corner id' if name == 'corner' else 'size'}; "
+                              f"give a whole number >= {lowest}", table.lines[bad[0]], name)
+    for n, joint in enumerate(joint_names):
+        _same_per_image(table, first, q[:, n], joint)
+    for name in ("width", "height"):
+        _same_per_image(table, first, numbers[name], name)
+    _same_per_image(table, first, roles, ROLE_COLUMN)
+    _same_per_image(table, first, sessions, SESSION_COLUMN)
+    pixels = np.column_stack([numbers["u"], numbers["v"]])
+    sizes = np.column_stack([numbers["width"], numbers["height"]]).astype(int)
+    outside = np.flatnonzero(np.any((pixels < -0.5) | (pixels > sizes - 0.5), axis=1))
+    if outside.size:
+        k = outside[0]
+        raise table.error(f"corner at ({pixels[k, 0]:g}, {pixels[k, 1]:g}) px is outside its {sizes[k, 0]}x"
+                          f"{sizes[k, 1]} image; check the u, v, width and height columns", table.lines[k])
+    corners = numbers["corner"].astype(int)
+    seen: dict[tuple[int, int], int] = {}
+    for k, key in enumerate(zip(image_of.tolist(), corners.tolist())):
+        if key in seen:
+            raise table.error(f"corner {key[1]} of image '{names[k]}' given again (first at line {seen[key]}); "
+                              "keep one row per corner", table.lines[k], "corner")
+        seen[key] = table.lines[k]
+    reserved = {IMAGE_COLUMN, *CORNER_COLUMNS, *joint_names, ROLE_COLUMN, SESSION_COLUMN}
+    extra, ignored = _read_extras(table, [n for n in table.names if n not in reserved])
+    firsts = np.array(list(first_row.values()), dtype=int)
+    board = np.column_stack([numbers["board_x"], numbers["board_y"], np.zeros(len(names))])
+    notes = [f"{table.source}: ignored non-numeric column(s): {', '.join(ignored)}"] if ignored else []
+    data = CornerSet(tuple(joint_names), tuple(order), q[firsts], roles[firsts], sessions[firsts], sizes[firsts],
+                     image_of, corners, pixels, board, np.array(table.lines), {n: v[firsts] for n, v in extra.items()},
+                     table.source)
+    return data, notes
