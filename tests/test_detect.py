@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import re
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -19,6 +20,7 @@ from pincal.errors import MeasurementError
 from pincal.measurements.camera_csv import read_corners
 from pincal.measurements.charuco import DICTIONARY_SIZES, parse_board
 from pincal.measurements.data import JointSpec
+from pincal.measurements.image_bags import IMAGE, ImageStream
 from pincal.simulation.board_images import BoardView, render_board
 from pincal.workflows.detection import DetectSettings, detect_files
 
@@ -200,3 +202,99 @@ def test_a_csv_whose_rows_disagree_is_refused(scene, tmp_path, line, column, val
     with pytest.raises(MeasurementError, match=re.escape(f"{edited}: line {line}")) as caught:
         read_corners(edited, joints)
     assert message in str(caught.value)
+
+
+def _image_bag(path, scene_images, offset):
+    """A rosbag2 (sqlite3) of a JointState topic at 25 Hz and a camera at 1 Hz, mono8 on /camera/image_raw and
+    PNG on /camera/compressed: three stops of 3 s (each showing one of ``scene_images``) with 1 s moves
+    between them (encoder noise 1e-5 rad), a grey image while moving; camera stamps ``offset`` s ahead of the joints' clock, both
+    received 10 ms after their stamp on the joints' clock."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.LATEST)
+    types = store.types
+    stops = [(4.0 * k + 1.0, 4.0 * k + 4.0) for k in range(3)]  # on the joint clock [s]
+    targets = np.array([[0.1, 0.5], [0.3, 0.2], [-0.2, 0.4]])
+
+    def posture(t):
+        for k, (start, end) in enumerate(stops):
+            if start <= t <= end:
+                return targets[k], k
+            if k + 1 < len(stops) and end < t < stops[k + 1][0]:
+                a = (t - end) / (stops[k + 1][0] - end)
+                return targets[k] + a * (targets[k + 1] - targets[k]), None
+        return (targets[0], None) if t < stops[0][0] else (targets[-1], None)
+
+    def header(t):
+        sec = int(np.floor(t))
+        return types["std_msgs/msg/Header"](stamp=types["builtin_interfaces/msg/Time"](
+            sec=sec, nanosec=int(round((t - sec) * 1e9))), frame_id="camera")
+
+    grey = np.full((480, 640), 128, np.uint8)
+    messages = []
+    rng = np.random.default_rng(7)
+    for t in np.arange(0.04, 13.0, 0.04):  # a zero stamp would be read as unset
+        q = posture(t)[0] + rng.normal(0.0, 1e-5, 2)  # encoder noise [rad]
+        messages.append((t + 0.01, "/joint_states", "sensor_msgs/msg/JointState", types["sensor_msgs/msg/JointState"](
+            header=header(t), name=list(JOINTS), position=q, velocity=np.zeros(0), effort=np.zeros(0))))
+    for t in np.arange(0.1, 13.0, 1.0):
+        _, k = posture(t)
+        image = grey if k is None else scene_images[k]
+        padded = np.pad(image, ((0, 0), (0, 8)))  # rows of 648 bytes: a step beyond the width
+        messages.append((t + 0.01, "/camera/image_raw", "sensor_msgs/msg/Image", types["sensor_msgs/msg/Image"](
+            header=header(t + offset), height=480, width=640, encoding="mono8", is_bigendian=0, step=648,
+            data=padded.ravel())))
+        png = cv2.imencode(".png", image)[1].ravel()
+        messages.append((t + 0.01, "/camera/compressed", "sensor_msgs/msg/CompressedImage",
+                         types["sensor_msgs/msg/CompressedImage"](header=header(t + offset), format="png", data=png)))
+    messages.sort(key=lambda m: m[0])
+    with Writer(path, version=Writer.VERSION_LATEST) as writer:
+        connections = {}
+        for received, topic, msgtype, message in messages:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+            writer.write(connections[topic], int(round(received * 1e9)), store.serialize_cdr(message, msgtype))
+    return targets
+
+
+@pytest.fixture(scope="module")
+def image_bag(scene, tmp_path_factory):
+    """The bag of :func:`_image_bag` showing the scene's three views, the joints' stops and the views."""
+    _, folder, names, _ = scene
+    shown = [cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE) for name in names[:3]]
+    bag = tmp_path_factory.mktemp("bag") / "session"
+    return bag, _image_bag(bag, shown, offset=1.5), shown  # a sign slip would take images of the moves
+
+
+@pytest.mark.parametrize("topic", ["/camera/image_raw", "/camera/compressed"])
+def test_extract_saves_each_stops_image_for_detect(image_bag, tmp_path, capsys, topic):
+    bag, targets, shown = image_bag
+    out = tmp_path / "joints.csv"
+    assert main(["extract", str(bag), "--joints", "/joint_states", "--image", topic, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "clock offset: " + topic + " stamps - /joint_states stamps = +1.5000 s" in printed
+    readings = _rows(out)
+    assert [r["image"] for r in readings] == ["image_000.png", "image_001.png", "image_002.png"]
+    # averaged over the 2 s window (50 readings of sigma 1e-5 rad): within 4 sigma / sqrt(50) = 5.7e-6 rad
+    np.testing.assert_allclose([[float(r[j]) for j in JOINTS] for r in readings], targets, atol=5.7e-6)
+    for r, image in zip(readings, shown):  # the image of the stop, as it was recorded
+        np.testing.assert_array_equal(cv2.imread(str(tmp_path / "joints_images" / r["image"]), 0), image)
+    data = tmp_path / "data.csv"
+    assert main(["detect", str(tmp_path / "joints_images"), "--board", SPEC.text, "--joints", str(out),
+                 "--out", str(data)]) == 0
+    assert len(_rows(data)) == 3 * SPEC.n_corners
+
+
+@pytest.mark.parametrize(("encoding", "channels", "convert"), [
+    ("rgb8", 3, cv2.COLOR_RGB2GRAY), ("bgra8", 4, cv2.COLOR_BGRA2GRAY), ("mono16", 1, None)])
+def test_raw_images_are_read_in_grey(encoding, channels, convert):
+    rng = np.random.default_rng(1)
+    depth = 2 if encoding == "mono16" else 1
+    pixels = rng.integers(0, 256 ** depth, (4, 5, channels)).astype(np.uint16 if depth == 2 else np.uint8)
+    data = np.pad(pixels.reshape(4, -1).view(np.uint8), ((0, 0), (0, 3)))  # little-endian rows, 3 bytes of padding
+    message = SimpleNamespace(encoding=encoding, height=4, width=5, step=data.shape[1], is_bigendian=0,
+                              data=data.ravel())
+    stream = ImageStream("/camera", IMAGE, np.zeros(1), np.zeros(1), (message,))
+    expected = (pixels[:, :, 0] >> 8).astype(np.uint8) if depth == 2 else cv2.cvtColor(pixels, convert)
+    np.testing.assert_array_equal(stream.image(0), expected)

@@ -26,6 +26,7 @@ PRINTED_BY = {
     "measurements/charuco.py": {"detect"},
     "measurements/images.py": {"detect"},
     "measurements/camera_csv.py": {"detect"},
+    "measurements/image_bags.py": {"extract"},
     "workflows/extract.py": {"extract"},
     "measurements/bags.py": {"extract"},
     "measurements/plateaus.py": {"extract"},

@@ -91,6 +91,9 @@ def _add_extract(sub) -> None:
     measured.add_argument("--point", action="append", metavar="TOPIC",
                           help="PointStamped (or a pose topic, position only) or tf:CHILD_FRAME, repeatable: one gives "
                                "x,y,z, several x1,y1,z1,x2,... in the order given (points of one rigid target)")
+    measured.add_argument("--image", metavar="TOPIC",
+                          help="sensor_msgs/Image or CompressedImage topic of a camera: each stop's middle image "
+                               "saved as a PNG in --image-dir, and --out is JOINTS.csv for pincal detect")
     ext.add_argument("--joint-names", type=joint_names, metavar="JOINT[,JOINT...]",
                      help="keep these joints only, judged still and written (default: every joint of the topic)")
     ext.add_argument("--still-tol", type=positive, default=STILL_TOL, metavar="RAD",
@@ -110,7 +113,10 @@ def _add_extract(sub) -> None:
                           f"(default {MAX_OFFSET_S:g})")
     offset.add_argument("--clock-offset", type=seconds, metavar="S",
                      help="measurement stamp minus joint stamp of one instant [s], instead of estimating it")
-    ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv", help="measurement CSV (v1) to write")
+    ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv",
+                     help="measurement CSV (v1) to write; with --image, JOINTS.csv")
+    ext.add_argument("--image-dir", type=Path, metavar="DIR",
+                     help="with --image: the folder of the images (default: OUT_images beside --out)")
 
 
 def _add_detect(sub) -> None:

@@ -50,8 +50,8 @@ from pincal.measurements.data import DEFAULT_ROLE, ROLE_COLUMN, ROLES, SESSION_C
 from pincal.measurements.images import CornerDetection
 from pincal.outputs import replacing
 
-__all__ = ["IMAGE_COLUMN", "CORNER_COLUMNS", "JointReadings", "read_joint_readings", "write_corners", "CornerSet",
-           "read_corners"]
+__all__ = ["IMAGE_COLUMN", "CORNER_COLUMNS", "JointReadings", "read_joint_readings", "write_joint_readings",
+           "write_corners", "CornerSet", "read_corners"]
 
 #: JOINTS.csv's and DATA.csv's column naming each image.
 IMAGE_COLUMN = "image"
@@ -125,6 +125,24 @@ def read_joint_readings(path: str | os.PathLike[str]) -> JointReadings:
     sessions = tuple(table.cells(SESSION_COLUMN)) if SESSION_COLUMN in table.names else None
     cells = tuple(tuple(table.cell(k, n) for n in columns) for k in range(len(table.rows)))
     return JointReadings(table.source, tuple(images), tuple(table.lines), columns, cells, tuple(roles), sessions)
+
+
+def write_joint_readings(path: str | os.PathLike[str], images: Sequence[str], joint_names: Sequence[str],
+                         q: np.ndarray, extra: Mapping[str, np.ndarray]) -> None:
+    """Write JOINTS.csv, whole or not at all: each image's name, its joint readings ``q`` (K, N) and the
+    numeric ``extra`` columns (K,) each, floats in their shortest exact form (``pincal extract --image``).
+
+    Raises:
+        MeasurementError: the file cannot be written.
+    """
+    try:
+        with replacing(path, "w", newline="") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow([IMAGE_COLUMN, *joint_names, *extra])
+            for k, name in enumerate(images):
+                writer.writerow([name, *(repr(float(v)) for v in q[k]), *(repr(float(extra[n][k])) for n in extra)])
+    except OSError as exc:
+        raise MeasurementError(f"{path}: cannot write file ({exc.strerror or exc})") from None
 
 
 def write_corners(path: str | os.PathLike[str], readings: JointReadings,
