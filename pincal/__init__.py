@@ -47,7 +47,7 @@ _DEFINED_IN = {
                                  "evaluate_fixture_files"),
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
-    "pincal.workflows.extract": ("BagRead", "extract_file"),
+    "pincal.workflows.extract": ("BagRead", "ImageExtraction", "extract_file", "extract_images"),
     "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
     "pincal.workflows.detection": ("DetectSettings", "DetectRun", "detect_files"),  # imports OpenCV
     "pincal.workflows.simulation": ("simulate_to_directory",),
@@ -116,7 +116,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         ThresholdFailure,
         evaluate_and_write,
     )
-    from pincal.workflows.extract import BagRead, extract_file
+    from pincal.workflows.extract import BagRead, ImageExtraction, extract_file, extract_images
     from pincal.workflows.fixture import (
         FixtureEvaluation,
         FixtureRun,
@@ -217,6 +217,8 @@ __all__ = [
     "urdf_from_dh_file",
     "BagRead",
     "extract_file",
+    "ImageExtraction",
+    "extract_images",
     "CharucoSpec",
     "parse_board",
     "DetectSettings",
