@@ -51,7 +51,9 @@ _DEFINED_IN = {
                                  "evaluate_fixture_files"),
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
-    "pincal.workflows.extract": ("BagRead", "NoPostures", "extract_file"),
+    "pincal.workflows.extract": ("BagRead", "ImageExtraction", "NoPostures", "extract_file", "extract_images"),
+    "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
+    "pincal.workflows.detection": ("DetectSettings", "DetectRun", "detect_files"),  # imports OpenCV
     "pincal.workflows.simulation": ("simulate_to_directory",),
     "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
     "pincal.report.html": ("render_html", "write_html"),  # imports jinja2 and matplotlib
@@ -66,6 +68,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.fit.socket_metrics import FixtureMetrics, fixture_metrics
     from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
     from pincal.measurements.bags import read_bag
+    from pincal.measurements.charuco import CharucoSpec, parse_board
     from pincal.measurements.csv_v1 import (
         read_measurements,
         read_sessions,
@@ -110,6 +113,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         simulate_experiment,
     )
     from pincal.workflows.calibration import CalibrationRun, calibrate_files
+    from pincal.workflows.detection import DetectRun, DetectSettings, detect_files
     from pincal.workflows.diagnosis import DiagnoseOutputs, DiagnoseRun, diagnose_files
     from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files
     from pincal.workflows.evaluation_outputs import (
@@ -118,7 +122,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         ThresholdFailure,
         evaluate_and_write,
     )
-    from pincal.workflows.extract import BagRead, NoPostures, extract_file
+    from pincal.workflows.extract import BagRead, ImageExtraction, NoPostures, extract_file, extract_images
     from pincal.workflows.fixture import (
         FixtureEvaluation,
         FixtureRun,
@@ -223,6 +227,13 @@ __all__ = [
     "BagRead",
     "extract_file",
     "NoPostures",
+    "ImageExtraction",
+    "extract_images",
+    "CharucoSpec",
+    "parse_board",
+    "DetectSettings",
+    "DetectRun",
+    "detect_files",
     "simulate_to_directory",
     "KinematicTree",
     "TargetSpec",

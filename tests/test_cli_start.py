@@ -20,7 +20,7 @@ HEAVY = ("numpy", "scipy", "pinocchio")
 
 #: Ask for help, or be refused by argparse: a missing required flag, a bad value of each kind of check
 #: (a number's range, a tool pose in degrees, a sensor model, a DH convention, extract's exclusive
-#: clock-offset flags).
+#: clock-offset flags, detect's missing --board).
 QUICK = [
     ["--help"],
     ["calibrate", "--help"],
@@ -32,6 +32,7 @@ QUICK = [
     ["urdf-from-dh", "t.csv", "--convention", "craig", "--out", "o"],
     ["extract", "b", "--joints", "j", "--pose", "p", "--out", "o", "--clock-offset", "1", "--max-offset", "2"],
     ["simulate", "--out", "o", "--seed", "-1"],
+    ["detect", "x.png", "--joints", "j.csv", "--out", "o.csv"],
 ]
 
 _LOADED = ("import json, sys\nfrom pincal.cli.commands import main\n"

@@ -21,6 +21,12 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 #: listed here (pincal/report/, pincal/model/ …) is shared, and its flags are checked against every command.
 PRINTED_BY = {
     "cli/extract.py": {"extract"},
+    "cli/detect.py": {"detect"},
+    "workflows/detection.py": {"detect"},
+    "measurements/charuco.py": {"detect"},
+    "measurements/images.py": {"detect"},
+    "measurements/camera_csv.py": {"detect"},
+    "measurements/image_bags.py": {"extract"},
     "workflows/extract.py": {"extract"},
     "measurements/bags.py": {"extract"},
     "measurements/plateaus.py": {"extract"},

@@ -362,10 +362,17 @@ def _run_extract(args: argparse.Namespace) -> int:
     return run_extract(args)
 
 
+def _run_detect(args: argparse.Namespace) -> int:
+    from pincal.cli.detect import run_detect  # OpenCV is loaded by this command only
+
+    return run_detect(args)
+
+
 _COMMANDS = {
     "simulate": simulate_command, "calibrate": _run_calibrate, "evaluate": _run_evaluate, "diagnose": _run_diagnose,
     "demo": demo_command, "example": _run_example, "plan": _run_plan, "urdf-from-dh": _run_urdf_from_dh,
     "study": study_command, "report": _run_report, "extract": _run_extract,
+    "detect": _run_detect,
 }
 
 

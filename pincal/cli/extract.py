@@ -1,4 +1,4 @@
-"""``pincal extract BAG --joints TOPIC (--pose TOPIC | --point TOPIC ...) --out DATA.csv``.
+"""``pincal extract BAG --joints TOPIC (--pose TOPIC | --point TOPIC ... | --image TOPIC) --out DATA.csv``.
 
 Runs :mod:`pincal.workflows.extract` (rosbags loaded only by this command): reads the bag, cuts the
 static postures and writes them as CSV v1, whole or not at all, never over an input. Prints what it
@@ -13,6 +13,8 @@ import sys
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from pincal.errors import PincalError
 
 if TYPE_CHECKING:
     from pincal.measurements.plateaus import Extraction, PlateauSettings
@@ -33,6 +35,10 @@ def run_extract(args: argparse.Namespace) -> int:
     settings = PlateauSettings(still_tol=args.still_tol, min_still=args.min_still, trim=args.trim,
                                min_samples=args.min_samples, max_spread_mm=args.max_spread,
                                max_offset=args.max_offset, clock_offset=args.clock_offset)
+    if args.image is not None:
+        return _run_extract_images(args, settings)
+    if args.image_dir is not None:
+        raise PincalError("--image-dir is the folder of --image's images; give --image TOPIC or drop --image-dir")
     topics = [args.pose] if args.pose is not None else list(args.point)
     try:
         read, extraction = extract_file(args.bag, args.joints, topics, args.out, settings, pose=args.pose is not None,
@@ -79,3 +85,29 @@ def _print_extraction(read: BagRead, extraction: Extraction, settings: PlateauSe
     rows = 0 if extraction.data is None else extraction.data.n_rows
     print(f"{extraction.stretches} still stretches of >= {settings.min_still:g} s (every joint within "
           f"{settings.still_tol:g}): {rows} rows; refused: {counts}")
+
+
+def _run_extract_images(args: argparse.Namespace, settings: PlateauSettings) -> int:
+    """``pincal extract --image``: the images of the stops saved, JOINTS.csv written."""
+    from pincal.workflows.extract import extract_images
+
+    run = extract_images(args.bag, args.joints, args.image, args.out, args.image_dir, settings,
+                         joint_names=args.joint_names)
+    joints, images = run.read.joints, run.images
+    for note in run.read.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    print(f"read {args.bag}: {joints.topic}: {len(joints.stamps)} readings of {len(joints.names)} joints "
+          f"({_rate(joints.stamps)}); {images.topic}: {len(images.stamps)} images ({images.msgtype.rsplit('/', 1)[1]})")
+    how = " (--clock-offset)" if settings.clock_offset is not None else ", from the receive times"
+    print(f"clock offset: {images.topic} stamps - {joints.topic} stamps = {run.offset.seconds:+.4f} s{how}")
+    origin = joints.stamps[0]
+    for refusal in run.refused:
+        print(f"pincal: refused: stop at {refusal.start - origin:.2f}-{refusal.end - origin:.2f} s (joint clock, from "
+              f"the first reading): {refusal.reason}: {refusal.detail}", file=sys.stderr)
+    folder = run.files[0].parent
+    print(f"{len(run.postures)} stops with an image (the one nearest the middle of the {settings.trim:g} s-trimmed "
+          f"window): wrote {len(run.files)} images to {folder} and {run.out} (columns: image, "
+          f"{len(joints.names)} joints, t_image, t_start_robot, t_end_robot)")
+    print(f"next: pincal detect {folder} --board charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT --joints {run.out} "
+          "--out DATA.csv")
+    return 0

@@ -28,6 +28,7 @@ from pincal.cli.arguments import (
     xacro_arg,
 )
 from pincal.fit.prior_defaults import DEFAULT_JOINT_ZERO_DEG, DEFAULT_ROTATION_DEG, DEFAULT_TRANSLATION_MM
+from pincal.measurements.charuco import BOARD_EXAMPLE, BOARD_FORM
 from pincal.measurements.plateau_defaults import (
     MAX_OFFSET_S,
     MAX_SPREAD_MM,
@@ -92,6 +93,9 @@ def _add_extract(sub) -> None:
     measured.add_argument("--point", action="append", metavar="TOPIC",
                           help="PointStamped (or a pose topic, position only) or tf:CHILD_FRAME, repeatable: one gives "
                                "x,y,z, several x1,y1,z1,x2,... in the order given (points of one rigid target)")
+    measured.add_argument("--image", metavar="TOPIC",
+                          help="sensor_msgs/Image or CompressedImage topic of a camera: each stop's middle image "
+                               "saved as a PNG in --image-dir, and --out is JOINTS.csv for pincal detect")
     ext.add_argument("--joint-names", type=joint_names, metavar="JOINT[,JOINT...]",
                      help="keep these joints only, judged still and written (default: every joint of the topic)")
     ext.add_argument("--still-tol", type=positive, default=STILL_TOL, metavar="RAD",
@@ -111,7 +115,24 @@ def _add_extract(sub) -> None:
                           f"(default {MAX_OFFSET_S:g})")
     offset.add_argument("--clock-offset", type=seconds, metavar="S",
                      help="measurement stamp minus joint stamp of one instant [s], instead of estimating it")
-    ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv", help="measurement CSV (v1) to write")
+    ext.add_argument("--out", required=True, type=Path, metavar="DATA.csv",
+                     help="measurement CSV (v1) to write; with --image, JOINTS.csv")
+    ext.add_argument("--image-dir", type=Path, metavar="DIR",
+                     help="with --image: the folder of the images (default: OUT_images beside --out)")
+
+
+def _add_detect(sub) -> None:
+    detect = sub.add_parser("detect", help="find a ChArUco board's corners in images: a camera's measurement CSV")
+    detect.add_argument("images", nargs="+", type=Path, metavar="IMAGES",
+                        help="image files (PNG, JPEG) or folders (their PNG and JPEG files, by name)")
+    detect.add_argument("--board", required=True, metavar=BOARD_FORM,
+                        help=f"the board in OpenCV's conventions: squares across and down, square and marker sides "
+                             f"[m], an OpenCV dictionary; e.g. {BOARD_EXAMPLE}")
+    detect.add_argument("--joints", required=True, type=Path, metavar="JOINTS.csv",
+                        help="an 'image' column naming each image file, then one column per URDF joint (rad; m for "
+                             "prismatic), optionally role and session")
+    detect.add_argument("--out", required=True, type=Path, metavar="DATA.csv",
+                        help="CSV to write: one row per corner found (docs/camera.md)")
 
 
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
@@ -350,6 +371,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="folder to put NAME in (default: ./data, where the docs' commands look)")
 
     _add_extract(sub)
+    _add_detect(sub)
 
     demo = sub.add_parser("demo", help="simulate, calibrate with Methods 1-3, evaluate (< 30 s)")
     demo.add_argument("--out", type=Path, default=Path("pincal-demo"),

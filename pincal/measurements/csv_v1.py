@@ -57,6 +57,7 @@ from pincal.measurements.data import (
     default_session_name,
     is_reserved,
     join_sets,
+    refuse_given_twice,
 )
 from pincal.outputs import replacing
 
@@ -453,12 +454,7 @@ def read_sessions(
     files = [Path(p) for p in paths]
     if len(files) == 1:
         return read_measurements(files[0], joints, couplings, other_branches, occlusion)
-    seen: dict[str, Path] = {}
-    for path in files:
-        key = os.path.normcase(os.path.abspath(path))
-        if key in seen:
-            raise MeasurementError(f"{path}: given twice (also as {seen[key]}); give each session's file once")
-        seen[key] = path
+    refuse_given_twice(files, "each session's file")
     stems = [p.stem for p in files]
     sets, notes = [], []
     for path, stem in zip(files, stems):

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import PurePath
+from pathlib import Path, PurePath
 from types import MappingProxyType
 from typing import Literal, get_args
 
@@ -18,7 +19,7 @@ from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mea
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
     "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
-    "SensorKind", "SENSOR_KINDS",
+    "SensorKind", "SENSOR_KINDS", "refuse_given_twice",
 ]
 
 ROLES = ("cpa", "calibration", "validation")
@@ -311,3 +312,14 @@ def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
         files=np.concatenate([s.files for s in sets]),
         dropped_extra=dropped,
     )
+
+
+def refuse_given_twice(files: Sequence[Path], what: str) -> None:
+    """Refuse a file given twice (by any path to it): ``what`` names the files in the message ("give
+    each session's file once")."""
+    seen: dict[str, Path] = {}
+    for path in files:
+        key = os.path.normcase(os.path.abspath(path))
+        if key in seen:
+            raise MeasurementError(f"{path}: given twice (also as {seen[key]}); give {what} once")
+        seen[key] = path

@@ -49,7 +49,7 @@ from pincal.measurements.plateau_defaults import (
 __all__ = [
     "STILL_TOL", "MIN_STILL_S", "TRIM_S", "MIN_SAMPLES", "MAX_SPREAD_MM", "MAX_OFFSET_S", "SHORT_FRACTION",
     "MIN_CORRELATION", "SPEED_SMOOTHING_S", "REFINE_STAGES", "EDGE_WINDOW_S", "DEGREE", "GRID_STEP_RANGE", "REASONS",
-    "PlateauSettings", "ClockOffset", "Refusal", "EXTRA_COLUMNS", "Extraction", "still_stretches",
+    "PlateauSettings", "ClockOffset", "Refusal", "EXTRA_COLUMNS", "Extraction", "still_stretches", "stops_of",
     "estimate_clock_offset", "extract_postures",
 ]
 
@@ -190,6 +190,18 @@ def still_stretches(stamps: np.ndarray, positions: np.ndarray, tol: float, durat
     covered = maximum_filter1d(ok.astype(np.uint8), size) > 0
     edges = np.diff(np.concatenate([[0], covered.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
+
+
+def stops_of(joints: JointStream, settings: PlateauSettings) -> tuple[list[tuple[int, int]], list[Refusal]]:
+    """The still stretches of ``joints`` (index ranges, :func:`still_stretches` of ``min_still``) and the
+    stops too short to use (still for :data:`SHORT_FRACTION` of it but not all), refused."""
+    t, q = joints.stamps, joints.positions
+    stops = still_stretches(t, q, settings.still_tol, settings.min_still)
+    short = still_stretches(t, q, settings.still_tol, settings.min_still * SHORT_FRACTION)
+    refused = [Refusal(float(t[a]), float(t[b]), "too short",
+                       f"still for {t[b] - t[a]:.2f} s < --min-still {settings.min_still:g} s")
+               for a, b in short if not any(a <= c and d <= b for c, d in stops)]
+    return stops, refused
 
 
 def _speed(grid: np.ndarray, stamps: np.ndarray, values: np.ndarray, step: float) -> np.ndarray:
@@ -378,11 +390,7 @@ def extract_postures(joints: JointStream, measurements: Sequence[MeasurementStre
         offset = estimate_clock_offset(joints, measurements, settings.max_offset, settings.still_tol,
                                        settings.min_still)
     t, q = joints.stamps, joints.positions
-    stops = still_stretches(t, q, settings.still_tol, settings.min_still)
-    short = still_stretches(t, q, settings.still_tol, settings.min_still * SHORT_FRACTION)
-    refused = [Refusal(float(t[a]), float(t[b]), "too short",
-                       f"still for {t[b] - t[a]:.2f} s < --min-still {settings.min_still:g} s")
-               for a, b in short if not any(a <= c and d <= b for c, d in stops)]
+    stops, refused = stops_of(joints, settings)
     pose = measurements[0].quaternions is not None
     # per posture: q, positions, rotation, spread [mm], spread [rad], samples, window [s]
     rows: list[tuple[np.ndarray, list[np.ndarray | None], np.ndarray | None, float, float | None, int,

@@ -4,6 +4,9 @@ written as CSV v1, whole or not at all, never over an input.
 
 In two steps, so a caller can say what was read before the cut (which may refuse the recording's
 clocks): :func:`read_bag_file`, then :func:`write_postures`; :func:`extract_file` runs both.
+
+A camera's images (``--image``): :func:`extract_images` saves the image of each static posture as a PNG
+file and writes JOINTS.csv, the input of ``pincal detect`` (:mod:`pincal.measurements.image_bags`).
 """
 
 from __future__ import annotations
@@ -12,14 +15,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from pincal.errors import MeasurementError
 from pincal.measurements.bags import JointStream, MeasurementStream, read_bag
+from pincal.measurements.camera_csv import write_joint_readings
 from pincal.measurements.csv_v1 import write_measurements
-from pincal.measurements.plateaus import Extraction, PlateauSettings, extract_postures
-from pincal.workflows.paths import refuse_overwrite
+from pincal.measurements.image_bags import ImagePosture, ImageStream, image_postures, read_image_topic
+from pincal.measurements.plateaus import ClockOffset, Extraction, PlateauSettings, Refusal, extract_postures
+from pincal.outputs import write_bytes
+from pincal.workflows.paths import ensure_directory, refuse_overwrite
 
 __all__ = ["BagRead", "NoPostures", "bag_files", "read_bag_file", "no_rows_error", "write_postures",
-           "extract_file"]
+           "extract_file", "ImageExtraction", "extract_images"]
 
 
 @dataclass(frozen=True)
@@ -93,3 +101,64 @@ def extract_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out:
     if extraction.data is None:
         raise no_rows_error(read, extraction)
     return read, extraction
+
+
+@dataclass(frozen=True)
+class ImageExtraction:
+    """What :func:`extract_images` read and wrote.
+
+    Attributes:
+        read: the bag, its joint stream and the notes of reading it (no measurement stream).
+        images: the image topic's images.
+        postures: the static postures with an image, in time order.
+        refused: the stops without one (too short, no image in the window).
+        offset: the clock offset used (given, or from the receive times).
+        files: the image files written, one per posture.
+        out: JOINTS.csv, written.
+    """
+
+    read: BagRead
+    images: ImageStream
+    postures: tuple[ImagePosture, ...]
+    refused: tuple[Refusal, ...]
+    offset: ClockOffset
+    files: tuple[Path, ...]
+    out: Path
+
+
+def extract_images(bag: str | Path, joints_topic: str, image_topic: str, out: str | Path,
+                   image_dir: str | Path | None = None, settings: PlateauSettings | None = None, *,
+                   joint_names: Sequence[str] | None = None) -> ImageExtraction:
+    """``pincal extract --image``: each static posture's image saved as ``image_NNN.png`` in ``image_dir``
+    (default: ``OUT_images`` beside ``out``), then JOINTS.csv written to ``out`` (the image's name, the
+    joint readings averaged over the window, ``t_image``, ``t_start_robot``, ``t_end_robot`` [s]).
+
+    Raises:
+        MeasurementError: no static posture with an image (nothing written); a bad bag, topic or image.
+    """
+    out = Path(out)
+    folder = Path(image_dir) if image_dir is not None else out.with_name(f"{out.stem}_images")
+    read = read_bag_file(bag, joints_topic, [], out, pose=False, joint_names=joint_names)
+    images = read_image_topic(read.bag, image_topic)
+    postures, refused, offset = image_postures(read.joints, images, settings or PlateauSettings())
+    if not postures:
+        raise MeasurementError(f"{read.bag}: no static posture with an image of {image_topic} ({len(refused)} stop(s) "
+                               "refused); nothing written")
+    import cv2
+
+    for path in bag_files(read.bag):
+        if path.parent == folder:
+            raise MeasurementError(f"{folder}: holds the bag's files; choose another folder for the images")
+    ensure_directory(folder)
+    files = []
+    for k, posture in enumerate(postures):
+        ok, png = cv2.imencode(".png", images.image(posture.image, str(read.bag)))
+        if not ok:
+            raise MeasurementError(f"{folder}: OpenCV cannot encode image {k} as PNG")
+        files.append(folder / f"image_{k:03d}.png")
+        write_bytes(files[-1], png.tobytes())
+    extra = {"t_image": np.array([images.stamps[p.image] for p in postures]),
+             "t_start_robot": np.array([p.window[0] for p in postures]),
+             "t_end_robot": np.array([p.window[1] for p in postures])}
+    write_joint_readings(out, [f.name for f in files], read.joints.names, np.array([p.q for p in postures]), extra)
+    return ImageExtraction(read, images, tuple(postures), tuple(refused), offset, tuple(files), out)
