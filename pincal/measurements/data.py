@@ -17,7 +17,7 @@ from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mea
 
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
-    "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
+    "JointMimic", "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
     "SensorKind", "SENSOR_KINDS",
 ]
 
@@ -45,6 +45,25 @@ POSITION_COLUMN_RE = re.compile(r"([xyz])(0|[1-9][0-9]*)?")
 
 
 @dataclass(frozen=True)
+class JointMimic:
+    """A joint that follows another (URDF ``<mimic>``): its angle is
+
+        q = multiplier · q_driver + offset   [rad or m]                         (M1)
+
+    so the data need no column for it (:mod:`pincal.measurements.mimics`).
+
+    Attributes:
+        driver: the joint it follows (on the chain or off it: then the data give its column).
+        multiplier: [-] (URDF default 1; rad/m or m/rad between a revolute and a prismatic joint).
+        offset: [rad or m] (URDF default 0).
+    """
+
+    driver: str
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
 class JointSpec:
     """One joint the data must provide.
 
@@ -53,12 +72,14 @@ class JointSpec:
         kind: ``"revolute"``, ``"continuous"`` or ``"prismatic"``.
         lower: lower limit [rad or m]; ``-inf`` when unlimited.
         upper: upper limit [rad or m]; ``inf`` when unlimited.
+        mimic: how the joint follows its driver (eq M1), None for a joint the data give.
     """
 
     name: str
     kind: str
     lower: float = -math.inf
     upper: float = math.inf
+    mimic: JointMimic | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in JOINT_SANITY:

@@ -31,8 +31,9 @@ import numpy as np
 from lxml import etree
 
 from pincal.errors import ModelError
+from pincal.measurements.data import JointMimic
 
-__all__ = ["origin_matrix", "joint_origins", "parent_joint", "render"]
+__all__ = ["origin_matrix", "joint_origins", "parent_joint", "joint_mimics", "render"]
 
 
 def _floats(text: str) -> np.ndarray:
@@ -82,6 +83,27 @@ def parent_joint(robot: etree._Element, link: str) -> tuple[str | None, bool]:
         if joint.find("child").get("link") == link:
             return joint.get("name"), joint.get("type") == "fixed"
     return None, False
+
+
+def joint_mimics(robot: etree._Element, source: str) -> dict[str, JointMimic]:
+    """``{joint name: how it follows its driver}`` of every ``<joint>`` with a ``<mimic>`` (URDF defaults:
+    multiplier 1, offset 0; eq M1 of :mod:`pincal.measurements.mimics`).
+
+    Raises:
+        ModelError: a ``<mimic>`` without a ``joint`` attribute, or naming a joint the URDF lacks or itself.
+    """
+    names = [joint.get("name") for joint in robot.findall("joint")]
+    out = {}
+    for joint in robot.findall("joint"):
+        mimic = joint.find("mimic")
+        if mimic is None:
+            continue
+        name, driver = joint.get("name"), mimic.get("joint")
+        if driver not in names or driver == name:
+            raise ModelError(f"{source}: joint '{name}': <mimic joint=\"{driver}\"> names no other joint of the "
+                             "URDF; name the joint it follows")
+        out[name] = JointMimic(driver, float(mimic.get("multiplier", 1.0)), float(mimic.get("offset", 0.0)))
+    return out
 
 
 # --------------------------------------------------------------------------- the written form
