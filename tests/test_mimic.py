@@ -13,7 +13,9 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import pinocchio as pin
 import pytest
+from conftest import assert_close, numeric_jacobian
 
 from pincal.cli.commands import main
 from pincal.errors import MeasurementError, ModelError
@@ -22,7 +24,12 @@ from pincal.measurements.csv_v1 import read_joint_columns, read_measurements, wr
 from pincal.measurements.data import JointMimic
 from pincal.measurements.mimics import last_digit
 from pincal.model.chain import KinematicChain
+from pincal.model.effects import Effect, EffectInputs, gravity_torques
 from pincal.model.parameter_sets import PlacementErrors
+from pincal.model.sensor import Registration
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.sensor import SensorResidual, TargetEstimate
+from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 from pincal.simulation.cells import measure_truth, sensor_at
 from pincal.simulation.sensor import SimulatedSensor, random_configurations, sampling_limits
 
@@ -148,3 +155,63 @@ def test_plan_draws_and_writes_the_follower_with_its_driver(cell, tmp_path):
     chain = KinematicChain.from_urdf(cell / "arm.urdf", "flange")
     q, _ = read_joint_columns(tmp_path / "p.csv", chain.joint_specs)  # its A3 column passes the check
     assert len(q) == 4 and np.allclose(q[:, 2], -0.5 * q[:, 1] + 0.3, rtol=0, atol=1e-15)
+
+
+def test_a_drivers_effects_move_its_follower_and_their_jacobian_says_so(cell):
+    """An effect on A2 changes A2's actual angle and so A3's (x -0.5, eq M1 differentiated): the residual
+    at effect value s is the plain residual at those angles, and its Jacobian matches central differences
+    (the driver's joint column gains -0.5 x the follower's)."""
+    chain = KinematicChain.from_urdf(cell / "arm.urdf", "flange")
+    rng = np.random.default_rng(8)
+    params = PlacementErrors(chain)
+    q = random_configurations(chain, rng, 9)
+    effects = [Effect("encoder_scale", "A2"), Effect("cyclic", "A2", harmonic=1),
+               Effect("coupling", "A4", driver="A2")]
+    inputs = EffectInputs(q=q, gravity=gravity_torques(chain, q), time=None, order=np.arange(9),
+                          joint_names=chain.joint_names)
+    free = np.arange(params.size)[::3]
+    start = TargetEstimate(Registration(pin.exp3(rng.normal(size=3)), rng.normal(size=3)),
+                           rng.normal(0, 0.1, (2, 3)), pin.exp3(rng.normal(size=3)))
+    rotations = np.stack([pin.exp3(rng.normal(size=3)) for _ in q])
+    sensed = rng.normal(size=(9, 2, 3))
+    nominal = rng.normal(0, 1e-3, params.size)
+
+    def objective(effects, at):
+        cache = KinematicsCache(params, free, nominal, at)
+        return SensorResidual(cache, sensed, rotations, start, RowWeights(rotation=2.0),
+                              effects=ModelledEffects(effects, inputs) if effects else None)
+
+    with_effects = objective(effects, q)
+    x = with_effects.start_vector()
+    x[with_effects.blocks["effects"]] = [0.01, 0.02, -0.03, 0.005]
+    shifts = np.zeros_like(q)
+    shifts[:, 1] = 0.01 * q[:, 1] + 0.02 * np.sin(q[:, 1]) - 0.03 * np.cos(q[:, 1])
+    shifts[:, 3] = 0.005 * q[:, 1]
+    moved = q + shifts
+    moved[:, 2] += -0.5 * shifts[:, 1]  # A3 follows A2's actual angle
+    plain = objective([], moved)
+    assert_close(with_effects.residual(x), plain.residual(x[: plain.n_free]), 1e-12, "followed shifts")
+    assert_close(with_effects.jacobian(x), numeric_jacobian(with_effects.residual, x), 1e-6, "chained columns")
+
+
+def test_a_driver_carries_its_followers_gravity_load(kuka_urdf, tmp_path):
+    """KUKA's joint 4 following joint 2 (x0.7, +0.1): joint 2's gravity torque is the derivative of the
+    potential energy along the tied motion, tau_2 + 0.7 tau_4 (virtual work); joint 4's its own."""
+    text = kuka_urdf.read_text(encoding="utf-8")
+    limit = 'velocity="2.2689280275926285" lower="-2.0943951023931953" upper="2.0943951023931953"/>'
+    (tmp_path / "kuka.urdf").write_text(_with_mimic(text, limit, '<mimic joint="lwr_joint_2" multiplier="0.7" '
+                                                                 'offset="0.1"/>'), encoding="utf-8")
+    chain = KinematicChain.from_urdf(tmp_path / "kuka.urdf", "lwr_link_7")
+    q = chain.followed(np.array([[0.2, 0.5, -0.3, 0.0, 0.4, -0.6, 0.1]]))
+    model, data = chain.model, chain.model.createData()
+
+    def potential(q2):
+        moved = q.copy()
+        moved[0, 1] = q2[0]
+        return np.array([pin.computePotentialEnergy(model, data, chain.followed(moved)[0])])
+
+    torque = gravity_torques(chain, q)[0]
+    # central differences, step 1e-6 rad: ~1e-12 x third derivatives of ~100 J, far below 1e-6 N m
+    assert torque[1] == pytest.approx(numeric_jacobian(potential, q[0, 1:2])[0, 0], abs=1e-6)
+    assert torque[3] == pytest.approx(pin.computeGeneralizedGravity(model, data, q[0])[3], abs=1e-12)
+    assert abs(torque[1] - pin.computeGeneralizedGravity(model, data, q[0])[1]) > 1.0  # N m: informative

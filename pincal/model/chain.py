@@ -264,18 +264,50 @@ class KinematicChain:
 
     # --- kinematics -----------------------------------------------------
 
+    @property
+    def follower_pairs(self) -> tuple[tuple[int, int, float], ...]:
+        """(follower, driver, multiplier) of each joint that follows another on the chain (eq M1), as
+        column indices of ``q``: d q_follower / d q_driver = multiplier. Empty on most chains."""
+        names = self.joint_names
+        return tuple((i, names.index(j.mimic.driver), j.mimic.multiplier) for i, j in enumerate(self.joints)
+                     if j.mimic is not None and j.mimic.driver in names)
+
     def followed(self, q: npt.ArrayLike) -> np.ndarray:
         """Joint values (K, N) [rad or m] with each joint that follows another on the chain set from it
         (eq M1); ``q`` itself (no copy) on a chain without one. A joint that follows one off the chain
         keeps its value: the chain cannot tell it."""
         q = np.asarray(q, dtype=float)
-        names = self.joint_names
-        follow = [(i, j.mimic) for i, j in enumerate(self.joints) if j.mimic and j.mimic.driver in names]
-        if not follow:
+        if not self.follower_pairs:
             return q
         out = np.array(q, dtype=float, copy=True)
-        for i, mimic in follow:
-            out[..., i] = mimic.multiplier * q[..., names.index(mimic.driver)] + mimic.offset
+        for i, driver, multiplier in self.follower_pairs:
+            mimic = self.joints[i].mimic
+            assert mimic is not None  # a follower has its mimic
+            out[..., i] = multiplier * q[..., driver] + mimic.offset
+        return out
+
+    def followed_shifts(self, shifts: np.ndarray) -> np.ndarray:
+        """Changes of the joint angles (K, N) [rad or m] carried to the joints that follow them (eq M1
+        differentiated: a follower moves by multiplier × its driver's change, on top of its own); the
+        same array on a chain without followers. What effects do to a driver's angle (compliance,
+        backlash ...) moves its followers: ``<mimic>`` ties the joints' actual angles. Applied to
+        Jacobian columns by the transpose (:meth:`followed_columns`)."""
+        if not self.follower_pairs:
+            return shifts
+        out = np.array(shifts, dtype=float, copy=True)
+        for i, driver, multiplier in self.follower_pairs:
+            out[..., i] += multiplier * shifts[..., driver]
+        return out
+
+    def followed_columns(self, columns: np.ndarray) -> np.ndarray:
+        """Derivatives with respect to the joints (..., N, D), N along axis −2, made derivatives with respect
+        to the joints' own changes: a driver's row gains multiplier × its follower's (the chain rule of eq M1,
+        the transpose of :meth:`followed_shifts`); the same array on a chain without followers."""
+        if not self.follower_pairs:
+            return columns
+        out = np.array(columns, dtype=float, copy=True)
+        for i, driver, multiplier in self.follower_pairs:
+            out[..., driver, :] += multiplier * columns[..., i, :]
         return out
 
     def configurations(self, q: npt.ArrayLike) -> np.ndarray:

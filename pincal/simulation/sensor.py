@@ -189,7 +189,8 @@ def simulated_shifts(
         order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
         joint_names=tuple(chain.joint_names),
     )
-    return joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
+    return chain.followed_shifts(joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs,
+                                              chain.joint_names))
 
 
 def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registration: Registration) -> MeasurementSet:

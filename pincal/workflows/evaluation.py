@@ -452,7 +452,8 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: Ma
                            time_reference=reference if row_time is not None else None,
                            context=None if context_q is None or context_time is None
                            else RowContext(context_q, context_time))
-    q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
+    q = data.q + chain.followed_shifts(joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs,
+                                                    chain.joint_names))
     out = RowCorrections(q)
     drift: DriftUse | None = None
     for effect, value in parsed:
