@@ -137,6 +137,7 @@ def test_calibrate_and_evaluate_without_the_column(cell, tmp_path, capsys):
     """Noise-free rows without A3's column: the held-out rows reproduced; the same parameters as with a
     consistent column; the corrected URDF keeps the tag and reads back to the same kinematics."""
     report = _calibrate(cell, tmp_path, "calibration.csv", "a")
+    assert report["identifiability"]["rank"] == 18  # of 42, as with A3 free (docs/calibrate.md)
     assert report["parameters"] == _calibrate(cell, tmp_path, "full_calibration.csv", "b")["parameters"]
     written = (tmp_path / "a.urdf").read_text(encoding="utf-8")
     assert MIMIC in written
@@ -215,3 +216,25 @@ def test_a_driver_carries_its_followers_gravity_load(kuka_urdf, tmp_path):
     assert torque[1] == pytest.approx(numeric_jacobian(potential, q[0, 1:2])[0, 0], abs=1e-6)
     assert torque[3] == pytest.approx(pin.computeGeneralizedGravity(model, data, q[0])[3], abs=1e-12)
     assert abs(torque[1] - pin.computeGeneralizedGravity(model, data, q[0])[1]) > 1.0  # N m: informative
+
+
+def test_a_follower_that_fixes_the_forearm_costs_what_the_report_names(cell, tmp_path):
+    """A3 following A2 by -1 (A2 ∥ A3): the forearm's attitude never changes, and the identifiability
+    report drops A4.tx and A4.tz too (16 of 42 identifiable, against 18 by -0.5), with no values."""
+    urdf = tmp_path / "upright.urdf"
+    urdf.write_text((cell / "arm.urdf").read_text(encoding="utf-8").replace('multiplier="-0.5"', 'multiplier="-1"'),
+                    encoding="utf-8")
+    chain = KinematicChain.from_urdf(urdf, "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(3)
+    rows = measure_truth(params, rng.normal(0.0, 3e-4, params.size), random_configurations(chain, rng, 40),
+                         sensor_at(3.0), rng, SimulatedSensor(1e-5, 1e-4, points=np.array([[0.03, 0.0, 0.1]])))
+    write_measurements(tmp_path / "upright.csv", rows)
+    assert main(["calibrate", str(urdf), str(tmp_path / "upright.csv"), "--tip-link", "flange", "--quiet",
+                 "--out", str(tmp_path / "u.urdf"), "--report", str(tmp_path / "u.json")]) == 0
+    report = json.loads((tmp_path / "u.json").read_text(encoding="utf-8"))
+    assert report["identifiability"]["rank"] == 16
+    dropped = {d["name"]: d for d in report["identifiability"]["dropped"]}
+    assert {"A4.tx", "A4.tz"} <= set(dropped)
+    values = {p["name"]: p for p in report["parameters"]}
+    assert values["A4.tx"]["calibrated"] is None and values["A4.tz"]["calibrated"] is None
