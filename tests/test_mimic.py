@@ -238,3 +238,31 @@ def test_a_follower_that_fixes_the_forearm_costs_what_the_report_names(cell, tmp
     assert {"A4.tx", "A4.tz"} <= set(dropped)
     values = {p["name"]: p for p in report["parameters"]}
     assert values["A4.tx"]["calibrated"] is None and values["A4.tz"]["calibrated"] is None
+
+
+def test_diagnose_names_a_wrong_multiplier(cell, tmp_path, capsys):
+    """The linkage moves A3 by -0.45 x A2, the URDF says -0.5: diagnose adopts the coupling of A3 to A2 (+0.05)
+    and says which multiplier the <mimic> should have; no convention (a follower has no reading)."""
+    chain = KinematicChain.from_urdf(cell / "arm.urdf", "flange")
+    params = PlacementErrors(chain)
+    rng = np.random.default_rng(5)
+    truth = rng.normal(0.0, 3e-4, params.size)
+    keep = [0, 1, 3, 4, 5]
+    for count, role in ((60, "calibration"), (30, "validation")):
+        q = random_configurations(chain, rng, count)
+        actual = q.copy()
+        actual[:, 2] = -0.45 * q[:, 1] + 0.3
+        rows = measure_truth(params, truth, actual, sensor_at(3.0), rng,
+                             SimulatedSensor(20e-6, np.radians(0.003), points=np.array([[0.03, 0.0, 0.1]])), role)
+        write_measurements(tmp_path / f"{role}.csv", replace(rows, joint_names=tuple(rows.joint_names[i] for i in keep),
+                                                             q=q[:, keep]))
+    assert main(["diagnose", str(cell / "arm.urdf"), str(tmp_path / "calibration.csv"), "--validation",
+                 str(tmp_path / "validation.csv"), "--tip-link", "flange", "--quiet", "--out", str(tmp_path / "d.urdf"),
+                 "--report", str(tmp_path / "d" / "REPORT.json")]) == 0
+    document = json.loads((tmp_path / "d" / "REPORT.json").read_text(encoding="utf-8"))
+    (effect,) = document["effects"]
+    assert effect["type"] == "coupling" and effect["joint"] == "A3" and effect["value"] == pytest.approx(0.05, abs=1e-3)
+    assert "couplings" not in document
+    assert ('A3 follows A2 by -0.45, not by its <mimic> multiplier -0.5: set multiplier="-0.45"'
+            in " ".join(document["diagnosis"]["notes"]))
+    capsys.readouterr()
