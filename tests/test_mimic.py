@@ -117,6 +117,14 @@ def test_a_driver_off_the_chain_gives_the_column(industrial_arm_urdf, tmp_path):
     assert data.q[0, 4] == -1.5 * 0.4 and np.array_equal(data.q[0, [0, 1, 2, 3, 5]], [0.1, 0.2, 0.3, 0.4, 0.6])
     with pytest.raises(MeasurementError, match="joint 'A5' follows 'B' by the URDF's <mimic>"):
         read_measurements(tmp_path / "b.csv", chain.joint_specs, [parse_coupling("A5=1*A4")])
+    # plan: PLAN.csv gives B, the joint the controller commands, after the chain's columns, and reads back
+    assert main(["plan", str(urdf), "--tip-link", "flange", "--count", "9", "--sample", "40", "--quiet",
+                 "--out", str(tmp_path / "p.csv"), "--report", str(tmp_path / "p.json")]) == 0
+    header = (tmp_path / "p.csv").read_text(encoding="utf-8").splitlines()[0]
+    assert header == "A1,A2,A3,A4,A5,A6,B,priority,candidate"
+    q, _ = read_joint_columns(tmp_path / "p.csv", chain.joint_specs)
+    both = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1, usecols=(4, 6))
+    assert np.allclose(both[:, 0], 2.0 * both[:, 1], rtol=0, atol=1e-15) and np.array_equal(q[:, 4], both[:, 0])
 
 
 def test_a_mimic_naming_no_joint_is_refused(cell, tmp_path):
