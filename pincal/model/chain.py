@@ -138,6 +138,11 @@ class KinematicChain:
                     "and prismatic joints only"
                 )
         chain_names = [model.names[j] for j in support]
+        for name in chain_names:  # a follower's driver: another movable joint of the URDF
+            driver = (mimics or {}).get(name)
+            if driver is not None and (driver.driver == name or not model.existJointName(driver.driver)):
+                raise ModelError(f"{source}: joint '{name}': <mimic joint=\"{driver.driver}\"> names no other "
+                                 "movable joint of the URDF; name the joint it follows")
         #: the URDF's movable joints off the chain: below the tip link (joint -> its child link), and the others
         self.beyond_tip_joints, self.other_branch_joints = _off_chain(model, full_tip, support)
         locked = [j for j in range(1, model.njoints) if j not in support]
@@ -188,7 +193,7 @@ class KinematicChain:
             reason = " ".join(str(exc).split())
             raise ModelError(f"{description.source}: Pinocchio cannot read this URDF ({reason})") from None
         return cls(model, tip_link, tool=tool, source=description.source,
-                   mimics=joint_mimics(description.root(), description.source))
+                   mimics=joint_mimics(description.root()))
 
     # --- names and sizes -------------------------------------------------
 
