@@ -147,6 +147,8 @@ def test_calibrate_and_evaluate_without_the_column(cell, tmp_path, capsys):
     consistent column; the corrected URDF keeps the tag and reads back to the same kinematics."""
     report = _calibrate(cell, tmp_path, "calibration.csv", "a")
     assert report["identifiability"]["rank"] == 18  # of 42, as with A3 free (docs/calibrate.md)
+    assert report["chain"]["mimics"] == [{"joint": "A3", "driver": "A2", "multiplier": -0.5, "offset": 0.3}]
+    assert main(["report", str(tmp_path / "a.json"), "--out", str(tmp_path / "a.html")]) == 0
     assert report["parameters"] == _calibrate(cell, tmp_path, "full_calibration.csv", "b")["parameters"]
     written = (tmp_path / "a.urdf").read_text(encoding="utf-8")
     assert MIMIC in written

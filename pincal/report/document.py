@@ -60,6 +60,7 @@ from pincal.report.model import (
     ChainJson,
     FitRows,
     Identifiability,
+    MimicJson,
     NotDetermined,
     PaperReport,
     Parameter,
@@ -172,9 +173,14 @@ def fit_rows(roles: np.ndarray) -> FitRows:
 
 
 def chain_summary(chain: KinematicChain) -> ChainJson:
-    """REPORT.json ``chain``: root and tip links, the joints and their kinds."""
-    return {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
-            "joint_kinds": [spec.kind for spec in chain.joint_specs]}
+    """REPORT.json ``chain``: root and tip links, the joints and their kinds, and those that follow another."""
+    out: ChainJson = {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
+                      "joint_kinds": [spec.kind for spec in chain.joint_specs]}
+    mimics: list[MimicJson] = [{"joint": j.name, "driver": j.mimic.driver, "multiplier": j.mimic.multiplier,
+                                "offset": j.mimic.offset} for j in chain.joints if j.mimic is not None]
+    if mimics:
+        out["mimics"] = mimics
+    return out
 
 
 def parameters_report(result) -> list[Parameter]:

@@ -34,7 +34,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Vector3", "Quaternion", "Sha256", "ChainLevel", "PaperMethod", "JointKind", "PositionStats", "OrientationStats",
-    "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "Parameter",
+    "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "MimicJson",
+    "Parameter",
     "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped",
     "CorrelatedPair", "NotDetermined", "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise",
     "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
@@ -126,10 +127,25 @@ class PaperChain(_ChainKeys):
     """The calibrated chain: root and tip links and its joints."""
 
 
-class ChainJson(_ChainKeys):
-    """The calibrated chain: root and tip links, its joints and their kinds."""
+class MimicJson(TypedDict):
+    """A chain joint that follows another (URDF ``<mimic>``): its angle is ``multiplier`` × ``driver``'s +
+    ``offset`` [rad or m] (eq M1 of :mod:`pincal.measurements.mimics`), computed from the driver's column."""
 
+    joint: str
+    driver: str
+    multiplier: float
+    offset: float
+
+
+class _ChainJointKeys(_ChainKeys):
     joint_kinds: list[JointKind]
+
+
+class ChainJson(_ChainJointKeys, total=False):
+    """The calibrated chain: root and tip links, its joints and their kinds; ``mimics``, its joints that
+    follow another (only when some do)."""
+
+    mimics: list[MimicJson]
 
 
 class Parameter(TypedDict):
