@@ -167,6 +167,9 @@ def test_plan_draws_and_writes_the_follower_with_its_driver(cell, tmp_path):
     chain = KinematicChain.from_urdf(cell / "arm.urdf", "flange")
     q, _ = read_joint_columns(tmp_path / "p.csv", chain.joint_specs)  # its A3 column passes the check
     assert len(q) == 4 and np.allclose(q[:, 2], -0.5 * q[:, 1] + 0.3, rtol=0, atol=1e-15)
+    ranges = json.loads((tmp_path / "p.json").read_text(encoding="utf-8"))["candidates"]["joint_ranges"]
+    assert [r["source"] for r in ranges[1:3]] == ["URDF limits", "follows its driver"]
+    assert ranges[2]["lower"] == pytest.approx(np.degrees(-0.5 * np.radians(ranges[1]["upper"]) + 0.3))
 
 
 def test_a_drivers_effects_move_its_follower_and_their_jacobian_says_so(cell):
