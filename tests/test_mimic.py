@@ -115,6 +115,8 @@ def test_a_driver_off_the_chain_gives_the_column(industrial_arm_urdf, tmp_path):
     plain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
     data, _ = read_measurements(tmp_path / "n.csv", plain.joint_specs, [parse_coupling("A5=-1.5*A4")])
     assert data.q[0, 4] == -1.5 * 0.4 and np.array_equal(data.q[0, [0, 1, 2, 3, 5]], [0.1, 0.2, 0.3, 0.4, 0.6])
+    with pytest.raises(MeasurementError, match="--coupling A9=1\\*A2: no joint 'A9' on the chain"):
+        read_measurements(tmp_path / "b.csv", chain.joint_specs, [parse_coupling("A9=1*A2")])  # still checked
     with pytest.raises(MeasurementError, match="joint 'A5' follows 'B' by the URDF's <mimic>"):
         read_measurements(tmp_path / "b.csv", chain.joint_specs, [parse_coupling("A5=1*A4")])
     # plan: PLAN.csv gives B, the joint the controller commands, after the chain's columns, and reads back

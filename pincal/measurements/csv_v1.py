@@ -417,7 +417,7 @@ def read_measurements(
     """
     table = read_table(path)
     joint_names = [j.name for j in joints]
-    read_against = [c for c in couplings if c.joint in table.names]  # the others: followers (eq M1)
+    read_against = [c for c in couplings if c.joint in table.names or c.joint not in joint_names]  # else eq M1
     q = corrected_angles(_joint_matrix(table, joints, other_branches, couplings), read_against, joint_names)
     point_names = _point_columns(table, joint_names)
     points = table.matrix([c for triplet in point_names for c in triplet])

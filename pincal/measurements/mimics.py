@@ -63,7 +63,7 @@ class _Table(Protocol):
 
 def last_digit(text: str) -> float:
     """The unit of the last digit printed in a number's text: ``"0.125"`` → 0.001, ``"1.5e-3"`` → 1e-4,
-    ``"2"`` → 1; 0 for a form without digits after it (what the rounding allows is then the doubles')."""
+    ``"2"`` → 1; 0 for a form this does not read (``"1_000"``, which float() takes: the doubles' rounding only)."""
     match = _NUMBER.fullmatch(text)
     if match is None:
         return 0.0
@@ -73,7 +73,7 @@ def last_digit(text: str) -> float:
 def followers(joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling], columns: Sequence[str]
               ) -> dict[str, JointMimic]:
     """The joints of ``joints`` whose angle comes from eq M1: each with a URDF ``<mimic>``, and each a
-    ``--coupling`` names that has no column in ``columns``.
+    ``--coupling`` names, of ``joints``, that has no column in ``columns``.
 
     Raises:
         MeasurementError: a ``--coupling`` on a joint the URDF already makes follow another.
@@ -86,7 +86,7 @@ def followers(joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling],
                 f"--coupling {coupling.label}: joint '{coupling.joint}' follows '{mimic.driver}' by the URDF's "
                 f"<mimic> (multiplier {mimic.multiplier:g}, offset {mimic.offset:g}); drop the flag, or the "
                 "<mimic> tag to calibrate the joint as read")
-        if coupling.joint not in columns:
+        if coupling.joint not in columns and any(j.name == coupling.joint for j in joints):
             out[coupling.joint] = JointMimic(coupling.driver, coupling.factor, 0.0)
     return out
 
