@@ -8,7 +8,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import PurePath
 from types import MappingProxyType
-from typing import Literal, get_args
+from typing import Literal, TypedDict, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -17,7 +17,8 @@ from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mea
 
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
-    "JointMimic", "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
+    "JointMimic", "MimicJson", "JointSpec", "is_reserved", "default_session_name", "reported_session",
+    "MeasurementSet", "join_sets",
     "SensorKind", "SENSOR_KINDS",
 ]
 
@@ -61,6 +62,16 @@ class JointMimic:
     driver: str
     multiplier: float = 1.0
     offset: float = 0.0
+
+
+class MimicJson(TypedDict):
+    """A chain joint that follows another, as REPORT.json gives it (``chain.mimics``): ``joint``'s angle is
+    ``multiplier`` × ``driver``'s + ``offset`` (eq M1), computed from the driver's column, not read."""
+
+    joint: str
+    driver: str
+    multiplier: float
+    offset: float
 
 
 @dataclass(frozen=True)

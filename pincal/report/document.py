@@ -50,6 +50,7 @@ from pincal.fit.metrics import PoseErrors
 from pincal.fit.registration_hold import rotation_reason
 from pincal.fit.target_hold import held_reason
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
+from pincal.measurements.data import MimicJson
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.sensor import Registration
@@ -60,7 +61,6 @@ from pincal.report.model import (
     ChainJson,
     FitRows,
     Identifiability,
-    MimicJson,
     NotDetermined,
     PaperReport,
     Parameter,

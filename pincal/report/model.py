@@ -22,6 +22,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
 
 from pincal.measurements.couplings import CouplingJson
+from pincal.measurements.data import MimicJson
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -34,8 +35,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Vector3", "Quaternion", "Sha256", "ChainLevel", "PaperMethod", "JointKind", "PositionStats", "OrientationStats",
-    "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "MimicJson",
-    "Parameter",
+    "PoseErrorsJson", "RegistrationJson", "RegistrationPair", "Sources", "PaperChain", "ChainJson", "Parameter",
     "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped",
     "CorrelatedPair", "NotDetermined", "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise",
     "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
@@ -127,23 +127,12 @@ class PaperChain(_ChainKeys):
     """The calibrated chain: root and tip links and its joints."""
 
 
-class MimicJson(TypedDict):
-    """A chain joint that follows another (URDF ``<mimic>``): its angle is ``multiplier`` × ``driver``'s +
-    ``offset`` [rad or m] (eq M1 of :mod:`pincal.measurements.mimics`), computed from the driver's column."""
-
-    joint: str
-    driver: str
-    multiplier: float
-    offset: float
-
-
 class _ChainJointKeys(_ChainKeys):
     joint_kinds: list[JointKind]
 
 
 class ChainJson(_ChainJointKeys, total=False):
-    """The calibrated chain: root and tip links, its joints and their kinds; ``mimics``, its joints that
-    follow another (only when some do)."""
+    """The calibrated chain: root and tip links, its joints and their kinds; ``mimics``: those that follow another."""
 
     mimics: list[MimicJson]
 
