@@ -230,6 +230,8 @@ SLOW_TESTS = (
     "tests/test_prior_downstream.py::test_diagnose_report_gives_the_posterior_std",
     "tests/test_diagnosis.py::test_a_joint_read_against_another_is_named_and_corrected_in_the_data",
     "tests/test_read_against.py::test_a_joint_read_against_another_is_named_corrected_and_at_the_noise",
+    "tests/test_mimic.py::test_calibrate_and_evaluate_without_the_column",
+    "tests/test_mimic.py::test_diagnose_names_a_wrong_multiplier",
     "tests/test_read_against.py::test_effects_that_correct_alike_are_applied_and_the_alternatives_named",
     "tests/test_tip_link.py::test_calibrate_and_plan_warn_on_a_short_tip",
     "tests/test_tip_link.py::test_diagnose_warns_on_a_short_tip",

@@ -39,7 +39,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, EffectInputs
 
 __all__ = ["CONVENTION_RANGE", "ConventionTrial", "convention_for", "chi_square", "adopted_trial",
-           "read_against_words"]
+           "read_against_words", "followers_of", "mimic_words"]
 
 #: |c| of a fitted coupling for which the convention ±1 is tried: nearer 1 than 0 and within the plausible
 #: 1.5 (:data:`pincal.diagnosis.verdicts.PLAUSIBLE`). A refit from a geometry chosen on the wrong readings
@@ -74,6 +74,24 @@ def convention_for(effect: Effect, value: float, corrected: Collection[str]) -> 
     if joint in corrected or driver in corrected:
         return None
     return ReadingCoupling(joint, -float(np.sign(value)), driver)
+
+
+def followers_of(chain: KinematicChain) -> tuple[str, ...]:
+    """The chain's joints that follow another (URDF ``<mimic>``): they have no reading to be read against
+    anything, so no convention is tried on them (:func:`convention_for`'s ``corrected``)."""
+    return tuple(j.name for j in chain.joints if j.mimic is not None)
+
+
+def mimic_words(effect: Effect, value: float, chain: KinematicChain) -> str | None:
+    """What an adopted coupling c of a joint that follows its driver (eq M1 of
+    :mod:`pincal.measurements.mimics`) says: the joint moves by (m + c) x the driver, so the URDF's
+    multiplier m is off by c (shift = c · q_driver); None for any other effect."""
+    mimic = next((j.mimic for j in chain.joints if j.name == effect.joint), None)
+    if effect.type != "coupling" or mimic is None or mimic.driver != effect.driver:
+        return None
+    return (f"{effect.joint} follows {effect.driver} by {mimic.multiplier + value:.4g}, not by its <mimic> multiplier "
+            f"{mimic.multiplier:g}: set multiplier=\"{mimic.multiplier + value:.4g}\" in the URDF's <mimic> of "
+            f"{effect.joint}, and the coupling has nothing left to correct")
 
 
 def chi_square(errors: PoseErrors, sigma_pos_m: float, sigma_rot_rad: float | None) -> float:

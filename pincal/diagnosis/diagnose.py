@@ -56,7 +56,7 @@ import numpy as np
 
 from pincal.diagnosis.catalogue import PARALLEL_AXES_RAD, candidate_effects, parallel_neighbours
 from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
-from pincal.diagnosis.conventions import ConventionTrial, read_against_words
+from pincal.diagnosis.conventions import ConventionTrial, mimic_words, read_against_words
 from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
 from pincal.diagnosis.moment_candidates import masses_unknown, moment_compliances
 from pincal.diagnosis.screening import GENERIC_NOT_RUN, FitObjective, bic, n_prior_rows, residual_freedom, testable
@@ -362,6 +362,7 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
     effects = tuple(
         (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective.effect_slices)
     )
+    notes += [words for e, v, _ in effects if (words := mimic_words(e, float(v[0]), chain)) is not None]
     freedom = residual_freedom(current_objective, final_solution)
     unexplained = remaining_structure(model, adopted, current_objective, final_solution, chain, freedom)
     if unexplained is None and not testable(freedom, 1 + 2 * len(HARMONICS), EVIDENCE):

@@ -25,7 +25,7 @@ from typing import NamedTuple, TypeVar, cast
 import numpy as np
 
 from pincal.diagnosis.conditions import ConditionSearch
-from pincal.diagnosis.conventions import ConventionTrial, adopted_trial, convention_for
+from pincal.diagnosis.conventions import ConventionTrial, adopted_trial, convention_for, followers_of
 from pincal.diagnosis.effect_fits import CandidateFit, EffectModel, heldout_errors, pose_errors_of
 from pincal.diagnosis.screening import (
     SCREEN_CONDITION,
@@ -331,7 +331,7 @@ def adopt(search: Search, state: State, judgement: Judgement, counter: Counter) 
     unit = shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic")
     shown = judgement.ranking[:SHOWN]
     coupling = None if search.trial is None else convention_for(effect, float(sol.x[obj.effect_slices[-1]][0]),
-                                                                search.corrected)
+                                                                (*search.corrected, *followers_of(chain)))
     try:
         found = None if coupling is None or search.trial is None else adopted_trial(
             search.trial(coupling), chain, search.sigma_column, model.inputs, held_inputs, (obj, sol), before_held,

@@ -59,6 +59,7 @@ from pincal.measurements.data import (
     join_sets,
     refuse_given_twice,
 )
+from pincal.measurements.mimics import follower_angles
 from pincal.outputs import replacing
 
 __all__ = [
@@ -228,13 +229,16 @@ def _encoding_hint(path: str | os.PathLike[str]) -> str:
     return " (it is UTF-16, e.g. Excel's 'Unicode text')" if head.startswith((b"\xff\xfe", b"\xfe\xff")) else ""
 
 
-def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec], other_branches: Sequence[str] = ()) -> np.ndarray:
-    """The joint columns as (K, N) [rad or m], in ``joints``' order, checked for a unit mistake.
+def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec], other_branches: Sequence[str] = (),
+                  couplings: Sequence[ReadingCoupling] = ()) -> np.ndarray:
+    """The joint columns as (K, N) [rad or m], in ``joints``' order, checked for a unit mistake; a joint
+    that follows another, from its driver (eq M1, :mod:`pincal.measurements.mimics`).
 
     ``other_branches``: joints of the same robot description on other branches than ``joints``' chain;
     a file with columns for them is of another chain, not misspelt (the error says so)."""
     joint_names = [j.name for j in joints]
-    missing = [n for n in joint_names if n not in table.names]
+    followed = follower_angles(table, joints, couplings)
+    missing = [n for n in joint_names if n not in table.names and n not in followed]
     if missing:
         hint = "; is the file comma-separated?" if len(table.names) == 1 else ""
         branch = [n for n in table.names if n in other_branches]
@@ -246,7 +250,7 @@ def _joint_matrix(table: CsvTable, joints: Sequence[JointSpec], other_branches: 
                      "the chain to the tip link: is --tip-link right?")
         raise table.error(f"missing joint column(s) {', '.join(missing)}{guess}; the URDF expects "
                           f"{', '.join(joint_names)}{hint}")
-    q = table.matrix(joint_names)
+    q = np.column_stack([followed[n] if n in followed else table.numbers(n) for n in joint_names])
     for n, joint in enumerate(joints):
         table.check_magnitude(joint.name, q[:, n], *JOINT_SANITY[joint.kind])
     return q
@@ -415,15 +419,17 @@ def read_measurements(
     """
     table = read_table(path)
     joint_names = [j.name for j in joints]
-    q = corrected_angles(_joint_matrix(table, joints, other_branches), couplings, joint_names)
+    read_against = [c for c in couplings if c.joint in table.names or c.joint not in joint_names]  # else eq M1
+    q = corrected_angles(_joint_matrix(table, joints, other_branches, couplings), read_against, joint_names)
     point_names = _point_columns(table, joint_names)
     points = table.matrix([c for triplet in point_names for c in triplet], math.nan if occlusion else None)
     for i, name in enumerate(c for triplet in point_names for c in triplet):
         table.check_magnitude(name, points[:, i], MAX_POSITION, "millimetres", "metres")
     rotations = _read_rotations(table)
     roles = _read_roles(table)
-    extra, ignored = _read_extras(table, [n for n in table.names if not is_reserved(n, joint_names)])
-    notes = _limit_notes(table, q, joints, corrected=[c.joint for c in couplings])
+    drivers = [j.mimic.driver for j in joints if j.mimic]  # a driver off the chain is no extra either
+    extra, ignored = _read_extras(table, [n for n in table.names if not is_reserved(n, [*joint_names, *drivers])])
+    notes = _limit_notes(table, q, joints, corrected=[c.joint for c in read_against])
     if ignored:
         notes.append(f"{table.source}: ignored non-numeric column(s): {', '.join(ignored)}")
     if extra:

@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from types import MappingProxyType
-from typing import Literal, get_args
+from typing import Literal, TypedDict, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -18,8 +18,8 @@ from pincal.errors import MeasurementError, ModelError, PincalError, did_you_mea
 
 __all__ = [
     "ROLES", "DEFAULT_ROLE", "ROLE_COLUMN", "SESSION_COLUMN", "QUAT_COLUMNS", "JOINT_SANITY", "POSITION_COLUMN_RE",
-    "JointSpec", "is_reserved", "default_session_name", "reported_session", "MeasurementSet", "join_sets",
-    "SensorKind", "SENSOR_KINDS", "refuse_given_twice",
+    "JointMimic", "MimicJson", "JointSpec", "is_reserved", "default_session_name", "reported_session",
+    "MeasurementSet", "join_sets", "SensorKind", "SENSOR_KINDS", "refuse_given_twice",
 ]
 
 ROLES = ("cpa", "calibration", "validation")
@@ -46,6 +46,35 @@ POSITION_COLUMN_RE = re.compile(r"([xyz])(0|[1-9][0-9]*)?")
 
 
 @dataclass(frozen=True)
+class JointMimic:
+    """A joint that follows another (URDF ``<mimic>``): its angle is
+
+        q = multiplier · q_driver + offset   [rad or m]                         (M1)
+
+    so the data need no column for it (:mod:`pincal.measurements.mimics`).
+
+    Attributes:
+        driver: the joint it follows (on the chain or off it: then the data give its column).
+        multiplier: [-] (URDF default 1; rad/m or m/rad between a revolute and a prismatic joint).
+        offset: [rad or m] (URDF default 0).
+    """
+
+    driver: str
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+
+class MimicJson(TypedDict):
+    """A chain joint that follows another, as REPORT.json gives it (``chain.mimics``): ``joint``'s angle is
+    ``multiplier`` × ``driver``'s + ``offset`` (eq M1), computed from the driver's column, not read."""
+
+    joint: str
+    driver: str
+    multiplier: float
+    offset: float
+
+
+@dataclass(frozen=True)
 class JointSpec:
     """One joint the data must provide.
 
@@ -54,12 +83,14 @@ class JointSpec:
         kind: ``"revolute"``, ``"continuous"`` or ``"prismatic"``.
         lower: lower limit [rad or m]; ``-inf`` when unlimited.
         upper: upper limit [rad or m]; ``inf`` when unlimited.
+        mimic: how the joint follows its driver (eq M1), None for a joint the data give.
     """
 
     name: str
     kind: str
     lower: float = -math.inf
     upper: float = math.inf
+    mimic: JointMimic | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in JOINT_SANITY:

@@ -23,8 +23,9 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import ModelError, did_you_mean
-from pincal.measurements.data import JointSpec
+from pincal.measurements.data import JointMimic, JointSpec
 from pincal.model.description import RobotDescription, read_description
+from pincal.model.urdf_elements import joint_mimics
 
 __all__ = ["ChainJoint", "ChainPoses", "KinematicChain", "points_in_base", "pose_from_xyz_rpy", "xyz_rpy_from_pose"]
 
@@ -56,6 +57,8 @@ class ChainJoint:
         axis: unit joint axis in the joint frame, shape (3,).
         lower: lower position limit [rad or m] (``-inf`` if none).
         upper: upper position limit [rad or m] (``inf`` if none).
+        mimic: how it follows another joint (URDF ``<mimic>``, eq M1 of
+            :mod:`pincal.measurements.mimics`), None for a joint read from the data.
     """
 
     name: str
@@ -63,11 +66,12 @@ class ChainJoint:
     axis: np.ndarray
     lower: float
     upper: float
+    mimic: JointMimic | None = None
 
     @property
     def spec(self) -> JointSpec:
         """The measurement reader's view of this joint."""
-        return JointSpec(self.name, self.kind, self.lower, self.upper)
+        return JointSpec(self.name, self.kind, self.lower, self.upper, self.mimic)
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,10 @@ class KinematicChain:
         tip_link: name of the link (Pinocchio body frame) at the end of the chain.
         tool: ``tip_T_tool`` as a 4x4 homogeneous matrix [m] (identity if None).
         source: where the model came from, for messages.
+        mimics: the URDF's ``<mimic>`` joints (:func:`pincal.model.urdf_elements.joint_mimics`): those on
+            the chain follow their driver (:attr:`ChainJoint.mimic`, :meth:`followed`). Pinocchio builds
+            each as an ordinary joint (``buildModelFromXML``'s default, ``mimic=False``), so its placement
+            and zero are parameters like any joint's and its angle is given, not derived, in ``q``.
     """
 
     def __init__(
@@ -110,6 +118,7 @@ class KinematicChain:
         tip_link: str,
         tool: npt.ArrayLike | None = None,
         source: str = "<model>",
+        mimics: Mapping[str, JointMimic] | None = None,
     ) -> None:
         body = pin.FrameType.BODY
         if not model.existFrame(tip_link, body):
@@ -129,6 +138,11 @@ class KinematicChain:
                     "and prismatic joints only"
                 )
         chain_names = [model.names[j] for j in support]
+        for name in chain_names:  # a follower's driver: another movable joint of the URDF
+            driver = (mimics or {}).get(name)
+            if driver is not None and (driver.driver == name or not model.existJointName(driver.driver)):
+                raise ModelError(f"{source}: joint '{name}': <mimic joint=\"{driver.driver}\"> names no other "
+                                 "movable joint of the URDF; name the joint it follows")
         #: the URDF's movable joints off the chain: below the tip link (joint -> its child link), and the others
         self.beyond_tip_joints, self.other_branch_joints = _off_chain(model, full_tip, support)
         locked = [j for j in range(1, model.njoints) if j not in support]
@@ -148,7 +162,7 @@ class KinematicChain:
             kind = _KINDS[jm.shortname()]
             lower = float(model.lowerPositionLimit[jm.idx_q]) if kind != "continuous" else -np.inf
             upper = float(model.upperPositionLimit[jm.idx_q]) if kind != "continuous" else np.inf
-            joints.append(ChainJoint(name, kind, _joint_axis(jm), lower, upper))
+            joints.append(ChainJoint(name, kind, _joint_axis(jm), lower, upper, (mimics or {}).get(name)))
         self.joints: tuple[ChainJoint, ...] = tuple(joints)
         self._tool = np.eye(4) if tool is None else _checked_transform(tool, "tool")
         self._continuous = [j.kind == "continuous" for j in self.joints]
@@ -178,7 +192,8 @@ class KinematicChain:
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
             reason = " ".join(str(exc).split())
             raise ModelError(f"{description.source}: Pinocchio cannot read this URDF ({reason})") from None
-        return cls(model, tip_link, tool=tool, source=description.source)
+        return cls(model, tip_link, tool=tool, source=description.source,
+                   mimics=joint_mimics(description.root()))
 
     # --- names and sizes -------------------------------------------------
 
@@ -253,6 +268,52 @@ class KinematicChain:
             self._tool = saved_tool
 
     # --- kinematics -----------------------------------------------------
+
+    @property
+    def follower_pairs(self) -> tuple[tuple[int, int, float], ...]:
+        """(follower, driver, multiplier) of each joint that follows another on the chain (eq M1), as
+        column indices of ``q``: d q_follower / d q_driver = multiplier. Empty on most chains."""
+        names = self.joint_names
+        return tuple((i, names.index(j.mimic.driver), j.mimic.multiplier) for i, j in enumerate(self.joints)
+                     if j.mimic is not None and j.mimic.driver in names)
+
+    def followed(self, q: npt.ArrayLike) -> np.ndarray:
+        """Joint values (K, N) [rad or m] with each joint that follows another on the chain set from it
+        (eq M1); ``q`` itself (no copy) on a chain without one. A joint that follows one off the chain
+        keeps its value: the chain cannot tell it."""
+        q = np.asarray(q, dtype=float)
+        if not self.follower_pairs:
+            return q
+        out = np.array(q, dtype=float, copy=True)
+        for i, driver, multiplier in self.follower_pairs:
+            mimic = self.joints[i].mimic
+            assert mimic is not None  # a follower has its mimic
+            out[..., i] = multiplier * q[..., driver] + mimic.offset
+        return out
+
+    def followed_shifts(self, shifts: np.ndarray) -> np.ndarray:
+        """Changes of the joint angles (K, N) [rad or m] carried to the joints that follow them (eq M1
+        differentiated: a follower moves by multiplier × its driver's change, on top of its own); the
+        same array on a chain without followers. What effects do to a driver's angle (compliance,
+        backlash ...) moves its followers: ``<mimic>`` ties the joints' actual angles. Applied to
+        Jacobian columns by the transpose (:meth:`followed_columns`)."""
+        if not self.follower_pairs:
+            return shifts
+        out = np.array(shifts, dtype=float, copy=True)
+        for i, driver, multiplier in self.follower_pairs:
+            out[..., i] += multiplier * shifts[..., driver]
+        return out
+
+    def followed_columns(self, columns: np.ndarray) -> np.ndarray:
+        """Derivatives with respect to the joints (..., N, D), N along axis −2, made derivatives with respect
+        to the joints' own changes: a driver's row gains multiplier × its follower's (the chain rule of eq M1,
+        the transpose of :meth:`followed_shifts`); the same array on a chain without followers."""
+        if not self.follower_pairs:
+            return columns
+        out = np.array(columns, dtype=float, copy=True)
+        for i, driver, multiplier in self.follower_pairs:
+            out[..., driver, :] += multiplier * columns[..., i, :]
+        return out
 
     def configurations(self, q: npt.ArrayLike) -> np.ndarray:
         """Joint readings (K, N) → Pinocchio configurations (K, nq).

@@ -199,7 +199,8 @@ def gravity_torques(
     chain: KinematicChain, q: np.ndarray, payload_kg: float = 0.0, payload_point: np.ndarray | None = None
 ) -> np.ndarray:
     """Gravity torques (K, N) of the chain's URDF inertias, plus a point mass
-    ``payload_kg`` at ``payload_point`` (in the tool frame) [N·m or N]."""
+    ``payload_kg`` at ``payload_point`` (in the tool frame) [N·m or N]. A joint that others follow
+    (URDF ``<mimic>``, eq M1) carries their loads too, by virtual work: tau_driver + multiplier · tau_follower."""
     model = chain.model.copy()
     if payload_kg > 0:
         point = np.zeros(3) if payload_point is None else np.asarray(payload_point, dtype=float)
@@ -208,7 +209,8 @@ def gravity_torques(
         model.appendBodyToJoint(tip.parentJoint, pin.Inertia(payload_kg, np.zeros(3), np.zeros((3, 3))), at_tool)
     data = model.createData()
     configurations = chain.configurations(q)
-    return np.stack([pin.computeGeneralizedGravity(model, data, c) for c in configurations])
+    torques = np.stack([pin.computeGeneralizedGravity(model, data, c) for c in configurations])
+    return chain.followed_columns(torques[..., None])[..., 0]
 
 
 def effect_inputs(

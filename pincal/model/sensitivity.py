@@ -221,7 +221,7 @@ class SensitivityModel:
             rows_poses.append(frame_placement(model, data, fid).homogeneous)  # a new (4, 4) array
         jacobians = np.array(rows_jacobians).reshape(k, 6, model.nv)  # reshape: the shape for K = 0 too
         poses = np.array(rows_poses).reshape(k, 4, 4)
-        joints = jacobians[:, :, self._real_columns].transpose(0, 2, 1)
+        joints = self.chain.followed_columns(jacobians[:, :, self._real_columns].transpose(0, 2, 1))  # eq M1
         jacobians = jacobians[:, :, self._slot_columns].transpose(0, 2, 1)
         positions = poses[:, :3, 3]
         sensitivity = Sensitivity(

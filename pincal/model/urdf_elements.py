@@ -31,8 +31,9 @@ import numpy as np
 from lxml import etree
 
 from pincal.errors import ModelError
+from pincal.measurements.data import JointMimic
 
-__all__ = ["origin_matrix", "joint_origins", "parent_joint", "render"]
+__all__ = ["origin_matrix", "joint_origins", "parent_joint", "joint_mimics", "render"]
 
 
 def _floats(text: str) -> np.ndarray:
@@ -82,6 +83,20 @@ def parent_joint(robot: etree._Element, link: str) -> tuple[str | None, bool]:
         if joint.find("child").get("link") == link:
             return joint.get("name"), joint.get("type") == "fixed"
     return None, False
+
+
+def joint_mimics(robot: etree._Element) -> dict[str, JointMimic]:
+    """``{joint name: how it follows its driver}`` of every ``<joint>`` with a ``<mimic joint>`` (URDF
+    defaults: multiplier 1, offset 0; eq M1 of :mod:`pincal.measurements.mimics`), as written: whether the
+    driver exists is the chain's to check, for its own joints (published URDFs name missing drivers on
+    branches nobody calibrates, e.g. example-robot-data's alex_psyonic_hands fingers)."""
+    out = {}
+    for joint in robot.findall("joint"):
+        mimic = joint.find("mimic")
+        if mimic is not None and mimic.get("joint"):
+            out[joint.get("name")] = JointMimic(mimic.get("joint"), float(mimic.get("multiplier", 1.0)),
+                                                float(mimic.get("offset", 0.0)))
+    return out
 
 
 # --------------------------------------------------------------------------- the written form

@@ -71,8 +71,9 @@ def check_within_limits(q: np.ndarray, chain: KinematicChain, source: str, lines
 
 
 #: Where a joint's range comes from: the URDF's ``<limit>``, one turn for a continuous joint (no limit to
-#: read), or the candidates of a file (the span of their readings).
-RangeSource = Literal["URDF limits", "continuous: one turn", "candidate file"]
+#: read), what its driver's range gives a joint that follows another (URDF ``<mimic>``, within its own
+#: limits: :func:`pincal.simulation.sensor.sampling_limits`), or the candidates of a file (their span).
+RangeSource = Literal["URDF limits", "continuous: one turn", "follows its driver", "candidate file"]
 
 
 class JointRangeJson(TypedDict):
@@ -122,7 +123,8 @@ def joint_ranges(chain: KinematicChain, read: np.ndarray | None = None) -> tuple
     out = []
     for n, joint in enumerate(chain.joints):
         scale = 1000.0 if joint.kind == "prismatic" else 180.0 / np.pi
-        source: RangeSource = ("candidate file" if read is not None
+        follows = joint.mimic is not None and joint.mimic.driver in chain.joint_names
+        source: RangeSource = ("candidate file" if read is not None else "follows its driver" if follows
                                else "continuous: one turn" if joint.kind == "continuous" else "URDF limits")
         out.append(JointRange(joint.name, joint.kind, float(lower[n] * scale), float(upper[n] * scale), source))
     return tuple(out)

@@ -22,6 +22,7 @@ import numpy as np
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.measurements.couplings import CouplingJson
+from pincal.measurements.data import JointMimic
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.outputs import file_sha256, replacing, write_text
 from pincal.planning.candidates import JointRange, JointRangeJson
@@ -221,18 +222,25 @@ def _finite(value):
 
 
 def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: np.ndarray) -> str:
-    """PLAN.csv: joint columns, ``priority`` and ``candidate``, one row per configuration in visiting order.
+    """PLAN.csv: joint columns, ``priority`` and ``candidate``, one row per configuration in visiting order; a
+    joint the chain's joints follow from off the chain (URDF ``<mimic>``, eq M1) has a column after the chain's,
+    the value the controller commands: (q_follower − offset) / multiplier.
 
     Returns:
         The SHA-256 (hex) of the bytes written, for PLAN.json's ``plan_csv_sha256``.
     """
+    drivers: dict[str, tuple[int, JointMimic]] = {}
+    for i, joint in enumerate(chain.joints):  # a driver of several followers: the first one's value
+        if joint.mimic is not None and joint.mimic.driver not in chain.joint_names:
+            drivers.setdefault(joint.mimic.driver, (i, joint.mimic))
     digest: list[str] = []
     try:
         with replacing(path, "w", newline="", verify=lambda written: digest.append(file_sha256(written))) as handle:
             writer = csv.writer(handle, lineterminator="\n")
-            writer.writerow([*chain.joint_names, "priority", "candidate"])
+            writer.writerow([*chain.joint_names, *drivers, "priority", "candidate"])
             for q, rank, index in zip(plan.q, plan.priority, plan.candidates):
-                writer.writerow([*(repr(float(v)) for v in q), int(rank), int(labels[index])])
+                commanded = [repr(float((q[i] - mimic.offset) / mimic.multiplier)) for i, mimic in drivers.values()]
+                writer.writerow([*(repr(float(v)) for v in q), *commanded, int(rank), int(labels[index])])
     except OSError as exc:
         raise PincalError(f"{path}: cannot write the plan ({exc.strerror or exc})") from None
     return digest[-1]

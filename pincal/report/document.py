@@ -50,6 +50,7 @@ from pincal.fit.metrics import PoseErrors
 from pincal.fit.registration_hold import rotation_reason
 from pincal.fit.target_hold import held_reason
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
+from pincal.measurements.data import MimicJson
 from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.sensor import Registration
@@ -173,9 +174,14 @@ def fit_rows(roles: np.ndarray) -> FitRows:
 
 
 def chain_summary(chain: KinematicChain) -> ChainJson:
-    """REPORT.json ``chain``: root and tip links, the joints and their kinds."""
-    return {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
-            "joint_kinds": [spec.kind for spec in chain.joint_specs]}
+    """REPORT.json ``chain``: root and tip links, the joints and their kinds, and those that follow another."""
+    out: ChainJson = {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
+                      "joint_kinds": [spec.kind for spec in chain.joint_specs]}
+    mimics: list[MimicJson] = [{"joint": j.name, "driver": j.mimic.driver, "multiplier": j.mimic.multiplier,
+                                "offset": j.mimic.offset} for j in chain.joints if j.mimic is not None]
+    if mimics:
+        out["mimics"] = mimics
+    return out
 
 
 def parameters_report(result) -> list[Parameter]:

@@ -1,15 +1,13 @@
 """The typed model of REPORT.json and of ``pincal evaluate --json``: one TypedDict per object.
 
-A REPORT.json is one of four kinds, told apart by its keys: :class:`CalibrationReport`
-(``calibrate --level registration|offsets|full|auto``), :class:`PaperReport`
-(``calibrate --level dh``, the paper's Methods 1–3),
-:class:`~pincal.report.model_diagnosis.DiagnosisReport` (``diagnose``: the calibration's
-keys and the effects) and :class:`~pincal.report.model_fixture.FixtureReport`
-(``calibrate --fixture``). The builders of :mod:`pincal.report.document` and
-:mod:`pincal.report.fixture` return them, so mypy checks every key they write;
-:mod:`pincal.report.schema` turns these classes (and PLAN.json's,
-:mod:`pincal.planning.files`) into ``docs/report.schema.json``, which the tests
-validate every document they write against.
+A REPORT.json is one of five kinds, told apart by its keys: :class:`CalibrationReport`
+(``calibrate --level registration|offsets|full|auto``), :class:`PaperReport` (``calibrate --level dh``),
+:class:`~pincal.report.model_diagnosis.DiagnosisReport` (``diagnose``: the calibration's keys and the
+effects), :class:`~pincal.report.model_fixture.FixtureReport` (``calibrate --fixture``) and
+:class:`~pincal.report.model_tree.TreeReport` (several ``--tip-link``). Their builders return them, so
+mypy checks every key they write; :mod:`pincal.report.schema` turns these classes (and PLAN.json's,
+:mod:`pincal.planning.files`) into ``docs/report.schema.json``, which the tests validate every document
+they write against.
 
 The keys and their values are promises to users' scripts: never renamed, only
 extended. A class's keys are required unless it lists them in a ``total=False``
@@ -22,6 +20,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
 
 from pincal.measurements.couplings import CouplingJson
+from pincal.measurements.data import MimicJson
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -111,8 +110,7 @@ class _SourcesKeys(TypedDict):
 
 class Sources(_SourcesKeys, total=False):
     """The files the report was made from: ``validation`` (diagnose), ``fixture`` (socket fixture);
-    ``corrected_urdf_withheld``: True when the corrected URDF was not written (a gross misfit without
-    ``--force``: :mod:`pincal.workflows.verdict`); absent when it was written."""
+    ``corrected_urdf_withheld``: True when the URDF was withheld (:mod:`pincal.workflows.verdict`)."""
 
     validation: str | None
     fixture: str
@@ -129,10 +127,14 @@ class PaperChain(_ChainKeys):
     """The calibrated chain: root and tip links and its joints."""
 
 
-class ChainJson(_ChainKeys):
-    """The calibrated chain: root and tip links, its joints and their kinds."""
-
+class _ChainJointKeys(_ChainKeys):
     joint_kinds: list[JointKind]
+
+
+class ChainJson(_ChainJointKeys, total=False):
+    """The calibrated chain: root and tip links, its joints and their kinds; ``mimics``: those that follow another."""
+
+    mimics: list[MimicJson]
 
 
 class Parameter(TypedDict):

@@ -278,7 +278,7 @@ class SensorResidual(Objective):
             for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
                 if basis is not None:
                     shifts[:, j] += basis @ x[sl]
-            q = self.inputs.q + shifts
+            q = self.inputs.q + self.cache.params.chain.followed_shifts(shifts)  # followers move too (eq M1)
         kinematics = self.cache.evaluate(x[self.blocks["kinematic"]], q)
         memo = self._memo
         if memo is not None and memo[1] is kinematics and np.array_equal(memo[0], x):

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pincal.errors import PincalError
+from pincal.errors import ModelError, PincalError
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.effects import (
@@ -189,7 +189,8 @@ def simulated_shifts(
         order=np.arange(len(q)) if time is None else np.argsort(time, kind="stable"),
         joint_names=tuple(chain.joint_names),
     )
-    return joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
+    return chain.followed_shifts(joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs,
+                                              chain.joint_names))
 
 
 def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registration: Registration) -> MeasurementSet:
@@ -205,14 +206,26 @@ def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registrati
 
 def sampling_limits(chain: KinematicChain) -> tuple[np.ndarray, np.ndarray]:
     """The range configurations are drawn from: each joint's URDF limits, one turn (±pi) for a continuous
-    joint, which has none [rad or m], (N,) lower and upper."""
+    joint, which has none [rad or m], (N,) lower and upper; a joint that follows another on the chain
+    (URDF ``<mimic>``) keeps its driver within the range its own limits allow, and spans what that gives it."""
     lower = np.array([j.lower if np.isfinite(j.lower) else -np.pi for j in chain.joints])
     upper = np.array([j.upper if np.isfinite(j.upper) else np.pi for j in chain.joints])
+    names = chain.joint_names
+    for i, joint in enumerate(chain.joints):  # a follower's limits narrow its driver's range (eq M1)
+        if joint.mimic is None or joint.mimic.driver not in names:
+            continue
+        d, m, o = names.index(joint.mimic.driver), joint.mimic.multiplier, joint.mimic.offset
+        ends = sorted(((lower[i] - o) / m, (upper[i] - o) / m))
+        lower[d], upper[d] = max(lower[d], ends[0]), min(upper[d], ends[1])
+        if lower[d] > upper[d]:
+            raise ModelError(f"{chain.source}: joint '{joint.name}' follows '{joint.mimic.driver}' (<mimic>) outside "
+                             f"its own limits over all of '{joint.mimic.driver}''s; check the <mimic> and the limits")
+        lower[i], upper[i] = sorted((m * lower[d] + o, m * upper[d] + o))
     return lower, upper
 
 
 def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
     """Joint readings drawn uniformly within the limits (±pi for continuous joints, :func:`sampling_limits`),
-    (count, N)."""
+    (count, N); a joint that follows another on the chain (URDF ``<mimic>``) follows its draw."""
     lower, upper = sampling_limits(chain)
-    return rng.uniform(lower, upper, (count, len(lower)))
+    return chain.followed(rng.uniform(lower, upper, (count, len(lower))))

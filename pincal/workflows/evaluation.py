@@ -454,7 +454,8 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: Ma
                            else RowContext(context_q, context_time))
     if any(e.moments for e, _ in parsed):  # a compliance of unknown masses follows the loads per mass moment
         inputs = with_loads(inputs, chain)
-    q = data.q + joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs, chain.joint_names)
+    q = data.q + chain.followed_shifts(joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs,
+                                                    chain.joint_names))
     out = RowCorrections(q)
     drift: DriftUse | None = None
     for effect, value in parsed:
