@@ -26,7 +26,7 @@ from pincal.model.pinhole import INTRINSIC_NAMES, CameraIntrinsics
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraResidual
 from pincal.robots import example_robot_data_urdf
-from pincal.simulation.camera_scene import facing_scene, view_configurations, view_corners
+from pincal.simulation.camera_scene import facing_scene, view_configurations, view_corners, with_fixed_link
 
 ARRANGEMENTS = ("eye_in_hand", "eye_to_hand")
 #: 1280x960 px, a wide-angle lens's distortion (OpenCV's sample calibrations: |k1| ~ 0.1-0.3).
@@ -44,9 +44,7 @@ N_CALIBRATION, N_VALIDATION = 20, 6
 def _chain(arrangement: str) -> KinematicChain:
     text = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf").read_text()
     link = "camera_link" if arrangement == "eye_in_hand" else "board_link"
-    added = (f'<link name="{link}"/><joint name="{link}_joint" type="fixed"><parent link="tool0"/>'
-             f'<child link="{link}"/><origin xyz="0 0 0" rpy="0 0 0"/></joint></robot>')
-    return KinematicChain(pin.buildModelFromXML(text.replace("</robot>", added)), link, source="<ur5 + camera>")
+    return KinematicChain(pin.buildModelFromXML(with_fixed_link(text, "tool0", link)), link, source="<ur5 + camera>")
 
 
 class _Case:

@@ -24,7 +24,7 @@ from pincal.model.camera_view import Arrangement, camera_points, pose
 from pincal.model.chain import KinematicChain
 from pincal.model.pinhole import CameraIntrinsics, project
 
-__all__ = ["CameraScene", "board_corners", "facing_scene", "view_corners", "view_configurations"]
+__all__ = ["CameraScene", "with_fixed_link", "board_corners", "facing_scene", "view_corners", "view_configurations"]
 
 #: The steepest view of the board an image is drawn with: the angle between the camera's axis and the
 #: board's normal [deg]. ChArUco detection degrades beyond about 60 degrees (the markers foreshorten).
@@ -48,6 +48,15 @@ class CameraScene:
     mount: np.ndarray
     intrinsics: CameraIntrinsics
     board: CharucoSpec
+
+
+def with_fixed_link(urdf_text: str, parent: str, link: str) -> str:
+    """``urdf_text`` with a link ``link`` added on ``parent`` by a fixed joint ``<link>_joint`` at the identity:
+    where a camera or a board is mounted, its true placement left to the scene's mount."""
+    added = (f'<link name="{link}"/><joint name="{link}_joint" type="fixed"><parent link="{parent}"/>'
+             f'<child link="{link}"/><origin xyz="0 0 0" rpy="0 0 0"/></joint></robot>')
+    head, tail = urdf_text.rsplit("</robot>", 1)
+    return head + added + tail
 
 
 def board_corners(board: CharucoSpec) -> np.ndarray:
