@@ -21,6 +21,7 @@ from pincal.fit.camera_start import HAND_EYE_METHODS, ROBOT_WORLD_METHODS, hand_
 from pincal.measurements.charuco import parse_board
 from pincal.model.camera_view import pose
 from pincal.model.chain import KinematicChain
+from pincal.model.corrected_urdf import write_corrected_urdf
 from pincal.model.parameter_sets import JointOffsets, PlacementErrors
 from pincal.model.pinhole import INTRINSIC_NAMES, CameraIntrinsics
 from pincal.residuals.base import KinematicsCache
@@ -109,11 +110,16 @@ def test_every_opencv_method_finds_the_mount_when_the_kinematics_are_exact(arran
         assert np.abs(start.worlds[0] - scene.worlds[0]).max() < 1e-5, method
 
 
-def test_noise_free_images_give_the_truth_from_a_mount_10_cm_and_30_deg_off(case: _Case):
+@pytest.fixture(scope="module")
+def exact_fit(case: _Case):
+    start, _ = hand_eye_start(case.chain, case.exact, case.arrangement, INTRINSICS)
+    return calibrate_camera(case.chain, case.exact, start, "full", CameraFitOptions(selection="all"))
+
+
+def test_noise_free_images_give_the_truth_from_a_mount_10_cm_and_30_deg_off(case: _Case, exact_fit):
     off_m, off_deg = np.linalg.norm(TRUE_MOUNT[:3, 3]), np.degrees(np.linalg.norm(pin.log3(TRUE_MOUNT[:3, :3])))
     assert off_m > 0.1 - 1e-12 and off_deg > 30.0 - 1e-9
-    start, _ = hand_eye_start(case.chain, case.exact, case.arrangement, INTRINSICS)
-    result = calibrate_camera(case.chain, case.exact, start, "full", CameraFitOptions(selection="all"))
+    result = exact_fit
     assert result.rms_px < 1e-7
     assert result.nominal_rms_px > 0.1  # the nominal kinematics cannot explain the images
     # 4 per revolute joint + 6 of the world frame + 6 of the mount, minus those two frames (Everett et al. 1987)
@@ -125,6 +131,22 @@ def test_noise_free_images_give_the_truth_from_a_mount_10_cm_and_30_deg_off(case
     assert np.sqrt(np.mean(held_out**2)) < 1e-6
     true_tip = case.placements[-1] @ TRUE_MOUNT  # the URDF's tip placement with the true mount folded in
     assert np.abs(result.tip_placement - true_tip).max() < 1e-2  # not identifiable apart from wrist 3's placement
+
+
+def test_the_corrected_urdf_carries_the_mount(case: _Case, exact_fit, tmp_path):
+    source = tmp_path / "robot.urdf"
+    link = case.chain.tip_link
+    source.write_text(with_fixed_link(example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf").read_text(),
+                                      "tool0", link))
+    result = exact_fit
+    nominal = case.chain.placements()
+    with case.chain.placed(list(result.corrected_placements)) as calibrated:
+        write_corrected_urdf(source, tmp_path / "corrected.urdf", calibrated, nominal)
+    corrected = KinematicChain.from_urdf(tmp_path / "corrected.urdf", link)
+    unmounted = replace(result, params=None, vector=np.zeros(0),
+                        estimate=replace(result.estimate, mount=np.eye(4)))
+    held_out = reprojection_errors(corrected, unmounted, _validation(case.exact))
+    assert np.sqrt(np.mean(held_out**2)) < 1e-5  # the URDF's 6 decimals of metres and radians
 
 
 @pytest.mark.parametrize("arrangement", ARRANGEMENTS)

@@ -12,6 +12,15 @@ What one camera cannot see is what the always-estimated part absorbs, reported b
 kinds: the tip link's placement is the mount's (``<tip link>.t*``, ``.r*`` of level ``full``), and the
 placement of the first joint and the first joint's offset move the whole chain as the world frame does
 (eye to hand: the camera's pose in the base; eye in hand: the board's).
+
+The intrinsics (:attr:`CameraFitOptions.intrinsics`) join the always-estimated part. With one image the mount
+and the world frame are one pose (six directions undetermined) and with two the motion's axis leaves two; from
+three images on (two motions about axes not parallel, as hand-eye calibration needs) all nine intrinsics are
+determined together with the mount and the world frame, the kinematics' identifiable combinations besides.
+How well, on the UR5 of the tests (7x5 board 0.5 m ahead, 0.2 px noise, the kinematics fixed): with 5
+images fx, fy to ~1 px, cx, cy to ~2-3 px, k1 to ~0.01, k2 to ~0.02-0.15, k3 to ~0.02-0.4; with 20 images
+those shrink by ~2-5, k3 staying the weakest (its r⁶ term matters only in the image's corners) -- estimate k3
+only from images that fill the frame, and prefer intrinsics from a dedicated calibration when there are few.
 """
 
 from __future__ import annotations
@@ -189,6 +198,12 @@ class CameraCalibration:
     fit_seconds: float
     total_seconds: float
     notes: tuple[str, ...] = ()
+
+    @property
+    def corrected_placements(self) -> tuple[np.ndarray, ...]:
+        """``chain_placements`` with the tip's replaced by :attr:`tip_placement`: the model with the mount in the
+        URDF, for :func:`pincal.model.corrected_urdf.write_corrected_urdf` (the mount then the identity)."""
+        return (*self.chain_placements[:-1], self.tip_placement)
 
 
 def calibrate_camera(chain: KinematicChain, corners: CornerSet, start: CameraEstimate, level: ChainLevel,
