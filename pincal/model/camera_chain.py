@@ -10,6 +10,7 @@ the fixed joint of the chain's end link is the mount :mod:`pincal.fit.camera_cal
 
 from __future__ import annotations
 
+import numpy as np
 import pinocchio as pin
 
 from pincal.errors import ModelError, did_you_mean
@@ -18,7 +19,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.description import RobotDescription
 from pincal.model.urdf_elements import parent_joint
 
-__all__ = ["camera_chain"]
+__all__ = ["camera_chain", "world_link_origin"]
 
 
 def _fixed_link(description: RobotDescription, model: pin.Model, link: str, what: str) -> int:
@@ -70,3 +71,23 @@ def camera_chain(description: RobotDescription, camera_link: str, board_link: st
         raise ModelError(f"{description.source}: the board's link '{board_link}' hangs from the root like the "
                          "camera's; one of them must ride on the chain")
     return KinematicChain(model, board_link, source=description.source), "eye_to_hand"
+
+
+def world_link_origin(description: RobotDescription, link: str, base_T_link: np.ndarray) -> tuple[str, np.ndarray]:
+    """The fixed joint and its origin (4, 4) [m] that put ``link``, hanging from the root through fixed joints
+    (the camera eye to hand, the board eye in hand), at ``base_T_link`` in the root link's frame: the
+    calibrated world frame W (``inv(W)`` eye to hand, ``W`` eye in hand) for a corrected URDF
+    (:func:`pincal.model.urdf.write_urdf_with_origins`). The link's parent keeps its place.
+
+    Raises:
+        ModelError: the link is not there, not attached by a fixed joint, or rides on the chain.
+    """
+    model = pin.buildModelFromXML(description.text)
+    if _fixed_link(description, model, link, "world frame") != 0:
+        raise ModelError(f"{description.source}: link '{link}' rides on the chain; the world frame's link hangs "
+                         "from the root")
+    root = description.root()
+    joint, _ = parent_joint(root, link)
+    parent = next(j.find("parent").get("link") for j in root.findall("joint") if j.get("name") == joint)
+    root_T_parent = model.frames[model.getFrameId(parent)].placement.homogeneous  # fixed to the root: its pose
+    return str(joint), np.linalg.inv(root_T_parent) @ np.asarray(base_T_link, dtype=float)
