@@ -78,6 +78,7 @@ if TYPE_CHECKING:  # annotations only: the settings import this module for Prior
     from pincal.model.effects import Effect
     from pincal.model.parameter_sets import ChainParameters
     from pincal.residuals.base import Objective
+    from pincal.residuals.camera import CameraResidual
     from pincal.residuals.fixture import FixtureResidual
     from pincal.residuals.sensor import SensorResidual
     from pincal.residuals.tree import TreeResidual
@@ -256,8 +257,8 @@ class PriorResidual:
     Every other attribute is the data objective's.
     """
 
-    def __init__(self, objective: SensorResidual | FixtureResidual | TreeResidual, sigma: np.ndarray,
-                 noise: float = 1.0) -> None:
+    def __init__(self, objective: SensorResidual | FixtureResidual | TreeResidual | CameraResidual,
+                 sigma: np.ndarray, noise: float = 1.0) -> None:
         self.objective = objective
         self.noise = float(noise)
         self.weight = noise / np.asarray(sigma, dtype=float)

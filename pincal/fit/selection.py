@@ -412,8 +412,10 @@ def select_subset(problem: KindProblem[ObjectiveT], ordering: Ordering, base: np
         column = {int(p): kin.start + i for i, p in enumerate(everything)}
         always = [c for c in range(jac.shape[1]) if not kin.start <= c < kin.stop]
         columns = always + [column[int(p)] for p in ordering.order[:rank]]
-        blocks = _row_blocks(np.arange(residual.size), rows, block).reshape(rows.n_rows, block)
-        fits = nested_fits(jac, residual, always, columns[len(always):], blocks if criterion == "press" else None)
+        blocks = None  # each row's residual entries: leave-one-row-out's, and only its (rows of any size elsewhere)
+        if criterion == "press":
+            blocks = _row_blocks(np.arange(residual.size), rows, block).reshape(rows.n_rows, block)
+        fits = nested_fits(jac, residual, always, columns[len(always):], blocks)
         linear = fits.scores(criterion)
         used = columns[: fits.scale.size]  # nested_fits drops prefixes that leave no residual degree of freedom
         undetermined = _first_undetermined(fits, objective, x0, jac[:, used], used, linear)

@@ -1,0 +1,196 @@
+"""Reprojection residuals of a board's corners seen by a camera, through the chain, in pixels.
+
+Image k shows corner c at the pixel g_c; the corner is b_c on the board [m] (z = 0, OpenCV's board
+frame). With the tip pose (t_k, R_k) from the chain (:class:`pincal.residuals.base.KinematicsCache`,
+the tool the identity), the mount M = (R_M, t_M) on the tip link, the world frame W_s = (R_W, t_W) of
+image k's session and the camera's intrinsics kappa (:func:`pincal.model.pinhole.project`, eqs P1-P3):
+
+* **eye to hand** (the board on the chain, M = tip_T_board; the camera fixed, W = camera_T_base):
+  ``y = t_k + R_k (R_M b + t_M)``, ``p = R_W y + t_W``                                       (C1)
+* **eye in hand** (the camera on the chain, M = tip_T_camera; the board fixed, W = base_T_board):
+  ``y = R_W b + t_W``, ``p = R_Mᵀ (R_kᵀ (y − t_k) − t_M)``                                    (C2)
+
+and the residual is ``e_c = project(kappa, p) − g_c`` [px] (C3). Eye to hand is the point sensor of
+:mod:`pincal.residuals.sensor` with the target points M b (known up to the mount) and a projection; W
+plays the registration's part in both (eqs C1, C2: :func:`pincal.model.camera_view.camera_points`).
+Unknowns, in this order: the free kinematic parameters, W_s of each session (6 each: the right
+rotation phi of the start's R_W [rad], then t_W [m]), the mount
+(psi of R_M [rad], t_M [m]), and the intrinsics fitted (a subset of ``fx fy cx cy k1 k2 p1 p2 k3``,
+their values).
+
+Jacobians, with v the velocity of the base-frame point y carried by the tip per unit parameter
+(:meth:`pincal.model.sensitivity.Sensitivity.point_velocity`, Pinocchio's frame Jacobians) and
+Jexp3 Pinocchio's right Jacobian (d(R exp(phi) b) = −R [b]× Jexp3(phi) d phi):
+
+* C1: dp/dtheta = R_W v; dp/dphi_W = −R_W [y]× Jexp3(phi_W); dp/dt_W = I;
+  dp/dpsi = −R_W R_k R_M [b]× Jexp3(psi); dp/dt_M = R_W R_k;
+* C2: dp/dtheta = −R_Mᵀ R_kᵀ v; dp/dphi_W = −R_Mᵀ R_kᵀ R_W [b]× Jexp3(phi_W); dp/dt_W = R_Mᵀ R_kᵀ;
+  dp/dpsi = [p]× Jexp3(psi) (from exp(psi + d)ᵀ ≈ (I − [Jexp3(psi) d]×) exp(psi)ᵀ); dp/dt_M = −R_Mᵀ;
+
+then de/d(·) = (dpixel/dp) dp/d(·) and de/dkappa from :func:`pincal.model.pinhole.projection_jacobians`.
+Every corner of every image is evaluated at once (stacks of M corners); the chain's model is only
+evaluated, never rebuilt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from pincal.measurements.camera_csv import CornerSet
+from pincal.model.camera_view import Arrangement, camera_points, pose
+from pincal.model.pinhole import INTRINSIC_NAMES, CameraIntrinsics, project, projection_jacobians
+from pincal.model.sensitivity import Sensitivity, ToolPoses
+from pincal.residuals.base import KinematicsCache, Objective
+from pincal.residuals.so3 import skew
+
+__all__ = ["CameraEstimate", "CameraResidual"]
+
+
+@dataclass(frozen=True)
+class CameraEstimate:
+    """The camera's unknowns besides the kinematics, at a parameter vector.
+
+    Attributes:
+        arrangement: ``eye_in_hand`` or ``eye_to_hand``.
+        worlds: W_s per session (S, 4, 4): ``camera_T_base`` (eye to hand) or ``base_T_board`` (eye in hand) [m].
+        mount: M (4, 4): ``tip_T_board`` (eye to hand) or ``tip_T_camera`` (eye in hand) [m], the camera's
+            optical frame (x right, y down, z ahead).
+        intrinsics: the camera's intrinsics.
+    """
+
+    arrangement: Arrangement
+    worlds: np.ndarray
+    mount: np.ndarray
+    intrinsics: CameraIntrinsics
+
+
+class CameraResidual(Objective):
+    """Eqs C1-C3 of the module docstring over the images the cache holds (its rows).
+
+    Args:
+        cache: kinematics of the K images (the chain's tip: the link carrying the board or the camera).
+        corners: the corners seen (their image, board point and pixel).
+        start: the world frames, mount and intrinsics to start from (the intrinsics not fitted stay there).
+        fitted_intrinsics: indices into :data:`pincal.model.pinhole.INTRINSIC_NAMES` of the intrinsics
+            estimated (default: none, the intrinsics given).
+        sessions: (K,) each image's session, an index into ``start.worlds`` (default: all in session 0).
+    """
+
+    def __init__(self, cache: KinematicsCache, corners: CornerSet, start: CameraEstimate,
+                 fitted_intrinsics: tuple[int, ...] = (), sessions: npt.ArrayLike | None = None) -> None:
+        super().__init__(cache)
+        self.start = start
+        self.image_of = np.asarray(corners.image_of, dtype=np.intp)  # (M,)
+        self.board = np.asarray(corners.board_points, dtype=float)  # (M, 3) [m]
+        self.pixels = np.asarray(corners.pixels, dtype=float)  # (M, 2) [px]
+        k = len(cache.q)
+        self.n_sessions = len(start.worlds)
+        image_sessions = np.zeros(k, dtype=np.intp) if sessions is None else np.asarray(sessions, dtype=np.intp)
+        if image_sessions.shape != (k,) or np.any((image_sessions < 0) | (image_sessions >= self.n_sessions)):
+            raise ValueError(f"sessions must be ({k},) indices below {self.n_sessions}")
+        self.session_of = image_sessions[self.image_of]  # each corner's session (M,)
+        self.fitted_intrinsics = tuple(int(i) for i in fitted_intrinsics)
+        sizes = {"kinematic": len(cache.free), "world": 6 * self.n_sessions, "mount": 6,
+                 "intrinsics": len(self.fitted_intrinsics)}
+        self.blocks: dict[str, slice] = {}
+        offset = 0
+        for name, size in sizes.items():
+            self.blocks[name] = slice(offset, offset + size)
+            offset += size
+        self.n_params = offset
+
+    @property
+    def n_free(self) -> int:
+        return self.n_params
+
+    def start_vector(self) -> np.ndarray:
+        """Kinematic values from the cache's base, zero rotation steps, the start's translations and intrinsics."""
+        x = np.zeros(self.n_params)
+        x[self.blocks["kinematic"]] = self.cache.base[self.cache.free]
+        world = x[self.blocks["world"]].reshape(-1, 6)
+        world[:, 3:] = self.start.worlds[:, :3, 3]
+        x[self.blocks["mount"].start + 3 : self.blocks["mount"].stop] = self.start.mount[:3, 3]
+        x[self.blocks["intrinsics"]] = self.start.intrinsics.vector()[list(self.fitted_intrinsics)]
+        return x
+
+    def estimate(self, x: npt.ArrayLike) -> CameraEstimate:
+        """World frames, mount and intrinsics at ``x``."""
+        x = np.asarray(x, dtype=float)
+        world = x[self.blocks["world"]].reshape(-1, 6)
+        worlds = np.array([pose(w[:3, :3] @ pin.exp3(v[:3]), v[3:]) for w, v in zip(self.start.worlds, world)])
+        mount = x[self.blocks["mount"]]
+        values = self.start.intrinsics.vector()
+        values[list(self.fitted_intrinsics)] = x[self.blocks["intrinsics"]]
+        return CameraEstimate(self.start.arrangement, worlds,
+                              pose(self.start.mount[:3, :3] @ pin.exp3(mount[:3]), mount[3:]),
+                              self.start.intrinsics.with_vector(values))
+
+    def _state(self, x: np.ndarray) -> tuple[ToolPoses, Sensitivity, CameraEstimate, np.ndarray, np.ndarray]:
+        """Tip poses, sensitivities, the estimate, each corner's base-frame point y (M, 3) and camera point p (M, 3)."""
+        poses, sens = self.cache.evaluate(x[self.blocks["kinematic"]])
+        estimate = self.estimate(x)
+        tips = (poses.tool_rotations[self.image_of], poses.tool_positions[self.image_of])
+        y, p = camera_points(self.start.arrangement, tips, estimate.worlds[self.session_of], estimate.mount, self.board)
+        return poses, sens, estimate, y, p
+
+    def camera_points(self, x: npt.ArrayLike) -> np.ndarray:
+        """Each corner in the camera's optical frame at ``x`` (M, 3) [m]."""
+        return self._state(np.asarray(x, dtype=float))[4]
+
+    def residual(self, x: npt.ArrayLike) -> np.ndarray:
+        """Eq C3: (u, v) of each corner, model minus measured, (2M,) [px]."""
+        _, _, estimate, _, p = self._state(np.asarray(x, dtype=float))
+        return (project(estimate.intrinsics, p) - self.pixels).reshape(-1)
+
+    def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
+        """d(eq C3)/dx (2M, n) [px per unit] (the module docstring's chain rule)."""
+        x = np.asarray(x, dtype=float)
+        poses, sens, estimate, y, p = self._state(x)
+        c = self.image_of
+        rotations = poses.tool_rotations[c]  # R_k of each corner (M, 3, 3)
+        velocity = sens.linear[c] + np.cross(sens.angular[c], (y - sens.origin[c])[:, None, :])  # v (M, n, 3)
+        w_rot = estimate.worlds[self.session_of, :3, :3]
+        m_rot = estimate.mount[:3, :3]
+        world_steps = x[self.blocks["world"]].reshape(-1, 6)[:, :3]
+        jexp_world = np.array([pin.Jexp3(v) for v in world_steps])[self.session_of]  # (M, 3, 3)
+        jexp_mount = pin.Jexp3(x[self.blocks["mount"]][:3])
+        n_corners = len(c)
+        world = np.zeros((n_corners, 3, 6))
+        mount = np.zeros((n_corners, 3, 6))
+        if self.start.arrangement == "eye_to_hand":  # eq C1's derivatives
+            kinematic = np.einsum("mij,mnj->min", w_rot, velocity)
+            world[:, :, :3] = -w_rot @ skew(y) @ jexp_world
+            world[:, :, 3:] = np.eye(3)
+            carried = w_rot @ rotations  # R_W R_k
+            mount[:, :, :3] = -carried @ m_rot @ skew(self.board) @ jexp_mount
+            mount[:, :, 3:] = carried
+        else:  # eq C2's
+            back = m_rot.T @ rotations.transpose(0, 2, 1)  # R_Mᵀ R_kᵀ
+            kinematic = -np.einsum("mij,mnj->min", back, velocity)
+            world[:, :, :3] = -back @ w_rot @ skew(self.board) @ jexp_world
+            world[:, :, 3:] = back
+            mount[:, :, :3] = skew(p) @ jexp_mount
+            mount[:, :, 3:] = -m_rot.T
+        d_point, d_intrinsics = projection_jacobians(estimate.intrinsics, p)  # (M, 2, 3), (M, 2, 9)
+        out = np.zeros((n_corners, 2, self.n_params))
+        out[:, :, self.blocks["kinematic"]] = d_point @ kinematic
+        sessions = self.blocks["world"].start + 6 * self.session_of[:, None] + np.arange(6)  # (M, 6) columns
+        np.put_along_axis(out, np.broadcast_to(sessions[:, None, :], (n_corners, 2, 6)), d_point @ world, axis=2)
+        out[:, :, self.blocks["mount"]] = d_point @ mount
+        out[:, :, self.blocks["intrinsics"]] = d_intrinsics[:, :, list(self.fitted_intrinsics)]
+        return out.reshape(2 * n_corners, self.n_params)
+
+    def column_names(self, kinematic: list[str], session_names: tuple[str, ...] = ()) -> list[str]:
+        """Names of the columns: ``kinematic`` (the free kinematic parameters'), then ``camera.rx`` ... /
+        ``board.rx`` ... (the world frame, ``[session]`` with several), ``mount.rx`` ..., the intrinsics."""
+        world = "camera" if self.start.arrangement == "eye_to_hand" else "board"
+        prefixes = [world] if self.n_sessions == 1 else [f"{world}[{n}]" for n in session_names]
+        names = list(kinematic)
+        names += [f"{prefix}.{axis}" for prefix in prefixes for axis in ("rx", "ry", "rz", "x", "y", "z")]
+        names += [f"mount.{axis}" for axis in ("rx", "ry", "rz", "x", "y", "z")]
+        names += [f"intrinsics.{INTRINSIC_NAMES[i]}" for i in self.fitted_intrinsics]
+        return names
