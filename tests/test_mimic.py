@@ -232,6 +232,13 @@ def test_a_driver_carries_its_followers_gravity_load(kuka_urdf, tmp_path):
     assert torque[1] == pytest.approx(numeric_jacobian(potential, q[0, 1:2])[0, 0], abs=1e-6)
     assert torque[3] == pytest.approx(pin.computeGeneralizedGravity(model, data, q[0])[3], abs=1e-12)
     assert abs(torque[1] - pin.computeGeneralizedGravity(model, data, q[0])[1]) > 1.0  # N m: informative
+    # without a mass model the loads per mass moment carry the follower's the same way (eq M2 with the URDF's
+    # inertias is these torques, to rounding)
+    from pincal.model.mass_moments import gravity_loads
+
+    pi = np.concatenate([model.inertias[j].toDynamicParameters()[:4] for j in chain.joint_ids])
+    g0 = np.linalg.norm(model.gravity.linear)
+    np.testing.assert_allclose(gravity_loads(chain, q)[0, :, 0, :] @ pi * g0, torque, atol=1e-10)
 
 
 def test_a_follower_that_fixes_the_forearm_costs_what_the_report_names(cell, tmp_path):

@@ -103,4 +103,7 @@ def gravity_loads(chain: KinematicChain, q: npt.ArrayLike) -> np.ndarray:
                 carried[parent] += data.liMi[jid].toDualActionMatrix() @ carried[jid]
         for i, jid in enumerate(ids):
             rows[k, i] = projections[i] @ carried[jid]
+    # a driver's torque carries its followers' (virtual work, eq M1 of the <mimic>: tau_d + m tau_f), as the
+    # URDF-mass torques do (pincal.model.effects.gravity_torques); the bending parts are the joint's own
+    rows[:, :, 0, :] = chain.followed_columns(rows[:, :, 0, :])
     return rows / g0
