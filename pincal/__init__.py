@@ -51,7 +51,7 @@ _DEFINED_IN = {
                                  "evaluate_fixture_files"),
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
-    "pincal.workflows.extract": ("BagRead", "ImageExtraction", "NoPostures", "extract_file", "extract_images"),
+    "pincal.workflows.extract": ("BagRead", "CutFailed", "ImageExtraction", "NoPostures", "extract_file", "extract_images"),
     "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
     "pincal.workflows.detection": ("DetectSettings", "DetectRun", "detect_files"),  # imports OpenCV
     "pincal.workflows.simulation": ("simulate_to_directory",),
@@ -122,7 +122,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         ThresholdFailure,
         evaluate_and_write,
     )
-    from pincal.workflows.extract import BagRead, ImageExtraction, NoPostures, extract_file, extract_images
+    from pincal.workflows.extract import BagRead, CutFailed, ImageExtraction, NoPostures, extract_file, extract_images
     from pincal.workflows.fixture import (
         FixtureEvaluation,
         FixtureRun,
@@ -227,6 +227,7 @@ __all__ = [
     "BagRead",
     "extract_file",
     "NoPostures",
+    "CutFailed",
     "ImageExtraction",
     "extract_images",
     "CharucoSpec",

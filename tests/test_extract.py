@@ -21,7 +21,7 @@ from pincal.cli.commands import main
 from pincal.errors import MeasurementError
 from pincal.measurements.bags import POINT, TF, TRANSFORM, read_bag, write_bag
 from pincal.measurements.csv_v1 import write_measurements
-from pincal.measurements.plateaus import extract_postures, still_stretches
+from pincal.measurements.plateaus import PlateauSettings, extract_postures, still_stretches
 from pincal.model.chain import KinematicChain
 from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE
 from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
@@ -343,7 +343,7 @@ def test_a_joint_named_as_a_column_is_refused(chain, tmp_path, capsys, name):
 def test_the_python_workflow_writes_what_the_command_writes(small_bag, tmp_path, capsys):
     """``pincal.extract_file`` (the job behind ``pincal extract``) writes the command's file byte for byte,
     prints nothing, and a recording that leaves no posture raises with nothing written."""
-    from pincal import PlateauSettings, extract_file
+    from pincal import extract_file
 
     by_command, by_call = tmp_path / "command.csv", tmp_path / "call.csv"
     assert main(["extract", str(small_bag), "--joints", "/joint_states", "--pose", "/tracker/pose",
@@ -360,3 +360,19 @@ def test_the_python_workflow_writes_what_the_command_writes(small_bag, tmp_path,
     # what was read and each stop refused travel with the error: the command prints them before it
     assert raised.value.extraction.data is None and len(raised.value.extraction.refused) == 4  # type: ignore[attr-defined]
     assert raised.value.read.joints.topic == "/joint_states"  # type: ignore[attr-defined]
+
+
+def test_a_cut_that_fails_says_what_was_read_first(small_bag, tmp_path, capsys):
+    """A clock offset the motion cannot give stops the cut: the streams read are printed before the error,
+    as for a recording with no posture (the error names the cause; nothing is written)."""
+    from pincal.workflows.extract import CutFailed, extract_file
+
+    out = tmp_path / "d.csv"
+    assert main(["extract", str(small_bag), "--joints", "/joint_states", "--pose", "/tracker/pose",
+                 "--max-offset", "0.001", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"read {small_bag}: /joint_states: ") and not out.exists()
+    with pytest.raises(CutFailed, match="edge of the search range") as raised:
+        extract_file(small_bag, "/joint_states", ["/tracker/pose"], out,
+                     PlateauSettings(max_offset=0.001), pose=True)
+    assert raised.value.read.joints.topic == "/joint_states"

@@ -30,7 +30,7 @@ def _rate(stamps: np.ndarray) -> str:
 def run_extract(args: argparse.Namespace) -> int:
     """Run ``pincal extract``; returns the exit code (0), raises PincalError on bad input."""
     from pincal.measurements.plateaus import PlateauSettings
-    from pincal.workflows.extract import NoPostures, extract_file
+    from pincal.workflows.extract import CutFailed, NoPostures, extract_file
 
     settings = PlateauSettings(still_tol=args.still_tol, min_still=args.min_still, trim=args.trim,
                                min_samples=args.min_samples, max_spread_mm=args.max_spread,
@@ -44,9 +44,14 @@ def run_extract(args: argparse.Namespace) -> int:
         read, extraction = extract_file(args.bag, args.joints, topics, args.out, settings, pose=args.pose is not None,
                                         joint_names=args.joint_names)
     except NoPostures as nothing:  # what was read and each stop refused, then the error
-        _print_extraction(nothing.read, nothing.extraction, settings)
+        _print_read(nothing.read)
+        _print_cut(nothing.read, nothing.extraction, settings)
         raise
-    _print_extraction(read, extraction, settings)
+    except CutFailed as failed:  # what was read, then why no posture could be cut
+        _print_read(failed.read)
+        raise
+    _print_read(read)
+    _print_cut(read, extraction, settings)
     data = extraction.data
     assert data is not None  # extract_file raises NoPostures otherwise
     spread = data.extra["spread_mm"]
@@ -60,10 +65,8 @@ def run_extract(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_extraction(read: BagRead, extraction: Extraction, settings: PlateauSettings) -> None:
-    """What the bag held, the clock offset, each stop refused and the count of rows."""
-    from pincal.measurements.plateaus import REASONS
-
+def _print_read(read: BagRead) -> None:
+    """What the bag held, and the reader's notes."""
     joints, streams = read.joints, read.streams
     for note in read.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
@@ -71,6 +74,13 @@ def _print_extraction(read: BagRead, extraction: Extraction, settings: PlateauSe
           f"({_rate(joints.stamps)}); " + "; ".join(
               f"{s.topic}: {len(s.stamps)} samples ({s.msgtype.rsplit('/', 1)[1]}, {_rate(s.stamps)}"
               + (f", frame '{s.frame}'" if s.frame else "") + ")" for s in streams))
+
+
+def _print_cut(read: BagRead, extraction: Extraction, settings: PlateauSettings) -> None:
+    """The clock offset, each stop refused and the count of rows."""
+    from pincal.measurements.plateaus import REASONS
+
+    joints, streams = read.joints, read.streams
     offset = extraction.offset
     text = (f"clock offset: {streams[0].topic} stamps - {joints.topic} stamps = {offset.seconds:+.4f} s")
     if offset.estimated:

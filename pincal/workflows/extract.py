@@ -26,7 +26,7 @@ from pincal.measurements.plateaus import ClockOffset, Extraction, PlateauSetting
 from pincal.outputs import write_bytes
 from pincal.workflows.paths import ensure_directory, refuse_overwrite
 
-__all__ = ["BagRead", "NoPostures", "bag_files", "read_bag_file", "no_rows_error", "write_postures",
+__all__ = ["BagRead", "CutFailed", "NoPostures", "bag_files", "read_bag_file", "no_rows_error", "write_postures",
            "extract_file", "ImageExtraction", "extract_images"]
 
 
@@ -62,14 +62,23 @@ def read_bag_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out
     return BagRead(bag, joints, streams, notes)
 
 
-class NoPostures(MeasurementError):
+class CutFailed(MeasurementError):
+    """The bag was read but its postures could not be cut (e.g. no clock offset found): nothing was
+    written. ``read`` says what was read (the command prints it before this error)."""
+
+    def __init__(self, read: BagRead, message: str) -> None:
+        super().__init__(message)
+        self.read = read
+
+
+class NoPostures(CutFailed):
     """A recording that leaves no static posture: nothing was written. ``read`` and ``extraction`` say
     what was read and why each stop was refused (the command prints them before this error)."""
 
     def __init__(self, read: BagRead, extraction: Extraction) -> None:
-        super().__init__(f"{read.bag}: no static posture left to write ({len(extraction.refused)} stop(s) "
+        super().__init__(read, f"{read.bag}: no static posture left to write ({len(extraction.refused)} stop(s) "
                          "refused, listed above); nothing written")
-        self.read, self.extraction = read, extraction
+        self.extraction = extraction
 
 
 def no_rows_error(read: BagRead, extraction: Extraction) -> MeasurementError:
@@ -94,10 +103,16 @@ def extract_file(bag: str | Path, joints_topic: str, topics: Sequence[str], out:
 
     Raises:
         NoPostures: the recording leaves no static posture (nothing written; what was read and refused in it).
+        CutFailed: the postures cannot be cut, e.g. no clock offset found (nothing written; what was read).
         MeasurementError: a bad bag or topic.
     """
     read = read_bag_file(bag, joints_topic, topics, out, pose=pose, joint_names=joint_names)
-    extraction = write_postures(read, out, settings or PlateauSettings())
+    try:
+        extraction = write_postures(read, out, settings or PlateauSettings())
+    except CutFailed:
+        raise
+    except MeasurementError as error:  # the cut's own error, with what was read
+        raise CutFailed(read, str(error)) from None
     if extraction.data is None:
         raise no_rows_error(read, extraction)
     return read, extraction
