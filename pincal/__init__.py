@@ -51,7 +51,8 @@ _DEFINED_IN = {
                                  "evaluate_fixture_files"),
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
-    "pincal.workflows.extract": ("BagRead", "CutFailed", "ImageExtraction", "NoPostures", "extract_file", "extract_images"),
+    "pincal.workflows.extract": ("BagRead", "CutFailed", "ImageExtraction", "NoPostures", "extract_file",
+                                 "extract_images"),
     "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
     "pincal.workflows.detection": ("DetectSettings", "DetectRun", "detect_files"),  # imports OpenCV
     "pincal.workflows.simulation": ("simulate_to_directory",),
