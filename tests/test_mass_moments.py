@@ -91,6 +91,12 @@ def test_a_moment_compliance_round_trips_through_the_report(kuka_chain):
     back, values = effect_from_dict(entry)
     assert back == effect and back.n_values == 2 and back.label == "compliance:lwr_joint_7:moments"
     np.testing.assert_array_equal(values, [1e-3, -2e-3])
+    from pincal.report.sections import _effect_value
+
+    led = effect_to_dict(Effect("compliance", "lwr_joint_7", moments=("mx:lwr_link_7", "m:lwr_link_7")),
+                         np.array([1e-3, 2e-3]), np.array([1e-5, 1e-5]))
+    shown, _ = _effect_value(led, dict.fromkeys(kuka_chain.joint_names, "revolute"))  # the HTML report's
+    assert shown.count("mrad") == 2 and shown.count("mrad/m") == 1, shown  # a mass-led one: its basis a lever arm
     assert masses_unknown(kuka_chain, "unknown", 0.0) and not masses_unknown(kuka_chain, "urdf", 0.0)
     assert chain_mass_kg(kuka_chain) > 0
 

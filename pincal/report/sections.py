@@ -141,8 +141,10 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
     value, std = entry.get("value"), entry.get("std")
     if entry.get("moments"):  # a compliance of unknown masses: one value per mass moment, in mrad (µm prismatic)
         values, stds = value if isinstance(value, list) else [value], std if isinstance(std, list) else [None]
-        scale, unit = (1e6, "µm") if length else (1000.0, "mrad")
-        return ", ".join(pm(v, s, scale, unit) for v, s in zip(values, stds + [None] * len(values))), ""
+        # a combination led by a mass (m:...) has a lever arm for basis: mrad/m (combination_words' units)
+        units = ["µm" if length else "mrad/m" if str(name).startswith("m:") else "mrad" for name in entry["moments"]]
+        scale = 1e6 if length else 1000.0
+        return ", ".join(pm(v, s, scale, u) for v, s, u in zip(values, stds + [None] * len(values), units)), ""
     if kind in ("drift", "pause_step"):  # [vx, vy, vz] m/s; a step's [dx, dy, dz] m
         values = value if isinstance(value, list) else [value]
         stds = std if isinstance(std, list) else [None] * len(values)
