@@ -298,3 +298,17 @@ def test_raw_images_are_read_in_grey(encoding, channels, convert):
     stream = ImageStream("/camera", IMAGE, np.zeros(1), np.zeros(1), (message,))
     expected = (pixels[:, :, 0] >> 8).astype(np.uint8) if depth == 2 else cv2.cvtColor(pixels, convert)
     np.testing.assert_array_equal(stream.image(0), expected)
+
+
+def test_extract_refuses_a_folder_with_images_it_would_not_replace(image_bag, tmp_path, capsys):
+    """A rerun into the same folder replaces its images; a folder holding more of an earlier run's, which
+    detect would take for this one's, is refused with nothing written."""
+    bag, _, _ = image_bag
+    out, folder = tmp_path / "joints.csv", tmp_path / "joints_images"
+    args = ["extract", str(bag), "--joints", "/joint_states", "--image", "/camera/image_raw", "--out", str(out)]
+    assert main(args) == 0 and main(args) == 0  # the same names again
+    (folder / "image_007.png").write_bytes((folder / "image_000.png").read_bytes())
+    out.unlink()
+    capsys.readouterr()
+    assert main(args) == 2
+    assert "image_007.png" in capsys.readouterr().err and not out.exists()

@@ -149,7 +149,8 @@ def extract_images(bag: str | Path, joints_topic: str, image_topic: str, out: st
     joint readings averaged over the window, ``t_image``, ``t_start_robot``, ``t_end_robot`` [s]).
 
     Raises:
-        MeasurementError: no static posture with an image (nothing written); a bad bag, topic or image.
+        MeasurementError: no static posture with an image, an image that cannot be decoded, a folder holding
+            an earlier run's images (nothing written then); a bad bag or topic.
     """
     out = Path(out)
     folder = Path(image_dir) if image_dir is not None else out.with_name(f"{out.stem}_images")
@@ -164,14 +165,20 @@ def extract_images(bag: str | Path, joints_topic: str, image_topic: str, out: st
     for path in bag_files(read.bag):
         if path.parent == folder:
             raise MeasurementError(f"{folder}: holds the bag's files; choose another folder for the images")
-    ensure_directory(folder)
-    files = []
+    encoded = []  # every image decoded and encoded before any file is written: whole or nothing
     for k, posture in enumerate(postures):
         ok, png = cv2.imencode(".png", images.image(posture.image, str(read.bag)))
         if not ok:
             raise MeasurementError(f"{folder}: OpenCV cannot encode image {k} as PNG")
-        files.append(folder / f"image_{k:03d}.png")
-        write_bytes(files[-1], png.tobytes())
+        encoded.append(png.tobytes())
+    files = [folder / f"image_{k:03d}.png" for k in range(len(encoded))]
+    stale = sorted(set(folder.glob("image_*.png")) - set(files)) if folder.is_dir() else []
+    if stale:  # an earlier run's images this one would not replace would pass for its own (detect reads the folder)
+        raise MeasurementError(f"{folder}: holds image_*.png files of an earlier run that this one would not replace "
+                               f"({stale[0].name} ...); choose another folder (--image-dir) or remove them")
+    ensure_directory(folder)
+    for path, png_bytes in zip(files, encoded):
+        write_bytes(path, png_bytes)
     extra = {"t_image": np.array([images.stamps[p.image] for p in postures]),
              "t_start_robot": np.array([p.window[0] for p in postures]),
              "t_end_robot": np.array([p.window[1] for p in postures])}
