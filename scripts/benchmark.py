@@ -21,6 +21,10 @@
     2 500 6D rows, side by side in rotated triples: on (f)'s UR5 session and on scripts/scenarios.py's
     tracker 4.2 m raster at constant orientation; goal diagnose <= 10x calibrate.
     ``--select CRITERION`` for all three (default: the commands' own). Writes scripts/benchmark_diagnose.json.
+(i) ``--tree``: ``pincal calibrate`` of TALOS's upper body (example-robot-data, talos_full_v2.urdf: 2 torso
+    joints shared by two 7-joint arms) with a marker on each gripper (``--tip-link LINK:1 --tip-link LINK:2``),
+    500 simulated rows, every placement off by 0.5 mm / 0.5 mrad, 0.1 mm noise: whole processes, median of
+    ``--runs``-capped 3; goal <= 5 s (the issue's 500 rows x 2 markers). Writes scripts/benchmark_tree.json.
 (f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
     selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
     6D rows (position + orientation) taken along 6 lines and 4 planes in joint
@@ -706,6 +710,57 @@ def _print_diagnose(result: dict) -> None:
           f"{result['load_average_after'][0]:.2f} ({os.cpu_count()} CPUs)")
 
 
+#: (i): TALOS's gripper links, each carrying one marker, and the rows of the issue's scale.
+TREE_TARGETS = ("gripper_left_base_link:1", "gripper_right_base_link:2")
+TREE_ROWS = 500
+TREE_GOAL_S = 5.0
+
+
+def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dict:
+    """(i): whole ``pincal calibrate`` processes of TALOS's upper body with a marker on each gripper [s]."""
+    import csv
+
+    import numpy as np
+    import pinocchio as pin
+
+    from pincal.model.description import read_description
+    from pincal.model.tree import KinematicTree, parse_targets
+    from pincal.model.tree_parameters import TreeParameters
+    from pincal.robots import example_robot_data_urdf
+
+    urdf = example_robot_data_urdf("talos_data/robots/talos_full_v2.urdf")
+    tree = KinematicTree.from_description(read_description(Path(urdf), ()), parse_targets(list(TREE_TARGETS)))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(seed)
+    lower, upper = (np.array([getattr(j, side) for j in tree.joints]) for side in ("lower", "upper"))
+    q = rng.uniform(np.maximum(lower, -1.5), np.minimum(upper, 1.5), (rows, tree.n_joints))
+    local = [np.array([[0.0, 0.0, -0.1]])] * len(TREE_TARGETS)  # 10 cm beyond each gripper's base [m]
+    with tree.placed(params.placements(rng.normal(0.0, 5e-4, params.size))):
+        world = tree.target_points(q, local)
+    sensed = (world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
+              + rng.normal(0.0, 1e-4, world.shape))  # a mocap 2 m away, 0.1 mm per axis
+    times = []
+    with tempfile.TemporaryDirectory() as folder:
+        data = Path(folder) / "talos.csv"
+        with open(data, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow([*tree.joint_names, *(f"{a}{i + 1}" for i in range(len(TREE_TARGETS)) for a in "xyz")])
+            for k in range(rows):
+                writer.writerow([*(repr(float(v)) for v in q[k]), *(repr(float(v)) for v in sensed[k].ravel())])
+        targets = [flag for target in TREE_TARGETS for flag in ("--tip-link", target)]
+        for _ in range(runs):
+            start = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "pincal", "calibrate", str(urdf), str(data), *targets,
+                            "--out", f"{folder}/talos.urdf", "--report", f"{folder}/REPORT.json", "--quiet"],
+                           check=True, capture_output=True)
+            times.append(time.perf_counter() - start)
+        report = json.loads(Path(folder, "REPORT.json").read_text(encoding="utf-8"))
+    return {"rows": rows, "joints": tree.n_joints, "targets": list(TREE_TARGETS), "times_s": times,
+            "median_s": statistics.median(times), "goal_s": TREE_GOAL_S,
+            "rms_after_mm": [t["calibration_errors"]["position"]["rms_mm"] for t in report["targets"]],
+            "load_average": os.getloadavg()}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--auto", action="store_true", help="only (g): --level auto against --level full, "
@@ -728,7 +783,19 @@ def main(argv: list[str] | None = None) -> int:
                         "side by side")
     parser.add_argument("--select", default=None, help="(h): a --select criterion for every command "
                         "(default: the commands' own)")
+    parser.add_argument("--tree", action="store_true", help="only (i): calibrate TALOS's upper body, a marker on "
+                        "each gripper, 500 rows, whole processes")
     args = parser.parse_args(argv)
+    if args.tree:
+        result = tree_calibration(runs=min(args.runs, 3))
+        print(f"(i) calibrate, {result['joints']} joints, {len(result['targets'])} targets, {result['rows']} rows, "
+              f"whole process: {result['median_s']:.2f} s median of {len(result['times_s'])} (goal <= "
+              f"{result['goal_s']:g} s); RMS after {', '.join(f'{v:.3f}' for v in result['rms_after_mm'])} mm; "
+              f"load {result['load_average'][0]:.1f}")
+        path = args.json or HERE / "benchmark_tree.json"
+        path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {path}")
+        return 0
     if args.diagnose:
         result = diagnose_against_calibrate(pairs=args.pairs or 3, select=args.select)
         _print_diagnose(result)
