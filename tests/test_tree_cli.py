@@ -121,3 +121,53 @@ def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys):
     code = main(["calibrate", str(urdf), str(data), *TARGETS, "--tool", "0,0,0,0,0,0", "--out",
                  str(folder / "t.urdf"), "--report", str(folder / "t.json")])
     assert code == 2 and "several --tip-link: --tool is not yet supported" in capsys.readouterr().err
+
+
+MIMIC = '<mimic joint="arm_left_3" multiplier="0.5" offset="0.1"/>'
+
+
+@pytest.fixture(scope="module")
+def mimic_files(tmp_path_factory):
+    """The robot with arm_left_4 following arm_left_3 (x0.5, +0.1), 30 noise-free rows of a perturbed one without
+    arm_left_4's column, and the same rows with a column for it that is wrong on line 4."""
+    folder = tmp_path_factory.mktemp("tree_mimic")
+    text = two_arm_urdf()
+    start = text.index('<joint name="arm_left_4"')
+    end = text.index("</joint>", start)
+    urdf = folder / "robot.urdf"
+    urdf.write_text(text[:end] + MIMIC + text[end:], encoding="utf-8")
+    tree = KinematicTree.from_urdf(urdf, parse_targets(TARGETS[1::2]))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-1.2, 1.2, (30, tree.n_joints))
+    names = list(tree.joint_names)
+    follower, driver = names.index("arm_left_4"), names.index("arm_left_3")
+    q[:, follower] = 0.5 * q[:, driver] + 0.1
+    with tree.placed(params.placements(rng.normal(0.0, 1e-3, params.size))):
+        sensed = tree.target_points(q, LOCAL) + np.array([0.3, -0.1, 0.2])
+    without, wrong = folder / "without.csv", folder / "wrong.csv"
+    keep = [i for i in range(len(names)) if i != follower]
+    _write_rows(without, [names[i] for i in keep], q[:, keep], sensed)
+    bad = q.copy()
+    bad[2, follower] += 0.01
+    _write_rows(wrong, names, bad, sensed)
+    return folder, urdf, without, wrong, tree
+
+
+def test_several_targets_follow_a_mimic_joint_without_its_column(mimic_files):
+    folder, urdf, without, _, tree = mimic_files
+    assert tree.joint_specs[tree.joint_names.index("arm_left_4")].mimic is not None
+    report_path = folder / "REPORT.json"
+    assert main(["calibrate", str(urdf), str(without), *TARGETS, "--out", str(folder / "out.urdf"),
+                 "--report", str(report_path), "--quiet"]) == 0
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    for target in report["targets"]:
+        assert target["calibration_errors"]["position"]["max_mm"] < 1e-6  # noise-free rows reproduced
+
+
+def test_several_targets_refuse_a_column_that_does_not_follow_its_mimic(mimic_files, capsys):
+    folder, urdf, _, wrong, _ = mimic_files
+    assert main(["calibrate", str(urdf), str(wrong), *TARGETS, "--out", str(folder / "w.urdf"),
+                 "--report", str(folder / "w.json"), "--quiet"]) == 2
+    assert "wrong.csv: line 4, column 'arm_left_4'" in capsys.readouterr().err
+    assert not (folder / "w.urdf").exists()
