@@ -102,6 +102,30 @@ def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
     assert "several --tip-link: evaluate --json is not yet supported" in capsys.readouterr().err
 
 
+def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files, capsys):
+    folder, _, _, out, report, *_, held_out = files
+    lines = held_out.read_text(encoding="utf-8").splitlines()
+    header = lines[0].split(",")
+    point_2 = [header.index(c) for c in ("x2", "y2", "z2", "x3", "y3", "z3")]
+    unseen = folder / "unseen.csv"
+    unseen.write_text("\n".join([lines[0], *(",".join("" if i in point_2 else c for i, c in enumerate(line.split(",")))
+                                             for line in lines[1:])]) + "\n", encoding="utf-8")
+    assert main(["evaluate", str(out), str(report), str(unseen)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[3].split() == ["right_marker", "0", "not", "seen"]  # points 2 and 3 empty in every row
+    one = folder / "one_unseen.csv"
+    one.write_text("\n".join([lines[0], *(",".join("" if i in point_2[:3] else c for i, c in enumerate(line.split(",")))
+                                          for line in lines[1:])]) + "\n", encoding="utf-8")
+    assert main(["evaluate", str(out), str(report), str(one)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.splitlines()[3].split()[:2] == ["right_marker", "10"]  # point 3 only
+    assert "point(s) 2 of right_marker not seen in any row" in captured.err
+    cpa = folder / "cpa.csv"
+    cpa.write_text("\n".join([lines[0] + ",role", *(line + ",cpa" for line in lines[1:])]) + "\n", encoding="utf-8")
+    assert main(["evaluate", str(out), str(report), str(cpa)]) == 2
+    assert f"{cpa}: no measured point in a row that is not role=cpa" in capsys.readouterr().err
+
+
 def test_the_report_page_refuses_a_trees_report(files):
     *_, report, _, _, _ = files
     with pytest.raises(PincalError, match="several --tip-link, which this command does not take yet"):

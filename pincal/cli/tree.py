@@ -96,6 +96,9 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
     print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
     print(f"{'target (points)':32s} {'seen':>5s} {'mean':>8s} {'RMS':>8s} {'max':>8s}  [mm]")
     for link, errors in run.targets:
+        if errors is None:
+            print(f"{link:32s} {0:5d}  not seen")
+            continue
         stats = errors["position"]
         print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
     if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
