@@ -101,7 +101,7 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     tau = np.stack([r.translation for r in registrations])[sessions]
     sensed = np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :]
     errors = np.linalg.norm(np.where(rows.seen[..., None], sensed - rows.points, np.nan), axis=2)  # (K, P) [m]
-    seen = rows.seen.any(axis=0)  # (P,) each point seen in some row
+    seen = np.any(rows.seen, axis=0)  # (P,) each point seen in some row
     per_target: list[tuple[str, TargetErrors | None]] = []
     for spec, _ in targets:
         numbers = tuple(p for p in spec.points if seen[p - 1])
