@@ -195,3 +195,33 @@ def test_several_targets_refuse_a_column_that_does_not_follow_its_mimic(mimic_fi
                  "--report", str(folder / "w.json"), "--quiet"]) == 2
     assert "wrong.csv: line 4, column 'arm_left_4'" in capsys.readouterr().err
     assert not (folder / "w.urdf").exists()
+
+
+def test_a_gross_misfit_withholds_the_urdf_unless_forced(files, capsys):
+    folder, urdf, data, *_ = files
+    rows = list(csv.reader(data.read_text(encoding="utf-8").splitlines()))
+    rng = np.random.default_rng(11)
+    scrambled = folder / "scrambled.csv"  # points of no robot: uniform in a 0.6 m cube
+    with open(scrambled, "w", newline="") as handle:
+        csv.writer(handle).writerows([rows[0], *([*row[:-9], *(repr(float(v)) for v in rng.uniform(-0.3, 0.3, 9))]
+                                                 for row in rows[1:])])
+    out, report_path = folder / "gross.urdf", folder / "gross.json"
+    out.write_text("an earlier run's", encoding="utf-8")
+    command = ["calibrate", str(urdf), str(scrambled), *TARGETS, "--level", "registration", "--out", str(out),
+               "--report", str(report_path), "--quiet"]
+    assert main(command) == 3
+    assert "pincal: warning: the calibrated model misses the measured points by" in capsys.readouterr().err
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    assert [w["code"] for w in report["warnings"]] == ["gross_misfit"]
+    assert report["sources"]["corrected_urdf_withheld"] is True and not out.exists()
+    assert main([*command, "--force"]) == 0 and out.exists()
+    assert "written all the same (--force)" in json.loads(report_path.read_text(encoding="utf-8"))["warnings"][0][
+        "message"]
+    assert main([*command, "--force", "--strict"]) == 3  # a warning with --strict
+
+
+def test_sigma_pos_is_refused_with_several_targets(files, capsys):
+    folder, urdf, data, *_ = files
+    code = main(["calibrate", str(urdf), str(data), *TARGETS, "--sigma-pos", "0.1", "--out", str(folder / "s.urdf"),
+                 "--report", str(folder / "s.json")])
+    assert code == 2 and "several --tip-link: --sigma-pos" in capsys.readouterr().err
