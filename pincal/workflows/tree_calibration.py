@@ -12,10 +12,10 @@ one line, never run differently.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 
@@ -40,7 +40,7 @@ from pincal.workflows.paths import description_inputs, input_paths, refuse_overw
 from pincal.workflows.settings import CalibrateSettings
 from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
 
-__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "refuse_several", "refuse_tree_report"]
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files"]
 
 
 @dataclass(frozen=True)
@@ -64,24 +64,6 @@ class TreeCalibrationRun:
     seconds: float
     reload_error: float
     withheld: bool = False
-
-
-def refuse_several(command: str, tip_links: Sequence[str] | str) -> str:
-    """The one ``--tip-link`` of a command that takes one chain; several are refused with one line."""
-    if isinstance(tip_links, str):
-        return tip_links
-    if len(tip_links) == 1:
-        return tip_links[0]
-    raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate is (pincal calibrate ... "
-                      "--tip-link LINK:POINTS --tip-link LINK:POINTS)")
-
-
-def refuse_tree_report(report: Mapping[str, Any], where: str, command: str) -> None:
-    """Refuse, with one line, a REPORT.json of several targets (``targets``) in a command that reads one chain's."""
-    if "targets" in report:
-        links = ", ".join(t["tip_link"] for t in report["targets"])
-        raise PincalError(f"{where}: a report of several --tip-link ({links}): not yet supported by {command}; "
-                          "its REPORT.json lists each target's errors")
 
 
 def _refused(settings: CalibrateSettings) -> None:
