@@ -225,3 +225,12 @@ def test_sigma_pos_is_refused_with_several_targets(files, capsys):
     code = main(["calibrate", str(urdf), str(data), *TARGETS, "--sigma-pos", "0.1", "--out", str(folder / "s.urdf"),
                  "--report", str(folder / "s.json")])
     assert code == 2 and "several --tip-link: --sigma-pos" in capsys.readouterr().err
+
+
+def test_one_tip_link_with_points_says_it_takes_a_link_only(files, capsys):
+    folder, urdf, data, *_ = files
+    code = main(["calibrate", str(urdf), str(data), "--tip-link", "left_marker:1", "--out", str(folder / "p.urdf"),
+                 "--report", str(folder / "p.json")])
+    assert code == 2
+    assert "a single --tip-link takes LINK only (LINK:POINTS is for several --tip-link): --tip-link left_marker" in \
+        capsys.readouterr().err
