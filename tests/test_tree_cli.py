@@ -187,6 +187,8 @@ def test_several_targets_follow_a_mimic_joint_without_its_column(mimic_files):
     report = json.loads(report_path.read_text(encoding="utf-8"))
     for target in report["targets"]:
         assert target["calibration_errors"]["position"]["max_mm"] < 1e-6  # noise-free rows reproduced
+    assert report["chain"]["mimics"] == [{"joint": "arm_left_4", "driver": "arm_left_3", "multiplier": 0.5,
+                                          "offset": 0.1}]
 
 
 def test_several_targets_refuse_a_column_that_does_not_follow_its_mimic(mimic_files, capsys):
