@@ -120,6 +120,14 @@ def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files,
     captured = capsys.readouterr()
     assert captured.out.splitlines()[3].split()[:2] == ["right_marker", "10"]  # point 3 only
     assert "point(s) 2 of right_marker not seen in any row" in captured.err
+    assert main(["evaluate", str(out), str(report), str(unseen), "--new-session"]) == 0  # points 1 still seen
+    session = folder / "session.csv"  # session b: no point measured
+    session.write_text("\n".join([lines[0] + ",session", *(line + ",a" for line in lines[1:6]),
+                                   *(",".join(["" if i >= len(header) - 9 else c for i, c in enumerate(line.split(","))]
+                                              + ["b"]) for line in lines[6:])]) + "\n", encoding="utf-8")
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(report), str(session), "--new-session"]) == 2
+    assert f"{session}: session 'b' has 0 measured point(s)" in capsys.readouterr().err
     cpa = folder / "cpa.csv"
     cpa.write_text("\n".join([lines[0] + ",role", *(line + ",cpa" for line in lines[1:])]) + "\n", encoding="utf-8")
     assert main(["evaluate", str(out), str(report), str(cpa)]) == 2

@@ -89,6 +89,11 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                           "nothing to evaluate: give rows where a target's point is measured")
     world = tree.target_points(data.q, [points for _, points in targets])  # (K, P, 3) [m]
     if settings.new_session:
+        for s, name in enumerate(data.session_names):  # a rigid registration needs three points (Arun et al. 1987)
+            if (count := int(rows.seen[rows.sessions == s].sum())) < 3:
+                raise PincalError(f"{data_path}: session '{name}' has {count} measured point(s) in rows that are not "
+                                  "role=cpa; --new-session registers each session on at least 3: leave its rows "
+                                  "out, or evaluate without --new-session")
         registrations = [register_points(world[rows.sessions == s][rows.seen[rows.sessions == s]],
                                          rows.points[rows.sessions == s][rows.seen[rows.sessions == s]])
                          for s in range(len(data.session_names))]
