@@ -102,6 +102,38 @@ def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
     assert "several --tip-link: evaluate --json is not yet supported" in capsys.readouterr().err
 
 
+def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files, capsys):
+    folder, _, _, out, report, *_, held_out = files
+    lines = held_out.read_text(encoding="utf-8").splitlines()
+    header = lines[0].split(",")
+    point_2 = [header.index(c) for c in ("x2", "y2", "z2", "x3", "y3", "z3")]
+    unseen = folder / "unseen.csv"
+    unseen.write_text("\n".join([lines[0], *(",".join("" if i in point_2 else c for i, c in enumerate(line.split(",")))
+                                             for line in lines[1:])]) + "\n", encoding="utf-8")
+    assert main(["evaluate", str(out), str(report), str(unseen)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[3].split() == ["right_marker", "0", "not", "seen"]  # points 2 and 3 empty in every row
+    one = folder / "one_unseen.csv"
+    one.write_text("\n".join([lines[0], *(",".join("" if i in point_2[:3] else c for i, c in enumerate(line.split(",")))
+                                          for line in lines[1:])]) + "\n", encoding="utf-8")
+    assert main(["evaluate", str(out), str(report), str(one)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.splitlines()[3].split()[:2] == ["right_marker", "10"]  # point 3 only
+    assert "point(s) 2 of right_marker not seen in any row" in captured.err
+    assert main(["evaluate", str(out), str(report), str(unseen), "--new-session"]) == 0  # points 1 still seen
+    session = folder / "session.csv"  # session b: no point measured
+    session.write_text("\n".join([lines[0] + ",session", *(line + ",a" for line in lines[1:6]),
+                                   *(",".join(["" if i >= len(header) - 9 else c for i, c in enumerate(line.split(","))]
+                                              + ["b"]) for line in lines[6:])]) + "\n", encoding="utf-8")
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(report), str(session), "--new-session"]) == 2
+    assert f"{session}: session 'b' has 0 measured point(s)" in capsys.readouterr().err
+    cpa = folder / "cpa.csv"
+    cpa.write_text("\n".join([lines[0] + ",role", *(line + ",cpa" for line in lines[1:])]) + "\n", encoding="utf-8")
+    assert main(["evaluate", str(out), str(report), str(cpa)]) == 2
+    assert f"{cpa}: no measured point in a row that is not role=cpa" in capsys.readouterr().err
+
+
 def test_the_report_page_refuses_a_trees_report(files):
     *_, report, _, _, _ = files
     with pytest.raises(PincalError, match="several --tip-link, which this command does not take yet"):
@@ -121,3 +153,94 @@ def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys):
     code = main(["calibrate", str(urdf), str(data), *TARGETS, "--tool", "0,0,0,0,0,0", "--out",
                  str(folder / "t.urdf"), "--report", str(folder / "t.json")])
     assert code == 2 and "several --tip-link: --tool is not yet supported" in capsys.readouterr().err
+
+
+MIMIC = '<mimic joint="arm_left_3" multiplier="0.5" offset="0.1"/>'
+
+
+@pytest.fixture(scope="module")
+def mimic_files(tmp_path_factory):
+    """The robot with arm_left_4 following arm_left_3 (x0.5, +0.1), 30 noise-free rows of a perturbed one without
+    arm_left_4's column, and the same rows with a column for it that is wrong on line 4."""
+    folder = tmp_path_factory.mktemp("tree_mimic")
+    text = two_arm_urdf()
+    start = text.index('<joint name="arm_left_4"')
+    end = text.index("</joint>", start)
+    urdf = folder / "robot.urdf"
+    urdf.write_text(text[:end] + MIMIC + text[end:], encoding="utf-8")
+    tree = KinematicTree.from_urdf(urdf, parse_targets(TARGETS[1::2]))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-1.2, 1.2, (30, tree.n_joints))
+    names = list(tree.joint_names)
+    follower, driver = names.index("arm_left_4"), names.index("arm_left_3")
+    q[:, follower] = 0.5 * q[:, driver] + 0.1
+    with tree.placed(params.placements(rng.normal(0.0, 1e-3, params.size))):
+        sensed = tree.target_points(q, LOCAL) + np.array([0.3, -0.1, 0.2])
+    without, wrong = folder / "without.csv", folder / "wrong.csv"
+    keep = [i for i in range(len(names)) if i != follower]
+    _write_rows(without, [names[i] for i in keep], q[:, keep], sensed)
+    bad = q.copy()
+    bad[2, follower] += 0.01
+    _write_rows(wrong, names, bad, sensed)
+    return folder, urdf, without, wrong, tree
+
+
+def test_several_targets_follow_a_mimic_joint_without_its_column(mimic_files):
+    folder, urdf, without, _, tree = mimic_files
+    assert tree.joint_specs[tree.joint_names.index("arm_left_4")].mimic is not None
+    report_path = folder / "REPORT.json"
+    assert main(["calibrate", str(urdf), str(without), *TARGETS, "--out", str(folder / "out.urdf"),
+                 "--report", str(report_path), "--quiet"]) == 0
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    for target in report["targets"]:
+        assert target["calibration_errors"]["position"]["max_mm"] < 1e-6  # noise-free rows reproduced
+    assert report["chain"]["mimics"] == [{"joint": "arm_left_4", "driver": "arm_left_3", "multiplier": 0.5,
+                                          "offset": 0.1}]
+
+
+def test_several_targets_refuse_a_column_that_does_not_follow_its_mimic(mimic_files, capsys):
+    folder, urdf, _, wrong, _ = mimic_files
+    assert main(["calibrate", str(urdf), str(wrong), *TARGETS, "--out", str(folder / "w.urdf"),
+                 "--report", str(folder / "w.json"), "--quiet"]) == 2
+    assert "wrong.csv: line 4, column 'arm_left_4'" in capsys.readouterr().err
+    assert not (folder / "w.urdf").exists()
+
+
+def test_a_gross_misfit_withholds_the_urdf_unless_forced(files, capsys):
+    folder, urdf, data, *_ = files
+    rows = list(csv.reader(data.read_text(encoding="utf-8").splitlines()))
+    rng = np.random.default_rng(11)
+    scrambled = folder / "scrambled.csv"  # points of no robot: uniform in a 0.6 m cube
+    with open(scrambled, "w", newline="") as handle:
+        csv.writer(handle).writerows([rows[0], *([*row[:-9], *(repr(float(v)) for v in rng.uniform(-0.3, 0.3, 9))]
+                                                 for row in rows[1:])])
+    out, report_path = folder / "gross.urdf", folder / "gross.json"
+    out.write_text("an earlier run's", encoding="utf-8")
+    command = ["calibrate", str(urdf), str(scrambled), *TARGETS, "--level", "registration", "--out", str(out),
+               "--report", str(report_path), "--quiet"]
+    assert main(command) == 3
+    assert "pincal: warning: the calibrated model misses the measured points by" in capsys.readouterr().err
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    assert [w["code"] for w in report["warnings"]] == ["gross_misfit"]
+    assert report["sources"]["corrected_urdf_withheld"] is True and not out.exists()
+    assert main([*command, "--force"]) == 0 and out.exists()
+    assert "written all the same (--force)" in json.loads(report_path.read_text(encoding="utf-8"))["warnings"][0][
+        "message"]
+    assert main([*command, "--force", "--strict"]) == 3  # a warning with --strict
+
+
+def test_sigma_pos_is_refused_with_several_targets(files, capsys):
+    folder, urdf, data, *_ = files
+    code = main(["calibrate", str(urdf), str(data), *TARGETS, "--sigma-pos", "0.1", "--out", str(folder / "s.urdf"),
+                 "--report", str(folder / "s.json")])
+    assert code == 2 and "several --tip-link: --sigma-pos" in capsys.readouterr().err
+
+
+def test_one_tip_link_with_points_says_it_takes_a_link_only(files, capsys):
+    folder, urdf, data, *_ = files
+    code = main(["calibrate", str(urdf), str(data), "--tip-link", "left_marker:1", "--out", str(folder / "p.urdf"),
+                 "--report", str(folder / "p.json")])
+    assert code == 2
+    assert "a single --tip-link takes LINK only (LINK:POINTS is for several --tip-link): --tip-link left_marker" in \
+        capsys.readouterr().err

@@ -55,7 +55,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from pincal.workflows.settings import CalibrateSettings
 
     if isinstance(args.tip_link, list):  # several targets on several chains, one calibration
-        return run_calibrate_tree(args)
+        tree_report, tree_withheld = run_calibrate_tree(args)
+        return _warned(tree_report, args.strict, tree_withheld)
     if args.fixture is not None:  # socket-fixture data, no sensor
         from pincal.cli.fixture import run_calibrate
 

@@ -9,16 +9,20 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pincal.cli.arguments import selection_criterion
 from pincal.errors import PincalError
+
+if TYPE_CHECKING:
+    from pincal.report.model_tree import TreeReport
 
 __all__ = ["one_tip_link", "run_calibrate_tree", "is_tree_report", "run_evaluate_tree"]
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
 _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
             ("html", "--html (the HTML report)"), ("reject_outliers", "--reject-outliers"),
-            ("coupling", "--coupling"))
+            ("coupling", "--coupling"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
 
 
 def one_tip_link(command: str, tip_links: Sequence[str] | str) -> str:
@@ -31,13 +35,15 @@ def one_tip_link(command: str, tip_links: Sequence[str] | str) -> str:
     return tip_links[0]
 
 
-def run_calibrate_tree(args: argparse.Namespace) -> int:
+def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     """Calibrate the targets of ``args.tip_link`` (several ``LINK:POINTS``), print each one's errors before
-    and after, write the corrected URDF and REPORT.json; the exit code."""
+    and after, write the corrected URDF (unless withheld: a gross misfit without ``--force``) and REPORT.json;
+    the report (its warnings for the caller to print) and whether the URDF was withheld."""
     from pincal.cli.progress import progress_bar
     from pincal.model.tree import parse_targets
     from pincal.workflows.settings import CalibrateSettings
     from pincal.workflows.tree_calibration import calibrate_tree_files
+    from pincal.workflows.verdict import urdf_line
 
     for attribute, flag in _NOT_YET:
         value = getattr(args, attribute, None)
@@ -62,9 +68,12 @@ def run_calibrate_tree(args: argparse.Namespace) -> int:
         name = f"{target['tip_link']} ({','.join(map(str, target['points']))})"
         print(f"{name:32s} {after['seen']:5d} {before['position']['rms_mm']:11.3f} {after['position']['rms_mm']:10.3f} "
               f"{after['position']['max_mm']:10.3f}")
-    print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
+    if run.withheld:
+        print(urdf_line(Path(args.out), True))
+    else:
+        print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
-    return 0
+    return run.report, run.withheld
 
 
 def is_tree_report(path: Path) -> bool:
@@ -96,6 +105,9 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
     print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
     print(f"{'target (points)':32s} {'seen':>5s} {'mean':>8s} {'RMS':>8s} {'max':>8s}  [mm]")
     for link, errors in run.targets:
+        if errors is None:
+            print(f"{link:32s} {0:5d}  not seen")
+            continue
         stats = errors["position"]
         print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
     if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:

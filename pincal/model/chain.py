@@ -122,6 +122,10 @@ class KinematicChain:
     ) -> None:
         body = pin.FrameType.BODY
         if not model.existFrame(tip_link, body):
+            link, colon, _ = tip_link.rpartition(":")
+            if colon and model.existFrame(link, body):  # LINK:POINTS, which names points of several targets
+                raise ModelError(f"{source}: no link named '{tip_link}'; a single --tip-link takes LINK only "
+                                 f"(LINK:POINTS is for several --tip-link): --tip-link {link}")
             links = sorted(f.name for f in model.frames if f.type == body)
             raise ModelError(f"{source}: no link named '{tip_link}'; {did_you_mean(tip_link, links, 'links')}")
         full_tip = model.frames[model.getFrameId(tip_link, body)]

@@ -25,9 +25,10 @@ import numpy as np
 import pinocchio as pin
 
 from pincal.errors import ModelError, PincalError
-from pincal.measurements.data import JointSpec
+from pincal.measurements.data import JointMimic, JointSpec
 from pincal.model.chain import ChainJoint, KinematicChain
 from pincal.model.description import RobotDescription, read_description
+from pincal.model.urdf_elements import joint_mimics
 
 __all__ = ["TargetSpec", "TreeTarget", "KinematicTree", "parse_targets", "TreePlacements"]
 
@@ -110,16 +111,19 @@ class KinematicTree:
         model: Pinocchio model of the whole URDF.
         targets: the targets (at least one).
         source: where the model came from, for messages.
+        mimics: the URDF's ``<mimic>`` joints (:func:`pincal.model.urdf_elements.joint_mimics`), given to
+            every target's chain: a follower takes its angle from its driver (eq M1), no column needed.
 
     Raises:
         ModelError: an unknown link (with the closest names), a chain that is not serial, or a tip link on
             the path to another target's (its placement would move the other's: give the lower one only).
     """
 
-    def __init__(self, model: pin.Model, targets: Sequence[TargetSpec], source: str = "<model>") -> None:
+    def __init__(self, model: pin.Model, targets: Sequence[TargetSpec], source: str = "<model>",
+                 mimics: Mapping[str, JointMimic] | None = None) -> None:
         if not targets:
             raise ModelError(f"{source}: a tree needs at least one target")
-        chains = [KinematicChain(model, t.link, source=source) for t in targets]
+        chains = [KinematicChain(model, t.link, source=source, mimics=mimics) for t in targets]
         _refuse_nested(model, [t.link for t in targets], source)
         order = sorted({model.getJointId(n) for chain in chains for n in chain.joint_names})  # depth first
         names = [model.names[j] for j in order]
@@ -152,7 +156,7 @@ class KinematicTree:
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
             reason = " ".join(str(exc).split())
             raise ModelError(f"{description.source}: Pinocchio cannot read this URDF ({reason})") from None
-        return cls(model, targets, source=description.source)
+        return cls(model, targets, source=description.source, mimics=joint_mimics(description.root()))
 
     @property
     def n_points(self) -> int:

@@ -39,6 +39,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -51,7 +52,7 @@ from pincal.fit.registration_hold import rotation_reason
 from pincal.fit.target_hold import held_reason
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
 from pincal.measurements.data import MimicJson
-from pincal.model.chain import pose_from_xyz_rpy, xyz_rpy_from_pose
+from pincal.model.chain import ChainJoint, pose_from_xyz_rpy, xyz_rpy_from_pose
 from pincal.model.dh.parameters import DHParameterSet
 from pincal.model.sensor import Registration
 from pincal.outputs import write_text
@@ -86,7 +87,7 @@ if TYPE_CHECKING:
 __all__ = [
     "REPORT_VERSION", "paper_report", "fit_rows", "chain_summary", "parameters_report", "identifiability_report",
     "not_determined_report", "selection_report", "write_report", "write_evaluation", "ReportModel", "read_report",
-    "chain_head", "chain_report",
+    "chain_head", "chain_report", "mimics_json",
 ]
 
 
@@ -177,11 +178,16 @@ def chain_summary(chain: KinematicChain) -> ChainJson:
     """REPORT.json ``chain``: root and tip links, the joints and their kinds, and those that follow another."""
     out: ChainJson = {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names),
                       "joint_kinds": [spec.kind for spec in chain.joint_specs]}
-    mimics: list[MimicJson] = [{"joint": j.name, "driver": j.mimic.driver, "multiplier": j.mimic.multiplier,
-                                "offset": j.mimic.offset} for j in chain.joints if j.mimic is not None]
+    mimics = mimics_json(chain.joints)
     if mimics:
         out["mimics"] = mimics
     return out
+
+
+def mimics_json(joints: Sequence[ChainJoint]) -> list[MimicJson]:
+    """REPORT.json ``chain.mimics``: each of ``joints`` that follows another (URDF ``<mimic>``, eq M1)."""
+    return [{"joint": j.name, "driver": j.mimic.driver, "multiplier": j.mimic.multiplier, "offset": j.mimic.offset}
+            for j in joints if j.mimic is not None]
 
 
 def parameters_report(result) -> list[Parameter]:

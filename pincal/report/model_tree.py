@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import TypedDict
 
+from pincal.measurements.data import MimicJson
 from pincal.report.model import (
     Finding,
     Identifiability,
@@ -22,13 +23,17 @@ from pincal.report.model import (
 __all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeReport"]
 
 
-class TreeChainJson(TypedDict):
-    """The calibrated tree: its root link, and every joint of the targets' chains once (those shared by
-    several, e.g. a torso's, first), with their kinds."""
-
+class _TreeChainKeys(TypedDict):
     root_link: str
     joints: list[str]
     joint_kinds: list[JointKind]
+
+
+class TreeChainJson(_TreeChainKeys, total=False):
+    """The calibrated tree: its root link, and every joint of the targets' chains once (those shared by
+    several, e.g. a torso's, first), with their kinds; ``mimics``: those that follow another (as one chain's)."""
+
+    mimics: list[MimicJson]
 
 
 class TargetErrors(TypedDict):

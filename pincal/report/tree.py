@@ -10,9 +10,9 @@ from pincal._version import __version__
 from pincal.fit.metrics import ErrorSummary
 from pincal.fit.tree_calibration import TreeCalibration
 from pincal.model.tree import KinematicTree
-from pincal.report.document import REPORT_VERSION, identifiability_report, parameters_report
+from pincal.report.document import REPORT_VERSION, identifiability_report, mimics_json, parameters_report
 from pincal.report.model import PositionStats, Sha256, Sources, registration_pair
-from pincal.report.model_tree import TargetErrors, TargetJson, TreeReport
+from pincal.report.model_tree import TargetErrors, TargetJson, TreeChainJson, TreeReport
 
 __all__ = ["target_errors", "tree_report"]
 
@@ -43,8 +43,7 @@ def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: Kinemat
     return {
         "pincal_version": __version__, "report_version": REPORT_VERSION, "method": None, "level": result.level,
         "model": "joint placements", "sources": sources,
-        "chain": {"root_link": tree.targets[0].chain.root_link, "joints": list(tree.joint_names),
-                  "joint_kinds": [j.kind for j in tree.joints]},
+        "chain": _chain(tree),
         "targets": targets,
         "parameters": parameters_report(result),
         "identifiability": identifiability_report(result),
@@ -54,3 +53,13 @@ def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: Kinemat
         "noise": {"sigma_pos_mm": result.sigma_pos_m * 1000.0, "sigma_rot_deg": None},
         "notes": notes, "warnings": [], "urdf_sha256": digest[0], "xacro_args": digest[1],
     }
+
+
+def _chain(tree: KinematicTree) -> TreeChainJson:
+    """REPORT.json ``chain`` of a tree: its root link, its joints once with their kinds, those that follow another."""
+    out: TreeChainJson = {"root_link": tree.targets[0].chain.root_link, "joints": list(tree.joint_names),
+                          "joint_kinds": [j.kind for j in tree.joints]}
+    mimics = mimics_json(tree.joints)
+    if mimics:
+        out["mimics"] = mimics
+    return out

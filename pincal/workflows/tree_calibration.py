@@ -2,25 +2,27 @@
 (:func:`calibrate_tree_files`), the corrected URDF carrying every calibrated chain and a REPORT.json with
 each target's errors (:mod:`pincal.report.model_tree`).
 
-What the single chain's run adds and a tree's does not yet: ``--level auto`` and ``dh``, a known
-``--tool``, ``--coupling``, orientation columns, the plausibility checks and effects.yaml; each is refused
-with one line, never run differently. The commands that take no tree yet refuse several ``--tip-link``
-(:func:`refuse_several`) and a tree's REPORT.json (:func:`refuse_tree_report`).
+A gross misfit (:func:`pincal.fit.plausibility.gross_misfit` of every seen point's RMS error) withholds the
+corrected URDF unless ``--force``, as with one chain (:mod:`pincal.workflows.verdict`). What the single
+chain's run adds and a tree's does not yet: ``--level auto`` and ``dh``, a known ``--tool``,
+``--coupling``, orientation columns, the other plausibility checks and effects.yaml; each is refused with
+one line, never run differently.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 
 from pincal._version import __version__
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
+from pincal.fit.plausibility import gross_misfit, reach_m
 from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
 from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.corrected_urdf import corrected_origins
@@ -31,14 +33,14 @@ from pincal.model.urdf import write_urdf_with_origins
 from pincal.outputs import file_sha256
 from pincal.progress import Progress
 from pincal.report.document import write_report
-from pincal.report.model import Sources
+from pincal.report.model import Sources, findings_json
 from pincal.report.model_tree import TreeReport
 from pincal.report.tree import tree_report
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.settings import CalibrateSettings
-from pincal.workflows.verdict import RELOAD_TOLERANCE
+from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
 
-__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "refuse_several", "refuse_tree_report"]
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,8 @@ class TreeCalibrationRun:
         notes: the reader's notes and the fit's.
         seconds: the calibration's wall time [s].
         reload_error: the largest difference of any target's tool pose after reloading the written URDF [m, -].
+        withheld: the corrected URDF is not written (a gross misfit without ``--force``:
+            :mod:`pincal.workflows.verdict`); REPORT.json says so in ``warnings``.
     """
 
     result: TreeCalibration
@@ -59,24 +63,7 @@ class TreeCalibrationRun:
     notes: list[str]
     seconds: float
     reload_error: float
-
-
-def refuse_several(command: str, tip_links: Sequence[str] | str) -> str:
-    """The one ``--tip-link`` of a command that takes one chain; several are refused with one line."""
-    if isinstance(tip_links, str):
-        return tip_links
-    if len(tip_links) == 1:
-        return tip_links[0]
-    raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate is (pincal calibrate ... "
-                      "--tip-link LINK:POINTS --tip-link LINK:POINTS)")
-
-
-def refuse_tree_report(report: Mapping[str, Any], where: str, command: str) -> None:
-    """Refuse, with one line, a REPORT.json of several targets (``targets``) in a command that reads one chain's."""
-    if "targets" in report:
-        links = ", ".join(t["tip_link"] for t in report["targets"])
-        raise PincalError(f"{where}: a report of several --tip-link ({links}): not yet supported by {command}; "
-                          "its REPORT.json lists each target's errors")
+    withheld: bool = False
 
 
 def _refused(settings: CalibrateSettings) -> None:
@@ -112,21 +99,36 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
     comment = (f"Calibrated by pincal {__version__} (level {level}, {len(tree.targets)} targets) from {urdf.name} "
                f"and {', '.join(p.name for p in data_paths)}. Registration and targets: see the report.")
-    reload_error, digest = _write_urdf(urdf, out_urdf, tree, result, (comment, settings.xacro_args), data.q)
+    # every seen point's distance from the model, as the single chain's RMS point residual; the reach of the
+    # farthest tip link: the gross-misfit rule of pincal.workflows.verdict, its URDF withheld unless --force
+    rms = float(np.sqrt(np.nanmean(result.point_errors ** 2)))
+    gross = gross_misfit(rms, max(reach_m(t.chain, data.q[:, t.columns]) for t in tree.targets))
+    warnings, withheld = withholding([] if gross is None else [gross], settings.force)
+    reload_error, digest = _write_urdf(urdf, out_urdf, tree, result, (comment, settings.xacro_args), data.q,
+                                       keep=not withheld)
     sources: Sources = {"urdf": str(urdf),
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf)}
     notes = notes + list(result.notes)
+    if withheld:
+        sources["corrected_urdf_withheld"] = True  # the path names no file of this run
+        notes += withhold(out_urdf)
     report = tree_report(result, nominal, tree, sources, notes,
                          (digest, dict(xacro_arguments(settings.xacro_args))))
+    report["warnings"] = findings_json(warnings)
     write_report(report_path, report)
-    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error)
+    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error, withheld)
+
+
+class _Withheld(Exception):
+    """Raised by a withheld URDF's check once it passed: cancels the write (as pincal.workflows.verdict's)."""
 
 
 def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibration,
-                text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray) -> tuple[float, str]:
+                text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray, keep: bool = True) -> tuple[float, str]:
     """Write ``urdf`` with every target chain's calibrated joint origins (a joint shared by several chains has
-    the same placement in each) and return the reload check's largest difference and the file's SHA-256.
+    the same placement in each) and return the reload check's largest difference and the file's SHA-256;
+    ``keep`` False: checked and hashed but not put in place (a withheld URDF, ``out`` left as it was).
 
     Raises:
         CalibrationError: reloading the written file moves a target's tool beyond :data:`RELOAD_TOLERANCE`
@@ -151,7 +153,12 @@ def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibrat
             raise CalibrationError(f"{out}: reloading the written URDF moves a target by {checked[-1]:.3g} "
                                    f"(> {RELOAD_TOLERANCE:g}); not written; please report this as a bug")
         digest.append(file_sha256(written))
+        if not keep:
+            raise _Withheld
 
-    write_urdf_with_origins(urdf, out, origins, comment=comment, verify=verify, xacro_args=xacro_args)
+    try:
+        write_urdf_with_origins(urdf, out, origins, comment=comment, verify=verify, xacro_args=xacro_args)
+    except _Withheld:
+        pass
     return checked[-1], digest[-1]
 

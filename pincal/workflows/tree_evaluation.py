@@ -40,14 +40,15 @@ class TreeEvaluation:
     """Outcome of :func:`evaluate_tree_files`.
 
     Attributes:
-        targets: each target's link and its points' errors on the evaluated rows (:class:`TargetErrors`).
+        targets: each target's link and its points' errors on the evaluated rows (:class:`TargetErrors`, of
+            its points seen in some row; None: no point of it seen).
         rows: how many rows were evaluated.
         registrations: how each session of the data was registered (``session: source``).
         max_mm: the largest error of any point [mm] (``--max-pos-mm`` judges it).
         notes: the reader's notes and what the user should know.
     """
 
-    targets: tuple[tuple[str, TargetErrors], ...]
+    targets: tuple[tuple[str, TargetErrors | None], ...]
     rows: int
     registrations: tuple[str, ...]
     max_mm: float
@@ -83,8 +84,16 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     data = data.select(data.roles != "cpa")
     names, reported = value_at(document, "sessions", report_path, _sessions)
     rows = tree_rows(tree, data)
+    if not rows.seen.any():
+        raise PincalError(f"{data_path}: no measured point in a row that is not role=cpa ({data.n_rows} such rows); "
+                          "nothing to evaluate: give rows where a target's point is measured")
     world = tree.target_points(data.q, [points for _, points in targets])  # (K, P, 3) [m]
     if settings.new_session:
+        for s, name in enumerate(data.session_names):  # a rigid registration needs three points (Arun et al. 1987)
+            if (count := int(rows.seen[rows.sessions == s].sum())) < 3:
+                raise PincalError(f"{data_path}: session '{name}' has {count} measured point(s) in rows that are not "
+                                  "role=cpa; --new-session registers each session on at least 3: leave its rows "
+                                  "out, or evaluate without --new-session")
         registrations = [register_points(world[rows.sessions == s][rows.seen[rows.sessions == s]],
                                          rows.points[rows.sessions == s][rows.seen[rows.sessions == s]])
                          for s in range(len(data.session_names))]
@@ -97,8 +106,16 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     tau = np.stack([r.translation for r in registrations])[sessions]
     sensed = np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :]
     errors = np.linalg.norm(np.where(rows.seen[..., None], sensed - rows.points, np.nan), axis=2)  # (K, P) [m]
-    per_target = tuple((spec.link, target_errors(errors, spec.points)) for spec, _ in targets)
-    return TreeEvaluation(per_target, data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
+    seen = np.any(rows.seen, axis=0)  # (P,) each point seen in some row
+    per_target: list[tuple[str, TargetErrors | None]] = []
+    for spec, _ in targets:
+        numbers = tuple(p for p in spec.points if seen[p - 1])
+        per_target.append((spec.link, target_errors(errors, numbers) if numbers else None))
+        if numbers and numbers != spec.points:
+            missing = ", ".join(str(p) for p in spec.points if p not in numbers)
+            notes.append(f"{data_path}: point(s) {missing} of {spec.link} not seen in any row; its errors are those "
+                         f"of point(s) {', '.join(map(str, numbers))}")
+    return TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
                           tuple(read_notes + notes))
 
 
