@@ -244,3 +244,18 @@ def test_one_tip_link_with_points_says_it_takes_a_link_only(files, capsys):
     assert code == 2
     assert "a single --tip-link takes LINK only (LINK:POINTS is for several --tip-link): --tip-link left_marker" in \
         capsys.readouterr().err
+
+
+def test_validation_rows_are_left_out_of_the_fit_with_a_note(files, tmp_path):
+    """Rows with role 'validation' are not calibrated on; the report says how many and how to judge them."""
+    folder, urdf, data, *_ = files
+    lines = data.read_text().splitlines()
+    rows = [lines[0] + ",role"] + [f"{line},{'validation' if k >= 35 else ''}" for k, line in enumerate(lines[1:])]
+    split = tmp_path / "split.csv"
+    split.write_text("\n".join(rows) + "\n")
+    out, report = tmp_path / "out.urdf", tmp_path / "REPORT.json"
+    assert main(["calibrate", str(urdf), str(split), *TARGETS, "--select", "all", "--out", str(out),
+                 "--report", str(report), "--quiet"]) == 0
+    document = json.loads(report.read_text())
+    assert [s["rows"] for s in document["sessions"]] == [35]
+    assert any(note.startswith("5 row(s) with role 'validation' are not in the fit") for note in document["notes"])

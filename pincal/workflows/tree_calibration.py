@@ -110,6 +110,10 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf)}
     notes = notes + list(result.notes)
+    held = int(np.sum(data.roles == "validation"))
+    if held:  # not in the fit, and not judged here: evaluate gives their errors per target
+        notes.append(f"{held} row(s) with role 'validation' are not in the fit; pincal evaluate {out_urdf} "
+                     f"{report_path} with their file gives each target's errors on them")
     if withheld:
         sources["corrected_urdf_withheld"] = True  # the path names no file of this run
         notes += withhold(out_urdf)
