@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
+import yaml
 from conftest import assert_close, numeric_jacobian
 
 from pincal.cli.commands import main
@@ -326,4 +327,17 @@ def test_a_coupling_that_follows_is_recorded_and_evaluated_as_it_was_decided(pas
         errors.append(evaluated["position"]["rms_mm"])
     assert errors[0] < NOISE_FREE_MM and errors[1] == pytest.approx(errors[0], abs=1e-12)
     capsys.readouterr()
+
+
+def test_effects_yaml_gives_a_follower_from_its_driver(passive_a3):
+    from pincal.report.effects_file import effects_path, read_effects_file
+
+    _, folder = passive_a3
+    document = yaml.safe_load(effects_path(folder / "c.urdf").read_text(encoding="utf-8"))
+    (entry,) = document["couplings"]
+    assert entry["follows"] is True and entry["equation"].startswith("q[A3] = factor x r[A2] (eq M1: A3 has no "
+                                                                     "reading")
+    assert any(line.startswith("an entry of couplings with follows") for line in document["apply"])
+    assert read_effects_file(effects_path(folder / "c.urdf")).couplings == (
+        ReadingCoupling("A3", 0.5, "A2", follows=True),)
 
