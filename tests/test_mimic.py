@@ -341,3 +341,18 @@ def test_effects_yaml_gives_a_follower_from_its_driver(passive_a3):
     assert read_effects_file(effects_path(folder / "c.urdf")).couplings == (
         ReadingCoupling("A3", 0.5, "A2", follows=True),)
 
+
+def test_plan_takes_a_follower_from_the_files_and_gives_it_no_column(passive_a3, tmp_path):
+    """plan --coupling A3=0.5*A2: a candidate file without A3's column is read (A3 from A2), and so are drawn
+    candidates beside --existing rows without it; PLAN.csv has no A3 column (the controller has no reading),
+    so calibrate on its rows decides the same; PLAN.json records follows."""
+    urdf, folder = passive_a3
+    common = ["plan", str(urdf), "--tip-link", "flange", "--count", "9", "--coupling", "A3=0.5*A2", "--quiet"]
+    for name, source in (("c", ["--candidates", str(folder / "validation.csv")]),
+                         ("e", ["--existing", str(folder / "calibration.csv"), "--sample", "100"])):
+        assert main([*common, *source, "--out", str(tmp_path / f"{name}.csv"),
+                     "--report", str(tmp_path / f"{name}.json")]) == 0
+        header = (tmp_path / f"{name}.csv").read_text(encoding="utf-8").splitlines()[0]
+        assert header == "A1,A2,A4,A5,A6,priority,candidate"
+        sources = json.loads((tmp_path / f"{name}.json").read_text(encoding="utf-8"))["sources"]
+        assert sources["couplings"] == [{"joint": "A3", "factor": 0.5, "driver": "A2", "follows": True}]
