@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -291,6 +292,17 @@ def test_diagnose_names_a_wrong_multiplier(cell, tmp_path, capsys):
     assert "couplings" not in document
     assert ('A3 follows A2 by -0.45, not by its <mimic> multiplier -0.5: set multiplier="-0.45"'
             in " ".join(document["diagnosis"]["notes"]))
+    # the same tie given by --coupling on the URDF without the tag: the flag is named, not the URDF (its 0.3 is
+    # then A3's zero, 17 deg against the 0.5 deg prior scale, so the factor fitted is not -0.45 here: the words only)
+    plain = cell.parent / "plain.urdf"
+    plain.write_text((cell / "arm.urdf").read_text(encoding="utf-8").replace(MIMIC, ""), encoding="utf-8")
+    assert main(["diagnose", str(plain), str(tmp_path / "calibration.csv"), "--validation",
+                 str(tmp_path / "validation.csv"), "--tip-link", "flange", "--quiet", "--coupling", "A3=-0.5*A2",
+                 "--out", str(tmp_path / "f.urdf"), "--report", str(tmp_path / "f.json")]) == 0
+    document = json.loads((tmp_path / "f.json").read_text(encoding="utf-8"))
+    assert document["couplings"] == [{"joint": "A3", "factor": -0.5, "driver": "A2", "follows": True}]
+    assert re.search(r"A3 follows A2 by (-[0-9.]+), not by its --coupling factor -0.5: give --coupling A3=\1\*A2",
+                     " ".join(document["diagnosis"]["notes"]))
     capsys.readouterr()
 
 
