@@ -10,17 +10,19 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
 import pytest
+import yaml
 from conftest import assert_close, numeric_jacobian
 
 from pincal.cli.commands import main
 from pincal.errors import MeasurementError, ModelError
-from pincal.measurements.couplings import parse_coupling
-from pincal.measurements.csv_v1 import read_joint_columns, read_measurements, write_measurements
+from pincal.measurements.couplings import ReadingCoupling, decide_followers, parse_coupling
+from pincal.measurements.csv_v1 import read_joint_columns, read_measurements, read_table, write_measurements
 from pincal.measurements.data import JointMimic
 from pincal.measurements.mimics import last_digit
 from pincal.model.chain import KinematicChain
@@ -49,9 +51,16 @@ def cell(industrial_arm_urdf, tmp_path_factory):
     folder = tmp_path_factory.mktemp("mimic")
     urdf = folder / "arm.urdf"
     urdf.write_text(_with_mimic(industrial_arm_urdf.read_text(encoding="utf-8"), A3_LIMIT, MIMIC), encoding="utf-8")
+    _measure(urdf, folder, 3)
+    return folder
+
+
+def _measure(urdf, folder, seed: int) -> None:
+    """Noise-free 6D rows of the chain of ``urdf`` to 'flange' (40 calibration, 20 validation postures), written
+    with (``full_*``) and without A3's column."""
     chain = KinematicChain.from_urdf(urdf, "flange")
     params = PlacementErrors(chain)
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     truth = rng.normal(0.0, 3e-4, params.size)
     keep = [0, 1, 3, 4, 5]
     for count, role in ((40, "calibration"), (20, "validation")):
@@ -60,7 +69,6 @@ def cell(industrial_arm_urdf, tmp_path_factory):
         write_measurements(folder / f"full_{role}.csv", rows)
         write_measurements(folder / f"{role}.csv", replace(rows, joint_names=tuple(rows.joint_names[i] for i in keep),
                                                            q=rows.q[:, keep]))
-    return folder
 
 
 def test_the_chain_reads_the_tag_and_follows_it(cell):
@@ -113,7 +121,10 @@ def test_a_driver_off_the_chain_gives_the_column(industrial_arm_urdf, tmp_path):
                                                r"\(q = 2 x B \+ 0\); add a column 'B' \(or 'A5'\)"):
         read_measurements(tmp_path / "n.csv", chain.joint_specs)
     plain = KinematicChain.from_urdf(industrial_arm_urdf, "flange")
-    data, _ = read_measurements(tmp_path / "n.csv", plain.joint_specs, [parse_coupling("A5=-1.5*A4")])
+    columns = [read_table(tmp_path / "n.csv").names]
+    decided = decide_followers([parse_coupling("A5=-1.5*A4")], plain.joint_names, columns)
+    assert decided == (ReadingCoupling("A5", -1.5, "A4", follows=True),)
+    data, _ = read_measurements(tmp_path / "n.csv", plain.joint_specs, decided)
     assert data.q[0, 4] == -1.5 * 0.4 and np.array_equal(data.q[0, [0, 1, 2, 3, 5]], [0.1, 0.2, 0.3, 0.4, 0.6])
     with pytest.raises(MeasurementError, match="--coupling A9=1\\*A2: no joint 'A9' on the chain"):
         read_measurements(tmp_path / "b.csv", chain.joint_specs, [parse_coupling("A9=1*A2")])  # still checked
@@ -288,4 +299,79 @@ def test_diagnose_names_a_wrong_multiplier(cell, tmp_path, capsys):
     assert "couplings" not in document
     assert ('A3 follows A2 by -0.45, not by its <mimic> multiplier -0.5: set multiplier="-0.45"'
             in " ".join(document["diagnosis"]["notes"]))
+    # the same tie given by --coupling on the URDF without the tag: the flag is named, not the URDF (its 0.3 is
+    # then A3's zero, 17 deg against the 0.5 deg prior scale, so the factor fitted is not -0.45 here: the words only)
+    plain = cell.parent / "plain.urdf"
+    plain.write_text((cell / "arm.urdf").read_text(encoding="utf-8").replace(MIMIC, ""), encoding="utf-8")
+    assert main(["diagnose", str(plain), str(tmp_path / "calibration.csv"), "--validation",
+                 str(tmp_path / "validation.csv"), "--tip-link", "flange", "--quiet", "--coupling", "A3=-0.5*A2",
+                 "--out", str(tmp_path / "f.urdf"), "--report", str(tmp_path / "f.json")]) == 0
+    document = json.loads((tmp_path / "f.json").read_text(encoding="utf-8"))
+    assert document["couplings"] == [{"joint": "A3", "factor": -0.5, "driver": "A2", "follows": True}]
+    assert re.search(r"A3 follows A2 by (-[0-9.]+), not by its --coupling factor -0.5: give --coupling A3=\1\*A2",
+                     " ".join(document["diagnosis"]["notes"]))
     capsys.readouterr()
+
+
+@pytest.fixture(scope="module")
+def passive_a3(industrial_arm_urdf, tmp_path_factory):
+    """The plain arm whose A3 is passive and follows A2 by 0.5 (no URDF tag: ``--coupling A3=0.5*A2``), measured
+    noise-free: 40 calibration and 20 held-out postures, the files without A3's column and (``full_*``) with
+    its true angle."""
+    folder = tmp_path_factory.mktemp("passive")
+    simulated = folder / "tied.urdf"  # only to draw the tied postures and measure them
+    simulated.write_text(_with_mimic(industrial_arm_urdf.read_text(encoding="utf-8"), A3_LIMIT,
+                                     '<mimic joint="A2" multiplier="0.5"/>'), encoding="utf-8")
+    _measure(simulated, folder, 5)
+    assert main(["calibrate", str(industrial_arm_urdf), str(folder / "calibration.csv"), "--tip-link", "flange",
+                 "--coupling", "A3=0.5*A2", "--quiet", "--out", str(folder / "c.urdf"),
+                 "--report", str(folder / "c.json")]) == 0
+    return industrial_arm_urdf, folder
+
+
+def test_a_coupling_that_follows_is_recorded_and_evaluated_as_it_was_decided(passive_a3, capsys):
+    """--coupling A3=0.5*A2 on rows without A3's column: A3 follows A2 for the whole run, REPORT.json says so
+    (couplings[].follows, chain.mimics), and evaluate computes A3 from A2 whether the evaluated file has A3's
+    column (checked against eq M1) or not: the same errors, at the round-off."""
+    _, folder = passive_a3
+    report = json.loads((folder / "c.json").read_text(encoding="utf-8"))
+    assert report["couplings"] == [{"joint": "A3", "factor": 0.5, "driver": "A2", "follows": True}]
+    assert report["chain"]["mimics"] == [{"joint": "A3", "driver": "A2", "multiplier": 0.5, "offset": 0.0}]
+    errors = []
+    for rows in ("validation.csv", "full_validation.csv"):
+        assert main(["evaluate", str(folder / "c.urdf"), str(folder / "c.json"), str(folder / rows),
+                     "--json", str(folder / f"e_{rows}.json")]) == 0
+        evaluated = json.loads((folder / f"e_{rows}.json").read_text(encoding="utf-8"))
+        assert evaluated["warnings"] == []
+        errors.append(evaluated["position"]["rms_mm"])
+    assert errors[0] < NOISE_FREE_MM and errors[1] == pytest.approx(errors[0], abs=1e-12)
+    capsys.readouterr()
+
+
+def test_effects_yaml_gives_a_follower_from_its_driver(passive_a3):
+    from pincal.report.effects_file import effects_path, read_effects_file
+
+    _, folder = passive_a3
+    document = yaml.safe_load(effects_path(folder / "c.urdf").read_text(encoding="utf-8"))
+    (entry,) = document["couplings"]
+    assert entry["follows"] is True and entry["equation"].startswith("q[A3] = factor x r[A2] (eq M1: A3 has no "
+                                                                     "reading")
+    assert any(line.startswith("an entry of couplings with follows") for line in document["apply"])
+    assert read_effects_file(effects_path(folder / "c.urdf")).couplings == (
+        ReadingCoupling("A3", 0.5, "A2", follows=True),)
+
+
+def test_plan_takes_a_follower_from_the_files_and_gives_it_no_column(passive_a3, tmp_path):
+    """plan --coupling A3=0.5*A2: a candidate file without A3's column is read (A3 from A2), and so are drawn
+    candidates beside --existing rows without it; PLAN.csv has no A3 column (the controller has no reading),
+    so calibrate on its rows decides the same; PLAN.json records follows."""
+    urdf, folder = passive_a3
+    common = ["plan", str(urdf), "--tip-link", "flange", "--count", "9", "--coupling", "A3=0.5*A2", "--quiet"]
+    for name, source in (("c", ["--candidates", str(folder / "validation.csv")]),
+                         ("e", ["--existing", str(folder / "calibration.csv"), "--sample", "100"])):
+        assert main([*common, *source, "--out", str(tmp_path / f"{name}.csv"),
+                     "--report", str(tmp_path / f"{name}.json")]) == 0
+        header = (tmp_path / f"{name}.csv").read_text(encoding="utf-8").splitlines()[0]
+        assert header == "A1,A2,A4,A5,A6,priority,candidate"
+        sources = json.loads((tmp_path / f"{name}.json").read_text(encoding="utf-8"))["sources"]
+        assert sources["couplings"] == [{"joint": "A3", "factor": 0.5, "driver": "A2", "follows": True}]

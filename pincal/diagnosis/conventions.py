@@ -82,13 +82,18 @@ def followers_of(chain: KinematicChain) -> tuple[str, ...]:
     return tuple(j.name for j in chain.joints if j.mimic is not None)
 
 
-def mimic_words(effect: Effect, value: float, chain: KinematicChain) -> str | None:
+def mimic_words(effect: Effect, value: float, chain: KinematicChain, flagged: Collection[str] = ()) -> str | None:
     """What an adopted coupling c of a joint that follows its driver (eq M1 of
     :mod:`pincal.measurements.mimics`) says: the joint moves by (m + c) x the driver, so the URDF's
-    multiplier m is off by c (shift = c · q_driver); None for any other effect."""
+    multiplier m (for a joint of ``flagged``, the factor of the ``--coupling`` that made it follow) is off by c
+    (shift = c · q_driver); None for any other effect."""
     mimic = next((j.mimic for j in chain.joints if j.name == effect.joint), None)
     if effect.type != "coupling" or mimic is None or mimic.driver != effect.driver:
         return None
+    if effect.joint in flagged:
+        return (f"{effect.joint} follows {effect.driver} by {mimic.multiplier + value:.4g}, not by its --coupling "
+                f"factor {mimic.multiplier:g}: give --coupling {effect.joint}={mimic.multiplier + value:.4g}*"
+                f"{effect.driver}, and the coupling has nothing left to correct")
     return (f"{effect.joint} follows {effect.driver} by {mimic.multiplier + value:.4g}, not by its <mimic> multiplier "
             f"{mimic.multiplier:g}: set multiplier=\"{mimic.multiplier + value:.4g}\" in the URDF's <mimic> of "
             f"{effect.joint}, and the coupling has nothing left to correct")

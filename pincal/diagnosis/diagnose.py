@@ -312,7 +312,8 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
                       and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
     search = Search(chain, calibration, rows, heldout, tuple(e for e in pool if e not in untestable),
                     tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_sigma_pos_m, trial,
-                    corrected, conditions, reference, unknown)
+                    corrected, conditions, reference, unknown,
+                    frozenset(c.joint for c in settings.couplings if c.follows))
     objective, solution = model.fit([], calibration.solution, [])
     return search, State(model, held_inputs, objective, solution,
                          bic(solution.residual, solution.x.size, n_prior_rows(objective)), steps=earlier)
@@ -362,7 +363,7 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
     effects = tuple(
         (e, final_solution.x[sl], final_std[sl]) for e, sl in zip(adopted, current_objective.effect_slices)
     )
-    notes += [words for e, v, _ in effects if (words := mimic_words(e, float(v[0]), chain)) is not None]
+    notes += [words for e, v, _ in effects if (words := mimic_words(e, float(v[0]), chain, search.flagged)) is not None]
     freedom = residual_freedom(current_objective, final_solution)
     unexplained = remaining_structure(model, adopted, current_objective, final_solution, chain, freedom)
     if unexplained is None and not testable(freedom, 1 + 2 * len(HARMONICS), EVIDENCE):

@@ -121,7 +121,8 @@ class Search:
     gravity torque drives), the row-weight column, the payload [kg] at ``point`` (the target's mean, m), the
     stated position noise [m], ``trial``: the geometry calibrated again on rows corrected by a coupling (None:
     a coupling stays an effect), the joints already corrected, the row conditions and mean row time [s], and
-    whether the masses are unknown (compliances follow mass moments, :mod:`pincal.diagnosis.moment_candidates`)."""
+    whether the masses are unknown (compliances follow mass moments, :mod:`pincal.diagnosis.moment_candidates`);
+    ``flagged``: the joints a ``--coupling`` made follow their driver (not a URDF ``<mimic>``)."""
 
     chain: KinematicChain
     calibration: ChainCalibration
@@ -138,6 +139,7 @@ class Search:
     conditions: ConditionSearch
     time_reference: float | None
     masses_unknown: bool = False
+    flagged: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)

@@ -28,27 +28,36 @@ from pincal.errors import MeasurementError, PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 
 __all__ = ["CouplingJson", "ReadingCoupling", "apply_couplings", "check_couplings", "corrected_angles",
-           "couplings_from_report", "parse_coupling", "readings_of"]
+           "couplings_from_report", "decide_followers", "parse_coupling", "reading_couplings", "readings_of"]
 
 _FORM = re.compile(r"^\s*([^=\s]+)\s*=\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*\*\s*([^=*\s]+)\s*$")
 
 
-class CouplingJson(TypedDict):
-    """A joint reading taken against another, as REPORT.json and PLAN.json give it (``couplings``):
-    ``joint``'s reading includes ``factor`` × ``driver``'s."""
-
+class _CouplingKeys(TypedDict):
     joint: str
     factor: float
     driver: str
+
+
+class CouplingJson(_CouplingKeys, total=False):
+    """A joint reading taken against another, as REPORT.json and PLAN.json give it (``couplings``):
+    ``joint``'s reading includes ``factor`` × ``driver``'s; ``follows`` (true only, absent otherwise): the
+    joint has no reading and follows its driver, q = factor × q_driver (eq M1 of
+    :mod:`pincal.measurements.mimics`, offset 0), as the run that wrote it decided."""
+
+    follows: bool
 
 
 @dataclass(frozen=True)
 class ReadingCoupling:
-    """Joint ``joint``'s reading includes ``factor`` × joint ``driver``'s reading (eq C1)."""
+    """Joint ``joint``'s reading includes ``factor`` × joint ``driver``'s reading (eq C1); with ``follows``,
+    ``joint`` has no reading at all and its angle is ``factor`` × ``driver``'s (eq M1, offset 0): decided
+    once per run, where the calibration data has no column for the joint (:func:`decide_followers`)."""
 
     joint: str
     factor: float
     driver: str
+    follows: bool = False
 
     def __post_init__(self) -> None:
         """Raises ValueError: a factor that is not a finite non-zero number, or a joint read against itself
@@ -63,7 +72,10 @@ class ReadingCoupling:
 
     def as_dict(self) -> CouplingJson:
         """REPORT.json and PLAN.json ``couplings`` entry."""
-        return {"joint": self.joint, "factor": self.factor, "driver": self.driver}
+        out: CouplingJson = {"joint": self.joint, "factor": self.factor, "driver": self.driver}
+        if self.follows:
+            out["follows"] = True
+        return out
 
 
 def parse_coupling(text: str) -> ReadingCoupling:
@@ -93,10 +105,30 @@ def couplings_from_report(entries: object, where: str) -> tuple[ReadingCoupling,
     try:
         if not isinstance(entries, list) or not all(isinstance(e, Mapping) for e in entries):
             raise TypeError("not a list of objects")
-        return tuple(ReadingCoupling(str(e["joint"]), float(e["factor"]), str(e["driver"])) for e in entries)
+        if not all(isinstance(e.get("follows", False), bool) for e in entries):
+            raise TypeError("follows is not true or false")
+        return tuple(ReadingCoupling(str(e["joint"]), float(e["factor"]), str(e["driver"]), e.get("follows", False))
+                     for e in entries)
     except (KeyError, TypeError, ValueError):
-        raise PincalError(f"{where}: couplings must be a list of {{joint, factor, driver}} with two different "
-                          "joints and a non-zero factor; rewrite it with pincal calibrate or diagnose") from None
+        raise PincalError(f"{where}: couplings must be a list of {{joint, factor, driver[, follows]}} with two "
+                          "different joints and a non-zero factor; rewrite it with pincal calibrate or diagnose"
+                          ) from None
+
+
+def decide_followers(couplings: Sequence[ReadingCoupling], joint_names: Iterable[str],
+                     columns: Iterable[Iterable[str]]) -> tuple[ReadingCoupling, ...]:
+    """``couplings`` with ``follows`` set on each whose joint is on the chain (``joint_names``) and lacks a
+    column in one of the files read (``columns``: each file's column names): that joint has no reading, it
+    follows its driver (eq M1, offset 0). Decided once, from the run's calibration data; every later file
+    (held-out rows, ``evaluate``'s, effects.yaml) uses what was decided, a column of it checked to eq M1."""
+    names, files = set(joint_names), [set(c) for c in columns]
+    return tuple(replace(c, follows=True) if c.follows or (c.joint in names and any(c.joint not in f for f in files))
+                 else c for c in couplings)
+
+
+def reading_couplings(couplings: Sequence[ReadingCoupling]) -> tuple[ReadingCoupling, ...]:
+    """The couplings of eq C1: those of a joint with a reading (not ``follows``)."""
+    return tuple(c for c in couplings if not c.follows)
 
 
 def check_couplings(couplings: Sequence[ReadingCoupling], joint_names: Iterable[str]) -> None:
@@ -118,11 +150,12 @@ def check_couplings(couplings: Sequence[ReadingCoupling], joint_names: Iterable[
 
 
 def _matrix(couplings: Sequence[ReadingCoupling], joint_names: Sequence[str]) -> np.ndarray:
-    """M of eq C1 for rows: actual = readings @ M.T (N, N)."""
+    """M of eq C1 for rows: actual = readings @ M.T (N, N); a follower's (``follows``) angle is eq M1's,
+    computed where it is read (:mod:`pincal.measurements.mimics`), not a row of M."""
     check_couplings(couplings, joint_names)
     names = list(joint_names)
     matrix = np.eye(len(names))
-    for c in couplings:
+    for c in reading_couplings(couplings):
         matrix[names.index(c.joint), names.index(c.driver)] -= c.factor
     return matrix
 
@@ -130,18 +163,19 @@ def _matrix(couplings: Sequence[ReadingCoupling], joint_names: Sequence[str]) ->
 def corrected_angles(readings: np.ndarray, couplings: Sequence[ReadingCoupling],
                      joint_names: Sequence[str]) -> np.ndarray:
     """Eq C1 on joint readings (K, N) in the order of ``joint_names``: the actual angles [rad or m]."""
-    return np.asarray(readings, dtype=float) if not couplings else readings @ _matrix(couplings, joint_names).T
+    return np.asarray(readings, dtype=float) if not reading_couplings(couplings) \
+        else readings @ _matrix(couplings, joint_names).T
 
 
 def readings_of(angles: np.ndarray, couplings: Sequence[ReadingCoupling], joint_names: Sequence[str]) -> np.ndarray:
     """The inverse of eq C1: what the controller reads (and is commanded in) at actual angles (K, N)."""
-    if not couplings:
+    if not reading_couplings(couplings):
         return np.asarray(angles, dtype=float)
     return np.linalg.solve(_matrix(couplings, joint_names), np.asarray(angles, dtype=float).T).T
 
 
 def apply_couplings(data: MeasurementSet, couplings: Sequence[ReadingCoupling]) -> MeasurementSet:
     """The rows of ``data`` with eq C1 applied to their joint readings (``data`` itself unchanged)."""
-    if not couplings:
+    if not reading_couplings(couplings):
         return data
     return replace(data, q=corrected_angles(data.q, couplings, data.joint_names))

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import MeasurementError, PincalError
-from pincal.measurements.couplings import ReadingCoupling, corrected_angles
+from pincal.measurements.couplings import ReadingCoupling, corrected_angles, reading_couplings
 from pincal.measurements.data import (
     DEFAULT_ROLE,
     JOINT_SANITY,
@@ -419,7 +419,7 @@ def read_measurements(
     """
     table = read_table(path)
     joint_names = [j.name for j in joints]
-    read_against = [c for c in couplings if c.joint in table.names or c.joint not in joint_names]  # else eq M1
+    read_against = reading_couplings(couplings)  # the others follow their driver (eq M1)
     q = corrected_angles(_joint_matrix(table, joints, other_branches, couplings), read_against, joint_names)
     point_names = _point_columns(table, joint_names)
     points = table.matrix([c for triplet in point_names for c in triplet], math.nan if occlusion else None)

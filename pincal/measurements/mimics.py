@@ -8,9 +8,10 @@ A URDF ``<mimic joint="D" multiplier="m" offset="o">`` on joint J says J moves w
 angle is computed from D's column, D on the chain or off it (another branch's joint the file holds).
 A column for J, if present, is checked against eq M1 row by row and the computed value is used, so a
 file with a consistent column gives the same numbers as one without. ``--coupling J=C*D`` naming a
-joint J the file has no column for means the same: J follows D with m = C, o = 0 (a joint with a
-column is a reading taken against D, eq C1 of :mod:`pincal.measurements.couplings`). The driver is
-taken as read, as every driver of eq C1 is.
+joint J the run's calibration data has no column for means the same: J follows D with m = C, o = 0
+(:func:`pincal.measurements.couplings.decide_followers`, recorded as ``couplings[].follows``; a joint
+with a column is a reading taken against D, eq C1 of :mod:`pincal.measurements.couplings`). The driver
+is taken as read, as every driver of eq C1 is.
 
 The check's tolerance is the rounding of the cells themselves: half a unit in the last digit printed
 in J's cell, plus |m| times that of D's cell (what eq M1 carries of it), plus a few double-precision
@@ -32,7 +33,7 @@ from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.couplings import ReadingCoupling
 from pincal.measurements.data import JointMimic, JointSpec
 
-__all__ = ["ROUNDING_STEPS", "followers", "follower_angles", "last_digit"]
+__all__ = ["ROUNDING_STEPS", "coupling_mimic", "followers", "follower_angles", "last_digit"]
 
 #: Double-precision rounding steps allowed in eq M1 beside the cells' own rounding: one product, one
 #: sum and the two decimal-to-binary conversions, each at most half an ulp (IEEE 754).
@@ -70,10 +71,11 @@ def last_digit(text: str) -> float:
     return 10.0 ** (int(match[2] or 0) - len(match[1] or ""))
 
 
-def followers(joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling], columns: Sequence[str]
-              ) -> dict[str, JointMimic]:
-    """The joints of ``joints`` whose angle comes from eq M1: each with a URDF ``<mimic>``, and each a
-    ``--coupling`` names, of ``joints``, that has no column in ``columns``.
+def followers(joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling]) -> dict[str, JointMimic]:
+    """The joints of ``joints`` whose angle comes from eq M1: each with a URDF ``<mimic>`` (or one a run put on
+    the chain, :meth:`pincal.model.chain.KinematicChain.follow`), and each a ``--coupling`` the run decided
+    ``follows`` (:func:`pincal.measurements.couplings.decide_followers`), of ``joints``: decided once per
+    run, never again by a file's columns.
 
     Raises:
         MeasurementError: a ``--coupling`` on a joint the URDF already makes follow another.
@@ -81,14 +83,19 @@ def followers(joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling],
     out = {j.name: j.mimic for j in joints if j.mimic is not None}
     for coupling in couplings:
         mimic = out.get(coupling.joint)
-        if mimic is not None:
+        if mimic is not None and not (coupling.follows and mimic == coupling_mimic(coupling)):
             raise MeasurementError(
                 f"--coupling {coupling.label}: joint '{coupling.joint}' follows '{mimic.driver}' by the URDF's "
                 f"<mimic> (multiplier {mimic.multiplier:g}, offset {mimic.offset:g}); drop the flag, or the "
                 "<mimic> tag to calibrate the joint as read")
-        if coupling.joint not in columns and any(j.name == coupling.joint for j in joints):
-            out[coupling.joint] = JointMimic(coupling.driver, coupling.factor, 0.0)
+        if coupling.follows and any(j.name == coupling.joint for j in joints):
+            out[coupling.joint] = coupling_mimic(coupling)
     return out
+
+
+def coupling_mimic(coupling: ReadingCoupling) -> JointMimic:
+    """Eq M1 of a ``--coupling J=C*D`` on a joint without a reading: J follows D with m = C, o = 0."""
+    return JointMimic(coupling.driver, coupling.factor, 0.0)
 
 
 def follower_angles(table: _Table, joints: Sequence[JointSpec], couplings: Sequence[ReadingCoupling] = ()
@@ -102,7 +109,7 @@ def follower_angles(table: _Table, joints: Sequence[JointSpec], couplings: Seque
             and the column to add), a driver that follows another joint itself, or a follower's column
             that differs from eq M1 by more than the cells' rounding (naming the line and column).
     """
-    mimics = followers(joints, couplings, table.names)
+    mimics = followers(joints, couplings)
     out: dict[str, np.ndarray] = {}
     for name, mimic in mimics.items():
         if mimic.driver in mimics:

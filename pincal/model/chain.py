@@ -16,14 +16,16 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import ModelError, did_you_mean
+from pincal.measurements.couplings import ReadingCoupling
 from pincal.measurements.data import JointMimic, JointSpec
+from pincal.measurements.mimics import followers
 from pincal.model.description import RobotDescription, read_description
 from pincal.model.urdf_elements import joint_mimics
 
@@ -270,6 +272,17 @@ class KinematicChain:
         finally:
             self.set_placements(saved)
             self._tool = saved_tool
+
+    def follow(self, couplings: Sequence[ReadingCoupling]) -> None:
+        """Make each ``--coupling`` the run decided ``follows`` a joint of the chain that follows its driver
+        (eq M1, offset 0; :func:`pincal.measurements.mimics.followers`), as a URDF ``<mimic>`` would, for
+        the whole run: its readers, its residuals (:meth:`followed_shifts`) and REPORT.json's ``chain.mimics``.
+
+        Raises:
+            MeasurementError: a ``--coupling`` on a joint the URDF already makes follow another.
+        """
+        mimics = followers(self.joint_specs, couplings)
+        self.joints = tuple(replace(j, mimic=mimics.get(j.name)) for j in self.joints)
 
     # --- kinematics -----------------------------------------------------
 

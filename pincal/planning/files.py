@@ -221,10 +221,13 @@ def _finite(value):
     return value
 
 
-def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: np.ndarray) -> str:
+def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: np.ndarray,
+                   unread: Sequence[str] = ()) -> str:
     """PLAN.csv: joint columns, ``priority`` and ``candidate``, one row per configuration in visiting order; a
     joint the chain's joints follow from off the chain (URDF ``<mimic>``, eq M1) has a column after the chain's,
-    the value the controller commands: (q_follower − offset) / multiplier.
+    the value the controller commands: (q_follower − offset) / multiplier. ``unread``: chain joints without
+    a reading (a ``--coupling`` that ``follows``), given no column: the controller has none for them, and a
+    file without the column is what makes calibrate decide they follow.
 
     Returns:
         The SHA-256 (hex) of the bytes written, for PLAN.json's ``plan_csv_sha256``.
@@ -237,10 +240,11 @@ def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: 
     try:
         with replacing(path, "w", newline="", verify=lambda written: digest.append(file_sha256(written))) as handle:
             writer = csv.writer(handle, lineterminator="\n")
-            writer.writerow([*chain.joint_names, *drivers, "priority", "candidate"])
+            kept = [n for n, name in enumerate(chain.joint_names) if name not in unread]
+            writer.writerow([*(chain.joint_names[n] for n in kept), *drivers, "priority", "candidate"])
             for q, rank, index in zip(plan.q, plan.priority, plan.candidates):
                 commanded = [repr(float((q[i] - mimic.offset) / mimic.multiplier)) for i, mimic in drivers.values()]
-                writer.writerow([*(repr(float(v)) for v in q), *commanded, int(rank), int(labels[index])])
+                writer.writerow([*(repr(float(q[n])) for n in kept), *commanded, int(rank), int(labels[index])])
     except OSError as exc:
         raise PincalError(f"{path}: cannot write the plan ({exc.strerror or exc})") from None
     return digest[-1]

@@ -8,6 +8,7 @@ REPORT.json document written with it, so both say the same. At a reading r (rad,
 prismatic joint) a controller takes
 
     q_J = r_J − F · r_I            for each coupling J = F × I (every driver as read; eq C1)
+    q_J = F · r_I                  for each such coupling marked ``follows``: J has no reading (eq M1)
     actual_j = q_j + Σ shift_j(q)  for each joint effect on j (shift formulas of the module
                                    docstring of :mod:`pincal.model.effects`, in words per entry)
 
@@ -110,6 +111,17 @@ def _equation(effect: Effect, entry: Mapping[str, Any]) -> str:
     return "measurement side, not for a controller: the sensor's lengths were scaled by 1 + value"
 
 
+def _coupling_equation(entry: Mapping[str, Any]) -> str:
+    """A ``couplings`` entry's equation in words: a reading taken against its driver (eq C1), or, ``follows``,
+    a joint without a reading computed from its driver's (eq M1, offset 0)."""
+    joint, driver = entry["joint"], entry["driver"]
+    if entry.get("follows"):
+        return (f"q[{joint}] = factor x r[{driver}] (eq M1: {joint} has no reading, it follows {driver}; "
+                "the driver as read)")
+    return (f"q[{joint}] = r[{joint}] - factor x r[{driver}] (eq C1: the controller's reading includes factor x "
+            "the driver's)")
+
+
 def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: str | Path) -> dict[str, Any]:
     """The effects.yaml mapping of a REPORT.json ``report``: its ``couplings`` and ``effects`` (each
     :func:`~pincal.model.effects.effect_to_dict`'s keys plus ``unit``, ``side`` and ``equation``)."""
@@ -117,10 +129,7 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
     kinds = dict(zip(chain.get("joints", []), chain.get("joint_kinds", [])))
     tool = report.get("tool") or {}
     points = np.asarray(tool.get("points_m") or [tool.get("xyz_m", [0.0, 0.0, 0.0])], dtype=float)
-    couplings = [{**c, "unit": "(relative)",
-                  "equation": f"q[{c['joint']}] = r[{c['joint']}] - factor x r[{c['driver']}] (eq C1: the "
-                              "controller's reading includes factor x the driver's)"}
-                 for c in report.get("couplings") or []]
+    couplings = [{**c, "unit": "(relative)", "equation": _coupling_equation(c)} for c in report.get("couplings") or []]
     effects = []
     for entry in report.get("effects") or []:
         effect, _ = effect_from_dict(entry)
@@ -144,6 +153,8 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
         "report": str(report_path),
         "apply": ["r = the controller's joint readings [rad, or m for a prismatic joint]",
                   "q = r, then each entry of couplings applied (every driver from r as read; q = r without any)",
+                  *(["an entry of couplings with follows: q[joint] = factor x r[driver], the joint has no reading"]
+                    if any(c.get("follows") for c in couplings) else []),
                   "actual = q + the shift of each entry of effects with side joint, evaluated at q",
                   "the joint values of the URDF named in urdf are actual; side measurement is the sensor's",
                   *(["side geometry (thermal): the URDF's lengths at the arm's temperature, as its equation says"]
@@ -188,7 +199,8 @@ class EffectsFile:
     """An effects.yaml read back.
 
     Attributes:
-        couplings: the readings taken against another joint (eq C1).
+        couplings: the readings taken against another joint (eq C1), and the joints that follow one
+            (``follows``, eq M1).
         effects: each effect with its values, joint and measurement side alike.
         payload_kg / payload_point_m: the point mass the gravity torques include [kg] and where it sits,
             in ``tool_parent``'s frame [m] (3,).

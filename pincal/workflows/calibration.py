@@ -36,7 +36,7 @@ from pincal.report.sessions import session_entries, session_errors
 from pincal.workflows.evaluation import SessionEvaluation
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.report_page import refuse_page, render_page, write_page
-from pincal.workflows.settings import CalibrateSettings, expect
+from pincal.workflows.settings import CalibrateSettings, expect, follow_couplings
 from pincal.workflows.verdict import (
     UrdfWrite,
     Verdict,
@@ -135,8 +135,9 @@ def calibrate_files(
     refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     html = refuse_page(html, inputs, [out_urdf, report_path, effects_path(out_urdf)])
     chain = KinematicChain.from_urdf(urdf, tool_parent, tool=tool_pose, xacro_args=xacro_args)
+    couplings = follow_couplings(chain, settings.couplings, data_paths)  # a joint without a column follows (M1)
     # readings taken against another joint corrected (eq C1) before the joint limits are judged
-    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings, chain.other_branch_joints)
+    data, notes = read_sessions(data_paths, chain.joint_specs, couplings, chain.other_branch_joints)
     nominal_placements = chain.placements()
     n_rows = fit_rows(data.roles)
     sources: Sources = {"urdf": str(urdf),
@@ -219,7 +220,7 @@ def calibrate_files(
     else:
         with chain.placed(placements):  # the report describes the calibrated model
             record = ReportRecord(urdf_sha256, xacro, row_errors, warnings=verdict.warnings,
-                                  level_choice=level_choice_part(choice), couplings=couplings_part(settings.couplings))
+                                  level_choice=level_choice_part(choice), couplings=couplings_part(couplings))
             report = chain_report(chain_head(fitted, chain, tool_parent, errors, n_rows, sources, report_notes),
                                   sessions=entries, record=record)
     # the couplings, which a URDF cannot carry, beside the URDF (none beside a withheld one)

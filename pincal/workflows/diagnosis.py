@@ -43,7 +43,7 @@ from pincal.workflows.paths import (
     refuse_overwrite_matching,
 )
 from pincal.workflows.report_page import refuse_page, render_page, write_page
-from pincal.workflows.settings import DiagnoseSettings, expect
+from pincal.workflows.settings import DiagnoseSettings, expect, follow_couplings
 from pincal.workflows.verdict import UrdfWrite, judged, unmodelled_notes, withhold, write_checked_urdf
 
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of these
@@ -124,11 +124,12 @@ def diagnose_files(
         raise PincalError("diagnose works on --level registration, offsets or full")
     started = time.perf_counter()
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
+    couplings = follow_couplings(chain, settings.couplings, data_paths)  # a joint without a column follows (M1)
     # readings taken against another joint corrected (eq C1) before the joint limits are judged
-    data, notes = read_sessions(data_paths, chain.joint_specs, settings.couplings, chain.other_branch_joints)
+    data, notes = read_sessions(data_paths, chain.joint_specs, couplings, chain.other_branch_joints)
     heldout = held_time = None
     if validation_path:
-        heldout, held_notes = read_measurements(validation_path, chain.joint_specs, settings.couplings,
+        heldout, held_notes = read_measurements(validation_path, chain.joint_specs, couplings,
                                                  chain.other_branch_joints)
         notes += held_notes
         held_time = time_column(heldout, time_column_name)
@@ -148,7 +149,7 @@ def diagnose_files(
     notes += unfitted_sessions(data, calibration.session_names)
     row_time = time_column(data, time_column_name)
     options = DiagnoseOptions(sigma_column=sigma_column, payload_kg=payload_kg, time=row_time, heldout_time=held_time,
-                              readings=readings, recalibrate=recalibrate, couplings=settings.couplings,
+                              readings=readings, recalibrate=recalibrate, couplings=couplings,
                               stated_sigma_pos_m=sigma_pos_m, masses=settings.masses)
     diagnosis = diagnose(chain, calibration, data, heldout, options, progress=stages.next())
     # the final model: on the readings corrected by the conventions diagnose found, from their calibration
@@ -185,7 +186,7 @@ def diagnose_files(
                                            None if validation_path is None else str(validation_path)))
         record = ReportRecord(urdf_sha256, dict(xacro_arguments(xacro_args)), row_errors, warnings=verdict.warnings,
                               level_choice=level_choice_part(choice),
-                              couplings=couplings_part((*settings.couplings, *diagnosis.couplings)))
+                              couplings=couplings_part((*couplings, *diagnosis.couplings)))
         report = diagnosis_report(
             head, diagnosis, payload_kg, time_column_name or _time_name(data),
             sessions=session_entries(final.session_names, final.target.registrations, used,

@@ -223,6 +223,7 @@ def evaluate_files(
             )
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
     chain = KinematicChain.from_description(description, report.tool_parent)
+    chain.follow(report.couplings)  # a joint the calibration made follow its driver (couplings[].follows)
     # the readings corrected as the calibration's were (eq C1), before the joint limits are judged
     data, read_notes = read_measurements(data_path, chain.joint_specs, report.couplings, chain.other_branch_joints)
     notes += read_notes
@@ -335,6 +336,7 @@ def _nominal_rms(report: ReportModel, report_path: str | Path, data: Measurement
 
     try:
         chain = KinematicChain.from_urdf(path, report.tool_parent, xacro_args=xacro_args)
+        chain.follow(report.couplings)
         nominal = calibrate_chain(chain, replace(data, roles=np.full(data.n_rows, "calibration", dtype=object)),
                                   "registration")
     except PincalError:

@@ -33,6 +33,7 @@ from pincal.planning.files import (
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
 from pincal.progress import Progress, Stages
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
+from pincal.workflows.settings import follow_couplings
 
 __all__ = ["urdf_from_dh_file", "PlanInputs", "PlanRun", "plan_files"]
 
@@ -143,7 +144,10 @@ def plan_files(
     ``inputs.collision_check`` (:mod:`pincal.planning.collisions`).
     ``inputs.couplings`` (``--coupling``): joints the controller reads against another; the candidate, existing
     and workspace files are corrected by eq C1 (:mod:`pincal.measurements.couplings`), PLAN.csv is written in
-    the controller's readings (its inverse) and PLAN.json records them (``sources.couplings``).
+    the controller's readings (its inverse) and PLAN.json records them (``sources.couplings``). A coupling on a
+    joint the ``--existing`` files (else the candidate file) have no column for ``follows`` its driver
+    (:func:`pincal.workflows.settings.follow_couplings`): drawn and read candidates compute it from the driver,
+    and PLAN.csv has no column for it (none is read). Without either file, a coupling is a reading.
     ``progress(done, total)`` counts the collision checks, then the search's steps
     (:func:`pincal.planning.planner.plan_measurements`).
 
@@ -168,6 +172,9 @@ def plan_files(
     refuse_overwrite(out_json, *sources_in, outputs=[out_csv])
     chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
     names = chain.joint_names
+    # a joint without a column in the recorded rows (else the candidate file) follows its driver (eq M1)
+    told: list[str | Path] = [*existing_paths] or ([candidates_path] if candidates_path is not None else [])
+    couplings = follow_couplings(chain, couplings, told)
     notes: list[str] = []
     if candidates_path is not None:  # a file holds the controller's readings (eq C1 with --coupling)
         readings, labels = read_candidates(candidates_path, chain)
@@ -207,7 +214,8 @@ def plan_files(
                             "xacro_args": dict(xacro_arguments(xacro_args))}
     if couplings:  # PLAN.csv in the controller's joint space: what it reads and is commanded in
         sources["couplings"] = [c.as_dict() for c in couplings]
-    digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels)
+    digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels,
+                            unread=[c.joint for c in couplings if c.follows])
     pool = CandidatePool(labels, ranges, check, clearance, inputs.sample if candidates_path is None else None)
     document = plan_document(plan, chain, sources, pool, tool_pose, plan_csv_sha256=digest, notes=notes)
     write_plan_json(out_json, document)

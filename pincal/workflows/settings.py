@@ -10,7 +10,8 @@ made, with the one-line message the command prints; the workflows of
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, cast, get_args
 
@@ -19,16 +20,18 @@ import numpy.typing as npt
 
 from pincal.errors import PincalError, expect_value
 from pincal.fit.prior import Prior
-from pincal.measurements.couplings import ReadingCoupling
+from pincal.measurements.couplings import ReadingCoupling, decide_followers
+from pincal.measurements.csv_v1 import read_table
 from pincal.model.masses import DEFAULT_MASSES, MASSES, Masses
 from pincal.model.thermal import PAUSE_S
 
 if TYPE_CHECKING:  # the fit's selection module is imported only when a selection is checked
     from pincal.fit.selection import SelectionCriterion
+    from pincal.model.chain import KinematicChain
 
 __all__ = [
     "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "CalibrateLevel", "DiagnoseLevel", "METHODS", "expect", "no_prior",
-    "default_selection", "CalibrateSettings", "DiagnoseSettings", "EvaluateSettings",
+    "default_selection", "CalibrateSettings", "DiagnoseSettings", "EvaluateSettings", "follow_couplings",
 ]
 
 #: ``calibrate --level``: the any-chain levels, ``auto`` (chosen by cross-validation) and ``dh``
@@ -281,3 +284,20 @@ class EvaluateSettings:
             if value is not None and not (np.isfinite(value) and value >= 0):
                 raise PincalError(f"{flag} must be a non-negative number, got {value}")
         object.__setattr__(self, "xacro_args", _xacro(self.xacro_args))
+
+
+def follow_couplings(chain: KinematicChain, couplings: Sequence[ReadingCoupling],
+                     paths: Sequence[str | os.PathLike[str]]) -> tuple[ReadingCoupling, ...]:
+    """The run's ``--coupling`` decided once, from the columns of its calibration files ``paths``: a coupling
+    on a chain joint one of them has no column for ``follows`` its driver
+    (:func:`pincal.measurements.couplings.decide_followers`), and ``chain`` is made to follow it for the whole
+    run (:meth:`pincal.model.chain.KinematicChain.follow`); REPORT.json records what was decided.
+
+    Raises:
+        MeasurementError: an unreadable file, a coupling on a joint the URDF's ``<mimic>`` already ties.
+    """
+    if not couplings:
+        return ()
+    decided = decide_followers(couplings, chain.joint_names, [read_table(p).names for p in paths])
+    chain.follow(decided)
+    return decided
