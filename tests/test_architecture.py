@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import functools
 import importlib
 from pathlib import Path
 
@@ -222,9 +223,16 @@ def test_one_calibration_pipeline(tmp_path):
 
 def declared_all(path: Path) -> list[str] | None:
     """The names of the module's ``__all__ = [...]`` (a literal list or tuple of strings), or None."""
+    found = _declared_all(path, path.stat().st_mtime_ns)
+    return None if found is None else list(found)
+
+
+@functools.cache
+def _declared_all(path: Path, modified_ns: int) -> tuple[str, ...] | None:
+    """:func:`declared_all` parsed once per file version (the public-name check asks once per import)."""
     for node in ast.parse(path.read_text(encoding="utf-8")).body:
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
-            return [ast.literal_eval(element) for element in node.value.elts]  # type: ignore[attr-defined]
+            return tuple(ast.literal_eval(element) for element in node.value.elts)  # type: ignore[attr-defined]
     return None
 
 
