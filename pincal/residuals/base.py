@@ -22,7 +22,7 @@ import numpy.typing as npt
 from pincal.errors import CalibrationError
 from pincal.model.sensitivity import ParameterSlot, Sensitivity, SensitivityModel, ToolPoses
 
-__all__ = ["pair_indices", "ParameterSet", "KinematicsCache", "Objective"]
+__all__ = ["pair_indices", "ParameterSet", "KinematicsCache", "Objective", "BlockObjective"]
 
 
 def pair_indices(n_rows: int) -> tuple[np.ndarray, np.ndarray]:
@@ -145,3 +145,15 @@ class Objective(ABC):
     @abstractmethod
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         """dr/dx, shape (m, n_free)."""
+
+
+class BlockObjective(Objective):
+    """An objective whose unknowns are the kinematic parameters and blocks of its own (registrations, target,
+    mount...): ``blocks`` names each block's slice of x, ``n_params`` counts them all, and every one is free."""
+
+    blocks: dict[str, slice]
+    n_params: int
+
+    @property
+    def n_free(self) -> int:
+        return self.n_params

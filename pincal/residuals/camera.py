@@ -44,7 +44,7 @@ from pincal.measurements.camera_csv import CornerSet
 from pincal.model.camera_view import Arrangement, camera_points, pose
 from pincal.model.pinhole import INTRINSIC_NAMES, CameraIntrinsics, project, projection_jacobians
 from pincal.model.sensitivity import Sensitivity, ToolPoses
-from pincal.residuals.base import KinematicsCache, Objective
+from pincal.residuals.base import BlockObjective, KinematicsCache
 from pincal.residuals.so3 import skew
 
 __all__ = ["CameraEstimate", "CameraResidual"]
@@ -68,7 +68,7 @@ class CameraEstimate:
     intrinsics: CameraIntrinsics
 
 
-class CameraResidual(Objective):
+class CameraResidual(BlockObjective):
     """Eqs C1-C3 of the module docstring over the images the cache holds (its rows).
 
     Args:
@@ -102,10 +102,6 @@ class CameraResidual(Objective):
             self.blocks[name] = slice(offset, offset + size)
             offset += size
         self.n_params = offset
-
-    @property
-    def n_free(self) -> int:
-        return self.n_params
 
     def start_vector(self) -> np.ndarray:
         """Kinematic values from the cache's base, zero rotation steps, the start's translations and intrinsics."""

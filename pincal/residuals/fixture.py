@@ -32,7 +32,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import CalibrationError
-from pincal.residuals.base import KinematicsCache, Objective
+from pincal.residuals.base import BlockObjective, KinematicsCache
 from pincal.residuals.so3 import skew
 
 __all__ = ["COLLINEAR_TOLERANCE", "rotation_basis", "FixtureEstimate", "FixtureResidual"]
@@ -78,7 +78,7 @@ class FixtureEstimate:
     positions: np.ndarray
 
 
-class FixtureResidual(Objective):
+class FixtureResidual(BlockObjective):
     """Eq F1 over the rows the cache holds.
 
     Args:
@@ -120,10 +120,6 @@ class FixtureResidual(Objective):
             offset += 3 + basis.shape[1]
         self.blocks["placements"] = slice(self.blocks["ball"].stop, offset)
         self.n_params = offset
-
-    @property
-    def n_free(self) -> int:
-        return self.n_params
 
     def start_vector(self) -> np.ndarray:
         """Kinematic values from the cache's base, the start's ball and positions, zero rotation steps."""

@@ -56,7 +56,7 @@ from pincal.model.effects import (
 from pincal.model.sensitivity import Sensitivity, ToolPoses
 from pincal.model.sensor import Registration
 from pincal.model.thermal import row_conditions
-from pincal.residuals.base import KinematicsCache, Objective
+from pincal.residuals.base import BlockObjective, KinematicsCache
 from pincal.residuals.conditions import condition_columns, point_columns
 from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights, SensorState, TargetEstimate
 from pincal.residuals.so3 import jlog3, log3, skew
@@ -83,7 +83,7 @@ class _Linearisation:
     joint_turns: np.ndarray | None = None  # with joints and orientations: (K, 3, N)
 
 
-class SensorResidual(Objective):
+class SensorResidual(BlockObjective):
     """Eq of the module docstring over the rows the cache holds.
 
     Args:
@@ -173,10 +173,6 @@ class SensorResidual(Objective):
             first += effect.n_values
         # the last state computed: (x, the kinematics it came from, the state)
         self._memo: tuple[np.ndarray, tuple[ToolPoses, Sensitivity], SensorState] | None = None
-
-    @property
-    def n_free(self) -> int:
-        return self.n_params
 
     def start_vector(self) -> np.ndarray:
         """Kinematic values from the cache's base, zero registration/rotation steps, start points."""
