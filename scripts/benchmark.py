@@ -761,6 +761,12 @@ def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dic
             "load_average": os.getloadavg()}
 
 
+def _write_json(path: Path, result: dict | list) -> None:
+    """Write one benchmark's numbers and say where."""
+    path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {path}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--auto", action="store_true", help="only (g): --level auto against --level full, "
@@ -792,16 +798,12 @@ def main(argv: list[str] | None = None) -> int:
               f"whole process: {result['median_s']:.2f} s median of {len(result['times_s'])} (goal <= "
               f"{result['goal_s']:g} s); RMS after {', '.join(f'{v:.3f}' for v in result['rms_after_mm'])} mm; "
               f"load {result['load_average'][0]:.1f}")
-        path = args.json or HERE / "benchmark_tree.json"
-        path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {path}")
+        _write_json(args.json or HERE / "benchmark_tree.json", result)
         return 0
     if args.diagnose:
         result = diagnose_against_calibrate(pairs=args.pairs or 3, select=args.select)
         _print_diagnose(result)
-        path = args.json or HERE / "benchmark_diagnose.json"
-        path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {path}")
+        _write_json(args.json or HERE / "benchmark_diagnose.json", result)
         return 0
     if args.auto:
         result = auto_against_full()
@@ -809,9 +811,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{result['ratio_median']:.2f}x (median of {result['pairs']} pairs; goal <= {result['goal']:g}x); "
               f"full {statistics.median(result['full_s']):.2f} s, auto {statistics.median(result['auto_s']):.2f} s, "
               f"load {result['load_average'][0]:.1f}")
-        path = args.json or HERE / "benchmark_auto.json"
-        path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {path}")
+        _write_json(args.json or HERE / "benchmark_auto.json", result)
         return 0
     if args.against:
         names = [n for n in args.only.split(",") if n]
@@ -820,9 +820,7 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"unknown benchmark(s) {unknown}; choose from {list(AGAINST)}")
         results = against(args.against, args.pairs or 5, names, args.one_blas_thread)
         _print_against(results)
-        path = args.json or HERE / "benchmark_against.json"
-        path.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {path}")
+        _write_json(args.json or HERE / "benchmark_against.json", results)
         return 0
     args.json = args.json or HERE / "benchmark_results.json"
 
@@ -892,8 +890,7 @@ def main(argv: list[str] | None = None) -> int:
     load = results["machine"]
     print(f"load average before {load['load_average_before'][0]:.2f}, after {load['load_average_after'][0]:.2f} "
           f"({load['cpus']} CPUs)")
-    args.json.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
-    print(f"wrote {args.json}")
+    _write_json(args.json, results)
     return 0
 
 
