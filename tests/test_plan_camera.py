@@ -9,16 +9,17 @@ the board (or camera) placed so that the posture Q0 sees the board straight on 0
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from pincal.cli.commands import main
-from pincal.measurements.camera_csv import read_joint_readings
+from pincal.measurements.camera_csv import CornerSet, read_joint_readings
 from pincal.measurements.charuco import parse_board
-from pincal.model.camera_view import camera_points
 from pincal.model.camera_info import write_camera_info
+from pincal.model.camera_view import camera_points
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.pinhole import CameraIntrinsics, project
@@ -27,7 +28,7 @@ from pincal.planning.camera_views import MAX_VIEW_ANGLE_DEG, ViewLimits, aimed_c
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.robots import example_robot_data_urdf
-from pincal.simulation.camera_scene import board_corners, facing_scene, with_fixed_link
+from pincal.simulation.camera_scene import CameraScene, board_corners, facing_scene, view_corners, with_fixed_link
 from pincal.simulation.sensor import random_configurations
 
 INTRINSICS = CameraIntrinsics(1000.0, 1000.0, 640.0, 480.0, (-0.1, 0.05, 1e-3, -5e-4, 0.0), 1280, 960)
@@ -95,7 +96,7 @@ def test_planned_images_see_the_whole_board_at_a_good_angle_and_size(case: _Case
     assert np.all((both >= 0.0) & (both <= [INTRINSICS.width - 1, INTRINSICS.height - 1]))
     assert np.all(angle <= MAX_VIEW_ANGLE_DEG)
     grid = corners.reshape(COUNT, BOARD.rows - 1, BOARD.cols - 1, 2)
-    spacing = min(np.linalg.norm(np.diff(grid, axis=1), axis=3).min(), np.linalg.norm(np.diff(grid, axis=2), axis=3).min())
+    spacing = min(np.linalg.norm(np.diff(grid, axis=axis), axis=3).min() for axis in (1, 2))
     floor = ViewLimits().min_spacing_px(BOARD, INTRINSICS.width, INTRINSICS.height)
     assert spacing >= floor == pytest.approx(0.03 * 1280 / 4 * 0.04 / 0.03)  # OpenCV's 3 % perimeter rate
     np.testing.assert_allclose(plan.views.angle_deg, angle, atol=1e-9)
@@ -121,9 +122,7 @@ def _information(case: _Case, q: np.ndarray) -> tuple[np.ndarray, list[str]]:
     return jacobian.T @ jacobian, residual.column_names([p.name for p in params.info])
 
 
-def plan_corners(case: _Case, q: np.ndarray):
-    from pincal.simulation.camera_scene import CameraScene, view_corners
-
+def plan_corners(case: _Case, q: np.ndarray) -> CornerSet:
     scene = CameraScene(case.arrangement, case.camera.worlds, case.camera.mount, INTRINSICS, BOARD)
     corners = view_corners(case.chain, scene, q, 0.0, np.random.default_rng(0))
     assert len(corners.image_of) == len(q) * BOARD.n_corners
@@ -219,4 +218,4 @@ def test_cli_camera_flags_without_a_camera_and_a_camera_link_not_in_the_urdf(
                                                    *_plan(files, "eye_to_hand")[6:], "--out", f"{root}/p.csv"]) == 2
     err = capsys.readouterr().err.strip()
     assert "no link named 'camera'" in err and len(err.splitlines()) == 1
-    assert not (tmp := __import__("pathlib").Path(f"{root}/p.csv")).exists(), tmp
+    assert not Path(f"{root}/p.csv").exists()
