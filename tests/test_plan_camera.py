@@ -19,7 +19,7 @@ from pincal.cli.commands import main
 from pincal.measurements.camera_csv import CornerSet, read_joint_readings
 from pincal.measurements.charuco import parse_board
 from pincal.model.camera_info import write_camera_info
-from pincal.model.camera_view import camera_points
+from pincal.model.camera_view import camera_points, pose
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.pinhole import CameraIntrinsics, project
@@ -28,7 +28,14 @@ from pincal.planning.camera_views import MAX_VIEW_ANGLE_DEG, ViewLimits, aimed_c
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.robots import example_robot_data_urdf
-from pincal.simulation.camera_scene import CameraScene, board_corners, facing_scene, view_corners, with_fixed_link
+from pincal.simulation.camera_scene import (
+    CameraScene,
+    board_corners,
+    facing_scene,
+    view_configurations,
+    view_corners,
+    with_fixed_link,
+)
 from pincal.simulation.sensor import random_configurations
 
 INTRINSICS = CameraIntrinsics(1000.0, 1000.0, 640.0, 480.0, (-0.1, 0.05, 1e-3, -5e-4, 0.0), 1280, 960)
@@ -219,3 +226,36 @@ def test_cli_camera_flags_without_a_camera_and_a_camera_link_not_in_the_urdf(
     err = capsys.readouterr().err.strip()
     assert "no link named 'camera'" in err and len(err.splitlines()) == 1
     assert not Path(f"{root}/p.csv").exists()
+
+
+def test_cli_plans_from_a_first_run_s_images(files: dict[str, str], capsys: pytest.CaptureFixture[str]) -> None:
+    """Eye in hand without --board-pose: a first run's DATA.csv (8 images, the camera's true mount 10 cm and
+    30 degrees off the URDF's, 0.2 px noise) says where the board and the camera are; the planned images see
+    the board as the truth projects it."""
+    root = files["root"]
+    chain = KinematicChain(pin.buildModelFromXML(_urdf("eye_in_hand")), "camera_link")
+    mount = pose(pin.exp3(np.radians(30.0) * np.array([0.6, 0.0, 0.8])), np.array([0.06, 0.0, 0.08]))
+    scene = facing_scene(chain, "eye_in_hand", Q0, mount, INTRINSICS, BOARD)
+    rng = np.random.default_rng(8)
+    corners = view_corners(chain, scene, view_configurations(chain, scene, Q0, 8, rng), 0.2, rng)
+    with open(f"{root}/data.csv", "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["image", "corner", "u", "v", "board_x", "board_y", "width", "height",
+                         *chain.joint_names, "role"])
+        for c in range(len(corners.image_of)):
+            k = corners.image_of[c]
+            writer.writerow([corners.images[k], corners.corners[c], *corners.pixels[c], *corners.board_points[c, :2],
+                             *corners.sizes[k], *corners.q[k], "calibration"])
+    out = f"{root}/PLAN_existing.csv"
+    assert main([*_plan(files, "eye_in_hand", "--existing", f"{root}/data.csv"), "--out", out]) == 0
+    captured = capsys.readouterr()
+    assert "8 image(s) recorded, reprojection RMS" in captured.err
+    with open(out, newline="") as handle:
+        q = np.array([[float(v) for v in row[:6]] for row in list(csv.reader(handle))[1:]])
+    case = _Case.__new__(_Case)  # the truth's view of the plan
+    case.arrangement, case.chain = "eye_in_hand", chain
+    case.camera = CameraEstimate("eye_in_hand", scene.worlds, mount, INTRINSICS)
+    pixels, outline, angle = _seen(case, q)
+    both = np.concatenate([pixels, outline], axis=1)
+    assert len(q) == 6 and np.all(angle <= MAX_VIEW_ANGLE_DEG + 0.5)  # the fitted mount and board: ~0.1 deg
+    assert np.all((both >= -2.0) & (both <= [INTRINSICS.width + 1, INTRINSICS.height + 1]))
