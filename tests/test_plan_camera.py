@@ -259,3 +259,21 @@ def test_cli_plans_from_a_first_run_s_images(files: dict[str, str], capsys: pyte
     both = np.concatenate([pixels, outline], axis=1)
     assert len(q) == 6 and np.all(angle <= MAX_VIEW_ANGLE_DEG + 0.5)  # the fitted mount and board: ~0.1 deg
     assert np.all((both >= -2.0) & (both <= [INTRINSICS.width + 1, INTRINSICS.height + 1]))
+
+
+def test_an_image_s_information_keeps_its_rank_when_compressed(case: _Case) -> None:
+    """An image moves its corners through the camera's pose relative to the board and the intrinsics only:
+    its block keeps 6 + (intrinsics estimated) rows and the same information JᵀJ."""
+    from pincal.model.pinhole import INTRINSIC_NAMES
+    from pincal.planning.camera_plan import _compressed, _image_blocks
+
+    q = case.plan.q[:3]
+    corners = plan_corners(case, q)
+    params = PlacementErrors(case.chain)
+    cache = KinematicsCache(params, np.arange(params.size), np.zeros(params.size), q)
+    residual = CameraResidual(cache, corners, case.camera, tuple(range(len(INTRINSIC_NAMES))))
+    blocks = _image_blocks(residual, len(q), 2 * BOARD.n_corners, 0.2)
+    small = _compressed(blocks, 6 + len(INTRINSIC_NAMES))
+    assert small.shape == (3, 15, blocks.shape[2])
+    full = np.einsum("kim,kin->kmn", blocks, blocks)
+    np.testing.assert_allclose(np.einsum("kim,kin->kmn", small, small), full, rtol=0, atol=1e-9 * np.abs(full).max())
