@@ -51,6 +51,8 @@ _DEFINED_IN = {
                                  "evaluate_fixture_files"),
     "pincal.planning.planner": ("PlanSettings",),
     "pincal.workflows.preparation": ("PlanInputs", "PlanRun", "plan_files", "urdf_from_dh_file"),
+    "pincal.planning.camera_plan": ("CameraPlanSettings",),
+    "pincal.workflows.camera_plan": ("CameraPlanInputs", "CameraPlanRun", "camera_plan_files"),
     "pincal.workflows.extract": ("BagRead", "CutFailed", "ImageExtraction", "NoPostures", "extract_file",
                                  "extract_images"),
     "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
@@ -106,6 +108,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.paper.methods import PaperCalibration, calibrate_paper
     from pincal.paper.ml_estimator import MLCalibration, MLSettings, calibrate_ml
     from pincal.paper.noise_limit import PredictedErrors, predicted_errors
+    from pincal.planning.camera_plan import CameraPlanSettings
     from pincal.planning.planner import PlanSettings
     from pincal.report.html import render_html, write_html
     from pincal.simulation.paper import (
@@ -114,6 +117,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         simulate_experiment,
     )
     from pincal.workflows.calibration import CalibrationRun, calibrate_files
+    from pincal.workflows.camera_plan import CameraPlanInputs, CameraPlanRun, camera_plan_files
     from pincal.workflows.detection import DetectRun, DetectSettings, detect_files
     from pincal.workflows.diagnosis import DiagnoseOutputs, DiagnoseRun, diagnose_files
     from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files
@@ -225,6 +229,10 @@ __all__ = [
     "PlanSettings",
     "plan_files",
     "urdf_from_dh_file",
+    "CameraPlanSettings",
+    "CameraPlanInputs",
+    "CameraPlanRun",
+    "camera_plan_files",
     "BagRead",
     "extract_file",
     "NoPostures",

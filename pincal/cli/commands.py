@@ -394,7 +394,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)  # no numpy, scipy or Pinocchio yet: --help and refusals are quick
     try:
         with _blas_limited_to_one_thread():
-            if args.command in ("diagnose", "plan"):
+            if args.command == "diagnose" or (args.command == "plan" and args.camera_link is None):
                 args.tip_link = one_tip_link(args.command, args.tip_link)
             return _COMMANDS[args.command](args)
     except PincalError as exc:

@@ -39,7 +39,7 @@ from pincal.measurements.plateau_defaults import (
 )
 from pincal.model.dh.conventions import DH_CONVENTIONS
 from pincal.model.masses import DEFAULT_MASSES, MASSES
-from pincal.planning.defaults import DEFAULT_SAMPLE, PLAN_LEVELS, WORKSPACE_SIZE
+from pincal.planning.defaults import DEFAULT_AIMED, DEFAULT_SAMPLE, PLAN_LEVELS, WORKSPACE_SIZE
 
 __all__ = ["build_parser"]
 
@@ -133,6 +133,22 @@ def _add_detect(sub) -> None:
                              "prismatic), optionally role and session")
     detect.add_argument("--out", required=True, type=Path, metavar="DATA.csv",
                         help="CSV to write: one row per corner found (docs/camera.md)")
+
+
+def _add_camera_plan(plan: argparse.ArgumentParser) -> None:
+    """``plan``'s flags of a camera: the images to take of a ChArUco board (docs/camera.md)."""
+    camera = plan.add_argument_group("a camera (plan the images of a ChArUco board instead of --tip-link)")
+    camera.add_argument("--camera-link", metavar="LINK",
+                        help="the link of the camera's optical frame, attached by a fixed joint: on the chain (eye "
+                             "in hand) or hanging from the root (eye to hand)")
+    camera.add_argument("--board-link", metavar="LINK", help="eye to hand: the link on the chain carrying the board")
+    camera.add_argument("--intrinsics", type=Path, metavar="FILE",
+                        help="the camera's intrinsics with its image size: ROS camera_info or OpenCV YAML")
+    camera.add_argument("--board", metavar=BOARD_FORM, help=f"the board, as detect takes it; e.g. {BOARD_EXAMPLE}")
+    camera.add_argument("--board-pose", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                        help="eye in hand: where the board is in the root link's frame, roughly [m, rad] (OpenCV's "
+                             "board frame: origin at its outer corner before corner 0, z out of its back); or "
+                             "--existing DATA.csv of a first run")
 
 
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
@@ -305,11 +321,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     plan = sub.add_parser("plan", help="choose the robot configurations worth measuring, and their order")
     plan.add_argument("urdf", type=Path, help="URDF of the robot, or a .xacro")
-    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK", action=TipLinks,
-                      help="link at the end of the calibrated chain, carrying the target")
+    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", metavar="LINK", action=TipLinks,
+                      help="link at the end of the calibrated chain, carrying the target (required, but for a "
+                           "camera: --camera-link)")
     plan.add_argument("--count", type=count, required=True, metavar="N", help="configurations to choose")
     plan.add_argument("--out", required=True, type=Path, metavar="PLAN.csv", help="plan to write (visiting order)")
-    plan.add_argument("--report", required=True, type=Path, metavar="PLAN.json", help="prediction to write")
+    plan.add_argument("--report", type=Path, metavar="PLAN.json", help="prediction to write (required, but for a "
+                                                                        "camera)")
+    _add_camera_plan(plan)
     plan.add_argument("--level", choices=PLAN_LEVELS, default="full",
                       help="what the calibration will estimate (default full); dh: the paper's DH parameters "
                            "with the tool known (needs --tool), as calibrate --level dh estimates them")
@@ -323,8 +342,9 @@ def build_parser() -> argparse.ArgumentParser:
     pool = plan.add_mutually_exclusive_group()
     pool.add_argument("--candidates", type=Path, metavar="CSV", help="choose among these configurations "
                       "(joint columns as in CSV v1; other columns ignored)")
-    pool.add_argument("--sample", type=count, default=DEFAULT_SAMPLE, metavar="M",
-                      help=f"else draw M within the joint limits (default {DEFAULT_SAMPLE})")
+    pool.add_argument("--sample", type=count, default=None, metavar="M",
+                      help=f"else draw M within the joint limits (default {DEFAULT_SAMPLE}; for a camera M aimed at "
+                           f"the board and M drawn, default {DEFAULT_AIMED})")
     plan.add_argument("--seed", type=count_or_zero, default=0, help="random seed (default 0)")
     plan.add_argument("--existing", type=Path, nargs="+", metavar="DATA.csv", help="measurements already "
                       "recorded, one file per session (the plan continues the last): choose what adds most to them")

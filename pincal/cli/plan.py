@@ -8,14 +8,34 @@ import sys
 
 from pincal.cli.arguments import selection_criterion
 
-__all__ = ["run_plan", "print_plan_summary", "print_candidates"]
+__all__ = ["run_plan", "run_camera_plan", "print_plan_summary", "print_candidates", "print_camera_plan"]
+
+
+#: ``plan``'s flags of a camera, and those of a point sensor a camera's plan refuses (dest: the flag).
+_CAMERA_FLAGS = {"board_link": "--board-link", "intrinsics": "--intrinsics", "board": "--board",
+                 "board_pose": "--board-pose"}
+_SENSOR_FLAGS = {"tip_link": "--tip-link", "report": "--report", "tool": "--tool", "measure": "--measure",
+                 "target_points": "--target-points", "workspace": "--workspace", "select": "--select",
+                 "sigma_pos": "--sigma-pos", "sigma_rot": "--sigma-rot", "min_distance": "--min-distance",
+                 "coupling": "--coupling", "alternate": "--alternate"}
 
 
 def run_plan(args: argparse.Namespace) -> int:
     """``pincal plan``: choose, write PLAN.csv and PLAN.json, print the summary; the exit code."""
     from pincal.cli.progress import progress_bar
+    from pincal.errors import PincalError
+    from pincal.planning.defaults import DEFAULT_SAMPLE
     from pincal.planning.planner import PlanSettings
     from pincal.workflows.preparation import PlanInputs, plan_files
+
+    if args.camera_link is not None:
+        return run_camera_plan(args)
+    given = [flag for dest, flag in _CAMERA_FLAGS.items() if getattr(args, dest) is not None]
+    if given:
+        raise PincalError(f"{given[0]} is a camera's: give --camera-link LINK to plan a camera's images")
+    if args.report is None:
+        raise PincalError("plan: give --report PLAN.json (the prediction to write)")
+    args.sample = DEFAULT_SAMPLE if args.sample is None else args.sample
 
     settings = PlanSettings(count=args.count, level=args.level, sensor=args.measure, criterion=args.criterion,
                             sigma_pos_mm=args.sigma_pos, sigma_rot_deg=args.sigma_rot, target_points=args.target_points,
@@ -95,3 +115,71 @@ def print_candidates(run) -> None:
               f"{ignored} at the zero configuration)")
     elif run.collision_check == "off":
         print("not checked for self-collision (--no-collision-check)")
+
+
+def run_camera_plan(args: argparse.Namespace) -> int:
+    """``pincal plan --camera-link``: choose the images, write PLAN.csv, print the summary; the exit code."""
+    from pincal.cli.progress import progress_bar
+    from pincal.errors import PincalError
+    from pincal.planning.camera_plan import CameraPlanSettings
+    from pincal.planning.defaults import DEFAULT_AIMED
+    from pincal.workflows.camera_plan import CameraPlanInputs, camera_plan_files
+
+    given = [flag for dest, flag in _SENSOR_FLAGS.items()
+             if getattr(args, dest) is not None and not (isinstance(getattr(args, dest), (list, tuple))
+                                                         and not getattr(args, dest))]
+    if given:
+        raise PincalError(f"{given[0]} is a point sensor's: a camera's plan (--camera-link) writes PLAN.csv of "
+                          "the images to take; leave it out")
+    missing = [flag for flag, value in (("--intrinsics", args.intrinsics), ("--board", args.board)) if value is None]
+    if missing:
+        raise PincalError(f"plan --camera-link: give {' and '.join(missing)} (the camera's intrinsics file with its "
+                          "image size; the board, as detect takes it)")
+    existing = args.existing or []
+    if len(existing) > 1:
+        raise PincalError("--existing: a camera's plan continues one first run; give its one DATA.csv")
+    settings = CameraPlanSettings(count=args.count, level=args.level, criterion=args.criterion, seed=args.seed)
+    inputs = CameraPlanInputs(camera_link=args.camera_link, intrinsics_path=args.intrinsics, board=args.board,
+                              board_link=args.board_link, board_pose=args.board_pose,
+                              existing_path=existing[0] if existing else None, candidates_path=args.candidates,
+                              sample=DEFAULT_AIMED if args.sample is None else args.sample,
+                              collision_check=not args.no_collision_check, xacro_args=args.xacro_args,
+                              package_dirs=dict(args.package_dir))
+    with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
+        run = camera_plan_files(args.urdf, inputs, settings, args.out, progress=progress)
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    print_camera_plan(run)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def print_camera_plan(run) -> None:
+    """The choice, the usable views, identifiability and the information and prediction against random."""
+    plan, settings = run.plan, run.plan.settings
+    limits = settings.limits
+    print(f"chose {len(plan.q)} of {int(plan.usable.sum())} usable candidates ({run.n_candidates} in all; usable: "
+          f"the whole board in the image, at most {limits.max_angle_deg:g} deg from facing the camera"
+          f", corners at least {plan.min_spacing_px:.3g} px apart) for criterion "
+          f"{settings.criterion} (level {settings.level}, {run.arrangement.replace('_', ' ')}, pixel noise "
+          f"{settings.sigma_px:.3g} px); {plan.seconds:.2f} s")
+    views = plan.views
+    print(f"views: {views.angle_deg.min():.0f}-{views.angle_deg.max():.0f} deg from facing, board "
+          f"{views.distance_m.min():.2f}-{views.distance_m.max():.2f} m away, corners at least "
+          f"{views.spacing_px.min():.3g} px apart")
+    others = len(plan.estimated) - len(plan.identifiable)
+    shown = ", ".join(plan.not_identifiable[:6]) + (", ..." if len(plan.not_identifiable) > 6 else "")
+    print(f"identifiable: {len(plan.identifiable)} kinematic parameters (+ {others} of the world frame, the mount"
+          + (" and the intrinsics" if settings.intrinsics else "") + "); "
+          f"not identifiable: {len(plan.not_identifiable)}" + (f" ({shown})" if shown else ""))
+    print(f"ln det of the information: plan {plan.log_det:.4g}, random {plan.random_log_det:.4g} [median of "
+          f"{settings.random_draws} draws of usable candidates]")
+    what = "camera's optical centre" if run.arrangement == "eye_in_hand" else "board's origin"
+
+    def errors(p) -> str:
+        return "not determined" if p is None else f"mean {p.mean_position_mm:.4g} mm, max {p.max_position_mm:.4g} mm"
+
+    print(f"predicted error of the {what}, plan:   {errors(plan.prediction)}")
+    print(f"predicted error of the {what}, random: {errors(plan.random)} [{plan.random_singular} draws not "
+          "determining the parameters]")
+    print(f"order: short travel, {plan.travel_s:.1f} s of moves at the velocity limits")

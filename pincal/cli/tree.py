@@ -25,8 +25,12 @@ _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weig
             ("coupling", "--coupling"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
 
 
-def one_tip_link(command: str, tip_links: Sequence[str] | str) -> str:
-    """The one ``--tip-link`` of ``command``, which calibrates one chain; several are refused with one line."""
+def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
+    """The one ``--tip-link`` of ``command``, which calibrates one chain; several are refused with one line,
+    none too (``plan`` asks for it or ``--camera-link``)."""
+    if tip_links is None:
+        raise PincalError(f"{command}: give --tip-link LINK (the chain's end, carrying the target)"
+                          + (", or --camera-link LINK to plan a camera's images" if command == "plan" else ""))
     if isinstance(tip_links, str):
         return tip_links
     if len(tip_links) > 1:

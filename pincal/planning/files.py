@@ -15,7 +15,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, TypedDict, cast
+from typing import TYPE_CHECKING, Annotated, Protocol, TypedDict, cast
 
 import numpy as np
 
@@ -35,8 +35,8 @@ if TYPE_CHECKING:  # annotations only: the REPORT.json loader reads PLAN.json wi
 __all__ = [
     "PLAN_VERSION", "PlanSources", "PlanChain", "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",
     "PredictionJson", "RandomPrediction", "PlanPredicted", "PlanIdentifiability", "ClearanceJson", "PlanCandidates",
-    "BalanceJson", "PlanOrder", "Addition", "PlanJson", "CandidatePool", "write_plan_csv", "write_plan_json",
-    "plan_document",
+    "BalanceJson", "PlanOrder", "Addition", "PlanJson", "CandidatePool", "PlannedRows", "write_plan_csv",
+    "write_plan_json", "plan_document",
 ]
 
 PLAN_VERSION = 1
@@ -221,7 +221,22 @@ def _finite(value):
     return value
 
 
-def write_plan_csv(path: str | Path, plan: Plan, chain: KinematicChain, labels: np.ndarray,
+class PlannedRows(Protocol):
+    """What PLAN.csv holds of a plan (:class:`pincal.planning.planner.Plan`, a camera's
+    :class:`pincal.planning.camera_plan.CameraPlan`): the configurations in visiting order (N, n_joints)
+    [rad or m], each one's priority (N,) and its index into the candidates (N,)."""
+
+    @property
+    def q(self) -> np.ndarray: ...
+
+    @property
+    def priority(self) -> np.ndarray: ...
+
+    @property
+    def candidates(self) -> np.ndarray: ...
+
+
+def write_plan_csv(path: str | Path, plan: PlannedRows, chain: KinematicChain, labels: np.ndarray,
                    unread: Sequence[str] = ()) -> str:
     """PLAN.csv: joint columns, ``priority`` and ``candidate``, one row per configuration in visiting order; a
     joint the chain's joints follow from off the chain (URDF ``<mimic>``, eq M1) has a column after the chain's,

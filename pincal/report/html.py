@@ -383,7 +383,8 @@ def _registration(doc: dict) -> dict[str, Any] | None:
 
 
 def render_html(document: dict[str, Any], evaluation: dict[str, Any] | None = None,
-                base: str | Path | None = None, source: str | Path | None = None) -> str:
+                base: str | Path | None = None, source: str | Path | None = None,
+                camera: dict[str, Any] | None = None) -> str:
     """The report page of ``document`` (a REPORT.json, or ``evaluate --json`` metrics) as HTML.
 
     Args:
@@ -393,20 +394,23 @@ def render_html(document: dict[str, Any], evaluation: dict[str, Any] | None = No
             (:func:`pincal.report.row_errors.evaluation_document`).
         base: folder of the report; relative plot paths of ``diagnose`` are also looked up there.
         source: the file ``document`` was read from, named in the error of a malformed one.
+        camera: a camera's section, its reprojection errors per image and a picture of one image
+            (:func:`pincal.report.camera_figures.camera_section`); None: none shown.
     """
     try:
         if is_plan(document):  # a PLAN.json: its own page, the same look
             context = plan_context(document, Path(base) if base is not None else Path.cwd(), figures)
             context["colours"] = {"nominal": NOMINAL, "calibrated": CALIBRATED, "flag": FLAG}
             return _environment().get_template(PLAN_TEMPLATE).render(**context)
-        return _render(document, evaluation, base)
+        return _render(document, evaluation, base, camera)
     except (LookupError, TypeError, ValueError, AttributeError, UndefinedError) as exc:
         where = f"{source}: " if source is not None else ""
         raise PincalError(f"{where}the report has an unexpected form ({type(exc).__name__}: {exc}); "
                           "pass a REPORT.json written by pincal calibrate or diagnose") from None
 
 
-def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: str | Path | None) -> str:
+def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: str | Path | None,
+            camera: dict[str, Any] | None = None) -> str:
     if "parameters" not in document and "position" in document:  # evaluate --json alone
         evaluation = {"errors": document, "data": None, "urdf": None, "sessions": document.get("sessions") or [],
                       "drift": document.get("drift"), "thermal": document.get("thermal"),
@@ -444,6 +448,7 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "ident": _identifiability(document),
         "registration": None if fixture else _registration(document),  # a fixture has no sensor
         "fixture": fixture,
+        "camera": camera,
         "sessions": sessions if sessions and len(sessions) > 1 else None,  # one session: the registration above
         "effects": effects_section(document, kinds, base, figures.png_uri),
         "notes": [str(n) for n in document.get("notes") or []],
@@ -485,7 +490,8 @@ def _environment() -> Environment:
 
 
 def write_html(path: str | Path, document: Mapping[str, Any], evaluation: dict[str, Any] | None = None,
-               base: str | Path | None = None, source: str | Path | None = None) -> None:
-    """Render ``document`` (read from ``source``) and write it to ``path`` atomically
-    (:func:`pincal.outputs.write_text`)."""
-    write_text(path, render_html(dict(document), evaluation, base, source))
+               base: str | Path | None = None, source: str | Path | None = None,
+               camera: dict[str, Any] | None = None) -> None:
+    """Render ``document`` (read from ``source``; with a ``camera`` section, :func:`render_html`) and write it
+    to ``path`` atomically (:func:`pincal.outputs.write_text`)."""
+    write_text(path, render_html(dict(document), evaluation, base, source, camera))

@@ -1,0 +1,102 @@
+"""The HTML report's parts for a camera (pincal.report.camera_figures): the reprojection errors per image and
+one image with its detected and reprojected corners, from plain values."""
+
+from __future__ import annotations
+
+import base64
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pincal.errors import PincalError
+from pincal.report.camera_figures import (
+    CameraImages,
+    camera_section,
+    corners_figure,
+    errors_figure,
+    render_camera_section,
+)
+from pincal.report.html import render_html, write_html
+
+SIZE = (320, 240)
+
+
+def _images(folder: Path | None = None) -> CameraImages:
+    """Three images of 6 corners each (the third's a validation image), errors of known size: image 1's corners
+    are off by (3, 4) px (5 px long), the others' by (0.3, 0.4) px (0.5 px long), one corner of image 0 by 2 px."""
+    rng = np.random.default_rng(5)
+    detected = rng.uniform(20, 200, (18, 2))
+    error = np.tile([0.3, 0.4], (18, 1))
+    error[6:12] = [3.0, 4.0]
+    error[0] = [2.0, 0.0]
+    return CameraImages(images=("a.png", "b.png", "c.png"), image_of=np.repeat(np.arange(3), 6), detected=detected,
+                        reprojected=detected + error, sizes=np.tile(SIZE, (3, 1)),
+                        roles=("calibration", "calibration", "validation"), folder=folder)
+
+
+def _png_size(uri: str) -> tuple[int, int]:
+    data = base64.b64decode(uri.split(",", 1)[1])
+    assert data.startswith(b"\x89PNG")
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+@pytest.fixture(scope="module")
+def section() -> dict:
+    return camera_section(_images())
+
+
+def test_the_section_carries_each_image_s_numbers_and_shows_the_worst_calibration_image(section: dict) -> None:
+    rows = {r["image"]: r for r in section["rows"]}
+    assert rows["b.png"]["rms_px"] == pytest.approx(5.0) and rows["b.png"]["max_px"] == pytest.approx(5.0)
+    assert rows["a.png"]["rms_px"] == pytest.approx(np.sqrt((4.0 + 5 * 0.25) / 6)) and rows["a.png"]["max_px"] == 2.0
+    assert rows["c.png"]["role"] == "validation" and rows["c.png"]["corners"] == 6
+    assert section["rms_px"] == pytest.approx(np.sqrt((4.0 + 11 * 0.25 + 6 * 25.0) / 18))
+    assert section["picture"]["image"] == "b.png" and section["picture"]["chosen"]
+    assert not section["picture"]["drawn"]  # no folder: a blank image of its size
+    html = render_camera_section(section)
+    assert "<td>b.png</td><td>calibration</td><td>6</td><td>5</td><td>5</td>" in html
+    assert "<td>a.png</td><td>calibration</td><td>6</td><td>0.935</td><td>2</td>" in html
+    assert 'id="figure-camera-errors"' in html and 'id="figure-camera-corners"' in html
+    assert re.search(r'id="camera-rms">([0-9.]+)<', html).group(1) == f"{section['rms_px']:.3g}"
+
+
+def test_the_errors_figure_is_an_svg_with_a_box_per_image() -> None:
+    uri = errors_figure(_images())
+    svg = base64.b64decode(uri.split(",", 1)[1]).decode()
+    assert uri.startswith("data:image/svg+xml;base64,") and all(n in svg for n in ("a.png", "b.png", "c.png"))
+    assert "reprojection error [px]" in svg
+
+
+def test_the_picture_draws_the_image_file_when_there_is_one(tmp_path: Path, section: dict) -> None:
+    import cv2
+
+    image = np.zeros(SIZE[::-1], dtype=np.uint8)
+    image[:, : SIZE[0] // 2] = 200  # a half-bright image: the drawn picture is not blank
+    cv2.imwrite(str(tmp_path / "b.png"), image)
+    uri, magnify, drawn = corners_figure(_images(tmp_path), 1)
+    assert drawn and magnify == pytest.approx(max(1.0, 0.04 * SIZE[0] / 5.0))
+    assert uri != section["picture"]["uri"]  # the same image blank
+    width, height = _png_size(uri)
+    assert width == 480 and abs(height / width - (SIZE[1] / SIZE[0] * 4.8 + 0.4) / 4.8) < 0.01
+    wrong = np.zeros((10, 10), dtype=np.uint8)  # a file of another size than the corners' image: not drawn
+    cv2.imwrite(str(tmp_path / "a.png"), wrong)
+    shown = camera_section(_images(tmp_path), shown=0)["picture"]
+    assert shown["image"] == "a.png" and not shown["drawn"] and not shown["chosen"]
+
+
+def test_the_report_page_shows_the_camera_section(tmp_path: Path, section: dict) -> None:
+    assert render_html({}, camera=None).count('id="camera"') == 0
+    out = tmp_path / "REPORT.html"
+    write_html(out, {}, camera=section)
+    page = out.read_text()
+    assert page.count('id="camera"') == 1 and 'href="#camera"' in page and 'id="figure-camera-corners"' in page
+    assert "One image: b.png" in page and "the calibration image with the largest RMS error" in page
+
+
+def test_values_that_do_not_fit_are_refused() -> None:
+    with pytest.raises(PincalError, match="18 corners need 18 detected"):
+        CameraImages(("a.png",), np.zeros(18, dtype=int), np.zeros((17, 2)), np.zeros((18, 2)), np.array([SIZE]))
+    with pytest.raises(PincalError, match="need 2 sizes"):
+        CameraImages(("a.png", "b.png"), np.zeros(2, dtype=int), np.zeros((2, 2)), np.zeros((2, 2)), np.array([SIZE]))
