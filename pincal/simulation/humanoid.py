@@ -72,8 +72,8 @@ class HumanoidSettings:
     """
 
     targets: tuple[str, ...] = TALOS_TARGETS
-    rows: int = 200
-    held_out_rows: int = 100
+    rows: int = 150
+    held_out_rows: int = 60
     sigma_pos_mm: float = 0.15
     deviation_mm: float = 1.0
     deviation_mrad: float = 1.0
