@@ -27,7 +27,7 @@ different number of them leaves the calibration rows as they were. Units: metres
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -39,8 +39,8 @@ from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
 from pincal.robots import example_robot_data_urdf
 
-__all__ = ["TALOS_URDF", "TALOS_TARGETS", "HumanoidSettings", "HumanoidData", "talos_description",
-           "simulate_humanoid"]
+__all__ = ["TALOS_URDF", "TALOS_TARGETS", "TALOS_COMPLIANCE", "HumanoidSettings", "HumanoidData", "talos_description",
+           "simulate_humanoid", "with_followers"]
 
 #: TALOS's description in example-robot-data (its path under the package's robots folder).
 TALOS_URDF = "talos_data/robots/talos_full_v2.urdf"
@@ -144,6 +144,12 @@ def simulate_humanoid(settings: HumanoidSettings | None = None) -> HumanoidData:
     shift = np.concatenate(moved) * 1e3
     return HumanoidData(tree, sets[0], sets[1], truth, tuple(i.name for i in params.info), MOCAP,
                         (float(np.sqrt(np.mean(shift**2))), float(shift.max())))
+
+
+def with_followers(tree: KinematicTree, data: MeasurementSet) -> MeasurementSet:
+    """``data`` with a column for every joint of ``tree``, in its order, each follower's computed from its
+    driver (eq M1): the rows as the measurement reader gives them to a tree's fit."""
+    return replace(data, joint_names=tree.joint_names, q=_tree_angles(tree, list(data.joint_names), data.q))
 
 
 def _postures(model: pin.Model, columns: list[str], settings: HumanoidSettings, rng: np.random.Generator,
