@@ -68,7 +68,7 @@ class TreeCalibration:
         total_seconds: the calibration's time [s].
         kept: the tree parameters estimated, sorted (the kinematic columns of ``covariance``).
         covariance: of the fit's unknowns — the kept parameters, the registrations, the points — as the fit
-            gives it (with a prior: the posterior) [m², rad², m·rad]; None at level ``registration``.
+            gives it (with a prior: the posterior) [m², rad², m·rad]; None: not known (a result made elsewhere).
     """
 
     level: ChainLevel
@@ -250,4 +250,4 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
         notes=tuple(notes), total_seconds=time.perf_counter() - started, kept=np.asarray(fit.kept, dtype=np.intp),
-        covariance=fit.covariance if size else None)
+        covariance=fit.covariance)
