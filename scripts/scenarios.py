@@ -222,7 +222,7 @@ SCENARIOS = (
              distance_m=1.5, sigma_pos_mm=0.4, sigma_rot_deg=None, rows=43, held_out_rows=18, seed=16,
              points=((0.05, 0.0, 0.05), (-0.03, 0.04, 0.06), (0.0, -0.05, 0.04)), deviations=("normal", 3.0, 5.0),
              joint_range=0.3, held_out_range=0.6),
-    *(Scenario(f"TALOS upper body, mocap 1.2 m, a marker per hand, 2 arms on one torso, mimic fingers{elastic}",
+    *(Scenario(f"TALOS upper body, mocap 1.1 m, a marker per hand, 2 arms on one torso, mimic fingers{elastic}",
                "TALOS upper body", motion="humanoid", sigma_pos_mm=0.15, sigma_rot_deg=None, rows=60,
                held_out_rows=30, seed=1, levels=("registration", "full"), elastic=bool(elastic))
       for elastic in ("", ", elastic torso and shoulders, masses unknown")),

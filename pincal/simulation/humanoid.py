@@ -17,7 +17,7 @@ The true robot of :func:`simulate_humanoid` differs from the URDF the way a real
   τ computed with the *true* masses, the URDF's plus ``payload_kg`` at each marker (a hand's tool and
   cables the URDF does not have) — so the URDF's masses cannot explain the deflection, and a diagnosis
   must take the masses as unknown (``--masses unknown``);
-* a motion-capture system 1.2 m away (an arbitrary registration) measuring each marker with
+* a motion-capture system 1.14 m away (an arbitrary registration) measuring each marker with
   N(0, ``sigma_pos_mm``) per axis.
 
 Calibration and held-out rows are drawn alike (uniform over each joint's range, clipped to
@@ -47,11 +47,12 @@ TALOS_URDF = "talos_data/robots/talos_full_v2.urdf"
 #: A marker on the first fingertip of each gripper: point 1 on the left hand, point 2 on the right.
 TALOS_TARGETS = ("gripper_left_fingertip_1_link:1", "gripper_right_fingertip_1_link:2")
 #: The joints that give under their load and by how much [rad/(N·m)]: the torso's pitch and each
-#: shoulder's, sagging (c < 0). An elastic humanoid's published joint compliances are of this order
-#: (1e-4 rad/(N·m) on ~50 N·m: a few mrad, millimetres at the hands); these move the markers by
-#: up to ~8 mm (:attr:`HumanoidData.deflection_mm`).
+#: shoulder's, sagging (c < 0). Chosen so that the markers move by the size of the errors a published
+#: calibration of an elastic humanoid upper body (two hand markers, ceiling motion capture) removed with
+#: joint and lateral compliances, 10.5 -> 3.1 mm mean: here 4.9 mm RMS, 13.6 mm at most at the defaults
+#: (:attr:`HumanoidData.deflection_mm`; the torso's ~40 N·m and the shoulders' ~18 N·m RMS loads).
 TALOS_COMPLIANCE = (("torso_2_joint", -1e-4), ("arm_left_2_joint", -2e-4), ("arm_right_2_joint", -2e-4))
-#: sensor_T_base of the simulated motion capture: 1.2 m in front of the robot, turned towards it.
+#: sensor_T_base of the simulated motion capture: an arbitrary pose 1.14 m from the robot's base link.
 MOCAP = Registration(rotation=pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), translation=np.array([1.0, 0.5, -0.2]))
 
 
