@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 from pincal._version import __version__
 from pincal.errors import PincalError
+from pincal.outputs import write_text
 
 if TYPE_CHECKING:
     from pincal.simulation.humanoid import HumanoidSettings
@@ -104,8 +105,8 @@ def write_talos(folder: Path) -> None:
         "placement_errors": dict(zip(data.parameter_names, data.truth.tolist())),
         "seed": settings.seed,
     }
-    (folder / "truth.json").write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
-    (folder / "README.md").write_text(_talos_readme(settings), encoding="utf-8")
+    write_text(folder / "truth.json", json.dumps(truth, indent=2) + "\n")
+    write_text(folder / "README.md", _talos_readme(settings))
 
 
 def _talos_readme(settings: HumanoidSettings) -> str:
