@@ -717,36 +717,21 @@ TREE_GOAL_S = 5.0
 
 
 def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dict:
-    """(i): whole ``pincal calibrate`` processes of TALOS's upper body with a marker on each gripper [s]."""
-    import csv
+    """(i): whole ``pincal calibrate`` processes of TALOS's upper body with a marker on each gripper [s]: the rows of
+    :func:`pincal.simulation.humanoid.simulate_humanoid` on a rigid robot off by N(0, 0.5 mm / 0.5 mrad)."""
+    from pincal.measurements.csv_v1 import write_measurements
+    from pincal.simulation.humanoid import HumanoidSettings, simulate_humanoid, talos_description
 
-    import numpy as np
-    import pinocchio as pin
-
-    from pincal.model.description import read_description
-    from pincal.model.tree import KinematicTree, parse_targets
-    from pincal.model.tree_parameters import TreeParameters
-    from pincal.robots import example_robot_data_urdf
-
-    urdf = example_robot_data_urdf("talos_data/robots/talos_full_v2.urdf")
-    tree = KinematicTree.from_description(read_description(Path(urdf), ()), parse_targets(list(TREE_TARGETS)))
-    params = TreeParameters(tree, "full")
-    rng = np.random.default_rng(seed)
-    lower, upper = (np.array([getattr(j, side) for j in tree.joints]) for side in ("lower", "upper"))
-    q = rng.uniform(np.maximum(lower, -1.5), np.minimum(upper, 1.5), (rows, tree.n_joints))
-    local = [np.array([[0.0, 0.0, -0.1]])] * len(TREE_TARGETS)  # 10 cm beyond each gripper's base [m]
-    with tree.placed(params.placements(rng.normal(0.0, 5e-4, params.size))):
-        world = tree.target_points(q, local)
-    sensed = (world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
-              + rng.normal(0.0, 1e-4, world.shape))  # a mocap 2 m away, 0.1 mm per axis
+    # a marker 10 cm beyond each gripper's base, a mocap at 0.1 mm per axis
+    settings = HumanoidSettings(targets=TREE_TARGETS, rows=rows, held_out_rows=0, sigma_pos_mm=0.1,
+                                deviation_mm=0.5, deviation_mrad=0.5, compliance=(), payload_kg=0.0,
+                                marker_m=(0.0, 0.0, -0.1), seed=seed)
+    simulated = simulate_humanoid(settings)
+    urdf = talos_description().path
     times = []
     with tempfile.TemporaryDirectory() as folder:
         data = Path(folder) / "talos.csv"
-        with open(data, "w", newline="") as handle:
-            writer = csv.writer(handle)
-            writer.writerow([*tree.joint_names, *(f"{a}{i + 1}" for i in range(len(TREE_TARGETS)) for a in "xyz")])
-            for k in range(rows):
-                writer.writerow([*(repr(float(v)) for v in q[k]), *(repr(float(v)) for v in sensed[k].ravel())])
+        write_measurements(data, simulated.calibration)
         targets = [flag for target in TREE_TARGETS for flag in ("--tip-link", target)]
         for _ in range(runs):
             start = time.perf_counter()
@@ -755,7 +740,7 @@ def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dic
                            check=True, capture_output=True)
             times.append(time.perf_counter() - start)
         report = json.loads(Path(folder, "REPORT.json").read_text(encoding="utf-8"))
-    return {"rows": rows, "joints": tree.n_joints, "targets": list(TREE_TARGETS), "times_s": times,
+    return {"rows": rows, "joints": simulated.tree.n_joints, "targets": list(TREE_TARGETS), "times_s": times,
             "median_s": statistics.median(times), "goal_s": TREE_GOAL_S,
             "rms_after_mm": [t["calibration_errors"]["position"]["rms_mm"] for t in report["targets"]],
             "load_average": os.getloadavg()}

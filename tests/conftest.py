@@ -317,6 +317,7 @@ SLOW_TESTS = (
     "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/extract.md]",
     "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/plan.md]",
     "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/getting-started.md]",
+    "tests/test_docs_examples.py::test_the_blocks_of_a_page_run_in_order[docs/whole-robots.md]",
 )
 
 

@@ -16,13 +16,13 @@ import tomllib
 
 from pincal.cli.commands import main
 from pincal.robots import example_robot_data_urdf
-from pincal.workflows.example import EXAMPLES, dataset_folder
+from pincal.workflows.example import EXAMPLES, GENERATED, dataset_folder
 
 ROOT = Path(__file__).resolve().parent.parent
 DATASETS = ROOT / "pincal" / "datasets"
 
 
-@pytest.mark.parametrize("name", sorted(EXAMPLES))
+@pytest.mark.parametrize("name", sorted(set(EXAMPLES) - set(GENERATED)))
 def test_a_set_is_copied_whole_and_never_over_an_existing_one(name, tmp_path, capsys):
     assert main(["example", name, "--out", str(tmp_path / "data")]) == 0
     copied, source = tmp_path / "data" / name, dataset_folder(name)
@@ -43,6 +43,24 @@ def test_a_set_is_copied_whole_and_never_over_an_existing_one(name, tmp_path, ca
     err = capsys.readouterr().err.strip()
     assert "exists; refusing to overwrite it" in err and len(err.splitlines()) == 1
     assert (copied / "README.md").read_text(encoding="utf-8") == "edited"
+
+
+def test_the_talos_set_is_made_whole_the_same_each_time_and_never_over_an_existing_one(tmp_path, capsys):
+    """pincal example talos simulates its set (nothing shipped): the URDF as example-robot-data has it, the rows,
+    truth.json and README; the same bytes on a second run elsewhere; a second run into the same place refused."""
+    for out in ("a", "b"):
+        assert main(["example", "talos", "--out", str(tmp_path / out)]) == 0
+    made = tmp_path / "a" / "talos"
+    assert sorted(p.name for p in made.iterdir()) == ["README.md", "calibration.csv", "talos_full_v2.urdf",
+                                                      "truth.json", "validation.csv"]
+    assert all((made / p.name).read_bytes() == p.read_bytes() for p in (tmp_path / "b" / "talos").iterdir())
+    assert (made / "talos_full_v2.urdf").read_bytes() == Path(
+        example_robot_data_urdf("talos_data/robots/talos_full_v2.urdf")).read_bytes()
+    header = (made / "calibration.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
+    assert "gripper_left_joint" in header and not any("fingertip" in c or "inner_double" in c for c in header)
+    assert "truth.json" in capsys.readouterr().out
+    assert main(["example", "talos", "--out", str(tmp_path / "a")]) == 2
+    assert "exists; refusing to overwrite it" in capsys.readouterr().err
 
 
 def test_the_docs_commands_run_on_a_copied_set(tmp_path, monkeypatch, capsys):
@@ -78,8 +96,9 @@ def test_an_example_script_runs_outside_a_clone(tmp_path, monkeypatch, capsys):
 def test_every_shipped_file_is_package_data_and_the_clone_links_to_it():
     patterns = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))[
         "tool"]["setuptools"]["package-data"]["pincal.datasets"]
-    files = {p for p in DATASETS.rglob("*")
-             if p.is_file() and p.name != "__init__.py" and p.suffix != ".pyc" and "__pycache__" not in p.parts}
+    files = {p for p in DATASETS.rglob("*")  # a set pincal example made in a clone's data/ is no shipped file
+             if p.is_file() and p.name != "__init__.py" and p.suffix != ".pyc" and "__pycache__" not in p.parts
+             and p.relative_to(DATASETS).parts[0] not in GENERATED}
     shipped = {p for pattern in patterns for p in DATASETS.glob(pattern)}  # globbed as setuptools does
     assert files and not sorted(files - shipped), "add a package-data pattern for these"
     assert (ROOT / "data").resolve() == DATASETS.resolve()  # the docs' data/ paths, in a clone

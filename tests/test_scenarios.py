@@ -26,7 +26,7 @@ def scenarios():
 
 @pytest.mark.parametrize("name", ["6D, raster at constant orientation", "3D, 24 postures", "mocap",
                                   "prismatic + continuous", "socket fixture", "3D, one line at constant orientation",
-                                  "each left out in turn"])
+                                  "each left out in turn", "TALOS upper body"])
 def test_scenario_reaches_its_noise_floor(scenarios, tmp_path, name):
     scenario = next(s for s in scenarios.SCENARIOS if name in s.name)
     robots = scenarios.build_robots(tmp_path)

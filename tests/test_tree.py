@@ -140,3 +140,19 @@ def test_two_sessions_are_registered_each_once_for_every_target(simulated):
     assert result.session_names == ("a", "b") and len(result.target.registrations) == 2
     first, second = result.target.registrations
     assert_close(second.rotation, moved @ first.rotation, 2e-3, "the second session's sensor turned by 'moved'")
+
+
+def test_the_predicted_point_error_propagates_the_fits_covariance(simulated):
+    """At the calibration rows themselves, the propagated covariance sums to σ² × the unknowns (the trace of the
+    hat matrix of a least-squares fit): e² K P = σ² p, p = kept + 6 (registration) + 3 P (points), σ the noise
+    the fit estimated (at level full the simulated one; at level registration the geometry it lacks too)."""
+    tree, _, _, data, sensed = simulated
+    sigma = 1e-4
+    noisy = sensed + np.random.default_rng(2).normal(0.0, sigma, sensed.shape)
+    rows = MeasurementSet(data.joint_names, data.q, noisy, None, data.roles, data.lines)
+    for level in ("full", "registration"):
+        result = calibrate_tree(tree, rows, level, ChainFitOptions(selection="all"))
+        expected = result.sigma_pos_m * np.sqrt((result.kept.size + 6 + 3 * 3) / (data.n_rows * 3))
+        assert 0.8 < result.predicted_point_rms(tree, data.q) / expected < 1.25, level
+        if level == "full":
+            assert 0.8 < result.sigma_pos_m / sigma < 1.25

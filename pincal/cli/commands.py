@@ -328,6 +328,8 @@ def _run_example(args: argparse.Namespace) -> int:
     readme = target / "README.md"
     if args.name == "examples":
         print(f"what they print and read: {readme}")
+    elif args.name == "talos":
+        print(f"what was simulated: {readme}; the true values: {target / 'truth.json'}")
     else:
         print(f"provenance and licence: {readme}" if readme.exists() else "provenance: docs/paper.md (Table 1)")
     return 0

@@ -383,10 +383,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     example = sub.add_parser("example", help="copy a measurement set shipped with pincal (TIAGo mocap, MUKCa, "
                                              "a ROS 2 bag), the KUKA URDF or the example scripts to DIR/NAME, for "
-                                             "the docs' commands outside a clone")
-    example.add_argument("name", choices=("tiago_mocap", "mukca", "lwr_bag", "urdf", "examples"), metavar="NAME",
-                         help="tiago_mocap, mukca, lwr_bag, urdf or examples (pincal example urdf --out . gives the "
-                              "docs' urdf/kuka_lwr4plus.urdf, pincal example examples --out . their examples/*.py)")
+                                             "the docs' commands outside a clone; talos: make TALOS's simulated set")
+    example.add_argument("name", choices=("tiago_mocap", "mukca", "lwr_bag", "urdf", "examples", "talos"),
+                         metavar="NAME",
+                         help="tiago_mocap, mukca, lwr_bag, urdf, examples or talos (pincal example urdf --out . gives "
+                              "the docs' urdf/kuka_lwr4plus.urdf, pincal example examples --out . their examples/*.py; "
+                              "talos is simulated on the spot: TALOS's URDF and motion-capture rows of both hands)")
     example.add_argument("--out", type=Path, default=Path("data"),
                          help="folder to put NAME in (default: ./data, where the docs' commands look)")
 

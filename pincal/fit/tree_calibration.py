@@ -18,7 +18,7 @@ silently different).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import cast
 
 import numpy as np
@@ -39,6 +39,7 @@ from pincal.model.tree import KinematicTree, TreePlacements
 from pincal.model.tree_parameters import TreeParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor import TargetEstimate
+from pincal.residuals.sensor_values import RowWeights
 from pincal.residuals.tree import TreeResidual, TreeRows
 
 __all__ = ["TreeCalibration", "calibrate_tree", "tree_rows", "initial_tree_target"]
@@ -65,6 +66,9 @@ class TreeCalibration:
             (``tree.placed(result.tree_placements)``).
         notes: what the user should know.
         total_seconds: the calibration's time [s].
+        kept: the tree parameters estimated, sorted (the kinematic columns of ``covariance``).
+        covariance: of the fit's unknowns — the kept parameters, the registrations, the points — as the fit
+            gives it (with a prior: the posterior) [m², rad², m·rad]; None: not known (a result made elsewhere).
     """
 
     level: ChainLevel
@@ -86,12 +90,29 @@ class TreeCalibration:
     tree_placements: TreePlacements
     notes: tuple[str, ...]
     total_seconds: float
+    kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=np.intp))
+    covariance: np.ndarray | None = None
 
     @property
     def rms_m(self) -> float:
         """RMS distance of the seen points from the model [m]."""
         seen = self.point_errors[np.isfinite(self.point_errors)]
         return float(np.sqrt(np.mean(seen**2)))
+
+    def predicted_point_rms(self, tree: KinematicTree, q: np.ndarray) -> float:
+        """Linearised prediction of the RMS error of every target point at tree joint readings ``q`` (K, N) due to
+        the estimation noise of the fit [m]: ``covariance`` propagated through the measurement Jacobian at the
+        calibrated model, in the first session's registration (as
+        :meth:`pincal.fit.chain_calibration.ChainCalibration.predicted_point_rms` for one chain)."""
+        if self.covariance is None:
+            return 0.0
+        k, n_points = len(q), len(self.target.points)
+        rows = TreeRows(np.asarray(q, dtype=float), np.zeros((k, n_points, 3)), np.ones((k, n_points), dtype=bool),
+                        np.zeros(k, dtype=np.intp))
+        objective = TreeResidual(tree, self.params, self.kept, self.vector, rows, self.target, RowWeights(np.ones(k)))
+        jac = objective.jacobian(objective.start_vector())  # at the calibrated model: its own start
+        variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
+        return float(np.sqrt(variance.sum() / (k * n_points)))
 
 
 def tree_rows(tree: KinematicTree, data: MeasurementSet, sessions: np.ndarray | None = None) -> TreeRows:
@@ -228,4 +249,5 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         row_sessions=rows.sessions, point_errors=tree_objective.point_errors(fit.solution.x, weights),
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
-        notes=tuple(notes), total_seconds=time.perf_counter() - started)
+        notes=tuple(notes), total_seconds=time.perf_counter() - started, kept=np.asarray(fit.kept, dtype=np.intp),
+        covariance=fit.covariance)

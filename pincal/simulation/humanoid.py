@@ -1,0 +1,206 @@
+"""A humanoid's upper body measured by motion capture: TALOS's two arms on its shared torso.
+
+The robot is TALOS as example-robot-data ships it (``talos_data/robots/talos_full_v2.urdf``, PAL
+Robotics): a 2-joint torso (yaw, pitch) carrying two 7-joint arms, each ending in a gripper whose
+fingers follow ``gripper_*_joint`` by ``<mimic>`` (a parallelogram: the inner link by +1, the
+fingertip by -1, so the fingertip keeps its attitude as the gripper opens). A marker on one fingertip
+of each gripper (:data:`TALOS_TARGETS`) puts 20 joints on the two chains: the torso's 2 (shared), 7 per
+arm and, per gripper, the 2 finger joints that follow its ``gripper_*_joint`` — a joint off both chains
+whose reading the rows carry, the followers having no column (eq M1 of :mod:`pincal.measurements.mimics`).
+
+The true robot of :func:`simulate_humanoid` differs from the URDF the way a real one does:
+
+* every placement of the tree's ``full`` parameters off by N(0, ``deviation_mm``) and
+  N(0, ``deviation_mrad``) (:class:`pincal.model.tree_parameters.TreeParameters`);
+* joints that give under their gravity load: actual = reading + c · τ(q) (the sign convention of
+  :mod:`pincal.model.effects`: τ the torque that holds the links, so a joint that sags has c < 0),
+  τ computed with the *true* masses, the URDF's plus ``payload_kg`` at each marker (a hand's tool and
+  cables the URDF does not have) — so the URDF's masses cannot explain the deflection, and a diagnosis
+  must take the masses as unknown (``--masses unknown``);
+* a motion-capture system 1.14 m away (an arbitrary registration) measuring each marker with
+  N(0, ``sigma_pos_mm``) per axis.
+
+Calibration and held-out rows are drawn alike (uniform over each joint's range, clipped to
+±``joint_range_rad``); the held-out rows are drawn after every value of the calibration rows, so a
+different number of them leaves the calibration rows as they were. Units: metres, radians, N·m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pinocchio as pin
+
+from pincal.measurements.data import MeasurementSet
+from pincal.model.description import RobotDescription, read_description
+from pincal.model.sensor import Registration
+from pincal.model.tree import KinematicTree, parse_targets
+from pincal.model.tree_parameters import TreeParameters
+from pincal.robots import example_robot_data_urdf
+
+__all__ = ["TALOS_URDF", "TALOS_TARGETS", "TALOS_COMPLIANCE", "HumanoidSettings", "HumanoidData", "talos_description",
+           "simulate_humanoid", "with_followers"]
+
+#: TALOS's description in example-robot-data (its path under the package's robots folder).
+TALOS_URDF = "talos_data/robots/talos_full_v2.urdf"
+#: A marker on the first fingertip of each gripper: point 1 on the left hand, point 2 on the right.
+TALOS_TARGETS = ("gripper_left_fingertip_1_link:1", "gripper_right_fingertip_1_link:2")
+#: The joints that give under their load and by how much [rad/(N·m)]: the torso's pitch and each
+#: shoulder's, sagging (c < 0). Chosen so that the markers move by the size of the errors a published
+#: calibration of an elastic humanoid upper body (two hand markers, ceiling motion capture) removed with
+#: joint and lateral compliances, 10.5 -> 3.1 mm mean: here 4.9 mm RMS, 13.6 mm at most at the defaults
+#: (:attr:`HumanoidData.deflection_mm`; the torso's ~40 N·m and the shoulders' ~18 N·m RMS loads).
+TALOS_COMPLIANCE = (("torso_2_joint", -1e-4), ("arm_left_2_joint", -2e-4), ("arm_right_2_joint", -2e-4))
+#: sensor_T_base of the simulated motion capture: an arbitrary pose 1.14 m from the robot's base link.
+MOCAP = Registration(rotation=pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), translation=np.array([1.0, 0.5, -0.2]))
+
+
+@dataclass(frozen=True)
+class HumanoidSettings:
+    """What :func:`simulate_humanoid` simulates (defaults: the docs' walk-through).
+
+    Attributes:
+        targets: ``LINK:POINTS`` per marker's link (as ``--tip-link``); one marker per target.
+        rows / held_out_rows: calibration rows and held-out rows (role ``validation``).
+        sigma_pos_mm: the motion capture's noise per axis [mm] (0.1-0.2 mm for a ceiling system).
+        deviation_mm / deviation_mrad: std of the true placement errors [mm, mrad].
+        compliance: (joint, c [rad/(N·m)]) of the true robot; empty: a rigid robot.
+        payload_kg: an unmodelled mass at each marker [kg] (it loads the compliant joints).
+        marker_m: each marker in its link [m].
+        joint_range_rad: the postures' joints within their limits and within ± this [rad].
+        seed: of every random draw.
+    """
+
+    targets: tuple[str, ...] = TALOS_TARGETS
+    rows: int = 150
+    held_out_rows: int = 60
+    sigma_pos_mm: float = 0.15
+    deviation_mm: float = 1.0
+    deviation_mrad: float = 1.0
+    compliance: tuple[tuple[str, float], ...] = TALOS_COMPLIANCE
+    payload_kg: float = 1.0
+    marker_m: tuple[float, float, float] = (0.0, 0.0, -0.02)
+    joint_range_rad: float = 1.5
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class HumanoidData:
+    """What :func:`simulate_humanoid` returns.
+
+    Attributes:
+        tree: the nominal tree (the URDF's), whose joints the rows' ``q`` follow.
+        calibration / validation: the rows; their columns are the tree's joints that follow none
+            and the drivers off the tree (``gripper_*_joint``), points ``x1,y1,z1 ...`` in the sensor frame.
+        truth: the true placement errors, :class:`TreeParameters` ``full`` of ``tree`` [m, rad].
+        parameter_names: their names (``arm_left_2_joint.tx`` ...).
+        registration: the true sensor_T_base.
+        deflection_mm: RMS and largest marker displacement the compliance causes [mm].
+    """
+
+    tree: KinematicTree
+    calibration: MeasurementSet
+    validation: MeasurementSet
+    truth: np.ndarray
+    parameter_names: tuple[str, ...]
+    registration: Registration
+    deflection_mm: tuple[float, float]
+
+
+def talos_description() -> RobotDescription:
+    """TALOS's URDF from example-robot-data, read and checked."""
+    return read_description(example_robot_data_urdf(TALOS_URDF))
+
+
+def simulate_humanoid(settings: HumanoidSettings | None = None) -> HumanoidData:
+    """TALOS's upper body measured by motion capture, a marker on each gripper (module docstring)."""
+    settings = HumanoidSettings() if settings is None else settings
+    description = talos_description()
+    tree = KinematicTree.from_description(description, parse_targets(list(settings.targets)))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(settings.seed)
+    followers = {j.name: j.mimic for j in tree.joints if j.mimic is not None}
+    read = [n for n in tree.joint_names if n not in followers]
+    drivers = sorted({m.driver for m in followers.values()} - set(tree.joint_names))
+    model = pin.buildModelFromXML(description.text)
+    columns = [*read, *drivers]
+    q_read = _postures(model, columns, settings, rng, settings.rows)
+    metres = np.array([info.unit == "m" for info in params.info])
+    truth = rng.normal(0.0, 1.0, params.size) * np.where(metres, settings.deviation_mm, settings.deviation_mrad) * 1e-3
+    loaded = _with_payload(model, tree, settings)
+    sets, moved = [], []
+    for role, count in (("calibration", settings.rows), ("validation", settings.held_out_rows)):
+        q = q_read if role == "calibration" else _postures(model, columns, settings, rng, count)
+        full = _tree_angles(tree, columns, q)
+        actual = full + _deflection(loaded, tree, full, settings.compliance)
+        local = [np.tile(settings.marker_m, (len(t.spec.points), 1)) for t in tree.targets]
+        with tree.placed(params.placements(truth)):
+            world = tree.target_points(actual, local)
+            moved.append(np.linalg.norm(world - tree.target_points(full, local), axis=2).ravel())
+        sensed = (world @ MOCAP.rotation.T + MOCAP.translation
+                  + rng.normal(0.0, settings.sigma_pos_mm * 1e-3, world.shape))
+        sets.append(MeasurementSet(tuple(columns), q, sensed, None, np.full(count, role, dtype=object),
+                                   np.arange(2, count + 2)))
+    shift = np.concatenate(moved) * 1e3
+    return HumanoidData(tree, sets[0], sets[1], truth, tuple(i.name for i in params.info), MOCAP,
+                        (float(np.sqrt(np.mean(shift**2))), float(shift.max())))
+
+
+def with_followers(tree: KinematicTree, data: MeasurementSet) -> MeasurementSet:
+    """``data`` with a column for every joint of ``tree``, in its order, each follower's computed from its
+    driver (eq M1): the rows as the measurement reader gives them to a tree's fit."""
+    return replace(data, joint_names=tree.joint_names, q=_tree_angles(tree, list(data.joint_names), data.q))
+
+
+def _postures(model: pin.Model, columns: list[str], settings: HumanoidSettings, rng: np.random.Generator,
+              count: int) -> np.ndarray:
+    """Readings (count, len(columns)) uniform within each joint's limits and ±joint_range_rad [rad]."""
+    ids = [model.getJointId(n) for n in columns]
+    lower = np.array([model.lowerPositionLimit[model.joints[j].idx_q] for j in ids])
+    upper = np.array([model.upperPositionLimit[model.joints[j].idx_q] for j in ids])
+    bound = settings.joint_range_rad
+    return rng.uniform(np.maximum(lower, -bound), np.minimum(upper, bound), (count, len(columns)))
+
+
+def _tree_angles(tree: KinematicTree, columns: list[str], q: np.ndarray) -> np.ndarray:
+    """Every tree joint's angle (K, N): the readings, and each follower from its driver (eq M1)."""
+    out = np.empty((len(q), tree.n_joints))
+    for i, joint in enumerate(tree.joints):
+        if joint.mimic is None:
+            out[:, i] = q[:, columns.index(joint.name)]
+        else:
+            out[:, i] = joint.mimic.multiplier * q[:, columns.index(joint.mimic.driver)] + joint.mimic.offset
+    return out
+
+
+def _with_payload(model: pin.Model, tree: KinematicTree, settings: HumanoidSettings) -> pin.Model:
+    """A copy of ``model`` with ``payload_kg`` at each marker: the true robot's masses."""
+    loaded = model.copy()
+    for target in tree.targets:
+        frame = loaded.frames[loaded.getFrameId(target.link, pin.FrameType.BODY)]
+        payload = pin.Inertia(settings.payload_kg, np.asarray(settings.marker_m, dtype=float), np.zeros((3, 3)))
+        loaded.inertias[frame.parentJoint] = loaded.inertias[frame.parentJoint] + frame.placement.act(payload)
+    return loaded
+
+
+def _deflection(model: pin.Model, tree: KinematicTree, angles: np.ndarray,
+                compliance: tuple[tuple[str, float], ...]) -> np.ndarray:
+    """Each tree joint's shift c · τ(q) (K, N) [rad]: τ the gravity torque of ``model`` (Pinocchio's
+    ``computeGeneralizedGravity``) with the tree's joints at ``angles`` and every other joint at zero."""
+    shifts = np.zeros_like(angles)
+    if not compliance:
+        return shifts
+    data = model.createData()
+    q_index = [model.joints[model.getJointId(n)].idx_q for n in tree.joint_names]
+    v_index = {n: model.joints[model.getJointId(n)].idx_v for n, _ in compliance}
+    configuration = pin.neutral(model)
+    for k, row in enumerate(angles):
+        configuration[q_index] = row
+        torque = pin.computeGeneralizedGravity(model, data, configuration)
+        for name, value in compliance:
+            shifts[k, tree.joint_names.index(name)] = value * torque[v_index[name]]
+    for i, joint in enumerate(tree.joints):  # a follower moves with its driver's shift (eq M1)
+        if joint.mimic is not None and joint.mimic.driver in tree.joint_names:
+            shifts[:, i] += joint.mimic.multiplier * shifts[:, tree.joint_names.index(joint.mimic.driver)]
+    return shifts

@@ -1,0 +1,55 @@
+"""pincal.simulation.humanoid: TALOS's upper body measured by motion capture (pincal example talos, the
+whole-robots walk-through, scripts/scenarios.py's two-arm row and scripts/benchmark.py --tree).
+
+Small sets (20 + 10 rows): the rows' columns (the grippers' drivers, no followers), the held-out rows drawn after
+the calibration rows, and the compliance: the markers move by millimetres, and not as the URDF's masses say.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pincal.model.tree_parameters import TreeParameters
+from pincal.simulation.humanoid import HumanoidSettings, simulate_humanoid
+
+SMALL = HumanoidSettings(rows=20, held_out_rows=10)
+
+
+@pytest.fixture(scope="module")
+def small():
+    return simulate_humanoid(SMALL)
+
+
+def test_the_rows_read_the_drivers_and_the_followers_follow_them(small):
+    """20 tree joints; the rows carry 16 of them and the two gripper drivers off the chains (18 columns)."""
+    tree = small.tree
+    assert tree.n_joints == 20
+    followers = [j for j in tree.joints if j.mimic is not None]
+    assert [j.mimic.multiplier for j in followers] == [1.0, -1.0, 1.0, -1.0]
+    assert small.calibration.joint_names[-2:] == ("gripper_left_joint", "gripper_right_joint")
+    assert len(small.calibration.joint_names) == 18 and not set(small.calibration.joint_names) & {
+        j.name for j in followers}
+    assert small.calibration.points.shape == (20, 2, 3) and small.validation.points.shape == (10, 2, 3)
+    assert set(small.validation.roles) == {"validation"} and set(small.calibration.roles) == {"calibration"}
+    assert small.truth.size == TreeParameters(tree, "full").size == len(small.parameter_names)
+
+
+def test_more_held_out_rows_leave_the_calibration_rows_as_they_were(small):
+    more = simulate_humanoid(replace(SMALL, held_out_rows=15))
+    assert np.array_equal(more.calibration.points, small.calibration.points)
+    assert np.array_equal(more.truth, small.truth)
+    assert np.array_equal(more.validation.q[:10], small.validation.q)
+
+
+def test_the_compliance_moves_the_markers_by_millimetres_and_not_as_the_urdfs_masses_say(small):
+    """The default joints give 1-15 mm at the markers (a rigid robot: none), and the payload the URDF lacks
+    loads the shoulders beyond what the URDF's masses do."""
+    rms, largest = small.deflection_mm
+    assert 2.0 < rms < 8.0 and 5.0 < largest < 20.0
+    assert simulate_humanoid(replace(SMALL, compliance=())).deflection_mm == (0.0, 0.0)
+    light = simulate_humanoid(replace(SMALL, payload_kg=0.0, compliance=(("arm_left_2_joint", 1e-3),)))
+    heavy = simulate_humanoid(replace(SMALL, compliance=(("arm_left_2_joint", 1e-3),)))
+    assert heavy.deflection_mm[0] > 1.2 * light.deflection_mm[0]  # the 1 kg at each hand loads the shoulder
