@@ -50,7 +50,7 @@ def noisy(request, tmp_path_factory):
                                                                noise_px=NOISE_PX, seed=5))
     out = root / "out"
     assert _calibrate(sim, out) == 0
-    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(sim.data),
+    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(sim.held_out),
                  "--json", str(out / "evaluation.json")]) == 0
     return sim, out
 
@@ -105,7 +105,8 @@ def test_noise_free_corners_give_the_truth_from_a_mount_10_cm_and_30_deg_off(exa
 def test_noisy_held_out_images_reach_the_noise_floor(noisy):
     sim, out = noisy
     document = json.loads((out / "evaluation.json").read_text())
-    held_out = [i for i in document["images"] if i["image"] >= "image_020"]  # the 8 validation images
+    held_out = document["images"]
+    assert len(held_out) == 8 and all(i["role"] == "validation" for i in held_out)
     after = np.sqrt(np.mean([i["after_rms_px"] ** 2 for i in held_out]))
     before = np.sqrt(np.mean([i["before_rms_px"] ** 2 for i in held_out]))
     # the floor: N(0, 0.2 px) per coordinate on ~400 held-out coordinates (sampling spread ~4 %), plus the

@@ -101,8 +101,8 @@ def cannot_see(result: CameraCalibration, chain: KinematicChain) -> list[str]:
              "camera sees the two only together, and the corrected URDF writes them as one origin"]
     if result.params is not None and result.dropped:
         names = sorted({result.params.info[d.index].name for d in result.dropped})
-        words.append(f"{len(names)} kinematic parameter(s) not determined by these images, held at nominal "
-                     f"(identifiability.dropped says which part absorbs each): {', '.join(names)}")
+        words.append(f"{len(names)} kinematic parameter(s) not determined by these images, held at nominal: "
+                     "identifiability.dropped names each and the parts that absorb it")
     return words
 
 

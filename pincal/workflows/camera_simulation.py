@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from pincal.errors import PincalError
+from pincal.fit.camera_calibration import images_of
 from pincal.measurements.camera_csv import write_corner_set
 from pincal.measurements.charuco import parse_board
 from pincal.model.camera_info import write_camera_info
@@ -77,7 +78,9 @@ class CameraSimulation:
     """The files written and the truth behind them.
 
     Attributes:
-        urdf / data / intrinsics: the nominal URDF, DATA.csv and the camera_info YAML of the true intrinsics.
+        urdf / data / intrinsics: the nominal URDF, DATA.csv (every image, the held-out ones of role
+            ``validation``) and the camera_info YAML of the true intrinsics.
+        held_out: ``held_out.csv``, the held-out images alone (None without any), for ``pincal evaluate``.
         camera_link / board_link: the links to name (board_link None eye in hand).
         placements: the chain's true joint and tip placements (as :meth:`KinematicChain.placements`).
         mount: the true mount (4, 4) [m]; world: the true world frame W (4, 4) [m] (:mod:`pincal.model.camera_view`).
@@ -86,6 +89,7 @@ class CameraSimulation:
     urdf: Path
     data: Path
     intrinsics: Path
+    held_out: Path | None
     camera_link: str
     board_link: str | None
     placements: tuple[np.ndarray, ...]
@@ -95,7 +99,8 @@ class CameraSimulation:
 
 def simulate_camera_files(out: str | Path, settings: CameraSimulationSettings = CameraSimulationSettings()
                           ) -> CameraSimulation:
-    """Write ``ur5_camera.urdf``, ``DATA.csv`` and ``camera_info.yaml`` into the folder ``out`` (module docstring)."""
+    """Write ``ur5_camera.urdf``, ``DATA.csv``, ``held_out.csv`` and ``camera_info.yaml`` into the folder ``out``
+    (module docstring)."""
     folder = ensure_directory(out)
     rng = np.random.default_rng(settings.seed)
     text = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf").read_text(encoding="utf-8")
@@ -120,6 +125,10 @@ def simulate_camera_files(out: str | Path, settings: CameraSimulationSettings = 
     urdf, data, intrinsics = folder / "ur5_camera.urdf", folder / "DATA.csv", folder / "camera_info.yaml"
     write_text(urdf, text)
     write_corner_set(data, corners)
+    held_out = None
+    if settings.held_out:
+        held_out = folder / "held_out.csv"
+        write_corner_set(held_out, images_of(corners, np.arange(settings.images, count)))
     write_camera_info(intrinsics, INTRINSICS, camera_name="camera_link")
-    return CameraSimulation(urdf, data, intrinsics, "camera_link", board_link, tuple(placements), TRUE_MOUNT,
+    return CameraSimulation(urdf, data, intrinsics, held_out, "camera_link", board_link, tuple(placements), TRUE_MOUNT,
                             scene.worlds[0])
