@@ -7,6 +7,7 @@ The data: pincal.workflows.camera_simulation (a UR5 with a camera or a board on 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +15,16 @@ import pinocchio as pin
 import pytest
 
 from pincal.cli.commands import main
+from pincal.fit.camera_calibration import CameraFitOptions, calibrate_camera
+from pincal.fit.camera_start import board_poses, hand_eye_start
 from pincal.model.camera_view import pose
 from pincal.model.chain import KinematicChain
-from pincal.workflows.camera_simulation import INTRINSICS, CameraSimulationSettings, simulate_camera_files
+from pincal.workflows.camera_simulation import (
+    INTRINSICS,
+    CameraSimulationSettings,
+    simulate_camera,
+    simulate_camera_files,
+)
 
 ARRANGEMENTS = ("eye_in_hand", "eye_to_hand")
 #: Pixel noise per coordinate [px] of the noisy data: ChArUco corners found to ~0.1-0.2 px (docs/camera.md).
@@ -199,3 +207,17 @@ def test_evaluate_refuses_another_urdf_and_a_missing_camera_info(exact, capsys, 
     (moved / "REPORT.json").write_text(json.dumps(report))
     _refused(["evaluate", str(moved / "robot.urdf"), str(moved / "REPORT.json"), str(sim.data), "--json",
               str(tmp_path / "e" / "evaluation.json")], capsys, tmp_path / "e", "camera_info")
+
+
+def test_an_image_of_one_row_of_corners_is_left_out_of_the_start_only():
+    """solvePnP cannot place a plane from one line of its points (it returns NaN): such an image gets no pose in the
+    start, and its corners still count in the fit."""
+    simulated = simulate_camera(CameraSimulationSettings("eye_in_hand", images=6, held_out=0, noise_px=0.0, seed=2))
+    corners = simulated.corners
+    row = (corners.image_of != 0) | (corners.board_points[:, 1] == corners.board_points[corners.image_of == 0][0, 1])
+    one_row = replace(corners, image_of=corners.image_of[row], corners=corners.corners[row],
+                      pixels=corners.pixels[row], board_points=corners.board_points[row], lines=corners.lines[row])
+    assert np.isnan(board_poses(one_row, INTRINSICS)[0]).all()
+    start, names = hand_eye_start(simulated.chain, one_row, "eye_in_hand", INTRINSICS)
+    result = calibrate_camera(simulated.chain, one_row, start, "registration", CameraFitOptions(), names)
+    assert np.all(np.isfinite(result.estimate.mount)) and result.nominal_rms_px < 5.0

@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from pincal.errors import PincalError
 from pincal.fit.camera_calibration import images_of
-from pincal.measurements.camera_csv import write_corner_set
+from pincal.measurements.camera_csv import CornerSet, write_corner_set
 from pincal.measurements.charuco import parse_board
 from pincal.model.camera_info import write_camera_info
 from pincal.model.camera_view import ARRANGEMENTS, Arrangement, pose
@@ -29,11 +29,11 @@ from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.pinhole import CameraIntrinsics
 from pincal.outputs import write_text
 from pincal.robots import example_robot_data_urdf
-from pincal.simulation.camera_scene import facing_scene, view_configurations, view_corners, with_fixed_link
+from pincal.simulation.camera_scene import CameraScene, facing_scene, view_configurations, view_corners, with_fixed_link
 from pincal.workflows.paths import ensure_directory
 
 __all__ = ["INTRINSICS", "BOARD_SPEC", "TRUE_MOUNT", "Q0", "CameraSimulationSettings", "CameraSimulation",
-           "simulate_camera_files"]
+           "SimulatedCamera", "simulate_camera", "simulate_camera_files"]
 
 #: 1280x960 px, a wide-angle lens's distortion (OpenCV's sample calibrations: |k1| ~ 0.1-0.3).
 INTRINSICS = CameraIntrinsics(1000.0, 1000.0, 640.0, 480.0, (-0.1, 0.05, 1e-3, -5e-4, 0.0), 1280, 960)
@@ -97,18 +97,33 @@ class CameraSimulation:
     world: np.ndarray
 
 
-def simulate_camera_files(out: str | Path, settings: CameraSimulationSettings = CameraSimulationSettings()
-                          ) -> CameraSimulation:
-    """Write ``ur5_camera.urdf``, ``DATA.csv``, ``held_out.csv`` and ``camera_info.yaml`` into the folder ``out``
-    (module docstring)."""
-    folder = ensure_directory(out)
+@dataclass(frozen=True)
+class SimulatedCamera:
+    """The scene of :func:`simulate_camera`, in memory.
+
+    Attributes:
+        urdf_text: the nominal URDF with the links added; chain: from its root to the camera's (eye in hand) or
+            the board's link (eye to hand), placed nominally.
+        placements: the chain's true placements; scene: the true mount, world frame, intrinsics and board.
+        q: each image's configuration (K, 6) [rad]; corners: what each image shows, with the pixel noise.
+    """
+
+    urdf_text: str
+    chain: KinematicChain
+    placements: tuple[np.ndarray, ...]
+    scene: CameraScene
+    q: np.ndarray
+    corners: CornerSet
+
+
+def simulate_camera(settings: CameraSimulationSettings = CameraSimulationSettings()) -> SimulatedCamera:
+    """The truth and the corners of the module docstring, in memory."""
     rng = np.random.default_rng(settings.seed)
     text = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf").read_text(encoding="utf-8")
     if settings.arrangement == "eye_in_hand":
-        text, tip, board_link = with_fixed_link(text, "tool0", "camera_link"), "camera_link", None
+        text, tip = with_fixed_link(text, "tool0", "camera_link"), "camera_link"
     else:
-        text = with_fixed_link(with_fixed_link(text, "tool0", "board_link"), "world", "camera_link")
-        tip, board_link = "board_link", "board_link"
+        text, tip = with_fixed_link(with_fixed_link(text, "tool0", "board_link"), "world", "camera_link"), "board_link"
     chain = KinematicChain(pin.buildModelFromXML(text), tip, source="<ur5 + camera>")
     params = PlacementErrors(chain)
     truth = np.zeros(params.size)
@@ -116,19 +131,29 @@ def simulate_camera_files(out: str | Path, settings: CameraSimulationSettings = 
                                                                  [settings.error_mrad * 1e-3] * 3]
     truth[: 6 * chain.n_joints] = errors.ravel()
     placements = params.placements(truth)
-    count = settings.images + settings.held_out
     with chain.placed(placements):
         scene = facing_scene(chain, settings.arrangement, Q0, TRUE_MOUNT, INTRINSICS, parse_board(BOARD_SPEC))
-        q = view_configurations(chain, scene, Q0, count, rng)
+        q = view_configurations(chain, scene, Q0, settings.images + settings.held_out, rng)
         roles = ["calibration"] * settings.images + ["validation"] * settings.held_out
         corners = view_corners(chain, scene, q, settings.noise_px, rng, roles=roles)
+    return SimulatedCamera(text, chain, tuple(placements), scene, q, corners)
+
+
+def simulate_camera_files(out: str | Path, settings: CameraSimulationSettings = CameraSimulationSettings()
+                          ) -> CameraSimulation:
+    """Write ``ur5_camera.urdf``, ``DATA.csv``, ``held_out.csv`` and ``camera_info.yaml`` into the folder ``out``
+    (module docstring)."""
+    folder = ensure_directory(out)
+    simulated = simulate_camera(settings)
+    corners = simulated.corners
     urdf, data, intrinsics = folder / "ur5_camera.urdf", folder / "DATA.csv", folder / "camera_info.yaml"
-    write_text(urdf, text)
+    write_text(urdf, simulated.urdf_text)
     write_corner_set(data, corners)
     held_out = None
     if settings.held_out:
         held_out = folder / "held_out.csv"
-        write_corner_set(held_out, images_of(corners, np.arange(settings.images, count)))
+        write_corner_set(held_out, images_of(corners, np.arange(settings.images, len(corners.images))))
     write_camera_info(intrinsics, INTRINSICS, camera_name="camera_link")
-    return CameraSimulation(urdf, data, intrinsics, held_out, "camera_link", board_link, tuple(placements), TRUE_MOUNT,
-                            scene.worlds[0])
+    board_link = None if settings.arrangement == "eye_in_hand" else "board_link"
+    return CameraSimulation(urdf, data, intrinsics, held_out, "camera_link", board_link, simulated.placements,
+                            TRUE_MOUNT, simulated.scene.worlds[0])
