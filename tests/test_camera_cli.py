@@ -17,6 +17,7 @@ import pytest
 from pincal.cli.commands import main
 from pincal.fit.camera_calibration import CameraFitOptions, calibrate_camera
 from pincal.fit.camera_start import board_poses, hand_eye_start
+from pincal.measurements.camera_csv import write_corner_set
 from pincal.model.camera_view import pose
 from pincal.model.chain import KinematicChain
 from pincal.workflows.camera_simulation import (
@@ -192,6 +193,8 @@ def test_bad_inputs_are_one_line_naming_the_file_and_write_nothing(small, capsys
     ]
     for argv, words in cases:
         _refused(argv + outputs, capsys, out, *words)
+    _refused(["diagnose", str(hand.urdf), str(hand.data), "--tip-link", "camera_link"] + outputs, capsys, out,
+             str(hand.data), "--camera-link")
 
 
 def test_evaluate_refuses_another_urdf_and_a_missing_camera_info(exact, capsys, tmp_path):
@@ -221,3 +224,22 @@ def test_an_image_of_one_row_of_corners_is_left_out_of_the_start_only():
     start, names = hand_eye_start(simulated.chain, one_row, "eye_in_hand", INTRINSICS)
     result = calibrate_camera(simulated.chain, one_row, start, "registration", CameraFitOptions(), names)
     assert np.all(np.isfinite(result.estimate.mount)) and result.nominal_rms_px < 5.0
+
+
+def test_images_that_are_not_of_this_robot_withhold_the_urdf_and_camera_info(small, tmp_path, capsys):
+    """The first three joints' readings of another image in each row: the model misses its corners by ~100 px, 65 mm
+    at the board, beyond 5 % of the reach: REPORT.json alone, exit 3; --force writes the URDF and its camera_info."""
+    hand = small[0]["eye_in_hand"]
+    settings = CameraSimulationSettings("eye_in_hand", images=8, held_out=0, noise_px=0.0, seed=3)
+    corners = simulate_camera(settings).corners
+    q = corners.q.copy()
+    q[:, :3] = q[::-1, :3]
+    write_corner_set(tmp_path / "DATA.csv", replace(corners, q=q))
+    argv = ["calibrate", str(hand.urdf), str(tmp_path / "DATA.csv"), "--camera-link", "camera_link", "--intrinsics",
+            str(hand.intrinsics), "--out", str(tmp_path / "out" / "robot.urdf"), "--report",
+            str(tmp_path / "out" / "REPORT.json")]
+    assert main(argv) == 3
+    assert "camera_info YAML" in capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["REPORT.json"]
+    assert main([*argv, "--force"]) == 0
+    assert (tmp_path / "out" / "robot.camera_info.yaml").is_file() and (tmp_path / "out" / "robot.urdf").is_file()

@@ -261,12 +261,17 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
+    from pincal.cli.camera import is_camera_data
     from pincal.cli.level_table import prior_scale_line
     from pincal.cli.progress import progress_bar
     from pincal.model.thermal import shown
     from pincal.workflows.diagnosis import DiagnoseOutputs, diagnose_files
     from pincal.workflows.settings import DiagnoseSettings
 
+    camera = is_camera_data([*args.data, *([args.validation] if args.validation else [])])
+    if camera is not None:
+        raise PincalError(f"{camera}: a camera's DATA.csv; diagnose does not take a camera's images yet: calibrate "
+                          "them with --camera-link LINK --intrinsics FILE|estimate")
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
     settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),

@@ -310,6 +310,9 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
         validation = images_of(validation, np.isin(validation.sessions.astype(str), sessions))
     gross = gross_misfit(_misfit_m(result, chain, calibration), reach_m(chain, calibration.q))
     warnings, withheld = withholding([] if gross is None else [gross], settings.force)
+    # what is withheld beside a camera's URDF is its camera_info, not an effects.yaml
+    warnings = [replace(w, message=w.message.replace("nor its effects.yaml", "nor its camera_info YAML"))
+                for w in warnings]
     comment = (f"Calibrated by pincal {__version__} (camera {setup.arrangement.replace('_', ' ')}, level "
                f"{result.level}) from {urdf.name} and {data.name}. World frame and intrinsics: see the report.")
     reload_error, urdf_sha256 = _write_urdf(urdf, out_urdf, setup, result, comment, settings.xacro_args,
