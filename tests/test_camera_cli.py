@@ -243,3 +243,23 @@ def test_images_that_are_not_of_this_robot_withhold_the_urdf_and_camera_info(sma
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["REPORT.json"]
     assert main([*argv, "--force"]) == 0
     assert (tmp_path / "out" / "robot.camera_info.yaml").is_file() and (tmp_path / "out" / "robot.urdf").is_file()
+
+
+def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path):
+    """The board moved 5 cm along its x axis since the calibration (its corners' board_x shifted): through the
+    reported board pose the corners miss by ~100 px; --new-session re-estimates the pose and they fit exactly."""
+    sim, out = exact
+    if sim.board_link is not None:
+        pytest.skip("eye to hand the board rides on the robot: moving it on the board moves the mount, not the world")
+    lines = sim.held_out.read_text().splitlines()
+    column = lines[0].split(",").index("board_x")
+    moved = [lines[0]] + [",".join(repr(float(c) + 0.05) if i == column else c for i, c in enumerate(line.split(",")))
+                          for line in lines[1:]]
+    (tmp_path / "moved.csv").write_text("\n".join(moved) + "\n")
+    evaluate = ["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(tmp_path / "moved.csv"), "--json"]
+    assert main([*evaluate, str(tmp_path / "reported.json")]) == 0
+    assert main([*evaluate, str(tmp_path / "new.json"), "--new-session"]) == 0
+    reported, new = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("reported", "new"))
+    assert reported["world"] == "reported" and reported["reprojection"]["after"]["rms_px"] > 10.0
+    assert new["world"] == "re-estimated" and new["reprojection"]["after"]["rms_px"] < 1e-6
+    assert new["reprojection"]["before"]["rms_px"] > 0.05  # the nominal kinematics cannot, whatever the board's pose

@@ -308,6 +308,9 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
         notes.append(f"{corners.source}: session(s) {', '.join(unseen)} have validation images only: no world frame "
                      "was fitted for them, so their images are left out of the report's errors")
         validation = images_of(validation, np.isin(validation.sessions.astype(str), sessions))
+    if setup.arrangement == "eye_to_hand" and len(sessions) > 1:
+        notes.append(f"{len(sessions)} sessions: the corrected URDF places {settings.camera_link} where session "
+                     f"'{sessions[0]}' saw it; every session's camera pose is in REPORT.json camera.worlds")
     gross = gross_misfit(_misfit_m(result, chain, calibration), reach_m(chain, calibration.q))
     warnings, withheld = withholding([] if gross is None else [gross], settings.force)
     # what is withheld beside a camera's URDF is its camera_info, not an effects.yaml
