@@ -237,7 +237,7 @@ def test_images_that_are_not_of_this_robot_withhold_the_urdf_and_camera_info(sma
     write_corner_set(tmp_path / "DATA.csv", replace(corners, q=q))
     argv = ["calibrate", str(hand.urdf), str(tmp_path / "DATA.csv"), "--camera-link", "camera_link", "--intrinsics",
             str(hand.intrinsics), "--out", str(tmp_path / "out" / "robot.urdf"), "--report",
-            str(tmp_path / "out" / "REPORT.json")]
+            str(tmp_path / "out" / "REPORT.json"), "--level", "registration"]
     assert main(argv) == 3
     assert "camera_info YAML" in capsys.readouterr().err
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["REPORT.json"]
