@@ -57,6 +57,10 @@ _DEFINED_IN = {
                                  "extract_images"),
     "pincal.measurements.charuco": ("CharucoSpec", "parse_board"),
     "pincal.workflows.detection": ("DetectSettings", "DetectRun", "detect_files"),  # imports OpenCV
+    "pincal.workflows.camera_calibration": ("CameraCalibrateSettings", "CameraCalibrationRun",
+                                            "calibrate_camera_files"),
+    "pincal.workflows.camera_evaluation": ("CameraEvaluateSettings", "CameraEvaluation", "evaluate_camera_files"),
+    "pincal.workflows.camera_simulation": ("CameraSimulationSettings", "CameraSimulation", "simulate_camera_files"),
     "pincal.workflows.simulation": ("simulate_to_directory",),
     "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
     "pincal.report.html": ("render_html", "write_html"),  # imports jinja2 and matplotlib
@@ -117,6 +121,13 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         simulate_experiment,
     )
     from pincal.workflows.calibration import CalibrationRun, calibrate_files
+    from pincal.workflows.camera_calibration import (
+        CameraCalibrateSettings,
+        CameraCalibrationRun,
+        calibrate_camera_files,
+    )
+    from pincal.workflows.camera_evaluation import CameraEvaluateSettings, CameraEvaluation, evaluate_camera_files
+    from pincal.workflows.camera_simulation import CameraSimulation, CameraSimulationSettings, simulate_camera_files
     from pincal.workflows.camera_plan import CameraPlanInputs, CameraPlanRun, camera_plan_files
     from pincal.workflows.detection import DetectRun, DetectSettings, detect_files
     from pincal.workflows.diagnosis import DiagnoseOutputs, DiagnoseRun, diagnose_files
@@ -244,6 +255,15 @@ __all__ = [
     "DetectSettings",
     "DetectRun",
     "detect_files",
+    "CameraCalibrateSettings",
+    "CameraCalibrationRun",
+    "calibrate_camera_files",
+    "CameraEvaluateSettings",
+    "CameraEvaluation",
+    "evaluate_camera_files",
+    "CameraSimulationSettings",
+    "CameraSimulation",
+    "simulate_camera_files",
     "simulate_to_directory",
     "KinematicTree",
     "TargetSpec",

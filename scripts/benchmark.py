@@ -25,6 +25,9 @@
     joints shared by two 7-joint arms) with a marker on each gripper (``--tip-link LINK:1 --tip-link LINK:2``),
     500 simulated rows, every placement off by 0.5 mm / 0.5 mrad, 0.1 mm noise: whole processes, median of
     ``--runs``-capped 3; goal <= 5 s (the issue's 500 rows x 2 markers). Writes scripts/benchmark_tree.json.
+(j) ``--camera``: whole ``pincal detect`` and ``pincal calibrate --camera-link`` processes on 60 rendered
+    1280x960 images of a ChArUco board seen by a camera on a UR5 (eye in hand), median of ``--runs``-capped 3;
+    goals detect <= 15 s, calibrate <= 10 s. Writes scripts/benchmark_camera.json.
 (f) Large, badly conditioned data: ``pincal calibrate --level full`` (AIC
     selection) of a UR5 (example-robot-data) on 2 500 simulated laser-tracker
     6D rows (position + orientation) taken along 6 lines and 4 planes in joint
@@ -746,6 +749,68 @@ def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dic
             "load_average": os.getloadavg()}
 
 
+#: (j)'s goals: 60 images of 1280x960 px, whole processes [s].
+CAMERA_GOALS = {"detect_s": 15.0, "calibrate_s": 10.0}
+
+
+def camera_benchmark(runs: int = 3, images: int = 60, seed: int = 1) -> dict:
+    """(j): whole ``pincal detect`` and ``pincal calibrate --camera-link`` processes on ``images`` rendered
+    1280x960 images of a ChArUco board seen by a camera on a UR5's tool0 (pincal.workflows.camera_simulation's
+    scene, rendered by pincal.simulation.board_images, 2 grey levels of noise), median of ``runs`` [s]."""
+    import csv
+
+    import cv2
+    import numpy as np
+
+    from pincal.model.camera_info import write_camera_info
+    from pincal.model.camera_view import pose
+    from pincal.simulation.board_images import BoardView, render_board
+    from pincal.workflows.camera_simulation import BOARD_SPEC, INTRINSICS, CameraSimulationSettings, simulate_camera
+
+    simulated = simulate_camera(CameraSimulationSettings("eye_in_hand", images=images, held_out=0, seed=seed))
+    chain, scene, rng = simulated.chain, simulated.scene, np.random.default_rng(seed)
+    detect, calibrate = [], []
+    with tempfile.TemporaryDirectory() as folder:
+        root = Path(folder)
+        (root / "images").mkdir()
+        started = time.perf_counter()
+        with chain.placed(list(simulated.placements)):
+            rotations, positions = chain.tool_poses(simulated.q)
+        names = [f"image_{k:03d}.png" for k in range(images)]
+        for name, r, t in zip(names, rotations, positions):
+            camera_T_board = np.linalg.inv(pose(r, t) @ scene.mount) @ scene.worlds[0]
+            view = BoardView(INTRINSICS.matrix, np.array(INTRINSICS.distortion), (INTRINSICS.width, INTRINSICS.height),
+                             cv2.Rodrigues(camera_T_board[:3, :3])[0].ravel(), camera_T_board[:3, 3])
+            cv2.imwrite(str(root / "images" / name), render_board(scene.board, view, 2.0, rng))
+        render_s = time.perf_counter() - started
+        with open(root / "joints.csv", "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(["image", *chain.joint_names])
+            writer.writerows([name, *(repr(float(v)) for v in row)] for name, row in zip(names, simulated.q))
+        (root / "ur5_camera.urdf").write_text(simulated.urdf_text, encoding="utf-8")
+        write_camera_info(root / "camera_info.yaml", INTRINSICS)
+        for _ in range(runs):
+            start = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "pincal", "detect", str(root / "images"), "--board", BOARD_SPEC,
+                            "--joints", str(root / "joints.csv"), "--out", str(root / "DATA.csv")],
+                           check=True, capture_output=True)
+            detect.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "pincal", "calibrate", str(root / "ur5_camera.urdf"),
+                            str(root / "DATA.csv"), "--camera-link", "camera_link", "--intrinsics",
+                            str(root / "camera_info.yaml"), "--out", str(root / "calibrated.urdf"), "--report",
+                            str(root / "REPORT.json")], check=True, capture_output=True)
+            calibrate.append(time.perf_counter() - start)
+        report = json.loads((root / "REPORT.json").read_text(encoding="utf-8"))
+    reprojection = report["camera"]["reprojection"]["calibration"]
+    return {"images": images, "size": [INTRINSICS.width, INTRINSICS.height], "render_s": render_s,
+            "detect_s": detect, "detect_median_s": statistics.median(detect),
+            "calibrate_s": calibrate, "calibrate_median_s": statistics.median(calibrate),
+            "fit_s": report["fit_seconds"], "corners": reprojection["after"]["corners"],
+            "rms_px": [reprojection["before"]["rms_px"], reprojection["after"]["rms_px"]], "goals": CAMERA_GOALS,
+            "load_average": os.getloadavg()}
+
+
 def _write_json(path: Path, result: dict | list) -> None:
     """Write one benchmark's numbers and say where."""
     path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
@@ -776,7 +841,18 @@ def main(argv: list[str] | None = None) -> int:
                         "(default: the commands' own)")
     parser.add_argument("--tree", action="store_true", help="only (i): calibrate TALOS's upper body, a marker on "
                         "each gripper, 500 rows, whole processes")
+    parser.add_argument("--camera", action="store_true", help="only (j): pincal detect and calibrate --camera-link "
+                        "on 60 rendered 1280x960 images, whole processes")
     args = parser.parse_args(argv)
+    if args.camera:
+        result = camera_benchmark(runs=min(args.runs, 3))
+        print(f"(j) {result['images']} images {result['size'][0]}x{result['size'][1]}, whole processes, median of "
+              f"{len(result['detect_s'])}: detect {result['detect_median_s']:.2f} s (goal <= "
+              f"{CAMERA_GOALS['detect_s']:g} s), calibrate --camera-link {result['calibrate_median_s']:.2f} s (goal <= "
+              f"{CAMERA_GOALS['calibrate_s']:g} s; the fit {result['fit_s']:.2f} s); {result['corners']} corners, RMS "
+              f"{result['rms_px'][0]:.3f} -> {result['rms_px'][1]:.3f} px; load {result['load_average'][0]:.1f}")
+        _write_json(args.json or HERE / "benchmark_camera.json", result)
+        return 0
     if args.tree:
         result = tree_calibration(runs=min(args.runs, 3))
         print(f"(i) calibrate, {result['joints']} joints, {len(result['targets'])} targets, {result['rows']} rows, "

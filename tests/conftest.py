@@ -79,7 +79,7 @@ SCHEMA_PATH = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json
 DOCUMENT_WRITERS = ("pincal.report.document", "pincal.planning.files")
 #: A document's kind in the schema (None: a REPORT.json, its top level) by a key only that kind has.
 DOCUMENT_KINDS = {"report_version": None, "plan_version": "PlanJson", "not_held_out": "FixtureEvaluationJson",
-                  "skipped_cpa_rows": "EvaluationJson"}
+                  "skipped_cpa_rows": "EvaluationJson", "camera_info": "CameraEvaluationJson"}
 _validators: dict[str | None, jsonschema.protocols.Validator] = {}
 
 
@@ -116,6 +116,8 @@ def report_kind(document) -> str:
         return "DiagnosisReport"
     if "targets" in document:
         return "TreeReport"
+    if document.get("measurement") == "camera":
+        return "CameraReport"
     return "PaperReport" if document.get("model") == "dh" else "CalibrationReport"
 
 

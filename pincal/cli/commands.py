@@ -54,6 +54,12 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from pincal.workflows.calibration import calibrate_files
     from pincal.workflows.settings import CalibrateSettings
 
+    if args.camera_link is not None:  # a camera's DATA.csv: the chain ends at the camera's or the board's link
+        from pincal.cli.camera import run_calibrate as run_camera
+
+        camera_report, camera_withheld = run_camera(args)
+        return _warned(camera_report, args.strict, camera_withheld)
+    _no_camera(args)
     if isinstance(args.tip_link, list):  # several targets on several chains, one calibration
         tree_report, tree_withheld = run_calibrate_tree(args)
         return _warned(tree_report, args.strict, tree_withheld)
@@ -107,6 +113,24 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     _print_effects_file(run.effects_file, run.report)
     _print_written(run.html)
     return _warned(run.report, args.strict, run.withheld)
+
+
+def _no_camera(args: argparse.Namespace) -> None:
+    """Without ``--camera-link``: refuse the camera's flags and a camera's DATA.csv, and ask for ``--tip-link``."""
+    from pincal.cli.camera import is_camera_data
+
+    given = [flag for flag, value in (("--board-link", args.board_link), ("--intrinsics", args.intrinsics)) if value]
+    if given:
+        raise PincalError(f"{' and '.join(given)} apply with --camera-link only (a camera's DATA.csv); give "
+                          "--camera-link LINK, or drop them")
+    camera = is_camera_data(args.data)
+    if camera is not None:
+        raise PincalError(f"{camera}: a camera's DATA.csv (columns image, corner, u, v ...: detect's); give "
+                          "--camera-link LINK (the camera's optical frame) and --intrinsics FILE|estimate instead of "
+                          "--tip-link")
+    if args.tip_link is None:
+        raise PincalError("the following arguments are required: --tip-link (or --camera-link for a camera's "
+                          "DATA.csv)")
 
 
 def _print_effects_file(path, report: Mapping[str, Any]) -> None:
@@ -194,6 +218,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         from pincal.cli.fixture import run_evaluate
 
         return _warned(run_evaluate(args), args.strict)
+    from pincal.cli.camera import is_camera_report
+
+    if is_camera_report(args.report):  # a camera's images: reprojection errors in pixels
+        from pincal.cli.camera import run_evaluate as run_camera
+
+        return run_camera(args)
     if is_tree_report(args.report):  # several targets on several chains
         return run_evaluate_tree(args)
     if args.nominal is not None:
@@ -231,12 +261,17 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_diagnose(args: argparse.Namespace) -> int:
+    from pincal.cli.camera import is_camera_data
     from pincal.cli.level_table import prior_scale_line
     from pincal.cli.progress import progress_bar
     from pincal.model.thermal import shown
     from pincal.workflows.diagnosis import DiagnoseOutputs, diagnose_files
     from pincal.workflows.settings import DiagnoseSettings
 
+    camera = is_camera_data([*args.data, *([args.validation] if args.validation else [])])
+    if camera is not None:
+        raise PincalError(f"{camera}: a camera's DATA.csv; diagnose does not take a camera's images yet: calibrate "
+                          "them with --camera-link LINK --intrinsics FILE|estimate")
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
     settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),

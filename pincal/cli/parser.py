@@ -151,6 +151,21 @@ def _add_camera_plan(plan: argparse.ArgumentParser) -> None:
                              "--existing DATA.csv of a first run")
 
 
+def _add_camera(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--camera-link", metavar="LINK",
+                        help="DATA is a camera's DATA.csv (pincal detect): LINK is the camera's optical frame, "
+                             "attached by a fixed joint; eye in hand when it rides on the chain (the board fixed in "
+                             "the world), eye to hand when it hangs from the root (give --board-link); no --tip-link "
+                             "(docs/camera.md)")
+    parser.add_argument("--board-link", metavar="LINK",
+                        help="with --camera-link, eye to hand: the link on the chain carrying the board (its frame "
+                             "OpenCV's board frame), attached by a fixed joint")
+    parser.add_argument("--intrinsics", metavar="FILE|estimate",
+                        help="with --camera-link: the camera's intrinsics (ROS camera_info or OpenCV YAML), or "
+                             "'estimate': started from OpenCV's calibrateCamera and fitted with the rest; written "
+                             "as CORRECTED.camera_info.yaml beside --out")
+
+
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:
     sub.add_argument("--prior-scale", type=prior_scale, metavar="MM,DEG[,DEG]",
                      help="with --select prior: fix the prior std of each placement translation and prismatic joint "
@@ -204,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--tool", type=tool_pose, metavar="X,Y,Z,ROLL,PITCH,YAW",
                      help="known pose of the measured target in the tip link [m, rad]; "
                           "without it (levels other than dh) the target is estimated")
-    cal.add_argument("--tip-link", "--tool-parent", dest="tip_link", required=True, metavar="LINK[:POINTS]",
+    cal.add_argument("--tip-link", "--tool-parent", dest="tip_link", metavar="LINK[:POINTS]",
                      action=TipLinks,
                      help="link at the end of the calibrated chain, carrying the target (or the ball, with "
                           "--fixture); repeat it as LINK:POINTS for several targets on several chains in one "
@@ -222,6 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="socket-fixture data, no sensor: DATA names the socket of each row (point) and the "
                           "fixture placement; FIXTURE.csv gives the sockets (point,x,y,z [m] or "
                           "point_a,point_b,distance)")
+    _add_camera(cal)
     _add_plausibility(cal)
     _add_coupling(cal)
     _add_xacro_arg(cal)

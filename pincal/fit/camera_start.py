@@ -3,6 +3,8 @@ by OpenCV's closed-form hand-eye calibration on the chain as it is (the nominal 
 
 1. Each image's ``camera_T_board`` from its corners and the intrinsics: ``cv2.solvePnP`` (planar IPPE
    for the first guess, refined by Levenberg-Marquardt: OpenCV's ``SOLVEPNP_IPPE`` then ``solvePnPRefineLM``).
+   An image whose corners lie on one line (one row of the board: a plane's pose is not determined by a line)
+   gets no pose and is left out of steps 2 and 3; its corners still count in the fit that follows.
 2. With the tip poses ``base_T_tip`` of the chain, the closed form: ``cv2.calibrateHandEye`` (AX = XB; methods
    TSAI, PARK, HORAUD, ANDREFF, DANIILIDIS) or ``cv2.calibrateRobotWorldHandEye`` (AX = ZB; SHAH, LI). Eye in
    hand is the form OpenCV documents; eye to hand is the same with the robot's poses inverted (the board on
@@ -38,6 +40,9 @@ ROBOT_WORLD_METHODS = ("SHAH", "LI")
 
 #: Corners a board pose needs: solvePnP's minimum for a planar target.
 MIN_CORNERS = 4
+#: Corners on one line: the second singular value of their spread below this fraction of the first (a row of a
+#: board lies on a line to the rounding of its positions, ~1e-16 relative; any two rows span the square's side).
+_COLLINEAR = 1e-9
 
 
 def _cv2() -> Any:
@@ -52,6 +57,9 @@ def _cv2() -> Any:
 def board_poses(corners: CornerSet, intrinsics: CameraIntrinsics) -> np.ndarray:
     """Each image's ``camera_T_board`` (K, 4, 4) [m] from its corners (step 1 of the module docstring).
 
+    Returns:
+        The poses; NaN for an image whose corners lie on one line (step 1).
+
     Raises:
         CalibrationError: an image with fewer than :data:`MIN_CORNERS` corners, or one solvePnP cannot place.
     """
@@ -65,6 +73,10 @@ def board_poses(corners: CornerSet, intrinsics: CameraIntrinsics) -> np.ndarray:
                                    f"needs {MIN_CORNERS}: delete its rows or take the image again")
         board = np.ascontiguousarray(corners.board_points[mine], dtype=float)
         pixels = np.ascontiguousarray(corners.pixels[mine], dtype=float)
+        spread = np.linalg.svd(board - board.mean(axis=0), compute_uv=False)
+        if spread[1] <= _COLLINEAR * spread[0]:  # one row of corners: no plane to place
+            out[k] = np.nan
+            continue
         found, rvec, tvec = cv2.solvePnP(board, pixels, matrix, distortion, flags=cv2.SOLVEPNP_IPPE)
         if not found:
             raise CalibrationError(f"{corners.source}: image '{name}': OpenCV's solvePnP cannot place the board; "
@@ -121,17 +133,21 @@ def hand_eye_start(chain: KinematicChain, corners: CornerSet, arrangement: Arran
             motions), an image that cannot be placed, an unknown method.
     """
     names, session_index = np.unique(corners.sessions.astype(str), return_inverse=True)
-    largest = np.flatnonzero(session_index == np.argmax(np.bincount(session_index)))
-    if len(largest) < 3:
-        raise CalibrationError(f"{corners.source}: {len(largest)} image(s) in the largest session; the hand-eye "
-                               "start needs at least 3 (two motions)")
     views = board_poses(corners, intrinsics)
+    placed = np.all(np.isfinite(views), axis=(1, 2))  # not an image of one row of corners
+    counts = np.bincount(session_index[placed], minlength=len(names))
+    largest = np.flatnonzero((session_index == np.argmax(counts)) & placed)
+    if len(largest) < 3 or np.any(counts == 0):
+        raise CalibrationError(f"{corners.source}: {len(largest)} image(s) with the board placed in the largest "
+                               "session (an image of one row of corners places none); the hand-eye start needs at "
+                               "least 3 (two motions), and a board placed in every session")
     rotations, positions = chain.tool_poses(corners.q)
     tips = np.array([pose(r, t) for r, t in zip(rotations, positions)])
     mount, world = _closed_form(arrangement, tips[largest], views[largest], method)
     if mount is None:  # eye to hand with AX = XB: M of each image from W, averaged
         assert world is not None  # the closed form gives one of them at least
         mount = _mean(np.linalg.inv(tips[largest]) @ np.linalg.inv(world) @ views[largest])
+    tips, views, session_index = tips[placed], views[placed], session_index[placed]
     if arrangement == "eye_in_hand":
         per_image = tips @ mount @ views  # base_T_board of each image
     else:

@@ -51,7 +51,7 @@ from pincal.measurements.images import CornerDetection
 from pincal.outputs import replacing
 
 __all__ = ["IMAGE_COLUMN", "CORNER_COLUMNS", "JointReadings", "read_joint_readings", "write_joint_readings",
-           "write_corners", "CornerSet", "read_corners"]
+           "write_corners", "CornerSet", "read_corners", "write_corner_set"]
 
 #: JOINTS.csv's and DATA.csv's column naming each image.
 IMAGE_COLUMN = "image"
@@ -291,3 +291,31 @@ def read_corners(path: str | os.PathLike[str], joints: Sequence[JointSpec]) -> t
                      image_of, corners, pixels, board, np.array(table.lines), {n: v[firsts] for n, v in extra.items()},
                      table.source)
     return data, notes
+
+
+def write_corner_set(path: str | os.PathLike[str], corners: CornerSet) -> int:
+    """Write ``corners`` as DATA.csv, whole or not at all, in :func:`write_corners`' columns, every number in its
+    shortest exact form (a simulation's corners read back bit for bit: :func:`read_corners`).
+
+    Returns:
+        The number of corner rows written.
+
+    Raises:
+        MeasurementError: the file cannot be written.
+    """
+    header = [IMAGE_COLUMN, *CORNER_COLUMNS, *corners.joint_names, *corners.extra, ROLE_COLUMN, SESSION_COLUMN]
+    try:
+        with replacing(path, "w", newline="") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(header)
+            for m, k in enumerate(corners.image_of):
+                width, height = (int(v) for v in corners.sizes[k])
+                writer.writerow([corners.images[k], int(corners.corners[m]),
+                                 *(repr(float(v)) for v in corners.pixels[m]),
+                                 *(repr(float(v)) for v in corners.board_points[m, :2]), width, height,
+                                 *(repr(float(v)) for v in corners.q[k]),
+                                 *(repr(float(corners.extra[n][k])) for n in corners.extra),
+                                 corners.roles[k], corners.sessions[k]])
+    except OSError as exc:
+        raise MeasurementError(f"{path}: cannot write file ({exc.strerror or exc})") from None
+    return len(corners.image_of)

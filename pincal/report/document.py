@@ -72,6 +72,7 @@ from pincal.report.model import (
     errors_json,
     registration_pair,
 )
+from pincal.report.model_camera import CameraEvaluationJson, CameraReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
@@ -269,12 +270,14 @@ def selection_report(selection) -> SelectionJson | None:
 
 
 def write_report(path: str | Path,
-                 report: CalibrationReport | DiagnosisReport | PaperReport | FixtureReport | TreeReport) -> None:
+                 report: CalibrationReport | DiagnosisReport | PaperReport | FixtureReport | TreeReport
+                 | CameraReport) -> None:
     """Write ``report`` as indented JSON."""
     write_text(path, json.dumps(report, indent=2) + "\n")
 
 
-def write_evaluation(path: str | Path, document: EvaluationJson | FixtureEvaluationJson) -> None:
+def write_evaluation(path: str | Path,
+                     document: EvaluationJson | FixtureEvaluationJson | CameraEvaluationJson) -> None:
     """Write ``pincal evaluate --json``'s document as indented JSON."""
     write_text(path, json.dumps(document, indent=2) + "\n")
 

@@ -1,13 +1,13 @@
 """The typed model of REPORT.json and of ``pincal evaluate --json``: one TypedDict per object.
 
-A REPORT.json is one of five kinds, told apart by its keys: :class:`CalibrationReport`
+A REPORT.json is one of six kinds, told apart by its keys: :class:`CalibrationReport`
 (``calibrate --level registration|offsets|full|auto``), :class:`PaperReport` (``calibrate --level dh``),
 :class:`~pincal.report.model_diagnosis.DiagnosisReport` (``diagnose``: the calibration's keys and the
-effects), :class:`~pincal.report.model_fixture.FixtureReport` (``calibrate --fixture``) and
-:class:`~pincal.report.model_tree.TreeReport` (several ``--tip-link``). Their builders return them, so
-mypy checks every key they write; :mod:`pincal.report.schema` turns these classes (and PLAN.json's,
-:mod:`pincal.planning.files`) into ``docs/report.schema.json``, which the tests validate every document
-they write against.
+effects), :class:`~pincal.report.model_fixture.FixtureReport` (``calibrate --fixture``),
+:class:`~pincal.report.model_tree.TreeReport` (several ``--tip-link``) and ``model_camera.CameraReport``
+(``--camera-link``). Their builders return them, so mypy checks every key they write; :mod:`pincal.report.schema`
+turns these (and PLAN.json's, :mod:`pincal.planning.files`) into ``docs/report.schema.json``, which the tests
+validate every document they write against.
 
 The keys and their values are promises to users' scripts: never renamed, only
 extended. A class's keys are required unless it lists them in a ``total=False``

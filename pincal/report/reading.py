@@ -19,6 +19,7 @@ from typing import Any, TypeVar, cast
 from pincal.errors import PincalError
 from pincal.planning.files import PlanJson
 from pincal.report.model import CalibrationReport, PaperReport
+from pincal.report.model_camera import CameraEvaluationJson, CameraReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
@@ -28,8 +29,8 @@ __all__ = [
     "KINDS", "REPORT_KINDS", "PAGE_KINDS", "ReportDocument", "Document", "document_kind", "load_report", "value_at",
 ]
 
-ReportDocument = CalibrationReport | DiagnosisReport | PaperReport | FixtureReport | TreeReport
-Document = ReportDocument | EvaluationJson | FixtureEvaluationJson | PlanJson
+ReportDocument = CalibrationReport | DiagnosisReport | PaperReport | FixtureReport | TreeReport | CameraReport
+Document = ReportDocument | EvaluationJson | FixtureEvaluationJson | PlanJson | CameraEvaluationJson
 
 #: Each kind of document pincal writes: its typed model and what it is called in a message.
 KINDS: dict[str, tuple[type, str]] = {
@@ -42,9 +43,11 @@ KINDS: dict[str, tuple[type, str]] = {
     "evaluation": (EvaluationJson, "the file of 'pincal evaluate --json'"),
     "fixture evaluation": (FixtureEvaluationJson, "the file of 'pincal evaluate --fixture --json'"),
     "plan": (PlanJson, "a PLAN.json"),
+    "camera": (CameraReport, "a camera's REPORT.json (calibrate --camera-link)"),
+    "camera evaluation": (CameraEvaluationJson, "the file of 'pincal evaluate --json' of a camera's report"),
 }
 #: The kinds of REPORT.json (the schema's top level, :data:`pincal.report.schema.REPORT_KINDS`).
-REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree")
+REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "camera")
 #: The kinds :func:`pincal.report.html.render_html` lays out as a page (not yet a tree's).
 PAGE_KINDS = ("calibration", "diagnosis", "paper", "fixture", "evaluation", "plan")
 
@@ -55,7 +58,8 @@ _MISSING: Any = object()
 def document_kind(document: Any) -> str | None:
     """The kind (a key of :data:`KINDS`) of a JSON document, told by the keys only it has; None
     for anything else. A socket-fixture calibration's REPORT.json has ``fixture``, any other
-    ``parameters``: a diagnosis' also ``diagnosis``, a paper method's ``model`` ``"dh"``, one of several
+    ``parameters``: a camera's ``measurement`` ``"camera"``, a diagnosis' also ``diagnosis``, a paper method's
+    ``model`` ``"dh"``, one of several
     ``--tip-link`` ``targets``."""
     if not isinstance(document, dict):
         return None
@@ -63,6 +67,8 @@ def document_kind(document: Any) -> str | None:
         return "plan"
     if "fixture" in document:
         return "fixture"
+    if document.get("measurement") == "camera" and "camera" in document:
+        return "camera"
     if "targets" in document and "parameters" in document:
         return "tree"
     if "parameters" in document:
@@ -73,6 +79,8 @@ def document_kind(document: Any) -> str | None:
         return "evaluation"
     if "after" in document and "not_held_out" in document:
         return "fixture evaluation"
+    if "reprojection" in document and "world" in document:
+        return "camera evaluation"
     return None
 
 

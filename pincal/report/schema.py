@@ -1,7 +1,7 @@
 """``docs/report.schema.json``: the JSON Schema of REPORT.json, generated from its typed model.
 
 ``python -m pincal.report.schema > docs/report.schema.json`` writes it (a test checks the
-committed file is what this prints). The top level accepts any of the five kinds of
+committed file is what this prints). The top level accepts any of the six kinds of
 REPORT.json (:data:`REPORT_KINDS`); ``$defs`` holds every object of
 the model, among them ``EvaluationJson`` / ``FixtureEvaluationJson`` (``pincal evaluate
 --json``) and ``PlanJson`` (PLAN.json, :mod:`pincal.planning.files`), which a document
@@ -26,6 +26,7 @@ from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from pincal.planning.files import PlanJson
 from pincal.report.model import CalibrationReport, PaperReport
+from pincal.report.model_camera import CameraEvaluationJson, CameraReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
@@ -34,10 +35,11 @@ from pincal.report.model_tree import TreeReport
 __all__ = ["REPORT_KINDS", "SCHEMA_ID", "OTHER_DOCUMENTS", "json_schema", "schema_text"]
 
 #: The kinds of REPORT.json, the schema's top level.
-REPORT_KINDS: tuple[type, ...] = (CalibrationReport, DiagnosisReport, PaperReport, FixtureReport, TreeReport)
+REPORT_KINDS: tuple[type, ...] = (CalibrationReport, DiagnosisReport, PaperReport, FixtureReport, TreeReport,
+                                  CameraReport)
 SCHEMA_ID = "https://pincal.invalid/report.schema.json"
 #: Documents described in ``$defs`` besides the kinds of REPORT.json.
-OTHER_DOCUMENTS: tuple[type, ...] = (EvaluationJson, FixtureEvaluationJson, PlanJson)
+OTHER_DOCUMENTS: tuple[type, ...] = (EvaluationJson, FixtureEvaluationJson, PlanJson, CameraEvaluationJson)
 
 _SCALARS: dict[Any, str] = {str: "string", int: "integer", float: "number", bool: "boolean", type(None): "null"}
 

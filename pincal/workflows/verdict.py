@@ -20,7 +20,7 @@ command to run: calibrate's URDF, data and flags, with outputs beside calibrate'
 from __future__ import annotations
 
 import shlex
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -33,6 +33,7 @@ from pincal.fit.prior import Prior
 from pincal.measurements.csv_v1 import file_columns
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
 from pincal.model.corrected_urdf import write_corrected_urdf
+from pincal.model.urdf import write_urdf_with_origins
 from pincal.outputs import file_sha256
 from pincal.report.effects_file import remove_effects_file
 from pincal.report.model import Finding as FindingJson
@@ -40,7 +41,7 @@ from pincal.report.model import findings_json
 from pincal.workflows.settings import CalibrateSettings, default_selection
 
 __all__ = ["RELOAD_TOLERANCE", "GROSS_CODE", "Verdict", "judged", "withholding", "withhold", "urdf_line",
-           "UrdfWrite", "write_checked_urdf", "unmodelled_notes", "diagnose_command"]
+           "UrdfWrite", "write_checked_urdf", "write_urdf_checked_by", "unmodelled_notes", "diagnose_command"]
 
 #: Reloading a written URDF must reproduce the calibrated TCP to this [m, rad].
 RELOAD_TOLERANCE = 1e-9
@@ -153,6 +154,32 @@ def write_checked_urdf(
                                  verify=verify, xacro_args=write.xacro_args)
         except _Withheld:
             pass
+    return checked[-1], digest[-1]
+
+
+def write_urdf_checked_by(write: UrdfWrite, origins: Mapping[str, np.ndarray],
+                          difference: Callable[[Path], float], what: str) -> tuple[float, str]:
+    """Write ``write.source`` with the joint ``origins`` as ``write`` says, checking before it replaces
+    ``write.destination`` that ``difference(written file)`` -- the reloaded model against the calibrated one
+    [m, -] -- is within :data:`RELOAD_TOLERANCE` (``what`` moved, the message says otherwise). Returns that
+    difference and the SHA-256 of the bytes written (the report's ``urdf_sha256``)."""
+    checked: list[float] = []
+    digest: list[str] = []
+
+    def verify(written: Path) -> None:
+        checked.append(float(difference(written)))
+        if checked[-1] > RELOAD_TOLERANCE:
+            raise CalibrationError(f"{write.destination}: reloading the written URDF moves {what} by {checked[-1]:.3g} "
+                                   f"(> {RELOAD_TOLERANCE:g}); not written; please report this as a bug")
+        digest.append(file_sha256(written))
+        if not write.keep:
+            raise _Withheld
+
+    try:
+        write_urdf_with_origins(write.source, write.destination, origins, comment=write.comment, verify=verify,
+                                xacro_args=write.xacro_args or None)
+    except _Withheld:
+        pass
     return checked[-1], digest[-1]
 
 

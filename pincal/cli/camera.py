@@ -1,0 +1,156 @@
+"""What ``pincal calibrate --camera-link`` and ``pincal evaluate`` of a camera's report print; the refusal of a
+camera's DATA.csv without ``--camera-link`` and of flags a camera has no use for.
+
+The jobs are :mod:`pincal.workflows.camera_calibration` and :mod:`pincal.workflows.camera_evaluation`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from pincal.cli.arguments import selection_criterion
+from pincal.errors import PincalError
+
+__all__ = ["CAMERA_NOT_USED", "is_camera_data", "refuse_camera_flags", "run_calibrate", "is_camera_report",
+           "run_evaluate"]
+
+#: Flags of calibrate that a camera's calibration has no use for (argparse dest → flag).
+CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or the board's link)",
+                   "method": "--method", "weight": "--weight", "tool": "--tool", "fixture": "--fixture",
+                   "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
+                   "sigma_pos": "--sigma-pos", "coupling": "--coupling", "html": "--html"}
+#: The columns that make a CSV a camera's DATA.csv (pincal detect's).
+_CAMERA_COLUMNS = ("image", "corner", "u", "v")
+
+
+def is_camera_data(paths: Sequence[Path]) -> Path | None:
+    """The first of ``paths`` whose header has a camera's DATA.csv columns, else None (an unreadable file is left
+    to its reader's message)."""
+    for path in paths:
+        try:
+            with open(path, newline="", encoding="utf-8-sig") as handle:
+                header = next(csv.reader(line for line in handle if line.strip() and not line.startswith("#")), [])
+        except (OSError, UnicodeDecodeError, csv.Error):
+            continue
+        if all(c in [h.strip() for h in header] for c in _CAMERA_COLUMNS):
+            return path
+    return None
+
+
+def refuse_camera_flags(args: argparse.Namespace) -> None:
+    """Refuse, in one line, calibrate's flags a camera's data have no use for; and the camera's flags without
+    ``--camera-link``."""
+    given = [flag for name, flag in CAMERA_NOT_USED.items() if getattr(args, name, None) not in (None, False, [])]
+    if given:
+        raise PincalError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to a camera's images "
+                          "(--camera-link); drop " + ("it" if len(given) == 1 else "them"))
+
+
+def run_calibrate(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
+    """``pincal calibrate URDF DATA.csv --camera-link LINK [--board-link LINK] --intrinsics FILE|estimate``: prints
+    the summary; returns the report (its warnings printed by the caller) and whether the URDF was withheld."""
+    from pincal.workflows.camera_calibration import CameraCalibrateSettings, calibrate_camera_files
+
+    refuse_camera_flags(args)
+    if len(args.data) != 1:
+        raise PincalError(f"a camera's calibration takes one DATA.csv (its 'session' column tells sessions apart), "
+                          f"got {len(args.data)}; join them into one file")
+    if args.intrinsics is None:
+        raise PincalError("--camera-link needs --intrinsics FILE (ROS camera_info or OpenCV YAML) or --intrinsics "
+                          "estimate (the intrinsics fitted with the rest)")
+    settings = CameraCalibrateSettings(args.camera_link, args.intrinsics, board_link=args.board_link,
+                                       level=args.level or "full", selection=selection_criterion(args),
+                                       xacro_args=args.xacro_args, force=args.force)
+    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, settings)
+    report, result = run.report, run.result
+    for note in report["notes"]:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    camera = report["camera"]
+    kept = sum(1 for p in report["parameters"] if p["calibrated"] is not None)
+    print(f"camera {camera['arrangement'].replace('_', ' ')}, level {result.level}: "
+          f"{camera['reprojection']['calibration']['after']['images']} calibration images, {kept} kinematic "
+          f"parameters kept of {len(report['parameters'])} ({report['identifiability']['rank']} identifiable), plus "
+          f"the mount, the world frame{'s' if len(camera['worlds']) > 1 else ''}"
+          + (" and the intrinsics" if camera["intrinsics"]["fitted"] else "")
+          + f"; {report['fit_seconds']:.2f} s")
+    print(_frame_line("mount", camera["mount"]))
+    for world in camera["worlds"]:
+        print(_frame_line("world", world))
+    intrinsics = camera["intrinsics"]
+    print(f"intrinsics: fx {intrinsics['fx']:.2f}, fy {intrinsics['fy']:.2f}, cx {intrinsics['cx']:.2f}, "
+          f"cy {intrinsics['cy']:.2f} px, distortion " + ", ".join(f"{v:.4g}" for v in intrinsics["distortion"])
+          + (" (fitted)" if intrinsics["fitted"] else " (given)"))
+    for words in camera["cannot_see"]:
+        print(f"not seen by one camera: {words}")
+    _print_reprojection(camera["reprojection"])
+    from pincal.workflows.verdict import urdf_line
+
+    print(urdf_line(args.out, run.withheld, run.reload_error))
+    if run.camera_info is not None:
+        print(f"wrote {run.camera_info}")
+    print(f"wrote {args.report}")
+    return report, run.withheld
+
+
+def _frame_line(what: str, frame: Mapping[str, Any]) -> str:
+    xyz = ", ".join(f"{v:.5f}" for v in frame["translation_m"])
+    quat = ", ".join(f"{v:.5f}" for v in frame["rotation_xyzw"])
+    return f"{what}: {frame['child']} in {frame['parent']}: ({xyz}) m, rotation xyzw ({quat})"
+
+
+def _print_reprojection(reprojection: Mapping[str, Any]) -> None:
+    """The before -> after table of reprojection RMS per role [px]."""
+    print(f"{'reprojection RMS [px]':24s} {'images':>6s} {'corners':>8s} {'before':>9s} {'after':>9s}")
+    for role, pair in reprojection.items():
+        before, after = pair["before"], pair["after"]
+        if after["images"]:
+            print(f"{role + ' images':24s} {after['images']:6d} {after['corners']:8d} {before['rms_px']:9.4f} "
+                  f"{after['rms_px']:9.4f}")
+    print("before: the nominal kinematics with their own mount and world frame fitted (OpenCV's hand-eye, refined)")
+
+
+def is_camera_report(path: Path) -> bool:
+    """Whether ``path`` is a camera's REPORT.json (``measurement`` camera); False for anything else, whose reader
+    then says what is wrong with it."""
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and document.get("measurement") == "camera" and "camera" in document
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """``pincal evaluate CORRECTED.urdf REPORT.json DATA.csv`` of a camera's report: the images' reprojection
+    errors before and after, overall and per image; writes ``--json``. Returns the exit code."""
+    from pincal.workflows.camera_evaluation import CameraEvaluateSettings, evaluate_camera_files
+
+    not_used = {"fixture": "--fixture", "max_pos_mm": "--max-pos-mm",
+                "max_rot_deg": "--max-rot-deg", "fixed_registration": "--fixed-registration",
+                "temperature_column": "--temperature-column", "html": "--html"}
+    given = [flag for name, flag in not_used.items() if getattr(args, name, None) not in (None, False)]
+    if given:
+        raise PincalError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to a camera's "
+                          "report; drop " + ("it" if len(given) == 1 else "them"))
+    settings = CameraEvaluateSettings(new_session=args.new_session, allow_other_urdf=args.allow_other_urdf,
+                                      nominal=args.nominal, xacro_args=tuple(args.xacro_args))
+    run = evaluate_camera_files(args.urdf, args.report, args.data, settings, json_path=args.json)
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    document = run.document
+    print(f"{'image':24s} {'corners':>8s} {'before':>9s} {'after':>9s}  [RMS px, u and v]")
+    for image in document["images"]:
+        print(f"{image['image']:24s} {image['corners']:8d} {image['before_rms_px']:9.4f} {image['after_rms_px']:9.4f}")
+    before, after = document["reprojection"]["before"], document["reprojection"]["after"]
+    print(f"{'all ' + str(after['images']) + ' images':24s} {after['corners']:8d} {before['rms_px']:9.4f} "
+          f"{after['rms_px']:9.4f}")
+    print(f"world frame: {document['world']}; before: {document['report']}'s nominal kinematics with their own mount "
+          "and world frame (OpenCV's hand-eye, refined); after: the corrected URDF and its camera_info")
+    if args.json is not None:
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,146 @@
+"""The typed model of a camera's REPORT.json (``calibrate --camera-link``) and of its ``evaluate --json``
+(:mod:`pincal.report.model`)."""
+
+from __future__ import annotations
+
+from typing import Literal, TypedDict
+
+from pincal.report.model import (
+    ChainJson,
+    ChainLevel,
+    Finding,
+    Identifiability,
+    Parameter,
+    Quaternion,
+    Sha256,
+    Vector3,
+)
+
+__all__ = ["CameraSources", "FrameJson", "IntrinsicsJson", "ReprojectionJson", "ReprojectionPair", "ImageErrorJson",
+           "CameraBlock", "CameraReport", "CameraEvaluationJson"]
+
+
+class _CameraSourcesKeys(TypedDict):
+    urdf: str
+    data: str
+    corrected_urdf: str
+    intrinsics: str
+    camera_info: str
+
+
+class CameraSources(_CameraSourcesKeys, total=False):
+    """The files of the run: ``intrinsics`` is the file given or ``estimate``; ``camera_info`` the YAML written
+    beside the corrected URDF; ``corrected_urdf_withheld`` true when neither was written (a gross misfit)."""
+
+    corrected_urdf_withheld: bool
+
+
+class FrameJson(TypedDict):
+    """A rigid transform ``parent_T_child``: the child's origin [m] and rotation (x, y, z, w) in the parent."""
+
+    parent: str
+    child: str
+    translation_m: Vector3
+    rotation_xyzw: Quaternion
+
+
+class IntrinsicsJson(TypedDict):
+    """OpenCV's pinhole camera [px] with its five distortion coefficients (k1, k2, p1, p2, k3), the image size [px]
+    and the intrinsics fitted (names of ``fx fy cx cy k1 k2 p1 p2 k3``; empty: the file's kept)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: list[float]
+    width: int
+    height: int
+    fitted: list[str]
+
+
+class ReprojectionJson(TypedDict):
+    """Reprojection errors of a set of images: RMS per coordinate (u, v) and the largest corner's distance [px]."""
+
+    images: int
+    corners: int
+    rms_px: float | None
+    max_px: float | None
+
+
+class ReprojectionPair(TypedDict):
+    """``before``: the nominal kinematics with their own mount and world frame fitted (OpenCV's hand-eye refined
+    by reprojection: what hand-eye tools give); ``after``: the calibrated model."""
+
+    before: ReprojectionJson
+    after: ReprojectionJson
+
+
+class ImageErrorJson(TypedDict):
+    """One image's corners reprojected: RMS per coordinate before and after [px]."""
+
+    image: str
+    role: str
+    session: str
+    corners: int
+    before_rms_px: float
+    after_rms_px: float
+
+
+class CameraBlock(TypedDict):
+    """What a camera's calibration found besides the kinematic parameters.
+
+    ``arrangement``: eye_in_hand (the camera on the chain, the board fixed) or eye_to_hand. ``mount``: the
+    camera's (or the board's) frame on the chain's last moving link's child, as written to the URDF;
+    ``nominal_*``: the same fitted with the nominal kinematics (OpenCV's hand-eye refined: the "before").
+    ``worlds``: per session (``sessions``, in the same order), the board in the root frame (eye in hand) or the
+    camera in it (eye to hand). ``cannot_see``: what one camera cannot determine,
+    in words. ``reprojection``: calibration and validation images, before and after; ``images``: each image."""
+
+    arrangement: Literal["eye_in_hand", "eye_to_hand"]
+    camera_link: str
+    board_link: str | None
+    mount: FrameJson
+    nominal_mount: FrameJson
+    sessions: list[str]
+    worlds: list[FrameJson]
+    nominal_worlds: list[FrameJson]
+    intrinsics: IntrinsicsJson
+    nominal_intrinsics: IntrinsicsJson
+    cannot_see: list[str]
+    reprojection: dict[str, ReprojectionPair]
+    images: list[ImageErrorJson]
+
+
+class CameraReport(TypedDict):
+    """REPORT.json of ``calibrate --camera-link``: a chain calibrated from a camera's images of a board."""
+
+    pincal_version: str
+    report_version: int
+    method: None
+    level: ChainLevel
+    model: Literal["joint placements"]
+    measurement: Literal["camera"]
+    sources: CameraSources
+    chain: ChainJson
+    parameters: list[Parameter]
+    identifiability: Identifiability
+    camera: CameraBlock
+    fit_seconds: float
+    notes: list[str]
+    warnings: list[Finding]
+    urdf_sha256: Sha256
+    xacro_args: dict[str, str]
+
+
+class CameraEvaluationJson(TypedDict):
+    """``pincal evaluate --json`` of a camera's report: the evaluated images' reprojection errors before (the nominal
+    URDF with the report's nominal mount, world frame and the start's intrinsics) and after (the corrected URDF and
+    its camera_info), overall and per image."""
+
+    urdf: str
+    report: str
+    data: str
+    camera_info: str
+    world: Literal["reported", "re-estimated"]
+    reprojection: ReprojectionPair
+    images: list[ImageErrorJson]

@@ -1,0 +1,200 @@
+"""``pincal evaluate CORRECTED.urdf REPORT.json DATA.csv`` of a camera's report: each image's corners reprojected
+before and after (:func:`evaluate_camera_files`), the errors in pixels.
+
+After: the corrected URDF (kinematics, mount and, eye to hand, the camera in the world) with its camera_info YAML
+(beside it, else the report's ``sources.camera_info``). Before: the nominal URDF (``--nominal``, else the report's
+``sources.urdf``) with the mount, world frame and intrinsics the calibration fitted to the nominal kinematics
+(OpenCV's hand-eye refined by reprojection: what hand-eye tools give). The world frame -- the board in the world eye
+in hand, the camera eye to hand -- is the report's for a session it has; with ``--new-session``, or for a session
+it lacks, it is re-estimated on the evaluated images (6 unknowns per session, by Gauss-Newton on eq C3 with the
+model fixed), for either model.
+
+Only pixels: DATA.csv has no truth of the camera's pose, and the pose the camera itself measures per image (PnP)
+errs along its axis by far more than the reprojection it comes from, so a relative-pose error between images
+would measure PnP, not the calibration. The relative-pose errors against a simulation's truth are in
+``scripts/camera_comparison.py``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import cast
+
+import numpy as np
+import pinocchio as pin
+from scipy.optimize import least_squares
+
+from pincal.errors import PincalError
+from pincal.measurements.camera_csv import CornerSet, read_corners
+from pincal.model.camera_chain import camera_chain
+from pincal.model.camera_info import check_image_size, read_intrinsics
+from pincal.model.camera_view import Arrangement
+from pincal.model.chain import KinematicChain
+from pincal.model.description import read_description
+from pincal.model.parameter_sets import NoParameters
+from pincal.outputs import file_sha256
+from pincal.report.camera import frame_matrix, image_errors_json, intrinsics_from_json, reprojection_json
+from pincal.report.document import write_evaluation
+from pincal.report.model_camera import CameraEvaluationJson, CameraReport, FrameJson
+from pincal.report.reading import load_report
+from pincal.residuals.base import KinematicsCache
+from pincal.residuals.camera import CameraEstimate, CameraResidual
+from pincal.workflows.camera_calibration import camera_info_path
+from pincal.workflows.paths import description_inputs, refuse_overwrite
+
+__all__ = ["CameraEvaluateSettings", "CameraEvaluation", "evaluate_camera_files"]
+
+
+@dataclass(frozen=True)
+class CameraEvaluateSettings:
+    """``pincal evaluate`` of a camera's report without its paths.
+
+    Attributes:
+        new_session: re-estimate every session's world frame on the evaluated images (the board or the camera
+            moved since the calibration).
+        allow_other_urdf: accept a URDF other than the one written with the report.
+        nominal: the uncalibrated URDF, for "before" (None: the report's ``sources.urdf``).
+        xacro_args: ``NAME:=VALUE`` pairs of a ``.xacro`` nominal URDF (default: the report's).
+    """
+
+    new_session: bool = False
+    allow_other_urdf: bool = False
+    nominal: Path | None = None
+    xacro_args: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class CameraEvaluation:
+    """Outcome of :func:`evaluate_camera_files`: ``document`` (``--json``'s), notes, and the file written (or None)."""
+
+    document: CameraEvaluationJson
+    notes: tuple[str, ...]
+    written: Path | None
+
+
+def _pixels(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+            refit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each corner's reprojection error (M, 2) [px] through ``chain`` as it is placed, ``estimate``'s world frames
+    (``sessions``: each image's index), mount and intrinsics; the world frames of sessions ``refit`` (indices)
+    re-estimated first. Returns the errors and the world frames used."""
+    params = NoParameters(chain)
+    cache = KinematicsCache(params, np.array([], dtype=int), np.zeros(0), corners.q)
+    objective = CameraResidual(cache, corners, estimate, (), sessions)
+    x0 = objective.start_vector()
+    columns = np.concatenate([objective.blocks["world"].start + 6 * s + np.arange(6) for s in refit]).astype(int) \
+        if len(refit) else np.array([], dtype=int)
+    if columns.size:
+        def residual(v: np.ndarray) -> np.ndarray:
+            x = x0.copy()
+            x[columns] = v
+            return objective.residual(x)
+
+        def jacobian(v: np.ndarray) -> np.ndarray:
+            x = x0.copy()
+            x[columns] = v
+            return objective.jacobian(x)[:, columns]
+
+        x0[columns] = least_squares(residual, x0[columns], jac=jacobian, method="lm").x
+    return objective.residual(x0).reshape(-1, 2), objective.estimate(x0).worlds
+
+
+def _session_indices(corners: CornerSet, names: list[str], new_session: bool
+                     ) -> tuple[np.ndarray, list[str], list[str]]:
+    """Each image's world frame (K,) among the report's sessions then the new ones, the new ones' names, and every
+    session's name in that order."""
+    seen = [str(s) for s in dict.fromkeys(corners.sessions.astype(str))]
+    new = seen if new_session else [s for s in seen if s not in names]
+    order = ([] if new_session else list(names)) + new
+    index = {name: i for i, name in enumerate(order)}
+    return np.array([index[str(s)] for s in corners.sessions], dtype=np.intp), new, order
+
+
+def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str | Path,
+                          settings: CameraEvaluateSettings = CameraEvaluateSettings(),
+                          json_path: str | Path | None = None) -> CameraEvaluation:
+    """Reproject the corners of ``data`` through the corrected ``urdf`` and the nominal one (module docstring);
+    write ``json_path`` (``--json``) if given.
+
+    Raises:
+        PincalError: one line naming the file: the report is not a camera's, the URDF not the report's (without
+            ``allow_other_urdf``), its camera or board link missing, the camera_info or nominal URDF missing,
+            images of another size than the intrinsics, DATA.csv not a camera's.
+    """
+    urdf, report_path, data = Path(urdf), Path(report_path), Path(data)
+    report = cast(CameraReport, load_report(report_path, accept=("camera",),
+                                            hint="pass the REPORT.json of calibrate --camera-link"))
+    if json_path is not None:
+        json_path = Path(json_path)
+        refuse_overwrite(json_path, *description_inputs(urdf), report_path, data)
+    notes: list[str] = []
+    if file_sha256(urdf) != report["urdf_sha256"]:
+        if not settings.allow_other_urdf:
+            raise PincalError(f"{urdf}: not the URDF {report_path} was written with (its SHA-256 differs from the "
+                              "report's urdf_sha256); evaluate the pair calibrate wrote, or pass --allow-other-urdf "
+                              "if you changed it on purpose")
+        notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
+    camera = report["camera"]
+    arrangement = cast(Arrangement, camera["arrangement"])
+    after_chain, _ = camera_chain(read_description(urdf), camera["camera_link"], camera["board_link"])
+    corners, read_notes = read_corners(data, after_chain.joint_specs)
+    notes += read_notes
+    beside = camera_info_path(urdf)
+    info = beside if beside.is_file() else Path(report["sources"]["camera_info"])
+    if not info.is_file():
+        raise PincalError(f"{report_path}: no camera_info beside {urdf} ({beside.name}) nor at {info}; put the "
+                          "camera_info YAML calibrate wrote beside the corrected URDF")
+    after_intrinsics = read_intrinsics(info)
+    check_image_size(after_intrinsics, corners.sizes, corners.images, corners.source, str(info))
+    nominal = settings.nominal or Path(report["sources"]["urdf"])
+    if not nominal.is_file():
+        raise PincalError(f"{report_path}: the nominal URDF {nominal} (sources.urdf) is not there; give it with "
+                          "--nominal URDF, for the errors before calibration")
+    xacro = settings.xacro_args or tuple(report["xacro_args"].items())
+    before_chain, _ = camera_chain(read_description(nominal, xacro or None), camera["camera_link"],
+                                   camera["board_link"])
+    names = list(camera["sessions"])
+    trained = int(np.count_nonzero(corners.roles != "validation"))
+    if trained:
+        notes.append(f"{data}: {trained} of the {len(corners.images)} images have a role other than validation: if "
+                     "the calibration used them, their errors are not held out")
+    sessions, new, order = _session_indices(corners, names, settings.new_session)
+    refit = np.array([order.index(n) for n in new], dtype=np.intp)
+    if new:
+        notes.append(f"world frame re-estimated on these images for session(s) {', '.join(new)}"
+                     + (" (--new-session)" if settings.new_session else " (not in the report)"))
+    after_worlds = _reported_worlds(camera["worlds"], arrangement, str(report_path))
+    before_worlds = _reported_worlds(camera["nominal_worlds"], arrangement, str(report_path))
+    if arrangement == "eye_to_hand":  # the corrected URDF places the camera: W from it, as calibrated
+        model = pin.buildModelFromXML(read_description(urdf).text)
+        root_T_camera = model.frames[model.getFrameId(camera["camera_link"], pin.FrameType.BODY)].placement.homogeneous
+        after_worlds[0] = np.linalg.inv(root_T_camera)
+    # a new session's world frame starts from the first reported one
+    start_after = ([] if settings.new_session else after_worlds) + [after_worlds[0]] * len(new)
+    start_before = ([] if settings.new_session else before_worlds) + [before_worlds[0]] * len(new)
+    after = CameraEstimate(arrangement, np.array(start_after), np.eye(4), after_intrinsics)
+    before_mount = frame_matrix(camera["nominal_mount"], f"{report_path}: camera.nominal_mount")
+    before = CameraEstimate(arrangement, np.array(start_before), np.eye(4),
+                            intrinsics_from_json(camera["nominal_intrinsics"], f"{report_path}: camera"))
+    after_px, _ = _pixels(after_chain, corners, after, sessions, refit)
+    placements = before_chain.placements()
+    with before_chain.placed([*placements[:-1], before_mount]):  # the hand-eye mount on the nominal chain
+        before_px, _ = _pixels(before_chain, corners, before, sessions, refit)
+    document: CameraEvaluationJson = {
+        "urdf": str(urdf), "report": str(report_path), "data": str(data), "camera_info": str(info),
+        "world": "re-estimated" if new else "reported",
+        "reprojection": {"before": reprojection_json(corners, before_px),
+                         "after": reprojection_json(corners, after_px)},
+        "images": image_errors_json(corners, after_px, before_px),
+    }
+    if json_path is not None:
+        write_evaluation(json_path, document)
+    return CameraEvaluation(document, tuple(notes), json_path)
+
+
+def _reported_worlds(frames: list[FrameJson], arrangement: Arrangement, where: str) -> list[np.ndarray]:
+    """The report's world frames as W (:mod:`pincal.model.camera_view`): the board in the root eye in hand, the
+    inverse of the camera in the root eye to hand."""
+    out = [frame_matrix(f, f"{where}: camera.worlds") for f in frames]
+    return out if arrangement == "eye_in_hand" else [np.linalg.inv(w) for w in out]
+
