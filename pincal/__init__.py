@@ -127,8 +127,8 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         calibrate_camera_files,
     )
     from pincal.workflows.camera_evaluation import CameraEvaluateSettings, CameraEvaluation, evaluate_camera_files
-    from pincal.workflows.camera_simulation import CameraSimulation, CameraSimulationSettings, simulate_camera_files
     from pincal.workflows.camera_plan import CameraPlanInputs, CameraPlanRun, camera_plan_files
+    from pincal.workflows.camera_simulation import CameraSimulation, CameraSimulationSettings, simulate_camera_files
     from pincal.workflows.detection import DetectRun, DetectSettings, detect_files
     from pincal.workflows.diagnosis import DiagnoseOutputs, DiagnoseRun, diagnose_files
     from pincal.workflows.evaluation import Evaluation, SessionEvaluation, evaluate_files

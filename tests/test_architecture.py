@@ -39,6 +39,17 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 ENTRY_POINTS = ("pincal", "pincal.__main__")
 
 
+@functools.lru_cache(maxsize=None)
+def parsed(text: str) -> ast.Module:
+    """The syntax tree of a module's source, parsed once per text: the checks below each walk every module
+    (eight parses of ~200 files were half of this file's time); callers only read the trees."""
+    return ast.parse(text)
+
+
+def parsed_file(path: Path) -> ast.Module:
+    return parsed(path.read_text(encoding="utf-8"))
+
+
 def module_name(path: Path) -> str:
     parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
@@ -46,7 +57,7 @@ def module_name(path: Path) -> str:
 
 def pincal_imports(path: Path, name: str) -> set[str]:
     """The pincal modules ``path`` (module ``name``) imports, anywhere in its body."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    tree = parsed_file(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found: set[str] = set()
     for node in ast.walk(tree):
@@ -198,7 +209,7 @@ def step_callers(modules: dict[str, Path]) -> dict[str, set[str]]:
     imported alias)."""
     callers: dict[str, set[str]] = {step: set() for step in PIPELINE_STEPS}
     for name, path in modules.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = parsed_file(path)
         aliases = {a.asname: a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
                    for a in node.names if a.asname}
         for node in ast.walk(tree):
@@ -230,7 +241,7 @@ def declared_all(path: Path) -> list[str] | None:
 @functools.cache
 def _declared_all(path: Path, modified_ns: int) -> tuple[str, ...] | None:
     """:func:`declared_all` parsed once per file version (the public-name check asks once per import)."""
-    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+    for node in parsed_file(path).body:
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
             return tuple(ast.literal_eval(element) for element in node.value.elts)  # type: ignore[attr-defined]
     return None
@@ -262,7 +273,7 @@ def names_imported_across_rooms(modules: dict[str, Path]) -> list[tuple[str, str
     found = []
     for importer, path in modules.items():
         package = importer if path.name == "__init__.py" else importer.rpartition(".")[0]
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(parsed_file(path)):
             if not isinstance(node, ast.ImportFrom):
                 continue
             base = package.split(".")[: len(package.split(".")) - (node.level - 1)] if node.level else []
@@ -293,7 +304,7 @@ def test_every_module_states_its_public_names():
     """A module that binds a public name (no leading underscore) at top level declares ``__all__``:
     what other rooms, the tests and the users may import from it. Every listed name exists."""
     for name, path in MODULES.items():
-        defined, imported = top_level_names(ast.parse(path.read_text(encoding="utf-8")))
+        defined, imported = top_level_names(parsed_file(path))
         exported = declared_all(path)
         public = {n for n in defined if not n.startswith("_")}
         if path.name == "__init__.py" and name != "pincal" and not public:
@@ -327,7 +338,7 @@ def private_attributes_by_room(modules: dict[str, Path]) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
     for name, path in modules.items():
         found = out.setdefault(room(name), set())
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(parsed_file(path)):
             if isinstance(node, ast.ClassDef):
                 for item in node.body:
                     if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -348,7 +359,7 @@ def private_attribute_reads(modules: dict[str, Path], defined: dict[str, set[str
     for name, path in modules.items():
         own = defined.get(room(name), set())
         elsewhere = set().union(*(names for r, names in defined.items() if r != room(name)))
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(parsed_file(path)):
             if isinstance(node, ast.Attribute) and node.attr in elsewhere - own and not (
                     isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
                 bad.append(f"{name}:{node.lineno} reads {node.attr}, private to another room")
@@ -380,7 +391,7 @@ def chain_mutations(text: str, label: str) -> list[str]:
     :data:`CHAIN_MUTATORS`, ``.apply(…)`` on a parameter set (a receiver whose source names
     ``param``), and an assignment into :data:`CHAIN_STATE`; in the order of the source."""
     found: list[tuple[int, str]] = []
-    for node in ast.walk(ast.parse(text)):
+    for node in ast.walk(parsed(text)):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
             name = node.func.attr
             if name in CHAIN_MUTATORS or (name == "apply" and "param" in ast.unparse(node.func.value).lower()):
@@ -434,7 +445,7 @@ def problem_assignments(text: str, label: str, fields: set[str]) -> list[str]:
     holder); and on ``self`` too in a method of a :data:`PROBLEM_CLASSES` class other than its constructor
     (:data:`CONSTRUCTORS`); in the order of the source."""
     classes = {name for _, name in PROBLEM_CLASSES}
-    tree = ast.parse(text)
+    tree = parsed(text)
     method_of: dict[int, str] = {}  # node → the problem class's method it is in
     for node in ast.walk(tree):
         if isinstance(node, ast.ClassDef) and node.name in classes:

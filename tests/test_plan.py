@@ -80,6 +80,10 @@ def _heldout_mm(chain, params, truth, result, points, q) -> float:
 # as N grows).
 # The selection: AIC (the library's default), and calibrate's default prior, which the plan then
 # counts in its information (eq P1).
+#: TIAGo's four markers make each candidate 12 rows, and half the candidates keep both promises with the same
+#: margins (measured: prediction within 4 %, planned / random 0.52; with 2000: 3 %, 0.51) at half the search's
+#: time. The one-marker robots keep 2000: with 1000 the UR5's planned error is 1.6 times its prediction.
+CANDIDATES = {"tiago": 1000}
 SIMULATED = [
     ("kuka", SensorModel("point", 1), MARKERS[:1], 12, "aic"),
     ("kuka", SensorModel("point", 1), MARKERS[:1], 12, "prior"),
@@ -96,7 +100,7 @@ def test_planned_configurations_calibrate_as_predicted_and_beat_random(robot, se
     chain = _chain(robot)
     params = PlacementErrors(chain)
     truth = np.random.default_rng(1).normal(0.0, 1e-3, params.size)
-    candidates = sample_candidates(chain, 2000, seed=0)
+    candidates = sample_candidates(chain, CANDIDATES.get(robot, 2000), seed=0)
     settings = PlanSettings(count=count, level="full", sensor=sensor, sigma_pos_mm=0.1, sigma_rot_deg=0.1,
                             target_points=points, selection=selection)
     plan = plan_measurements(chain, candidates, settings)

@@ -123,6 +123,19 @@ def test_a_written_report_is_valid_and_of_one_kind(written_report):
     assert matching == ["CalibrationReport"]
 
 
+def test_a_report_valid_as_two_kinds_fails(written_report, monkeypatch):
+    """The suite's check of the schema's oneOf (conftest.validate_document: every other kind must refuse a
+    report) fails when another kind would accept it: here a kind that is the CalibrationReport again."""
+    import conftest
+
+    monkeypatch.setitem(conftest._validators, "Twin", conftest._validator("CalibrationReport"))
+    monkeypatch.setattr(conftest, "report_kinds", lambda: ["CalibrationReport", "Twin"])
+    with pytest.raises(jsonschema.ValidationError, match="valid as CalibrationReport and as .'Twin'."):
+        validate_document(written_report)
+    monkeypatch.setattr(conftest, "report_kinds", lambda: ["CalibrationReport", "PaperReport"])
+    validate_document(written_report)
+
+
 @pytest.mark.parametrize("change", ["rename", "drop", "retype", "add", "nested"])
 def test_a_renamed_missing_or_mistyped_key_fails(written_report, change):
     report = json.loads(json.dumps(written_report))
