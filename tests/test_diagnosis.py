@@ -70,6 +70,7 @@ def test_clean_data_claims_nothing(effect_free):
     "effect_text",
     [
         "compliance:lwr_joint_2:2e-4",
+        "lateral:lwr_joint_3:3e-4:2.5e-4",  # bending of J3 about its two lateral axes: ~7 mm (pincal.model.lateral)
         "encoder_scale:lwr_joint_4:0.003",
         "cyclic:lwr_joint_3:2:0.002:-0.001",
         "backlash:lwr_joint_4:0.004:gravity",

@@ -308,8 +308,11 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
     else:  # a joint no gravity torque acts on in any row (a vertical axis; no mass beyond it): nothing to test
         weightless = {name for j, name in enumerate(chain.joint_names)
                       if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
-        untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
-                      and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
+        unbent = {name for j, name in enumerate(chain.joint_names)  # no moment about its lateral axes (eq M3)
+                  if inputs.bending is None or np.max(np.abs(inputs.bending[:, j]), initial=0.0) < NO_TORQUE}
+        untestable = [e for e in pool if ((e.type == "compliance" or e.source == "gravity")
+                                          and (e.driver or e.joint) in weightless)  # a torque coupling: its driver's
+                      or (e.type == "lateral" and e.joint in unbent)]
     search = Search(chain, calibration, rows, heldout, tuple(e for e in pool if e not in untestable),
                     tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_sigma_pos_m, trial,
                     corrected, conditions, reference, unknown,
