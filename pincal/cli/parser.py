@@ -271,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="gravity loads from the URDF's inertias (urdf, the default; a URDF without any counts as "
                           "unknown), or unknown: each compliance follows the carried links' mass moments, fitted as "
                           "the combinations the rows determine")
+    dia.add_argument("--lateral", action="store_true",
+                     help="also try each revolute joint's lateral (bending) compliance: the joint turning about the "
+                          "two axes orthogonal to its own under the gravity moment it carries")
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     _add_temperature(dia)

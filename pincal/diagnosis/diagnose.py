@@ -174,6 +174,8 @@ class DiagnoseOptions:
         masses: ``urdf``: gravity torques of the URDF's inertias; ``unknown``: compliances follow the carried links'
             mass moments (:mod:`pincal.diagnosis.moment_candidates`), as they do with ``urdf`` on a URDF without
             inertias and no payload.
+        lateral: the default candidates include each revolute joint's lateral (bending) compliance
+            (:mod:`pincal.model.lateral`; ``diagnose --lateral``).
     """
 
     sigma_column: str | None = None
@@ -186,6 +188,7 @@ class DiagnoseOptions:
     couplings: Sequence[ReadingCoupling] = ()
     stated_sigma_pos_m: float | None = None
     masses: Masses = "urdf"
+    lateral: bool = False
 
 
 def diagnose(
@@ -217,7 +220,7 @@ def diagnose(
     expect_value(options, DiagnoseOptions, "diagnose")
     candidates = options.candidates
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
-        candidates = candidate_effects(chain, True)
+        candidates = candidate_effects(chain, True, options.lateral)
     nominal, counter = chain.placements(), Counter(progress)
     settings = replace(options, candidates=tuple(candidates))
     recalibrate, couplings, time, heldout_time = (options.recalibrate, options.couplings, options.time,
