@@ -133,6 +133,11 @@ def test_a_lateral_compliance_round_trips_through_the_report():
     back, read = effect_from_dict(entry)
     assert back == effect
     np.testing.assert_array_equal(read, values)
+    from pincal.report.sections import _effect_value, effect_label
+
+    kinds = {"lwr_joint_2": "revolute"}
+    assert _effect_value(entry, kinds)[0] == "u 0.2 ± 0.001 mrad/(N·m), v -0.3 ± 0.002 mrad/(N·m)"  # the HTML's
+    assert effect_label(entry).startswith("lateral (bending) compliance of lwr_joint_2")
     massless = Effect("lateral", "lwr_joint_4", moments=("u/mx:lwr_link_5", "v/my:lwr_link_5"))
     back, read = effect_from_dict(effect_to_dict(massless, np.array([0.1, -0.2])))
     assert back == massless and back.label == "lateral:lwr_joint_4:moments"

@@ -167,7 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
                           "coupling:J:DRIVER:REL (J's actual angle adds REL x DRIVER's reading), "
                           "drift:VX:VY:VZ (m/s), sensor_scale:REL, thermal:ALPHA (1/K; writes temperature_c), "
-                          "pause_step:DX:DY:DZ (m; an 8 h pause halfway)")
+                          "pause_step:DX:DY:DZ (m; an 8 h pause halfway), lateral:J:CU:CV (rad/(N·m): J bends about "
+                          "its two lateral axes under the gravity moment about them)")
 
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
     cal.add_argument("urdf", type=Path, help="URDF to calibrate, or a .xacro (never overwritten)")
