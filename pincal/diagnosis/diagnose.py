@@ -69,6 +69,7 @@ from pincal.diagnosis.steps import (
     State,
     Step,
     placements_of,
+    regravitated,
     search_step,
 )
 from pincal.diagnosis.structure import remaining_structure
@@ -82,7 +83,7 @@ from pincal.fit.solver import solve
 from pincal.measurements.couplings import ReadingCoupling, apply_couplings
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import HARMONICS, Effect, EffectInputs, RowContext, effect_inputs, with_loads
+from pincal.model.effects import BEND_EFFECTS, HARMONICS, Effect, EffectInputs, RowContext, effect_inputs, with_loads
 from pincal.model.masses import Masses
 from pincal.progress import Counter, Progress
 
@@ -375,6 +376,11 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
     if unexplained is None and not testable(freedom, 1 + 2 * len(HARMONICS), EVIDENCE):
         notes.append(GENERIC_NOT_RUN)
     counter.settle()
+    placements = placements_of(calibration, current_objective, final_solution.x)
+    held_inputs, judged = state.held_inputs, current_objective
+    if any(e.type in BEND_EFFECTS for e in adopted):  # the bending moments of the final geometry, as evaluate has them
+        model, held_inputs = regravitated(search, model, held_inputs, placements)
+        judged = model.problem(adopted).objective(calibration.kept, calibration.vector)
     return Diagnosis(
         effects=effects,
         steps=state.steps,
@@ -384,13 +390,13 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
         solution_x=final_solution.x,
         inputs=model.inputs,
         time_reference=search.time_reference,
-        calibration_errors=pose_errors_of(current_objective, final_solution.x),
-        heldout_errors=heldout_errors(model, current_objective, final_solution.x, heldout, state.held_inputs),
+        calibration_errors=pose_errors_of(judged, final_solution.x),
+        heldout_errors=heldout_errors(model, judged, final_solution.x, heldout, held_inputs),
         solution_std=final_std,
         sigma_pos_m=model.sigma_pos,
         sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),
-        chain_placements=tuple(placements_of(calibration, current_objective, final_solution.x)),
-        target_changes=tuple(target_changes(current_objective, final_solution.x)),
+        chain_placements=tuple(placements),
+        target_changes=tuple(target_changes(judged, final_solution.x)),
         conditions=search.conditions,
     )

@@ -56,7 +56,8 @@ from pincal.progress import Counter
 __all__ = [
     "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "NAMING_EVALUATIONS", "Step", "CandidateFit", "Trial", "Search",
     "State", "Judgement", "Restart", "Refitted", "screen_candidates", "fit_candidate", "judge_candidates", "adopt",
-    "refit", "refresh_gravity", "search_step", "placements_of", "judged", "drop_superseded",
+    "refit", "refresh_gravity", "search_step", "placements_of", "judged", "drop_superseded", "gravity_driven",
+    "regravitated",
 ]
 
 #: Refits with gravity torques recomputed on the refitted geometry.
@@ -301,24 +302,35 @@ def refresh_gravity(search: Search, refitted: Refitted, effects: list[Effect]) -
     """With a compliance or gravity-flank effect among ``effects``: gravity torques of the calibration (and
     held-out) rows recomputed on the refitted geometry, not the one fitted without the effects, and the model
     fitted again, :data:`GRAVITY_REFRESHES` times."""
-    if not any(e.type in ("compliance", "lateral") or e.source == "gravity" for e in effects):
+    if not gravity_driven(effects):
         return refitted
     model, held_inputs, obj, sol = refitted
-    calibration, chain, heldout = search.calibration, search.chain, search.heldout
-    inputs = model.inputs
     for _ in range(GRAVITY_REFRESHES):
-        with chain.placed(placements_of(calibration, obj, sol.x)):
-            fresh = effect_inputs(chain, search.rows, search.payload_kg, search.point)
-            inputs = replace(inputs, gravity=fresh.gravity, bending=fresh.bending)
-            inputs = inputs if inputs.loads is None else with_loads(inputs, chain)
-            if heldout is not None:
-                assert held_inputs is not None  # set with the held-out rows
-                fresh = effect_inputs(chain, heldout, search.payload_kg, search.point)
-                held_inputs = replace(held_inputs, gravity=fresh.gravity, bending=fresh.bending)
-                held_inputs = held_inputs if held_inputs.loads is None else with_loads(held_inputs, chain)
-        model = replace(model, inputs=inputs)
+        model, held_inputs = regravitated(search, model, held_inputs, placements_of(search.calibration, obj, sol.x))
         obj, sol = model.fit(effects, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj.effect_slices])
     return Refitted(model, held_inputs, obj, sol)
+
+
+def gravity_driven(effects: Sequence[Effect]) -> bool:
+    """Whether some of ``effects`` follow the gravity loads (a compliance, a lateral one, a gravity flank)."""
+    return any(e.type in ("compliance", "lateral") or e.source == "gravity" for e in effects)
+
+
+def regravitated(search: Search, model: EffectModel, held_inputs: EffectInputs | None,
+                 placements: Sequence[np.ndarray]) -> tuple[EffectModel, EffectInputs | None]:
+    """``model`` and the held-out rows' inputs with the gravity loads (torques, bending moments, loads per mass
+    moment) of the calibration and held-out rows recomputed on the geometry ``placements``."""
+    chain, heldout, inputs = search.chain, search.heldout, model.inputs
+    with chain.placed(placements):
+        fresh = effect_inputs(chain, search.rows, search.payload_kg, search.point)
+        inputs = replace(inputs, gravity=fresh.gravity, bending=fresh.bending)
+        inputs = inputs if inputs.loads is None else with_loads(inputs, chain)
+        if heldout is not None:
+            assert held_inputs is not None  # set with the held-out rows
+            fresh = effect_inputs(chain, heldout, search.payload_kg, search.point)
+            held_inputs = replace(held_inputs, gravity=fresh.gravity, bending=fresh.bending)
+            held_inputs = held_inputs if held_inputs.loads is None else with_loads(held_inputs, chain)
+    return replace(model, inputs=inputs), held_inputs
 
 
 def adopt(search: Search, state: State, judgement: Judgement, counter: Counter) -> State | Restart:
