@@ -37,7 +37,7 @@ SETTINGS = dict(sigma_pos_mm=0.02, sigma_rot_deg=0.02, n_cpa=8, n_calibration=80
 NOT_ADOPTED = "reported, not adopted: "
 
 
-def _run(kuka_urdf, effect_text, seed=3):
+def _run(kuka_urdf, effect_text, seed=3, lateral=False):
     from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK)
@@ -47,7 +47,7 @@ def _run(kuka_urdf, effect_text, seed=3):
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     calibration = calibrate_chain(chain, experiment.calibration, "offsets", ChainFitOptions(tool_known=True))
     time = time_column(experiment.calibration)
-    candidates = candidate_effects(chain, time is not None) + [e for e, _ in effects if e.type == "coupling"]
+    candidates = candidate_effects(chain, time is not None, lateral) + [e for e, _ in effects if e.type == "coupling"]
     result = diagnose(chain, calibration, experiment.calibration, heldout=experiment.validation,
                       options=DiagnoseOptions(time=time, heldout_time=time_column(experiment.validation),
                                               candidates=candidates))
@@ -56,8 +56,8 @@ def _run(kuka_urdf, effect_text, seed=3):
 
 @pytest.fixture(scope="module")
 def effect_free(kuka_urdf):
-    """Diagnosis of the same simulated data without an effect (nothing adopted)."""
-    result, _ = _run(kuka_urdf, None)
+    """Diagnosis of the same simulated data without an effect (nothing adopted), lateral compliances offered too."""
+    result, _ = _run(kuka_urdf, None, lateral=True)
     return result
 
 
@@ -70,6 +70,7 @@ def test_clean_data_claims_nothing(effect_free):
     "effect_text",
     [
         "compliance:lwr_joint_2:2e-4",
+        "lateral:lwr_joint_3:3e-4:2.5e-4",  # bending of J3 about its two lateral axes: ~7 mm (pincal.model.lateral)
         "encoder_scale:lwr_joint_4:0.003",
         "cyclic:lwr_joint_3:2:0.002:-0.001",
         "backlash:lwr_joint_4:0.004:gravity",
@@ -95,7 +96,8 @@ def test_undeclared_effect_is_found_measured_and_removed(kuka_urdf, effect_free,
     1.87 for one value and p = 12 (offsets and registration). An effect left in
     the held-out predictions would give 18 to 500 times the effect-free error.
     """
-    result, [(truth, values)] = _run(kuka_urdf, effect_text)
+    # lateral compliances offered beside the compliances: a joint's is not claimed for a lateral one, nor back
+    result, [(truth, values)] = _run(kuka_urdf, effect_text, lateral=effect_text.startswith(("compliance", "lateral")))
     assert [e.label for e, _, _ in result.effects] == [truth.label]
     effect, found, std = result.effects[0]
     assert np.all(np.abs(found - values) <= 3.0 * std), f"{found} ± {std} vs {values}"

@@ -71,7 +71,7 @@ def cell(tmp_path_factory) -> Path:
 
 def test_a_lift_sagging_under_the_shoulders_torque_is_stated_in_m_per_newton_metre(cell, monkeypatch, capsys):
     """Console, REPORT.json's advice, effects.yaml and the HTML page say m/(N·m) (mm/(N·m) on the page)."""
-    monkeypatch.setattr(diagnose_module, "candidate_effects", lambda chain, has_time: [SAG])
+    monkeypatch.setattr(diagnose_module, "candidate_effects", lambda chain, has_time, lateral=False: [SAG])
     out, report, html = cell / "d.urdf", cell / "d" / "REPORT.json", cell / "d" / "REPORT.html"
     assert main(["diagnose", str(TIAGO), str(cell / "cal.csv"), "--validation", str(cell / "val.csv"),
                  "--tip-link", TIP, "--quiet", "--out", str(out), "--report", str(report), "--html", str(html)]) == 0

@@ -278,6 +278,7 @@ def _run_diagnose(args: argparse.Namespace) -> int:
                                 payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
                                 xacro_args=args.xacro_args, couplings=args.coupling or (),
                                 temperature_column=args.temperature_column, force=args.force, masses=args.masses,
+                                lateral=args.lateral,
                                 **({} if args.pause_s is None else {"pause_s": args.pause_s}))
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         run = diagnose_files(args.urdf, args.data, args.out, args.report, settings, validation_path=args.validation,

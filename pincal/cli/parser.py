@@ -198,7 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "encoder_scale:J:REL, cyclic:J:H:SIN:COS, backlash:J:RAD[:gravity|approach], "
                           "coupling:J:DRIVER:REL (J's actual angle adds REL x DRIVER's reading), "
                           "drift:VX:VY:VZ (m/s), sensor_scale:REL, thermal:ALPHA (1/K; writes temperature_c), "
-                          "pause_step:DX:DY:DZ (m; an 8 h pause halfway)")
+                          "pause_step:DX:DY:DZ (m; an 8 h pause halfway), lateral:J:CU:CV (rad/(N·m): J bends about "
+                          "its two lateral axes under the gravity moment about them)")
 
     cal = sub.add_parser("calibrate", help="calibrate a URDF from measurements")
     cal.add_argument("urdf", type=Path, help="URDF to calibrate, or a .xacro (never overwritten)")
@@ -303,6 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="gravity loads from the URDF's inertias (urdf, the default; a URDF without any counts as "
                           "unknown), or unknown: each compliance follows the carried links' mass moments, fitted as "
                           "the combinations the rows determine")
+    dia.add_argument("--lateral", action="store_true",
+                     help="also try each revolute joint's lateral (bending) compliance: the joint turning about the "
+                          "two axes orthogonal to its own under the gravity moment it carries")
     dia.add_argument("--time-column", metavar="COLUMN",
                      help="row time [s] for drift and approach order (default: time, t, timestamp or t_start_robot)")
     _add_temperature(dia)

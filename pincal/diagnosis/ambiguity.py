@@ -7,11 +7,45 @@ which effects they were, of which joints, and what to measure to separate them (
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
-from pincal.model.effects import Effect
+import numpy as np
 
-__all__ = ["ambiguity_words", "ordinal"]
+from pincal.model.effects import BEND_EFFECTS, Effect
+
+if TYPE_CHECKING:
+    from pincal.diagnosis.screening import FitObjective
+    from pincal.fit.solver import Solution
+
+__all__ = ["ambiguity_words", "ordinal", "basis_correlation", "alike_correlation"]
+
+
+def basis_correlation(a: np.ndarray | None, b: np.ndarray | None) -> float:
+    """The correlation of two effects' bases over the rows (their first columns, (K, n) each; 0 without one)."""
+    if a is None or b is None:
+        return 0.0
+    a, b = a[:, 0] - a[:, 0].mean(), b[:, 0] - b[:, 0].mean()
+    denominator = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / denominator) if denominator > 0 else 0.0
+
+
+def alike_correlation(effects: tuple[Effect, Effect], bases: tuple[np.ndarray | None, np.ndarray | None],
+                      fits: tuple[tuple[FitObjective, Solution] | None, ...]) -> float:
+    """How alike two candidates correct the poses: their bases' correlation (:func:`basis_correlation`) when both
+    shift a joint reading or the sensor by a per-row series; with a lateral compliance, whose deflection turns
+    the chain about another axis than any reading's, the cosine of what each fit changes in the measured
+    coordinates (its whitened Jacobian columns times its values, the data rows), 0 without both fits."""
+    if not any(e.type in BEND_EFFECTS for e in effects):
+        return basis_correlation(*bases)
+    if fits[0] is None or fits[1] is None:
+        return 0.0
+    changes = []
+    for objective, solution in (fits[0], fits[1]):
+        data = getattr(objective, "objective", objective)  # a prior-wrapped objective's sensor residual
+        sl = data.effect_slices[-1]
+        changes.append((objective.jacobian(solution.x)[:, sl] @ solution.x[sl])[: data.row_indices().size])
+    denominator = np.linalg.norm(changes[0]) * np.linalg.norm(changes[1])
+    return float(changes[0] @ changes[1] / denominator) if denominator > 0 else 0.0
 
 
 def ordinal(n: int) -> str:
@@ -21,7 +55,8 @@ def ordinal(n: int) -> str:
 
 
 #: What each joint effect is, in words, for the alternatives of an ambiguous one (:func:`ambiguity_words`).
-_WORDS = {"compliance": "a compliance", "encoder_scale": "an encoder scale", "coupling": "a coupling",
+_WORDS = {"compliance": "a compliance", "lateral": "a lateral (bending) compliance",
+          "encoder_scale": "an encoder scale", "coupling": "a coupling",
           "backlash": "a backlash", "drift": "a drift", "sensor_scale": "the sensor's scale",
           "thermal": "a thermal expansion", "pause_step": "a step at a pause"}
 

@@ -29,8 +29,9 @@ def parallel_neighbours(chain: KinematicChain) -> set[tuple[int, int]]:
             and np.linalg.norm(np.cross(axes[i], axes[i + 1])) < PARALLEL_AXES_RAD}
 
 
-def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
-    """Every candidate on every joint of the chain, plus the sensor's; couplings between the
+def candidate_effects(chain: KinematicChain, has_time: bool, lateral: bool = False) -> list[Effect]:
+    """Every candidate on every joint of the chain (with ``lateral``, each revolute joint's lateral compliance
+    too, :mod:`pincal.model.lateral`), plus the sensor's; couplings between the
     :func:`parallel_neighbours` only, of the reading and of the gravity torque (a compliance driven by the
     neighbour's torque): a parallelogram or a counterbalance links J2's and J3's loads."""
     out: list[Effect] = []
@@ -38,6 +39,8 @@ def candidate_effects(chain: KinematicChain, has_time: bool) -> list[Effect]:
     parallel = parallel_neighbours(chain)
     for j, joint in enumerate(names):
         out.append(Effect("compliance", joint))
+        if lateral and chain.joints[j].kind != "prismatic":  # a revolute joint bends about its lateral axes
+            out.append(Effect("lateral", joint))
         out.append(Effect("encoder_scale", joint))
         out += [Effect("cyclic", joint, harmonic=h) for h in HARMONICS]
         out += [Effect("backlash", joint, source=s) for s in BACKLASH_SOURCES]

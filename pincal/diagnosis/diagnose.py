@@ -69,6 +69,7 @@ from pincal.diagnosis.steps import (
     State,
     Step,
     placements_of,
+    regravitated,
     search_step,
 )
 from pincal.diagnosis.structure import remaining_structure
@@ -82,7 +83,7 @@ from pincal.fit.solver import solve
 from pincal.measurements.couplings import ReadingCoupling, apply_couplings
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import HARMONICS, Effect, EffectInputs, RowContext, effect_inputs, with_loads
+from pincal.model.effects import BEND_EFFECTS, HARMONICS, Effect, EffectInputs, RowContext, effect_inputs, with_loads
 from pincal.model.masses import Masses
 from pincal.progress import Counter, Progress
 
@@ -174,6 +175,8 @@ class DiagnoseOptions:
         masses: ``urdf``: gravity torques of the URDF's inertias; ``unknown``: compliances follow the carried links'
             mass moments (:mod:`pincal.diagnosis.moment_candidates`), as they do with ``urdf`` on a URDF without
             inertias and no payload.
+        lateral: the default candidates include each revolute joint's lateral (bending) compliance
+            (:mod:`pincal.model.lateral`; ``diagnose --lateral``).
     """
 
     sigma_column: str | None = None
@@ -186,6 +189,7 @@ class DiagnoseOptions:
     couplings: Sequence[ReadingCoupling] = ()
     stated_sigma_pos_m: float | None = None
     masses: Masses = "urdf"
+    lateral: bool = False
 
 
 def diagnose(
@@ -217,7 +221,7 @@ def diagnose(
     expect_value(options, DiagnoseOptions, "diagnose")
     candidates = options.candidates
     if candidates is None:  # on the nominal geometry: which axes are parallel is the design's (drift: with a time)
-        candidates = candidate_effects(chain, True)
+        candidates = candidate_effects(chain, True, options.lateral)
     nominal, counter = chain.placements(), Counter(progress)
     settings = replace(options, candidates=tuple(candidates))
     recalibrate, couplings, time, heldout_time = (options.recalibrate, options.couplings, options.time,
@@ -308,8 +312,11 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
     else:  # a joint no gravity torque acts on in any row (a vertical axis; no mass beyond it): nothing to test
         weightless = {name for j, name in enumerate(chain.joint_names)
                       if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
-        untestable = [e for e in pool if (e.type == "compliance" or e.source == "gravity")
-                      and (e.driver or e.joint) in weightless]  # a torque coupling needs its driver's torque
+        unbent = {name for j, name in enumerate(chain.joint_names)  # no moment about its lateral axes (eq M3)
+                  if inputs.bending is None or np.max(np.abs(inputs.bending[:, j]), initial=0.0) < NO_TORQUE}
+        untestable = [e for e in pool if ((e.type == "compliance" or e.source == "gravity")
+                                          and (e.driver or e.joint) in weightless)  # a torque coupling: its driver's
+                      or (e.type == "lateral" and e.joint in unbent)]
     search = Search(chain, calibration, rows, heldout, tuple(e for e in pool if e not in untestable),
                     tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_sigma_pos_m, trial,
                     corrected, conditions, reference, unknown,
@@ -369,6 +376,11 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
     if unexplained is None and not testable(freedom, 1 + 2 * len(HARMONICS), EVIDENCE):
         notes.append(GENERIC_NOT_RUN)
     counter.settle()
+    placements = placements_of(calibration, current_objective, final_solution.x)
+    held_inputs, judged = state.held_inputs, current_objective
+    if any(e.type in BEND_EFFECTS for e in adopted):  # the bending moments of the final geometry, as evaluate has them
+        model, held_inputs = regravitated(search, model, held_inputs, placements)
+        judged = model.problem(adopted).objective(calibration.kept, calibration.vector)
     return Diagnosis(
         effects=effects,
         steps=state.steps,
@@ -378,13 +390,13 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
         solution_x=final_solution.x,
         inputs=model.inputs,
         time_reference=search.time_reference,
-        calibration_errors=pose_errors_of(current_objective, final_solution.x),
-        heldout_errors=heldout_errors(model, current_objective, final_solution.x, heldout, state.held_inputs),
+        calibration_errors=pose_errors_of(judged, final_solution.x),
+        heldout_errors=heldout_errors(model, judged, final_solution.x, heldout, held_inputs),
         solution_std=final_std,
         sigma_pos_m=model.sigma_pos,
         sigma_rot_rad=model.sigma_rot,
         notes=tuple(notes),
-        chain_placements=tuple(placements_of(calibration, current_objective, final_solution.x)),
-        target_changes=tuple(target_changes(current_objective, final_solution.x)),
+        chain_placements=tuple(placements),
+        target_changes=tuple(target_changes(judged, final_solution.x)),
         conditions=search.conditions,
     )

@@ -17,12 +17,12 @@ import numpy as np
 
 from pincal.fit.identifiability import RANK_TOLERANCE, order_parameters
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import Effect, EffectInputs
+from pincal.model.effects import LATERAL_COMPONENTS, Effect, EffectInputs
 from pincal.model.mass_moments import chain_mass_kg
 from pincal.model.masses import Masses
 
 __all__ = ["REGROUP_MIN", "NO_LOAD", "MomentCombinations", "masses_unknown", "base_combinations",
-           "moment_compliances", "combination_words", "needs_masses"]
+           "moment_compliances", "combination_words", "needs_masses", "lateral_moments"]
 
 #: Regrouping coefficients below this are not named in words: an m·c column is a direction cosine, an m column
 #: a lever arm [m], so 1e-3 is 0.1 % of a moment or a millimetre of lever, the size of the calibrated geometry's
@@ -43,7 +43,7 @@ def masses_unknown(chain: KinematicChain, masses: Masses, payload_kg: float) -> 
 def needs_masses(effect: Effect) -> bool:
     """An effect that needs the URDF's gravity torques: a compliance under a load the URDF gives (its own or
     its driver's), a gravity backlash."""
-    return (effect.type == "compliance" and not effect.moments) or effect.source == "gravity"
+    return (effect.type in ("compliance", "lateral") and not effect.moments) or effect.source == "gravity"
 
 
 @dataclass(frozen=True)
@@ -86,23 +86,33 @@ def base_combinations(columns: np.ndarray, names: Sequence[str]) -> MomentCombin
     return MomentCombinations(tuple(names[c] for c in kept), regrouped)
 
 
-def joint_combinations(effect: Effect, inputs: EffectInputs) -> MomentCombinations:
-    """The combinations the rows of ``inputs`` (with loads) determine for ``effect``'s joint's load (eq M2)."""
+def joint_combinations(effect: Effect, inputs: EffectInputs, component: int = 0) -> MomentCombinations:
+    """The combinations the rows of ``inputs`` (with loads) determine for ``effect``'s joint's load: along its axis
+    (``component`` 0, eq M2) or about its lateral axis u (1) or v (2) (eq M3)."""
     assert inputs.loads is not None  # with_loads
     j = inputs.joint_names.index(str(effect.joint))
-    return base_combinations(inputs.loads[:, j, 0, :], inputs.load_names)
+    return base_combinations(inputs.loads[:, j, component, :], inputs.load_names)
+
+
+def lateral_moments(effect: Effect, inputs: EffectInputs) -> tuple[str, ...]:
+    """The mass moments a lateral compliance of unknown masses follows (eq L2 of :mod:`pincal.model.lateral`): the
+    combinations the rows determine of its joint's load about u, then about v (``u/PARAMETER:LINK``)."""
+    return tuple(f"{component}/{name}" for c, component in enumerate(LATERAL_COMPONENTS)
+                 for name in joint_combinations(effect, inputs, 1 + c).kept)
 
 
 def moment_compliances(pool: Sequence[Effect], inputs: EffectInputs,
                        chain: KinematicChain) -> tuple[list[Effect], list[Effect]]:
-    """``pool`` with each joint's own compliance turned into one over the mass-moment combinations its load
-    has over the rows, and the candidates that cannot be tested without masses: a compliance whose load no
-    combination moves (an axis along gravity in every row), a torque coupling, a gravity backlash."""
+    """``pool`` with each joint's own compliance (and lateral compliance, :func:`lateral_moments`) turned into one
+    over the mass-moment combinations its load has over the rows, and the candidates that cannot be tested without
+    masses: a compliance whose load no combination moves (an axis along gravity in every row), a torque coupling,
+    a gravity backlash."""
     out: list[Effect] = []
     untestable: list[Effect] = []
     for effect in pool:
-        if effect.type == "compliance" and not effect.driver and not effect.moments:
-            kept = joint_combinations(effect, inputs).kept
+        if effect.type in ("compliance", "lateral") and not effect.driver and not effect.moments:
+            kept = joint_combinations(effect, inputs).kept if effect.type == "compliance" else lateral_moments(
+                effect, inputs)
             (out if kept else untestable).append(replace(effect, moments=kept) if kept else effect)
         elif needs_masses(effect):
             untestable.append(effect)
@@ -124,12 +134,17 @@ def combination_words(effect: Effect, inputs: EffectInputs, prismatic: bool) -> 
     """What each value of a compliance of unknown masses stands for, in its unit: ``g·(m·x[link_3] + 0.425
     m[link_4])/k[J2] [rad]`` (m·x: the link's mass moment along its joint frame's x [kg·m], m its mass [kg];
     g the gravity's magnitude [m/s²], k the joint's stiffness [N·m/rad]: rad, or rad/m for a combination led by
-    a mass (its basis is a lever arm); m for a ``prismatic`` joint)."""
-    combos = joint_combinations(effect, inputs)
-    regrouped = dict(zip(combos.kept, combos.regrouped))
+    a mass (its basis is a lever arm); m for a ``prismatic`` joint). A lateral compliance's (``u/...``, ``v/...``)
+    are over its stiffness about that lateral axis, ``k_u[J3]`` (:mod:`pincal.model.lateral`)."""
+    regrouped: dict[str, tuple[tuple[str, float], ...]] = {}
+    for component in (0,) if effect.type != "lateral" else (1, 2):
+        combos = joint_combinations(effect, inputs, component)
+        prefix = "" if component == 0 else LATERAL_COMPONENTS[component - 1] + "/"
+        regrouped.update({prefix + name: other for name, other in zip(combos.kept, combos.regrouped)})
     words = []
     for name in effect.moments:
-        terms = " ".join([_term(name)] + [_term(other, c) for other, c in regrouped.get(name, ())])
-        unit = "m" if prismatic else "rad/m" if name.startswith("m:") else "rad"
-        words.append(f"g·({terms})/k[{effect.joint}] [{unit}]")
+        axis, _, moment = name.rpartition("/")
+        terms = " ".join([_term(moment)] + [_term(other, c) for other, c in regrouped.get(name, ())])
+        unit = "m" if prismatic else "rad/m" if moment.startswith("m:") else "rad"
+        words.append(f"g·({terms})/k{'_' + axis if axis else ''}[{effect.joint}] [{unit}]")
     return words

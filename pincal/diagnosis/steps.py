@@ -50,13 +50,14 @@ from pincal.measurements.couplings import ReadingCoupling
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.effect_units import shift_unit
-from pincal.model.effects import Effect, EffectInputs, effect_inputs, with_loads
+from pincal.model.effects import BEND_EFFECTS, Effect, EffectInputs, effect_inputs, with_loads
 from pincal.progress import Counter
 
 __all__ = [
     "GRAVITY_REFRESHES", "CANDIDATE_TOLERANCE", "NAMING_EVALUATIONS", "Step", "CandidateFit", "Trial", "Search",
     "State", "Judgement", "Restart", "Refitted", "screen_candidates", "fit_candidate", "judge_candidates", "adopt",
-    "refit", "refresh_gravity", "search_step", "placements_of", "judged",
+    "refit", "refresh_gravity", "search_step", "placements_of", "judged", "drop_superseded", "gravity_driven",
+    "regravitated",
 ]
 
 #: Refits with gravity torques recomputed on the refitted geometry.
@@ -162,6 +163,7 @@ class State:
     inseparable: frozenset[str] = frozenset()
     untested: tuple[tuple[str, float], ...] = ()
     done: bool = False
+    dropped: frozenset[str] = frozenset()  # adopted, then dropped as superseded (:func:`drop_superseded`)
 
 
 @dataclass(frozen=True)
@@ -196,7 +198,7 @@ class Refitted(NamedTuple):
 def screen_candidates(search: Search, state: State) -> tuple[tuple[Effect, Score], ...]:
     """Screen: each candidate not adopted yet with its linearised score test from the current fit, best first
     (:func:`pincal.diagnosis.screening.screen`); empty when none is left."""
-    offered = [e for e in search.pool if e not in state.adopted]
+    offered = [e for e in search.pool if e not in state.adopted and e.label not in state.dropped]
     return tuple(screen(state.objective, state.solution, offered, state.bic)) if offered else ()
 
 
@@ -300,23 +302,35 @@ def refresh_gravity(search: Search, refitted: Refitted, effects: list[Effect]) -
     """With a compliance or gravity-flank effect among ``effects``: gravity torques of the calibration (and
     held-out) rows recomputed on the refitted geometry, not the one fitted without the effects, and the model
     fitted again, :data:`GRAVITY_REFRESHES` times."""
-    if not any(e.type == "compliance" or e.source == "gravity" for e in effects):
+    if not gravity_driven(effects):
         return refitted
     model, held_inputs, obj, sol = refitted
-    calibration, chain, heldout = search.calibration, search.chain, search.heldout
-    inputs = model.inputs
     for _ in range(GRAVITY_REFRESHES):
-        with chain.placed(placements_of(calibration, obj, sol.x)):
-            inputs = replace(inputs, gravity=effect_inputs(chain, search.rows, search.payload_kg, search.point).gravity)
-            inputs = inputs if inputs.loads is None else with_loads(inputs, chain)
-            if heldout is not None:
-                assert held_inputs is not None  # set with the held-out rows
-                held_inputs = replace(held_inputs,
-                                      gravity=effect_inputs(chain, heldout, search.payload_kg, search.point).gravity)
-                held_inputs = held_inputs if held_inputs.loads is None else with_loads(held_inputs, chain)
-        model = replace(model, inputs=inputs)
+        model, held_inputs = regravitated(search, model, held_inputs, placements_of(search.calibration, obj, sol.x))
         obj, sol = model.fit(effects, sol.x[: obj.blocks["effects"].start], [sol.x[sl] for sl in obj.effect_slices])
     return Refitted(model, held_inputs, obj, sol)
+
+
+def gravity_driven(effects: Sequence[Effect]) -> bool:
+    """Whether some of ``effects`` follow the gravity loads (a compliance, a lateral one, a gravity flank)."""
+    return any(e.type in ("compliance", "lateral") or e.source == "gravity" for e in effects)
+
+
+def regravitated(search: Search, model: EffectModel, held_inputs: EffectInputs | None,
+                 placements: Sequence[np.ndarray]) -> tuple[EffectModel, EffectInputs | None]:
+    """``model`` and the held-out rows' inputs with the gravity loads (torques, bending moments, loads per mass
+    moment) of the calibration and held-out rows recomputed on the geometry ``placements``."""
+    chain, heldout, inputs = search.chain, search.heldout, model.inputs
+    with chain.placed(placements):
+        fresh = effect_inputs(chain, search.rows, search.payload_kg, search.point)
+        inputs = replace(inputs, gravity=fresh.gravity, bending=fresh.bending)
+        inputs = inputs if inputs.loads is None else with_loads(inputs, chain)
+        if heldout is not None:
+            assert held_inputs is not None  # set with the held-out rows
+            fresh = effect_inputs(chain, heldout, search.payload_kg, search.point)
+            held_inputs = replace(held_inputs, gravity=fresh.gravity, bending=fresh.bending)
+            held_inputs = held_inputs if held_inputs.loads is None else with_loads(held_inputs, chain)
+    return replace(model, inputs=inputs), held_inputs
 
 
 def adopt(search: Search, state: State, judgement: Judgement, counter: Counter) -> State | Restart:
@@ -368,9 +382,35 @@ def adopt(search: Search, state: State, judgement: Judgement, counter: Counter) 
         driver=driver, driver_label=driver_label, joint_residual=joint_residual, fitted_shift=fitted,
         shift_unit=unit,
     )
-    return replace(state, model=model, held_inputs=held_inputs, objective=obj, solution=sol,
-                   bic=bic(sol.residual, sol.x.size, n_prior_rows(obj)), adopted=tuple(adopted),
-                   steps=(*state.steps, step))
+    return drop_superseded(replace(state, model=model, held_inputs=held_inputs, objective=obj, solution=sol,
+                                   bic=bic(sol.residual, sol.x.size, n_prior_rows(obj)), adopted=tuple(adopted),
+                                   steps=(*state.steps, step)))
+
+
+def drop_superseded(state: State) -> State:
+    """Each lateral compliance adopted before the last effect refitted out: when the effects adopted after it
+    explain what it did — keeping it no longer gains the evidence cut, BIC without it − BIC with it above
+    :data:`EVIDENCE` (the backward step of stepwise selection, Efroymson 1960) — it is dropped and noted. Its
+    deflection fits many load patterns at once (a function of every carried link's mass moments without masses),
+    so a forward step can take it for two effects that are each a joint's own, adopted next."""
+    for effect in state.adopted[:-1]:
+        if effect.type not in BEND_EFFECTS:
+            continue
+        obj, sol = state.objective, state.solution
+        kept = [(e, sol.x[sl]) for e, sl in zip(state.adopted, obj.effect_slices) if e != effect]
+        try:
+            new_obj, new_sol = state.model.fit([e for e, _ in kept], sol.x[: obj.blocks["effects"].start],
+                                               [v for _, v in kept])
+        except CalibrationError:  # the fit without it fails: it stays
+            continue
+        without = bic(new_sol.residual, new_sol.x.size, n_prior_rows(new_obj))
+        if without - state.bic < -EVIDENCE:
+            note = (f"{effect.label} dropped after {state.adopted[-1].label} was adopted: the effects adopted after it "
+                    f"explain what it did (keeping it gains ΔBIC {state.bic - without:.1f}, not below {EVIDENCE:g})")
+            state = replace(state, objective=new_obj, solution=new_sol, bic=without,
+                            adopted=tuple(e for e, _ in kept), dropped=state.dropped | {effect.label},
+                            rejected=_merged(state.rejected, {f"{effect.label}:dropped": note}))
+    return state
 
 
 def search_step(search: Search, state: State, counter: Counter) -> State | Restart:

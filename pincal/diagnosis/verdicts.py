@@ -31,7 +31,7 @@ from typing import cast
 
 import numpy as np
 
-from pincal.diagnosis.ambiguity import ambiguity_words
+from pincal.diagnosis.ambiguity import alike_correlation, ambiguity_words
 from pincal.diagnosis.effect_fits import CandidateFit, pose_errors_of
 from pincal.diagnosis.held_out import (
     HELD_OUT_LEVEL,
@@ -78,6 +78,7 @@ EVIDENCE = -10.0
 PLAUSIBLE: dict[str, dict[str, float]] = {
     "compliance": {"rad/(N·m)": 1e-3, "m/N": 1e-4, "rad/N": 1e-4, "m/(N·m)": 1e-3,  # 0.1 rad or m / 100 N·m, 1 kN
                    "rad": 0.1, "m": 0.1},  # unknown masses: g₀·moment/k, the same 0.1 rad or m of deflection
+    "lateral": {"rad/(N·m)": 1e-3, "rad": 0.1},  # the compliance's bound: 0.1 rad of bending under 100 N·m
     "coupling": {"(relative)": 1.5, "rad/m": 15.0, "m/rad": 1.5},
     "encoder_scale": {"(relative)": 0.02},
     "cyclic": {"rad": 0.02, "m": 0.005},
@@ -243,14 +244,6 @@ def target_changes(objective: FitObjective, x: np.ndarray) -> list[TargetChange]
     return out
 
 
-def _correlation(a: np.ndarray | None, b: np.ndarray | None) -> float:
-    if a is None or b is None:
-        return 0.0
-    a, b = a[:, 0] - a[:, 0].mean(), b[:, 0] - b[:, 0].mean()
-    denominator = np.sqrt((a @ a) * (b @ b))
-    return float(a @ b / denominator) if denominator > 0 else 0.0
-
-
 class Judge:
     """Ranks a step's fitted candidates, gives their verdicts and picks the one to adopt.
 
@@ -326,7 +319,7 @@ class Judge:
                 if chosen is not None and effect == chosen[1]:  # taken for a better-ranked one that corrects alike
                     verdict = "adopted"
                 elif chosen is not None and effect in self._ambiguous.get(chosen[1], ("", [], ""))[1]:
-                    verdict = self._alike(effect, chosen[1])
+                    verdict = self._alike(effect, chosen[1], self._alikeness((effect, obj, sol), chosen[1:]))
                 elif chosen is None:
                     verdict, taken = self.judged(effect, value, delta, tried, compared, obj, sol, std)
                     if taken is not None:
@@ -371,12 +364,11 @@ class Judge:
         if reason:
             return reason, None
         compared.append(delta)
-        basis = effect_basis(effect, self.inputs, self.chain)
-        members = [(effect, objective, solution)]
+        members, correlations = [(effect, objective, solution)], {}
         for other_delta, other, obj, sol in tried:
             if other is effect or other_delta - delta > 6.0 or (effect.type, other.type) == ("pause_step", "drift"):
                 continue  # a drift the data cannot tell from a step at a pause: the step is named
-            correlation = _correlation(basis, effect_basis(other, self.inputs, self.chain))
+            correlation = correlations[other] = self._alikeness((effect, objective, solution), (other, obj, sol))
             if abs(correlation) <= AMBIGUOUS:
                 continue
             if (effect.type, other.type) == ("drift", "pause_step"):
@@ -390,7 +382,7 @@ class Judge:
         if taken == effect:
             return "adopted", taken
         if taken is not None:
-            return self._alike(effect, taken), taken
+            return self._alike(effect, taken, correlations.get(taken, 0.0)), taken
         others = ", ".join(other.label for other, _, _ in members[1:])
         return self._verdicts[effect] + (f"; the held-out test refuses {others} too (the same correction)"
                                          if others else ""), None
@@ -430,11 +422,15 @@ class Judge:
             self._ambiguous[taken] = ambiguity_words(taken, others, why), others, why
         return taken, why
 
-    def _alike(self, effect: Effect, taken: Effect) -> str:
+    def _alikeness(self, first: Member, second: Member) -> float:
+        """How alike two candidates correct the poses (:func:`pincal.diagnosis.ambiguity.alike_correlation`)."""
+        fits = tuple(None if m[1] is None or m[2] is None else (m[1], m[2]) for m in (first, second))
+        return alike_correlation((first[0], second[0]), (effect_basis(first[0], self.inputs, self.chain),
+                                                         effect_basis(second[0], self.inputs, self.chain)), fits)
+
+    def _alike(self, effect: Effect, taken: Effect, correlation: float) -> str:
         """The verdict of a candidate that corrects the same poses as the one ``taken`` instead (with its own
-        held-out verdict when it fails the test)."""
-        correlation = _correlation(effect_basis(effect, self.inputs, self.chain),
-                                   effect_basis(taken, self.inputs, self.chain))
+        held-out verdict when it fails the test; ``correlation``: how alike, :func:`alike_correlation`)."""
         own = self._verdicts.get(effect, "adopted")
         return (f"{taken.label} corrects the same poses the same way (bases correlated {correlation:+.2f}): these "
                 f"poses cannot tell them apart, and {taken.label} is preferred ({self._ambiguous[taken][2]})"

@@ -20,6 +20,7 @@ import pinocchio as pin
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.effects import sensed_points
+from pincal.model.lateral import bent_tool_poses
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 
@@ -98,18 +99,30 @@ class RowCorrections:
         sensor_scale / drift: sensor effects: the model point is (1 + s)(Omega x + tau + drift_k),
             ``drift`` the offset of each row [m], (K, 3).
         conditions: each row's thermal expansion and pause step (eq T1–T2 of :mod:`pincal.model.thermal`).
+        bends: the joints' lateral deflections (K, 2N) [rad] (eq L1 of :mod:`pincal.model.lateral`), or None.
     """
 
     q: np.ndarray | None = None
     sensor_scale: float = 0.0
     drift: np.ndarray | None = None
     conditions: RowConditions | None = None
+    bends: np.ndarray | None = None
 
     def select(self, rows: np.ndarray) -> RowCorrections:
         """The corrections of the rows ``rows`` (indices) alone."""
         return RowCorrections(None if self.q is None else np.asarray(self.q)[rows], self.sensor_scale,
                               None if self.drift is None else np.asarray(self.drift)[rows],
-                              None if self.conditions is None else self.conditions.select(rows))
+                              None if self.conditions is None else self.conditions.select(rows),
+                              None if self.bends is None else np.asarray(self.bends)[rows])
+
+    def tool_poses(self, chain: KinematicChain, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``chain.tool_poses`` (rotations, positions) at these corrections' joint values (``q`` without), its joints
+        deflected by ``bends`` if any."""
+        q = q if self.q is None else np.asarray(self.q, dtype=float)
+        if self.bends is None:
+            return chain.tool_poses(q)
+        poses = bent_tool_poses(chain, q, self.bends)
+        return poses.tool_rotations, poses.tool_positions
 
 
 def pose_errors(
@@ -136,9 +149,9 @@ def pose_errors(
             them (errors of one chain through several registrations share them); ``corrections.q``
             is then not used.
     """
-    q, drift, conditions = corrections.q, corrections.drift, corrections.conditions
+    drift, conditions = corrections.drift, corrections.conditions
     if tool_poses is None:
-        tool_poses = chain.tool_poses(data.q if q is None else q)
+        tool_poses = corrections.tool_poses(chain, data.q)
     tool_rotations, tool_positions = tool_poses
     points = np.zeros((1, 3)) if points is None else np.atleast_2d(np.asarray(points, dtype=float))
     world = points_in_base(tool_positions, tool_rotations, points)

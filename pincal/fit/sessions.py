@@ -352,12 +352,12 @@ def register_session(
         sensed = sensed - np.asarray(offsets, dtype=float)[:, None, :]
     expanded = None if conditions is None or conditions.expansion is None else RowConditions(conditions.expansion)
     points = np.atleast_2d(np.asarray(points, dtype=float))
-    poses = chain.poses(q)
-    world = points_in_base(poses.tool_positions, poses.tool_rotations, points)
+    tool_rotations, tool_positions = corrections.tool_poses(chain, q)  # the joints bent by a lateral compliance
+    world = points_in_base(tool_positions, tool_rotations, points)
     world = world if expanded is None else expanded.world(world)
-    start = start_registration(world, sensed, poses.tool_rotations @ np.asarray(rotation, dtype=float),
+    start = start_registration(world, sensed, tool_rotations @ np.asarray(rotation, dtype=float),
                                replace(data, points=sensed))
-    cache = KinematicsCache(NoParameters(chain), np.array([], dtype=int), np.zeros(0), q)
+    cache = KinematicsCache(NoParameters(chain), np.array([], dtype=int), np.zeros(0), q, bends=corrections.bends)
     objective = SensorResidual(
         cache, sensed, data.rotations, TargetEstimate(start, points, np.asarray(rotation, dtype=float)),
         RowWeights(1.0 / sigma_pos_m, 1.0 / sigma_rot_rad), FittedBlocks(points=False, rotation=False),

@@ -9,6 +9,8 @@ compliance is in rad/(N·m), m/N, rad/N (a revolute joint under a prismatic join
 A compliance of unknown masses (``moments``) follows g₀ × mass moments instead of a load: its values are
 g₀ · (mass moment) / k, a shift [rad, or m for a prismatic joint] (:mod:`pincal.model.mass_moments`; a
 combination led by a link's mass, rather than its moment, is per metre of its lever arm: rad/m).
+A lateral compliance turns a revolute joint about its two lateral axes per N·m of gravity moment about them:
+rad/(N·m) (rad per mass moment without masses, as a compliance's; :mod:`pincal.model.lateral`).
 """
 
 from __future__ import annotations
@@ -50,6 +52,8 @@ def value_unit(kind: str, prismatic: bool = False, driver_prismatic: bool | None
     driver = prismatic if driver_prismatic is None else driver_prismatic
     if kind == "compliance":
         return f"{shift}/N" if driver else f"{shift}/(N·m)"
+    if kind == "lateral":  # a revolute joint's deflection about its lateral axes per N·m of moment about them
+        return "rad/(N·m)"
     if kind in ("cyclic", "backlash"):
         return shift
     if kind == "coupling" and driver != prismatic:

@@ -23,6 +23,10 @@ Each joint effect shifts the reading of one joint: actual = q_j + shift, with
   over the rows in time order — a joint that moved less than
   :data:`APPROACH_MIN_STEP` keeps the flank it was on; 0 for the first row.
 
+A ``lateral`` compliance (values c_u, c_v [rad/(N·m)], or per mass moment without masses) does not shift a
+reading: it turns the chain at its joint about the two axes orthogonal to the joint's, by its compliances
+times the gravity moments about them (eq L1–L3 of :mod:`pincal.model.lateral`).
+
 Two effects act on the sensor side: ``drift`` moves the registration's
 translation linearly with time (u [m/s], 3 values; thermal drift) and
 ``sensor_scale`` scales the sensor's lengths (relative); ``thermal`` (α [1/K]) and
@@ -49,19 +53,25 @@ from pincal.errors import PincalError, did_you_mean
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
 from pincal.model.drift import held_times, time_spans
-from pincal.model.mass_moments import gravity_loads, moment_names
+from pincal.model.mass_moments import bending_moments, gravity_loads, moment_names, payload_model
 from pincal.model.sensor import Registration
 
 __all__ = [
-    "JOINT_EFFECTS", "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
+    "JOINT_EFFECTS", "BEND_EFFECTS", "LATERAL_COMPONENTS",
+    "SENSOR_EFFECTS", "EFFECT_TYPES", "BACKLASH_SOURCES", "HARMONICS", "APPROACH_MIN_STEP",
     "FLANK_GAP_S",
     "Effect", "EffectInputs", "RowContext", "gravity_torques", "effect_inputs", "with_loads", "approach_flank",
     "sensed_points", "joint_basis", "joint_shifts", "parse_effect", "effect_to_dict", "effect_from_dict",
 ]
 
 JOINT_EFFECTS = ("compliance", "encoder_scale", "cyclic", "backlash", "coupling")
+#: Effects that turn the chain at a joint about axes other than its own (:mod:`pincal.model.lateral`).
+BEND_EFFECTS = ("lateral",)
 SENSOR_EFFECTS = ("drift", "sensor_scale", "pause_step")
-EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS + ("thermal",)
+EFFECT_TYPES = JOINT_EFFECTS + SENSOR_EFFECTS + ("thermal",) + BEND_EFFECTS
+#: The axes a lateral compliance bends its joint about (:func:`pincal.model.mass_moments.lateral_axes`), the
+#: prefixes of its ``moments`` (``u/PARAMETER:LINK``).
+LATERAL_COMPONENTS = ("u", "v")
 BACKLASH_SOURCES = ("gravity", "approach")
 HARMONICS = (1, 2)
 
@@ -100,7 +110,7 @@ class Effect:
     def __post_init__(self) -> None:
         if self.type not in EFFECT_TYPES:
             raise PincalError(f"unknown effect '{self.type}'; effects are: {', '.join(EFFECT_TYPES)}")
-        if self.type in JOINT_EFFECTS and not self.joint:
+        if self.type in JOINT_EFFECTS + BEND_EFFECTS and not self.joint:
             raise PincalError(f"effect '{self.type}' needs a joint")
         if self.type == "cyclic" and self.harmonic not in HARMONICS:
             raise PincalError(f"cyclic effect harmonic must be one of {HARMONICS}, got {self.harmonic}")
@@ -111,15 +121,19 @@ class Effect:
             raise PincalError(f"effect '{self.type}': a coupling names, and a compliance may name, a driving joint "
                               f"other than its own; no other effect does (got joint '{self.joint}', "
                               f"driver '{self.driver}')")
-        if self.moments and (self.type != "compliance" or self.driver):
+        if self.moments and (self.type not in ("compliance", "lateral") or self.driver):
             raise PincalError(f"effect '{self.type}': only a joint's compliance under its own load follows mass "
                               "moments")
+        if self.type == "lateral" and self.moments and not all(
+                name.split("/", 1)[0] in LATERAL_COMPONENTS and "/" in name for name in self.moments):
+            raise PincalError(f"effect 'lateral:{self.joint}': its mass moments are u/PARAMETER:LINK or "
+                              f"v/PARAMETER:LINK (about which lateral axis), got {', '.join(self.moments)}")
 
     @property
     def n_values(self) -> int:
         if self.moments:
             return len(self.moments)
-        return {"cyclic": 2, "drift": 3, "pause_step": 3}.get(self.type, 1)
+        return {"cyclic": 2, "drift": 3, "pause_step": 3, "lateral": 2}.get(self.type, 1)
 
     @property
     def label(self) -> str:
@@ -161,6 +175,8 @@ class EffectInputs:
         loads: each joint's gravity loads per mass moment over g₀ (K, N, 3, 4N)
             (:func:`pincal.model.mass_moments.gravity_loads`), for compliances of unknown masses; or None.
         load_names: the mass moments of the loads' columns (:func:`pincal.model.mass_moments.moment_names`).
+        bending: the gravity moment each joint carries about its lateral axes u, v (K, N, 2) [N·m] (eq M3 of
+            the URDF's inertias and the payload, :func:`pincal.model.mass_moments.bending_moments`), or None.
     """
 
     q: np.ndarray
@@ -175,6 +191,7 @@ class EffectInputs:
     pauses: np.ndarray | None = None
     loads: np.ndarray | None = None
     load_names: tuple[str, ...] = ()
+    bending: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -201,12 +218,7 @@ def gravity_torques(
     """Gravity torques (K, N) of the chain's URDF inertias, plus a point mass
     ``payload_kg`` at ``payload_point`` (in the tool frame) [N·m or N]. A joint that others follow
     (URDF ``<mimic>``, eq M1) carries their loads too, by virtual work: tau_driver + multiplier · tau_follower."""
-    model = chain.model.copy()
-    if payload_kg > 0:
-        point = np.zeros(3) if payload_point is None else np.asarray(payload_point, dtype=float)
-        tip = model.frames[chain.tip_frame_id]
-        at_tool = tip.placement * pin.SE3(chain.tool) * pin.SE3(np.eye(3), point)
-        model.appendBodyToJoint(tip.parentJoint, pin.Inertia(payload_kg, np.zeros(3), np.zeros((3, 3))), at_tool)
+    model = payload_model(chain, payload_kg, payload_point)
     data = model.createData()
     configurations = chain.configurations(q)
     torques = np.stack([pin.computeGeneralizedGravity(model, data, c) for c in configurations])
@@ -250,6 +262,7 @@ def effect_inputs(
     return EffectInputs(
         q=np.asarray(data.q, dtype=float),
         gravity=gravity_torques(chain, data.q, payload_kg, payload_point),
+        bending=bending_moments(chain, data.q, payload_kg, payload_point),
         time=drift_time,
         order=order,
         context_q=np.asarray(context_q, dtype=float) if near else None,
@@ -352,7 +365,8 @@ def joint_shifts(
 
 def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
     """``TYPE:JOINT:VALUE`` (``cyclic:JOINT:H:SIN:COS``, ``backlash:JOINT:VALUE[:SOURCE]``,
-    ``coupling:JOINT:DRIVER:VALUE``, ``compliance:JOINT[:DRIVER]:VALUE``, ``drift:VX:VY:VZ`` [m/s],
+    ``coupling:JOINT:DRIVER:VALUE``, ``compliance:JOINT[:DRIVER]:VALUE``, ``lateral:JOINT:CU:CV`` [rad/(N·m)],
+    ``drift:VX:VY:VZ`` [m/s],
     ``sensor_scale:VALUE``, ``thermal:ALPHA`` [1/K], ``pause_step:DX:DY:DZ`` [m], the first pause's) → effect
     and values."""
     parts = text.split(":")
@@ -368,6 +382,8 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
             effect, values = Effect(kind), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
         elif kind in ("sensor_scale", "thermal"):
             effect, values = Effect(kind), np.array([float(parts[1])])
+        elif kind == "lateral":
+            effect, values = Effect(kind, parts[1]), np.array([float(parts[2]), float(parts[3])])
         elif kind == "pause_step":
             effect, values = Effect(kind, pause=1), np.array([float(v) for v in parts[1:4]], dtype=float).reshape(3)
         elif kind == "coupling" or (kind == "compliance" and len(parts) == 4):
@@ -381,6 +397,7 @@ def parse_effect(text: str) -> tuple[Effect, np.ndarray]:
         raise PincalError(
             f"bad effect '{text}': use TYPE:JOINT:VALUE, cyclic:JOINT:H:SIN:COS, "
             "backlash:JOINT:VALUE[:gravity|approach], coupling:JOINT:DRIVER:VALUE, compliance:JOINT:DRIVER:VALUE, "
+            "lateral:JOINT:CU:CV, "
             "drift:VX:VY:VZ, sensor_scale:VALUE, thermal:ALPHA or pause_step:DX:DY:DZ"
         ) from None
 
@@ -398,7 +415,7 @@ def effect_to_dict(effect: Effect, values: np.ndarray, std: np.ndarray | None = 
         if std is not None:
             out.update(sin_std=float(std[0]), cos_std=float(std[1]))
         return out
-    vector = effect.type in ("drift", "pause_step") or bool(effect.moments)
+    vector = effect.type in ("drift", "pause_step", "lateral") or bool(effect.moments)
     out["value"] = values.tolist() if vector else float(values[0])
     if std is not None:
         out["std"] = std.tolist() if vector else float(std[0])

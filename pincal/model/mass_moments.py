@@ -32,7 +32,8 @@ import pinocchio as pin
 
 from pincal.model.chain import KinematicChain
 
-__all__ = ["MOMENT_PARAMETERS", "LOAD_COMPONENTS", "moment_names", "chain_mass_kg", "gravity_loads"]
+__all__ = ["MOMENT_PARAMETERS", "LOAD_COMPONENTS", "moment_names", "chain_mass_kg", "lateral_axes", "payload_model",
+           "gravity_loads", "bending_moments"]
 
 #: The static inertial parameters of a body, in Pinocchio's order: m [kg], m·c_x, m·c_y, m·c_z [kg·m].
 MOMENT_PARAMETERS = ("m", "mx", "my", "mz")
@@ -58,7 +59,7 @@ def chain_mass_kg(chain: KinematicChain) -> float:
     return float(sum(chain.model.inertias[jid].mass for jid in range(1, chain.model.njoints)))
 
 
-def _lateral_axes(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lateral_axes(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """u, v: unit vectors with (u, v, axis) right-handed; u the joint frame's axis least aligned with ``axis``
     made orthogonal to it (x for a z axis: u = x, v = y)."""
     axis = axis / np.linalg.norm(axis)
@@ -66,6 +67,39 @@ def _lateral_axes(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     u = seed - axis * (seed @ axis)
     u /= np.linalg.norm(u)
     return u, np.cross(axis, u)
+
+
+def payload_model(chain: KinematicChain, payload_kg: float = 0.0, payload_point: np.ndarray | None = None) -> pin.Model:
+    """The chain's Pinocchio model with a point mass ``payload_kg`` [kg] at ``payload_point`` (in the tool frame
+    [m], default its origin) on the tip's joint; the model itself without a payload."""
+    if payload_kg <= 0:
+        return chain.model
+    model = chain.model.copy()
+    point = np.zeros(3) if payload_point is None else np.asarray(payload_point, dtype=float)
+    tip = model.frames[chain.tip_frame_id]
+    at_tool = tip.placement * pin.SE3(chain.tool) * pin.SE3(np.eye(3), point)
+    model.appendBodyToJoint(tip.parentJoint, pin.Inertia(payload_kg, np.zeros(3), np.zeros((3, 3))), at_tool)
+    return model
+
+
+def bending_moments(chain: KinematicChain, q: npt.ArrayLike, payload_kg: float = 0.0,
+                    payload_point: np.ndarray | None = None) -> np.ndarray:
+    """Eq M3 of the URDF's inertias (plus a payload, :func:`payload_model`): the gravity moment each chain joint
+    carries about its u and v axes (:func:`lateral_axes`), (K, N, 2) [N·m]; zero for a prismatic joint.
+    Pinocchio's ``rnea`` at rest leaves in ``data.f`` the wrench each joint transmits to the links it carries, in
+    its frame: the sum of eq M1 with the URDF's π."""
+    model = payload_model(chain, payload_kg, payload_point)
+    data = model.createData()
+    configurations = chain.configurations(q)
+    axes = np.array([lateral_axes(np.asarray(j.axis, dtype=float)) if j.kind != "prismatic" else np.zeros((2, 3))
+                     for j in chain.joints])  # (N, 2, 3)
+    zero = np.zeros(model.nv)
+    out = np.zeros((len(configurations), chain.n_joints, 2))
+    for k, configuration in enumerate(configurations):
+        pin.rnea(model, data, configuration, zero, zero)
+        moments = np.array([data.f[jid].angular for jid in chain.joint_ids])  # (N, 3)
+        out[k] = np.einsum("nij,nj->ni", axes, moments)
+    return out
 
 
 def gravity_loads(chain: KinematicChain, q: npt.ArrayLike) -> np.ndarray:
@@ -85,7 +119,7 @@ def gravity_loads(chain: KinematicChain, q: npt.ArrayLike) -> np.ndarray:
     rows = np.zeros((len(configurations), n, 3, 4 * bodies))
     projections = []
     for joint in chain.joints:
-        u, v = _lateral_axes(np.asarray(joint.axis, dtype=float))
+        u, v = lateral_axes(np.asarray(joint.axis, dtype=float))
         a = np.asarray(joint.axis, dtype=float)
         if joint.kind == "prismatic":
             projections.append(np.vstack([np.r_[a, 0, 0, 0], np.zeros((2, 6))]))

@@ -47,7 +47,9 @@ class ParameterSlot:
         after_motion: True for the joint's child frame (after its motion),
             False for its placement frame (before the motion).
         kind: ``revolute`` (turns about ``axis`` through a point given at
-            evaluation time) or ``prismatic`` (translates along ``axis``).
+            evaluation time), ``prismatic`` (translates along ``axis``) or ``bend`` (turns about ``axis``
+            through the joint's origin right after its motion, at an angle :meth:`SensitivityModel.evaluate`
+            is given per row: a joint's lateral deflection, :mod:`pincal.model.lateral`).
         axis: unit direction in that frame, shape (3,).
     """
 
@@ -80,6 +82,7 @@ class Sensitivity:
         origin: the tool frame origins the linear part refers to [m], (K, 3).
         joint_angular / joint_linear: the same for the chain's own joints
             (Pinocchio's joint Jacobian columns), (K, N, 3).
+        bend_angular / bend_linear: the same for the ``bend`` slots, in their order (K, B, 3), or None.
     """
 
     angular: np.ndarray
@@ -87,6 +90,8 @@ class Sensitivity:
     origin: np.ndarray
     joint_angular: np.ndarray | None = None
     joint_linear: np.ndarray | None = None
+    bend_angular: np.ndarray | None = None
+    bend_linear: np.ndarray | None = None
 
     def point_velocity(self, points: npt.ArrayLike) -> np.ndarray:
         """d(point)/d(parameter) for points rigidly attached to the tool, (K, 3) → (K, n_par, 3)."""
@@ -104,11 +109,16 @@ def _sensitivity_joint(slot: ParameterSlot) -> pin.JointModel:
     axis = np.asarray(slot.axis, dtype=float)
     aligned = np.flatnonzero(np.abs(axis) > 1e-15)
     if len(aligned) == 1 and axis[aligned[0]] == 1.0:
-        table = _ALIGNED_REVOLUTE if slot.kind == "revolute" else _ALIGNED_PRISMATIC
+        table = _ALIGNED_PRISMATIC if slot.kind == "prismatic" else _ALIGNED_REVOLUTE
         return table[int(aligned[0])]()
-    if slot.kind == "revolute":
+    if slot.kind in ("revolute", "bend"):
         return pin.JointModelRevoluteUnaligned(axis)
     return pin.JointModelPrismaticUnaligned(axis)
+
+
+def _group(slot: ParameterSlot) -> str:
+    """Where a slot sits at its joint: ``placement`` (before the motion), ``bend`` (right after it), ``child``."""
+    return "bend" if slot.kind == "bend" else "child" if slot.after_motion else "placement"
 
 
 class SensitivityModel:
@@ -116,7 +126,9 @@ class SensitivityModel:
 
     Args:
         chain: the chain (its joint types and tool are used).
-        slots: where each parameter acts, in parameter order.
+        slots: where each parameter acts, in parameter order; ``bend`` slots (after the others) sit right
+            after their joint's motion, before its other child-frame slots: a parameter of the next link's
+            placement acts beyond the joint's deflection.
     """
 
     def __init__(self, chain: KinematicChain, slots: Sequence[ParameterSlot]) -> None:
@@ -126,16 +138,16 @@ class SensitivityModel:
         parent = 0
         self._real_ids: list[int] = []
         self._slot_ids: list[int] = [0] * len(self.slots)
-        # joint order: [placement-frame slots of joint i], joint i, [child-frame slots of joint i], ...
+        # joint order: [placement-frame slots of joint i], joint i, [its bends], [child-frame slots of joint i], ...
         self._order: list[tuple[str, int]] = []
         for i, jid in enumerate(chain.joint_ids):
-            for after in (False, True):
-                if after:
+            for group in ("placement", "bend", "child"):
+                if group == "bend":
                     parent = model.addJoint(parent, chain.model.joints[jid], pin.SE3.Identity(), chain.joint_names[i])
                     self._real_ids.append(parent)
                     self._order.append(("joint", i))
                 for s, slot in enumerate(self.slots):
-                    if slot.joint == i and slot.after_motion == after:
+                    if slot.joint == i and _group(slot) == group:
                         parent = model.addJoint(
                             parent, _sensitivity_joint(slot), pin.SE3.Identity(), f"pincal_slot_{s}")
                         self._slot_ids[s] = parent
@@ -151,6 +163,10 @@ class SensitivityModel:
             [np.arange(model.joints[j].idx_q, model.joints[j].idx_q + model.joints[j].nq) for j in self._real_ids]
         )
         self._q_template = pin.neutral(model)
+        self._slot_q = np.array([model.joints[j].idx_q for j in self._slot_ids], dtype=int)
+        bent = np.array([slot.kind == "bend" for slot in self.slots], dtype=bool)
+        self._bent = np.flatnonzero(bent)
+        self._straight: np.ndarray | slice = np.flatnonzero(~bent) if bent.any() else slice(None)
         # per element of _order: its model joint, its chain joint, and its slot if that is revolute
         # (turning about a point, which set_state places) else None
         self._elements = [
@@ -204,12 +220,16 @@ class SensitivityModel:
         tool = placements[-1] @ tip_T_tool if pending is None else pending @ placements[-1] @ tip_T_tool
         self.model.frames[self._tool_frame].placement = pin.SE3(tool)
 
-    def evaluate(self, q: npt.ArrayLike) -> tuple[ToolPoses, Sensitivity]:
-        """Tool poses and parameter derivatives at K joint readings (K, N)."""
+    def evaluate(self, q: npt.ArrayLike, bends: npt.ArrayLike | None = None) -> tuple[ToolPoses, Sensitivity]:
+        """Tool poses and parameter derivatives at K joint readings (K, N), the ``bend`` slots turned by
+        ``bends`` (K, B) [rad] (None: zero); the other slots at zero."""
         configurations = self.chain.configurations(q)
         k = configurations.shape[0]
         augmented = np.tile(self._q_template, (k, 1))
         augmented[:, self._real_q] = configurations
+        bent = self._bent
+        if bends is not None and bent.size:
+            augmented[:, self._slot_q[bent]] = np.asarray(bends, dtype=float).reshape(k, bent.size)
         model, data, fid = self.model, self.data, self._tool_frame
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         joint_jacobians, frame_jacobian = pin.computeJointJacobians, pin.getFrameJacobian
@@ -224,11 +244,14 @@ class SensitivityModel:
         joints = self.chain.followed_columns(jacobians[:, :, self._real_columns].transpose(0, 2, 1))  # eq M1
         jacobians = jacobians[:, :, self._slot_columns].transpose(0, 2, 1)
         positions = poses[:, :3, 3]
+        straight = self._straight
         sensitivity = Sensitivity(
-            angular=jacobians[:, :, 3:],
-            linear=jacobians[:, :, :3],
+            angular=jacobians[:, straight, 3:],
+            linear=jacobians[:, straight, :3],
             origin=positions,
             joint_angular=joints[:, :, 3:],
             joint_linear=joints[:, :, :3],
+            bend_angular=jacobians[:, bent, 3:] if bent.size else None,
+            bend_linear=jacobians[:, bent, :3] if bent.size else None,
         )
         return ToolPoses(positions, poses[:, :3, :3]), sensitivity

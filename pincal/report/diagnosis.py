@@ -57,6 +57,17 @@ def moment_compliance_words(joint: str, unit: str) -> str:
             "the opposite sign to its combinations")
 
 
+def lateral_words(joint: str, values: list[float] | None, unit: str) -> str:
+    """A lateral compliance in words, with its sign convention (eq L1–L3 of :mod:`pincal.model.lateral`); its
+    values ``values`` (c_u, c_v; None: of unknown masses, per combination)."""
+    per = ("c_u x its gravity moment about u, then about v by c_v x the one about v" if values else
+           "the sum of each u/ value x its moment per unit of g x mass moment, then about v likewise (eq M3)")
+    text = (f"{joint} turns, right after its motion, about its lateral axis u by {per} (the moments that hold the "
+            f"carried links against gravity, as Pinocchio computes them; u, v orthogonal to its axis, in its frame), "
+            f"so c < 0 is a joint that bends under its load, its lateral stiffness 1 / |c| [{unit}]")
+    return text + (f": here c_u = {values[0]:.3g}, c_v = {values[1]:.3g}" if values else "")
+
+
 def diagnosis_report(
     head: ChainHead,
     diagnosis: Diagnosis,
@@ -113,6 +124,12 @@ def diagnosis_report(
         elif effect.driver:  # a compliance under another joint's torque: what links them
             kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
             entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
+        elif effect.type == "lateral":  # its sign convention, and without masses what each value stands for
+            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
+            if effect.moments:
+                entry["combinations"] = combination_words(effect, diagnosis.inputs, False)
+            entry["advice"] = lateral_words(str(effect.joint), None if effect.moments else [float(v) for v in values],
+                                            effect_unit(effect, kinds))
         elif effect.moments:  # a compliance of unknown masses: what each value stands for, its sign convention
             kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
             entry["combinations"] = combination_words(effect, diagnosis.inputs, kinds[str(effect.joint)] == "prismatic")

@@ -12,7 +12,9 @@ prismatic joint) a controller takes
     actual_j = q_j + Σ shift_j(q)  for each joint effect on j (shift formulas of the module
                                    docstring of :mod:`pincal.model.effects`, in words per entry)
 
-and gives ``actual`` to the corrected URDF's kinematics. ``drift``, ``sensor_scale`` and ``pause_step``
+and gives ``actual`` to the corrected URDF's kinematics; a ``lateral`` compliance (``side: bend``, eq L1–L3 of
+:mod:`pincal.model.lateral`) turns the chain at its joint about the joint's two lateral axes. ``drift``,
+``sensor_scale`` and ``pause_step``
 describe the calibration's sensor, not the robot: listed with ``side: measurement``, for no controller.
 ``thermal`` (eq T1 of :mod:`pincal.model.thermal`) scales every length of the URDF with the arm's
 temperature: ``side: geometry``, for a controller that reads that temperature.
@@ -34,7 +36,7 @@ from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.measurements.couplings import ReadingCoupling, couplings_from_report
 from pincal.model.effect_units import effect_unit
-from pincal.model.effects import APPROACH_MIN_STEP, SENSOR_EFFECTS, Effect, effect_from_dict
+from pincal.model.effects import APPROACH_MIN_STEP, BEND_EFFECTS, SENSOR_EFFECTS, Effect, effect_from_dict
 from pincal.outputs import write_text
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "EffectsFile", "effects_path", "carried", "written_line", "effects_document",
@@ -67,8 +69,27 @@ def written_line(path: str | Path, report: Mapping[str, Any]) -> str:
 
 
 def _side(effect: Effect) -> str:
-    """``joint`` (a shift of a joint value), ``geometry`` (the URDF's lengths) or ``measurement`` (the sensor's)."""
+    """``joint`` (a shift of a joint value), ``bend`` (the chain turned at a joint about its lateral axes),
+    ``geometry`` (the URDF's lengths) or ``measurement`` (the sensor's)."""
+    if effect.type in BEND_EFFECTS:
+        return "bend"
     return "measurement" if effect.type in SENSOR_EFFECTS else "geometry" if effect.type == "thermal" else "joint"
+
+
+def _lateral_equation(effect: Effect) -> str:
+    """A lateral compliance in words (eq L1–L3 of :mod:`pincal.model.lateral`), for a controller author."""
+    joint = effect.joint
+    axes = (f"right after {joint}'s motion, turn the chain (the next link's origin and all beyond) about {joint}'s "
+            "lateral axis u by angle_u, then about v by angle_v; u = the joint frame's coordinate axis least aligned "
+            "with the joint axis a, made orthogonal to a (x for a z axis), v = a x u; ")
+    if effect.moments:
+        return axes + ("angle_u = sum over the moments u/PARAMETER:LINK of value x L_u[b](q), angle_v likewise over "
+                       f"v/...; L_u[b](q) is {joint}'s gravity moment about u per unit of mass moment b over |g| "
+                       "(eq M1, M3 of pincal.model.mass_moments); each value is g x the combination of mass moments / "
+                       f"{joint}'s lateral stiffness (mass moments unknown)")
+    return axes + (f"angle_u = value[0] x M_u(q), angle_v = value[1] x M_v(q), M_u, M_v the gravity moments {joint} "
+                   "carries about u and v [N·m] (Pinocchio's rnea at rest on the URDF's inertias, plus payload_kg at "
+                   "payload_point_m: the moment of the wrench it transmits, in its frame)")
 
 
 def _equation(effect: Effect, entry: Mapping[str, Any]) -> str:
@@ -76,6 +97,8 @@ def _equation(effect: Effect, entry: Mapping[str, Any]) -> str:
     values after the couplings, tau(q) the gravity torques there [N·m, or N for a prismatic joint]."""
     joint, driver = effect.joint, effect.driver or effect.joint
     head = f"actual {joint} = q[{joint}] + "
+    if effect.type in BEND_EFFECTS:
+        return _lateral_equation(effect)
     if effect.moments:
         return (head + f"sum over b of value[b] x L[b](q), b each mass moment of moments (PARAMETER:LINK, m its mass, "
                 f"mx my mz its first moment in its joint frame) and L[b](q) {joint}'s gravity load per unit of it "
@@ -157,6 +180,8 @@ def effects_document(report: Mapping[str, Any], urdf: str | Path, report_path: s
                     if any(c.get("follows") for c in couplings) else []),
                   "actual = q + the shift of each entry of effects with side joint, evaluated at q",
                   "the joint values of the URDF named in urdf are actual; side measurement is the sensor's",
+                  *(["side bend (lateral): the chain turned at the joint about its lateral axes, as its equation "
+                     "says, the angles evaluated at q"] if any(e["side"] == "bend" for e in effects) else []),
                   *(["side geometry (thermal): the URDF's lengths at the arm's temperature, as its equation says"]
                     if any(e["side"] == "geometry" for e in effects) else [])],
         "tool_parent": tool.get("parent_link"),

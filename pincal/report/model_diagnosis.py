@@ -15,7 +15,7 @@ __all__ = [
 
 class _EffectKeys(TypedDict):
     type: Literal["compliance", "encoder_scale", "cyclic", "backlash", "coupling", "drift", "sensor_scale",
-                  "pause_step", "thermal"]
+                  "pause_step", "thermal", "lateral"]
     joint: str | None
 
 

@@ -142,9 +142,13 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
     if entry.get("moments"):  # a compliance of unknown masses: one value per mass moment, in mrad (µm prismatic)
         values, stds = value if isinstance(value, list) else [value], std if isinstance(std, list) else [None]
         # a combination led by a mass (m:...) has a lever arm for basis: mrad/m (combination_words' units)
-        units = ["µm" if length else "mrad/m" if str(name).startswith("m:") else "mrad" for name in entry["moments"]]
+        units = ["µm" if length else "mrad/m" if str(name).rpartition("/")[2].startswith("m:") else "mrad"
+                 for name in entry["moments"]]  # a lateral compliance's names start u/ or v/
         scale = 1e6 if length else 1000.0
         return ", ".join(pm(v, s, scale, u) for v, s, u in zip(values, stds + [None] * len(values), units)), ""
+    if kind == "lateral":  # [c_u, c_v] rad/(N·m): mrad/(N·m) about each lateral axis
+        values, stds = value if isinstance(value, list) else [value], std if isinstance(std, list) else [None, None]
+        return ", ".join(f"{axis} {pm(v, s, 1000.0, 'mrad/(N·m)')}" for axis, v, s in zip("uv", values, stds)), ""
     if kind in ("drift", "pause_step"):  # [vx, vy, vz] m/s; a step's [dx, dy, dz] m
         values = value if isinstance(value, list) else [value]
         stds = std if isinstance(std, list) else [None] * len(values)
@@ -166,7 +170,8 @@ def _effect_value(entry: dict, kinds: dict[Any, str]) -> tuple[str, str]:
 def effect_label(entry: dict) -> str:
     """``backlash of arm_6_joint (approach flank)``, ``cyclic error of arm_3_joint (harmonic 2)``."""
     kind, joint = entry.get("type", "?"), entry.get("joint")
-    name = {"cyclic": "cyclic error", "encoder_scale": "encoder scale", "sensor_scale": "sensor scale"}.get(kind, kind)
+    name = {"cyclic": "cyclic error", "encoder_scale": "encoder scale", "sensor_scale": "sensor scale",
+            "lateral": "lateral (bending) compliance"}.get(kind, kind)
     text = f"{name} of {joint}" if joint else f"{name} of the sensor" if kind == "sensor_scale" else str(name)
     if kind == "cyclic":
         text += f" (harmonic {entry.get('harmonic')})"

@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pincal.errors import CalibrationError
+from pincal.model.lateral import bend_slots
 from pincal.model.sensitivity import ParameterSlot, Sensitivity, SensitivityModel, ToolPoses
 
 __all__ = ["pair_indices", "ParameterSet", "KinematicsCache", "Objective", "BlockObjective"]
@@ -52,6 +53,8 @@ class KinematicsCache:
             the fits of one problem share them (a model holds no state between
             evaluations: each sets its placements first). Built and added here
             when missing.
+        bends: the chain joints' lateral deflections (K, 2N) [rad] of every evaluation not given its own
+            (:func:`pincal.model.lateral.bend_angles`, a report's lateral compliances), or None.
     """
 
     def __init__(
@@ -61,6 +64,7 @@ class KinematicsCache:
         base: npt.ArrayLike,
         q: npt.ArrayLike,
         models: dict[tuple[ParameterSlot, ...], SensitivityModel] | None = None,
+        bends: npt.ArrayLike | None = None,
     ) -> None:
         self.params = params
         self.free = np.asarray(free, dtype=int)
@@ -74,6 +78,8 @@ class KinematicsCache:
         if key not in models:
             models[key] = SensitivityModel(params.chain, key)
         self.model = models[key]
+        self._models, self._key = models, key
+        self.bends = None if bends is None else np.asarray(bends, dtype=float)
         # the last few results with their inputs (bytes of x, shape and bytes of q, the tool), newest last
         self._recent: list[tuple[tuple[bytes, tuple[int, ...], bytes, bytes], tuple[ToolPoses, Sensitivity]]] = []
 
@@ -87,16 +93,28 @@ class KinematicsCache:
     #: last but one point evaluated when MINPACK's last trial step was rejected.
     RECENT = 2
 
-    def evaluate(self, x: npt.ArrayLike, q: npt.ArrayLike | None = None) -> tuple[ToolPoses, Sensitivity]:
+    def bent_model(self) -> SensitivityModel:
+        """The sensitivity model with every chain joint's ``bend`` slots after the free parameters'
+        (:func:`pincal.model.lateral.bend_slots`), shared like the others."""
+        key = self._key + bend_slots(self.params.chain)
+        if key not in self._models:
+            self._models[key] = SensitivityModel(self.params.chain, key)
+        return self._models[key]
+
+    def evaluate(self, x: npt.ArrayLike, q: npt.ArrayLike | None = None,
+                 bends: npt.ArrayLike | None = None) -> tuple[ToolPoses, Sensitivity]:
         """Tool poses and the free parameters' sensitivities at ``x``, at the
-        cache's configurations or at ``q`` (K, N) when given (effects shift them).
+        cache's configurations or at ``q`` (K, N) when given (effects shift them), the joints deflected
+        laterally by ``bends`` (K, 2N) [rad] (default: the cache's ``bends``; with either, the
+        sensitivities hold the bend slots' columns too, :attr:`Sensitivity.bend_angular`).
 
         The result is shared with later calls at the same inputs: do not write into it.
         """
         x = np.asarray(x, dtype=float)
         q = self.q if q is None else np.asarray(q, dtype=float)
+        bent = self.bends if bends is None else np.asarray(bends, dtype=float)
         tool = self.params.chain.tool
-        key = (x.tobytes(), q.shape, q.tobytes(), tool.tobytes())
+        key = (x.tobytes(), q.shape, q.tobytes(), tool.tobytes() + (b"" if bent is None else b"bent" + bent.tobytes()))
         recent = self._recent
         for index, (inputs, cached) in enumerate(recent):
             if inputs == key:  # computed already: `cached`
@@ -105,12 +123,12 @@ class KinematicsCache:
                 break
         else:  # not among the recent results: compute it
             vector = self.full_vector(x)
-            self.model.set_state(
-                self.params.placements(vector),
-                self.params.slot_points(vector)[self._slots],
-                tool,
-            )
-            poses, sens = self.model.evaluate(q)
+            model = self.model if bent is None else self.bent_model()
+            points = self.params.slot_points(vector)[self._slots]
+            if bent is not None:  # the bend slots turn about their joint's origin
+                points = np.vstack([points.reshape(-1, 3), np.zeros((len(model.slots) - len(self._slots), 3))])
+            model.set_state(self.params.placements(vector), points, tool)
+            poses, sens = model.evaluate(q, bent)
             to_slots = self.params.slot_jacobian(vector)
             if to_slots is not None:  # d(slot twist)/d(parameter) is not the identity
                 block = to_slots[self._block].T  # (free, slots)
@@ -120,6 +138,8 @@ class KinematicsCache:
                     origin=sens.origin,
                     joint_angular=sens.joint_angular,
                     joint_linear=sens.joint_linear,
+                    bend_angular=sens.bend_angular,
+                    bend_linear=sens.bend_linear,
                 )
             result = (poses, sens)
             if len(recent) == self.RECENT:

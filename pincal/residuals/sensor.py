@@ -38,7 +38,6 @@ sensor noise that :mod:`pincal.paper.noise_limit` propagates.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
@@ -46,19 +45,21 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.model.chain import points_in_base
-from pincal.model.effects import (
-    JOINT_EFFECTS,
-    Effect,
-    EffectInputs,
-    joint_basis,
-    sensed_points,
-)
+from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, joint_basis, sensed_points
 from pincal.model.sensitivity import Sensitivity, ToolPoses
 from pincal.model.sensor import Registration
 from pincal.model.thermal import row_conditions
 from pincal.residuals.base import BlockObjective, KinematicsCache
+from pincal.residuals.bends import bend_bases, bend_columns, lateral_columns, row_bends
 from pincal.residuals.conditions import condition_columns, point_columns
-from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights, SensorState, TargetEstimate
+from pincal.residuals.sensor_values import (
+    FittedBlocks,
+    Linearisation,
+    ModelledEffects,
+    RowWeights,
+    SensorState,
+    TargetEstimate,
+)
 from pincal.residuals.so3 import jlog3, log3, skew
 
 # TargetEstimate: defined in sensor_values, listed here too for the code that imports it from here
@@ -66,21 +67,6 @@ __all__ = ["REGISTRATION_NAMES", "TargetEstimate", "SensorResidual"]
 
 #: Names of the six registration unknowns: the right rotation phi of Omega_0 [rad], tau [m].
 REGISTRATION_NAMES = ("phi_x", "phi_y", "phi_z", "tau_x", "tau_y", "tau_z")
-
-
-@dataclass
-class _Linearisation:
-    """What the Jacobian blocks share at one x (:meth:`SensorResidual._linearisation`)."""
-
-    state: SensorState
-    omega: np.ndarray  # each row's Omega, (3, 3) or (K, 3, 3)
-    offsets: np.ndarray  # the target points' offsets from the tool origin in the sensor frame (K, P, 3) [m]
-    scale: float  # sensor scale s
-    sensed: np.ndarray  # sensed points, (1 + s) excluded (K, P, 3) [m]
-    jlog: np.ndarray | None = None  # with orientations: Jlog3(E_k) (K, 3, 3)
-    left: np.ndarray | None = None  # with orientations: Jlog3(E_k) E_kᵀ G_kᵀ Omega (K, 3, 3)
-    joint_points: np.ndarray | None = None  # with joints: d(point)/d(q_j) (K, P, 3, N)
-    joint_turns: np.ndarray | None = None  # with joints and orientations: (K, 3, N)
 
 
 class SensorResidual(BlockObjective):
@@ -130,6 +116,7 @@ class SensorResidual(BlockObjective):
             joint_basis(e, cast(EffectInputs, inputs), j) if e.type in JOINT_EFFECTS else None
             for e, j in zip(self.effects, self._effect_joint)
         ]
+        self._bend_basis = bend_bases(self.effects, inputs, self._effect_joint)  # lateral compliances' (eq L3)
         if any(e.type == "drift" for e in self.effects) and (inputs is None or inputs.time is None):
             raise ValueError("a drift effect needs a time column")
         self.g = np.asarray(sensor_points, dtype=float)
@@ -267,15 +254,7 @@ class SensorResidual(BlockObjective):
         """Tool poses, sensitivities, target and target points in the base frame at ``x``
         (the last one is kept: least_squares asks for the residual and the Jacobian at the same x)."""
         x = np.asarray(x, dtype=float)
-        q = None
-        if self.effects:
-            assert self.inputs is not None  # effects need their inputs (__init__)
-            shifts = np.zeros_like(self.inputs.q)
-            for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
-                if basis is not None:
-                    shifts[:, j] += basis @ x[sl]
-            q = self.inputs.q + self.cache.params.chain.followed_shifts(shifts)  # followers move too (eq M1)
-        kinematics = self.cache.evaluate(x[self.blocks["kinematic"]], q)
+        kinematics = self.cache.evaluate(x[self.blocks["kinematic"]], *self._joint_state(x))
         memo = self._memo
         if memo is not None and memo[1] is kinematics and np.array_equal(memo[0], x):
             return memo[2]
@@ -285,6 +264,20 @@ class SensorResidual(BlockObjective):
         state = (poses, sens, target, world)
         self._memo = (x.copy(), kinematics, state)
         return state
+
+    def _joint_state(self, x: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The joint values the joint effects at ``x`` shift the readings to (None: the readings), and the joints'
+        lateral deflections (eq L1–L3 of :mod:`pincal.model.lateral`; None: none)."""
+        q = None
+        if self.effects:
+            assert self.inputs is not None  # effects need their inputs (__init__)
+            shifts = np.zeros_like(self.inputs.q)
+            for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
+                if basis is not None:
+                    shifts[:, j] += basis @ x[sl]
+            q = self.inputs.q + self.cache.params.chain.followed_shifts(shifts)  # followers move too (eq M1)
+        return q, row_bends(self._bend_basis, self._effect_joint, self.effect_values(x), self.cache.bends,
+                            self.cache.params.chain.n_joints)
 
     def predicted_points(self, x: npt.ArrayLike) -> np.ndarray:
         """Model points in the sensor frame (K, P, 3) [m]: (1 + s)(Omega y + tau + t u)."""
@@ -358,7 +351,8 @@ class SensorResidual(BlockObjective):
 
     def jacobian(self, x: npt.ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)
-        lin = self._linearisation(x, joints=any(b is not None for b in self._effect_basis))
+        lin = self._linearisation(x, joints=any(b is not None for b in self._effect_basis),
+                                  bends=any(b is not None for b in self._bend_basis))
         poses, sens, target, world = lin.state
         k, n_points = world.shape[:2]
         omega, _ = self.row_frames(target)
@@ -386,9 +380,10 @@ class SensorResidual(BlockObjective):
                     rows_pos[:, p, :, pts.start + 3 * p : pts.start + 3 * p + 3] = rotated
                 else:
                     rows_pos[:, p, :, pts] = rotated @ self.point_basis[3 * p : 3 * p + 3]
-        for effect, j, basis, sl in zip(self.effects, self._effect_joint, self._effect_basis, self.effect_slices):
+        for effect, j, basis, bend, sl in zip(self.effects, self._effect_joint, self._effect_basis,
+                                              self._bend_basis, self.effect_slices):
             if effect.type != "sensor_scale":
-                rows_pos[..., sl] = self._effect_position_columns(lin, effect, j, basis)
+                rows_pos[..., sl] = self._effect_position_columns(lin, effect, j, basis, bend)
         rows_pos *= 1.0 + lin.scale  # every term is scaled by the sensor's (1 + s)
         for effect, sl in zip(self.effects, self.effect_slices):
             if effect.type == "sensor_scale":
@@ -406,39 +401,44 @@ class SensorResidual(BlockObjective):
         candidate's columns, for a linearised test of adding it); a sensor scale
         already in the objective is not offered again."""
         x = np.asarray(x, dtype=float)
-        lin = self._linearisation(x, joints=any(e.type in JOINT_EFFECTS for e in effects))
         joint_names = list(self.cache.params.chain.joint_names)
+        joints = [joint_names.index(e.joint) if e.joint else -1 for e in effects]
+        bends = bend_bases(effects, self.inputs, joints)
+        lin = self._linearisation(x, joints=any(e.type in JOINT_EFFECTS for e in effects),
+                                  bends=any(b is not None for b in bends))
         out = []
-        for effect in effects:
-            j = joint_names.index(effect.joint) if effect.joint else -1
+        for effect, j, bend in zip(effects, joints, bends):
             # a joint effect's columns need the effect inputs: the caller gives them
             basis = joint_basis(effect, cast(EffectInputs, self.inputs), j) if effect.type in JOINT_EFFECTS else None
             if effect.type == "sensor_scale":
                 position = lin.sensed[..., None]
             else:
-                position = self._effect_position_columns(lin, effect, j, basis) * (1.0 + lin.scale)
+                position = self._effect_position_columns(lin, effect, j, basis, bend) * (1.0 + lin.scale)
             parts = [(position * self.w[:, None, None, None]).reshape(-1, effect.n_values)]
             if self.G is not None:
                 rotation = np.zeros((len(self.G), 3, effect.n_values))
                 if basis is not None:
                     assert lin.joint_turns is not None  # a joint effect's, linearised with joints and orientations
                     rotation = lin.joint_turns[:, :, j, None] * basis[:, None, :]
+                elif bend is not None:
+                    rotation = lateral_columns(cast(np.ndarray, lin.bend_turns), j, bend)
                 parts.append((rotation * self.v[:, None, None]).reshape(-1, effect.n_values))
             out.append(np.vstack(parts))
         return out
 
-    def _linearisation(self, x: np.ndarray, joints: bool) -> _Linearisation:
+    def _linearisation(self, x: np.ndarray, joints: bool, bends: bool = False) -> Linearisation:
         """What the Jacobian blocks share at ``x``: the state; the target points'
         offsets from the tool origin in the sensor frame (K, P, 3); the sensor
         scale and the sensed points (1 + s excluded); with orientations, E_k, Jlog3(E_k)
         and Jlog3(E_k) E_kᵀ G_kᵀ Omega ("left", K × 3 × 3); with ``joints``, the chain
-        joints' point columns d(point)/d(q_j) (K, P, 3, N) and turns (K, 3, N)."""
+        joints' point columns d(point)/d(q_j) (K, P, 3, N) and turns (K, 3, N); with ``bends``, the bend slots'
+        (:func:`pincal.residuals.bends.bend_columns`: from the bent model, at zero bends when the fit has none)."""
         state = self.state(x)
         poses, sens, target, world = state
         omega, _ = self.row_frames(target)
         omega_t = np.swapaxes(omega, -1, -2)
         scale, drift = self._sensor_terms(x, target)
-        lin = _Linearisation(
+        lin = Linearisation(
             state=state,
             omega=omega,
             offsets=(world - sens.origin[:, None, :]) @ omega_t,
@@ -457,12 +457,20 @@ class SensorResidual(BlockObjective):
             lin.joint_points = joint_points
             if lin.left is not None:  # with orientations
                 lin.joint_turns = lin.left @ sens.joint_angular.transpose(0, 2, 1)
+        if bends:
+            zero = np.zeros((len(world), 2 * self.cache.params.chain.n_joints))  # no bends yet: at zero ones
+            bent = sens if sens.bend_angular is not None else self.cache.evaluate(
+                x[self.blocks["kinematic"]], self._joint_state(x)[0], zero)[1]
+            lin.bend_points, lin.bend_turns = bend_columns(
+                bent, omega_t, lin.offsets, lin.left, None if target.conditions is None else target.conditions.factor)
         return lin
 
-    def _effect_position_columns(self, lin: _Linearisation, effect: Effect, j: int,
-                                 basis: np.ndarray | None) -> np.ndarray:
+    def _effect_position_columns(self, lin: Linearisation, effect: Effect, j: int,
+                                 basis: np.ndarray | None, bend: np.ndarray | None = None) -> np.ndarray:
         """d(sensed point)/d(effect values) before the sensor scale and weights, (K, P, 3, n_values)."""
         k, n_points = lin.offsets.shape[:2]
+        if bend is not None:  # a lateral compliance: the bend slots' columns times B_k (eq L3)
+            return lateral_columns(cast(np.ndarray, lin.bend_points), j, bend)
         if basis is not None:  # joint shift: the joint's column times the basis
             assert lin.joint_points is not None  # a joint effect's lin is made with joints
             return lin.joint_points[:, :, :, j, None] * basis[:, None, None, :]
@@ -473,7 +481,7 @@ class SensorResidual(BlockObjective):
             return condition_columns(effect, cast(EffectInputs, self.inputs), lin.state[3], lin.omega)
         return np.zeros((k, n_points, 3, effect.n_values))
 
-    def _orientation_jacobian(self, x: np.ndarray, lin: _Linearisation) -> np.ndarray:
+    def _orientation_jacobian(self, x: np.ndarray, lin: Linearisation) -> np.ndarray:
         poses, sens, target, _ = lin.state
         jlog, left = lin.jlog, lin.left  # (K, 3, 3) each
         assert jlog is not None and left is not None  # called with orientations
@@ -491,10 +499,12 @@ class SensorResidual(BlockObjective):
             rows[:, :, reg] = self._in_basis(columns)
         if rot.stop > rot.start:
             rows[:, :, rot] = jlog @ pin.Jexp3(x[rot])
-        for j, basis, sl in zip(self._effect_joint, self._effect_basis, self.effect_slices):
+        for j, basis, bend, sl in zip(self._effect_joint, self._effect_basis, self._bend_basis, self.effect_slices):
             if basis is not None:
                 assert lin.joint_turns is not None  # a joint effect's lin is made with joints
                 rows[:, :, sl] = lin.joint_turns[:, :, j, None] * basis[:, None, :]
+            elif bend is not None:
+                rows[:, :, sl] = lateral_columns(cast(np.ndarray, lin.bend_turns), j, bend)
         rows *= self.v[:, None, None]
         return rows.reshape(-1, self.n_params)
 

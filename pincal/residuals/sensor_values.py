@@ -15,7 +15,7 @@ from pincal.model.sensitivity import Sensitivity, ToolPoses
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 
-__all__ = ["RowWeights", "FittedBlocks", "ModelledEffects", "TargetEstimate", "SensorState"]
+__all__ = ["RowWeights", "FittedBlocks", "ModelledEffects", "TargetEstimate", "SensorState", "Linearisation"]
 
 
 @dataclass(frozen=True)
@@ -100,3 +100,21 @@ class TargetEstimate:
 #: What :meth:`SensorResidual.state` gives: tool poses, sensitivities, target, target points in the base
 #: frame (K, P, 3) [m].
 SensorState = tuple[ToolPoses, Sensitivity, TargetEstimate, np.ndarray]
+
+
+@dataclass
+class Linearisation:
+    """What the Jacobian blocks of a sensor residual share at one x
+    (:meth:`pincal.residuals.sensor.SensorResidual._linearisation`)."""
+
+    state: SensorState
+    omega: np.ndarray  # each row's Omega, (3, 3) or (K, 3, 3)
+    offsets: np.ndarray  # the target points' offsets from the tool origin in the sensor frame (K, P, 3) [m]
+    scale: float  # sensor scale s
+    sensed: np.ndarray  # sensed points, (1 + s) excluded (K, P, 3) [m]
+    jlog: np.ndarray | None = None  # with orientations: Jlog3(E_k) (K, 3, 3)
+    left: np.ndarray | None = None  # with orientations: Jlog3(E_k) E_kᵀ G_kᵀ Omega (K, 3, 3)
+    joint_points: np.ndarray | None = None  # with joints: d(point)/d(q_j) (K, P, 3, N)
+    joint_turns: np.ndarray | None = None  # with joints and orientations: (K, 3, N)
+    bend_points: np.ndarray | None = None  # with lateral effects: d(point)/d(bend) (K, P, 3, 2N)
+    bend_turns: np.ndarray | None = None  # with lateral effects and orientations: (K, 3, 2N)

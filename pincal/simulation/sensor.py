@@ -12,17 +12,21 @@ from pincal.errors import ModelError, PincalError
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, points_in_base
 from pincal.model.effects import (
+    BEND_EFFECTS,
     Effect,
     EffectInputs,
     gravity_torques,
     joint_shifts,
     sensed_points,
 )
+from pincal.model.lateral import bend_angles, bent_tool_poses
+from pincal.model.mass_moments import bending_moments
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
 
 __all__ = [
     "DEFAULT_REGISTRATION", "cpa_configurations", "SimulatedSensor", "SimulatedEffects", "measure", "simulated_shifts",
+    "simulated_bends",
     "perfect_measurements", "random_configurations", "sampling_limits", "REFERENCE_C", "TEMPERATURE_COLUMN", "warm_up",
     "simulated_conditions",
 ]
@@ -129,7 +133,12 @@ def measure(
                 if time is None:
                     raise PincalError("a simulated drift needs row times")
                 drift = time[:, None] * np.asarray(value, dtype=float)
-    tool_rotations, tool_positions = chain.tool_poses(actual)
+    bends = simulated_bends(chain, np.asarray(q, dtype=float), simulated.effects)
+    if bends is None:
+        tool_rotations, tool_positions = chain.tool_poses(actual)
+    else:  # lateral compliances turn the chain at their joints (eq L1 of pincal.model.lateral)
+        poses = bent_tool_poses(chain, actual, bends)
+        tool_rotations, tool_positions = poses.tool_rotations, poses.tool_positions
     points = np.zeros((1, 3)) if points is None else np.asarray(points, dtype=float)
     world = points_in_base(tool_positions, tool_rotations, points)
     if conditions is not None:  # eq T1-T2 of pincal.model.thermal
@@ -191,6 +200,17 @@ def simulated_shifts(
     )
     return chain.followed_shifts(joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs,
                                               chain.joint_names))
+
+
+def simulated_bends(chain: KinematicChain, q: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]]
+                    ) -> np.ndarray | None:
+    """The lateral deflections (K, 2N) [rad] the ``lateral`` effects among ``effects`` cause at readings ``q``
+    under the URDF's inertias (eq L1 of :mod:`pincal.model.lateral`); None without one."""
+    if not any(e.type in BEND_EFFECTS for e, _ in effects):
+        return None
+    inputs = EffectInputs(q=q, gravity=np.zeros_like(q), time=None, order=np.arange(len(q)),
+                          joint_names=tuple(chain.joint_names), bending=bending_moments(chain, q))
+    return bend_angles([e for e, _ in effects], [v for _, v in effects], inputs, chain.joint_names)
 
 
 def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registration: Registration) -> MeasurementSet:

@@ -150,7 +150,7 @@ def diagnose_files(
     row_time = time_column(data, time_column_name)
     options = DiagnoseOptions(sigma_column=sigma_column, payload_kg=payload_kg, time=row_time, heldout_time=held_time,
                               readings=readings, recalibrate=recalibrate, couplings=couplings,
-                              stated_sigma_pos_m=sigma_pos_m, masses=settings.masses)
+                              stated_sigma_pos_m=sigma_pos_m, masses=settings.masses, lateral=settings.lateral)
     diagnosis = diagnose(chain, calibration, data, heldout, options, progress=stages.next())
     # the final model: on the readings corrected by the conventions diagnose found, from their calibration
     data, calibration = apply_couplings(data, diagnosis.couplings), diagnosis.calibration or calibration

@@ -65,6 +65,7 @@ from pincal.model.chain import KinematicChain
 from pincal.model.description import RobotDescription, read_description
 from pincal.model.drift import drift_offsets, read_time_spans, time_column
 from pincal.model.effects import RowContext, effect_from_dict, effect_inputs, joint_shifts, with_loads
+from pincal.model.lateral import bend_angles
 from pincal.model.sensor import Registration
 from pincal.outputs import file_sha256
 from pincal.report.document import ReportModel, read_report
@@ -458,7 +459,8 @@ def _effect_corrections(chain: KinematicChain, data: MeasurementSet, effects: Ma
         inputs = with_loads(inputs, chain)
     q = data.q + chain.followed_shifts(joint_shifts([e for e, _ in parsed], [v for _, v in parsed], inputs,
                                                     chain.joint_names))
-    out = RowCorrections(q)
+    out = RowCorrections(q, bends=bend_angles([e for e, _ in parsed], [v for _, v in parsed], inputs,
+                                              chain.joint_names))  # lateral compliances (eq L1-L3)
     drift: DriftUse | None = None
     for effect, value in parsed:
         if effect.type == "sensor_scale":

@@ -215,6 +215,7 @@ class DiagnoseSettings(_FitSettings):
         pause_s: a gap longer than this between rows of a session is a pause [s] (:mod:`pincal.model.thermal`).
         masses: where the gravity loads come from, one of :data:`pincal.model.masses.MASSES` (``unknown``:
             compliances follow the carried links' mass moments, as on a URDF without inertias).
+        lateral: also try each revolute joint's lateral (bending) compliance (:mod:`pincal.model.lateral`).
 
     Raises:
         PincalError: an unknown level, selection or masses, a prior at level registration, a negative
@@ -235,6 +236,7 @@ class DiagnoseSettings(_FitSettings):
     pause_s: float = PAUSE_S
     force: bool = False
     masses: Masses = DEFAULT_MASSES
+    lateral: bool = False
 
     def __post_init__(self) -> None:
         if self.level not in DIAGNOSE_LEVELS:
