@@ -65,6 +65,8 @@ class TreeCalibration:
             (``tree.placed(result.tree_placements)``).
         notes: what the user should know.
         total_seconds: the calibration's time [s].
+        prior_sigma: σ_i of every tree parameter under ``--select prior`` (eq P1), None otherwise: the prior
+            ``diagnose`` keeps on the geometry.
     """
 
     level: ChainLevel
@@ -86,6 +88,7 @@ class TreeCalibration:
     tree_placements: TreePlacements
     notes: tuple[str, ...]
     total_seconds: float
+    prior_sigma: np.ndarray | None = None
 
     @property
     def rms_m(self) -> float:
@@ -228,4 +231,4 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         row_sessions=rows.sessions, point_errors=tree_objective.point_errors(fit.solution.x, weights),
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
-        notes=tuple(notes), total_seconds=time.perf_counter() - started)
+        notes=tuple(notes), total_seconds=time.perf_counter() - started, prior_sigma=problem.prior)
