@@ -45,6 +45,7 @@ from pincal.diagnosis.screening import (
     testable,
 )
 from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, effect_basis, offset_like, plausible
+from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.metrics import PoseErrors
 from pincal.fit.pipeline import KEPT
@@ -116,6 +117,7 @@ class TreeDiagnosis:
         masses_unknown: compliances follow mass moments (``--masses unknown`` or no inertias).
         time_reference: the calibration rows' mean time [s] a drift is relative to (None without times).
         notes: what the user should know.
+        inputs: the effect inputs of the calibration rows (columns: the tree's joints).
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -133,6 +135,7 @@ class TreeDiagnosis:
     masses_unknown: bool
     time_reference: float | None
     notes: tuple[str, ...]
+    inputs: EffectInputs
 
 
 def tree_candidates(tree: KinematicTree, has_time: bool) -> list[Effect]:
@@ -256,11 +259,16 @@ def _step(search: _Search, inputs: EffectInputs, current: tuple[FitObjective, So
     shortlist = [e for e, score in screened[:SHORTLIST] if may_reach(score.delta_bic, EVIDENCE)]
     counter.expect(len(shortlist) + 1)
     fitted = []
+    failed: list[TreeCandidate] = []
     for effect in shortlist:
-        new_objective, new_solution = search.fit([*adopted, effect], np.r_[solution.x, np.zeros(effect.n_values)])
+        counter.tick()
+        try:
+            new_objective, new_solution = search.fit([*adopted, effect], np.r_[solution.x, np.zeros(effect.n_values)])
+        except CalibrationError as error:  # the rows do not determine it beside the geometry: reported, not adopted
+            failed.append(TreeCandidate(effect, np.inf, np.zeros(effect.n_values), f"its fit fails ({error})"))
+            continue
         fitted.append((bic(new_solution.residual, new_solution.x.size, n_prior_rows(new_objective)) - now, effect,
                        new_objective, new_solution))
-        counter.tick()
     fitted.sort(key=lambda item: item[0])
     chosen = None
     ranking = []
@@ -271,6 +279,7 @@ def _step(search: _Search, inputs: EffectInputs, current: tuple[FitObjective, So
         ranking.append(TreeCandidate(effect, float(delta), values, verdict))
         if verdict == "adopted":
             chosen = (effect, new_objective, new_solution, float(delta))
+    ranking += failed
     ranking += [TreeCandidate(e, s.delta_bic, np.zeros(e.n_values), "screened out", screened=True)
                 for e, s in screened if e not in shortlist][: max(0, SHORTLIST - len(ranking))]
     counter.tick()
@@ -330,4 +339,5 @@ def _concluded(search: _Search, final: tuple[FitObjective, Solution], adopted: S
         point_errors=errors, heldout_before=steps[0].heldout_before if steps else search.held_errors([], solution.x),
         heldout_after=search.held_errors(adopted, solution.x),
         sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown,
-        time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes))
+        time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes),
+        inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))

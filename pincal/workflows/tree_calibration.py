@@ -28,7 +28,7 @@ from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.corrected_urdf import corrected_origins
 from pincal.model.description import xacro_arguments
 from pincal.model.parameter_sets import ChainLevel
-from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.model.tree import KinematicTree, TargetSpec, TreePlacements
 from pincal.model.urdf import write_urdf_with_origins
 from pincal.outputs import file_sha256
 from pincal.progress import Progress
@@ -40,7 +40,7 @@ from pincal.workflows.paths import description_inputs, input_paths, refuse_overw
 from pincal.workflows.settings import CalibrateSettings
 from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
 
-__all__ = ["TreeCalibrationRun", "calibrate_tree_files"]
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "write_tree_urdf"]
 
 
 @dataclass(frozen=True)
@@ -104,8 +104,8 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     rms = float(np.sqrt(np.nanmean(result.point_errors ** 2)))
     gross = gross_misfit(rms, max(reach_m(t.chain, data.q[:, t.columns]) for t in tree.targets))
     warnings, withheld = withholding([] if gross is None else [gross], settings.force)
-    reload_error, digest = _write_urdf(urdf, out_urdf, tree, result, (comment, settings.xacro_args), data.q,
-                                       keep=not withheld)
+    reload_error, digest = write_tree_urdf(urdf, out_urdf, tree, result.tree_placements,
+                                           (comment, settings.xacro_args), data.q, keep=not withheld)
     sources: Sources = {"urdf": str(urdf),
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf)}
@@ -128,10 +128,11 @@ class _Withheld(Exception):
     """Raised by a withheld URDF's check once it passed: cancels the write (as pincal.workflows.verdict's)."""
 
 
-def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibration,
-                text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray, keep: bool = True) -> tuple[float, str]:
-    """Write ``urdf`` with every target chain's calibrated joint origins (a joint shared by several chains has
-    the same placement in each) and return the reload check's largest difference and the file's SHA-256;
+def write_tree_urdf(urdf: Path, out: Path, tree: KinematicTree, tree_placements: TreePlacements,
+                    text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray, keep: bool = True) -> tuple[float, str]:
+    """Write ``urdf`` with every target chain's joint origins at ``tree_placements`` (the calibrated model; a
+    joint shared by several chains has the same placement in each) and return the reload check's largest
+    difference and the file's SHA-256;
     ``keep`` False: checked and hashed but not put in place (a withheld URDF, ``out`` left as it was).
 
     Raises:
@@ -141,7 +142,7 @@ def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibrat
     comment, xacro_args = text
     nominal = tree.placements()
     origins: dict[str, np.ndarray] = {}
-    with tree.placed(result.tree_placements):
+    with tree.placed(tree_placements):
         for target, placements in zip(tree.targets, nominal):
             origins.update(corrected_origins(urdf, target.chain, placements, xacro_args))
         calibrated = [t.chain.tool_poses(q[:, t.columns]) for t in tree.targets]

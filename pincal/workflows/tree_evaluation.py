@@ -9,6 +9,10 @@ session of the data registered anew with the model and the points fixed (Arun et
 points: the least-squares rigid registration of equally weighted points). What evaluate does with one
 chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``, ``--max-rot-deg``,
 ``--json``, ``--html`` — is refused in one line.
+
+A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
+joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
+sensor scale scales the sensed points; a drift is the calibration's sensor, not applied (a note says so).
 """
 
 from __future__ import annotations
@@ -24,8 +28,11 @@ from pincal.fit.registration import register_points
 from pincal.fit.sessions import session_rows
 from pincal.fit.tree_calibration import tree_rows
 from pincal.measurements.csv_v1 import read_measurements
+from pincal.measurements.data import MeasurementSet
+from pincal.model.effects import JOINT_EFFECTS, effect_from_dict, joint_shifts
 from pincal.model.sensor import Registration
 from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.model.tree_effects import TreeBody, tree_inputs
 from pincal.outputs import file_sha256
 from pincal.report.model_tree import TargetErrors
 from pincal.report.reading import load_report, value_at
@@ -87,7 +94,9 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     if not rows.seen.any():
         raise PincalError(f"{data_path}: no measured point in a row that is not role=cpa ({data.n_rows} such rows); "
                           "nothing to evaluate: give rows where a target's point is measured")
-    world = tree.target_points(data.q, [points for _, points in targets])  # (K, P, 3) [m]
+    q, scale, effect_notes = _with_effects(tree, data, document.get("effects") or [])
+    notes += effect_notes
+    world = tree.target_points(q, [points for _, points in targets])  # (K, P, 3) [m]
     if settings.new_session:
         for s, name in enumerate(data.session_names):  # a rigid registration needs three points (Arun et al. 1987)
             if (count := int(rows.seen[rows.sessions == s].sum())) < 3:
@@ -104,7 +113,7 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
         how = [f"{name}: the report's" + ("" if name in names else f" '{names[0]}'") for name in data.session_names]
     omega = np.stack([r.rotation for r in registrations])[sessions]
     tau = np.stack([r.translation for r in registrations])[sessions]
-    sensed = np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :]
+    sensed = (1.0 + scale) * (np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :])
     errors = np.linalg.norm(np.where(rows.seen[..., None], sensed - rows.points, np.nan), axis=2)  # (K, P) [m]
     seen = np.any(rows.seen, axis=0)  # (P,) each point seen in some row
     per_target: list[tuple[str, TargetErrors | None]] = []
@@ -117,6 +126,22 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                          f"of point(s) {', '.join(map(str, numbers))}")
     return TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
                           tuple(read_notes + notes))
+
+
+def _with_effects(tree: KinematicTree, data: MeasurementSet, entries: Any) -> tuple[np.ndarray, float, list[str]]:
+    """The rows' tree joint values with a report's joint effects applied (actual = reading + shift, followers
+    moved with their drivers, eq M1), its sensor scale s, and notes on what is not applied."""
+    effects = [effect_from_dict(entry) for entry in entries]
+    if not effects:
+        return data.q, 0.0, []
+    body = TreeBody(tree)
+    inputs = tree_inputs(tree, data, loads=any(e.moments for e, _ in effects))
+    joint = [(e, v) for e, v in effects if e.type in JOINT_EFFECTS]
+    shifts = joint_shifts([e for e, _ in joint], [v for _, v in joint], inputs, tree.joint_names)
+    scale = sum(float(v[0]) for e, v in effects if e.type == "sensor_scale")
+    others = [e.label for e, _ in effects if e.type not in JOINT_EFFECTS and e.type != "sensor_scale"]
+    notes = [f"the report's {', '.join(others)}: the calibration sensor's, not applied to these rows"] if others else []
+    return data.q + body.followed_shifts(shifts), scale, notes
 
 
 def _targets(entries: Any) -> list[tuple[TargetSpec, np.ndarray]]:
