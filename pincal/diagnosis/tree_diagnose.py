@@ -12,11 +12,11 @@ and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts
 
     ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m) < EVIDENCE = −10      (Schwarz 1978; Kass & Raftery 1995)
 
-on the calibration rows (m: their seen coordinates; the noise scale held at the calibration's), a value in
-physical range, a change of some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is not
-an offset, and with held-out rows better on them beyond their noise (the signed-rank test of
-:func:`pincal.diagnosis.held_out.held_out_verdict`). The search stops when no candidate passes, or after
-:data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+on the calibration rows (m: their seen coordinates; the noise scale held at the calibration's), a value some
+:data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of some measured coordinate of
+at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out rows better on them beyond
+their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`). The search stops when
+no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
 
 Not yet as with one chain: a coupling nearer ±1 tried as a joint read against another (it stays an effect),
 two candidates that correct alike named together, thermal and pause steps, a payload, the generic check for
@@ -33,7 +33,7 @@ import numpy as np
 
 from pincal.diagnosis.catalogue import candidate_effects
 from pincal.diagnosis.diagnose import MAX_EFFECTS, DiagnoseOptions
-from pincal.diagnosis.held_out import held_out_verdict
+from pincal.diagnosis.held_out import HELD_OUT_Z, held_out_verdict
 from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
 from pincal.diagnosis.screening import (
     FitObjective,
@@ -62,11 +62,19 @@ from pincal.progress import Counter, Progress
 from pincal.residuals.sensor_values import ModelledEffects, TargetEstimate
 from pincal.residuals.tree import TreeResidual
 
-__all__ = ["SHORTLIST", "TreeStep", "TreeCandidate", "TreeDiagnosis", "tree_candidates", "diagnose_tree"]
+__all__ = ["SHORTLIST", "DETERMINED_Z", "TreeStep", "TreeCandidate", "TreeDiagnosis", "tree_candidates",
+           "diagnose_tree"]
 
 #: Candidates fitted in full per step, the best of the screen that may reach the evidence cut: the single
 #: chain's "first eight" (:mod:`pincal.diagnosis.diagnose`, screening).
 SHORTLIST = 8
+
+
+#: Least |value| / standard deviation of some value of an effect to adopt it: a one-value effect entering linearly
+#: gains about (v/σ)² − ln m of BIC, so one within 2σ of zero (the held-out test's z, HELD_OUT_Z of
+#: :mod:`pincal.diagnosis.held_out`) passes the cut only through the prior's rows — a direction of the geometry
+#: the prior held (a sensor scale against every length), freed; not through the data.
+DETERMINED_Z = HELD_OUT_Z
 
 
 @dataclass(frozen=True)
@@ -295,6 +303,11 @@ def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tu
     values = solution.x[objective.effect_slices[-1]]
     if delta >= EVIDENCE:
         return f"ΔBIC {delta:.1f} not below {EVIDENCE:g}"
+    spread = standard_deviations(objective, solution)[objective.effect_slices[-1]]
+    if not np.max(np.abs(values) / np.maximum(spread, 1e-300)) >= DETERMINED_Z:
+        return (f"its value {np.round(values, 6).tolist()} is within {DETERMINED_Z:g} standard deviations "
+                f"({np.round(spread, 6).tolist()}) of zero: its ΔBIC is gained by the geometry it frees, not by a "
+                "value the rows determine")
     if not plausible(effect, values, body):
         return f"its value {np.round(values, 6).tolist()} is outside the physical range (a stand-in for something else)"
     sl = objective.effect_slices[-1]
