@@ -11,7 +11,6 @@ import pytest
 from tree_robot import two_arm_urdf
 
 from pincal.cli.commands import main
-from pincal.errors import PincalError
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
 from pincal.report.reading import PAGE_KINDS, load_report
@@ -134,10 +133,17 @@ def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files,
     assert f"{cpa}: no measured point in a row that is not role=cpa" in capsys.readouterr().err
 
 
-def test_the_report_page_refuses_a_trees_report(files):
-    *_, report, _, _, _ = files
-    with pytest.raises(PincalError, match="several --tip-link, which this command does not take yet"):
-        load_report(report, PAGE_KINDS)  # the page's loader (pincal report, --html)
+def test_the_report_page_shows_each_targets_errors(files, capsys):
+    folder, *_, report, _, _, _ = files
+    assert load_report(report, PAGE_KINDS)["targets"]  # the page's loader (pincal report, --html)
+    assert main(["report", str(report), "--out", str(folder / "tree.html")]) == 0
+    page = (folder / "tree.html").read_text(encoding="utf-8")
+    assert 'id="targets-table"' in page and "Calibration (full) of 2 targets" in page
+    document = json.loads(report.read_text(encoding="utf-8"))
+    for target in document["targets"]:  # each target's line: its link, its RMS before and after as the report's
+        before, after = target["nominal_errors"]["position"]["rms_mm"], target["calibration_errors"]["position"]
+        assert f"<td>{target['tip_link']}</td>" in page and f"<td>{before:.3f}</td>" in page
+        assert f"<td>{after['rms_mm']:.3f}</td>" in page
 
 
 def test_one_tip_link_keeps_refusing_an_empty_point_cell(files, capsys):

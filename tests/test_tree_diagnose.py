@@ -58,7 +58,7 @@ def diagnosed(robot):
     folder, urdf, _ = robot
     out, report = folder / "out.urdf", folder / "REPORT.json"
     code = main(["diagnose", str(urdf), str(folder / "data.csv"), *TARGETS, "--validation", str(folder / "held.csv"),
-                 "--out", str(out), "--report", str(report), "--quiet"])
+                 "--out", str(out), "--report", str(report), "--html", str(folder / "REPORT.html"), "--quiet"])
     return code, out, report
 
 
@@ -88,6 +88,10 @@ def test_diagnose_names_the_torso_compliance_and_brings_each_target_to_the_noise
         before, after = target["validation_geometry_errors"], target["validation_errors"]
         assert before["position"]["rms_mm"] > 4 * FLOOR_MM  # the geometry alone cannot explain the sag
         assert after["position"]["rms_mm"] < 1.25 * FLOOR_MM  # with it: the noise
+    page = (report_path.with_name("REPORT.html")).read_text(encoding="utf-8")  # each target before and after
+    assert "Diagnosis of 2 targets" in page and "<th>with effects RMS [mm]</th>" in page
+    for target in report["targets"]:
+        assert f"<td>{target['validation_errors']['position']['rms_mm']:.3f}</td>" in page
     effects = yaml.safe_load((out.with_name("out.effects.yaml")).read_text(encoding="utf-8"))
     assert [(e["type"], e["joint"]) for e in effects["effects"]] == [("compliance", "torso_2")]
     # evaluate applies the report's effect: the held-out rows at the noise, as diagnose predicted them

@@ -21,7 +21,7 @@ __all__ = ["one_tip_link", "run_calibrate_tree", "run_diagnose_tree", "is_tree_r
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
 _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
-            ("html", "--html (the HTML report)"), ("reject_outliers", "--reject-outliers"),
+            ("reject_outliers", "--reject-outliers"),
             ("coupling", "--coupling"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
 
 
@@ -55,7 +55,8 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
                                  sigma_column=args.sigma_column, selection=selection_criterion(args),
                                  sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args, force=args.force)
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
-        run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress)
+        run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress,
+                                   html=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     result = run.result
@@ -73,6 +74,8 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     else:
         print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
     return run.report, run.withheld
 
 

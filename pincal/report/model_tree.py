@@ -19,10 +19,10 @@ from pincal.report.model import (
     Sha256,
     Vector3,
 )
-from pincal.report.model_diagnosis import EffectJson
+from pincal.report.model_diagnosis import CandidateJson, EffectJson
 
-__all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeCandidateJson", "TreeStepJson",
-           "TreeDiagnosisJson", "TreeReport"]
+__all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeCandidateJson", "TreeBeforeAfter",
+           "TreeStepJson", "TreeDiagnosisJson", "TreeReport"]
 
 
 class _TreeChainKeys(TypedDict):
@@ -77,25 +77,31 @@ class TreeSessionJson(TypedDict):
     registration: RegistrationPair
 
 
-class TreeCandidateJson(TypedDict):
-    """A candidate effect of a step of ``diagnose`` on a tree: its label (``compliance:torso_2``), its ΔBIC
-    against the step's model (of its full fit; of the linearised test when ``screened``), its verdict in words."""
+class TreeCandidateJson(CandidateJson, total=False):
+    """A candidate effect of a step of ``diagnose`` on a tree: the effect's keys (its values when fitted in
+    full), its ΔBIC against the step's model (of its full fit; of the linearised test when ``screened``), its
+    verdict in words."""
 
-    effect: str
-    delta_bic: float
     screened: bool
-    verdict: str
+
+
+class TreeBeforeAfter(TypedDict):
+    """Every target's points on a set of rows before and after a step (``seen`` pairs, ``position``: mean, RMS
+    and max [mm] over every seen point, ``position_per_point``)."""
+
+    before: TargetErrors
+    after: TargetErrors
 
 
 class TreeStepJson(TypedDict):
     """An effect ``diagnose`` adopted on a tree: the effect (its values and standard deviations), its ΔBIC,
-    the RMS distance of every seen point [mm] on the calibration rows before and after it, and on the held-out
-    rows (None without ``--validation``), the step's candidates, best first."""
+    every seen point's errors on the calibration rows before and after it, and on the held-out rows (None
+    without ``--validation``), the step's candidates, best first."""
 
     effect: EffectJson
     delta_bic: float
-    calibration_rms_mm: list[float]
-    validation_rms_mm: list[float] | None
+    calibration: TreeBeforeAfter
+    heldout: TreeBeforeAfter | None
     candidates: list[TreeCandidateJson]
 
 

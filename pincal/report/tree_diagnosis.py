@@ -4,22 +4,27 @@ and after the effects on the calibration and held-out rows, the effects and the 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import cast
 
 import numpy as np
 
 from pincal.diagnosis.tree_diagnose import TreeCandidate, TreeDiagnosis
 from pincal.diagnosis.verdicts import CRITERION
+from pincal.model.effects import EffectInputs
 from pincal.model.tree import KinematicTree
 from pincal.report.diagnosis import effect_entries
-from pincal.report.model_tree import TargetErrors, TargetJson, TreeCandidateJson, TreeDiagnosisJson, TreeReport
+from pincal.report.model_tree import (
+    TargetErrors,
+    TargetJson,
+    TreeBeforeAfter,
+    TreeCandidateJson,
+    TreeDiagnosisJson,
+    TreeReport,
+)
 from pincal.report.tree import target_errors
 
 __all__ = ["with_diagnosis"]
-
-
-def _rms_mm(errors: np.ndarray | None) -> float | None:
-    return None if errors is None else float(np.sqrt(np.nanmean(errors**2)) * 1000.0)
 
 
 def _held(errors: np.ndarray | None, points: tuple[int, ...]) -> TargetErrors | None:
@@ -28,9 +33,30 @@ def _held(errors: np.ndarray | None, points: tuple[int, ...]) -> TargetErrors | 
     return target_errors(errors, numbers) if errors is not None and numbers else None
 
 
-def _candidates(candidates: Sequence[TreeCandidate]) -> list[TreeCandidateJson]:
-    return [{"effect": c.effect.label, "delta_bic": c.delta_bic, "screened": c.screened, "verdict": c.verdict}
-            for c in candidates]
+def _all_points(errors: np.ndarray) -> TargetErrors:
+    """Every seen point's errors (K, P) [m] as one target's (its points: those seen in some row)."""
+    return target_errors(errors, tuple(int(p) + 1 for p in np.flatnonzero(np.isfinite(errors).any(axis=0))))
+
+
+def _before_after(before: np.ndarray | None, after: np.ndarray | None) -> TreeBeforeAfter | None:
+    return None if before is None or after is None else {"before": _all_points(before), "after": _all_points(after)}
+
+
+def _candidates(candidates: Sequence[TreeCandidate], inputs: EffectInputs, kinds: Mapping[str, str]
+                ) -> list[TreeCandidateJson]:
+    """Each candidate's effect (its values when fitted in full, its type and joint when screened out), ΔBIC and
+    verdict."""
+    out = []
+    for candidate in candidates:
+        entry = cast(TreeCandidateJson, effect_entries([(candidate.effect, candidate.values, np.full(
+            candidate.values.shape, np.nan))], inputs, kinds, {})[0])
+        for key in ("std", "sin_std", "cos_std", "advice", "combinations") + (
+                ("value", "sin", "cos") if candidate.screened else ()):
+            entry.pop(key, None)  # type: ignore[misc]
+        entry["delta_bic"], entry["screened"] = candidate.delta_bic, candidate.screened
+        entry["verdict"] = candidate.verdict
+        out.append(entry)
+    return out
 
 
 def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis, geometry_errors: np.ndarray,
@@ -50,13 +76,11 @@ def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis, geometry_errors
         "steps": [{
             "effect": effect_entries([(step.effect, step.values, step.std)], diagnosis.inputs, kinds, {})[0],
             "delta_bic": step.delta_bic,
-            "calibration_rms_mm": [float(_rms_mm(step.calibration_before) or 0.0),
-                                   float(_rms_mm(step.calibration_after) or 0.0)],
-            "validation_rms_mm": None if step.heldout_before is None or step.heldout_after is None else [
-                float(_rms_mm(step.heldout_before) or 0.0), float(_rms_mm(step.heldout_after) or 0.0)],
-            "candidates": _candidates(step.candidates),
+            "calibration": cast(TreeBeforeAfter, _before_after(step.calibration_before, step.calibration_after)),
+            "heldout": _before_after(step.heldout_before, step.heldout_after),
+            "candidates": _candidates(step.candidates, diagnosis.inputs, kinds),
         } for step in diagnosis.steps],
-        "last_candidates": _candidates(diagnosis.last_candidates),
+        "last_candidates": _candidates(diagnosis.last_candidates, diagnosis.inputs, kinds),
         "untestable": [e.label for e in diagnosis.untestable],
     }
     out["effects"] = effect_entries(diagnosis.effects, diagnosis.inputs, kinds, {})

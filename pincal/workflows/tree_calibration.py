@@ -37,6 +37,7 @@ from pincal.report.model import Sources, findings_json
 from pincal.report.model_tree import TreeReport
 from pincal.report.tree import tree_report
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import CalibrateSettings
 from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
 
@@ -55,6 +56,7 @@ class TreeCalibrationRun:
         reload_error: the largest difference of any target's tool pose after reloading the written URDF [m, -].
         withheld: the corrected URDF is not written (a gross misfit without ``--force``:
             :mod:`pincal.workflows.verdict`); REPORT.json says so in ``warnings``.
+        html: the report's page written (``--html``), or None.
     """
 
     result: TreeCalibration
@@ -64,6 +66,7 @@ class TreeCalibrationRun:
     seconds: float
     reload_error: float
     withheld: bool = False
+    html: Path | None = None
 
 
 def _refused(settings: CalibrateSettings) -> None:
@@ -76,10 +79,11 @@ def _refused(settings: CalibrateSettings) -> None:
 
 def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str | Path], out_urdf: str | Path,
                          report_path: str | Path, targets: Sequence[TargetSpec], settings: CalibrateSettings,
-                         progress: Progress | None = None) -> TreeCalibrationRun:
+                         progress: Progress | None = None, html: str | Path | None = None) -> TreeCalibrationRun:
     """Calibrate every one of ``targets`` (:func:`pincal.model.tree.parse_targets` of the ``--tip-link``
     values) on ``data_path`` in one fit, as ``settings`` say (its ``tip_link`` is not read); write the
-    corrected URDF (every calibrated chain's joint origins, checked by reloading it) and the report.
+    corrected URDF (every calibrated chain's joint origins, checked by reloading it) and the report, and with
+    ``html`` the report's page (each target's errors before and after: :mod:`pincal.report.tree_html`).
 
     An empty cell of a point is that point not seen in the row (occlusion): only it is left out.
     """
@@ -89,6 +93,7 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     inputs = [*description_inputs(urdf, settings.xacro_args), *data_paths]
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    page_path = refuse_page(html, inputs, [out_urdf, report_path])
     tree = KinematicTree.from_urdf(urdf, targets, xacro_args=settings.xacro_args)
     data, notes = read_sessions(data_paths, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
     options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
@@ -120,8 +125,10 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     report = tree_report(result, nominal, tree, sources, notes,
                          (digest, dict(xacro_arguments(settings.xacro_args))))
     report["warnings"] = findings_json(warnings)
+    page = render_page(page_path, report, report_path)
     write_report(report_path, report)
-    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error, withheld)
+    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error, withheld,
+                              write_page(page_path, page))
 
 
 class _Withheld(Exception):

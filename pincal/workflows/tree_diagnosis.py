@@ -79,8 +79,7 @@ def _refused(settings: DiagnoseSettings, outputs: DiagnoseOutputs) -> None:
     for refused, flag in ((settings.level in ("auto", "dh"), f"--level {settings.level}"),
                           (settings.tool_pose is not None, "--tool"), (bool(settings.couplings), "--coupling"),
                           (settings.payload_kg > 0, "--payload-kg"), (outputs.plots_dir is not None, "--plots"),
-                          (settings.temperature_column is not None, "--temperature-column"),
-                          (outputs.html is not None, "--html")):
+                          (settings.temperature_column is not None, "--temperature-column")):
         if refused:
             raise PincalError(f"several --tip-link: diagnose {flag} is not yet supported; leave it out (--level "
                               "registration, offsets or full)")
