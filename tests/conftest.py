@@ -79,7 +79,7 @@ SCHEMA_PATH = Path(__file__).resolve().parents[1] / "docs" / "report.schema.json
 DOCUMENT_WRITERS = ("pincal.report.document", "pincal.planning.files")
 #: A document's kind in the schema (None: a REPORT.json, its top level) by a key only that kind has.
 DOCUMENT_KINDS = {"report_version": None, "plan_version": "PlanJson", "not_held_out": "FixtureEvaluationJson",
-                  "skipped_cpa_rows": "EvaluationJson"}
+                  "skipped_cpa_rows": "EvaluationJson", "evaluated_targets": "TreeEvaluationJson"}
 _validators: dict[str | None, jsonschema.protocols.Validator] = {}
 
 

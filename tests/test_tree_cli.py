@@ -97,8 +97,12 @@ def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
     left, right = (line.split() for line in printed[2:4])
     assert left[:2] == ["left_marker", "9"] and right[:2] == ["right_marker", "20"]  # point 1 not seen once
     assert float(left[-1]) < 1e-6 and float(right[-1]) < 1e-6  # noise-free rows: the truth predicted
-    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(folder / "e.json")]) == 2
-    assert "several --tip-link: evaluate --json is not yet supported" in capsys.readouterr().err
+    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(folder / "e.json")]) == 0
+    document = json.loads((folder / "e.json").read_text(encoding="utf-8"))  # what it printed, per target
+    assert [(t["tip_link"], t["points"], t["errors"]["seen"]) for t in document["evaluated_targets"]] == [
+        ("left_marker", [1], 9), ("right_marker", [2, 3], 20)]
+    assert document["rows"] == 10 and document["max_mm"] < 1e-6
+    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(held_out)]) == 2  # an input
 
 
 def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files, capsys):

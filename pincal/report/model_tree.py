@@ -22,7 +22,7 @@ from pincal.report.model import (
 from pincal.report.model_diagnosis import CandidateJson, EffectJson
 
 __all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeCandidateJson", "TreeBeforeAfter",
-           "TreeStepJson", "TreeDiagnosisJson", "TreeReport"]
+           "TreeStepJson", "TreeDiagnosisJson", "TreeReport", "TreeEvaluationTarget", "TreeEvaluationJson"]
 
 
 class _TreeChainKeys(TypedDict):
@@ -140,3 +140,24 @@ class TreeReport(RunHead, _TreeDiagnosisKeys):
     warnings: list[Finding]
     urdf_sha256: Sha256
     xacro_args: dict[str, str]
+
+
+class TreeEvaluationTarget(TypedDict):
+    """One target of ``evaluate --json`` of a tree's report: its link, its points, and their errors on the
+    evaluated rows (None: none of its points seen there)."""
+
+    tip_link: str
+    points: list[int]
+    errors: TargetErrors | None
+
+
+class TreeEvaluationJson(TypedDict):
+    """``pincal evaluate --json`` of a REPORT.json of several ``--tip-link``: how many rows were evaluated, how
+    each session was registered, each target's errors (``evaluated_targets``), the largest error of any point
+    [mm] (what ``--max-pos-mm`` judges), and the notes."""
+
+    rows: int
+    registrations: list[str]
+    evaluated_targets: list[TreeEvaluationTarget]
+    max_mm: float
+    notes: list[str]
