@@ -12,11 +12,11 @@ and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts
 
     ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m) < EVIDENCE = −10      (Schwarz 1978; Kass & Raftery 1995)
 
-on the calibration rows (m: their seen coordinates; the noise scale held at the calibration's), a value some
-:data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of some measured coordinate of
-at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out rows better on them beyond
-their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`). The search stops when
-no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+on the calibration rows (m: their seen coordinates; the noise scale the current model's, re-estimated after
+each adoption), a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of
+some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out
+rows better on them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`).
+The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
 
 Not yet as with one chain: a coupling nearer ±1 tried as a joint read against another (it stays an effect),
 two candidates that correct alike named together, thermal and pause steps, a payload, the generic check for
@@ -48,7 +48,6 @@ from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, effect_basis, offset
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.pipeline import KEPT
 from pincal.fit.prior import PriorResidual, standard_deviations
 from pincal.fit.sessions import session_rows
 from pincal.fit.solver import Solution, solve
@@ -213,7 +212,7 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     inputs = tree_inputs(tree, used, time, loads=unknown)
     pool = list(options.candidates) if options.candidates is not None else tree_candidates(tree, time is not None)
     pool, untestable = testable_pool(pool, inputs, TreeBody(tree), unknown)
-    kept = np.flatnonzero(np.asarray(calibration.status) == KEPT)
+    kept = calibration.kept  # under a prior also the parameters it holds near nominal: free in the fit
     problem = TreeProblem(tree, calibration.params, rows, calibration.target, row_weights(used, options.sigma_column),
                           calibration.session_names, sigma_pos=calibration.sigma_pos_m, prior=calibration.prior_sigma,
                           effects=ModelledEffects((), inputs))
@@ -234,11 +233,23 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     adopted: list[Effect] = []
     steps: list[TreeStep] = []
     ranking: tuple[TreeCandidate, ...] = ()
+    notes: list[str] = []
     while len(adopted) < MAX_EFFECTS:
         chosen, ranking = _step(search, inputs, (objective, solution), adopted, pool, counter)
         if chosen is None:
             break
         effect, new_objective, new_solution, delta = chosen
+        # refitted at the noise scale of its residual (maximum likelihood; with a prior, eq P2), as the single
+        # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
+        # strongly against the rows, and what it held would be left for the next candidates to imitate
+        search = replace(search, problem=search.problem.rescaled(cast(TreeResidual | PriorResidual, new_objective),
+                                                                 new_solution))
+        try:
+            new_objective, new_solution = search.fit([*adopted, effect], new_solution.x)
+        except CalibrationError as error:  # sparse data: with the scale re-estimated it is not determined
+            notes.append(f"{effect.label} not adopted: its refit with the noise re-estimated fails ({error}); the "
+                         "search stops here")
+            break
         values = new_solution.x[new_objective.effect_slices[-1]]
         std = standard_deviations(new_objective, new_solution)[new_objective.effect_slices[-1]]
         steps.append(TreeStep(effect, values, std, delta, search.errors(objective, solution.x),
@@ -248,7 +259,7 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
                               ranking))
         adopted.append(effect)
         objective, solution = new_objective, new_solution
-    return _concluded(search, (objective, solution), adopted, steps, ranking, untestable, unknown, time)
+    return _concluded(search, (objective, solution), (adopted, steps, ranking), untestable, unknown, time, notes)
 
 
 def _step(search: _Search, inputs: EffectInputs, current: tuple[FitObjective, Solution], adopted: list[Effect],
@@ -325,10 +336,12 @@ def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tu
                             search.noise, None)
 
 
-def _concluded(search: _Search, final: tuple[FitObjective, Solution], adopted: Sequence[Effect],
-               steps: Sequence[TreeStep], ranking: tuple[TreeCandidate, ...], untestable: Sequence[Effect],
-               unknown: bool, time: np.ndarray | None) -> TreeDiagnosis:
-    """The final model as a value: the tree vector, placements, target and errors of the last fit."""
+def _concluded(search: _Search, final: tuple[FitObjective, Solution],
+               found: tuple[Sequence[Effect], Sequence[TreeStep], tuple[TreeCandidate, ...]],
+               untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None, notes: list[str]) -> TreeDiagnosis:
+    """The final model as a value: the tree vector, placements, target and errors of the last fit; ``found``: the
+    effects adopted, their steps and the last step's ranking."""
+    adopted, steps, ranking = found
     objective, solution = final
     problem = search.problem
     kinematic = objective.blocks["kinematic"]
@@ -338,7 +351,6 @@ def _concluded(search: _Search, final: tuple[FitObjective, Solution], adopted: S
     errors = search.errors(objective, solution.x)
     seen = errors[np.isfinite(errors)]
     effects = tuple((effect, solution.x[sl], std_all[sl]) for effect, sl in zip(adopted, objective.effect_slices))
-    notes = []
     if untestable:
         notes.append(f"{len(untestable)} candidate(s) cannot be tested on these rows ("
                      f"{', '.join(e.label for e in untestable[:4])}{' ...' if len(untestable) > 4 else ''}): "

@@ -18,7 +18,7 @@ silently different).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import cast
 
 import numpy as np
@@ -67,6 +67,8 @@ class TreeCalibration:
         total_seconds: the calibration's time [s].
         prior_sigma: σ_i of every tree parameter under ``--select prior`` (eq P1), None otherwise: the prior
             ``diagnose`` keeps on the geometry.
+        kept: the tree parameters the fit had free (indices, sorted): those ``calibrated`` and, under a prior,
+            those it holds near nominal (``status`` says which); the geometry ``diagnose`` refits.
     """
 
     level: ChainLevel
@@ -89,6 +91,7 @@ class TreeCalibration:
     notes: tuple[str, ...]
     total_seconds: float
     prior_sigma: np.ndarray | None = None
+    kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=np.intp))
 
     @property
     def rms_m(self) -> float:
@@ -231,4 +234,5 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         row_sessions=rows.sessions, point_errors=tree_objective.point_errors(fit.solution.x, weights),
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
-        notes=tuple(notes), total_seconds=time.perf_counter() - started, prior_sigma=problem.prior)
+        notes=tuple(notes), total_seconds=time.perf_counter() - started, prior_sigma=problem.prior,
+        kept=np.sort(np.asarray(fit.kept, dtype=np.intp)))
