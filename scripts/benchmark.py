@@ -739,10 +739,10 @@ def _tree_rows(tree, params, rows: int, seed: int, compliance: float):
     q = rng.uniform(np.maximum(lower, -1.5), np.minimum(upper, 1.5), (rows, tree.n_joints))
     local = [np.array([[0.0, 0.0, -0.1]])] * len(TREE_TARGETS)  # 10 cm beyond each gripper's base [m]
     actual = q.copy()
-    if compliance:
-        joint = tree.joint_names.index(TREE_COMPLIANCE[0])
-        actual[:, joint] += compliance * gravity_torques(TreeBody(tree), q)[:, joint]
-    with tree.placed(params.placements(rng.normal(0.0, 5e-4, params.size))):
+    with tree.placed(params.placements(rng.normal(0.0, 5e-4, params.size))):  # the true geometry, its loads
+        if compliance:
+            joint = tree.joint_names.index(TREE_COMPLIANCE[0])
+            actual[:, joint] += compliance * gravity_torques(TreeBody(tree), q)[:, joint]
         world = tree.target_points(actual, local)
     return q, (world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
                + rng.normal(0.0, 1e-4, world.shape))

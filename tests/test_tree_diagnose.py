@@ -100,7 +100,7 @@ def test_diagnose_names_the_torso_compliance_and_brings_each_target_to_the_noise
     assert main(["evaluate", str(out), str(report_path), str(folder / "held.csv")]) == 0
     rows = [line.split() for line in capsys.readouterr().out.splitlines()[2:4]]
     for row, target in zip(rows, report["targets"]):
-        # its loads at the corrected URDF's geometry, diagnose's at the nominal: within 2 %
+        # its loads at the corrected URDF's geometry, diagnose's at the URDF's: within 2 %
         assert float(row[3]) == pytest.approx(target["validation_errors"]["position"]["rms_mm"], rel=0.02)
 
 

@@ -51,9 +51,9 @@ def compliant_rows(tree, params, truth, compliance, n_rows, rng, sigma_m=1e-4, l
     local = [np.array([[0.01, 0.0, 0.02]]), np.array([[0.0, 0.01, 0.0]])] if local is None else local
     q = rng.uniform(-1.2, 1.2, (n_rows, tree.n_joints))
     actual = q.copy()
-    actual[:, 1] += compliance * gravity_torques(TreeBody(tree), q)[:, 1]  # torso_2 at its reading + c tau
-    actual[:, 1] += backlash * approach_flank(q[:, 1], np.arange(n_rows))
-    with tree.placed(params.placements(truth)):
+    with tree.placed(params.placements(truth)):  # the loads of the true geometry, as a robot's
+        actual[:, 1] += compliance * gravity_torques(TreeBody(tree), q)[:, 1]  # torso_2 at its reading + c tau
+        actual[:, 1] += backlash * approach_flank(q[:, 1], np.arange(n_rows))
         world = tree.target_points(actual, local)
     sensed = world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
     return q, sensed + rng.normal(0.0, sigma_m, sensed.shape)

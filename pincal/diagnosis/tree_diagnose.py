@@ -30,10 +30,11 @@ from dataclasses import dataclass, replace
 from typing import cast
 
 import numpy as np
+import scipy.stats
 
 from pincal.diagnosis.catalogue import candidate_effects
 from pincal.diagnosis.diagnose import MAX_EFFECTS, DiagnoseOptions
-from pincal.diagnosis.held_out import HELD_OUT_Z, held_out_verdict
+from pincal.diagnosis.held_out import HELD_OUT_LEVEL, HELD_OUT_Z, held_out_verdict
 from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
 from pincal.diagnosis.screening import (
     FitObjective,
@@ -48,9 +49,9 @@ from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, effect_basis, offset
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import PriorResidual, standard_deviations
+from pincal.fit.prior import PriorResidual, posterior, standard_deviations
 from pincal.fit.sessions import session_rows
-from pincal.fit.solver import Solution, solve
+from pincal.fit.solver import Solution, gram, solve
 from pincal.fit.tree_calibration import TreeCalibration, tree_rows
 from pincal.fit.tree_problem import TreeProblem
 from pincal.measurements.data import MeasurementSet
@@ -61,8 +62,8 @@ from pincal.progress import Counter, Progress
 from pincal.residuals.sensor_values import ModelledEffects, TargetEstimate
 from pincal.residuals.tree import TreeResidual
 
-__all__ = ["SHORTLIST", "DETERMINED_Z", "TreeStep", "TreeCandidate", "TreeDiagnosis", "tree_candidates",
-           "diagnose_tree"]
+__all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "TreeStep", "TreeCandidate", "TreeDiagnosis",
+           "tree_candidates", "diagnose_tree"]
 
 #: Candidates fitted in full per step, the best of the screen that may reach the evidence cut: the single
 #: chain's "first eight" (:mod:`pincal.diagnosis.diagnose`, screening).
@@ -74,6 +75,10 @@ SHORTLIST = 8
 #: :mod:`pincal.diagnosis.held_out`) passes the cut only through the prior's rows — a direction of the geometry
 #: the prior held (a sensor scale against every length), freed; not through the data.
 DETERMINED_Z = HELD_OUT_Z
+#: The same level for an effect of any number of values (a compliance over mass moments: each value alone may
+#: be undetermined, their combination not): Wald's χ² of the values above its quantile at 1 − 2 Φ(−2) (one
+#: value: χ² = (v/σ)² ≥ 4, |v| ≥ 2σ).
+DETERMINED_LEVEL = 1.0 - 2.0 * HELD_OUT_LEVEL
 
 
 @dataclass(frozen=True)
@@ -209,6 +214,8 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     rows = tree_rows(tree, used, calibration.row_sessions)
     time = None if options.time is None else np.asarray(options.time, dtype=float)[calibration.used_index]
     unknown = masses_unknown(TreeBody(tree), options.masses, 0.0)
+    # the loads at the URDF's geometry: at the calibrated one a mass-moment column the URDF's symmetry makes
+    # dependent (a combination the rows cannot determine) becomes independent by a hair, its value unbounded
     inputs = tree_inputs(tree, used, time, loads=unknown)
     pool = list(options.candidates) if options.candidates is not None else tree_candidates(tree, time is not None)
     pool, untestable = testable_pool(pool, inputs, TreeBody(tree), unknown)
@@ -314,11 +321,11 @@ def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tu
     values = solution.x[objective.effect_slices[-1]]
     if delta >= EVIDENCE:
         return f"ΔBIC {delta:.1f} not below {EVIDENCE:g}"
-    spread = standard_deviations(objective, solution)[objective.effect_slices[-1]]
-    if not np.max(np.abs(values) / np.maximum(spread, 1e-300)) >= DETERMINED_Z:
-        return (f"its value {np.round(values, 6).tolist()} is within {DETERMINED_Z:g} standard deviations "
-                f"({np.round(spread, 6).tolist()}) of zero: its ΔBIC is gained by the geometry it frees, not by a "
-                "value the rows determine")
+    wald = _wald(objective, solution)
+    if wald < float(scipy.stats.chi2.ppf(DETERMINED_LEVEL, values.size)):  # one value: |v| < 2σ
+        return (f"its value {np.round(values, 6).tolist()} is not {DETERMINED_Z:g} standard deviations from zero "
+                f"(Wald χ² {wald:.3g} over {values.size} value(s)): its ΔBIC is gained by the geometry it frees, not "
+                "by a value the rows determine")
     if not plausible(effect, values, body):
         return f"its value {np.round(values, 6).tolist()} is outside the physical range (a stand-in for something else)"
     sl = objective.effect_slices[-1]
@@ -334,6 +341,19 @@ def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tu
     # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
     return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
                             search.noise, None)
+
+
+def _wald(objective: FitObjective, solution: Solution) -> float:
+    """Wald's statistic vᵀ C⁻¹ v of the last effect's values v, C their covariance: the posterior's under a prior
+    (:func:`pincal.fit.prior.posterior`), else the solver's s² (JᵀJ)⁻¹ (:func:`pincal.fit.solver.solve`)."""
+    jacobian, residual, sl = solution.jacobian, solution.residual, objective.effect_slices[-1]
+    if isinstance(objective, PriorResidual):
+        covariance, _ = posterior(jacobian, residual, objective.n_prior, objective.noise)
+    else:
+        covariance = float(residual @ residual) / max(jacobian.shape[0] - jacobian.shape[1], 1) * np.linalg.inv(
+            gram(jacobian))
+    values = solution.x[sl]
+    return float(values @ np.linalg.lstsq(covariance[sl, sl], values, rcond=None)[0])
 
 
 def _concluded(search: _Search, final: tuple[FitObjective, Solution],

@@ -27,7 +27,8 @@ __all__ = ["TreeBody", "tree_inputs", "target_inputs", "acting_on"]
 
 class TreeBody(KinematicChain):
     """The tree's joints as one Pinocchio model, with the interface of a chain's loads: :attr:`model` (the URDF
-    with the joints off every target's chain locked at neutral), :attr:`joints` in the tree's order,
+    with the joints off every target's chain locked at neutral, each joint placed where its chain has it: inside
+    :meth:`KinematicTree.placed`, the calibrated geometry), :attr:`joints` in the tree's order,
     :meth:`configurations` and the ``<mimic>`` followers' columns. Only for loads and candidates of effects:
     its tool is the identity at the first target's tip link, and its poses are those of no target."""
 
@@ -36,6 +37,10 @@ class TreeBody(KinematicChain):
         ids = [model.getJointId(name) for name in tree.joint_names]
         locked = [j for j in range(1, model.njoints) if j not in ids]
         reduced = reduced_model(model, locked) if locked else model.copy()
+        for target in tree.targets:  # each joint where its chain has it now (inside tree.placed: the calibrated)
+            chain = target.chain.model
+            for name in target.chain.joint_names:
+                reduced.jointPlacements[reduced.getJointId(name)] = chain.jointPlacements[chain.getJointId(name)]
         self.model = reduced
         self.data = reduced.createData()
         self.source = tree.source
