@@ -111,8 +111,12 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     if not diagnosis.steps:
         print("  nothing significant: no effect is claimed")
     for entry in report.get("effects", []):
-        if "advice" in entry:
+        if "advice" in entry:  # what a compliance's sign means, what a coupling asks of the data
             print(f"  {entry['advice']}")
+        moments = entry.get("value")  # a mass-moment compliance's values, each a combination in words
+        shown: list[float] = moments if isinstance(moments, list) else []
+        for words, number in zip(entry.get("combinations", ()), shown):
+            print(f"  {number:.4g} = {words}")
     held = any(t.get("validation_errors") for t in report["targets"])
     print(f"{'target (points)':32s} {'RMS geometry':>13s} {'RMS final':>10s}"
           + (f" {'held-out geometry':>18s} {'held-out final':>15s}" if held else "") + "  [mm]")
