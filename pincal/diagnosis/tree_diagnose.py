@@ -45,7 +45,7 @@ from pincal.diagnosis.screening import (
     residual_freedom,
     testable,
 )
-from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, effect_basis, offset_like, plausible
+from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, NOISE_FLOOR, effect_basis, offset_like, plausible
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.metrics import PoseErrors
@@ -162,14 +162,21 @@ def tree_candidates(tree: KinematicTree, has_time: bool) -> list[Effect]:
 @dataclass(frozen=True)
 class _Search:
     """What the search holds fixed: the problem (with the tree's effect inputs), the fitted geometry's
-    indices and base vector, the held-out rows' problem (None without them), the noise the held-out
-    test judges in [m]."""
+    indices and base vector, the held-out rows' problem (None without them), the sensor's stated position
+    noise per axis [m] (``--sigma-pos``; None: the fits' own)."""
 
     problem: TreeProblem
     kept: np.ndarray
     base: np.ndarray
     held: TreeProblem | None
-    noise: float
+    stated: float | None
+
+    def judged_noise(self, objective: FitObjective, solution: Solution) -> float:
+        """The noise [m] a held-out test judges in: the stated one, else the smaller of the current model's and
+        the candidate's fit's (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`: a model far off the data puts
+        its own estimate too high), at least :data:`pincal.diagnosis.verdicts.NOISE_FLOOR`."""
+        fitted = self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution).sigma_pos
+        return self.stated or max(min(self.problem.sigma_pos, fitted), NOISE_FLOOR)
 
     def fit(self, effects: Sequence[Effect], x0: np.ndarray | None = None) -> tuple[FitObjective, Solution]:
         objective = self.objective(self.problem, effects)
@@ -234,7 +241,7 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
         held = replace(problem, rows=held_rows, row_weight=np.ones(heldout.n_rows), sigma_pos=1.0,
                        effects=ModelledEffects((), held_inputs))
     search = _Search(problem, kept, calibration.vector, held,
-                     options.stated_sigma_pos_m or calibration.sigma_pos_m)
+                     options.stated_sigma_pos_m)
     counter = Counter(progress)
     objective, solution = search.fit([])
     adopted: list[Effect] = []
@@ -340,7 +347,7 @@ def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tu
         return "adopted"
     # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
     return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
-                            search.noise, None)
+                            search.judged_noise(objective, solution), None)
 
 
 def _wald(objective: FitObjective, solution: Solution) -> float:
