@@ -43,6 +43,8 @@ _DEFINED_IN = {
     "pincal.workflows.calibration": ("CalibrationRun", "calibrate_files"),
     "pincal.workflows.tree_calibration": ("TreeCalibrationRun", "calibrate_tree_files"),
     "pincal.workflows.tree_evaluation": ("TreeEvaluation", "evaluate_tree_files"),
+    "pincal.workflows.tree_diagnosis": ("TreeDiagnoseRun", "diagnose_tree_files"),
+    "pincal.diagnosis.tree_diagnose": ("TreeDiagnosis", "diagnose_tree"),
     "pincal.workflows.diagnosis": ("DiagnoseOutputs", "DiagnoseRun", "diagnose_files"),
     "pincal.workflows.evaluation": ("Evaluation", "SessionEvaluation", "evaluate_files"),
     "pincal.workflows.evaluation_outputs": ("EvaluateOutputs", "EvaluateRun", "ThresholdFailure", "evaluate_and_write"),
@@ -67,6 +69,7 @@ _DEFINED_IN = {
 }
 
 if TYPE_CHECKING:  # what static analysers see; at run time the names come from __getattr__
+    from pincal.diagnosis.tree_diagnose import TreeDiagnosis, diagnose_tree
     from pincal.fit.chain_calibration import ChainCalibration, ChainFitOptions, calibrate_chain
     from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
     from pincal.fit.level_choice import LevelChoice, choose_fixture_level, choose_level
@@ -150,6 +153,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
     from pincal.workflows.settings import CalibrateSettings, DiagnoseSettings, EvaluateSettings
     from pincal.workflows.simulation import simulate_to_directory
     from pincal.workflows.tree_calibration import TreeCalibrationRun, calibrate_tree_files
+    from pincal.workflows.tree_diagnosis import TreeDiagnoseRun, diagnose_tree_files
     from pincal.workflows.tree_evaluation import TreeEvaluation, evaluate_tree_files
 
 __all__ = [
@@ -274,6 +278,10 @@ __all__ = [
     "calibrate_tree_files",
     "TreeEvaluation",
     "evaluate_tree_files",
+    "TreeDiagnoseRun",
+    "diagnose_tree_files",
+    "TreeDiagnosis",
+    "diagnose_tree",
 ]
 
 _ON_FIRST_USE = {name: module for module, names in _DEFINED_IN.items() for name in names}

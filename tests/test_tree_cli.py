@@ -11,7 +11,6 @@ import pytest
 from tree_robot import two_arm_urdf
 
 from pincal.cli.commands import main
-from pincal.errors import PincalError
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
 from pincal.report.reading import PAGE_KINDS, load_report
@@ -79,14 +78,14 @@ def test_calibrate_several_targets_writes_every_chain_and_each_targets_errors(fi
 
 
 @pytest.mark.parametrize(("command", "extra"), [
-    ("diagnose", ["DATA", "--out", "o.urdf", "--report", "r.json"]),
     ("plan", ["--count", "5", "--out", "p.csv", "--report", "p.json"]),
 ])
 def test_commands_of_one_chain_refuse_several_tip_links(files, capsys, command, extra):
     folder, urdf, data, *_ = files
     extra = [str(data) if e == "DATA" else str(folder / e) if "." in e else e for e in extra]
     assert main([command, str(urdf), *TARGETS, *extra]) == 2
-    assert f"several --tip-link: not yet supported by {command}; calibrate is" in capsys.readouterr().err
+    assert f"several --tip-link: not yet supported by {command}; calibrate, diagnose and evaluate are" in \
+        capsys.readouterr().err
     assert not (folder / "o.urdf").exists() and not (folder / "p.csv").exists()
 
 
@@ -98,8 +97,12 @@ def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
     left, right = (line.split() for line in printed[2:4])
     assert left[:2] == ["left_marker", "9"] and right[:2] == ["right_marker", "20"]  # point 1 not seen once
     assert float(left[-1]) < 1e-6 and float(right[-1]) < 1e-6  # noise-free rows: the truth predicted
-    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(folder / "e.json")]) == 2
-    assert "several --tip-link: evaluate --json is not yet supported" in capsys.readouterr().err
+    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(folder / "e.json")]) == 0
+    document = json.loads((folder / "e.json").read_text(encoding="utf-8"))  # what it printed, per target
+    assert [(t["tip_link"], t["points"], t["errors"]["seen"]) for t in document["evaluated_targets"]] == [
+        ("left_marker", [1], 9), ("right_marker", [2, 3], 20)]
+    assert document["rows"] == 10 and document["max_mm"] < 1e-6
+    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(held_out)]) == 2  # an input
 
 
 def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files, capsys):
@@ -134,10 +137,17 @@ def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files,
     assert f"{cpa}: no measured point in a row that is not role=cpa" in capsys.readouterr().err
 
 
-def test_the_report_page_refuses_a_trees_report(files):
-    *_, report, _, _, _ = files
-    with pytest.raises(PincalError, match="several --tip-link, which this command does not take yet"):
-        load_report(report, PAGE_KINDS)  # the page's loader (pincal report, --html)
+def test_the_report_page_shows_each_targets_errors(files, capsys):
+    folder, *_, report, _, _, _ = files
+    assert load_report(report, PAGE_KINDS)["targets"]  # the page's loader (pincal report, --html)
+    assert main(["report", str(report), "--out", str(folder / "tree.html")]) == 0
+    page = (folder / "tree.html").read_text(encoding="utf-8")
+    assert 'id="targets-table"' in page and "Calibration (full) of 2 targets" in page
+    document = json.loads(report.read_text(encoding="utf-8"))
+    for target in document["targets"]:  # each target's line: its link, its RMS before and after as the report's
+        before, after = target["nominal_errors"]["position"]["rms_mm"], target["calibration_errors"]["position"]
+        assert f"<td>{target['tip_link']}</td>" in page and f"<td>{before:.3f}</td>" in page
+        assert f"<td>{after['rms_mm']:.3f}</td>" in page
 
 
 def test_one_tip_link_keeps_refusing_an_empty_point_cell(files, capsys):

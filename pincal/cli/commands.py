@@ -20,7 +20,7 @@ from pincal.cli.arguments import selection_criterion
 from pincal.cli.error_table import HEADER, error_columns, point_rows
 from pincal.cli.paper_commands import demo_command, simulate_command, study_command
 from pincal.cli.parser import build_parser
-from pincal.cli.tree import is_tree_report, one_tip_link, run_calibrate_tree, run_evaluate_tree
+from pincal.cli.tree import is_tree_report, one_tip_link, run_calibrate_tree, run_diagnose_tree, run_evaluate_tree
 from pincal.errors import PincalError
 
 if TYPE_CHECKING:
@@ -432,6 +432,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)  # no numpy, scipy or Pinocchio yet: --help and refusals are quick
     try:
         with _blas_limited_to_one_thread():
+            if args.command == "diagnose" and not isinstance(args.tip_link, str) and args.tip_link is not None \
+                    and len(args.tip_link) > 1:
+                tree_report, tree_withheld = run_diagnose_tree(args)  # several targets on several chains
+                return _warned(tree_report, args.strict, tree_withheld)
             if args.command == "diagnose" or (args.command == "plan" and args.camera_link is None):
                 args.tip_link = one_tip_link(args.command, args.tip_link)
             return _COMMANDS[args.command](args)

@@ -17,11 +17,11 @@ from pincal.errors import PincalError
 if TYPE_CHECKING:
     from pincal.report.model_tree import TreeReport
 
-__all__ = ["one_tip_link", "run_calibrate_tree", "is_tree_report", "run_evaluate_tree"]
+__all__ = ["one_tip_link", "run_calibrate_tree", "run_diagnose_tree", "is_tree_report", "run_evaluate_tree"]
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
 _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
-            ("html", "--html (the HTML report)"), ("reject_outliers", "--reject-outliers"),
+            ("reject_outliers", "--reject-outliers"),
             ("coupling", "--coupling"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
 
 
@@ -34,8 +34,8 @@ def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
     if isinstance(tip_links, str):
         return tip_links
     if len(tip_links) > 1:
-        raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate is (pincal calibrate "
-                          "... --tip-link LINK:POINTS --tip-link LINK:POINTS)")
+        raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate, diagnose and evaluate "
+                          "are (pincal calibrate ... --tip-link LINK:POINTS --tip-link LINK:POINTS)")
     return tip_links[0]
 
 
@@ -59,7 +59,8 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
                                  sigma_column=args.sigma_column, selection=selection_criterion(args),
                                  sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args, force=args.force)
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
-        run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress)
+        run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress,
+                                   html=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     result = run.result
@@ -77,7 +78,71 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     else:
         print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
     print(f"wrote {args.report}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
     return run.report, run.withheld
+
+
+def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
+    """Diagnose the targets of ``args.tip_link`` (several ``LINK:POINTS``): calibrate them in one fit, search the
+    tree's residuals for effects, print each effect adopted and each target's errors before and after, write the
+    URDF, effects.yaml and REPORT.json; the report (its warnings for the caller to print) and whether the URDF was
+    withheld."""
+    from pincal.model.effect_units import effect_unit
+    from pincal.model.tree import parse_targets
+    from pincal.workflows.diagnosis import DiagnoseOutputs
+    from pincal.workflows.settings import DiagnoseSettings
+    from pincal.workflows.tree_diagnosis import diagnose_tree_files
+
+    targets = parse_targets(args.tip_link)
+    settings = DiagnoseSettings(tip_link=targets[0].link, level=args.level, tool_pose=args.tool,
+                                sigma_column=args.sigma_column, selection=selection_criterion(args),
+                                payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
+                                xacro_args=args.xacro_args, couplings=args.coupling or (),
+                                temperature_column=args.temperature_column, force=args.force, masses=args.masses,
+                                **({} if args.pause_s is None else {"pause_s": args.pause_s}))
+    run = diagnose_tree_files(args.urdf, args.data, args.out, args.report, targets, settings,
+                              validation_path=args.validation, outputs=DiagnoseOutputs(args.plots, args.html))
+    for note in run.notes:
+        print(f"pincal: note: {note}", file=sys.stderr)
+    report, diagnosis = run.report, run.diagnosis
+    kinds = dict(zip(report["chain"]["joints"], report["chain"]["joint_kinds"]))
+    print(f"geometric calibration ({run.calibration.level}, {len(targets)} targets), then {len(diagnosis.steps)} "
+          f"effect(s) adopted; masses: {report['diagnosis']['masses']}")
+    for step in diagnosis.steps:
+        value = ", ".join(f"{v:.4g}±{s:.2g}" for v, s in zip(step.values, step.std))
+        print(f"  {step.effect.label:36s} {value} {effect_unit(step.effect, kinds)}  dBIC {step.delta_bic:.1f}")
+    if not diagnosis.steps:
+        print("  nothing significant: no effect is claimed")
+    for entry in report.get("effects", []):
+        if "advice" in entry:  # what a compliance's sign means, what a coupling asks of the data
+            print(f"  {entry['advice']}")
+        moments = entry.get("value")  # a mass-moment compliance's values, each a combination in words
+        shown: list[float] = moments if isinstance(moments, list) else []
+        for words, number in zip(entry.get("combinations", ()), shown):
+            print(f"  {number:.4g} = {words}")
+    held = any(t.get("validation_errors") for t in report["targets"])
+    print(f"{'target (points)':32s} {'RMS geometry':>13s} {'RMS final':>10s}"
+          + (f" {'held-out geometry':>18s} {'held-out final':>15s}" if held else "") + "  [mm]")
+    for target in report["targets"]:
+        name = f"{target['tip_link']} ({','.join(map(str, target['points']))})"
+        line = (f"{name:32s} {target['geometry_errors']['position']['rms_mm']:13.3f} "
+                f"{target['calibration_errors']['position']['rms_mm']:10.3f}")
+        before, after = target.get("validation_geometry_errors"), target.get("validation_errors")
+        if held:
+            line += (f" {before['position']['rms_mm']:18.3f} {after['position']['rms_mm']:15.3f}" if before and after
+                     else f" {'not seen':>18s} {'':>15s}")
+        print(line)
+    if run.withheld:
+        print(f"{args.out}: not written (withheld; --force writes it)")
+    else:
+        print(f"wrote {args.out}")
+    if run.effects_file is not None:
+        print(f"wrote {run.effects_file}")
+    print(f"wrote {args.report}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
+    return report, run.withheld
 
 
 def is_tree_report(path: Path) -> bool:
@@ -96,14 +161,14 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
     from pincal.workflows.settings import EvaluateSettings
     from pincal.workflows.tree_evaluation import evaluate_tree_files
 
-    for attribute, flag in (("json", "--json"), ("html", "--html"), ("nominal", "--nominal")):
+    for attribute, flag in (("html", "--html"), ("nominal", "--nominal")):
         if getattr(args, attribute, None) is not None:
             raise PincalError(f"several --tip-link: evaluate {flag} is not yet supported; leave it out")
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
                                 fixed_registration=args.fixed_registration, new_session=args.new_session,
                                 temperature_column=args.temperature_column, max_pos_mm=args.max_pos_mm,
                                 max_rot_deg=args.max_rot_deg)
-    run = evaluate_tree_files(args.urdf, args.report, args.data, settings)
+    run = evaluate_tree_files(args.urdf, args.report, args.data, settings, json_path=args.json)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
@@ -114,6 +179,8 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
             continue
         stats = errors["position"]
         print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
+    if args.json is not None:
+        print(f"wrote {args.json}")
     if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
         print(f"FAIL: largest position error {run.max_mm:.3f} mm > --max-pos-mm {args.max_pos_mm:g}")
         return 1

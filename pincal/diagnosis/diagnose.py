@@ -58,7 +58,7 @@ from pincal.diagnosis.catalogue import PARALLEL_AXES_RAD, candidate_effects, par
 from pincal.diagnosis.conditions import ConditionSearch, Readings, search_conditions
 from pincal.diagnosis.conventions import ConventionTrial, mimic_words, read_against_words
 from pincal.diagnosis.effect_fits import EffectModel, heldout_errors, pose_errors_of
-from pincal.diagnosis.moment_candidates import masses_unknown, moment_compliances
+from pincal.diagnosis.moment_candidates import NO_TORQUE, masses_unknown, testable_pool
 from pincal.diagnosis.screening import GENERIC_NOT_RUN, FitObjective, bic, n_prior_rows, residual_freedom, testable
 from pincal.diagnosis.steps import (
     CANDIDATE_TOLERANCE,
@@ -95,9 +95,6 @@ __all__ = [
 
 #: Most effects adopted.
 MAX_EFFECTS = 4
-#: Largest |gravity torque| [N·m or N] of a joint over the rows below which it has none: compliance and
-#: gravity-flank backlash cannot be tested there (rounding of Pinocchio's RNEA is ~1e-12).
-NO_TORQUE = 1e-9
 
 @dataclass(frozen=True)
 class Diagnosis:
@@ -307,17 +304,8 @@ def _prepare(chain: KinematicChain, calibration: ChainCalibration,
     if row_time is None:
         pool = [e for e in pool if e.type != "drift"]
     pool += [e for e in conditions.candidates if e not in pool]
-    if unknown:  # compliances follow the carried links' mass moments; what needs the URDF's torques cannot be tested
-        pool, untestable = moment_compliances(pool, inputs, chain)
-    else:  # a joint no gravity torque acts on in any row (a vertical axis; no mass beyond it): nothing to test
-        weightless = {name for j, name in enumerate(chain.joint_names)
-                      if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
-        unbent = {name for j, name in enumerate(chain.joint_names)  # no moment about its lateral axes (eq M3)
-                  if inputs.bending is None or np.max(np.abs(inputs.bending[:, j]), initial=0.0) < NO_TORQUE}
-        untestable = [e for e in pool if ((e.type == "compliance" or e.source == "gravity")
-                                          and (e.driver or e.joint) in weightless)  # a torque coupling: its driver's
-                      or (e.type == "lateral" and e.joint in unbent)]
-    search = Search(chain, calibration, rows, heldout, tuple(e for e in pool if e not in untestable),
+    pool, untestable = testable_pool(pool, inputs, chain, unknown)
+    search = Search(chain, calibration, rows, heldout, tuple(pool),
                     tuple(untestable), settings.sigma_column, payload_kg, point, settings.stated_sigma_pos_m, trial,
                     corrected, conditions, reference, unknown,
                     frozenset(c.joint for c in settings.couplings if c.follows))

@@ -21,8 +21,8 @@ from pincal.model.effects import LATERAL_COMPONENTS, Effect, EffectInputs
 from pincal.model.mass_moments import chain_mass_kg
 from pincal.model.masses import Masses
 
-__all__ = ["REGROUP_MIN", "NO_LOAD", "MomentCombinations", "masses_unknown", "base_combinations",
-           "moment_compliances", "combination_words", "needs_masses", "lateral_moments"]
+__all__ = ["REGROUP_MIN", "NO_LOAD", "NO_TORQUE", "testable_pool", "MomentCombinations", "masses_unknown",
+           "base_combinations", "moment_compliances", "combination_words", "needs_masses", "lateral_moments"]
 
 #: Regrouping coefficients below this are not named in words: an m·c column is a direction cosine, an m column
 #: a lever arm [m], so 1e-3 is 0.1 % of a moment or a millimetre of lever, the size of the calibrated geometry's
@@ -32,6 +32,9 @@ REGROUP_MIN = 1e-3
 #: load that is zero in every row (about a vertical axis) is ~1e-16; 1e-9, as the 1e-9 N·m below which
 #: diagnose calls a joint's URDF torque none (:data:`pincal.diagnosis.diagnose.NO_TORQUE`), is far above it.
 NO_LOAD = 1e-9
+#: Largest |gravity torque| [N·m or N] of a joint over the rows below which it has none: compliance and
+#: gravity-flank backlash cannot be tested there (rounding of Pinocchio's RNEA is ~1e-12).
+NO_TORQUE = 1e-9
 
 
 def masses_unknown(chain: KinematicChain, masses: Masses, payload_kg: float) -> bool:
@@ -119,6 +122,24 @@ def moment_compliances(pool: Sequence[Effect], inputs: EffectInputs,
         else:
             out.append(effect)
     return out, untestable
+
+
+def testable_pool(pool: Sequence[Effect], inputs: EffectInputs, chain: KinematicChain,
+                  unknown: bool) -> tuple[list[Effect], list[Effect]]:
+    """``pool`` as the rows can test it, and the candidates they cannot: with ``unknown`` masses, compliances over
+    mass-moment combinations (:func:`moment_compliances`); otherwise without the compliances and gravity backlash
+    of a joint no gravity torque acts on in any row (a vertical axis; no mass beyond it), a torque coupling
+    without its driver's torque, and the lateral compliance of a joint no moment bends about its lateral axes
+    (eq M3)."""
+    if unknown:
+        return moment_compliances(pool, inputs, chain)
+    weightless = {name for j, name in enumerate(inputs.joint_names) if np.max(np.abs(inputs.gravity[:, j])) < NO_TORQUE}
+    unbent = {name for j, name in enumerate(inputs.joint_names)
+              if inputs.bending is None or np.max(np.abs(inputs.bending[:, j]), initial=0.0) < NO_TORQUE}
+    untestable = [e for e in pool if ((e.type == "compliance" or e.source == "gravity")
+                                      and (e.driver or e.joint) in weightless)  # a torque coupling: its driver's
+                  or (e.type == "lateral" and e.joint in unbent)]
+    return [e for e in pool if e not in untestable], untestable
 
 
 def _term(name: str, coefficient: float | None = None) -> str:

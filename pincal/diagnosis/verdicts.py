@@ -53,7 +53,7 @@ from pincal.model.thermal import implausible
 __all__ = [
     "EVIDENCE", "PLAUSIBLE", "NEGLIGIBLE", "NOISE_FLOOR", "CRITERION", "OFFSET_LIKE", "AMBIGUOUS", "SHOWN", "REJECTED",
     "Candidate", "effect_basis", "Judge", "READ_AGAINST", "coupling_advice", "torque_coupling_advice", "POSITION_ONLY",
-    "TargetChange", "target_changes",
+    "TargetChange", "target_changes", "plausible", "offset_like",
 ]
 
 #: ΔBIC below which the evidence for an effect is "very strong".
@@ -160,7 +160,7 @@ def effect_basis(effect: Effect, inputs: EffectInputs, chain: KinematicChain) ->
     return joint_basis(effect, inputs, chain.joint_names.index(effect.joint))
 
 
-def _offset_like(basis: np.ndarray | None) -> bool:
+def offset_like(basis: np.ndarray | None) -> bool:
     if basis is None:
         return False
     columns = basis.reshape(len(basis), -1)
@@ -168,7 +168,7 @@ def _offset_like(basis: np.ndarray | None) -> bool:
     return bool(np.all(ratio > OFFSET_LIKE))
 
 
-def _plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> bool:
+def plausible(effect: Effect, values: np.ndarray, chain: KinematicChain) -> bool:
     limit = PLAUSIBLE[effect.type][effect_unit(effect, chain.joint_kinds)]
     magnitude = np.hypot(*values) if effect.type == "cyclic" else np.max(np.abs(values))
     return bool(magnitude <= limit)
@@ -443,7 +443,7 @@ class Judge:
         reason = None if std is None else implausible(effect, value, std)
         if reason:
             return reason
-        if not _plausible(effect, value, self.chain):
+        if not plausible(effect, value, self.chain):
             return (f"its value {np.round(value, 6).tolist()} is outside the physical range "
                     "(a stand-in for something else)")
         if objective is not None and solution is not None:  # fitted in full (given together)
@@ -452,7 +452,7 @@ class Judge:
                 return (f"it changes no measured coordinate by more than {largest:.2g} of its noise (below "
                         f"{NEGLIGIBLE:g}): too small to matter, whatever its ΔBIC")
         # a coupling's mean part is the joint offset the geometry has: its ΔBIC and change (above) are its variation's
-        if effect.type != "coupling" and _offset_like(effect_basis(effect, self.inputs, self.chain)):
+        if effect.type != "coupling" and offset_like(effect_basis(effect, self.inputs, self.chain)):
             return "its basis barely changes over the rows, so it acts as a joint offset"
         return None
 

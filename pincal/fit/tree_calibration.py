@@ -66,7 +66,11 @@ class TreeCalibration:
             (``tree.placed(result.tree_placements)``).
         notes: what the user should know.
         total_seconds: the calibration's time [s].
-        kept: the tree parameters estimated, sorted (the kinematic columns of ``covariance``).
+        prior_sigma: σ_i of every tree parameter under ``--select prior`` (eq P1), None otherwise: the prior
+            ``diagnose`` keeps on the geometry.
+        kept: the tree parameters the fit had free (indices, sorted): those ``calibrated`` and, under a prior,
+            those it holds near nominal (``status`` says which); the geometry ``diagnose`` refits; the kinematic
+            columns of ``covariance``.
         covariance: of the fit's unknowns — the kept parameters, the registrations, the points — as the fit
             gives it (with a prior: the posterior) [m², rad², m·rad]; None: not known (a result made elsewhere).
     """
@@ -90,6 +94,7 @@ class TreeCalibration:
     tree_placements: TreePlacements
     notes: tuple[str, ...]
     total_seconds: float
+    prior_sigma: np.ndarray | None = None
     kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=np.intp))
     covariance: np.ndarray | None = None
 
@@ -249,5 +254,5 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         row_sessions=rows.sessions, point_errors=tree_objective.point_errors(fit.solution.x, weights),
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
-        notes=tuple(notes), total_seconds=time.perf_counter() - started, kept=np.asarray(fit.kept, dtype=np.intp),
-        covariance=fit.covariance)
+        notes=tuple(notes), total_seconds=time.perf_counter() - started, prior_sigma=problem.prior,
+        kept=np.sort(np.asarray(fit.kept, dtype=np.intp)), covariance=fit.covariance)

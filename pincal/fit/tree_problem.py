@@ -21,7 +21,7 @@ from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 from pincal.model.tree import KinematicTree
 from pincal.model.tree_parameters import TreeParameters
 from pincal.residuals.sensor import TargetEstimate
-from pincal.residuals.sensor_values import RowWeights
+from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 from pincal.residuals.tree import TreeResidual, TreeRows
 
 __all__ = ["TreeProblem"]
@@ -33,7 +33,8 @@ class TreeProblem:
 
     ``rows``: the measurements; ``start``: the registrations and points to start from; ``row_weight``: each
     row's relative weight (K,); ``sigma_pos``: the position noise scale [m]; ``prior``: σ_i of every tree
-    parameter with ``--select prior`` (eq P1); ``models``: sensitivity models shared by the variants.
+    parameter with ``--select prior`` (eq P1); ``models``: sensitivity models shared by the variants;
+    ``effects``: the effects fitted beside the geometry and the tree's effect inputs (``diagnose``).
     """
 
     tree: KinematicTree
@@ -45,10 +46,11 @@ class TreeProblem:
     sigma_pos: float = START_SIGMA_POS_M
     prior: np.ndarray | None = None
     models: dict[tuple[ParameterSlot, ...], SensitivityModel] = field(default_factory=dict)
+    effects: ModelledEffects | None = None
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> TreeResidual | PriorResidual:
         objective = TreeResidual(self.tree, self.params, free, base, self.rows, self.start,
-                                 RowWeights(self.row_weight / self.sigma_pos), self.models)
+                                 RowWeights(self.row_weight / self.sigma_pos), self.models, self.effects)
         return objective if self.prior is None else PriorResidual(objective, self.prior[free])
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,

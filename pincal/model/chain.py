@@ -29,7 +29,8 @@ from pincal.measurements.mimics import followers
 from pincal.model.description import RobotDescription, read_description
 from pincal.model.urdf_elements import joint_mimics
 
-__all__ = ["ChainJoint", "ChainPoses", "KinematicChain", "points_in_base", "pose_from_xyz_rpy", "xyz_rpy_from_pose"]
+__all__ = ["ChainJoint", "ChainPoses", "KinematicChain", "points_in_base", "pose_from_xyz_rpy", "xyz_rpy_from_pose",
+           "reduced_model"]
 
 _KINDS = {
     "JointModelRX": "revolute",
@@ -153,7 +154,7 @@ class KinematicChain:
         self.beyond_tip_joints, self.other_branch_joints = _off_chain(model, full_tip, support)
         locked = [j for j in range(1, model.njoints) if j not in support]
         if locked:
-            model = _reduced(model, locked)
+            model = reduced_model(model, locked)
         self.model: pin.Model = model
         self.data: pin.Data = model.createData()
         self.source = source
@@ -418,7 +419,7 @@ def _off_chain(model: pin.Model, tip: pin.Frame, support: Sequence[int]) -> tupl
     return beyond, tuple(other)
 
 
-def _reduced(model: pin.Model, locked: list[int]) -> pin.Model:
+def reduced_model(model: pin.Model, locked: list[int]) -> pin.Model:
     """``model`` with the joints ``locked`` fixed at their neutral values (Pinocchio's buildReducedModel).
 
     Pinocchio 3–4 looks frames up by name alone while reducing, so a joint named like a

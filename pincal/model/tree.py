@@ -129,6 +129,8 @@ class KinematicTree:
         names = [model.names[j] for j in order]
         by_name = {j.name: j for chain in chains for j in chain.joints}
         self.source = source
+        #: the whole URDF's Pinocchio model (the loads of effects on shared joints: :mod:`pincal.model.tree_effects`)
+        self.model = model
         self.joints: tuple[ChainJoint, ...] = tuple(by_name[n] for n in names)
         self.n_joints = len(names)
         self.joint_names: tuple[str, ...] = tuple(names)

@@ -3,6 +3,7 @@ diagnosis (:class:`pincal.report.model_diagnosis.DiagnosisReport`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
@@ -28,8 +29,9 @@ from pincal.report.record import ReportRecord
 
 if TYPE_CHECKING:
     from pincal.diagnosis.diagnose import Diagnosis
+    from pincal.model.effects import Effect, EffectInputs
 
-__all__ = ["diagnosis_report", "compliance_words", "moment_compliance_words"]
+__all__ = ["diagnosis_report", "effect_entries", "compliance_words", "moment_compliance_words"]
 
 
 def compliance_words(joint: str, value: float, unit: str) -> str:
@@ -68,6 +70,37 @@ def lateral_words(joint: str, values: list[float] | None, unit: str) -> str:
     return text + (f": here c_u = {values[0]:.3g}, c_v = {values[1]:.3g}" if values else "")
 
 
+def effect_entries(effects: Sequence[tuple[Effect, np.ndarray, np.ndarray]], inputs: EffectInputs,
+                   kinds: Mapping[str, str], given: Mapping[tuple[str, str], float]) -> list[EffectJson]:
+    """REPORT.json's ``effects`` of adopted ``effects`` (values, standard deviations): each
+    :func:`~pincal.model.effects.effect_to_dict` with what to do about it (``advice``), and a compliance of
+    unknown masses what each value stands for (``combinations``, over the rows of ``inputs``); ``kinds``: each
+    joint's kind, ``given``: the factor of each ``--coupling`` (joint, driver)."""
+    from pincal.diagnosis.moment_candidates import combination_words
+    from pincal.diagnosis.verdicts import coupling_advice, torque_coupling_advice
+    from pincal.model.effect_units import effect_unit
+    from pincal.model.effects import effect_to_dict
+
+    out = [cast(EffectJson, effect_to_dict(e, v, s)) for e, v, s in effects]
+    for entry, (effect, values, _) in zip(out, effects):
+        if effect.type == "coupling":  # what to do: correct the readings (±1), or keep it in the model
+            factor = given.get((str(effect.joint), str(effect.driver)))
+            entry["advice"] = coupling_advice(effect, float(values[0]), factor)
+        elif effect.driver:  # a compliance under another joint's torque: what links them
+            entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
+        elif effect.type == "lateral":  # its sign convention, and without masses what each value stands for
+            if effect.moments:
+                entry["combinations"] = combination_words(effect, inputs, False)
+            entry["advice"] = lateral_words(str(effect.joint), None if effect.moments else [float(v) for v in values],
+                                            effect_unit(effect, kinds))
+        elif effect.moments:  # a compliance of unknown masses: what each value stands for, its sign convention
+            entry["combinations"] = combination_words(effect, inputs, kinds[str(effect.joint)] == "prismatic")
+            entry["advice"] = moment_compliance_words(str(effect.joint), effect_unit(effect, kinds))
+        elif effect.type == "compliance":  # its sign convention, where the value is read
+            entry["advice"] = compliance_words(str(effect.joint), float(values[0]), effect_unit(effect, kinds))
+    return out
+
+
 def diagnosis_report(
     head: ChainHead,
     diagnosis: Diagnosis,
@@ -84,10 +117,7 @@ def diagnosis_report(
     ``time_spans``: :func:`pincal.report.sessions.drift_spans`; ``record``: what the run records beside the fit
     (:class:`pincal.report.record.ReportRecord`)."""
     couplings = record.couplings
-    from pincal.diagnosis.moment_candidates import combination_words
-    from pincal.diagnosis.verdicts import CRITERION, coupling_advice, torque_coupling_advice
-    from pincal.model.effect_units import effect_unit
-    from pincal.model.effects import effect_to_dict
+    from pincal.diagnosis.verdicts import CRITERION
 
     def errors(e) -> PoseErrorsJson | None:
         return None if e is None else errors_json(e)
@@ -113,30 +143,11 @@ def diagnosis_report(
         "notes": list(diagnosis.notes),
         "plots": plots,
     }
-    effects = [cast(EffectJson, effect_to_dict(e, v, s)) for e, v, s in diagnosis.effects]
+    kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
+    given = {(c["joint"], c["driver"]): c["factor"] for c in (couplings or {}).get("couplings", [])}
+    effects = effect_entries(diagnosis.effects, diagnosis.inputs, kinds, given)
     for entry, change in zip(effects, diagnosis.target_changes):  # how far each moves the target (mm, mrad)
         entry["target_change"] = cast(TargetChangeJson, change.as_dict())
-    given = {(c["joint"], c["driver"]): c["factor"] for c in (couplings or {}).get("couplings", [])}
-    for entry, (effect, values, _) in zip(effects, diagnosis.effects):
-        if effect.type == "coupling":  # what to do: correct the readings (±1), or keep it in the model
-            entry["advice"] = coupling_advice(effect, float(values[0]),
-                                              given.get((str(effect.joint), str(effect.driver))))
-        elif effect.driver:  # a compliance under another joint's torque: what links them
-            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
-            entry["advice"] = torque_coupling_advice(effect, float(values[0]), effect_unit(effect, kinds))
-        elif effect.type == "lateral":  # its sign convention, and without masses what each value stands for
-            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
-            if effect.moments:
-                entry["combinations"] = combination_words(effect, diagnosis.inputs, False)
-            entry["advice"] = lateral_words(str(effect.joint), None if effect.moments else [float(v) for v in values],
-                                            effect_unit(effect, kinds))
-        elif effect.moments:  # a compliance of unknown masses: what each value stands for, its sign convention
-            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
-            entry["combinations"] = combination_words(effect, diagnosis.inputs, kinds[str(effect.joint)] == "prismatic")
-            entry["advice"] = moment_compliance_words(str(effect.joint), effect_unit(effect, kinds))
-        elif effect.type == "compliance":  # its sign convention, where the value is read
-            kinds = dict(zip(head["chain"]["joints"], head["chain"]["joint_kinds"]))
-            entry["advice"] = compliance_words(str(effect.joint), float(values[0]), effect_unit(effect, kinds))
     return {
         **head,
         "warnings": record.warnings,

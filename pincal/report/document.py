@@ -76,7 +76,7 @@ from pincal.report.model_camera import CameraEvaluationJson, CameraReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
-from pincal.report.model_tree import TreeReport
+from pincal.report.model_tree import TreeEvaluationJson, TreeReport
 from pincal.report.reading import load_report, value_at
 from pincal.report.record import ReportRecord
 
@@ -276,8 +276,8 @@ def write_report(path: str | Path,
     write_text(path, json.dumps(report, indent=2) + "\n")
 
 
-def write_evaluation(path: str | Path,
-                     document: EvaluationJson | FixtureEvaluationJson | CameraEvaluationJson) -> None:
+def write_evaluation(path: str | Path, document: EvaluationJson | FixtureEvaluationJson | TreeEvaluationJson
+                     | CameraEvaluationJson) -> None:
     """Write ``pincal evaluate --json``'s document as indented JSON."""
     write_text(path, json.dumps(document, indent=2) + "\n")
 

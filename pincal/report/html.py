@@ -44,6 +44,7 @@ from pincal.report.sections import (
     rotation_text,
     sessions_section,
 )
+from pincal.report.tree_html import tree_section
 
 __all__ = [
     "TEMPLATE", "PLAN_TEMPLATE", "KNOWN_KEYS", "headline", "evaluated_sessions",
@@ -218,7 +219,7 @@ def _facts(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
         facts.append(("robot (URDF)", str(sources["urdf"])))
     if chain:
         joints = chain.get("joints") or []
-        facts.append(("chain", (f"{chain.get('root_link')} → {chain.get('tip_link')} ({len(joints)} joints: "
+        facts.append(("chain", (f"{chain.get('root_link')} → {chain.get('tip_link') or _TIPS} ({len(joints)} joints: "
                                f"{', '.join(joints)})")))
     if doc.get("method") is not None:
         facts.append(("model", f"Method {doc['method']} of Franaszek & Marvel 2022 (DH parameters)"))
@@ -422,18 +423,20 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
     params = parameter_section(document, figures.parameter_figure)
     sessions = sessions_section(document) if document.get("registration") else None
     fixture = fixture_section(document, evaluation) if isinstance(document.get("fixture"), dict) else None
-    shown = KNOWN_KEYS | ({"sessions"} if sessions else set()) | ({"fixture", "measurement"} if fixture else set())
+    tree = tree_section(document)  # several targets: each one's errors instead of one chain's
+    shown = KNOWN_KEYS | ({"sessions"} if sessions else set()) | ({"fixture", "measurement"} if fixture else set()) | (
+        {"targets"} if tree else set())
     extra = [(key, generic(value)) for key, value in document.items()
              if key not in shown and value not in (None, {}, [], "")]
     sources = document.get("sources") or {}
     if document.get("method") is not None:
         kind = f"Method {document['method']} calibration"
     elif "diagnosis" in document:
-        kind = "Diagnosis"
+        kind = "Diagnosis" + (f" of {len(tree['rows'])} targets" if tree else "")
     elif fixture is not None:
         kind = f"Socket-fixture calibration ({document.get('level')})"
     elif document.get("level"):
-        kind = f"Calibration ({document['level']})"
+        kind = f"Calibration ({document['level']})" + (f" of {len(tree['rows'])} targets" if tree else "")
     else:
         kind = "Evaluation"
     robot = Path(str(sources["urdf"])).name if sources.get("urdf") else None
@@ -449,6 +452,7 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "registration": None if fixture else _registration(document),  # a fixture has no sensor
         "fixture": fixture,
         "camera": camera,
+        "tree": tree,
         "sessions": sessions if sessions and len(sessions) > 1 else None,  # one session: the registration above
         "effects": effects_section(document, kinds, base, figures.png_uri),
         "notes": [str(n) for n in document.get("notes") or []],
@@ -474,10 +478,14 @@ def _legend(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
     return [(label, colour) for label, colour in LEGEND if any(model_colour(n) == colour for n in names)]
 
 
+#: The tip of a tree's chain, which has one per target (REPORT.json ``targets``).
+_TIPS = "each target's tip link"
+
+
 def _chain(chain: Any) -> dict[str, Any] | None:
     if not isinstance(chain, dict):
         return None
-    return {"root": chain.get("root_link", "?"), "tip": chain.get("tip_link", "?"),
+    return {"root": chain.get("root_link", "?"), "tip": chain.get("tip_link") or _TIPS,
             "joints": len(chain.get("joints") or [])}
 
 

@@ -1,6 +1,6 @@
-"""The typed model of REPORT.json of ``calibrate`` with several ``--tip-link LINK:POINTS`` (a tree): the
-chains' joints once, each target with its link, points, supporting joints and errors
-(:mod:`pincal.report.model` has the shared parts)."""
+"""The typed model of REPORT.json of ``calibrate`` and ``diagnose`` with several ``--tip-link LINK:POINTS`` (a
+tree): the chains' joints once, each target with its link, points, supporting joints and errors; ``diagnose``'s
+effects and search (:mod:`pincal.report.model` has the shared parts)."""
 
 from __future__ import annotations
 
@@ -19,8 +19,10 @@ from pincal.report.model import (
     Sha256,
     Vector3,
 )
+from pincal.report.model_diagnosis import CandidateJson, EffectJson
 
-__all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeReport"]
+__all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeCandidateJson", "TreeBeforeAfter",
+           "TreeStepJson", "TreeDiagnosisJson", "TreeReport", "TreeEvaluationTarget", "TreeEvaluationJson"]
 
 
 class _TreeChainKeys(TypedDict):
@@ -45,17 +47,26 @@ class TargetErrors(TypedDict):
     position_per_point: list[PositionStats]
 
 
-class TargetJson(TypedDict):
-    """One ``--tip-link LINK:POINTS``: the link, the numbers of the points it carries (1 is ``x1,y1,z1``),
-    the joints of the chain root → link, each point in the link as calibrated [m], and the calibration rows'
-    errors of the nominal model (registered to them) and of the calibrated one."""
-
+class _TargetKeys(TypedDict):
     tip_link: str
     points: list[int]
     joints: list[str]
     points_m: list[Vector3]
     nominal_errors: TargetErrors
     calibration_errors: TargetErrors
+
+
+class TargetJson(_TargetKeys, total=False):
+    """One ``--tip-link LINK:POINTS``: the link, the numbers of the points it carries (1 is ``x1,y1,z1``),
+    the joints of the chain root → link, each point in the link as calibrated [m], and the calibration rows'
+    errors of the nominal model (registered to them) and of the calibrated one. ``diagnose`` adds the
+    calibration rows' errors of the geometric calibration its effects were added to (``geometry_errors``;
+    ``calibration_errors`` are then the final model's, with its effects), and with ``--validation`` the held-out
+    rows' errors of both (``validation_geometry_errors``, ``validation_errors``)."""
+
+    geometry_errors: TargetErrors
+    validation_geometry_errors: TargetErrors | None
+    validation_errors: TargetErrors | None
 
 
 class TreeSessionJson(TypedDict):
@@ -66,10 +77,57 @@ class TreeSessionJson(TypedDict):
     registration: RegistrationPair
 
 
-class TreeReport(RunHead):
+class TreeCandidateJson(CandidateJson, total=False):
+    """A candidate effect of a step of ``diagnose`` on a tree: the effect's keys (its values when fitted in
+    full), its ΔBIC against the step's model (of its full fit; of the linearised test when ``screened``), its
+    verdict in words."""
+
+    screened: bool
+
+
+class TreeBeforeAfter(TypedDict):
+    """Every target's points on a set of rows before and after a step (``seen`` pairs, ``position``: mean, RMS
+    and max [mm] over every seen point, ``position_per_point``)."""
+
+    before: TargetErrors
+    after: TargetErrors
+
+
+class TreeStepJson(TypedDict):
+    """An effect ``diagnose`` adopted on a tree: the effect (its values and standard deviations), its ΔBIC,
+    every seen point's errors on the calibration rows before and after it, and on the held-out rows (None
+    without ``--validation``), the step's candidates, best first."""
+
+    effect: EffectJson
+    delta_bic: float
+    calibration: TreeBeforeAfter
+    heldout: TreeBeforeAfter | None
+    candidates: list[TreeCandidateJson]
+
+
+class TreeDiagnosisJson(TypedDict):
+    """``diagnose``'s search on a tree: the adoption rule in words, where the loads come from (``masses``:
+    ``urdf`` or ``unknown``), the adopted steps, the candidates of the step that adopted nothing, and those
+    the rows cannot test."""
+
+    criterion: str
+    masses: str
+    steps: list[TreeStepJson]
+    last_candidates: list[TreeCandidateJson]
+    untestable: list[str]
+
+
+class _TreeDiagnosisKeys(TypedDict, total=False):
+    effects: list[EffectJson]
+    diagnosis: TreeDiagnosisJson
+
+
+class TreeReport(RunHead, _TreeDiagnosisKeys):
     """REPORT.json of ``calibrate`` with several ``--tip-link LINK:POINTS``: one calibration of every target,
     the joints shared by several chains fitted once (``parameters``: one entry each), one registration per
-    session (``registration``: the first session's; every one under ``sessions``)."""
+    session (``registration``: the first session's; every one under ``sessions``). ``diagnose``'s adds the
+    effects of the final model (``effects``, as in effects.yaml; ``parameters`` and ``targets`` are the final
+    model's) and its search (``diagnosis``)."""
 
     chain: TreeChainJson
     targets: list[TargetJson]
@@ -82,3 +140,24 @@ class TreeReport(RunHead):
     warnings: list[Finding]
     urdf_sha256: Sha256
     xacro_args: dict[str, str]
+
+
+class TreeEvaluationTarget(TypedDict):
+    """One target of ``evaluate --json`` of a tree's report: its link, its points, and their errors on the
+    evaluated rows (None: none of its points seen there)."""
+
+    tip_link: str
+    points: list[int]
+    errors: TargetErrors | None
+
+
+class TreeEvaluationJson(TypedDict):
+    """``pincal evaluate --json`` of a REPORT.json of several ``--tip-link``: how many rows were evaluated, how
+    each session was registered, each target's errors (``evaluated_targets``), the largest error of any point
+    [mm] (what ``--max-pos-mm`` judges), and the notes."""
+
+    rows: int
+    registrations: list[str]
+    evaluated_targets: list[TreeEvaluationTarget]
+    max_mm: float
+    notes: list[str]

@@ -39,7 +39,7 @@ KINDS: dict[str, tuple[type, str]] = {
     "paper": (PaperReport, "a paper method's REPORT.json (--level dh)"),
     "fixture": (FixtureReport, "a socket-fixture calibration's REPORT.json"),
     "tree": (TreeReport, "a REPORT.json of several --tip-link, which this command does not take yet (calibrate "
-                         "writes it; each target's errors are in it)"),
+                         "and diagnose write it; each target's errors are in it)"),
     "evaluation": (EvaluationJson, "the file of 'pincal evaluate --json'"),
     "fixture evaluation": (FixtureEvaluationJson, "the file of 'pincal evaluate --fixture --json'"),
     "plan": (PlanJson, "a PLAN.json"),
@@ -48,8 +48,8 @@ KINDS: dict[str, tuple[type, str]] = {
 }
 #: The kinds of REPORT.json (the schema's top level, :data:`pincal.report.schema.REPORT_KINDS`).
 REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "camera")
-#: The kinds :func:`pincal.report.html.render_html` lays out as a page (not yet a tree's).
-PAGE_KINDS = ("calibration", "diagnosis", "paper", "fixture", "evaluation", "plan")
+#: The kinds :func:`pincal.report.html.render_html` lays out as a page (not yet a camera's).
+PAGE_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "evaluation", "plan")
 
 _T = TypeVar("_T")
 _MISSING: Any = object()

@@ -30,7 +30,7 @@ from pincal.report.model_camera import CameraEvaluationJson, CameraReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
-from pincal.report.model_tree import TreeReport
+from pincal.report.model_tree import TreeEvaluationJson, TreeReport
 
 __all__ = ["REPORT_KINDS", "SCHEMA_ID", "OTHER_DOCUMENTS", "json_schema", "schema_text"]
 
@@ -39,7 +39,8 @@ REPORT_KINDS: tuple[type, ...] = (CalibrationReport, DiagnosisReport, PaperRepor
                                   CameraReport)
 SCHEMA_ID = "https://pincal.invalid/report.schema.json"
 #: Documents described in ``$defs`` besides the kinds of REPORT.json.
-OTHER_DOCUMENTS: tuple[type, ...] = (EvaluationJson, FixtureEvaluationJson, PlanJson, CameraEvaluationJson)
+OTHER_DOCUMENTS: tuple[type, ...] = (EvaluationJson, FixtureEvaluationJson, TreeEvaluationJson, PlanJson,
+                                     CameraEvaluationJson)
 
 _SCALARS: dict[Any, str] = {str: "string", int: "integer", float: "number", bool: "boolean", type(None): "null"}
 

@@ -12,6 +12,12 @@ parameter of a joint off a target's chain has a zero column in its rows), the re
 (6 per session), the points m_p (3 each, in the order of their numbers, each in its own tip
 link). A point not seen in a row (an empty cell: occlusion) has no residual: the entries are
 the seen (row, point) pairs, row by row and in point order within a row, 3 each.
+
+Effects (:mod:`pincal.model.effects`, as ``diagnose`` adds them) enter as they enter each target's
+sensor residual: a joint effect shifts its joint's reading in every target whose chain has the joint
+(its values one unknown of the tree, after the points), a sensor effect moves every target's points;
+their inputs are the tree's (:func:`pincal.model.tree_effects.tree_inputs`: a shared joint's load is
+that of everything it carries).
 """
 
 from __future__ import annotations
@@ -22,14 +28,16 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from pincal.model.effects import Effect
 from pincal.model.parameter_sets import ChainParameters, NoParameters
 from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 from pincal.model.sensor import Registration
 from pincal.model.tree import KinematicTree
+from pincal.model.tree_effects import acting_on, target_inputs
 from pincal.model.tree_parameters import TreeParameters
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
-from pincal.residuals.sensor_values import FittedBlocks, RowWeights
+from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights
 
 __all__ = ["TreeRows", "TreeResidual"]
 
@@ -63,11 +71,15 @@ class TreeResidual:
         start: the registrations (one per session) and every point's start (P, 3) in its tip link.
         weights: w_k [1/m] (``rotation`` is not used: the targets are points).
         models: sensitivity models shared by the fits of one problem, by slots (as :class:`KinematicsCache`'s).
+        effects: the effects fitted and the tree's inputs (:func:`pincal.model.tree_effects.tree_inputs`), whose
+            columns are the tree's joints; inputs without effects: :meth:`effect_columns` can test candidates.
     """
 
-    def __init__(self, tree: KinematicTree, params: TreeParameters | None, free: npt.ArrayLike, base: npt.ArrayLike,
+    def __init__(  # noqa: PLR0913 - a sensor residual's arguments (the cache's three apart) and the tree's two
+            self, tree: KinematicTree, params: TreeParameters | None, free: npt.ArrayLike, base: npt.ArrayLike,
                  rows: TreeRows, start: TargetEstimate, weights: RowWeights,
-                 models: dict[tuple[ParameterSlot, ...], SensitivityModel] | None = None) -> None:
+                 models: dict[tuple[ParameterSlot, ...], SensitivityModel] | None = None,
+                 effects: ModelledEffects | None = None) -> None:
         self.tree = tree
         self.params = params
         self.free = np.asarray(free, dtype=np.intp)
@@ -77,12 +89,20 @@ class TreeResidual:
         self.n_sessions = len(start.registrations)
         self.registration_basis = None  # every registration unknown is fitted (a tree holds none)
         self.point_basis = None
+        effects = ModelledEffects() if effects is None else effects
+        self.effects, self.inputs = tuple(effects.effects), effects.inputs
+        if self.effects and self.inputs is None:
+            raise ValueError("effects need their inputs (gravity torques, time)")
         n_kin, n_reg = self.free.size, 6 * self.n_sessions
+        first = n_kin + n_reg + 3 * n_points
         self.blocks = {"kinematic": slice(0, n_kin), "registration": slice(n_kin, n_kin + n_reg),
-                       "points": slice(n_kin + n_reg, n_kin + n_reg + 3 * n_points),
-                       "rotation": slice(n_kin + n_reg + 3 * n_points, n_kin + n_reg + 3 * n_points),
-                       "effects": slice(n_kin + n_reg + 3 * n_points, n_kin + n_reg + 3 * n_points)}
-        self.n_params = n_kin + n_reg + 3 * n_points
+                       "points": slice(n_kin + n_reg, first), "rotation": slice(first, first),
+                       "effects": slice(first, first + sum(e.n_values for e in self.effects))}
+        self.n_params = self.blocks["effects"].stop
+        self.effect_slices: list[slice] = []
+        for effect in self.effects:
+            self.effect_slices.append(slice(first, first + effect.n_values))
+            first += effect.n_values
         self.seen = np.asarray(rows.seen, dtype=bool)
         #: each target's SensorResidual and the tree columns of its unknowns
         self.parts: list[tuple[SensorResidual, np.ndarray, np.ndarray]] = []
@@ -100,13 +120,18 @@ class TreeResidual:
             cache = KinematicsCache(cache_params, local, chain_base, rows.q[:, target.columns], models)
             measured = np.where(self.seen[:, numbers, None], rows.points[:, numbers], 0.0)
             part_start = TargetEstimate(start.registration, start.points[numbers], np.eye(3), start.registrations)
+            acting = acting_on(self.effects, target)
+            modelled = ModelledEffects() if self.inputs is None else ModelledEffects(
+                [self.effects[i] for i in acting], target_inputs(self.inputs, target))
             part = SensorResidual(cache, measured, None, part_start, weights,
-                                  FittedBlocks(registration=True, points=True, rotation=False),
+                                  FittedBlocks(registration=True, points=True, rotation=False), modelled,
                                   sessions=rows.sessions)
             kin = np.array([position[int(i)] for i in (params.index[t][local] if params is not None else [])],
                            dtype=np.intp)
+            values = [np.arange(self.effect_slices[i].start, self.effect_slices[i].stop) for i in acting]
             columns = np.concatenate([kin, self.blocks["registration"].start + np.arange(n_reg),
-                                      self.blocks["points"].start + (3 * numbers[:, None] + np.arange(3)).ravel()])
+                                      self.blocks["points"].start + (3 * numbers[:, None] + np.arange(3)).ravel(),
+                                      *values])
             self.parts.append((part, columns, numbers))
 
     @property
@@ -145,6 +170,25 @@ class TreeResidual:
             else:
                 out[:, numbers] = part.residual(local).reshape(k, numbers.size, 3)
         return out
+
+    def effect_values(self, x: npt.ArrayLike) -> list[np.ndarray]:
+        """Values of each effect at ``x``."""
+        x = np.asarray(x, dtype=float)
+        return [x[sl] for sl in self.effect_slices]
+
+    def effect_columns(self, x: npt.ArrayLike, effects: Sequence[Effect]) -> list[np.ndarray]:
+        """The Jacobian columns each of ``effects`` would add at ``x``, its values zero: (3 K_seen, n_values)
+        each, in the row order of :meth:`residual` (as :meth:`SensorResidual.effect_columns`, each target's part
+        from the targets it moves; zero in the others')."""
+        x = np.asarray(x, dtype=float)
+        k, n_points = self.seen.shape
+        full = [np.zeros((k, n_points, 3, e.n_values)) for e in effects]
+        for (part, columns, numbers), target in zip(self.parts, self.tree.targets):
+            acting = acting_on(effects, target)
+            blocks = part.effect_columns(x[columns], [effects[i] for i in acting])
+            for i, block in zip(acting, blocks):
+                full[i][:, numbers] = block.reshape(k, numbers.size, 3, -1)
+        return [f[self.seen].reshape(-1, f.shape[-1]) for f in full]
 
     def residual(self, x: npt.ArrayLike) -> np.ndarray:
         """The seen points' residuals, (3 K_seen,)."""

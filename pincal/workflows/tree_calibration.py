@@ -28,7 +28,7 @@ from pincal.measurements.csv_v1 import read_sessions
 from pincal.model.corrected_urdf import corrected_origins
 from pincal.model.description import xacro_arguments
 from pincal.model.parameter_sets import ChainLevel
-from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.model.tree import KinematicTree, TargetSpec, TreePlacements
 from pincal.model.urdf import write_urdf_with_origins
 from pincal.outputs import file_sha256
 from pincal.progress import Progress
@@ -37,10 +37,11 @@ from pincal.report.model import Sources, findings_json
 from pincal.report.model_tree import TreeReport
 from pincal.report.tree import tree_report
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import CalibrateSettings
 from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
 
-__all__ = ["TreeCalibrationRun", "calibrate_tree_files"]
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "write_tree_urdf"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,7 @@ class TreeCalibrationRun:
         reload_error: the largest difference of any target's tool pose after reloading the written URDF [m, -].
         withheld: the corrected URDF is not written (a gross misfit without ``--force``:
             :mod:`pincal.workflows.verdict`); REPORT.json says so in ``warnings``.
+        html: the report's page written (``--html``), or None.
     """
 
     result: TreeCalibration
@@ -64,6 +66,7 @@ class TreeCalibrationRun:
     seconds: float
     reload_error: float
     withheld: bool = False
+    html: Path | None = None
 
 
 def _refused(settings: CalibrateSettings) -> None:
@@ -76,10 +79,11 @@ def _refused(settings: CalibrateSettings) -> None:
 
 def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str | Path], out_urdf: str | Path,
                          report_path: str | Path, targets: Sequence[TargetSpec], settings: CalibrateSettings,
-                         progress: Progress | None = None) -> TreeCalibrationRun:
+                         progress: Progress | None = None, html: str | Path | None = None) -> TreeCalibrationRun:
     """Calibrate every one of ``targets`` (:func:`pincal.model.tree.parse_targets` of the ``--tip-link``
     values) on ``data_path`` in one fit, as ``settings`` say (its ``tip_link`` is not read); write the
-    corrected URDF (every calibrated chain's joint origins, checked by reloading it) and the report.
+    corrected URDF (every calibrated chain's joint origins, checked by reloading it) and the report, and with
+    ``html`` the report's page (each target's errors before and after: :mod:`pincal.report.tree_html`).
 
     An empty cell of a point is that point not seen in the row (occlusion): only it is left out.
     """
@@ -89,6 +93,7 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     inputs = [*description_inputs(urdf, settings.xacro_args), *data_paths]
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
+    page_path = refuse_page(html, inputs, [out_urdf, report_path])
     tree = KinematicTree.from_urdf(urdf, targets, xacro_args=settings.xacro_args)
     data, notes = read_sessions(data_paths, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
     options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
@@ -104,8 +109,8 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     rms = float(np.sqrt(np.nanmean(result.point_errors ** 2)))
     gross = gross_misfit(rms, max(reach_m(t.chain, data.q[:, t.columns]) for t in tree.targets))
     warnings, withheld = withholding([] if gross is None else [gross], settings.force)
-    reload_error, digest = _write_urdf(urdf, out_urdf, tree, result, (comment, settings.xacro_args), data.q,
-                                       keep=not withheld)
+    reload_error, digest = write_tree_urdf(urdf, out_urdf, tree, result.tree_placements,
+                                           (comment, settings.xacro_args), data.q, keep=not withheld)
     sources: Sources = {"urdf": str(urdf),
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf)}
@@ -120,18 +125,21 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     report = tree_report(result, nominal, tree, sources, notes,
                          (digest, dict(xacro_arguments(settings.xacro_args))))
     report["warnings"] = findings_json(warnings)
+    page = render_page(page_path, report, report_path)
     write_report(report_path, report)
-    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error, withheld)
+    return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error, withheld,
+                              write_page(page_path, page))
 
 
 class _Withheld(Exception):
     """Raised by a withheld URDF's check once it passed: cancels the write (as pincal.workflows.verdict's)."""
 
 
-def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibration,
-                text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray, keep: bool = True) -> tuple[float, str]:
-    """Write ``urdf`` with every target chain's calibrated joint origins (a joint shared by several chains has
-    the same placement in each) and return the reload check's largest difference and the file's SHA-256;
+def write_tree_urdf(urdf: Path, out: Path, tree: KinematicTree, tree_placements: TreePlacements,
+                    text: tuple[str, Sequence[tuple[str, str]]], q: np.ndarray, keep: bool = True) -> tuple[float, str]:
+    """Write ``urdf`` with every target chain's joint origins at ``tree_placements`` (the calibrated model; a
+    joint shared by several chains has the same placement in each) and return the reload check's largest
+    difference and the file's SHA-256;
     ``keep`` False: checked and hashed but not put in place (a withheld URDF, ``out`` left as it was).
 
     Raises:
@@ -141,7 +149,7 @@ def _write_urdf(urdf: Path, out: Path, tree: KinematicTree, result: TreeCalibrat
     comment, xacro_args = text
     nominal = tree.placements()
     origins: dict[str, np.ndarray] = {}
-    with tree.placed(result.tree_placements):
+    with tree.placed(tree_placements):
         for target, placements in zip(tree.targets, nominal):
             origins.update(corrected_origins(urdf, target.chain, placements, xacro_args))
         calibrated = [t.chain.tool_poses(q[:, t.columns]) for t in tree.targets]

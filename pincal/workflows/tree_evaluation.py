@@ -8,7 +8,11 @@ of a session it has not seen (held-out rows of the same setup), or — with ``--
 session of the data registered anew with the model and the points fixed (Arun et al. 1987 on the seen
 points: the least-squares rigid registration of equally weighted points). What evaluate does with one
 chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``, ``--max-rot-deg``,
-``--json``, ``--html`` — is refused in one line.
+``--html`` — is refused in one line; ``--json`` writes :class:`pincal.report.model_tree.TreeEvaluationJson`.
+
+A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
+joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
+sensor scale scales the sensed points; a drift is the calibration's sensor, not applied (a note says so).
 """
 
 from __future__ import annotations
@@ -24,12 +28,17 @@ from pincal.fit.registration import register_points
 from pincal.fit.sessions import session_rows
 from pincal.fit.tree_calibration import tree_rows
 from pincal.measurements.csv_v1 import read_measurements
+from pincal.measurements.data import MeasurementSet
+from pincal.model.effects import JOINT_EFFECTS, effect_from_dict, joint_shifts
 from pincal.model.sensor import Registration
 from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.model.tree_effects import TreeBody, tree_inputs
 from pincal.outputs import file_sha256
-from pincal.report.model_tree import TargetErrors
+from pincal.report.document import write_evaluation
+from pincal.report.model_tree import TargetErrors, TreeEvaluationJson
 from pincal.report.reading import load_report, value_at
 from pincal.report.tree import target_errors
+from pincal.workflows.paths import refuse_overwrite
 from pincal.workflows.settings import EvaluateSettings
 
 __all__ = ["TreeEvaluation", "evaluate_tree_files"]
@@ -53,11 +62,21 @@ class TreeEvaluation:
     registrations: tuple[str, ...]
     max_mm: float
     notes: tuple[str, ...]
+    points: tuple[tuple[int, ...], ...] = ()
+
+    def as_dict(self) -> TreeEvaluationJson:
+        """``evaluate --json``'s document (:class:`pincal.report.model_tree.TreeEvaluationJson`)."""
+        return {"rows": self.rows, "registrations": list(self.registrations),
+                "evaluated_targets": [{"tip_link": link, "points": list(points), "errors": errors}
+                                      for (link, errors), points in zip(self.targets, self.points)],
+                "max_mm": self.max_mm, "notes": list(self.notes)}
 
 
 def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: str | Path,
-                        settings: EvaluateSettings | None = None) -> TreeEvaluation:
-    """Eq 24's position errors of the model of a tree's report on the non-CPA rows of ``data_path``.
+                        settings: EvaluateSettings | None = None, json_path: str | Path | None = None
+                        ) -> TreeEvaluation:
+    """Eq 24's position errors of the model of a tree's report on the non-CPA rows of ``data_path``; with
+    ``json_path``, written there too (``evaluate --json``: :meth:`TreeEvaluation.as_dict`).
 
     Raises:
         PincalError: a setting a tree does not take yet; ``urdf`` not the file written with the report (its
@@ -70,6 +89,8 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                           (settings.max_rot_deg is not None, "--max-rot-deg (the targets are points)")):
         if refused:
             raise PincalError(f"several --tip-link: {flag} is not yet supported by evaluate; leave it out")
+    if json_path is not None:
+        refuse_overwrite(json_path, urdf, report_path, data_path)
     document = cast(dict[str, Any], load_report(report_path, ("tree",)))
     notes: list[str] = []
     if file_sha256(urdf) != value_at(document, "urdf_sha256", report_path):
@@ -87,7 +108,9 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     if not rows.seen.any():
         raise PincalError(f"{data_path}: no measured point in a row that is not role=cpa ({data.n_rows} such rows); "
                           "nothing to evaluate: give rows where a target's point is measured")
-    world = tree.target_points(data.q, [points for _, points in targets])  # (K, P, 3) [m]
+    q, scale, effect_notes = _with_effects(tree, data, document.get("effects") or [])
+    notes += effect_notes
+    world = tree.target_points(q, [points for _, points in targets])  # (K, P, 3) [m]
     if settings.new_session:
         for s, name in enumerate(data.session_names):  # a rigid registration needs three points (Arun et al. 1987)
             if (count := int(rows.seen[rows.sessions == s].sum())) < 3:
@@ -104,7 +127,7 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
         how = [f"{name}: the report's" + ("" if name in names else f" '{names[0]}'") for name in data.session_names]
     omega = np.stack([r.rotation for r in registrations])[sessions]
     tau = np.stack([r.translation for r in registrations])[sessions]
-    sensed = np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :]
+    sensed = (1.0 + scale) * (np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :])
     errors = np.linalg.norm(np.where(rows.seen[..., None], sensed - rows.points, np.nan), axis=2)  # (K, P) [m]
     seen = np.any(rows.seen, axis=0)  # (P,) each point seen in some row
     per_target: list[tuple[str, TargetErrors | None]] = []
@@ -115,8 +138,27 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
             missing = ", ".join(str(p) for p in spec.points if p not in numbers)
             notes.append(f"{data_path}: point(s) {missing} of {spec.link} not seen in any row; its errors are those "
                          f"of point(s) {', '.join(map(str, numbers))}")
-    return TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
-                          tuple(read_notes + notes))
+    evaluation = TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
+                                tuple(read_notes + notes), tuple(spec.points for spec, _ in targets))
+    if json_path is not None:
+        write_evaluation(json_path, evaluation.as_dict())
+    return evaluation
+
+
+def _with_effects(tree: KinematicTree, data: MeasurementSet, entries: Any) -> tuple[np.ndarray, float, list[str]]:
+    """The rows' tree joint values with a report's joint effects applied (actual = reading + shift, followers
+    moved with their drivers, eq M1), its sensor scale s, and notes on what is not applied."""
+    effects = [effect_from_dict(entry) for entry in entries]
+    if not effects:
+        return data.q, 0.0, []
+    body = TreeBody(tree)
+    inputs = tree_inputs(tree, data, loads=any(e.moments for e, _ in effects))
+    joint = [(e, v) for e, v in effects if e.type in JOINT_EFFECTS]
+    shifts = joint_shifts([e for e, _ in joint], [v for _, v in joint], inputs, tree.joint_names)
+    scale = sum(float(v[0]) for e, v in effects if e.type == "sensor_scale")
+    others = [e.label for e, _ in effects if e.type not in JOINT_EFFECTS and e.type != "sensor_scale"]
+    notes = [f"the report's {', '.join(others)}: the calibration sensor's, not applied to these rows"] if others else []
+    return data.q + body.followed_shifts(shifts), scale, notes
 
 
 def _targets(entries: Any) -> list[tuple[TargetSpec, np.ndarray]]:

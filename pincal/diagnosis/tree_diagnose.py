@@ -1,0 +1,395 @@
+"""Close the loop on a tree: the effects the geometry of several targets lacks (``diagnose --tip-link A:1
+--tip-link B:2``).
+
+After the tree's geometric calibration (:func:`pincal.fit.tree_calibration.calibrate_tree`), every candidate
+of the single chain's catalogue on every target's chain (:func:`pincal.diagnosis.catalogue.candidate_effects`,
+a joint shared by several chains once) is tested on the tree's residual
+(:class:`pincal.residuals.tree.TreeResidual`): a joint effect shifts its joint's reading in every chain that
+has it, its load that of everything the joint carries (:mod:`pincal.model.tree_effects`). Each step screens
+every candidate by the linearised score test of :mod:`pincal.diagnosis.screening` at the current fit, fits
+those that may reach the evidence cut in full (geometry, registrations, points and the effects together),
+and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts`):
+
+    ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m) < EVIDENCE = −10      (Schwarz 1978; Kass & Raftery 1995)
+
+on the calibration rows (m: their seen coordinates; the noise scale the current model's, re-estimated after
+each adoption), a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of
+some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out
+rows better on them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`).
+The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+
+Not yet as with one chain: a coupling nearer ±1 tried as a joint read against another (it stays an effect),
+two candidates that correct alike named together, thermal and pause steps, a payload, the generic check for
+remaining structure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import cast
+
+import numpy as np
+import scipy.stats
+
+from pincal.diagnosis.catalogue import candidate_effects
+from pincal.diagnosis.diagnose import MAX_EFFECTS, DiagnoseOptions
+from pincal.diagnosis.held_out import HELD_OUT_LEVEL, HELD_OUT_Z, held_out_verdict
+from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
+from pincal.diagnosis.screening import (
+    FitObjective,
+    Linearisation,
+    bic,
+    may_reach,
+    n_prior_rows,
+    residual_freedom,
+    testable,
+)
+from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, NOISE_FLOOR, effect_basis, offset_like, plausible
+from pincal.errors import CalibrationError
+from pincal.fit.chain_calibration import row_weights
+from pincal.fit.metrics import PoseErrors
+from pincal.fit.prior import PriorResidual, posterior, standard_deviations
+from pincal.fit.sessions import session_rows
+from pincal.fit.solver import Solution, gram, solve
+from pincal.fit.tree_calibration import TreeCalibration, tree_rows
+from pincal.fit.tree_problem import TreeProblem
+from pincal.measurements.data import MeasurementSet
+from pincal.model.effects import Effect, EffectInputs
+from pincal.model.tree import KinematicTree, TreePlacements
+from pincal.model.tree_effects import TreeBody, tree_inputs
+from pincal.progress import Counter, Progress
+from pincal.residuals.sensor_values import ModelledEffects, TargetEstimate
+from pincal.residuals.tree import TreeResidual
+
+__all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "TreeStep", "TreeCandidate", "TreeDiagnosis",
+           "tree_candidates", "diagnose_tree"]
+
+#: Candidates fitted in full per step, the best of the screen that may reach the evidence cut: the single
+#: chain's "first eight" (:mod:`pincal.diagnosis.diagnose`, screening).
+SHORTLIST = 8
+
+
+#: Least |value| / standard deviation of some value of an effect to adopt it: a one-value effect entering linearly
+#: gains about (v/σ)² − ln m of BIC, so one within 2σ of zero (the held-out test's z, HELD_OUT_Z of
+#: :mod:`pincal.diagnosis.held_out`) passes the cut only through the prior's rows — a direction of the geometry
+#: the prior held (a sensor scale against every length), freed; not through the data.
+DETERMINED_Z = HELD_OUT_Z
+#: The same level for an effect of any number of values (a compliance over mass moments: each value alone may
+#: be undetermined, their combination not): Wald's χ² of the values above its quantile at 1 − 2 Φ(−2) (one
+#: value: χ² = (v/σ)² ≥ 4, |v| ≥ 2σ).
+DETERMINED_LEVEL = 1.0 - 2.0 * HELD_OUT_LEVEL
+
+
+@dataclass(frozen=True)
+class TreeCandidate:
+    """A candidate of a step: the effect, its full fit's ΔBIC against the step's model (the linearised one,
+    marked ``screened``, when it was not fitted in full), its values and the verdict in words."""
+
+    effect: Effect
+    delta_bic: float
+    values: np.ndarray
+    verdict: str
+    screened: bool = False
+
+
+@dataclass(frozen=True)
+class TreeStep:
+    """One adopted effect: its values and standard deviations [unit of :func:`pincal.model.effect_units.effect_unit`],
+    its ΔBIC, the calibration rows' point errors (K, P) [m] before and after it (NaN where not seen), the held-out
+    rows' (None without them), and the step's candidates (best first)."""
+
+    effect: Effect
+    values: np.ndarray
+    std: np.ndarray
+    delta_bic: float
+    calibration_before: np.ndarray
+    calibration_after: np.ndarray
+    heldout_before: np.ndarray | None
+    heldout_after: np.ndarray | None
+    candidates: tuple[TreeCandidate, ...]
+
+
+@dataclass(frozen=True)
+class TreeDiagnosis:
+    """Outcome of :func:`diagnose_tree`.
+
+    Attributes:
+        effects: the adopted effects with their values and standard deviations.
+        steps: one per adopted effect.
+        last_candidates: the ranking of the step that adopted nothing (best first).
+        untestable: the candidates the rows cannot test (no gravity torque on the joint; masses unknown).
+        vector / std: every tree parameter [m, rad] of the final model, (n,) (NaN std where not estimated).
+        target: the registrations and points of the final model.
+        tree_placements: each target's chain placements of the final model.
+        point_errors: the calibration rows' point errors of the final model (K, P) [m], NaN where not seen.
+        heldout_before / heldout_after: the held-out rows' point errors (K_h, P) [m] of the geometric
+            calibration and of the final model (None without held-out rows).
+        sigma_pos_m: the noise scale of the final model's residuals [m].
+        masses_unknown: compliances follow mass moments (``--masses unknown`` or no inertias).
+        time_reference: the calibration rows' mean time [s] a drift is relative to (None without times).
+        notes: what the user should know.
+        inputs: the effect inputs of the calibration rows (columns: the tree's joints).
+    """
+
+    effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
+    steps: tuple[TreeStep, ...]
+    last_candidates: tuple[TreeCandidate, ...]
+    untestable: tuple[Effect, ...]
+    vector: np.ndarray
+    std: np.ndarray
+    target: TargetEstimate
+    tree_placements: TreePlacements
+    point_errors: np.ndarray
+    heldout_before: np.ndarray | None
+    heldout_after: np.ndarray | None
+    sigma_pos_m: float
+    masses_unknown: bool
+    time_reference: float | None
+    notes: tuple[str, ...]
+    inputs: EffectInputs
+
+
+def tree_candidates(tree: KinematicTree, has_time: bool) -> list[Effect]:
+    """The single chain's catalogue on every target's chain (:func:`candidate_effects`), each effect once: a
+    joint shared by several chains is one candidate of each kind."""
+    out: list[Effect] = []
+    for target in tree.targets:
+        out += [e for e in candidate_effects(target.chain, has_time) if e not in out]
+    return out
+
+
+@dataclass(frozen=True)
+class _Search:
+    """What the search holds fixed: the problem (with the tree's effect inputs), the fitted geometry's
+    indices and base vector, the held-out rows' problem (None without them), the sensor's stated position
+    noise per axis [m] (``--sigma-pos``; None: the fits' own)."""
+
+    problem: TreeProblem
+    kept: np.ndarray
+    base: np.ndarray
+    held: TreeProblem | None
+    stated: float | None
+
+    def judged_noise(self, objective: FitObjective, solution: Solution) -> float:
+        """The noise [m] a held-out test judges in: the stated one, else the smaller of the current model's and
+        the candidate's fit's (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`: a model far off the data puts
+        its own estimate too high), at least :data:`pincal.diagnosis.verdicts.NOISE_FLOOR`."""
+        fitted = self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution).sigma_pos
+        return self.stated or max(min(self.problem.sigma_pos, fitted), NOISE_FLOOR)
+
+    def fit(self, effects: Sequence[Effect], x0: np.ndarray | None = None) -> tuple[FitObjective, Solution]:
+        objective = self.objective(self.problem, effects)
+        start = objective.start_vector() if x0 is None else x0
+        return cast(FitObjective, objective), solve(objective, start, what="effect fit")
+
+    def objective(self, problem: TreeProblem, effects: Sequence[Effect]) -> TreeResidual | PriorResidual:
+        effects_inputs = cast(ModelledEffects, problem.effects)
+        return replace(problem, effects=replace(effects_inputs, effects=tuple(effects))).objective(self.kept,
+                                                                                                  self.base)
+
+    def errors(self, objective: FitObjective, x: np.ndarray) -> np.ndarray:
+        """The calibration rows' point errors (K, P) [m] of a fit, NaN where not seen."""
+        tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
+        return tree_objective.point_errors(x, self.problem.row_weight / self.problem.sigma_pos)
+
+    def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
+        """The held-out rows' point errors (K_h, P) [m] of the model at ``x`` (None without them)."""
+        if self.held is None:
+            return None
+        held = cast(TreeResidual, self.objective(self.held, effects))
+        held = cast(TreeResidual, getattr(held, "objective", held))
+        return held.point_errors(x, np.ones(held.seen.shape[0]))
+
+
+def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: MeasurementSet,
+                  heldout: MeasurementSet | None = None, options: DiagnoseOptions | None = None,
+                  progress: Progress | None = None) -> TreeDiagnosis:
+    """Search the tree calibration's residuals for missing effects (module docstring).
+
+    Args:
+        tree: the tree ``calibration`` was made on (not changed: the final model is the result's placements).
+        calibration: its result (:func:`pincal.fit.tree_calibration.calibrate_tree`).
+        data: the measurement set it was calibrated on (its calibration rows: ``calibration.used_index``).
+        heldout: held-out rows, each in the registration of its calibrated session.
+        options: the row weights, row times, masses and stated noise (:class:`DiagnoseOptions`; a payload,
+            candidates of a thermal or pause kind and a recalibration are not taken).
+        progress: ``progress(done, total)``: one unit per candidate fitted in full, one per step.
+    """
+    options = DiagnoseOptions() if options is None else options
+    used = data.select(calibration.used_index)
+    rows = tree_rows(tree, used, calibration.row_sessions)
+    time = None if options.time is None else np.asarray(options.time, dtype=float)[calibration.used_index]
+    unknown = masses_unknown(TreeBody(tree), options.masses, 0.0)
+    # the loads at the URDF's geometry: at the calibrated one a mass-moment column the URDF's symmetry makes
+    # dependent (a combination the rows cannot determine) becomes independent by a hair, its value unbounded
+    inputs = tree_inputs(tree, used, time, loads=unknown)
+    pool = list(options.candidates) if options.candidates is not None else tree_candidates(tree, time is not None)
+    pool, untestable = testable_pool(pool, inputs, TreeBody(tree), unknown)
+    kept = calibration.kept  # under a prior also the parameters it holds near nominal: free in the fit
+    problem = TreeProblem(tree, calibration.params, rows, calibration.target, row_weights(used, options.sigma_column),
+                          calibration.session_names, sigma_pos=calibration.sigma_pos_m, prior=calibration.prior_sigma,
+                          effects=ModelledEffects((), inputs))
+    held = None
+    if heldout is not None:
+        held_rows = tree_rows(tree, heldout, session_rows(heldout, calibration.session_names))
+        held_time = None if options.heldout_time is None else np.asarray(options.heldout_time, dtype=float)
+        reference = None if time is None else float(np.mean(time))
+        held_inputs = tree_inputs(tree, heldout, held_time, loads=unknown)
+        if held_time is not None and reference is not None:  # a drift's time as the calibration rows'
+            held_inputs = replace(held_inputs, time=held_time - reference)
+        held = replace(problem, rows=held_rows, row_weight=np.ones(heldout.n_rows), sigma_pos=1.0,
+                       effects=ModelledEffects((), held_inputs))
+    search = _Search(problem, kept, calibration.vector, held,
+                     options.stated_sigma_pos_m)
+    counter = Counter(progress)
+    objective, solution = search.fit([])
+    adopted: list[Effect] = []
+    steps: list[TreeStep] = []
+    ranking: tuple[TreeCandidate, ...] = ()
+    notes: list[str] = []
+    while len(adopted) < MAX_EFFECTS:
+        chosen, ranking = _step(search, inputs, (objective, solution), adopted, pool, counter)
+        if chosen is None:
+            break
+        effect, new_objective, new_solution, delta = chosen
+        # refitted at the noise scale of its residual (maximum likelihood; with a prior, eq P2), as the single
+        # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
+        # strongly against the rows, and what it held would be left for the next candidates to imitate
+        search = replace(search, problem=search.problem.rescaled(cast(TreeResidual | PriorResidual, new_objective),
+                                                                 new_solution))
+        try:
+            new_objective, new_solution = search.fit([*adopted, effect], new_solution.x)
+        except CalibrationError as error:  # sparse data: with the scale re-estimated it is not determined
+            notes.append(f"{effect.label} not adopted: its refit with the noise re-estimated fails ({error}); the "
+                         "search stops here")
+            break
+        values = new_solution.x[new_objective.effect_slices[-1]]
+        std = standard_deviations(new_objective, new_solution)[new_objective.effect_slices[-1]]
+        steps.append(TreeStep(effect, values, std, delta, search.errors(objective, solution.x),
+                              search.errors(new_objective, new_solution.x),
+                              search.held_errors(adopted, solution.x), search.held_errors([*adopted, effect],
+                                                                                          new_solution.x),
+                              ranking))
+        adopted.append(effect)
+        objective, solution = new_objective, new_solution
+    return _concluded(search, (objective, solution), (adopted, steps, ranking), untestable, unknown, time, notes)
+
+
+def _step(search: _Search, inputs: EffectInputs, current: tuple[FitObjective, Solution], adopted: list[Effect],
+          pool: Sequence[Effect], counter: Counter
+          ) -> tuple[tuple[Effect, FitObjective, Solution, float] | None, tuple[TreeCandidate, ...]]:
+    """One step: screen every candidate not adopted, fit the shortlist in full, judge them best first; the one
+    adopted (its fit and ΔBIC) or None, and the ranking."""
+    objective, solution = current
+    now = bic(solution.residual, solution.x.size, n_prior_rows(objective))
+    freedom = residual_freedom(objective, solution)
+    offered = [e for e in pool if e not in adopted and testable(freedom, e.n_values, EVIDENCE)]
+    if not offered:
+        return None, ()
+    scores = Linearisation(solution, n_prior_rows(objective)).test(objective.effect_columns(solution.x, offered), now)
+    screened = sorted(zip(offered, scores), key=lambda item: item[1].delta_bic)
+    shortlist = [e for e, score in screened[:SHORTLIST] if may_reach(score.delta_bic, EVIDENCE)]
+    counter.expect(len(shortlist) + 1)
+    fitted = []
+    failed: list[TreeCandidate] = []
+    for effect in shortlist:
+        counter.tick()
+        try:
+            new_objective, new_solution = search.fit([*adopted, effect], np.r_[solution.x, np.zeros(effect.n_values)])
+        except CalibrationError as error:  # the rows do not determine it beside the geometry: reported, not adopted
+            failed.append(TreeCandidate(effect, np.inf, np.zeros(effect.n_values), f"its fit fails ({error})"))
+            continue
+        fitted.append((bic(new_solution.residual, new_solution.x.size, n_prior_rows(new_objective)) - now, effect,
+                       new_objective, new_solution))
+    fitted.sort(key=lambda item: item[0])
+    chosen = None
+    ranking = []
+    for delta, effect, new_objective, new_solution in fitted:
+        values = new_solution.x[new_objective.effect_slices[-1]]
+        verdict = "not judged: another adopted" if chosen is not None else _verdict(
+            search, inputs, effect, (delta, adopted), (new_objective, new_solution), solution.x)
+        ranking.append(TreeCandidate(effect, float(delta), values, verdict))
+        if verdict == "adopted":
+            chosen = (effect, new_objective, new_solution, float(delta))
+    ranking += failed
+    ranking += [TreeCandidate(e, s.delta_bic, np.zeros(e.n_values), "screened out", screened=True)
+                for e, s in screened if e not in shortlist][: max(0, SHORTLIST - len(ranking))]
+    counter.tick()
+    return chosen, tuple(ranking)
+
+
+def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tuple[float, Sequence[Effect]],
+             fit: tuple[FitObjective, Solution], x_before: np.ndarray) -> str:
+    """``adopted``, or why not, by the single chain's rules (module docstring)."""
+    delta, adopted = evidence
+    objective, solution = fit
+    body = TreeBody(search.problem.tree)
+    values = solution.x[objective.effect_slices[-1]]
+    if delta >= EVIDENCE:
+        return f"ΔBIC {delta:.1f} not below {EVIDENCE:g}"
+    wald = _wald(objective, solution)
+    if wald < float(scipy.stats.chi2.ppf(DETERMINED_LEVEL, values.size)):  # one value: |v| < 2σ
+        return (f"its value {np.round(values, 6).tolist()} is not {DETERMINED_Z:g} standard deviations from zero "
+                f"(Wald χ² {wald:.3g} over {values.size} value(s)): its ΔBIC is gained by the geometry it frees, not "
+                "by a value the rows determine")
+    if not plausible(effect, values, body):
+        return f"its value {np.round(values, 6).tolist()} is outside the physical range (a stand-in for something else)"
+    sl = objective.effect_slices[-1]
+    largest = float(np.max(np.abs(objective.jacobian(solution.x)[: solution.residual.size - n_prior_rows(objective),
+                                                                 sl] @ values), initial=0.0))
+    if largest < NEGLIGIBLE:  # the residual is whitened: its columns times the values are in noise units
+        return f"it changes no measured coordinate by more than {largest:.2g} of its noise: too small to matter"
+    if effect.type != "coupling" and offset_like(effect_basis(effect, inputs, body)):
+        return "its basis barely changes over the rows, so it acts as a joint offset"
+    before, after = search.held_errors(adopted, x_before), search.held_errors([*adopted, effect], solution.x)
+    if before is None or after is None:
+        return "adopted"
+    # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
+    return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
+                            search.judged_noise(objective, solution), None)
+
+
+def _wald(objective: FitObjective, solution: Solution) -> float:
+    """Wald's statistic vᵀ C⁻¹ v of the last effect's values v, C their covariance: the posterior's under a prior
+    (:func:`pincal.fit.prior.posterior`), else the solver's s² (JᵀJ)⁻¹ (:func:`pincal.fit.solver.solve`)."""
+    jacobian, residual, sl = solution.jacobian, solution.residual, objective.effect_slices[-1]
+    if isinstance(objective, PriorResidual):
+        covariance, _ = posterior(jacobian, residual, objective.n_prior, objective.noise)
+    else:
+        covariance = float(residual @ residual) / max(jacobian.shape[0] - jacobian.shape[1], 1) * np.linalg.inv(
+            gram(jacobian))
+    values = solution.x[sl]
+    return float(values @ np.linalg.lstsq(covariance[sl, sl], values, rcond=None)[0])
+
+
+def _concluded(search: _Search, final: tuple[FitObjective, Solution],
+               found: tuple[Sequence[Effect], Sequence[TreeStep], tuple[TreeCandidate, ...]],
+               untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None, notes: list[str]) -> TreeDiagnosis:
+    """The final model as a value: the tree vector, placements, target and errors of the last fit; ``found``: the
+    effects adopted, their steps and the last step's ranking."""
+    adopted, steps, ranking = found
+    objective, solution = final
+    problem = search.problem
+    kinematic = objective.blocks["kinematic"]
+    std_all = standard_deviations(objective, solution)
+    vector, std = search.base.copy(), np.full(search.base.size, np.nan)
+    vector[search.kept], std[search.kept] = solution.x[kinematic], std_all[kinematic]
+    errors = search.errors(objective, solution.x)
+    seen = errors[np.isfinite(errors)]
+    effects = tuple((effect, solution.x[sl], std_all[sl]) for effect, sl in zip(adopted, objective.effect_slices))
+    if untestable:
+        notes.append(f"{len(untestable)} candidate(s) cannot be tested on these rows ("
+                     f"{', '.join(e.label for e in untestable[:4])}{' ...' if len(untestable) > 4 else ''}): "
+                     + ("no mass moment loads the joint" if unknown else
+                        "no gravity torque acts on the joint in any row (give the URDF's inertias, or --masses "
+                        "unknown)"))
+    return TreeDiagnosis(
+        effects=effects, steps=tuple(steps), last_candidates=ranking, untestable=tuple(untestable),
+        vector=vector, std=std, target=cast(TreeResidual, objective).estimate(solution.x),
+        tree_placements=problem.tree.placements() if problem.params is None else problem.params.placements(vector),
+        point_errors=errors, heldout_before=steps[0].heldout_before if steps else search.held_errors([], solution.x),
+        heldout_after=search.held_errors(adopted, solution.x),
+        sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown,
+        time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes),
+        inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))

@@ -1,0 +1,90 @@
+"""REPORT.json of ``diagnose`` with several ``--tip-link LINK:POINTS`` (:class:`pincal.report.model_tree.TreeReport`
+with ``effects`` and ``diagnosis``): the calibration's report of the final model, each target's errors before
+and after the effects on the calibration and held-out rows, the effects and the search."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import cast
+
+import numpy as np
+
+from pincal.diagnosis.tree_diagnose import TreeCandidate, TreeDiagnosis
+from pincal.diagnosis.verdicts import CRITERION
+from pincal.model.effects import EffectInputs
+from pincal.model.tree import KinematicTree
+from pincal.report.diagnosis import effect_entries
+from pincal.report.model_tree import (
+    TargetErrors,
+    TargetJson,
+    TreeBeforeAfter,
+    TreeCandidateJson,
+    TreeDiagnosisJson,
+    TreeReport,
+)
+from pincal.report.tree import target_errors
+
+__all__ = ["with_diagnosis"]
+
+
+def _held(errors: np.ndarray | None, points: tuple[int, ...]) -> TargetErrors | None:
+    """A target's errors on the held-out rows (K_h, P) [m], of its points seen there (None: none, or no rows)."""
+    numbers = () if errors is None else tuple(p for p in points if np.isfinite(errors[:, p - 1]).any())
+    return target_errors(errors, numbers) if errors is not None and numbers else None
+
+
+def _all_points(errors: np.ndarray) -> TargetErrors:
+    """Every seen point's errors (K, P) [m] as one target's (its points: those seen in some row)."""
+    return target_errors(errors, tuple(int(p) + 1 for p in np.flatnonzero(np.isfinite(errors).any(axis=0))))
+
+
+def _before_after(before: np.ndarray | None, after: np.ndarray | None) -> TreeBeforeAfter | None:
+    return None if before is None or after is None else {"before": _all_points(before), "after": _all_points(after)}
+
+
+def _candidates(candidates: Sequence[TreeCandidate], inputs: EffectInputs, kinds: Mapping[str, str]
+                ) -> list[TreeCandidateJson]:
+    """Each candidate's effect (its values when fitted in full, its type and joint when screened out), ΔBIC and
+    verdict."""
+    out = []
+    for candidate in candidates:
+        entry = cast(TreeCandidateJson, effect_entries([(candidate.effect, candidate.values, np.full(
+            candidate.values.shape, np.nan))], inputs, kinds, {})[0])
+        for key in ("std", "sin_std", "cos_std", "advice", "combinations") + (
+                ("value", "sin", "cos") if candidate.screened else ()):
+            entry.pop(key, None)  # type: ignore[misc]
+        entry["delta_bic"], entry["screened"] = candidate.delta_bic, candidate.screened
+        entry["verdict"] = candidate.verdict
+        out.append(entry)
+    return out
+
+
+def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis, geometry_errors: np.ndarray,
+                   tree: KinematicTree) -> TreeReport:
+    """``report`` (:func:`pincal.report.tree.tree_report` of the final model) with each target's errors of the
+    geometric calibration (``geometry_errors``, its calibration rows' point errors (K, P) [m]) and on the
+    held-out rows, the effects and the search of ``diagnosis``."""
+    kinds = dict(zip(report["chain"]["joints"], report["chain"]["joint_kinds"]))
+    out: TreeReport = {**report, "targets": [TargetJson(**t) for t in report["targets"]]}
+    for target, entry in zip(tree.targets, out["targets"]):
+        entry["geometry_errors"] = target_errors(geometry_errors, target.spec.points)
+        entry["validation_geometry_errors"] = _held(diagnosis.heldout_before, target.spec.points)
+        entry["validation_errors"] = _held(diagnosis.heldout_after, target.spec.points)
+    section: TreeDiagnosisJson = {
+        "criterion": CRITERION,
+        "masses": "unknown" if diagnosis.masses_unknown else "urdf",
+        "steps": [{
+            "effect": effect_entries([(step.effect, step.values, step.std)], diagnosis.inputs, kinds, {})[0],
+            "delta_bic": step.delta_bic,
+            "calibration": cast(TreeBeforeAfter, _before_after(step.calibration_before, step.calibration_after)),
+            "heldout": _before_after(step.heldout_before, step.heldout_after),
+            "candidates": _candidates(step.candidates, diagnosis.inputs, kinds),
+        } for step in diagnosis.steps],
+        "last_candidates": _candidates(diagnosis.last_candidates, diagnosis.inputs, kinds),
+        "untestable": [e.label for e in diagnosis.untestable],
+    }
+    out["effects"] = effect_entries(diagnosis.effects, diagnosis.inputs, kinds, {})
+    out["diagnosis"] = section
+    return out
+
+
