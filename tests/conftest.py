@@ -254,6 +254,8 @@ SLOW_TESTS = (
     "tests/test_tree_diagnose.py::test_diagnose_names_the_torso_compliance_and_brings_each_target_to_the_noise_floor",
     "tests/test_tree_diagnose.py::test_without_the_effect_nothing_is_claimed_and_with_unknown_masses_its_moments"
     "[unknown]",
+    # plan with several --tip-link: 32 tree calibrations against the plan's per-target prediction (11 s)
+    "tests/test_tree_plan.py::test_planned_configurations_calibrate_as_predicted_for_each_target_and_beat_random",
     "tests/test_mimic.py::test_diagnose_names_a_wrong_multiplier",
     "tests/test_read_against.py::test_effects_that_correct_alike_are_applied_and_the_alternatives_named",
     "tests/test_tip_link.py::test_calibrate_and_plan_warn_on_a_short_tip",

@@ -77,18 +77,6 @@ def test_calibrate_several_targets_writes_every_chain_and_each_targets_errors(fi
     assert np.abs(predicted - sensed).max() < 1e-9
 
 
-@pytest.mark.parametrize(("command", "extra"), [
-    ("plan", ["--count", "5", "--out", "p.csv", "--report", "p.json"]),
-])
-def test_commands_of_one_chain_refuse_several_tip_links(files, capsys, command, extra):
-    folder, urdf, data, *_ = files
-    extra = [str(data) if e == "DATA" else str(folder / e) if "." in e else e for e in extra]
-    assert main([command, str(urdf), *TARGETS, *extra]) == 2
-    assert f"several --tip-link: not yet supported by {command}; calibrate, diagnose and evaluate are" in \
-        capsys.readouterr().err
-    assert not (folder / "o.urdf").exists() and not (folder / "p.csv").exists()
-
-
 def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
     folder, _, _, out, report, *_, held_out = files
     assert main(["evaluate", str(out), str(report), str(held_out), "--max-pos-mm", "1e-6"]) == 0

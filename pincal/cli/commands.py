@@ -436,7 +436,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     and len(args.tip_link) > 1:
                 tree_report, tree_withheld = run_diagnose_tree(args)  # several targets on several chains
                 return _warned(tree_report, args.strict, tree_withheld)
-            if args.command == "diagnose" or (args.command == "plan" and args.camera_link is None):
+            several = isinstance(getattr(args, "tip_link", None), list) and len(args.tip_link) > 1  # plan: a tree
+            if args.command == "diagnose" or (args.command == "plan" and args.camera_link is None and not several):
                 args.tip_link = one_tip_link(args.command, args.tip_link)
             return _COMMANDS[args.command](args)
     except PincalError as exc:

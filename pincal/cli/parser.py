@@ -341,9 +341,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     plan = sub.add_parser("plan", help="choose the robot configurations worth measuring, and their order")
     plan.add_argument("urdf", type=Path, help="URDF of the robot, or a .xacro")
-    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", metavar="LINK", action=TipLinks,
+    plan.add_argument("--tip-link", "--tool-parent", dest="tip_link", metavar="LINK[:POINTS]", action=TipLinks,
                       help="link at the end of the calibrated chain, carrying the target (required, but for a "
-                           "camera: --camera-link)")
+                           "camera: --camera-link); repeated, LINK:POINTS each: several targets on the chains of "
+                           "a tree, as calibrate takes them")
     plan.add_argument("--count", type=count, required=True, metavar="N", help="configurations to choose")
     plan.add_argument("--out", required=True, type=Path, metavar="PLAN.csv", help="plan to write (visiting order)")
     plan.add_argument("--report", type=Path, metavar="PLAN.json", help="prediction to write (required, but for a "

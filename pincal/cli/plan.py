@@ -24,6 +24,7 @@ def run_plan(args: argparse.Namespace) -> int:
     """``pincal plan``: choose, write PLAN.csv and PLAN.json, print the summary; the exit code."""
     from pincal.cli.progress import progress_bar
     from pincal.errors import PincalError
+    from pincal.model.tree import parse_targets
     from pincal.planning.defaults import DEFAULT_SAMPLE
     from pincal.planning.planner import PlanSettings
     from pincal.workflows.preparation import PlanInputs, plan_files
@@ -45,8 +46,10 @@ def run_plan(args: argparse.Namespace) -> int:
                         existing_path=args.existing, workspace_path=args.workspace, min_distance_m=args.min_distance,
                         collision_check=not args.no_collision_check, xacro_args=args.xacro_args,
                         package_dirs=dict(args.package_dir), couplings=args.coupling or ())
+    # several --tip-link LINK:POINTS: the tree of their chains (one string: one chain, as ever)
+    tip_link = args.tip_link if isinstance(args.tip_link, str) else parse_targets(args.tip_link)
     with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
-        run = plan_files(args.urdf, args.tip_link, settings, args.out, args.report, inputs, progress=progress)
+        run = plan_files(args.urdf, tip_link, settings, args.out, args.report, inputs, progress=progress)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     print_plan_summary(run)
@@ -82,6 +85,13 @@ def print_plan_summary(run) -> None:
     ratio = doc["predicted"]["plan_over_random_mean_position"]
     if ratio is not None:
         print(f"plan / random mean position error: {ratio:.2f}")
+    for target in plan.targets:  # several --tip-link: each target's share
+
+        def mean(values) -> str:
+            return "not determined" if values is None else f"mean {values[0]:.4g} mm, max {values[1]:.4g} mm"
+
+        name = f"{target.link} ({','.join(map(str, target.points))})"
+        print(f"  {name}: plan {mean(target.plan)}; random {mean(target.random)}")
     if plan.recorded is not None:
         print(f"recorded rows alone: {errors(plan.recorded)}")
         for entry in doc["additions"][:10]:

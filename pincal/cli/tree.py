@@ -34,7 +34,7 @@ def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
     if isinstance(tip_links, str):
         return tip_links
     if len(tip_links) > 1:
-        raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate, diagnose and evaluate "
+        raise PincalError(f"several --tip-link: not yet supported by {command}; calibrate, diagnose, evaluate and plan "
                           "are (pincal calibrate ... --tip-link LINK:POINTS --tip-link LINK:POINTS)")
     return tip_links[0]
 

@@ -22,6 +22,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import ModelError, PincalError
@@ -159,6 +160,46 @@ class KinematicTree:
             reason = " ".join(str(exc).split())
             raise ModelError(f"{description.source}: Pinocchio cannot read this URDF ({reason})") from None
         return cls(model, targets, source=description.source, mimics=joint_mimics(description.root()))
+
+    @property
+    def followers(self) -> tuple[str, ...]:
+        """The tree's joints that follow another joint (URDF ``<mimic>``, eq M1): their readings come from their
+        driver's (a tree joint's, or a column of its own off the tree), a file needs no column for them."""
+        return tuple(j.name for j in self.joints if j.mimic is not None)
+
+    def followed(self, q: npt.ArrayLike) -> np.ndarray:
+        """Tree joint values (K, N) [rad or m] with each follower set from its driver (eq M1), as
+        :meth:`KinematicChain.followed`; followers of one driver off the tree (a gripper's fingers) set from the
+        first of them, so that one driver value gives them all; a copy."""
+        out = np.array(q, dtype=float, copy=True)
+        names = self.joint_names
+        leaders: dict[str, int] = {}
+        for i, joint in enumerate(self.joints):
+            mimic = joint.mimic
+            if mimic is None:
+                continue
+            if mimic.driver in names:
+                out[..., i] = mimic.multiplier * out[..., names.index(mimic.driver)] + mimic.offset
+            elif mimic.driver in leaders:  # the driver's value that the first follower stands for
+                lead = leaders[mimic.driver]
+                first = self.joints[lead].mimic
+                assert first is not None  # a leader follows the driver
+                driver = (out[..., lead] - first.offset) / first.multiplier
+                out[..., i] = mimic.multiplier * driver + mimic.offset
+            else:
+                leaders[mimic.driver] = i
+        return out
+
+    def configurations(self, q: npt.ArrayLike) -> np.ndarray:
+        """Tree joint readings (K, N) → configurations (K, nq) of the URDF's model reduced to the tree's joints
+        (continuous joints as (cos, sin), as :meth:`KinematicChain.configurations`)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if q.shape[1] != self.n_joints:
+            raise ModelError(f"expected {self.n_joints} joint values per row, got {q.shape[1]}")
+        columns: list[np.ndarray] = []
+        for i, joint in enumerate(self.joints):
+            columns += [np.cos(q[:, i]), np.sin(q[:, i])] if joint.kind == "continuous" else [q[:, i]]
+        return np.column_stack(columns)
 
     @property
     def n_points(self) -> int:

@@ -17,6 +17,7 @@ import numpy as np
 from pincal.errors import MeasurementError, PincalError
 from pincal.measurements.csv_v1 import read_joint_columns
 from pincal.model.chain import KinematicChain
+from pincal.model.tree import KinematicTree
 from pincal.planning.defaults import DEFAULT_SAMPLE, WORKSPACE_SIZE
 from pincal.simulation.sensor import random_configurations, sampling_limits
 
@@ -32,14 +33,14 @@ LIMIT_SLACK = 1e-3
 # DEFAULT_SAMPLE, WORKSPACE_SIZE: pincal.planning.defaults (the parser reads them)
 
 
-def sample_candidates(chain: KinematicChain, count: int, seed: int) -> np.ndarray:
+def sample_candidates(chain: KinematicChain | KinematicTree, count: int, seed: int) -> np.ndarray:
     """``count`` configurations uniform within the joint limits (±π for continuous joints), (count, N)."""
     if count < 1:
         raise PincalError(f"--sample {count}: draw at least one configuration")
     return random_configurations(chain, np.random.default_rng(seed), count)
 
 
-def read_candidates(path: str | Path, chain: KinematicChain) -> tuple[np.ndarray, np.ndarray]:
+def read_candidates(path: str | Path, chain: KinematicChain | KinematicTree) -> tuple[np.ndarray, np.ndarray]:
     """Joint readings of a candidate file (:func:`pincal.measurements.csv_v1.read_joint_columns`).
 
     Returns:
@@ -55,7 +56,7 @@ def read_candidates(path: str | Path, chain: KinematicChain) -> tuple[np.ndarray
     return q, lines
 
 
-def check_within_limits(q: np.ndarray, chain: KinematicChain, source: str, lines: np.ndarray) -> None:
+def check_within_limits(q: np.ndarray, chain: KinematicChain | KinematicTree, source: str, lines: np.ndarray) -> None:
     """Reject readings outside the joint limits (beyond :data:`LIMIT_SLACK`), naming the first one."""
     for n, joint in enumerate(chain.joints):
         unit = "m" if joint.kind == "prismatic" else "rad"
@@ -112,7 +113,7 @@ class JointRange:
                 "source": self.source}
 
 
-def joint_ranges(chain: KinematicChain, read: np.ndarray | None = None) -> tuple[JointRange, ...]:
+def joint_ranges(chain: KinematicChain | KinematicTree, read: np.ndarray | None = None) -> tuple[JointRange, ...]:
     """Each joint's range of the candidates: drawn (``read`` None) within :func:`pincal.simulation.sensor.
     sampling_limits` (the URDF's limits, one turn for a continuous joint), else the span of the ``read``
     candidates (K, N) [rad or m]; in deg (mm for a prismatic joint)."""

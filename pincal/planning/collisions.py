@@ -29,6 +29,7 @@ from pincal.errors import ModelError
 from pincal.model.chain import KinematicChain
 from pincal.model.description import read_description
 from pincal.model.packages import with_resolved_meshes
+from pincal.model.tree import KinematicTree
 from pincal.progress import Counter, Progress
 
 __all__ = ["CollisionCheck", "Clearance", "check_clearance", "has_collision_geometry"]
@@ -77,7 +78,7 @@ def has_collision_geometry(urdf: str | Path, xacro_args: Sequence[tuple[str, str
                for element in root.iter("collision"))
 
 
-def _geometry(urdf: Path, chain: KinematicChain, xacro_args: Sequence[tuple[str, str]] = (),
+def _geometry(urdf: Path, chain: KinematicChain | KinematicTree, xacro_args: Sequence[tuple[str, str]] = (),
               package_dirs: Mapping[str, Path] | None = None) -> tuple[pin.Model, pin.GeometryModel]:
     """Chain model and collision geometry reduced like :class:`KinematicChain` does (a ``.xacro`` is
     expanded in memory with ``xacro_args``; ``package://`` meshes found as :mod:`pincal.model.packages` says)."""
@@ -98,7 +99,7 @@ def _geometry(urdf: Path, chain: KinematicChain, xacro_args: Sequence[tuple[str,
 
 
 def check_clearance(
-    urdf: str | Path, chain: KinematicChain, q: np.ndarray, min_distance: float,
+    urdf: str | Path, chain: KinematicChain | KinematicTree, q: np.ndarray, min_distance: float,
     xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
     package_dirs: Mapping[str, Path] | None = None,

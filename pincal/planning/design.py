@@ -50,8 +50,8 @@ from pincal.progress import Counter
 
 __all__ = [
     "CRITERIA", "PRIOR", "MAX_PASSES", "STARTS", "PASS_TOLERANCE", "SWAP_TOLERANCE", "QUADRATURE", "SINGULAR",
-    "Prediction", "DesignProblem", "Selection", "select", "priority_order", "ContinuousDesign", "CONTINUOUS_ITERATIONS",
-    "CONTINUOUS_EFFICIENCY", "continuous_design",
+    "Prediction", "TargetPrediction", "DesignProblem", "Selection", "select", "priority_order", "ContinuousDesign",
+    "CONTINUOUS_ITERATIONS", "CONTINUOUS_EFFICIENCY", "continuous_design",
 ]
 
 CRITERIA = {
@@ -99,6 +99,23 @@ class Prediction:
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class TargetPrediction:
+    """One target's share of a prediction (several targets on a tree): the mean and largest over the workspace
+    sample and its points of E‖position error‖ [mm], for the plan and the median over the random choices (None:
+    not determined).
+
+    Attributes:
+        link: the target's tip link; points: its point numbers (1 is x1,y1,z1).
+        plan / random: (mean, max) [mm], or None.
+    """
+
+    link: str
+    points: tuple[int, ...]
+    plan: tuple[float, float] | None
+    random: tuple[float, float] | None
 
 
 class DesignProblem:
@@ -174,6 +191,14 @@ class DesignProblem:
         rows = np.concatenate([self.existing, self.blocks[np.asarray(chosen, dtype=int)]]).reshape(-1, self.n)
         cond = condition_number(rows) if condition else float("nan")
         return Prediction(float(pos.mean()), float(pos.max()), rot_mean, rot_max, cond)
+
+    def point_errors(self, chosen) -> np.ndarray | None:
+        """E‖position error‖ [mm] of each workspace configuration and target point, (E, P), of the model calibrated
+        on the recorded rows and ``chosen``; None if singular."""
+        info = self.information(chosen)
+        if _singular(info):
+            return None
+        return self.expected_errors(np.linalg.inv(info))[0].reshape(len(self.position), -1)
 
     def expected_errors(self, covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """E‖position error‖ [mm] at each workspace configuration and target point, (E·P,), and

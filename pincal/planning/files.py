@@ -24,16 +24,18 @@ from pincal.errors import PincalError
 from pincal.measurements.couplings import CouplingJson
 from pincal.measurements.data import JointMimic
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
+from pincal.model.tree import KinematicTree
 from pincal.outputs import file_sha256, replacing, write_text
 from pincal.planning.candidates import JointRange, JointRangeJson
 from pincal.planning.collisions import Clearance, CollisionCheck
-from pincal.planning.design import CRITERIA
+from pincal.planning.design import CRITERIA, TargetPrediction
 
 if TYPE_CHECKING:  # annotations only: the REPORT.json loader reads PLAN.json without the planner's imports
     from pincal.planning.planner import Plan
 
 __all__ = [
-    "PLAN_VERSION", "PlanSources", "PlanChain", "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",
+    "PLAN_VERSION", "PlanSources", "PlanChain", "PlanTarget", "TargetErrorsJson", "TargetPredictionJson",
+    "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",
     "PredictionJson", "RandomPrediction", "PlanPredicted", "PlanIdentifiability", "ClearanceJson", "PlanCandidates",
     "BalanceJson", "PlanOrder", "Addition", "PlanJson", "CandidatePool", "PlannedRows", "write_plan_csv",
     "write_plan_json", "plan_document",
@@ -62,10 +64,26 @@ class PlanSources(_PlanSourcesKeys, total=False):
     couplings: list[CouplingJson]
 
 
-class PlanChain(TypedDict):
+class _PlanChainKeys(TypedDict):
     root_link: str
     tip_link: str
     joints: list[str]
+
+
+class PlanTarget(TypedDict):
+    """One target of several (``--tip-link LINK:POINTS``): its tip link, its point numbers (1 is ``x1,y1,z1``) and
+    its chain's joints."""
+
+    tip_link: str
+    points: list[int]
+    joints: list[str]
+
+
+class PlanChain(_PlanChainKeys, total=False):
+    """The chain planned for: its root, its tip link and its joints (PLAN.csv's columns but for followers). With
+    several ``--tip-link``: the tree's joints, ``tip_link`` the first target's, and ``targets`` each target."""
+
+    targets: list[PlanTarget]
 
 
 class PlanPriorScale(TypedDict):
@@ -121,13 +139,36 @@ class RandomPrediction(PredictionJson):
     statistic: str
 
 
-class PlanPredicted(TypedDict):
+class TargetErrorsJson(TypedDict):
+    """A target's expected position errors over the workspace sample and its points [mm]."""
+
+    mean_position_mm: float
+    max_position_mm: float
+
+
+class TargetPredictionJson(TypedDict):
+    """One target's share of the prediction (several ``--tip-link``): the plan's, and the median of the random
+    choices' (null: not determined)."""
+
+    tip_link: str
+    points: list[int]
+    plan: TargetErrorsJson | None
+    random: TargetErrorsJson | None
+
+
+class _PlanPredictedKeys(TypedDict):
     what: str
     workspace_configurations: int
     plan: PredictionJson | None
     random: RandomPrediction | None
     plan_over_random_mean_position: float | None
     recorded_only: PredictionJson | None
+
+
+class PlanPredicted(_PlanPredictedKeys, total=False):
+    """The predicted errors; with several ``--tip-link``, ``targets``: each target's."""
+
+    targets: list[TargetPredictionJson]
 
 
 class PlanIdentifiability(TypedDict):
@@ -236,7 +277,7 @@ class PlannedRows(Protocol):
     def candidates(self) -> np.ndarray: ...
 
 
-def write_plan_csv(path: str | Path, plan: PlannedRows, chain: KinematicChain, labels: np.ndarray,
+def write_plan_csv(path: str | Path, plan: PlannedRows, chain: KinematicChain | KinematicTree, labels: np.ndarray,
                    unread: Sequence[str] = ()) -> str:
     """PLAN.csv: joint columns, ``priority`` and ``candidate``, one row per configuration in visiting order; a
     joint the chain's joints follow from off the chain (URDF ``<mimic>``, eq M1) has a column after the chain's,
@@ -273,6 +314,24 @@ def write_plan_json(path: str | Path, document: PlanJson) -> None:
         raise PincalError(f"{path}: cannot write the plan report ({exc.strerror or exc})") from None
 
 
+def _chain_json(chain: KinematicChain | KinematicTree) -> PlanChain:
+    """PLAN.json ``chain``: one chain's, or a tree's joints with each target (the first one's tip link)."""
+    if isinstance(chain, KinematicChain):
+        return {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names)}
+    first = chain.targets[0].chain
+    return {"root_link": first.root_link, "tip_link": first.tip_link, "joints": list(chain.joint_names),
+            "targets": [{"tip_link": t.link, "points": list(t.spec.points), "joints": list(t.chain.joint_names)}
+                        for t in chain.targets]}
+
+
+def _target_json(target: TargetPrediction) -> TargetPredictionJson:
+    def errors(values: tuple[float, float] | None) -> TargetErrorsJson | None:
+        return None if values is None else {"mean_position_mm": values[0], "max_position_mm": values[1]}
+
+    return {"tip_link": target.link, "points": list(target.points), "plan": errors(target.plan),
+            "random": errors(target.random)}
+
+
 def _prediction(prediction) -> PredictionJson | None:
     return None if prediction is None else cast(PredictionJson, prediction.as_dict())
 
@@ -298,7 +357,7 @@ class CandidatePool:
 
 def plan_document(
     plan: Plan,
-    chain: KinematicChain,
+    chain: KinematicChain | KinematicTree,
     sources: PlanSources,
     pool: CandidatePool,
     tool_pose: np.ndarray | None,
@@ -319,12 +378,28 @@ def plan_document(
         tool = {"xyz_m": xyz.tolist(), "rpy_rad": rpy.tolist()}
     kinematic = len(plan.identifiable)
     assert settings.sensor is not None  # a plan's settings name the sensor (pincal.planning.planner.plan)
+    predicted: PlanPredicted = {
+        "what": "linearised noise limit of the model calibrated on these configurations (all identifiable "
+                "parameters estimated" + ("" if settings.prior is None else ", with the prior of "
+                                          "settings.prior_scale") + "): expected error against the truth "
+                "over the workspace sample",
+        "workspace_configurations": plan.workspace_size,
+        "plan": _prediction(plan.prediction),
+        "random": None if plan.random is None else {**cast(PredictionJson, plan.random.as_dict()),
+                                                    "draws": settings.random_draws,
+                                                    "singular_draws": plan.random_singular,
+                                                    "statistic": "median over draws"},
+        "plan_over_random_mean_position": ratio,
+        "recorded_only": _prediction(plan.recorded),
+    }
+    if plan.targets:  # several --tip-link: each target's share
+        predicted["targets"] = [_target_json(t) for t in plan.targets]
     return {
         "pincal_version": __version__,
         "plan_version": PLAN_VERSION,
         "sources": sources,
         "plan_csv_sha256": plan_csv_sha256,
-        "chain": {"root_link": chain.root_link, "tip_link": chain.tip_link, "joints": list(chain.joint_names)},
+        "chain": _chain_json(chain),
         "settings": {
             "count": settings.count,
             "level": settings.level,
@@ -341,20 +416,7 @@ def plan_document(
             "sample": pool.sample,
         },
         "criterion": {"name": plan.criterion, "definition": CRITERIA[plan.criterion], "value": plan.criterion_value},
-        "predicted": {
-            "what": "linearised noise limit of the model calibrated on these configurations (all identifiable "
-                    "parameters estimated" + ("" if settings.prior is None else ", with the prior of "
-                                              "settings.prior_scale") + "): expected error against the truth "
-                    "over the workspace sample",
-            "workspace_configurations": plan.workspace_size,
-            "plan": _prediction(plan.prediction),
-            "random": None if plan.random is None else {**cast(PredictionJson, plan.random.as_dict()),
-                                                        "draws": settings.random_draws,
-                                                        "singular_draws": plan.random_singular,
-                                                        "statistic": "median over draws"},
-            "plan_over_random_mean_position": ratio,
-            "recorded_only": _prediction(plan.recorded),
-        },
+        "predicted": predicted,
         "identifiability": {
             "identifiable": list(plan.identifiable),
             "not_identifiable": list(plan.not_identifiable),

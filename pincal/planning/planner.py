@@ -14,10 +14,12 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from pincal.errors import PincalError, did_you_mean
 from pincal.fit.chain_calibration import ChainFitOptions, calibrate_chain
@@ -25,10 +27,10 @@ from pincal.fit.prior import Prior, prior_of
 from pincal.fit.selection import SELECTION_CRITERIA, SelectionCriterion
 from pincal.fit.sessions import initial_target
 from pincal.measurements.data import MeasurementSet
-from pincal.model.chain import KinematicChain
+from pincal.model.chain import ChainJoint, KinematicChain
 from pincal.model.parameter_sets import CHAIN_LEVELS
 from pincal.planning.candidates import WORKSPACE_SIZE
-from pincal.planning.design import DesignProblem, Prediction, select
+from pincal.planning.design import DesignProblem, Prediction, TargetPrediction, select
 from pincal.planning.information import (
     MeasurementModel,
     SensorModel,
@@ -40,7 +42,8 @@ from pincal.residuals.sensor import REGISTRATION_NAMES
 
 __all__ = [
     "DEFAULT_SIGMA_POS_MM", "DEFAULT_SIGMA_ROT_DEG", "RANDOM_DRAWS", "PlanSettings", "Addition", "Plan",
-    "plan_measurements",
+    "plan_measurements", "Joints", "PlanContext", "usable_pool", "workspace_sample", "choose", "joint_columns",
+    "velocity_limits",
 ]
 
 #: Default sensor noise: the ``pincal simulate`` defaults (σ_p = 0.055 mm per axis,
@@ -153,6 +156,7 @@ class Plan:
         seconds: planning time [s].
         settings: the settings, with the sensor resolved.
         notes: what the user should know.
+        targets: with several targets (a tree), each one's predicted errors, plan and random.
     """
 
     settings: PlanSettings
@@ -179,6 +183,7 @@ class Plan:
     swaps: int
     seconds: float
     notes: tuple[str, ...] = field(default=())
+    targets: tuple[TargetPrediction, ...] = ()
 
 
 def plan_measurements(
@@ -213,20 +218,11 @@ def plan_measurements(
                       else SensorModel("points", existing.n_points) if existing.n_points > 1 else sensor)
         settings = replace(settings, sensor=sensor)
     assert settings.sensor is not None  # set above when not given
-    candidates = np.atleast_2d(np.asarray(candidates, dtype=float))
-    allowed = np.ones(len(candidates), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
-    alternate = _joint_columns(chain, settings.alternate)
-    if settings.count < 1:
-        raise PincalError(f"--count {settings.count}: choose at least one configuration")
-    if settings.count > int(allowed.sum()):
-        refused = len(candidates) - int(allowed.sum())
-        raise PincalError(f"--count {settings.count} is more than the {int(allowed.sum())} usable candidates"
-                          + (f" ({refused} refused)" if refused else "") + "; lower --count or give more candidates")
+    candidates, allowed = usable_pool(candidates, allowed, settings.count)
+    joint_columns(chain.joint_names, settings.alternate)  # an unknown joint refused before the work
     rng = np.random.default_rng(settings.seed)
     model, sigma_source, recorded_q, recorded_sessions = _measurement_model(chain, settings, existing)
-    if workspace is None:
-        pool = np.flatnonzero(allowed)
-        workspace = candidates[rng.choice(pool, min(len(pool), settings.workspace_size), replace=False)]
+    workspace = workspace_sample(candidates, allowed, workspace, settings, rng)
     blocks, recorded, errors, names = _session_columns(
         model, model.jacobian(candidates), model.jacobian(recorded_q), recorded_sessions,
         model.error_jacobian(workspace))
@@ -235,8 +231,77 @@ def plan_measurements(
         precision = np.zeros(blocks.shape[2])
         precision[: len(model.names)] = model.prior_precision(settings.prior)
     problem = DesignProblem(blocks, model.kinematic, recorded, *errors, prior_precision=precision)
+    sigma_rot = float(np.degrees(model.sigma_rot_rad)) if settings.sensor.has_rotation else None
+    context = PlanContext(settings, candidates, allowed, recorded_q, names, Joints(chain.joints, _velocities(chain)),
+                          (model.sigma_pos_m * 1000.0, sigma_rot, sigma_source), model.points, started)
+    return choose(problem, context, rng, progress)[0]
+
+
+@dataclass(frozen=True)
+class Joints:
+    """The joints a plan moves (limits: the visiting order's start) and their velocity limits [rad/s or m/s]."""
+
+    joints: tuple[ChainJoint, ...]
+    velocities: np.ndarray
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+
+@dataclass(frozen=True)
+class PlanContext:
+    """What :func:`choose` needs beside the design problem: the settings (the sensor resolved), the candidates
+    (K, N) [rad or m] and which may be chosen (K,), the recorded rows' configurations (K0, N), the problem's
+    column names, the joints, the noise (σ_p [mm], σ_a [deg] or None, where it comes from), the target points
+    (P, 3) [m] and when planning started (``time.perf_counter()``)."""
+
+    settings: PlanSettings
+    candidates: np.ndarray
+    allowed: np.ndarray
+    recorded_q: np.ndarray
+    names: tuple[str, ...]
+    joints: Joints
+    noise: tuple[float, float | None, str]
+    target_points: np.ndarray
+    started: float
+
+
+def usable_pool(candidates: np.ndarray, allowed: np.ndarray | None, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The candidates (K, N) and which may be chosen (K,; default all); refuses a ``count`` they cannot meet."""
+    candidates = np.atleast_2d(np.asarray(candidates, dtype=float))
+    allowed = np.ones(len(candidates), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+    if count < 1:
+        raise PincalError(f"--count {count}: choose at least one configuration")
+    if count > int(allowed.sum()):
+        refused = len(candidates) - int(allowed.sum())
+        raise PincalError(f"--count {count} is more than the {int(allowed.sum())} usable candidates"
+                          + (f" ({refused} refused)" if refused else "") + "; lower --count or give more candidates")
+    return candidates, allowed
+
+
+def workspace_sample(candidates: np.ndarray, allowed: np.ndarray, workspace: np.ndarray | None,
+                     settings: PlanSettings, rng: np.random.Generator) -> np.ndarray:
+    """The configurations accuracy is averaged over: ``workspace``, else ``settings.workspace_size`` of the
+    allowed candidates drawn with ``rng``."""
+    if workspace is not None:
+        return workspace
+    pool = np.flatnonzero(allowed)
+    return candidates[rng.choice(pool, min(len(pool), settings.workspace_size), replace=False)]
+
+
+def choose(problem: DesignProblem, context: PlanContext, rng: np.random.Generator,
+           progress: Progress | None = None) -> tuple[Plan, list[np.ndarray]]:
+    """Choose ``context.settings.count`` candidates for the criterion, predict, compare with random choices and
+    order them: the plan, and the random subsets it was compared with (indices into the candidates).
+
+    Raises:
+        PincalError: a count too small to determine the parameters.
+    """
+    settings, candidates, allowed, names = context.settings, context.candidates, context.allowed, context.names
+    assert settings.sensor is not None  # resolved by the caller
     rows = settings.sensor.rows
-    needed = int(np.ceil((problem.n - rows * len(recorded)) / rows))
+    needed = int(np.ceil((problem.n - rows * len(problem.existing)) / rows))
     if settings.count < needed:
         raise PincalError(
             f"--count {settings.count} cannot determine the {problem.n} parameters estimated at level "
@@ -246,18 +311,20 @@ def plan_measurements(
     counter.expect(settings.random_draws + settings.count)  # the random draws, the additions
     selection = select(problem, settings.count, settings.criterion, allowed, counter, seed=settings.seed)
     prediction = problem.predict(selection.chosen)
-    random, singular = _random_baseline(problem, settings, allowed, rng, counter)
-    recorded_prediction = problem.predict([]) if len(recorded) else None
+    random, singular, draws = _random_baseline(problem, settings, allowed, rng, counter)
+    recorded_prediction = problem.predict([]) if len(problem.existing) else None
     additions = _additions(problem, selection.priority, recorded_prediction, counter)
     counter.settle()
-    order = _visiting_order(chain, candidates[selection.chosen], recorded_q, alternate, settings.seed)
+    order = _visiting_order(context.joints, candidates[selection.chosen], context.recorded_q,
+                            joint_columns(context.joints.names, settings.alternate), settings.seed)
     chosen = selection.chosen[order]
     q = candidates[chosen]
     rank = {int(c): i + 1 for i, c in enumerate(selection.priority)}
     notes = []
     if prediction is None:
         notes.append("the chosen configurations do not determine every identifiable parameter; plan more")
-    return Plan(
+    sigma_pos_mm, sigma_rot_deg, sigma_source = context.noise
+    plan = Plan(
         settings=settings,
         q=q,
         candidates=chosen,
@@ -272,25 +339,27 @@ def plan_measurements(
         identifiable=tuple(names[i] for i in problem.identifiable),
         not_identifiable=tuple(names[i] for i in problem.not_identifiable),
         estimated=tuple(names[i] for i in problem.columns),
-        balance=tuple(approach_balance(q, chain.joint_names)),
-        travel_s=float(move_times(q, _velocities(chain)).sum()),
-        sigma_pos_mm=model.sigma_pos_m * 1000.0,
-        sigma_rot_deg=float(np.degrees(model.sigma_rot_rad)) if settings.sensor.has_rotation else None,
+        balance=tuple(approach_balance(q, context.joints.names)),
+        travel_s=float(move_times(q, context.joints.velocities).sum()),
+        sigma_pos_mm=sigma_pos_mm,
+        sigma_rot_deg=sigma_rot_deg,
         sigma_source=sigma_source,
-        target_points=model.points,
-        workspace_size=len(workspace),
+        target_points=context.target_points,
+        workspace_size=len(problem.position),
         swaps=selection.swaps,
-        seconds=time.perf_counter() - started,
+        seconds=time.perf_counter() - context.started,
         notes=tuple(notes),
     )
+    return plan, draws
 
 
-def _joint_columns(chain: KinematicChain, names) -> np.ndarray:
-    unknown = [n for n in names if n not in chain.joint_names]
+def joint_columns(joint_names: Sequence[str], names: Sequence[str]) -> np.ndarray:
+    """The columns of the ``--alternate`` joints ``names`` among ``joint_names``; an unknown one is refused."""
+    unknown = [n for n in names if n not in joint_names]
     if unknown:
         raise PincalError(f"--alternate: no joint {', '.join(repr(n) for n in unknown)} on the chain; "
-                          f"{did_you_mean(unknown[0], chain.joint_names, 'its joints')}")
-    return np.array([chain.joint_names.index(n) for n in names], dtype=int)
+                          f"{did_you_mean(unknown[0], list(joint_names), 'its joints')}")
+    return np.array([list(joint_names).index(n) for n in names], dtype=int)
 
 
 def _measurement_model(chain: KinematicChain, settings: PlanSettings, existing: MeasurementSet | None):
@@ -376,22 +445,24 @@ def _session_columns(
 
 
 def _random_baseline(problem: DesignProblem, settings: PlanSettings, allowed: np.ndarray, rng, counter: Counter):
-    """Median predicted errors of random N-subsets of the allowed candidates, and how many were singular."""
+    """Median predicted errors of random N-subsets of the allowed candidates, how many were singular, and the
+    subsets drawn."""
     pool = np.flatnonzero(allowed)
-    draws = []
+    draws, subsets = [], []
     for _ in range(settings.random_draws):
-        draws.append(problem.predict(rng.choice(pool, settings.count, replace=False)))
+        subsets.append(rng.choice(pool, settings.count, replace=False))
+        draws.append(problem.predict(subsets[-1]))
         counter.tick()
     good = [d for d in draws if d is not None]
     singular = len(draws) - len(good)
     if len(good) <= len(draws) // 2:
-        return None, singular
+        return None, singular, subsets
     median: dict[str, Any] = {}  # float, or None for orientation errors without orientations
     for key in ("mean_position_mm", "max_position_mm", "mean_rotation_deg", "max_rotation_deg", "condition"):
         values = [getattr(d, key) for d in good]
         # the singular draws count as infinitely bad
         median[key] = None if values[0] is None else float(np.median(values + [np.inf] * singular))
-    return Prediction(**median), singular
+    return Prediction(**median), singular, subsets
 
 
 def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Prediction | None,
@@ -412,16 +483,21 @@ def _additions(problem: DesignProblem, priority: np.ndarray, recorded: Predictio
 
 def _velocities(chain: KinematicChain) -> np.ndarray:
     """Velocity limit of each chain joint [rad/s or m/s]; 1 where the URDF gives none."""
-    v = np.array([chain.model.velocityLimit[chain.model.joints[j].idx_v] for j in chain.joint_ids], dtype=float)
+    return velocity_limits(chain.model, chain.joint_ids)
+
+
+def velocity_limits(model: pin.Model, joint_ids: Sequence[int]) -> np.ndarray:
+    """Velocity limit of each of the joints ``joint_ids`` of ``model`` [rad/s or m/s]; 1 where the URDF gives none."""
+    v = np.array([model.velocityLimit[model.joints[j].idx_v] for j in joint_ids], dtype=float)
     return np.where(np.isfinite(v) & (v > 0), v, 1.0)
 
 
-def _visiting_order(chain, q: np.ndarray, recorded_q: np.ndarray, alternate: np.ndarray, seed: int) -> np.ndarray:
+def _visiting_order(joints: Joints, q: np.ndarray, recorded_q: np.ndarray, alternate: np.ndarray,
+                    seed: int) -> np.ndarray:
     """Permutation of the chosen rows: short travel, or balanced approaches of the ``alternate`` joints."""
-    lower = np.array([j.lower for j in chain.joints])
-    upper = np.array([j.upper for j in chain.joints])
-    start = recorded_q[-1] if len(recorded_q) else np.clip(np.zeros(chain.n_joints), lower, upper)
-    velocity = _velocities(chain)
+    lower = np.array([j.lower for j in joints.joints])
+    upper = np.array([j.upper for j in joints.joints])
+    start = recorded_q[-1] if len(recorded_q) else np.clip(np.zeros(len(lower)), lower, upper)
     if len(alternate):
-        return alternating_order(q, velocity, alternate, start, seed)
-    return short_tour(q, velocity, start)
+        return alternating_order(q, joints.velocities, alternate, start, seed)
+    return short_tour(q, joints.velocities, start)

@@ -23,6 +23,7 @@ from pincal.model.lateral import bend_angles, bent_tool_poses
 from pincal.model.mass_moments import bending_moments
 from pincal.model.sensor import Registration
 from pincal.model.thermal import RowConditions
+from pincal.model.tree import KinematicTree
 
 __all__ = [
     "DEFAULT_REGISTRATION", "cpa_configurations", "SimulatedSensor", "SimulatedEffects", "measure", "simulated_shifts",
@@ -224,7 +225,7 @@ def perfect_measurements(chain: KinematicChain, data: MeasurementSet, registrati
     )
 
 
-def sampling_limits(chain: KinematicChain) -> tuple[np.ndarray, np.ndarray]:
+def sampling_limits(chain: KinematicChain | KinematicTree) -> tuple[np.ndarray, np.ndarray]:
     """The range configurations are drawn from: each joint's URDF limits, one turn (±pi) for a continuous
     joint, which has none [rad or m], (N,) lower and upper; a joint that follows another on the chain
     (URDF ``<mimic>``) keeps its driver within the range its own limits allow, and spans what that gives it."""
@@ -244,7 +245,7 @@ def sampling_limits(chain: KinematicChain) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
-def random_configurations(chain: KinematicChain, rng: np.random.Generator, count: int) -> np.ndarray:
+def random_configurations(chain: KinematicChain | KinematicTree, rng: np.random.Generator, count: int) -> np.ndarray:
     """Joint readings drawn uniformly within the limits (±pi for continuous joints, :func:`sampling_limits`),
     (count, N); a joint that follows another on the chain (URDF ``<mimic>``) follows its draw."""
     lower, upper = sampling_limits(chain)

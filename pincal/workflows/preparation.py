@@ -20,6 +20,7 @@ from pincal.measurements.csv_v1 import file_columns, read_sessions
 from pincal.model.chain import KinematicChain
 from pincal.model.description import xacro_arguments
 from pincal.model.dh.conversion import DHUrdf, urdf_from_dh_table
+from pincal.model.tree import KinematicTree, TargetSpec
 from pincal.planning.candidates import DEFAULT_SAMPLE, JointRange, joint_ranges, read_candidates, sample_candidates
 from pincal.planning.collisions import Clearance, CollisionCheck, check_clearance, has_collision_geometry
 from pincal.planning.files import (
@@ -31,6 +32,7 @@ from pincal.planning.files import (
     write_plan_json,
 )
 from pincal.planning.planner import Plan, PlanSettings, plan_measurements
+from pincal.planning.tree_plan import plan_tree_measurements
 from pincal.progress import Progress, Stages
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.settings import follow_couplings
@@ -127,7 +129,7 @@ class PlanRun:
 
 def plan_files(
     urdf: str | Path,
-    tip_link: str,
+    tip_link: str | Sequence[TargetSpec],
     settings: PlanSettings,
     out_csv: str | Path,
     out_json: str | Path,
@@ -135,6 +137,11 @@ def plan_files(
     progress: Progress | None = None,
 ) -> PlanRun:
     """Plan ``settings.count`` measurements of the chain ``urdf`` → ``tip_link``; write PLAN.csv and PLAN.json.
+
+    ``tip_link`` may be several targets (:func:`pincal.model.tree.parse_targets` of ``--tip-link LINK:POINTS``
+    values): the plan is then the tree's (:func:`pincal.planning.tree_plan.plan_tree_measurements`), its candidates
+    every joint of the targets' chains, PLAN.csv a column for each but the joints that follow another
+    (``<mimic>``), PLAN.json each target's prediction; ``--tool``, ``--coupling`` and ``--level dh`` are refused.
 
     ``settings.tool_known`` must say whether ``inputs.tool_pose`` is given. Level ``dh``
     plans for the paper's DH parameters with the target known, so it needs
@@ -170,11 +177,16 @@ def plan_files(
                   *(Path(p) for p in (candidates_path, *existing_paths, workspace_path) if p is not None)]
     refuse_overwrite(out_csv, *sources_in)
     refuse_overwrite(out_json, *sources_in, outputs=[out_csv])
-    chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
+    chain: KinematicChain | KinematicTree
+    if isinstance(tip_link, str):
+        chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
+        # a joint without a column in the recorded rows (else the candidate file) follows its driver (eq M1)
+        told: list[str | Path] = [*existing_paths] or ([candidates_path] if candidates_path is not None else [])
+        couplings = follow_couplings(chain, couplings, told)
+    else:
+        _refused_for_tree(settings, inputs)
+        chain = KinematicTree.from_urdf(urdf, tip_link, xacro_args=xacro_args)
     names = chain.joint_names
-    # a joint without a column in the recorded rows (else the candidate file) follows its driver (eq M1)
-    told: list[str | Path] = [*existing_paths] or ([candidates_path] if candidates_path is not None else [])
-    couplings = follow_couplings(chain, couplings, told)
     notes: list[str] = []
     if candidates_path is not None:  # a file holds the controller's readings (eq C1 with --coupling)
         readings, labels = read_candidates(candidates_path, chain)
@@ -189,10 +201,12 @@ def plan_files(
     files = [] if candidates_path is None else [candidates_path]
     existing = None
     if existing_paths:  # several files: sessions, one registration each; the plan continues the last
-        existing, read_notes = read_sessions(existing_paths, chain.joint_specs, couplings, chain.other_branch_joints)
+        existing, read_notes = read_sessions(existing_paths, chain.joint_specs, couplings, chain.other_branch_joints,
+                                             occlusion=isinstance(chain, KinematicTree))
         notes += read_notes
         files += existing_paths
-    notes += [finding.message for finding in tip_link_findings(chain, file_columns(files, names))]
+    if isinstance(chain, KinematicChain):
+        notes += [finding.message for finding in tip_link_findings(chain, file_columns(files, names))]
     workspace = (corrected_angles(read_candidates(workspace_path, chain)[0], couplings, names)
                  if workspace_path is not None else None)
     stages = Stages(progress)
@@ -207,22 +221,35 @@ def plan_files(
         notes.append(f"{urdf.name}: no two links that move relative to each other both have <collision> geometry "
                      f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration): the candidates "
                      "are in effect not checked for collision (check the plan's postures before the robot moves)")
-    plan = plan_measurements(chain, candidates, settings, existing=existing, workspace=workspace,
-                             allowed=None if clearance is None else clearance.allowed, progress=stages.next())
+    allowed = None if clearance is None else clearance.allowed
+    plan = (plan_measurements(chain, candidates, settings, existing, workspace, allowed, stages.next())
+            if isinstance(chain, KinematicChain)
+            else plan_tree_measurements(chain, candidates, settings, existing, workspace, allowed, stages.next()))
     sources: PlanSources = {"urdf": str(urdf), "candidates": _text(candidates_path),
                             "existing": _existing_source(existing_paths), "workspace": _text(workspace_path),
                             "xacro_args": dict(xacro_arguments(xacro_args))}
     if couplings:  # PLAN.csv in the controller's joint space: what it reads and is commanded in
         sources["couplings"] = [c.as_dict() for c in couplings]
+    unread = [c.joint for c in couplings if c.follows] + list(chain.followers if isinstance(chain, KinematicTree)
+                                                              else ())
     digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels,
-                            unread=[c.joint for c in couplings if c.follows])
+                            unread=unread)
     pool = CandidatePool(labels, ranges, check, clearance, inputs.sample if candidates_path is None else None)
     document = plan_document(plan, chain, sources, pool, tool_pose, plan_csv_sha256=digest, notes=notes)
     write_plan_json(out_json, document)
     return PlanRun(plan, document, clearance, len(candidates), notes + list(plan.notes), check, ranges)
 
 
-def _clearance(urdf: Path, chain: KinematicChain, candidates: np.ndarray, check: CollisionCheck,
+def _refused_for_tree(settings: PlanSettings, inputs: PlanInputs) -> None:
+    """What a tree's plan does not take: one line each."""
+    for refused, flag in ((inputs.tool_pose is not None, "--tool"), (bool(inputs.couplings), "--coupling"),
+                          (settings.level == "dh", "--level dh")):
+        if refused:
+            raise PincalError(f"several --tip-link: plan {flag} is not supported; leave it out (each target's points "
+                              "are estimated, as calibrate with several --tip-link does)")
+
+
+def _clearance(urdf: Path, chain: KinematicChain | KinematicTree, candidates: np.ndarray, check: CollisionCheck,
                inputs: PlanInputs, progress: Progress | None) -> Clearance:
     """The collision check of the candidates: for self-collision (a clearance of 0), or ``--min-distance``."""
     try:
