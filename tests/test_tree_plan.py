@@ -123,6 +123,10 @@ def test_plan_writes_every_joint_column_and_each_targets_prediction_and_calibrat
     for target in targets:
         assert 0.0 < target["plan"]["mean_position_mm"] < target["random"]["mean_position_mm"]
     assert document["settings"]["measure"] == "points:2"
+    page = folder / "PLAN.html"  # the plan's page: each target's prediction
+    assert main(["report", str(folder / "PLAN.json"), "--out", str(page)]) == 0
+    html = page.read_text(encoding="utf-8")
+    assert 'id="targets-table"' in html and "left_marker (1)" in html and "right_marker (2)" in html
     out, report = folder / "out.urdf", folder / "REPORT.json"
     assert main(["calibrate", str(urdf), str(measured), *TARGETS, "--out", str(out), "--report", str(report),
                  "--quiet"]) == 0

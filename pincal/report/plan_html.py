@@ -131,6 +131,18 @@ def _prediction_rows(predicted: dict) -> list[dict[str, Any]]:
     return rows
 
 
+def _targets(predicted: dict) -> list[dict[str, Any]]:
+    """Each target's predicted errors (several ``--tip-link``: ``predicted.targets``), for its table."""
+    rows = []
+    for target in predicted.get("targets") or []:
+        plan, random = target.get("plan") or {}, target.get("random") or {}
+        rows.append({"link": target.get("tip_link"), "points": ",".join(map(str, target.get("points") or [])),
+                     "plan_mean": num(plan.get("mean_position_mm"), 4), "plan_max": num(plan.get("max_position_mm"), 4),
+                     "random_mean": num(random.get("mean_position_mm"), 4),
+                     "random_max": num(random.get("max_position_mm"), 4)})
+    return rows
+
+
 def plan_context(document: dict[str, Any], base: Path, figures) -> dict[str, Any]:
     """The values of ``templates/plan.html.j2``; ``figures``: :mod:`pincal.report.figures`."""
     chain = document.get("chain") or {}
@@ -179,6 +191,7 @@ def plan_context(document: dict[str, Any], base: Path, figures) -> dict[str, Any
         "random_mean": num((predicted.get("random") or {}).get("mean_position_mm"), 3),
         "what": predicted.get("what"), "workspace": predicted.get("workspace_configurations"),
         "criterion": document.get("criterion") or {},
+        "targets": _targets(predicted),
         "prediction": prediction, "has_rotation": any(r["mean_rotation_deg"] != "—" for r in prediction),
         "prediction_figure": figures.prediction_figure(prediction),
         "joints": [(j, _unit(kinds.get(j, "revolute"))[1]) for j in joints], "poses": poses,
