@@ -145,6 +145,25 @@ def test_plan_continues_recorded_rows(planned, capsys):
     assert "left_marker (1): plan mean" in capsys.readouterr().out
 
 
+def test_recorded_sessions_get_a_registration_each_and_an_unseen_point_no_information(planned):
+    """Two --existing files (sessions), the first with point 2 not seen in one row: each session's registration
+    is estimated (6 unknowns each), the candidates continue the last one's."""
+    folder, urdf, _, _, _, measured = planned
+    rows = list(csv.reader(open(measured, newline="")))
+    first, second = folder / "first.csv", folder / "second.csv"
+    hidden = [*rows[1][:-3], "", "", ""]  # the first row's x2,y2,z2 empty: not seen
+    with open(first, "w", newline="") as handle:
+        csv.writer(handle).writerows([rows[0], hidden, *rows[2:7]])
+    with open(second, "w", newline="") as handle:
+        csv.writer(handle).writerows([rows[0], *rows[7:]])
+    plan_json = folder / "SESSIONS.json"
+    assert main(["plan", str(urdf), *TARGETS, "--count", "3", "--sample", "100", "--existing", str(first),
+                 str(second), "--level", "offsets", "--out", str(folder / "SESSIONS.csv"), "--report", str(plan_json),
+                 "--quiet"]) == 0
+    identifiability = json.loads(plan_json.read_text(encoding="utf-8"))["identifiability"]
+    assert identifiability["estimated_parameters"] == identifiability["kinematic_parameters"] + 2 * 6 + 2 * 3
+
+
 _ARM_4 = '<child link="arm_{0}_4_link"/><origin xyz="0.01 0 -0.25" rpy="0 0 0"/><axis xyz="0 1 0"/>'
 
 
