@@ -45,6 +45,7 @@ from pincal.model.pinhole import INTRINSIC_NAMES
 from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
+from pincal.residuals.sensor_values import ModelledEffects
 
 __all__ = ["CAMERA_SELECTIONS", "CameraFitOptions", "CameraProblem", "CameraCalibration", "calibrate_camera",
            "images_of", "reprojection_errors"]
@@ -80,6 +81,8 @@ class CameraProblem:
     estimated, indices into :data:`pincal.model.pinhole.INTRINSIC_NAMES`. ``models``: sensitivity models by
     slots, shared by every problem derived from this one. ``prior``: σ_i of every kinematic parameter
     (eq P1 of :mod:`pincal.fit.prior`). ``noise``: the pixel noise σ [px] weighting a prior's rows.
+    ``effects``: the joint effects fitted with the rest and their inputs over the images (eq C4 of
+    :mod:`pincal.residuals.camera`; None: none).
     """
 
     chain: KinematicChain
@@ -91,11 +94,12 @@ class CameraProblem:
     models: dict[tuple[ParameterSlot, ...], SensitivityModel] = field(default_factory=dict)
     prior: np.ndarray | None = None
     noise: float = 1.0
+    effects: ModelledEffects | None = None
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> CameraResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.corners.q, self.models)
-        objective = CameraResidual(cache, self.corners, self.start, self.fitted, self.sessions)
+        objective = CameraResidual(cache, self.corners, self.start, self.fitted, self.sessions, self.effects)
         return objective if self.prior is None else PriorResidual(objective, self.prior[free], self.noise)
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,
