@@ -255,6 +255,8 @@ SLOW_TESTS = (
     "tests/test_tree_diagnose.py::test_without_the_effect_nothing_is_claimed_and_with_unknown_masses_its_moments"
     "[unknown]",
     "tests/test_mimic.py::test_diagnose_names_a_wrong_multiplier",
+    # diagnose through a camera, end to end: its fixture simulates and calibrates 28 images (2.3 s)
+    "tests/test_camera_diagnose.py::test_diagnose_names_the_backlash_and_the_held_out_images_reach_the_noise",
     "tests/test_read_against.py::test_effects_that_correct_alike_are_applied_and_the_alternatives_named",
     "tests/test_tip_link.py::test_calibrate_and_plan_warn_on_a_short_tip",
     "tests/test_tip_link.py::test_diagnose_warns_on_a_short_tip",

@@ -8,17 +8,21 @@ readings being those minus the true effect.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from pincal.fit.camera_calibration import CameraProblem
+from pincal.diagnosis.camera_diagnose import CameraDiagnosis, camera_effect_inputs, diagnose_camera
+from pincal.fit.camera_calibration import CameraProblem, calibrate_camera, images_of
 from pincal.fit.camera_start import hand_eye_start
-from pincal.model.effects import Effect, effect_inputs
+from pincal.model.effects import Effect, effect_inputs, joint_basis
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.pinhole import INTRINSIC_NAMES
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraResidual
 from pincal.residuals.sensor_values import ModelledEffects
+from pincal.simulation.camera_scene import view_corners
 from pincal.workflows.camera_simulation import INTRINSICS, CameraSimulationSettings, simulate_camera
 
 EFFECTS = (Effect("backlash", "elbow_joint", source="approach"), Effect("cyclic", "wrist_1_joint", harmonic=2),
@@ -54,3 +58,54 @@ def test_effect_columns_match_central_differences(arrangement: str):
     with_zero = np.r_[x0, np.zeros(objective.n_params - plain.n_params)]
     columns = np.hstack(plain.effect_columns(x0, EFFECTS))
     assert np.allclose(columns, objective.jacobian(with_zero)[:, objective.blocks["effects"]], rtol=1e-12, atol=1e-9)
+
+
+#: The true backlash of the elbow's approach flank [rad]: 3 mrad turn the camera 0.5 m from the board by ~1.5 mm,
+#: several pixels (the held-out images' RMS ~5 px against 0.2 px of noise).
+BACKLASH = Effect("backlash", "elbow_joint", source="approach")
+N_CALIBRATION, N_HELD = 20, 8
+NOISE_PX = 0.2
+
+
+def _images(value: float) -> tuple:
+    """The scene's chain, its calibration and held-out images with the true backlash ``value`` [rad] on the elbow,
+    and the camera calibration of the former (level full, from OpenCV's hand-eye on the nominal kinematics)."""
+    simulated = simulate_camera(CameraSimulationSettings("eye_in_hand", images=N_CALIBRATION, held_out=N_HELD, seed=3))
+    chain, q = simulated.chain, simulated.q
+    j = chain.joint_names.index(BACKLASH.joint)
+    true_q = q.copy()
+    for rows in (np.arange(N_CALIBRATION), np.arange(N_CALIBRATION, N_CALIBRATION + N_HELD)):  # each set's flanks
+        true_q[rows, j] += value * joint_basis(BACKLASH, camera_effect_inputs(chain, images_of(simulated.corners,
+                                                                                               rows)), j)[:, 0]
+    with chain.placed(simulated.placements):
+        corners = view_corners(chain, simulated.scene, true_q, NOISE_PX, np.random.default_rng(5),
+                               roles=simulated.corners.roles)
+    corners = replace(corners, q=q)  # the readings: the true angles less the backlash
+    used, held = images_of(corners, corners.roles != "validation"), images_of(corners, corners.roles == "validation")
+    start, names = hand_eye_start(chain, used, "eye_in_hand", INTRINSICS)
+    return chain, corners, held, calibrate_camera(chain, used, start, "full", session_names=names)
+
+
+@pytest.fixture(scope="module")
+def with_backlash() -> CameraDiagnosis:
+    chain, corners, held, calibration = _images(3e-3)
+    return diagnose_camera(chain, calibration, corners, held)
+
+
+def test_diagnose_names_the_backlash_and_the_held_out_images_reach_the_noise(with_backlash: CameraDiagnosis):
+    diagnosis = with_backlash
+    assert [effect for effect, _, _ in diagnosis.effects] == [BACKLASH]
+    (_, value, std), = diagnosis.effects
+    assert abs(value[0] - 3e-3) < max(3 * std[0], 1e-4)  # its value to 0.1 mrad
+    assert diagnosis.calibration_rms_px > 5 * NOISE_PX  # the geometry alone cannot explain it
+    assert diagnosis.heldout_before_px > 10 * NOISE_PX
+    assert diagnosis.heldout_after_px < 1.1 * NOISE_PX and diagnosis.rms_px < 1.1 * NOISE_PX  # the noise floor
+    assert diagnosis.steps[0].candidates[0].verdict == "adopted"
+
+
+def test_without_the_effect_nothing_is_claimed():
+    chain, corners, held, calibration = _images(0.0)
+    diagnosis = diagnose_camera(chain, calibration, corners, held)
+    assert diagnosis.effects == ()
+    assert diagnosis.heldout_after_px == diagnosis.heldout_before_px < 1.1 * NOISE_PX
+    assert all(candidate.delta_bic > -10.0 for candidate in diagnosis.last_candidates)

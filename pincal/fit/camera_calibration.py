@@ -48,7 +48,8 @@ from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.residuals.sensor_values import ModelledEffects
 
 __all__ = ["CAMERA_SELECTIONS", "CameraFitOptions", "CameraProblem", "CameraCalibration", "calibrate_camera",
-           "images_of", "reprojection_errors"]
+           "images_of", "reprojection_errors", "image_sessions",
+           "images_as_rows"]
 
 #: The selection criteria a camera's fit offers: leave-one-row-out (``press``) needs rows of one size,
 #: and an image shows any number of corners.
@@ -147,10 +148,15 @@ class CameraProblem:
 
     def rows_view(self) -> MeasurementSet:
         """The images as rows of one point, for the selection's bookkeeping (their count and the file)."""
-        corners = self.corners
-        k = len(corners.images)
-        return MeasurementSet(corners.joint_names, corners.q, np.zeros((k, 1, 3)), None,
-                              np.full(k, "calibration", dtype=object), np.arange(k) + 2, {}, corners.source)
+        return images_as_rows(self.corners)
+
+
+def images_as_rows(corners: CornerSet) -> MeasurementSet:
+    """The images of ``corners`` as rows of one point at zero, their joint readings and the file (what the
+    selection's bookkeeping and the effects' inputs read)."""
+    k = len(corners.images)
+    return MeasurementSet(corners.joint_names, corners.q, np.zeros((k, 1, 3)), None,
+                          np.full(k, "calibration", dtype=object), np.arange(k) + 2, {}, corners.source)
 
 
 @dataclass(frozen=True)
@@ -237,7 +243,7 @@ def calibrate_camera(chain: KinematicChain, corners: CornerSet, start: CameraEst
     if unknown:
         raise CalibrationError(f"no intrinsic named {', '.join(unknown)}; they are {', '.join(INTRINSIC_NAMES)}")
     corners = _calibration_images(corners)
-    sessions = _session_indices(corners, session_names, len(start.worlds))
+    sessions = image_sessions(corners, session_names, len(start.worlds))
     params = LEVELS[level](chain) if level in LEVELS else None
     fitted = tuple(INTRINSIC_NAMES.index(n) for n in dict.fromkeys(options.intrinsics))
     problem = CameraProblem(chain, params, corners, start, sessions)
@@ -301,7 +307,7 @@ def reprojection_errors(chain: KinematicChain, result: CameraCalibration, corner
     where it was seen (M, 2) [px] (eq C3 at the result's kinematics, world frames, mount and intrinsics)."""
     params = result.params if result.params is not None else NoParameters(chain)
     cache = KinematicsCache(params, np.array([], dtype=int), result.vector, corners.q)
-    sessions = _session_indices(corners, result.session_names, len(result.estimate.worlds))
+    sessions = image_sessions(corners, result.session_names, len(result.estimate.worlds))
     objective = CameraResidual(cache, corners, result.estimate, (), sessions)
     return objective.residual(objective.start_vector()).reshape(-1, 2)
 
@@ -315,7 +321,7 @@ def _calibration_images(corners: CornerSet) -> CornerSet:
     return corners if len(keep) == len(corners.images) else images_of(corners, keep)
 
 
-def _session_indices(corners: CornerSet, session_names: tuple[str, ...], n_worlds: int) -> np.ndarray:
+def image_sessions(corners: CornerSet, session_names: tuple[str, ...], n_worlds: int) -> np.ndarray:
     """Each image's index into the start's world frames (K,): by ``session_names``, or 0 with one world frame."""
     if not session_names:
         if n_worlds != 1:
