@@ -13,8 +13,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pincal.diagnosis.camera_diagnose import CameraDiagnosis, camera_effect_inputs, diagnose_camera
-from pincal.fit.camera_calibration import CameraProblem, calibrate_camera, images_of
+from pincal.diagnosis.camera_diagnose import CameraDiagnosis, diagnose_camera
+from pincal.fit.camera_calibration import CameraProblem, calibrate_camera, camera_effect_inputs, images_of
 from pincal.fit.camera_start import hand_eye_start
 from pincal.model.effects import Effect, effect_inputs, joint_basis
 from pincal.model.parameter_sets import PlacementErrors

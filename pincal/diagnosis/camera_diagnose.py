@@ -29,19 +29,25 @@ from pincal.diagnosis.effect_loop import EffectCandidate, EffectStep, Found, sea
 from pincal.diagnosis.held_out import held_out_verdict
 from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
 from pincal.diagnosis.screening import FitObjective
-from pincal.fit.camera_calibration import CameraCalibration, CameraProblem, image_sessions, images_as_rows, images_of
+from pincal.fit.camera_calibration import (
+    CameraCalibration,
+    CameraProblem,
+    camera_effect_inputs,
+    image_sessions,
+    images_of,
+)
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import standard_deviations
+from pincal.fit.prior import PriorResidual, standard_deviations
 from pincal.fit.solver import Solution, solve
 from pincal.measurements.camera_csv import CornerSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, effect_inputs, with_loads
+from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs
 from pincal.model.parameter_sets import NoParameters
 from pincal.progress import Counter, Progress
 from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.residuals.sensor_values import ModelledEffects
 
-__all__ = ["CORNER_NOISE_FLOOR_PX", "CameraDiagnosis", "camera_candidates", "camera_effect_inputs", "diagnose_camera"]
+__all__ = ["CORNER_NOISE_FLOOR_PX", "CameraDiagnosis", "camera_candidates", "diagnose_camera"]
 
 #: Pixel noise no corner detection goes below [px]: a hundredth of a pixel, the accuracy sub-pixel corner
 #: refinement reaches on ideal synthetic images (real ones: ~0.05-0.2 px, OpenCV's ChArUco tutorial). The
@@ -95,13 +101,6 @@ def camera_candidates(chain: KinematicChain) -> list[Effect]:
     return [e for e in candidate_effects(chain, has_time=False) if e.type in JOINT_EFFECTS]
 
 
-def camera_effect_inputs(chain: KinematicChain, corners: CornerSet, loads: bool = False) -> EffectInputs:
-    """The effect inputs of the images of ``corners`` (one row each, in file order: their approach flanks follow
-    it), with the gravity loads per mass moment when ``loads`` (compliances of unknown masses)."""
-    inputs = effect_inputs(chain, images_as_rows(corners))
-    return with_loads(inputs, chain) if loads else inputs
-
-
 @dataclass(frozen=True)
 class _Search:
     """The loop's residual (:class:`pincal.diagnosis.effect_loop.EffectSearch`): the calibration images' problem
@@ -115,10 +114,9 @@ class _Search:
     def body(self) -> KinematicChain:
         return self.problem.chain
 
-    def objective(self, problem: CameraProblem, effects: Sequence[Effect]) -> CameraResidual:
+    def objective(self, problem: CameraProblem, effects: Sequence[Effect]) -> CameraResidual | PriorResidual:
         inputs = cast(ModelledEffects, problem.effects)
-        return cast(CameraResidual, replace(problem, effects=replace(inputs, effects=tuple(effects))).objective(
-            self.kept, self.base))
+        return replace(problem, effects=replace(inputs, effects=tuple(effects))).objective(self.kept, self.base)
 
     def fit(self, effects: Sequence[Effect], x0: np.ndarray | None = None) -> tuple[FitObjective, Solution]:
         objective = self.objective(self.problem, effects)
@@ -126,28 +124,33 @@ class _Search:
         return cast(FitObjective, objective), solve(objective, start, what="effect fit")
 
     def rescaled(self, objective: FitObjective, solution: Solution) -> _Search:
-        return replace(self, problem=self.problem.rescaled(cast(CameraResidual, objective), solution))
+        return replace(self, problem=self.problem.rescaled(cast(CameraResidual | PriorResidual, objective), solution))
 
     def row_noise(self) -> float:
         return self.problem.noise  # the residual is in pixels
 
     def errors(self, objective: FitObjective, x: np.ndarray) -> np.ndarray:
-        return _per_image(cast(CameraResidual, objective), self.problem.corners, x)
+        return _per_image(_camera(objective), self.problem.corners, x)
 
     def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         if self.held is None:
             return None
-        return _per_image(self.objective(self.held, effects), self.held.corners, x)
+        return _per_image(_camera(self.objective(self.held, effects)), self.held.corners, x)
 
     def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution]) -> str:
         """The held-out test of :func:`held_out_verdict` on the images' corner distances [px]: in its units of a
         thousandth (its text's "mm" then reads pixels, said so)."""
         objective, solution = fit
-        fitted = self.problem.rescaled(cast(CameraResidual, objective), solution).noise
+        fitted = self.problem.rescaled(cast(CameraResidual | PriorResidual, objective), solution).noise
         noise = max(min(self.problem.noise, fitted), CORNER_NOISE_FLOOR_PX)
         text = held_out_verdict(PoseErrors(1e-3 * np.nan_to_num(before), None),
                                 PoseErrors(1e-3 * np.nan_to_num(after), None), 1e-3 * noise, None)
         return text.replace("position ", "reprojection ").replace(" mm RMS", " px RMS of the corners' distances")
+
+
+def _camera(objective: object) -> CameraResidual:
+    """The reprojection residual of a fit's objective (inside a prior-wrapped one)."""
+    return cast(CameraResidual, getattr(objective, "objective", objective))
 
 
 def _per_image(objective: CameraResidual, corners: CornerSet, x: np.ndarray) -> np.ndarray:
@@ -180,7 +183,8 @@ def diagnose_camera(chain: KinematicChain, calibration: CameraCalibration, corne
     pool, untestable = testable_pool(pool, inputs, chain, unknown)
     sessions = image_sessions(used, calibration.session_names, len(calibration.estimate.worlds))
     problem = CameraProblem(chain, calibration.params, used, calibration.estimate, sessions,
-                            noise=calibration.rms_px, effects=ModelledEffects((), inputs))
+                            prior=calibration.prior_sigma, noise=calibration.rms_px,
+                            effects=ModelledEffects((), inputs))
     held = None
     if heldout is not None and len(heldout.images):
         held = replace(problem, corners=heldout, sessions=image_sessions(heldout, calibration.session_names,
@@ -200,7 +204,7 @@ def _concluded(found: Found, calibration: CameraCalibration, untestable: Sequenc
                unknown: bool) -> CameraDiagnosis:
     """The final model as a value: the kinematic vector, the camera's estimate and placements of the last fit."""
     search = cast(_Search, found.search)
-    objective, solution = cast(CameraResidual, found.objective), found.solution
+    objective, solution = _camera(found.objective), found.solution
     problem = search.problem
     kinematic = objective.blocks["kinematic"]
     std_all = standard_deviations(found.objective, solution)
@@ -222,7 +226,8 @@ def _concluded(found: Found, calibration: CameraCalibration, untestable: Sequenc
     return CameraDiagnosis(
         effects=effects, steps=found.steps, last_candidates=found.ranking, untestable=tuple(untestable),
         vector=vector, std=std, estimate=estimate, chain_placements=placements,
-        tip_placement=placements[-1] @ estimate.mount, rms_px=float(np.sqrt(np.mean(solution.residual**2))),
+        tip_placement=placements[-1] @ estimate.mount,
+        rms_px=float(np.sqrt(np.mean(objective.residual(solution.x)**2))),
         calibration_rms_px=calibration.rms_px, heldout_before_px=_rms(before),
         heldout_after_px=_rms(search.held_errors(found.adopted, solution.x)), masses_unknown=unknown,
         notes=tuple(notes), inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))

@@ -26,6 +26,7 @@ only from images that fill the frame, and prefer intrinsics from a dedicated cal
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import cast
 
@@ -40,6 +41,7 @@ from pincal.fit.solver import Solution, solve
 from pincal.measurements.camera_csv import CornerSet
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.model.effects import Effect, EffectInputs, effect_inputs, with_loads
 from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainLevel, ChainParameters, NoParameters
 from pincal.model.pinhole import INTRINSIC_NAMES
 from pincal.model.sensitivity import ParameterSlot, SensitivityModel
@@ -49,7 +51,7 @@ from pincal.residuals.sensor_values import ModelledEffects
 
 __all__ = ["CAMERA_SELECTIONS", "CameraFitOptions", "CameraProblem", "CameraCalibration", "calibrate_camera",
            "images_of", "reprojection_errors", "image_sessions",
-           "images_as_rows"]
+           "images_as_rows", "camera_effect_inputs"]
 
 #: The selection criteria a camera's fit offers: leave-one-row-out (``press``) needs rows of one size,
 #: and an image shows any number of corners.
@@ -183,6 +185,8 @@ class CameraCalibration:
         solution / covariance: the final fit's unknowns and their covariance (the posterior with a prior).
         fit_seconds / total_seconds: the final fit; everything, start and selection included [s].
         notes: things the user should know.
+        prior_sigma: with ``selection`` prior, σ_i of every kinematic parameter (eq P1 of :mod:`pincal.fit.prior`),
+            (n,); None without a prior.
     """
 
     level: ChainLevel
@@ -208,6 +212,7 @@ class CameraCalibration:
     fit_seconds: float
     total_seconds: float
     notes: tuple[str, ...] = ()
+    prior_sigma: np.ndarray | None = None
 
     @property
     def corrected_placements(self) -> tuple[np.ndarray, ...]:
@@ -286,6 +291,7 @@ def calibrate_camera(chain: KinematicChain, corners: CornerSet, start: CameraEst
         kept=kept, chain_placements=placements, tip_placement=placements[-1] @ estimate.mount, solution=x.copy(),
         covariance=covariance, fit_seconds=fit.fit_seconds, total_seconds=time.perf_counter() - started,
         notes=() if fit.selection is None else tuple(fit.selection.notes),
+        prior_sigma=cast(CameraProblem, fit.problem).prior,
     )
 
 
@@ -302,14 +308,30 @@ def images_of(corners: CornerSet, keep: np.ndarray) -> CornerSet:
                    extra={n: v[keep] for n, v in corners.extra.items()})
 
 
-def reprojection_errors(chain: KinematicChain, result: CameraCalibration, corners: CornerSet) -> np.ndarray:
+def camera_effect_inputs(chain: KinematicChain, corners: CornerSet, loads: bool = False) -> EffectInputs:
+    """The effect inputs of the images of ``corners`` (one row each, in file order: their approach flanks follow
+    it), with the gravity loads per mass moment when ``loads`` (compliances of unknown masses)."""
+    inputs = effect_inputs(chain, images_as_rows(corners))
+    return with_loads(inputs, chain) if loads else inputs
+
+
+def reprojection_errors(chain: KinematicChain, result: CameraCalibration, corners: CornerSet,
+                        effects: Sequence[tuple[Effect, np.ndarray]] = ()) -> np.ndarray:
     """Each corner of every image of ``corners`` (any role) reprojected through the calibrated model, minus
-    where it was seen (M, 2) [px] (eq C3 at the result's kinematics, world frames, mount and intrinsics)."""
+    where it was seen (M, 2) [px] (eq C3 at the result's kinematics, world frames, mount and intrinsics; with
+    ``effects``, joint effects and their values, eq C4 over these images)."""
     params = result.params if result.params is not None else NoParameters(chain)
     cache = KinematicsCache(params, np.array([], dtype=int), result.vector, corners.q)
     sessions = image_sessions(corners, result.session_names, len(result.estimate.worlds))
-    objective = CameraResidual(cache, corners, result.estimate, (), sessions)
-    return objective.residual(objective.start_vector()).reshape(-1, 2)
+    modelled = None
+    if effects:
+        inputs = camera_effect_inputs(chain, corners, loads=any(e.moments for e, _ in effects))
+        modelled = ModelledEffects(tuple(e for e, _ in effects), inputs)
+    objective = CameraResidual(cache, corners, result.estimate, (), sessions, modelled)
+    x = objective.start_vector()
+    if effects:
+        x[objective.blocks["effects"]] = np.concatenate([np.asarray(v, dtype=float) for _, v in effects])
+    return objective.residual(x).reshape(-1, 2)
 
 
 def _calibration_images(corners: CornerSet) -> CornerSet:
