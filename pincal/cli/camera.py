@@ -108,10 +108,13 @@ def run_diagnose(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     print(f"then {len(diagnosis.effects)} effect(s) adopted, calibration RMS {diagnosis.calibration_rms_px:.4f} -> "
           f"{diagnosis.rms_px:.4f} px" + (f", held-out RMS {diagnosis.heldout_before_px:.4f} -> "
                                           f"{diagnosis.heldout_after_px:.4f} px" if held else ""))
-    for entry, step in zip(run.report.get("effects", []), diagnosis.steps):
-        values = ", ".join(f"{v:.6g}" for v in step.values)
+    from pincal.model.effect_units import effect_unit
+
+    kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))
+    for step in diagnosis.steps:
+        values = ", ".join(f"{v:.4g}" for v in step.values)
         stds = ", ".join(f"{v:.2g}" for v in step.std)
-        print(f"  {step.effect.label}: {values} ± {stds} {entry.get('unit', '')}  (ΔBIC {step.delta_bic:.1f})")
+        print(f"  {step.effect.label}: {values} ± {stds} {effect_unit(step.effect, kinds)} (ΔBIC {step.delta_bic:.1f})")
     if not diagnosis.effects and diagnosis.last_candidates:
         best = diagnosis.last_candidates[0]
         print(f"  best candidate {best.effect.label}: {best.verdict}")
