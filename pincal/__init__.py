@@ -63,12 +63,15 @@ _DEFINED_IN = {
                                             "calibrate_camera_files"),
     "pincal.workflows.camera_evaluation": ("CameraEvaluateSettings", "CameraEvaluation", "evaluate_camera_files"),
     "pincal.workflows.camera_simulation": ("CameraSimulationSettings", "CameraSimulation", "simulate_camera_files"),
+    "pincal.workflows.camera_diagnosis": ("CameraDiagnoseSettings", "CameraDiagnoseRun", "diagnose_camera_files"),
+    "pincal.diagnosis.camera_diagnose": ("CameraDiagnosis", "diagnose_camera"),
     "pincal.workflows.simulation": ("simulate_to_directory",),
     "pincal.model.dh.urdf": ("dh_robot_from_urdf", "urdf_from_dh"),  # imports yourdfpy
     "pincal.report.html": ("render_html", "write_html"),  # imports jinja2 and matplotlib
 }
 
 if TYPE_CHECKING:  # what static analysers see; at run time the names come from __getattr__
+    from pincal.diagnosis.camera_diagnose import CameraDiagnosis, diagnose_camera
     from pincal.diagnosis.tree_diagnose import TreeDiagnosis, diagnose_tree
     from pincal.fit.chain_calibration import ChainCalibration, ChainFitOptions, calibrate_chain
     from pincal.fit.fixture_calibration import FixtureCalibration, calibrate_fixture
@@ -129,6 +132,7 @@ if TYPE_CHECKING:  # what static analysers see; at run time the names come from 
         CameraCalibrationRun,
         calibrate_camera_files,
     )
+    from pincal.workflows.camera_diagnosis import CameraDiagnoseRun, CameraDiagnoseSettings, diagnose_camera_files
     from pincal.workflows.camera_evaluation import CameraEvaluateSettings, CameraEvaluation, evaluate_camera_files
     from pincal.workflows.camera_plan import CameraPlanInputs, CameraPlanRun, camera_plan_files
     from pincal.workflows.camera_simulation import CameraSimulation, CameraSimulationSettings, simulate_camera_files
@@ -268,6 +272,11 @@ __all__ = [
     "CameraSimulationSettings",
     "CameraSimulation",
     "simulate_camera_files",
+    "CameraDiagnoseSettings",
+    "CameraDiagnoseRun",
+    "diagnose_camera_files",
+    "CameraDiagnosis",
+    "diagnose_camera",
     "simulate_to_directory",
     "KinematicTree",
     "TargetSpec",

@@ -12,19 +12,25 @@ import json
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pincal.cli.arguments import selection_criterion
 from pincal.errors import PincalError
 
-__all__ = ["CAMERA_NOT_USED", "is_camera_data", "refuse_camera_flags", "run_calibrate", "is_camera_report",
-           "run_evaluate"]
+if TYPE_CHECKING:
+    from pincal.workflows.camera_calibration import CameraCalibrateSettings, CameraCalibrationRun
+
+__all__ = ["CAMERA_NOT_USED", "DIAGNOSE_NOT_USED", "is_camera_data", "refuse_camera_flags", "run_calibrate",
+           "run_diagnose", "is_camera_report", "run_evaluate"]
 
 #: Flags of calibrate that a camera's calibration has no use for (argparse dest → flag).
 CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or the board's link)",
                    "method": "--method", "weight": "--weight", "tool": "--tool", "fixture": "--fixture",
                    "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
                    "sigma_pos": "--sigma-pos", "coupling": "--coupling", "html": "--html"}
+#: Flags of diagnose that a camera's diagnosis has no use for (argparse dest → flag), besides calibrate's.
+DIAGNOSE_NOT_USED = {"payload_kg": "--payload-kg", "lateral": "--lateral", "time_column": "--time-column",
+                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots"}
 #: The columns that make a CSV a camera's DATA.csv (pincal detect's).
 _CAMERA_COLUMNS = ("image", "corner", "u", "v")
 
@@ -55,19 +61,72 @@ def refuse_camera_flags(args: argparse.Namespace) -> None:
 def run_calibrate(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     """``pincal calibrate URDF DATA.csv --camera-link LINK [--board-link LINK] --intrinsics FILE|estimate``: prints
     the summary; returns the report (its warnings printed by the caller) and whether the URDF was withheld."""
-    from pincal.workflows.camera_calibration import CameraCalibrateSettings, calibrate_camera_files
+    from pincal.workflows.camera_calibration import calibrate_camera_files
 
     refuse_camera_flags(args)
+    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, _settings(args))
+    _print_run(args, run)
+    return run.report, run.withheld
+
+
+def _settings(args: argparse.Namespace) -> CameraCalibrateSettings:
+    """The camera calibration's settings of calibrate's or diagnose's arguments (one DATA.csv, intrinsics given)."""
+    from pincal.workflows.camera_calibration import CameraCalibrateSettings
+
     if len(args.data) != 1:
         raise PincalError(f"a camera's calibration takes one DATA.csv (its 'session' column tells sessions apart), "
                           f"got {len(args.data)}; join them into one file")
     if args.intrinsics is None:
         raise PincalError("--camera-link needs --intrinsics FILE (ROS camera_info or OpenCV YAML) or --intrinsics "
                           "estimate (the intrinsics fitted with the rest)")
-    settings = CameraCalibrateSettings(args.camera_link, args.intrinsics, board_link=args.board_link,
-                                       level=args.level or "full", selection=selection_criterion(args),
-                                       xacro_args=args.xacro_args, force=args.force)
-    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, settings)
+    return CameraCalibrateSettings(args.camera_link, args.intrinsics, board_link=args.board_link,
+                                   level=args.level or "full", selection=selection_criterion(args),
+                                   xacro_args=args.xacro_args, force=args.force)
+
+
+def run_diagnose(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
+    """``pincal diagnose URDF DATA.csv --camera-link LINK [--board-link LINK] --intrinsics FILE|estimate
+    [--validation HELD_OUT.csv]``: prints the camera calibration's summary and the effects adopted; returns the
+    report and whether the URDF was withheld."""
+    from pincal.cli.progress import progress_bar
+    from pincal.workflows.camera_diagnosis import CameraDiagnoseSettings, diagnose_camera_files
+
+    given = [flag for name, flag in {**CAMERA_NOT_USED, **DIAGNOSE_NOT_USED}.items()
+             if getattr(args, name, None) not in (None, False, [])]
+    if given:
+        raise PincalError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to diagnose on a "
+                          "camera's images (--camera-link); drop " + ("it" if len(given) == 1 else "them"))
+    if args.level == "auto":
+        raise PincalError("diagnose --camera-link: --level auto is not supported; give registration, offsets or full")
+    settings = CameraDiagnoseSettings(_settings(args), masses=args.masses)
+    with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
+        diagnosed = diagnose_camera_files(args.urdf, args.data[0], args.out, args.report, settings,
+                                          validation=args.validation, progress=progress)
+    run, diagnosis = diagnosed.run, diagnosed.diagnosis
+    _print_run(args, run)
+    held = diagnosis.heldout_before_px is not None
+    print(f"then {len(diagnosis.effects)} effect(s) adopted, calibration RMS {diagnosis.calibration_rms_px:.4f} -> "
+          f"{diagnosis.rms_px:.4f} px" + (f", held-out RMS {diagnosis.heldout_before_px:.4f} -> "
+                                          f"{diagnosis.heldout_after_px:.4f} px" if held else ""))
+    from pincal.model.effect_units import effect_unit
+
+    kinds = dict(zip(run.report["chain"]["joints"], run.report["chain"]["joint_kinds"]))
+    for step in diagnosis.steps:
+        values = ", ".join(f"{v:.4g}" for v in step.values)
+        stds = ", ".join(f"{v:.2g}" for v in step.std)
+        print(f"  {step.effect.label}: {values} ± {stds} {effect_unit(step.effect, kinds)} (ΔBIC {step.delta_bic:.1f})")
+    if not diagnosis.effects and diagnosis.last_candidates:
+        best = diagnosis.last_candidates[0]
+        print(f"  best candidate {best.effect.label}: {best.verdict}")
+    if not run.withheld and diagnosis.effects:
+        from pincal.report.effects_file import effects_path, written_line
+
+        print(written_line(effects_path(args.out), run.report))
+    return run.report, run.withheld
+
+
+def _print_run(args: argparse.Namespace, run: CameraCalibrationRun) -> None:
+    """calibrate's summary of a camera's run: the fit, frames, intrinsics, reprojection table, files written."""
     report, result = run.report, run.result
     for note in report["notes"]:
         print(f"pincal: note: {note}", file=sys.stderr)
@@ -95,7 +154,6 @@ def run_calibrate(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     if run.camera_info is not None:
         print(f"wrote {run.camera_info}")
     print(f"wrote {args.report}")
-    return report, run.withheld
 
 
 def _frame_line(what: str, frame: Mapping[str, Any]) -> str:

@@ -270,8 +270,9 @@ def _run_diagnose(args: argparse.Namespace) -> int:
 
     camera = is_camera_data([*args.data, *([args.validation] if args.validation else [])])
     if camera is not None:
-        raise PincalError(f"{camera}: a camera's DATA.csv; diagnose does not take a camera's images yet: calibrate "
-                          "them with --camera-link LINK --intrinsics FILE|estimate")
+        raise PincalError(f"{camera}: a camera's DATA.csv (columns image, corner, u, v ...: detect's); give "
+                          "--camera-link LINK (the camera's optical frame) and --intrinsics FILE|estimate instead of "
+                          "--tip-link")
     plots = args.plots if args.plots is not None else args.report.parent / "diagnose_plots"
     settings = DiagnoseSettings(tip_link=args.tip_link, level=args.level, tool_pose=args.tool,
                                 sigma_column=args.sigma_column, selection=selection_criterion(args),
@@ -436,6 +437,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     and len(args.tip_link) > 1:
                 tree_report, tree_withheld = run_diagnose_tree(args)  # several targets on several chains
                 return _warned(tree_report, args.strict, tree_withheld)
+            if args.command == "diagnose" and args.camera_link is not None:  # a camera's DATA.csv
+                from pincal.cli.camera import run_diagnose as run_camera_diagnose
+
+                camera_report, camera_withheld = run_camera_diagnose(args)
+                return _warned(camera_report, args.strict, camera_withheld)
             several = isinstance(getattr(args, "tip_link", None), list) and len(args.tip_link) > 1  # plan: a tree
             if args.command == "diagnose" or (args.command == "plan" and args.camera_link is None and not several):
                 args.tip_link = one_tip_link(args.command, args.tip_link)

@@ -287,8 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("--validation", type=Path, metavar="DATA2",
                      help="held-out measurements: errors reported before/after; an effect is adopted only if they "
                           "fit better beyond their noise (a paired test over their rows)")
-    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", required=True, metavar="LINK", action=TipLinks,
-                     help="link at the end of the calibrated chain, carrying the target")
+    dia.add_argument("--tool-parent", "--tip-link", dest="tip_link", metavar="LINK", action=TipLinks,
+                     help="link at the end of the calibrated chain, carrying the target (required, but for a "
+                          "camera's DATA.csv: --camera-link)")
     dia.add_argument("--level", choices=("registration", "offsets", "full", "auto"), default="full",
                      help="geometric model under the effects (default full; auto: chosen by cross-validation "
                           "of the geometric calibration)")
@@ -315,6 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "registration stepped (default 1800: a stop long enough for the cell's temperature to move; "
                           "a measuring program's rows are seconds to minutes apart)")
     dia.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots into DIR (default: beside the report)")
+    _add_camera(dia)
     _add_plausibility(dia)
     _add_coupling(dia)
     _add_xacro_arg(dia)

@@ -30,7 +30,8 @@ def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
     none too (``plan`` asks for it or ``--camera-link``)."""
     if tip_links is None:
         raise PincalError(f"{command}: give --tip-link LINK (the chain's end, carrying the target)"
-                          + (", or --camera-link LINK to plan a camera's images" if command == "plan" else ""))
+                          + (", or --camera-link LINK to plan a camera's images" if command == "plan" else "")
+                          + (", or --camera-link LINK for a camera's DATA.csv" if command == "diagnose" else ""))
     if isinstance(tip_links, str):
         return tip_links
     if len(tip_links) > 1:

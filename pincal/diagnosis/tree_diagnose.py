@@ -30,31 +30,31 @@ from dataclasses import dataclass, replace
 from typing import cast
 
 import numpy as np
-import scipy.stats
 
 from pincal.diagnosis.catalogue import candidate_effects
-from pincal.diagnosis.diagnose import MAX_EFFECTS, DiagnoseOptions
-from pincal.diagnosis.held_out import HELD_OUT_LEVEL, HELD_OUT_Z, held_out_verdict
-from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
-from pincal.diagnosis.screening import (
-    FitObjective,
-    Linearisation,
-    bic,
-    may_reach,
-    n_prior_rows,
-    residual_freedom,
-    testable,
+from pincal.diagnosis.diagnose import DiagnoseOptions
+from pincal.diagnosis.effect_loop import (
+    DETERMINED_LEVEL,
+    DETERMINED_Z,
+    SHORTLIST,
+    EffectCandidate,
+    EffectStep,
+    Found,
+    search_effects,
 )
-from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, NOISE_FLOOR, effect_basis, offset_like, plausible
-from pincal.errors import CalibrationError
+from pincal.diagnosis.held_out import held_out_verdict
+from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
+from pincal.diagnosis.screening import FitObjective
+from pincal.diagnosis.verdicts import NOISE_FLOOR
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import PriorResidual, posterior, standard_deviations
+from pincal.fit.prior import PriorResidual, standard_deviations
 from pincal.fit.sessions import session_rows
-from pincal.fit.solver import Solution, gram, solve
+from pincal.fit.solver import Solution, solve
 from pincal.fit.tree_calibration import TreeCalibration, tree_rows
 from pincal.fit.tree_problem import TreeProblem
 from pincal.measurements.data import MeasurementSet
+from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, EffectInputs
 from pincal.model.tree import KinematicTree, TreePlacements
 from pincal.model.tree_effects import TreeBody, tree_inputs
@@ -65,49 +65,9 @@ from pincal.residuals.tree import TreeResidual
 __all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "TreeStep", "TreeCandidate", "TreeDiagnosis",
            "tree_candidates", "diagnose_tree"]
 
-#: Candidates fitted in full per step, the best of the screen that may reach the evidence cut: the single
-#: chain's "first eight" (:mod:`pincal.diagnosis.diagnose`, screening).
-SHORTLIST = 8
-
-
-#: Least |value| / standard deviation of some value of an effect to adopt it: a one-value effect entering linearly
-#: gains about (v/σ)² − ln m of BIC, so one within 2σ of zero (the held-out test's z, HELD_OUT_Z of
-#: :mod:`pincal.diagnosis.held_out`) passes the cut only through the prior's rows — a direction of the geometry
-#: the prior held (a sensor scale against every length), freed; not through the data.
-DETERMINED_Z = HELD_OUT_Z
-#: The same level for an effect of any number of values (a compliance over mass moments: each value alone may
-#: be undetermined, their combination not): Wald's χ² of the values above its quantile at 1 − 2 Φ(−2) (one
-#: value: χ² = (v/σ)² ≥ 4, |v| ≥ 2σ).
-DETERMINED_LEVEL = 1.0 - 2.0 * HELD_OUT_LEVEL
-
-
-@dataclass(frozen=True)
-class TreeCandidate:
-    """A candidate of a step: the effect, its full fit's ΔBIC against the step's model (the linearised one,
-    marked ``screened``, when it was not fitted in full), its values and the verdict in words."""
-
-    effect: Effect
-    delta_bic: float
-    values: np.ndarray
-    verdict: str
-    screened: bool = False
-
-
-@dataclass(frozen=True)
-class TreeStep:
-    """One adopted effect: its values and standard deviations [unit of :func:`pincal.model.effect_units.effect_unit`],
-    its ΔBIC, the calibration rows' point errors (K, P) [m] before and after it (NaN where not seen), the held-out
-    rows' (None without them), and the step's candidates (best first)."""
-
-    effect: Effect
-    values: np.ndarray
-    std: np.ndarray
-    delta_bic: float
-    calibration_before: np.ndarray
-    calibration_after: np.ndarray
-    heldout_before: np.ndarray | None
-    heldout_after: np.ndarray | None
-    candidates: tuple[TreeCandidate, ...]
+#: A candidate of a step and an adopted effect (the loop's, :mod:`pincal.diagnosis.effect_loop`).
+TreeCandidate = EffectCandidate
+TreeStep = EffectStep
 
 
 @dataclass(frozen=True)
@@ -170,6 +130,20 @@ class _Search:
     base: np.ndarray
     held: TreeProblem | None
     stated: float | None
+
+    def body(self) -> KinematicChain:
+        return TreeBody(self.problem.tree)
+
+    def rescaled(self, objective: FitObjective, solution: Solution) -> _Search:
+        return replace(self, problem=self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution))
+
+    def row_noise(self) -> float:
+        return 1.0  # the residual is whitened: its rows are in noise units
+
+    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution]) -> str:
+        # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
+        return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
+                                self.judged_noise(*fit), None)
 
     def judged_noise(self, objective: FitObjective, solution: Solution) -> float:
         """The noise [m] a held-out test judges in: the stated one, else the smaller of the current model's and
@@ -242,134 +216,15 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
                        effects=ModelledEffects((), held_inputs))
     search = _Search(problem, kept, calibration.vector, held,
                      options.stated_sigma_pos_m)
-    counter = Counter(progress)
-    objective, solution = search.fit([])
-    adopted: list[Effect] = []
-    steps: list[TreeStep] = []
-    ranking: tuple[TreeCandidate, ...] = ()
-    notes: list[str] = []
-    while len(adopted) < MAX_EFFECTS:
-        chosen, ranking = _step(search, inputs, (objective, solution), adopted, pool, counter)
-        if chosen is None:
-            break
-        effect, new_objective, new_solution, delta = chosen
-        # refitted at the noise scale of its residual (maximum likelihood; with a prior, eq P2), as the single
-        # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
-        # strongly against the rows, and what it held would be left for the next candidates to imitate
-        search = replace(search, problem=search.problem.rescaled(cast(TreeResidual | PriorResidual, new_objective),
-                                                                 new_solution))
-        try:
-            new_objective, new_solution = search.fit([*adopted, effect], new_solution.x)
-        except CalibrationError as error:  # sparse data: with the scale re-estimated it is not determined
-            notes.append(f"{effect.label} not adopted: its refit with the noise re-estimated fails ({error}); the "
-                         "search stops here")
-            break
-        values = new_solution.x[new_objective.effect_slices[-1]]
-        std = standard_deviations(new_objective, new_solution)[new_objective.effect_slices[-1]]
-        steps.append(TreeStep(effect, values, std, delta, search.errors(objective, solution.x),
-                              search.errors(new_objective, new_solution.x),
-                              search.held_errors(adopted, solution.x), search.held_errors([*adopted, effect],
-                                                                                          new_solution.x),
-                              ranking))
-        adopted.append(effect)
-        objective, solution = new_objective, new_solution
-    return _concluded(search, (objective, solution), (adopted, steps, ranking), untestable, unknown, time, notes)
+    found = search_effects(search, inputs, pool, Counter(progress))
+    return _concluded(found, untestable, unknown, time)
 
 
-def _step(search: _Search, inputs: EffectInputs, current: tuple[FitObjective, Solution], adopted: list[Effect],
-          pool: Sequence[Effect], counter: Counter
-          ) -> tuple[tuple[Effect, FitObjective, Solution, float] | None, tuple[TreeCandidate, ...]]:
-    """One step: screen every candidate not adopted, fit the shortlist in full, judge them best first; the one
-    adopted (its fit and ΔBIC) or None, and the ranking."""
-    objective, solution = current
-    now = bic(solution.residual, solution.x.size, n_prior_rows(objective))
-    freedom = residual_freedom(objective, solution)
-    offered = [e for e in pool if e not in adopted and testable(freedom, e.n_values, EVIDENCE)]
-    if not offered:
-        return None, ()
-    scores = Linearisation(solution, n_prior_rows(objective)).test(objective.effect_columns(solution.x, offered), now)
-    screened = sorted(zip(offered, scores), key=lambda item: item[1].delta_bic)
-    shortlist = [e for e, score in screened[:SHORTLIST] if may_reach(score.delta_bic, EVIDENCE)]
-    counter.expect(len(shortlist) + 1)
-    fitted = []
-    failed: list[TreeCandidate] = []
-    for effect in shortlist:
-        counter.tick()
-        try:
-            new_objective, new_solution = search.fit([*adopted, effect], np.r_[solution.x, np.zeros(effect.n_values)])
-        except CalibrationError as error:  # the rows do not determine it beside the geometry: reported, not adopted
-            failed.append(TreeCandidate(effect, np.inf, np.zeros(effect.n_values), f"its fit fails ({error})"))
-            continue
-        fitted.append((bic(new_solution.residual, new_solution.x.size, n_prior_rows(new_objective)) - now, effect,
-                       new_objective, new_solution))
-    fitted.sort(key=lambda item: item[0])
-    chosen = None
-    ranking = []
-    for delta, effect, new_objective, new_solution in fitted:
-        values = new_solution.x[new_objective.effect_slices[-1]]
-        verdict = "not judged: another adopted" if chosen is not None else _verdict(
-            search, inputs, effect, (delta, adopted), (new_objective, new_solution), solution.x)
-        ranking.append(TreeCandidate(effect, float(delta), values, verdict))
-        if verdict == "adopted":
-            chosen = (effect, new_objective, new_solution, float(delta))
-    ranking += failed
-    ranking += [TreeCandidate(e, s.delta_bic, np.zeros(e.n_values), "screened out", screened=True)
-                for e, s in screened if e not in shortlist][: max(0, SHORTLIST - len(ranking))]
-    counter.tick()
-    return chosen, tuple(ranking)
-
-
-def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tuple[float, Sequence[Effect]],
-             fit: tuple[FitObjective, Solution], x_before: np.ndarray) -> str:
-    """``adopted``, or why not, by the single chain's rules (module docstring)."""
-    delta, adopted = evidence
-    objective, solution = fit
-    body = TreeBody(search.problem.tree)
-    values = solution.x[objective.effect_slices[-1]]
-    if delta >= EVIDENCE:
-        return f"ΔBIC {delta:.1f} not below {EVIDENCE:g}"
-    wald = _wald(objective, solution)
-    if wald < float(scipy.stats.chi2.ppf(DETERMINED_LEVEL, values.size)):  # one value: |v| < 2σ
-        return (f"its value {np.round(values, 6).tolist()} is not {DETERMINED_Z:g} standard deviations from zero "
-                f"(Wald χ² {wald:.3g} over {values.size} value(s)): its ΔBIC is gained by the geometry it frees, not "
-                "by a value the rows determine")
-    if not plausible(effect, values, body):
-        return f"its value {np.round(values, 6).tolist()} is outside the physical range (a stand-in for something else)"
-    sl = objective.effect_slices[-1]
-    largest = float(np.max(np.abs(objective.jacobian(solution.x)[: solution.residual.size - n_prior_rows(objective),
-                                                                 sl] @ values), initial=0.0))
-    if largest < NEGLIGIBLE:  # the residual is whitened: its columns times the values are in noise units
-        return f"it changes no measured coordinate by more than {largest:.2g} of its noise: too small to matter"
-    if effect.type != "coupling" and offset_like(effect_basis(effect, inputs, body)):
-        return "its basis barely changes over the rows, so it acts as a joint offset"
-    before, after = search.held_errors(adopted, x_before), search.held_errors([*adopted, effect], solution.x)
-    if before is None or after is None:
-        return "adopted"
-    # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
-    return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
-                            search.judged_noise(objective, solution), None)
-
-
-def _wald(objective: FitObjective, solution: Solution) -> float:
-    """Wald's statistic vᵀ C⁻¹ v of the last effect's values v, C their covariance: the posterior's under a prior
-    (:func:`pincal.fit.prior.posterior`), else the solver's s² (JᵀJ)⁻¹ (:func:`pincal.fit.solver.solve`)."""
-    jacobian, residual, sl = solution.jacobian, solution.residual, objective.effect_slices[-1]
-    if isinstance(objective, PriorResidual):
-        covariance, _ = posterior(jacobian, residual, objective.n_prior, objective.noise)
-    else:
-        covariance = float(residual @ residual) / max(jacobian.shape[0] - jacobian.shape[1], 1) * np.linalg.inv(
-            gram(jacobian))
-    values = solution.x[sl]
-    return float(values @ np.linalg.lstsq(covariance[sl, sl], values, rcond=None)[0])
-
-
-def _concluded(search: _Search, final: tuple[FitObjective, Solution],
-               found: tuple[Sequence[Effect], Sequence[TreeStep], tuple[TreeCandidate, ...]],
-               untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None, notes: list[str]) -> TreeDiagnosis:
-    """The final model as a value: the tree vector, placements, target and errors of the last fit; ``found``: the
-    effects adopted, their steps and the last step's ranking."""
-    adopted, steps, ranking = found
-    objective, solution = final
+def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None) -> TreeDiagnosis:
+    """The final model as a value: the tree vector, placements, target and errors of the search's last fit."""
+    search = cast(_Search, found.search)
+    adopted, steps, ranking, notes = found.adopted, found.steps, found.ranking, list(found.notes)
+    objective, solution = found.objective, found.solution
     problem = search.problem
     kinematic = objective.blocks["kinematic"]
     std_all = standard_deviations(objective, solution)

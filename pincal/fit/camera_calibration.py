@@ -26,6 +26,7 @@ only from images that fill the frame, and prefer intrinsics from a dedicated cal
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import cast
 
@@ -40,14 +41,17 @@ from pincal.fit.solver import Solution, solve
 from pincal.measurements.camera_csv import CornerSet
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
+from pincal.model.effects import Effect, EffectInputs, effect_inputs, with_loads
 from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainLevel, ChainParameters, NoParameters
 from pincal.model.pinhole import INTRINSIC_NAMES
 from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
+from pincal.residuals.sensor_values import ModelledEffects
 
 __all__ = ["CAMERA_SELECTIONS", "CameraFitOptions", "CameraProblem", "CameraCalibration", "calibrate_camera",
-           "images_of", "reprojection_errors"]
+           "images_of", "reprojection_errors", "image_sessions",
+           "images_as_rows", "camera_effect_inputs"]
 
 #: The selection criteria a camera's fit offers: leave-one-row-out (``press``) needs rows of one size,
 #: and an image shows any number of corners.
@@ -80,6 +84,8 @@ class CameraProblem:
     estimated, indices into :data:`pincal.model.pinhole.INTRINSIC_NAMES`. ``models``: sensitivity models by
     slots, shared by every problem derived from this one. ``prior``: σ_i of every kinematic parameter
     (eq P1 of :mod:`pincal.fit.prior`). ``noise``: the pixel noise σ [px] weighting a prior's rows.
+    ``effects``: the joint effects fitted with the rest and their inputs over the images (eq C4 of
+    :mod:`pincal.residuals.camera`; None: none).
     """
 
     chain: KinematicChain
@@ -91,11 +97,12 @@ class CameraProblem:
     models: dict[tuple[ParameterSlot, ...], SensitivityModel] = field(default_factory=dict)
     prior: np.ndarray | None = None
     noise: float = 1.0
+    effects: ModelledEffects | None = None
 
     def objective(self, free: np.ndarray, base: np.ndarray) -> CameraResidual | PriorResidual:
         params = self.params if self.params is not None else NoParameters(self.chain)
         cache = KinematicsCache(params, free, base, self.corners.q, self.models)
-        objective = CameraResidual(cache, self.corners, self.start, self.fitted, self.sessions)
+        objective = CameraResidual(cache, self.corners, self.start, self.fitted, self.sessions, self.effects)
         return objective if self.prior is None else PriorResidual(objective, self.prior[free], self.noise)
 
     def fit(self, free: np.ndarray, base: np.ndarray, x0: np.ndarray | None = None,
@@ -143,10 +150,15 @@ class CameraProblem:
 
     def rows_view(self) -> MeasurementSet:
         """The images as rows of one point, for the selection's bookkeeping (their count and the file)."""
-        corners = self.corners
-        k = len(corners.images)
-        return MeasurementSet(corners.joint_names, corners.q, np.zeros((k, 1, 3)), None,
-                              np.full(k, "calibration", dtype=object), np.arange(k) + 2, {}, corners.source)
+        return images_as_rows(self.corners)
+
+
+def images_as_rows(corners: CornerSet) -> MeasurementSet:
+    """The images of ``corners`` as rows of one point at zero, their joint readings and the file (what the
+    selection's bookkeeping and the effects' inputs read)."""
+    k = len(corners.images)
+    return MeasurementSet(corners.joint_names, corners.q, np.zeros((k, 1, 3)), None,
+                          np.full(k, "calibration", dtype=object), np.arange(k) + 2, {}, corners.source)
 
 
 @dataclass(frozen=True)
@@ -173,6 +185,8 @@ class CameraCalibration:
         solution / covariance: the final fit's unknowns and their covariance (the posterior with a prior).
         fit_seconds / total_seconds: the final fit; everything, start and selection included [s].
         notes: things the user should know.
+        prior_sigma: with ``selection`` prior, σ_i of every kinematic parameter (eq P1 of :mod:`pincal.fit.prior`),
+            (n,); None without a prior.
     """
 
     level: ChainLevel
@@ -198,6 +212,7 @@ class CameraCalibration:
     fit_seconds: float
     total_seconds: float
     notes: tuple[str, ...] = ()
+    prior_sigma: np.ndarray | None = None
 
     @property
     def corrected_placements(self) -> tuple[np.ndarray, ...]:
@@ -233,7 +248,7 @@ def calibrate_camera(chain: KinematicChain, corners: CornerSet, start: CameraEst
     if unknown:
         raise CalibrationError(f"no intrinsic named {', '.join(unknown)}; they are {', '.join(INTRINSIC_NAMES)}")
     corners = _calibration_images(corners)
-    sessions = _session_indices(corners, session_names, len(start.worlds))
+    sessions = image_sessions(corners, session_names, len(start.worlds))
     params = LEVELS[level](chain) if level in LEVELS else None
     fitted = tuple(INTRINSIC_NAMES.index(n) for n in dict.fromkeys(options.intrinsics))
     problem = CameraProblem(chain, params, corners, start, sessions)
@@ -276,6 +291,7 @@ def calibrate_camera(chain: KinematicChain, corners: CornerSet, start: CameraEst
         kept=kept, chain_placements=placements, tip_placement=placements[-1] @ estimate.mount, solution=x.copy(),
         covariance=covariance, fit_seconds=fit.fit_seconds, total_seconds=time.perf_counter() - started,
         notes=() if fit.selection is None else tuple(fit.selection.notes),
+        prior_sigma=cast(CameraProblem, fit.problem).prior,
     )
 
 
@@ -292,14 +308,30 @@ def images_of(corners: CornerSet, keep: np.ndarray) -> CornerSet:
                    extra={n: v[keep] for n, v in corners.extra.items()})
 
 
-def reprojection_errors(chain: KinematicChain, result: CameraCalibration, corners: CornerSet) -> np.ndarray:
+def camera_effect_inputs(chain: KinematicChain, corners: CornerSet, loads: bool = False) -> EffectInputs:
+    """The effect inputs of the images of ``corners`` (one row each, in file order: their approach flanks follow
+    it), with the gravity loads per mass moment when ``loads`` (compliances of unknown masses)."""
+    inputs = effect_inputs(chain, images_as_rows(corners))
+    return with_loads(inputs, chain) if loads else inputs
+
+
+def reprojection_errors(chain: KinematicChain, result: CameraCalibration, corners: CornerSet,
+                        effects: Sequence[tuple[Effect, np.ndarray]] = ()) -> np.ndarray:
     """Each corner of every image of ``corners`` (any role) reprojected through the calibrated model, minus
-    where it was seen (M, 2) [px] (eq C3 at the result's kinematics, world frames, mount and intrinsics)."""
+    where it was seen (M, 2) [px] (eq C3 at the result's kinematics, world frames, mount and intrinsics; with
+    ``effects``, joint effects and their values, eq C4 over these images)."""
     params = result.params if result.params is not None else NoParameters(chain)
     cache = KinematicsCache(params, np.array([], dtype=int), result.vector, corners.q)
-    sessions = _session_indices(corners, result.session_names, len(result.estimate.worlds))
-    objective = CameraResidual(cache, corners, result.estimate, (), sessions)
-    return objective.residual(objective.start_vector()).reshape(-1, 2)
+    sessions = image_sessions(corners, result.session_names, len(result.estimate.worlds))
+    modelled = None
+    if effects:
+        inputs = camera_effect_inputs(chain, corners, loads=any(e.moments for e, _ in effects))
+        modelled = ModelledEffects(tuple(e for e, _ in effects), inputs)
+    objective = CameraResidual(cache, corners, result.estimate, (), sessions, modelled)
+    x = objective.start_vector()
+    if effects:
+        x[objective.blocks["effects"]] = np.concatenate([np.asarray(v, dtype=float) for _, v in effects])
+    return objective.residual(x).reshape(-1, 2)
 
 
 def _calibration_images(corners: CornerSet) -> CornerSet:
@@ -311,7 +343,7 @@ def _calibration_images(corners: CornerSet) -> CornerSet:
     return corners if len(keep) == len(corners.images) else images_of(corners, keep)
 
 
-def _session_indices(corners: CornerSet, session_names: tuple[str, ...], n_worlds: int) -> np.ndarray:
+def image_sessions(corners: CornerSet, session_names: tuple[str, ...], n_worlds: int) -> np.ndarray:
     """Each image's index into the start's world frames (K,): by ``session_names``, or 0 with one world frame."""
     if not session_names:
         if n_worlds != 1:

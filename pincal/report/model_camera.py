@@ -15,9 +15,11 @@ from pincal.report.model import (
     Sha256,
     Vector3,
 )
+from pincal.report.model_diagnosis import EffectJson
+from pincal.report.model_tree import TreeCandidateJson
 
 __all__ = ["CameraSources", "FrameJson", "IntrinsicsJson", "ReprojectionJson", "ReprojectionPair", "ImageErrorJson",
-           "CameraBlock", "CameraReport", "CameraEvaluationJson"]
+           "CameraBlock", "CameraReport", "CameraEvaluationJson", "RmsPair", "CameraStepJson", "CameraDiagnosisJson"]
 
 
 class _CameraSourcesKeys(TypedDict):
@@ -30,9 +32,11 @@ class _CameraSourcesKeys(TypedDict):
 
 class CameraSources(_CameraSourcesKeys, total=False):
     """The files of the run: ``intrinsics`` is the file given or ``estimate``; ``camera_info`` the YAML written
-    beside the corrected URDF; ``corrected_urdf_withheld`` true when neither was written (a gross misfit)."""
+    beside the corrected URDF; ``corrected_urdf_withheld`` true when neither was written (a gross misfit);
+    ``validation``: ``diagnose --validation``'s held-out images."""
 
     corrected_urdf_withheld: bool
+    validation: str
 
 
 class FrameJson(TypedDict):
@@ -111,8 +115,49 @@ class CameraBlock(TypedDict):
     images: list[ImageErrorJson]
 
 
-class CameraReport(TypedDict):
-    """REPORT.json of ``calibrate --camera-link``: a chain calibrated from a camera's images of a board."""
+class RmsPair(TypedDict):
+    """A set of images' reprojection RMS per coordinate (u and v) [px] before and after a step."""
+
+    before_px: float
+    after_px: float
+
+
+class CameraStepJson(TypedDict):
+    """An effect ``diagnose --camera-link`` adopted: the effect (its values and standard deviations), its ΔBIC, the
+    calibration images' reprojection RMS before and after it, the held-out images' (None without any), the step's
+    candidates, best first."""
+
+    effect: EffectJson
+    delta_bic: float
+    calibration: RmsPair
+    heldout: RmsPair | None
+    candidates: list[TreeCandidateJson]
+
+
+class CameraDiagnosisJson(TypedDict):
+    """``diagnose --camera-link``'s search: the adoption rule in words, where the loads come from (``masses``:
+    ``urdf`` or ``unknown``), the adopted steps, the candidates of the step that adopted nothing, those the images
+    cannot test, and the held-out images' reprojection RMS [px] of the camera calibration and of the final model
+    (None without held-out images)."""
+
+    criterion: str
+    masses: str
+    steps: list[CameraStepJson]
+    last_candidates: list[TreeCandidateJson]
+    untestable: list[str]
+    heldout: RmsPair | None
+
+
+class _CameraDiagnosisKeys(TypedDict, total=False):
+    effects: list[EffectJson]
+    diagnosis: CameraDiagnosisJson
+
+
+class CameraReport(_CameraDiagnosisKeys):
+    """REPORT.json of ``calibrate --camera-link``: a chain calibrated from a camera's images of a board.
+    ``diagnose --camera-link``'s adds the joint effects of the final model (``effects``, as in effects.yaml;
+    ``parameters``, ``camera`` and its reprojection errors are the final model's, with its effects) and its search
+    (``diagnosis``)."""
 
     pincal_version: str
     report_version: int

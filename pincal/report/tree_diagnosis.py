@@ -24,7 +24,7 @@ from pincal.report.model_tree import (
 )
 from pincal.report.tree import target_errors
 
-__all__ = ["with_diagnosis"]
+__all__ = ["with_diagnosis", "candidate_entries"]
 
 
 def _held(errors: np.ndarray | None, points: tuple[int, ...]) -> TargetErrors | None:
@@ -42,7 +42,7 @@ def _before_after(before: np.ndarray | None, after: np.ndarray | None) -> TreeBe
     return None if before is None or after is None else {"before": _all_points(before), "after": _all_points(after)}
 
 
-def _candidates(candidates: Sequence[TreeCandidate], inputs: EffectInputs, kinds: Mapping[str, str]
+def candidate_entries(candidates: Sequence[TreeCandidate], inputs: EffectInputs, kinds: Mapping[str, str]
                 ) -> list[TreeCandidateJson]:
     """Each candidate's effect (its values when fitted in full, its type and joint when screened out), ΔBIC and
     verdict."""
@@ -78,9 +78,9 @@ def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis, geometry_errors
             "delta_bic": step.delta_bic,
             "calibration": cast(TreeBeforeAfter, _before_after(step.calibration_before, step.calibration_after)),
             "heldout": _before_after(step.heldout_before, step.heldout_after),
-            "candidates": _candidates(step.candidates, diagnosis.inputs, kinds),
+            "candidates": candidate_entries(step.candidates, diagnosis.inputs, kinds),
         } for step in diagnosis.steps],
-        "last_candidates": _candidates(diagnosis.last_candidates, diagnosis.inputs, kinds),
+        "last_candidates": candidate_entries(diagnosis.last_candidates, diagnosis.inputs, kinds),
         "untestable": [e.label for e in diagnosis.untestable],
     }
     out["effects"] = effect_entries(diagnosis.effects, diagnosis.inputs, kinds, {})

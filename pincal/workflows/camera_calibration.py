@@ -21,6 +21,7 @@ board's mean depth, ``e [m] = e [px] · Z / f``, against the same 5 % of the rea
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal, cast
@@ -48,10 +49,12 @@ from pincal.model.camera_view import Arrangement
 from pincal.model.chain import KinematicChain
 from pincal.model.corrected_urdf import corrected_origins
 from pincal.model.description import read_description, xacro_arguments
+from pincal.model.effects import Effect
 from pincal.model.parameter_sets import CHAIN_LEVELS, ChainLevel
 from pincal.model.pinhole import INTRINSIC_NAMES, CameraIntrinsics
 from pincal.report.camera import CameraRecord, camera_report
 from pincal.report.document import write_report
+from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import findings_json
 from pincal.report.model_camera import CameraReport, CameraSources
 from pincal.workflows.paths import description_inputs, refuse_overwrite
@@ -59,7 +62,8 @@ from pincal.workflows.settings import default_selection, expect
 from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_urdf_checked_by
 
 __all__ = ["ESTIMATE", "CameraCalibrateSettings", "CameraSetup", "CameraCalibrationRun", "camera_info_path",
-           "load_camera", "estimate_intrinsics", "calibrate_camera_files"]
+           "load_camera", "estimate_intrinsics", "calibrate_camera_files", "CameraPaths", "CameraFit", "CameraModel",
+           "fit_camera", "write_camera_run"]
 
 #: ``--intrinsics estimate``: the intrinsics started from OpenCV's calibrateCamera and fitted with the rest.
 ESTIMATE = "estimate"
@@ -270,27 +274,65 @@ def _write_urdf(urdf: Path, out_urdf: Path, setup: CameraSetup, result: CameraCa
                                  "the camera")
 
 
-def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | Path, report_path: str | Path,
-                           settings: CameraCalibrateSettings) -> CameraCalibrationRun:
-    """Calibrate ``urdf`` from a camera's ``data`` (DATA.csv, as detect writes it) as ``settings`` say; write the
-    corrected URDF, its camera_info YAML (:func:`camera_info_path`) and REPORT.json (module docstring).
+@dataclass(frozen=True)
+class CameraPaths:
+    """The files of a camera's run: the URDF, DATA.csv, the corrected URDF and REPORT.json to write; ``validation``:
+    held-out images of another file (None: DATA.csv's of role ``validation``); ``effects``: the run writes an
+    effects.yaml beside the URDF (``diagnose``)."""
+
+    urdf: Path
+    data: Path
+    out_urdf: Path
+    report: Path
+    validation: Path | None = None
+    effects: bool = False
+
+
+@dataclass(frozen=True)
+class CameraFit:
+    """A camera's calibration before anything is written: the inputs read, the fit, its calibration and held-out
+    images, the intrinsics fitted, notes and the fit's time [s]."""
+
+    setup: CameraSetup
+    result: CameraCalibration
+    calibration: CornerSet
+    validation: CornerSet
+    fitted: tuple[str, ...]
+    notes: tuple[str, ...]
+    seconds: float
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """What a camera's run writes: the model (``result``; the fit's, or ``diagnose``'s final one), the joint effects
+    its errors apply (eq C4 of :mod:`pincal.residuals.camera`), and what completes its report (None: nothing)."""
+
+    result: CameraCalibration
+    effects: tuple[tuple[Effect, np.ndarray], ...] = ()
+    extend: Callable[[CameraReport], CameraReport] | None = None
+
+
+def fit_camera(paths: CameraPaths, settings: CameraCalibrateSettings) -> CameraFit:
+    """Refuse outputs that are inputs, read the inputs and calibrate (:func:`calibrate_camera_files`'s first half).
 
     Raises:
         PincalError: the inputs' one-line errors (:func:`load_camera`), an output path that is an input, fewer
             than 3 calibration images, a fit the images cannot determine.
     """
-    expect(settings, CameraCalibrateSettings, "calibrate_camera_files")
-    urdf, data, out_urdf, report_path = Path(urdf), Path(data), Path(out_urdf), Path(report_path)
-    info_path = camera_info_path(out_urdf)
-    inputs = [*description_inputs(urdf, settings.xacro_args), data]
+    info_path = camera_info_path(paths.out_urdf)
+    inputs = [*description_inputs(paths.urdf, settings.xacro_args), paths.data] + (
+        [paths.validation] if paths.validation else [])
     if isinstance(settings.intrinsics, Path):
         inputs.append(settings.intrinsics)
-    refuse_overwrite(out_urdf, *inputs)
-    refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
-    refuse_overwrite(info_path, *inputs, outputs=[out_urdf, report_path])
-    setup = load_camera(urdf, data, settings.camera_link, settings.board_link, settings.intrinsics,
+    refuse_overwrite(paths.out_urdf, *inputs)
+    refuse_overwrite(paths.report, *inputs, outputs=[paths.out_urdf])
+    refuse_overwrite(info_path, *inputs, outputs=[paths.out_urdf, paths.report])
+    if paths.effects:
+        refuse_overwrite(effects_path(paths.out_urdf), *inputs, outputs=[paths.out_urdf, paths.report, info_path])
+    setup = load_camera(paths.urdf, paths.data, settings.camera_link, settings.board_link, settings.intrinsics,
                         settings.xacro_args)
     chain, corners = setup.chain, setup.corners
+    notes = list(setup.notes)
     calibration = images_of(corners, corners.roles != "validation")
     if len(calibration.images) < 3:
         raise PincalError(f"{corners.source}: {len(calibration.images)} calibration image(s) (role 'validation' is "
@@ -301,23 +343,55 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
     result = calibrate_camera(chain, calibration, start, settings.level,
                               CameraFitOptions(intrinsics=fitted, selection=settings.criterion), sessions)
     seconds = time.perf_counter() - started
-    notes = list(setup.notes)
     validation = images_of(corners, corners.roles == "validation")
+    if paths.validation is not None:
+        validation, held_notes = read_corners(paths.validation, chain.joint_specs)
+        notes += held_notes
+        check_image_size(result.estimate.intrinsics, validation.sizes, validation.images, validation.source,
+                         str(settings.intrinsics))
     unseen = sorted({str(s) for s in validation.sessions} - set(sessions))
     if unseen:
-        notes.append(f"{corners.source}: session(s) {', '.join(unseen)} have validation images only: no world frame "
-                     "was fitted for them, so their images are left out of the report's errors")
+        notes.append(f"{validation.source}: session(s) {', '.join(unseen)} have validation images only: no world "
+                     "frame was fitted for them, so their images are left out of the report's errors")
         validation = images_of(validation, np.isin(validation.sessions.astype(str), sessions))
     if setup.arrangement == "eye_to_hand" and len(sessions) > 1:
         notes.append(f"{len(sessions)} sessions: the corrected URDF places {settings.camera_link} where session "
                      f"'{sessions[0]}' saw it; every session's camera pose is in REPORT.json camera.worlds")
-    gross = gross_misfit(_misfit_m(result, chain, calibration), reach_m(chain, calibration.q))
+    return CameraFit(setup, result, calibration, validation, fitted, tuple(notes), seconds)
+
+
+def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | Path, report_path: str | Path,
+                           settings: CameraCalibrateSettings) -> CameraCalibrationRun:
+    """Calibrate ``urdf`` from a camera's ``data`` (DATA.csv, as detect writes it) as ``settings`` say; write the
+    corrected URDF, its camera_info YAML (:func:`camera_info_path`) and REPORT.json (module docstring).
+
+    Raises:
+        PincalError: the inputs' one-line errors (:func:`load_camera`), an output path that is an input, fewer
+            than 3 calibration images, a fit the images cannot determine.
+    """
+    expect(settings, CameraCalibrateSettings, "calibrate_camera_files")
+    paths = CameraPaths(Path(urdf), Path(data), Path(out_urdf), Path(report_path))
+    fit = fit_camera(paths, settings)
+    return write_camera_run(paths, settings, fit, CameraModel(fit.result))
+
+
+def write_camera_run(paths: CameraPaths, settings: CameraCalibrateSettings, fit: CameraFit,
+                     model: CameraModel) -> CameraCalibrationRun:
+    """Write ``model``'s corrected URDF, camera_info, effects.yaml (``paths.effects``) and REPORT.json, or withhold
+    the URDF, camera_info and effects.yaml of a model that misses its corners grossly (module docstring)."""
+    setup, chain, result = fit.setup, fit.setup.chain, model.result
+    urdf, data, out_urdf, report_path = paths.urdf, paths.data, paths.out_urdf, paths.report
+    info_path = camera_info_path(out_urdf)
+    notes = list(fit.notes)
+    gross = gross_misfit(_misfit_m(result, chain, fit.calibration), reach_m(chain, fit.calibration.q))
     warnings, withheld = withholding([] if gross is None else [gross], settings.force)
-    # what is withheld beside a camera's URDF is its camera_info, not an effects.yaml
-    warnings = [replace(w, message=w.message.replace("nor its effects.yaml", "nor its camera_info YAML"))
-                for w in warnings]
+    if not paths.effects:  # what is withheld beside a camera's URDF is its camera_info, not an effects.yaml
+        warnings = [replace(w, message=w.message.replace("nor its effects.yaml", "nor its camera_info YAML"))
+                    for w in warnings]
     comment = (f"Calibrated by pincal {__version__} (camera {setup.arrangement.replace('_', ' ')}, level "
-               f"{result.level}) from {urdf.name} and {data.name}. World frame and intrinsics: see the report.")
+               f"{result.level}{', diagnose' if paths.effects else ''}) from {urdf.name} and {data.name}. World "
+               "frame, intrinsics" + (" and effects (which a URDF cannot carry)" if paths.effects else "")
+               + ": see the report.")
     reload_error, urdf_sha256 = _write_urdf(urdf, out_urdf, setup, result, comment, settings.xacro_args,
                                             keep=not withheld)
     camera_info = None
@@ -330,18 +404,24 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
     else:
         write_camera_info(info_path, result.estimate.intrinsics, camera_name=settings.camera_link)
         camera_info = info_path
-    errors = {"calibration": (calibration, reprojection_errors(chain, result, calibration),
-                              reprojection_errors(chain, _nominal(result), calibration)),
-              "validation": (validation, reprojection_errors(chain, result, validation),
-                             reprojection_errors(chain, _nominal(result), validation))}
+    nominal = _nominal(fit.result)
+    errors = {role: (corners, reprojection_errors(chain, result, corners, model.effects),
+                     reprojection_errors(chain, nominal, corners))
+              for role, corners in (("calibration", fit.calibration), ("validation", fit.validation))}
     sources: CameraSources = {"urdf": str(urdf), "data": str(data), "corrected_urdf": str(out_urdf),
                               "intrinsics": str(settings.intrinsics), "camera_info": str(info_path)}
+    if paths.validation is not None:
+        sources["validation"] = str(paths.validation)
     if withheld:
         sources["corrected_urdf_withheld"] = True  # the paths name no file of this run
     record = CameraRecord(settings.camera_link, settings.board_link, errors, sources, notes + list(result.notes),
-                          findings_json(warnings), urdf_sha256, dict(xacro_arguments(settings.xacro_args)), seconds,
-                          fitted)
+                          findings_json(warnings), urdf_sha256, dict(xacro_arguments(settings.xacro_args)),
+                          fit.seconds, fit.fitted)
     report = camera_report(result, chain, record)
+    if model.extend is not None:
+        report = model.extend(report)
+    if paths.effects and not withheld:
+        write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
     return CameraCalibrationRun(result, report, camera_info, reload_error, withheld, tuple(notes))
 

@@ -17,6 +17,7 @@ would measure PnP, not the calibration. The relative-pose errors against a simul
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -26,12 +27,14 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 
 from pincal.errors import PincalError
+from pincal.fit.camera_calibration import camera_effect_inputs
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.model.camera_chain import camera_chain
 from pincal.model.camera_info import check_image_size, read_intrinsics
 from pincal.model.camera_view import Arrangement
 from pincal.model.chain import KinematicChain
 from pincal.model.description import read_description
+from pincal.model.effects import Effect, effect_from_dict
 from pincal.model.parameter_sets import NoParameters
 from pincal.outputs import file_sha256
 from pincal.report.camera import frame_matrix, image_errors_json, intrinsics_from_json, reprojection_json
@@ -40,6 +43,7 @@ from pincal.report.model_camera import CameraEvaluationJson, CameraReport, Frame
 from pincal.report.reading import load_report
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
+from pincal.residuals.sensor_values import ModelledEffects
 from pincal.workflows.camera_calibration import camera_info_path
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 
@@ -74,14 +78,21 @@ class CameraEvaluation:
 
 
 def _pixels(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
-            refit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            refit: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Each corner's reprojection error (M, 2) [px] through ``chain`` as it is placed, ``estimate``'s world frames
-    (``sessions``: each image's index), mount and intrinsics; the world frames of sessions ``refit`` (indices)
-    re-estimated first. Returns the errors and the world frames used."""
+    (``sessions``: each image's index), mount and intrinsics, the joint ``effects`` at their values (eq C4 over these
+    images); the world frames of sessions ``refit`` (indices) re-estimated first. Returns the errors and the world
+    frames used."""
     params = NoParameters(chain)
     cache = KinematicsCache(params, np.array([], dtype=int), np.zeros(0), corners.q)
-    objective = CameraResidual(cache, corners, estimate, (), sessions)
+    modelled = None
+    if effects:
+        modelled = ModelledEffects(tuple(e for e, _ in effects),
+                                   camera_effect_inputs(chain, corners, loads=any(e.moments for e, _ in effects)))
+    objective = CameraResidual(cache, corners, estimate, (), sessions, modelled)
     x0 = objective.start_vector()
+    if effects:
+        x0[objective.blocks["effects"]] = np.concatenate([np.asarray(v, dtype=float) for _, v in effects])
     columns = np.concatenate([objective.blocks["world"].start + 6 * s + np.arange(6) for s in refit]).astype(int) \
         if len(refit) else np.array([], dtype=int)
     if columns.size:
@@ -176,7 +187,8 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     before_mount = frame_matrix(camera["nominal_mount"], f"{report_path}: camera.nominal_mount")
     before = CameraEstimate(arrangement, np.array(start_before), np.eye(4),
                             intrinsics_from_json(camera["nominal_intrinsics"], f"{report_path}: camera"))
-    after_px, _ = _pixels(after_chain, corners, after, sessions, refit)
+    effects = [effect_from_dict(entry) for entry in report.get("effects") or []]  # diagnose's, applied after
+    after_px, _ = _pixels(after_chain, corners, after, sessions, refit, effects)
     placements = before_chain.placements()
     with before_chain.placed([*placements[:-1], before_mount]):  # the hand-eye mount on the nominal chain
         before_px, _ = _pixels(before_chain, corners, before, sessions, refit)

@@ -12,7 +12,7 @@ identity. The docs' walk-throughs (docs/camera.md) and the tests make their data
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +22,11 @@ from pincal.errors import PincalError
 from pincal.fit.camera_calibration import images_of
 from pincal.measurements.camera_csv import CornerSet, write_corner_set
 from pincal.measurements.charuco import parse_board
+from pincal.measurements.data import MeasurementSet
 from pincal.model.camera_info import write_camera_info
 from pincal.model.camera_view import ARRANGEMENTS, Arrangement, pose
 from pincal.model.chain import KinematicChain
+from pincal.model.effects import Effect, effect_inputs, joint_basis
 from pincal.model.parameter_sets import PlacementErrors
 from pincal.model.pinhole import CameraIntrinsics
 from pincal.outputs import write_text
@@ -55,6 +57,9 @@ class CameraSimulationSettings:
         noise_px: Gaussian noise of each corner's u and v [px].
         error_mm / error_mrad: the joint placements' true errors, per coordinate (σ) [mm, mrad].
         seed: the random seed.
+        effects: joint effects the readings lack, with their true values (:mod:`pincal.model.effects`): the
+            images are taken at the readings plus each effect's shift, the calibration images' and the held-out
+            ones' each over their own set (an approach flank follows its set's order); default none.
     """
 
     arrangement: Arrangement = "eye_in_hand"
@@ -64,6 +69,7 @@ class CameraSimulationSettings:
     error_mm: float = 0.5
     error_mrad: float = 0.5
     seed: int = 1
+    effects: tuple[tuple[Effect, tuple[float, ...]], ...] = ()
 
     def __post_init__(self) -> None:
         if self.arrangement not in ARRANGEMENTS:
@@ -135,8 +141,23 @@ def simulate_camera(settings: CameraSimulationSettings = CameraSimulationSetting
         scene = facing_scene(chain, settings.arrangement, Q0, TRUE_MOUNT, INTRINSICS, parse_board(BOARD_SPEC))
         q = view_configurations(chain, scene, Q0, settings.images + settings.held_out, rng)
         roles = ["calibration"] * settings.images + ["validation"] * settings.held_out
-        corners = view_corners(chain, scene, q, settings.noise_px, rng, roles=roles)
-    return SimulatedCamera(text, chain, tuple(placements), scene, q, corners)
+        corners = view_corners(chain, scene, _actual(chain, q, settings), settings.noise_px, rng, roles=roles)
+    return SimulatedCamera(text, chain, tuple(placements), scene, q, replace(corners, q=q))
+
+
+def _actual(chain: KinematicChain, q: np.ndarray, settings: CameraSimulationSettings) -> np.ndarray:
+    """The joint angles of readings ``q`` (K, N) under ``settings.effects`` [rad]: each set's own shifts."""
+    actual = np.array(q, dtype=float)
+    for rows in (np.arange(settings.images), np.arange(settings.images, settings.images + settings.held_out)):
+        if settings.effects and rows.size:
+            k = len(rows)
+            inputs = effect_inputs(chain, MeasurementSet(chain.joint_names, q[rows], np.zeros((k, 1, 3)), None,
+                                                         np.full(k, "calibration", dtype=object), np.arange(k) + 2,
+                                                         {}, "<simulated>"))
+            for effect, values in settings.effects:
+                j = chain.joint_names.index(str(effect.joint))
+                actual[rows, j] += joint_basis(effect, inputs, j) @ np.asarray(values, dtype=float)
+    return actual
 
 
 def simulate_camera_files(out: str | Path, settings: CameraSimulationSettings = CameraSimulationSettings()
