@@ -24,7 +24,7 @@ __all__ = ["CAMERA_NOT_USED", "is_camera_data", "refuse_camera_flags", "run_cali
 CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or the board's link)",
                    "method": "--method", "weight": "--weight", "tool": "--tool", "fixture": "--fixture",
                    "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                   "sigma_pos": "--sigma-pos", "coupling": "--coupling", "html": "--html"}
+                   "sigma_pos": "--sigma-pos", "coupling": "--coupling"}
 #: The columns that make a CSV a camera's DATA.csv (pincal detect's).
 _CAMERA_COLUMNS = ("image", "corner", "u", "v")
 
@@ -66,8 +66,8 @@ def run_calibrate(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
                           "estimate (the intrinsics fitted with the rest)")
     settings = CameraCalibrateSettings(args.camera_link, args.intrinsics, board_link=args.board_link,
                                        level=args.level or "full", selection=selection_criterion(args),
-                                       xacro_args=args.xacro_args, force=args.force)
-    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, settings)
+                                       xacro_args=args.xacro_args, force=args.force, images=args.images)
+    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, settings, html=args.html)
     report, result = run.report, run.result
     for note in report["notes"]:
         print(f"pincal: note: {note}", file=sys.stderr)
@@ -95,6 +95,8 @@ def run_calibrate(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     if run.camera_info is not None:
         print(f"wrote {run.camera_info}")
     print(f"wrote {args.report}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
     return report, run.withheld
 
 

@@ -55,6 +55,7 @@ from pincal.report.document import write_report
 from pincal.report.model import findings_json
 from pincal.report.model_camera import CameraReport, CameraSources
 from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import default_selection, expect
 from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_urdf_checked_by
 
@@ -78,6 +79,8 @@ class CameraCalibrateSettings:
             :class:`pincal.fit.prior.Prior`); None: the commands' default (:func:`default_selection`).
         xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
         force: write the corrected URDF and camera_info even of a model that misses its corners grossly.
+        images: the folder of the image files, where the HTML page looks for the one it draws (by the name
+            DATA.csv gives, which is a file name: detect keeps no folders); None: DATA.csv's folder.
 
     Raises:
         PincalError: an unknown level or selection, a prior at level registration.
@@ -90,6 +93,7 @@ class CameraCalibrateSettings:
     selection: SelectionCriterion | Prior | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
     force: bool = False
+    images: Path | None = None
 
     def __post_init__(self) -> None:
         from pincal.fit.camera_calibration import CAMERA_SELECTIONS
@@ -107,6 +111,8 @@ class CameraCalibrateSettings:
                               "parameter): use --level offsets or full, or drop it")
         if self.intrinsics != ESTIMATE:
             object.__setattr__(self, "intrinsics", Path(self.intrinsics))
+        if self.images is not None:
+            object.__setattr__(self, "images", Path(self.images))
         object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
 
     @property
@@ -205,6 +211,7 @@ class CameraCalibrationRun:
         reload_error: the largest difference of the written URDF's camera (or board) poses, reloaded [m, -].
         withheld: the model misses its corners grossly: the corrected URDF and camera_info not written.
         notes: for the user.
+        html: the report's page written (``--html``), or None.
     """
 
     result: CameraCalibration
@@ -213,6 +220,7 @@ class CameraCalibrationRun:
     reload_error: float
     withheld: bool
     notes: tuple[str, ...]
+    html: Path | None = None
 
 
 def _start(setup: CameraSetup, calibration: CornerSet) -> tuple[CameraIntrinsics, tuple[str, ...]]:
@@ -271,9 +279,11 @@ def _write_urdf(urdf: Path, out_urdf: Path, setup: CameraSetup, result: CameraCa
 
 
 def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | Path, report_path: str | Path,
-                           settings: CameraCalibrateSettings) -> CameraCalibrationRun:
+                           settings: CameraCalibrateSettings, html: str | Path | None = None) -> CameraCalibrationRun:
     """Calibrate ``urdf`` from a camera's ``data`` (DATA.csv, as detect writes it) as ``settings`` say; write the
-    corrected URDF, its camera_info YAML (:func:`camera_info_path`) and REPORT.json (module docstring).
+    corrected URDF, its camera_info YAML (:func:`camera_info_path`), REPORT.json (module docstring) and, given
+    ``html``, the report's page (:mod:`pincal.workflows.report_page`: the camera's section draws the image of
+    REPORT.json's ``camera.picture`` from ``settings.images``).
 
     Raises:
         PincalError: the inputs' one-line errors (:func:`load_camera`), an output path that is an input, fewer
@@ -288,6 +298,7 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
     refuse_overwrite(info_path, *inputs, outputs=[out_urdf, report_path])
+    page_path = refuse_page(html, inputs, [out_urdf, report_path, info_path])
     setup = load_camera(urdf, data, settings.camera_link, settings.board_link, settings.intrinsics,
                         settings.xacro_args)
     chain, corners = setup.chain, setup.corners
@@ -335,15 +346,18 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
               "validation": (validation, reprojection_errors(chain, result, validation),
                              reprojection_errors(chain, _nominal(result), validation))}
     sources: CameraSources = {"urdf": str(urdf), "data": str(data), "corrected_urdf": str(out_urdf),
-                              "intrinsics": str(settings.intrinsics), "camera_info": str(info_path)}
+                              "intrinsics": str(settings.intrinsics), "camera_info": str(info_path),
+                              "images": str(settings.images if settings.images is not None else data.parent)}
     if withheld:
         sources["corrected_urdf_withheld"] = True  # the paths name no file of this run
     record = CameraRecord(settings.camera_link, settings.board_link, errors, sources, notes + list(result.notes),
                           findings_json(warnings), urdf_sha256, dict(xacro_arguments(settings.xacro_args)), seconds,
                           fitted)
     report = camera_report(result, chain, record)
+    page = render_page(page_path, report, report_path)  # made before the report is written
     write_report(report_path, report)
-    return CameraCalibrationRun(result, report, camera_info, reload_error, withheld, tuple(notes))
+    return CameraCalibrationRun(result, report, camera_info, reload_error, withheld, tuple(notes),
+                                write_page(page_path, page))
 
 
 def _nominal(result: CameraCalibration) -> CameraCalibration:
