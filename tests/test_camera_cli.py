@@ -245,7 +245,17 @@ def test_images_that_are_not_of_this_robot_withhold_the_urdf_and_camera_info(sma
     assert (tmp_path / "out" / "robot.camera_info.yaml").is_file() and (tmp_path / "out" / "robot.urdf").is_file()
 
 
-def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path):
+def test_evaluate_refuses_the_other_arrangement_s_images(exact, small, capsys, tmp_path):
+    """Eye-in-hand images against an eye-to-hand report (and back) miss by ~190 px even with the world frame
+    re-estimated, 0.1-0.45 m at the board: refused in one line naming the data and the report's arrangement."""
+    sim, out = exact
+    other = small[0]["eye_to_hand" if sim.board_link is None else "eye_in_hand"]
+    _refused(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(other.data), "--json",
+              str(tmp_path / "e" / "evaluation.json")], capsys, tmp_path / "e", str(other.data),
+             "not images of", "eye in hand" if sim.board_link is None else "eye to hand")
+
+
+def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path, capsys):
     """The board moved 5 cm along its x axis since the calibration (its corners' board_x shifted): through the
     reported board pose the corners miss by ~100 px; --new-session re-estimates the pose and they fit exactly."""
     sim, out = exact
@@ -258,6 +268,7 @@ def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path)
     (tmp_path / "moved.csv").write_text("\n".join(moved) + "\n")
     evaluate = ["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(tmp_path / "moved.csv"), "--json"]
     assert main([*evaluate, str(tmp_path / "reported.json")]) == 0
+    assert "has the board moved since the calibration? --new-session" in capsys.readouterr().err
     assert main([*evaluate, str(tmp_path / "new.json"), "--new-session"]) == 0
     reported, new = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("reported", "new"))
     assert reported["world"] == "reported" and reported["reprojection"]["after"]["rms_px"] > 10.0

@@ -44,7 +44,7 @@ from pincal.fit.selection import SelectionCriterion
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.model.camera_chain import camera_chain, world_link_origin
 from pincal.model.camera_info import check_image_size, read_intrinsics, write_camera_info
-from pincal.model.camera_view import Arrangement
+from pincal.model.camera_view import Arrangement, camera_points
 from pincal.model.chain import KinematicChain
 from pincal.model.corrected_urdf import corrected_origins
 from pincal.model.description import read_description, xacro_arguments
@@ -54,13 +54,14 @@ from pincal.report.camera import CameraRecord, camera_report
 from pincal.report.document import write_report
 from pincal.report.model import findings_json
 from pincal.report.model_camera import CameraReport, CameraSources
+from pincal.residuals.camera import CameraEstimate
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import default_selection, expect
 from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_urdf_checked_by
 
 __all__ = ["ESTIMATE", "CameraCalibrateSettings", "CameraSetup", "CameraCalibrationRun", "camera_info_path",
-           "load_camera", "estimate_intrinsics", "calibrate_camera_files"]
+           "load_camera", "estimate_intrinsics", "misfit_m", "calibrate_camera_files"]
 
 #: ``--intrinsics estimate``: the intrinsics started from OpenCV's calibrateCamera and fitted with the rest.
 ESTIMATE = "estimate"
@@ -230,20 +231,25 @@ def _start(setup: CameraSetup, calibration: CornerSet) -> tuple[CameraIntrinsics
     return estimate_intrinsics(calibration), INTRINSIC_NAMES
 
 
-def _misfit_m(result: CameraCalibration, chain: KinematicChain, calibration: CornerSet) -> float:
-    """The calibration corners' RMS reprojection error seen at the board: e [m] = e [px] · Z / f, over both
-    image axes (a point residual, as the sensor path's ``rms_m``)."""
-    from pincal.model.camera_view import camera_points
+def misfit_m(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+             rms_px: float) -> float:
+    """A reprojection RMS ``rms_px`` [px, per coordinate] of ``corners`` seen at the board: e [m] = e [px] · √2 · Z / f
+    over both image axes (a point residual, as the sensor path's ``rms_m``), Z the corners' mean depth through
+    ``chain`` as it is placed and ``estimate`` (``sessions``: each image's index into its world frames)."""
+    rotations, positions = chain.tool_poses(corners.q)
+    c = corners.image_of
+    _, p = camera_points(estimate.arrangement, (rotations[c], positions[c]), estimate.worlds[sessions[c]],
+                         estimate.mount, corners.board_points)
+    focal = 0.5 * (estimate.intrinsics.fx + estimate.intrinsics.fy)
+    return float(rms_px * np.sqrt(2.0) * np.mean(np.abs(p[:, 2])) / focal)
 
-    with chain.placed(list(result.chain_placements)):
-        rotations, positions = chain.tool_poses(calibration.q)
-    c = calibration.image_of
+
+def _misfit_m(result: CameraCalibration, chain: KinematicChain, calibration: CornerSet) -> float:
+    """The calibration corners' RMS reprojection error seen at the board (:func:`misfit_m`)."""
     session = {name: s for s, name in enumerate(result.session_names)}
-    worlds = result.estimate.worlds[[session.get(str(n), 0) for n in calibration.sessions]]
-    _, p = camera_points(result.estimate.arrangement, (rotations[c], positions[c]), worlds[c], result.estimate.mount,
-                         calibration.board_points)
-    focal = 0.5 * (result.estimate.intrinsics.fx + result.estimate.intrinsics.fy)
-    return float(result.rms_px * np.sqrt(2.0) * np.mean(np.abs(p[:, 2])) / focal)
+    sessions = np.array([session.get(str(n), 0) for n in calibration.sessions], dtype=np.intp)
+    with chain.placed(list(result.chain_placements)):
+        return misfit_m(chain, calibration, result.estimate, sessions, result.rms_px)
 
 
 def _write_urdf(urdf: Path, out_urdf: Path, setup: CameraSetup, result: CameraCalibration, comment: str,

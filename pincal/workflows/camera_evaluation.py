@@ -17,7 +17,7 @@ would measure PnP, not the calibration. The relative-pose errors against a simul
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import cast
 
@@ -26,6 +26,7 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 
 from pincal.errors import PincalError
+from pincal.fit.plausibility import GROSS_REACH_FRACTION, gross_misfit, reach_m
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.model.camera_chain import camera_chain
 from pincal.model.camera_info import check_image_size, read_intrinsics
@@ -40,7 +41,7 @@ from pincal.report.model_camera import CameraEvaluationJson, CameraReport, Frame
 from pincal.report.reading import load_report
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
-from pincal.workflows.camera_calibration import camera_info_path
+from pincal.workflows.camera_calibration import camera_info_path, misfit_m
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 
 __all__ = ["CameraEvaluateSettings", "CameraEvaluation", "evaluate_camera_files"]
@@ -176,7 +177,9 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     before_mount = frame_matrix(camera["nominal_mount"], f"{report_path}: camera.nominal_mount")
     before = CameraEstimate(arrangement, np.array(start_before), np.eye(4),
                             intrinsics_from_json(camera["nominal_intrinsics"], f"{report_path}: camera"))
-    after_px, _ = _pixels(after_chain, corners, after, sessions, refit)
+    after_px, worlds = _pixels(after_chain, corners, after, sessions, refit)
+    notes += _refuse_other_images(after_chain, corners, replace(after, worlds=worlds), sessions, after_px,
+                                  (str(data), str(report_path), camera["camera_link"], camera["board_link"]))
     placements = before_chain.placements()
     with before_chain.placed([*placements[:-1], before_mount]):  # the hand-eye mount on the nominal chain
         before_px, _ = _pixels(before_chain, corners, before, sessions, refit)
@@ -190,6 +193,35 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     if json_path is not None:
         write_evaluation(json_path, document)
     return CameraEvaluation(document, tuple(notes), json_path)
+
+
+def _refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+                         errors: np.ndarray, names: tuple[str, str, str, str | None]) -> list[str]:
+    """Refuse images the corrected model misses grossly (:func:`pincal.fit.plausibility.gross_misfit`, the pixels
+    seen at the board: :func:`pincal.workflows.camera_calibration.misfit_m`) even with every session's world frame
+    re-estimated on them: images of the other arrangement, or of another robot. A miss the re-estimated world frame
+    removes is a board (or camera) moved since the calibration: a note. ``names``: DATA.csv, REPORT.json, the
+    camera's and the board's links."""
+    data, report, camera_link, board_link = names
+    reach = reach_m(chain, corners.q)
+    rms = float(np.sqrt(np.mean(errors**2)))
+    if gross_misfit(misfit_m(chain, corners, estimate, sessions, rms), reach) is None:
+        return []
+    every = np.unique(sessions)
+    errors, worlds = _pixels(chain, corners, estimate, sessions, every)
+    refit = float(np.sqrt(np.mean(errors**2)))
+    seen = misfit_m(chain, corners, replace(estimate, worlds=worlds), sessions, refit)
+    if gross_misfit(seen, reach) is not None:
+        setup = (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else
+                 f"eye to hand: {camera_link} on the root, the board on {board_link}")
+        raise PincalError(f"{data}: the corrected model misses these images' corners by {refit:.4g} px RMS even with "
+                          f"the world frame re-estimated ({seen * 1e3:.3g} mm at the board, beyond "
+                          f"{GROSS_REACH_FRACTION * 100:g} % of the reach): not images of {report}'s arrangement "
+                          f"({setup}) or not of this robot; evaluate them against their own calibration's report")
+    moved = "board" if board_link is None else "camera"
+    return [f"{data}: through the reported world frame the corrected model misses these corners by {rms:.4g} px RMS, "
+            f"with it re-estimated by {refit:.4g} px: has the {moved} moved since the calibration? --new-session "
+            "re-estimates it"]
 
 
 def _reported_worlds(frames: list[FrameJson], arrangement: Arrangement, where: str) -> list[np.ndarray]:
