@@ -274,3 +274,36 @@ def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path,
     assert reported["world"] == "reported" and reported["reprojection"]["after"]["rms_px"] > 10.0
     assert new["world"] == "re-estimated" and new["reprojection"]["after"]["rms_px"] < 1e-6
     assert new["reprojection"]["before"]["rms_px"] > 0.05  # the nominal kinematics cannot, whatever the board's pose
+
+
+@pytest.mark.parametrize("arrangement", ARRANGEMENTS)
+def test_two_sessions_get_a_world_frame_each(arrangement, tmp_path, capsys):
+    """Two sessions, the board (eye in hand) or the camera (eye to hand) moved 3.6 cm and 5.7 degrees between them:
+    a world frame each, found exactly from noise-free corners; eye to hand the URDF carries the first session's
+    camera, said in a note; evaluate reprojects each held-out image through its session's world frame."""
+    from pincal.report.camera import frame_matrix
+    from pincal.workflows.camera_simulation import SESSION_MOVE
+
+    sim = simulate_camera_files(tmp_path, CameraSimulationSettings(arrangement, images=8, held_out=4, noise_px=0.0,
+                                                                   seed=3, sessions=2))
+    out = tmp_path / "out"
+    assert _calibrate(sim, out, "--select", "all") == 0
+    err = capsys.readouterr().err
+    report = json.loads((out / "REPORT.json").read_text())
+    camera = report["camera"]
+    assert camera["sessions"] == ["s0", "s1"] and len(camera["worlds"]) == 2
+    assert camera["reprojection"]["calibration"]["after"]["rms_px"] < 1e-6
+    assert camera["reprojection"]["validation"]["after"]["rms_px"] < 1e-6
+    first, second = (frame_matrix(f, "worlds") for f in camera["worlds"])
+    assert np.abs(np.linalg.inv(first) @ second - SESSION_MOVE).max() < 1e-6  # the move, in the moved thing's frame
+    said = [n for n in report["notes"] if "sessions" in n]
+    if arrangement == "eye_to_hand":
+        assert len(said) == 1 and "session 's0'" in said[0] and said[0] in err
+        assert _check_views(sim, out)[0] < 1e-6  # the URDF's camera is where s0 saw it
+    else:
+        assert not said
+    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(sim.held_out), "--json",
+                 str(out / "evaluation.json")]) == 0
+    evaluation = json.loads((out / "evaluation.json").read_text())
+    assert evaluation["world"] == "reported" and evaluation["reprojection"]["after"]["rms_px"] < 1e-6
+    assert {i["session"] for i in evaluation["images"]} == {"s0", "s1"}
