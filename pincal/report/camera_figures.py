@@ -27,7 +27,9 @@ from typing import Any
 import numpy as np
 from matplotlib import rc_context
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 
 from pincal.errors import PincalError
 from pincal.palette import CALIBRATED, FLAG, NOMINAL
@@ -179,14 +181,17 @@ def corners_figure(images: CameraImages, index: int, magnify: float | None = Non
         fig = Figure(figsize=(inches, inches * height / max(width, 1) + 0.4),
                      layout="constrained")
         ax = fig.subplots()
-        ax.imshow(picture, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        if drawn:  # a blank image is the axes' white: no 1280x960 array to resample
+            ax.imshow(picture, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        else:  # the image's border drawn, as the picture's edge would show it
+            ax.add_patch(Rectangle((-0.5, -0.5), width, height, fill=False, edgecolor=NOMINAL, linewidth=0.8))
+            ax.set_aspect("equal")
         ax.plot(detected[:, 0], detected[:, 1], "o", markersize=6, markerfacecolor="none",
                 markeredgecolor=CALIBRATED, markeredgewidth=1.2, label="detected")
         ax.plot(reprojected[:, 0], reprojected[:, 1], "x", markersize=6, color=FLAG, markeredgewidth=1.2,
                 label="reprojected")
         tips = detected + magnify * errors
-        for start, end in zip(detected, tips):
-            ax.plot([start[0], end[0]], [start[1], end[1]], color=FLAG, linewidth=1.0)
+        ax.add_collection(LineCollection(list(np.stack([detected, tips], axis=1)), colors=FLAG, linewidths=1.0))
         ax.set_xlim(-0.5, width - 0.5)
         ax.set_ylim(height - 0.5, -0.5)
         ax.grid(False)
