@@ -123,7 +123,7 @@ def calibrated_page(tmp_path_factory):
             str(out / "robot.urdf"), "--report", str(out / "REPORT.json"), "--html", str(out / "REPORT.html"),
             "--images", str(folder)]
     assert main(argv) == 0
-    return out, folder
+    return out, folder, sim
 
 
 def test_calibrate_writes_the_camera_s_page_and_report_redraws_it(calibrated_page, tmp_path: Path, capsys) -> None:
@@ -131,7 +131,7 @@ def test_calibrate_writes_the_camera_s_page_and_report_redraws_it(calibrated_pag
 
     from pincal.cli.commands import main
 
-    out, folder = calibrated_page
+    out, folder, _ = calibrated_page
     page = (out / "REPORT.html").read_text()
     report = json.loads((out / "REPORT.json").read_text())
     picture = report["camera"]["picture"]
@@ -145,4 +145,23 @@ def test_calibrate_writes_the_camera_s_page_and_report_redraws_it(calibrated_pag
     assert "camera in the world — in the corrected URDF" in page and "More in this report" not in page
     assert main(["report", str(out / "REPORT.json"), "--out", str(tmp_path / "again.html")]) == 0
     assert (tmp_path / "again.html").read_text() == page  # the page is the report's alone
+    capsys.readouterr()
+
+
+def test_evaluate_html_shows_the_evaluated_images(calibrated_page, tmp_path: Path, capsys) -> None:
+    """evaluate --html: the report's page with an evaluated card, the evaluated images' rows and the worst of them
+    drawn (looked for beside the evaluated DATA.csv: not there, a blank image)."""
+    import json
+
+    from pincal.cli.commands import main
+
+    out, _, sim = calibrated_page
+    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(sim.held_out), "--json",
+                 str(tmp_path / "evaluation.json"), "--html", str(tmp_path / "EVALUATION.html")]) == 0
+    page = (tmp_path / "EVALUATION.html").read_text()
+    evaluation = json.loads((tmp_path / "evaluation.json").read_text())
+    assert evaluation["picture"]["image"] == "image_004.png" and "evaluated images · 1" in page
+    assert "One image: image_004.png" in page and "the validation image with the largest RMS error" in page
+    assert "<td>image_004.png</td><td>validation</td>" in page and "<td>image_000.png</td>" not in page
+    assert "image file was not found" in page and f"{sim.held_out} through" in page
     capsys.readouterr()

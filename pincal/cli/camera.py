@@ -134,14 +134,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
     not_used = {"fixture": "--fixture", "max_pos_mm": "--max-pos-mm",
                 "max_rot_deg": "--max-rot-deg", "fixed_registration": "--fixed-registration",
-                "temperature_column": "--temperature-column", "html": "--html"}
+                "temperature_column": "--temperature-column"}
     given = [flag for name, flag in not_used.items() if getattr(args, name, None) not in (None, False)]
     if given:
         raise PincalError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to a camera's "
                           "report; drop " + ("it" if len(given) == 1 else "them"))
     settings = CameraEvaluateSettings(new_session=args.new_session, allow_other_urdf=args.allow_other_urdf,
                                       nominal=args.nominal, xacro_args=tuple(args.xacro_args))
-    run = evaluate_camera_files(args.urdf, args.report, args.data, settings, json_path=args.json)
+    run = evaluate_camera_files(args.urdf, args.report, args.data, settings, json_path=args.json, html_path=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     document = run.document
@@ -153,6 +153,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
           f"{after['rms_px']:9.4f}")
     print(f"world frame: {document['world']}; before: {document['report']}'s nominal kinematics with their own mount "
           "and world frame (OpenCV's hand-eye, refined); after: the corrected URDF and its camera_info")
-    if args.json is not None:
-        print(f"wrote {args.json}")
+    for written in (run.written, run.html):
+        if written is not None:
+            print(f"wrote {written}")
     return 0

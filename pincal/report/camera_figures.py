@@ -229,7 +229,8 @@ def section_values(names: Sequence[str], roles: Sequence[str], per_image: Sequen
     if picture is not None:
         corners, index, chosen = picture
         uri, magnify, drawn = corners_figure(corners, index)
-        shown = {"uri": uri, "image": corners.images[index], "magnify": magnify, "drawn": drawn,
+        shown = {"uri": uri, "image": corners.images[index], "role": corners.roles[index], "magnify": magnify,
+                 "drawn": drawn,
                  "rms_px": float(corners.rms()[index]), "chosen": chosen}
     errors = np.concatenate([np.asarray(e, dtype=float) for e in per_image]) if len(per_image) else np.zeros(0)
     overall = float(np.sqrt(np.mean(errors**2))) if len(errors) else None

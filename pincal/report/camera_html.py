@@ -12,7 +12,7 @@ and the picture of ``camera.picture`` (its corners as detected and reprojected),
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -84,25 +84,34 @@ def _cards(reprojection: Mapping[str, Any]) -> list[dict[str, Any]]:
     return cards
 
 
-def camera_page(document: Mapping[str, Any], images: Sequence[Mapping[str, Any]] | None = None) -> dict[str, Any]:
-    """The values of ``camera.html.j2`` for a camera's REPORT.json ``document`` (module docstring); ``images``: the
-    rows shown instead of the report's (``evaluate --json``'s ``images``)."""
+def camera_page(document: Mapping[str, Any], evaluation: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The values of ``camera.html.j2`` for a camera's REPORT.json ``document`` (module docstring); with
+    ``evaluation`` (``evaluate --json``'s document), its images instead of the report's, an ``evaluated`` card
+    after the report's, and its picture drawn from the image files beside the evaluated DATA.csv."""
     camera, sources = document["camera"], document.get("sources") or {}
-    rows = list(camera["images"] if images is None else images)
+    if evaluation is None:
+        rows, shown, folder = list(camera["images"]), camera.get("picture"), sources.get("images")
+    else:
+        rows, shown = list(evaluation["images"]), evaluation.get("picture")
+        folder = Path(str(evaluation["data"])).parent
     per_image = [np.asarray(row["errors_px"], dtype=float) for row in rows]
-    shown = camera.get("picture")
     picture = None
-    if shown and images is None:
-        folder = Path(str(sources["images"])) if sources.get("images") else None
+    if shown:
         detected = np.asarray(shown["detected_px"], dtype=float).reshape(-1, 2)
         corners = CameraImages((str(shown["image"]),), np.zeros(len(detected), dtype=np.intp), detected,
                                np.asarray(shown["reprojected_px"], dtype=float).reshape(-1, 2),
-                               np.array([[shown["width"], shown["height"]]]), (str(shown["role"]),), folder)
+                               np.array([[shown["width"], shown["height"]]]), (str(shown["role"]),),
+                               None if folder is None else Path(str(folder)))
         picture = (corners, 0, True)
     section = section_values([str(r["image"]) for r in rows], [str(r["role"]) for r in rows], per_image, picture)
     for row, values in zip(section["rows"], rows):
         row.update(session=values["session"], before_rms_uv=values["before_rms_px"],
                    after_rms_uv=values["after_rms_px"])
-    section.update(per_coordinate=True, cards=_cards(camera["reprojection"]), facts=_facts(document),
+    cards, facts = _cards(camera["reprojection"]), _facts(document)
+    if evaluation is not None:
+        cards += _cards({"evaluated": evaluation["reprojection"]})
+        facts.append(("evaluated", f"{evaluation['data']} through {evaluation['urdf']} and {evaluation['camera_info']} "
+                                   f"(world frame {evaluation['world']})"))
+    section.update(per_coordinate=True, cards=cards, facts=facts,
                    sessions=len({r["session"] for r in rows}) > 1)
     return section

@@ -153,7 +153,8 @@ class CameraReport(TypedDict):
 class CameraEvaluationJson(TypedDict):
     """``pincal evaluate --json`` of a camera's report: the evaluated images' reprojection errors before (the nominal
     URDF with the report's nominal mount, world frame and the start's intrinsics) and after (the corrected URDF and
-    its camera_info), overall and per image."""
+    its camera_info), overall and per image; ``picture``: the evaluated image with the largest RMS after, for
+    ``evaluate --html``."""
 
     urdf: str
     report: str
@@ -162,3 +163,4 @@ class CameraEvaluationJson(TypedDict):
     world: Literal["reported", "re-estimated"]
     reprojection: ReprojectionPair
     images: list[ImageErrorJson]
+    picture: PictureJson | None

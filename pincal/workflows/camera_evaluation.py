@@ -34,8 +34,14 @@ from pincal.model.camera_view import Arrangement
 from pincal.model.chain import KinematicChain
 from pincal.model.description import read_description
 from pincal.model.parameter_sets import NoParameters
-from pincal.outputs import file_sha256
-from pincal.report.camera import frame_matrix, image_errors_json, intrinsics_from_json, reprojection_json
+from pincal.outputs import file_sha256, write_text
+from pincal.report.camera import (
+    frame_matrix,
+    image_errors_json,
+    intrinsics_from_json,
+    picture_json,
+    reprojection_json,
+)
 from pincal.report.document import write_evaluation
 from pincal.report.model_camera import CameraEvaluationJson, CameraReport, FrameJson
 from pincal.report.reading import load_report
@@ -43,6 +49,7 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.workflows.camera_calibration import camera_info_path, misfit_m
 from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page
 
 __all__ = ["CameraEvaluateSettings", "CameraEvaluation", "evaluate_camera_files"]
 
@@ -67,11 +74,13 @@ class CameraEvaluateSettings:
 
 @dataclass(frozen=True)
 class CameraEvaluation:
-    """Outcome of :func:`evaluate_camera_files`: ``document`` (``--json``'s), notes, and the file written (or None)."""
+    """Outcome of :func:`evaluate_camera_files`: ``document`` (``--json``'s), notes, and the files written: ``--json``'s
+    and ``--html``'s (or None)."""
 
     document: CameraEvaluationJson
     notes: tuple[str, ...]
     written: Path | None
+    html: Path | None = None
 
 
 def _pixels(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
@@ -113,9 +122,10 @@ def _session_indices(corners: CornerSet, names: list[str], new_session: bool
 
 def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str | Path,
                           settings: CameraEvaluateSettings = CameraEvaluateSettings(),
-                          json_path: str | Path | None = None) -> CameraEvaluation:
+                          json_path: str | Path | None = None, html_path: str | Path | None = None) -> CameraEvaluation:
     """Reproject the corners of ``data`` through the corrected ``urdf`` and the nominal one (module docstring);
-    write ``json_path`` (``--json``) if given.
+    write ``json_path`` (``--json``) and ``html_path`` (``--html``: the report's page with these images' errors, the
+    picture drawn from the image files beside ``data``) if given.
 
     Raises:
         PincalError: one line naming the file: the report is not a camera's, the URDF not the report's (without
@@ -128,6 +138,8 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     if json_path is not None:
         json_path = Path(json_path)
         refuse_overwrite(json_path, *description_inputs(urdf), report_path, data)
+    html_path = refuse_page(html_path, [*description_inputs(urdf), report_path, data],
+                            [] if json_path is None else [json_path])
     notes: list[str] = []
     if file_sha256(urdf) != report["urdf_sha256"]:
         if not settings.allow_other_urdf:
@@ -189,10 +201,19 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
         "reprojection": {"before": reprojection_json(corners, before_px),
                          "after": reprojection_json(corners, after_px)},
         "images": image_errors_json(corners, after_px, before_px),
+        "picture": picture_json(corners, after_px),
     }
+    page = None
+    if html_path is not None:  # made before anything is written
+        from pincal.report.camera_html import camera_page
+        from pincal.report.html import render_html
+
+        page = render_html(dict(report), camera=camera_page(report, document), source=report_path)
     if json_path is not None:
         write_evaluation(json_path, document)
-    return CameraEvaluation(document, tuple(notes), json_path)
+    if page is not None and html_path is not None:
+        write_text(html_path, page)
+    return CameraEvaluation(document, tuple(notes), json_path, html_path)
 
 
 def _refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
