@@ -7,7 +7,9 @@ After: the corrected URDF (kinematics, mount and, eye to hand, the camera in the
 (OpenCV's hand-eye refined by reprojection: what hand-eye tools give). The world frame -- the board in the world eye
 in hand, the camera eye to hand -- is the report's for a session it has; with ``--new-session``, or for a session
 it lacks, it is re-estimated on the evaluated images (6 unknowns per session, by Gauss-Newton on eq C3 with the
-model fixed), for either model.
+model fixed), for either model. Images the corrected model misses grossly (the pixels seen at the board beyond
+5 % of the reach, as calibrate withholds a model) even with every world frame re-estimated are refused: no moved
+board or camera explains them, they are of the other arrangement or another robot.
 
 Only pixels: DATA.csv has no truth of the camera's pose, and the pose the camera itself measures per image (PnP)
 errs along its axis by far more than the reprojection it comes from, so a relative-pose error between images
@@ -130,7 +132,8 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     Raises:
         PincalError: one line naming the file: the report is not a camera's, the URDF not the report's (without
             ``allow_other_urdf``), its camera or board link missing, the camera_info or nominal URDF missing,
-            images of another size than the intrinsics, DATA.csv not a camera's.
+            images of another size than the intrinsics, DATA.csv not a camera's, images the corrected model misses
+            grossly even with their world frames re-estimated (the other arrangement's, another robot's).
     """
     urdf, report_path, data = Path(urdf), Path(report_path), Path(data)
     report = cast(CameraReport, load_report(report_path, accept=("camera",),
