@@ -337,16 +337,12 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
                f"{result.level}) from {urdf.name} and {data.name}. World frame and intrinsics: see the report.")
     reload_error, urdf_sha256 = _write_urdf(urdf, out_urdf, setup, result, comment, settings.xacro_args,
                                             keep=not withheld)
-    camera_info = None
     if withheld:
         removed = withhold(out_urdf)
         if info_path.is_file():
             info_path.unlink()
             removed.append(f"removed {info_path}, left by an earlier run")
         notes += removed
-    else:
-        write_camera_info(info_path, result.estimate.intrinsics, camera_name=settings.camera_link)
-        camera_info = info_path
     errors = {"calibration": (calibration, reprojection_errors(chain, result, calibration),
                               reprojection_errors(chain, _nominal(result), calibration)),
               "validation": (validation, reprojection_errors(chain, result, validation),
@@ -360,7 +356,11 @@ def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | P
                           findings_json(warnings), urdf_sha256, dict(xacro_arguments(settings.xacro_args)), seconds,
                           fitted)
     report = camera_report(result, chain, record)
-    page = render_page(page_path, report, report_path)  # made before the report is written
+    page = render_page(page_path, report, report_path)  # made before the report and camera_info are written
+    camera_info = None
+    if not withheld:
+        write_camera_info(info_path, result.estimate.intrinsics, camera_name=settings.camera_link)
+        camera_info = info_path
     write_report(report_path, report)
     return CameraCalibrationRun(result, report, camera_info, reload_error, withheld, tuple(notes),
                                 write_page(page_path, page))
