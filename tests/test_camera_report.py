@@ -165,3 +165,5 @@ def test_evaluate_html_shows_the_evaluated_images(calibrated_page, tmp_path: Pat
     assert "<td>image_004.png</td><td>validation</td>" in page and "<td>image_000.png</td>" not in page
     assert "image file was not found" in page and f"{sim.held_out} through" in page
     capsys.readouterr()
+    assert main(["report", str(tmp_path / "evaluation.json"), "--out", str(tmp_path / "alone.html")]) == 2
+    assert "pincal evaluate ... --html" in capsys.readouterr().err and not (tmp_path / "alone.html").exists()
