@@ -66,7 +66,8 @@ def _facts(document: Mapping[str, Any]) -> list[tuple[str, str]]:
                                 + f"; {intrinsics['width']}×{intrinsics['height']} px; "
                                 + origin))
     if sources.get("camera_info"):
-        facts.append(("camera_info", str(sources["camera_info"])))
+        facts.append(("camera_info", str(sources["camera_info"])
+                      + (" (not written: withheld with the URDF)" if sources.get("corrected_urdf_withheld") else "")))
     facts += [("not seen by one camera", str(words)) for words in camera.get("cannot_see") or []]
     if document.get("fit_seconds") is not None:
         facts.append(("time", f"start and fit {num(float(document['fit_seconds']), 3)} s"))
