@@ -245,7 +245,17 @@ def test_images_that_are_not_of_this_robot_withhold_the_urdf_and_camera_info(sma
     assert (tmp_path / "out" / "robot.camera_info.yaml").is_file() and (tmp_path / "out" / "robot.urdf").is_file()
 
 
-def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path):
+def test_evaluate_refuses_the_other_arrangement_s_images(exact, small, capsys, tmp_path):
+    """Eye-in-hand images against an eye-to-hand report (and back) miss by ~190 px even with the world frame
+    re-estimated, 0.1-0.45 m at the board: refused in one line naming the data and the report's arrangement."""
+    sim, out = exact
+    other = small[0]["eye_to_hand" if sim.board_link is None else "eye_in_hand"]
+    _refused(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(other.data), "--json",
+              str(tmp_path / "e" / "evaluation.json")], capsys, tmp_path / "e", str(other.data),
+             "not images of", "eye in hand" if sim.board_link is None else "eye to hand")
+
+
+def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path, capsys):
     """The board moved 5 cm along its x axis since the calibration (its corners' board_x shifted): through the
     reported board pose the corners miss by ~100 px; --new-session re-estimates the pose and they fit exactly."""
     sim, out = exact
@@ -258,8 +268,42 @@ def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path)
     (tmp_path / "moved.csv").write_text("\n".join(moved) + "\n")
     evaluate = ["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(tmp_path / "moved.csv"), "--json"]
     assert main([*evaluate, str(tmp_path / "reported.json")]) == 0
+    assert "has the board moved since the calibration? --new-session" in capsys.readouterr().err
     assert main([*evaluate, str(tmp_path / "new.json"), "--new-session"]) == 0
     reported, new = (json.loads((tmp_path / f"{name}.json").read_text()) for name in ("reported", "new"))
     assert reported["world"] == "reported" and reported["reprojection"]["after"]["rms_px"] > 10.0
     assert new["world"] == "re-estimated" and new["reprojection"]["after"]["rms_px"] < 1e-6
     assert new["reprojection"]["before"]["rms_px"] > 0.05  # the nominal kinematics cannot, whatever the board's pose
+
+
+@pytest.mark.parametrize("arrangement", ARRANGEMENTS)
+def test_two_sessions_get_a_world_frame_each(arrangement, tmp_path, capsys):
+    """Two sessions, the board (eye in hand) or the camera (eye to hand) moved 3.6 cm and 5.7 degrees between them:
+    a world frame each, found exactly from noise-free corners; eye to hand the URDF carries the first session's
+    camera, said in a note; evaluate reprojects each held-out image through its session's world frame."""
+    from pincal.report.camera import frame_matrix
+    from pincal.workflows.camera_simulation import SESSION_MOVE
+
+    sim = simulate_camera_files(tmp_path, CameraSimulationSettings(arrangement, images=8, held_out=4, noise_px=0.0,
+                                                                   seed=3, sessions=2))
+    out = tmp_path / "out"
+    assert _calibrate(sim, out, "--select", "all") == 0
+    err = capsys.readouterr().err
+    report = json.loads((out / "REPORT.json").read_text())
+    camera = report["camera"]
+    assert camera["sessions"] == ["s0", "s1"] and len(camera["worlds"]) == 2
+    assert camera["reprojection"]["calibration"]["after"]["rms_px"] < 1e-6
+    assert camera["reprojection"]["validation"]["after"]["rms_px"] < 1e-6
+    first, second = (frame_matrix(f, "worlds") for f in camera["worlds"])
+    assert np.abs(np.linalg.inv(first) @ second - SESSION_MOVE).max() < 1e-6  # the move, in the moved thing's frame
+    said = [n for n in report["notes"] if "sessions" in n]
+    if arrangement == "eye_to_hand":
+        assert len(said) == 1 and "session 's0'" in said[0] and said[0] in err
+        assert _check_views(sim, out)[0] < 1e-6  # the URDF's camera is where s0 saw it
+    else:
+        assert not said
+    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(sim.held_out), "--json",
+                 str(out / "evaluation.json")]) == 0
+    evaluation = json.loads((out / "evaluation.json").read_text())
+    assert evaluation["world"] == "reported" and evaluation["reprojection"]["after"]["rms_px"] < 1e-6
+    assert {i["session"] for i in evaluation["images"]} == {"s0", "s1"}

@@ -100,3 +100,70 @@ def test_values_that_do_not_fit_are_refused() -> None:
         CameraImages(("a.png",), np.zeros(18, dtype=int), np.zeros((17, 2)), np.zeros((18, 2)), np.array([SIZE]))
     with pytest.raises(PincalError, match="need 2 sizes"):
         CameraImages(("a.png", "b.png"), np.zeros(2, dtype=int), np.zeros((2, 2)), np.zeros((2, 2)), np.array([SIZE]))
+
+
+@pytest.fixture(scope="module")
+def calibrated_page(tmp_path_factory):
+    """calibrate --camera-link --html of 4 noise-free images eye to hand (level registration), the image files in a
+    folder of their own given with --images: blank 1280x960 PNGs."""
+    import cv2
+
+    from pincal.cli.commands import main
+    from pincal.workflows.camera_simulation import CameraSimulationSettings, simulate_camera_files
+
+    root = tmp_path_factory.mktemp("camera_page")
+    sim = simulate_camera_files(root, CameraSimulationSettings("eye_to_hand", images=4, held_out=1, noise_px=0.0))
+    folder = root / "images"
+    folder.mkdir()
+    for k in range(5):
+        cv2.imwrite(str(folder / f"image_{k:03d}.png"), np.full((960, 1280), 90, dtype=np.uint8))
+    out = root / "out"
+    argv = ["calibrate", str(sim.urdf), str(sim.data), "--camera-link", sim.camera_link, "--board-link",
+            sim.board_link, "--intrinsics", str(sim.intrinsics), "--level", "registration", "--out",
+            str(out / "robot.urdf"), "--report", str(out / "REPORT.json"), "--html", str(out / "REPORT.html"),
+            "--images", str(folder)]
+    assert main(argv) == 0
+    return out, folder, sim
+
+
+def test_calibrate_writes_the_camera_s_page_and_report_redraws_it(calibrated_page, tmp_path: Path, capsys) -> None:
+    import json
+
+    from pincal.cli.commands import main
+
+    out, folder, _ = calibrated_page
+    page = (out / "REPORT.html").read_text()
+    report = json.loads((out / "REPORT.json").read_text())
+    picture = report["camera"]["picture"]
+    assert picture["role"] == "calibration" and len(picture["detected_px"]) == len(picture["reprojected_px"]) > 3
+    assert report["sources"]["images"] == str(folder)
+    images = report["camera"]["images"]
+    assert [len(i["errors_px"]) for i in images] == [i["corners"] for i in images]
+    assert "Camera calibration (registration, eye to hand)" in page and page.count('id="camera"') == 1
+    assert f"One image: {picture['image']}" in page and "image file was not found" not in page
+    assert "calibration images · 4" in page and "validation images · 1" in page and "Errors (eq 24)" not in page
+    assert "camera in the world — in the corrected URDF" in page and "More in this report" not in page
+    assert main(["report", str(out / "REPORT.json"), "--out", str(tmp_path / "again.html")]) == 0
+    assert (tmp_path / "again.html").read_text() == page  # the page is the report's alone
+    capsys.readouterr()
+
+
+def test_evaluate_html_shows_the_evaluated_images(calibrated_page, tmp_path: Path, capsys) -> None:
+    """evaluate --html: the report's page with an evaluated card, the evaluated images' rows and the worst of them
+    drawn (looked for beside the evaluated DATA.csv: not there, a blank image)."""
+    import json
+
+    from pincal.cli.commands import main
+
+    out, _, sim = calibrated_page
+    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(sim.held_out), "--json",
+                 str(tmp_path / "evaluation.json"), "--html", str(tmp_path / "EVALUATION.html")]) == 0
+    page = (tmp_path / "EVALUATION.html").read_text()
+    evaluation = json.loads((tmp_path / "evaluation.json").read_text())
+    assert evaluation["picture"]["image"] == "image_004.png" and "evaluated images · 1" in page
+    assert "One image: image_004.png" in page and "the validation image with the largest RMS error" in page
+    assert "<td>image_004.png</td><td>validation</td>" in page and "<td>image_000.png</td>" not in page
+    assert "image file was not found" in page and f"{sim.held_out} through" in page
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "evaluation.json"), "--out", str(tmp_path / "alone.html")]) == 2
+    assert "pincal evaluate ... --html" in capsys.readouterr().err and not (tmp_path / "alone.html").exists()

@@ -27,10 +27,11 @@ __all__ = ["CAMERA_NOT_USED", "DIAGNOSE_NOT_USED", "is_camera_data", "refuse_cam
 CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or the board's link)",
                    "method": "--method", "weight": "--weight", "tool": "--tool", "fixture": "--fixture",
                    "sigma_column": "--sigma-column", "reject_outliers": "--reject-outliers",
-                   "sigma_pos": "--sigma-pos", "coupling": "--coupling", "html": "--html"}
+                   "sigma_pos": "--sigma-pos", "coupling": "--coupling"}
 #: Flags of diagnose that a camera's diagnosis has no use for (argparse dest → flag), besides calibrate's.
 DIAGNOSE_NOT_USED = {"payload_kg": "--payload-kg", "lateral": "--lateral", "time_column": "--time-column",
-                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots"}
+                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots",
+                     "html": "--html", "images": "--images"}
 #: The columns that make a CSV a camera's DATA.csv (pincal detect's).
 _CAMERA_COLUMNS = ("image", "corner", "u", "v")
 
@@ -64,7 +65,7 @@ def run_calibrate(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     from pincal.workflows.camera_calibration import calibrate_camera_files
 
     refuse_camera_flags(args)
-    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, _settings(args))
+    run = calibrate_camera_files(args.urdf, args.data[0], args.out, args.report, _settings(args), html=args.html)
     _print_run(args, run)
     return run.report, run.withheld
 
@@ -81,7 +82,8 @@ def _settings(args: argparse.Namespace) -> CameraCalibrateSettings:
                           "estimate (the intrinsics fitted with the rest)")
     return CameraCalibrateSettings(args.camera_link, args.intrinsics, board_link=args.board_link,
                                    level=args.level or "full", selection=selection_criterion(args),
-                                   xacro_args=args.xacro_args, force=args.force)
+                                   xacro_args=args.xacro_args, force=args.force,
+                                   images=args.images)
 
 
 def run_diagnose(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
@@ -154,6 +156,8 @@ def _print_run(args: argparse.Namespace, run: CameraCalibrationRun) -> None:
     if run.camera_info is not None:
         print(f"wrote {run.camera_info}")
     print(f"wrote {args.report}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
 
 
 def _frame_line(what: str, frame: Mapping[str, Any]) -> str:
@@ -190,14 +194,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
     not_used = {"fixture": "--fixture", "max_pos_mm": "--max-pos-mm",
                 "max_rot_deg": "--max-rot-deg", "fixed_registration": "--fixed-registration",
-                "temperature_column": "--temperature-column", "html": "--html"}
+                "temperature_column": "--temperature-column"}
     given = [flag for name, flag in not_used.items() if getattr(args, name, None) not in (None, False)]
     if given:
         raise PincalError(f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to a camera's "
                           "report; drop " + ("it" if len(given) == 1 else "them"))
     settings = CameraEvaluateSettings(new_session=args.new_session, allow_other_urdf=args.allow_other_urdf,
                                       nominal=args.nominal, xacro_args=tuple(args.xacro_args))
-    run = evaluate_camera_files(args.urdf, args.report, args.data, settings, json_path=args.json)
+    run = evaluate_camera_files(args.urdf, args.report, args.data, settings, json_path=args.json, html_path=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     document = run.document
@@ -209,6 +213,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
           f"{after['rms_px']:9.4f}")
     print(f"world frame: {document['world']}; before: {document['report']}'s nominal kinematics with their own mount "
           "and world frame (OpenCV's hand-eye, refined); after: the corrected URDF and its camera_info")
-    if args.json is not None:
-        print(f"wrote {args.json}")
+    for written in (run.written, run.html):
+        if written is not None:
+            print(f"wrote {written}")
     return 0

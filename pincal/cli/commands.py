@@ -119,7 +119,8 @@ def _no_camera(args: argparse.Namespace) -> None:
     """Without ``--camera-link``: refuse the camera's flags and a camera's DATA.csv, and ask for ``--tip-link``."""
     from pincal.cli.camera import is_camera_data
 
-    given = [flag for flag, value in (("--board-link", args.board_link), ("--intrinsics", args.intrinsics)) if value]
+    given = [flag for flag, value in (("--board-link", args.board_link), ("--intrinsics", args.intrinsics),
+                                      ("--images", args.images)) if value]
     if given:
         raise PincalError(f"{' and '.join(given)} apply with --camera-link only (a camera's DATA.csv); give "
                           "--camera-link LINK, or drop them")

@@ -164,6 +164,10 @@ def _add_camera(parser: argparse.ArgumentParser) -> None:
                         help="with --camera-link: the camera's intrinsics (ROS camera_info or OpenCV YAML), or "
                              "'estimate': started from OpenCV's calibrateCamera and fitted with the rest; written "
                              "as CORRECTED.camera_info.yaml beside --out")
+    parser.add_argument("--images", type=Path, metavar="DIR",
+                        help="with --camera-link: the folder of the image files, where the HTML page (--html, or "
+                             "pincal report later) finds the one image it draws (default: DATA.csv's folder; DATA.csv "
+                             "names each image by its file name)")
 
 
 def _add_prior_scale(sub: argparse.ArgumentParser) -> None:

@@ -25,15 +25,19 @@ from pincal.report.model_camera import (
     FrameJson,
     ImageErrorJson,
     IntrinsicsJson,
+    PictureJson,
     ReprojectionJson,
     ReprojectionPair,
 )
 
 __all__ = ["ImageErrors", "CameraRecord", "frame_json", "frame_matrix", "intrinsics_json", "intrinsics_from_json",
-           "reprojection_json", "image_errors_json", "cannot_see", "camera_report"]
+           "reprojection_json", "image_errors_json", "picture_json", "cannot_see", "camera_report"]
 
 #: A set of images with each corner's error after and before (M, 2) [px] each.
 ImageErrors = tuple[CornerSet, np.ndarray, np.ndarray]
+#: Decimals of a corner's error length in REPORT.json [px]: 1e-4 px, a thousandth of a ChArUco corner's
+#: detection noise (~0.1 px, docs/camera.md), keeps 60 images of 24 corners to ~30 kB of indented JSON.
+ERROR_DECIMALS = 4
 
 
 def frame_json(parent: str, child: str, transform: np.ndarray) -> FrameJson:
@@ -85,8 +89,24 @@ def image_errors_json(corners: CornerSet, after: np.ndarray, before: np.ndarray)
             out.append({"image": name, "role": str(corners.roles[k]), "session": str(corners.sessions[k]),
                         "corners": int(np.count_nonzero(mine)),
                         "before_rms_px": float(np.sqrt(np.mean(before[mine] ** 2))),
-                        "after_rms_px": float(np.sqrt(np.mean(after[mine] ** 2)))})
+                        "after_rms_px": float(np.sqrt(np.mean(after[mine] ** 2))),
+                        "errors_px": [round(float(v), ERROR_DECIMALS) for v in np.linalg.norm(after[mine], axis=1)]})
     return out
+
+
+def picture_json(corners: CornerSet, after: np.ndarray) -> PictureJson | None:
+    """The image the HTML page draws (:class:`pincal.report.model_camera.PictureJson`): of ``corners``, the one with
+    the largest RMS of ``after`` (M, 2) [px] (eq C3: reprojected minus detected); None without corners."""
+    counts = np.bincount(corners.image_of, minlength=len(corners.images))
+    if not counts.any():
+        return None
+    sums = np.bincount(corners.image_of, weights=np.sum(after**2, axis=1), minlength=len(corners.images))
+    k = int(np.argmax(np.where(counts > 0, sums / np.maximum(counts, 1), -1.0)))
+    mine = corners.image_of == k
+    width, height = (int(v) for v in corners.sizes[k])
+    return {"image": corners.images[k], "role": str(corners.roles[k]), "width": width, "height": height,
+            "detected_px": corners.pixels[mine].tolist(),
+            "reprojected_px": (corners.pixels[mine] + after[mine]).tolist()}
 
 
 def cannot_see(result: CameraCalibration, chain: KinematicChain) -> list[str]:
@@ -163,6 +183,7 @@ def camera_report(result: CameraCalibration, chain: KinematicChain, record: Came
                              for role, (images, after, before) in record.errors.items()},
             "images": [entry for images, after, before in record.errors.values()
                        for entry in image_errors_json(images, after, before)],
+            "picture": picture_json(*record.errors["calibration"][:2]),
         },
         "fit_seconds": record.seconds, "notes": record.notes, "warnings": record.warnings,
         "urdf_sha256": record.urdf_sha256, "xacro_args": record.xacro_args,

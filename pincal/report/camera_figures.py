@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import base64
 import io
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,14 +27,16 @@ from typing import Any
 import numpy as np
 from matplotlib import rc_context
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 
 from pincal.errors import PincalError
 from pincal.palette import CALIBRATED, FLAG, NOMINAL
 from pincal.report.figures import _STYLE, _svg_uri
 
-__all__ = ["CAMERA_TEMPLATE", "CameraImages", "errors_figure", "corners_figure", "camera_section",
-           "render_camera_section"]
+__all__ = ["CAMERA_TEMPLATE", "CameraImages", "errors_figure", "lengths_figure", "corners_figure", "camera_section",
+           "section_values", "render_camera_section"]
 
 #: The template of the camera's section (its macro ``sections(camera)``).
 CAMERA_TEMPLATE = "camera.html.j2"
@@ -88,6 +91,11 @@ class CameraImages:
         """Each corner's error length ‖reprojected − detected‖ (M,) [px]."""
         return np.linalg.norm(self.reprojected - self.detected, axis=1)
 
+    def per_image(self) -> list[np.ndarray]:
+        """Each image's corners' error lengths, K arrays [px]."""
+        errors = self.errors
+        return [errors[self.image_of == i] for i in range(len(self.images))]
+
     def rms(self) -> np.ndarray:
         """Each image's RMS error length (K,) [px] (NaN for an image without corners)."""
         k = len(self.images)
@@ -108,14 +116,18 @@ def errors_figure(images: CameraImages) -> str:
     """Each image's corners' error lengths [px] as a box (quartiles, whiskers to 1.5 IQR, the rest as points),
     its RMS as a diamond; calibration images in the calibrated colour, validation ones in the flag colour.
     An SVG ``data:`` URI."""
-    errors, rms = images.errors, images.rms()
-    k = len(images.images)
-    per_image = [errors[images.image_of == i] for i in range(k)]
+    return lengths_figure(images.images, images.roles, images.per_image())
+
+
+def lengths_figure(names: Sequence[str], roles: Sequence[str], per_image: Sequence[np.ndarray]) -> str:
+    """:func:`errors_figure` of each image's corners' error lengths ``per_image`` (K arrays) [px]."""
+    k = len(names)
+    rms = np.array([np.sqrt(np.mean(e**2)) if len(e) else np.nan for e in per_image])
     with rc_context(_STYLE):
         fig = Figure(figsize=(max(4.5, min(14.0, 1.2 + 0.28 * k)), 3.0), layout="constrained")
         ax = fig.subplots()
         shown = [i for i in range(k) if len(per_image[i])]
-        colours = [FLAG if images.roles[i] == "validation" else CALIBRATED for i in shown]
+        colours = [FLAG if roles[i] == "validation" else CALIBRATED for i in shown]
         boxes = ax.boxplot([per_image[i] for i in shown], positions=shown, widths=0.6, patch_artist=True,
                            flierprops={"markersize": 2.5, "markeredgecolor": NOMINAL})
         for patch, colour in zip(boxes["boxes"], colours):
@@ -123,7 +135,7 @@ def errors_figure(images: CameraImages) -> str:
             patch.set_alpha(0.45)
             patch.set_edgecolor(colour)
         ax.scatter(shown, rms[shown], marker="D", s=14, color=colours, zorder=3, label="RMS of the image")
-        ax.set_xticks(range(k), list(images.images) if k <= 40 else [str(i) for i in range(k)],
+        ax.set_xticks(range(k), list(names) if k <= 40 else [str(i) for i in range(k)],
                       rotation=90 if k > 6 else 0, fontsize=7)
         ax.set_xlim(-0.7, k - 0.3)
         ax.set_ylim(0.0, None)
@@ -169,14 +181,17 @@ def corners_figure(images: CameraImages, index: int, magnify: float | None = Non
         fig = Figure(figsize=(inches, inches * height / max(width, 1) + 0.4),
                      layout="constrained")
         ax = fig.subplots()
-        ax.imshow(picture, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        if drawn:  # a blank image is the axes' white: no 1280x960 array to resample
+            ax.imshow(picture, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        else:  # the image's border drawn, as the picture's edge would show it
+            ax.add_patch(Rectangle((-0.5, -0.5), width, height, fill=False, edgecolor=NOMINAL, linewidth=0.8))
+            ax.set_aspect("equal")
         ax.plot(detected[:, 0], detected[:, 1], "o", markersize=6, markerfacecolor="none",
                 markeredgecolor=CALIBRATED, markeredgewidth=1.2, label="detected")
         ax.plot(reprojected[:, 0], reprojected[:, 1], "x", markersize=6, color=FLAG, markeredgewidth=1.2,
                 label="reprojected")
         tips = detected + magnify * errors
-        for start, end in zip(detected, tips):
-            ax.plot([start[0], end[0]], [start[1], end[1]], color=FLAG, linewidth=1.0)
+        ax.add_collection(LineCollection(list(np.stack([detected, tips], axis=1)), colors=FLAG, linewidths=1.0))
         ax.set_xlim(-0.5, width - 0.5)
         ax.set_ylim(height - 0.5, -0.5)
         ax.grid(False)
@@ -192,34 +207,42 @@ def camera_section(images: CameraImages, shown: int | None = None) -> dict[str, 
     """The values of the template's camera section (``camera.html.j2``): per image its role, corners, RMS and
     largest error [px]; the errors figure; the picture of image ``shown`` (default: the calibration image
     with the largest RMS, where a bad corner or a bad model shows first)."""
-    errors, rms = images.errors, images.rms()
+    rms = images.rms()
     k = len(images.images)
-    rows = []
-    for i in range(k):
-        mine = errors[images.image_of == i]
-        rows.append({"image": images.images[i], "role": images.roles[i], "corners": int(len(mine)),
-                     "rms_px": float(rms[i]) if len(mine) else None,
-                     "max_px": float(mine.max()) if len(mine) else None})
     chosen = shown is None
     if shown is None:
-        candidates = [i for i in range(k) if rows[i]["rms_px"] is not None]
+        candidates = [i for i in range(k) if np.isfinite(rms[i])]
         calibration = [i for i in candidates if images.roles[i] != "validation"] or candidates
         shown = max(calibration, key=lambda i: rms[i]) if calibration else None
-    picture = None
-    if shown is not None:
-        uri, magnify, drawn = corners_figure(images, shown)
-        picture = {"uri": uri, "image": images.images[shown], "magnify": magnify, "drawn": drawn,
-                   "rms_px": rows[shown]["rms_px"], "chosen": chosen}
+    return section_values(images.images, images.roles, images.per_image(),
+                          None if shown is None else (images, shown, chosen))
+
+
+def section_values(names: Sequence[str], roles: Sequence[str], per_image: Sequence[np.ndarray],
+                   picture: tuple[CameraImages, int, bool] | None) -> dict[str, Any]:
+    """:func:`camera_section`'s values from each image's corners' error lengths ``per_image`` (K arrays) [px] and
+    the picture to draw: (its corners, its index among them, whether it was chosen rather than asked for)."""
+    rows = [{"image": name, "role": role, "corners": int(len(e)),
+             "rms_px": float(np.sqrt(np.mean(e**2))) if len(e) else None,
+             "max_px": float(np.max(e)) if len(e) else None} for name, role, e in zip(names, roles, per_image)]
+    shown = None
+    if picture is not None:
+        corners, index, chosen = picture
+        uri, magnify, drawn = corners_figure(corners, index)
+        shown = {"uri": uri, "image": corners.images[index], "role": corners.roles[index], "magnify": magnify,
+                 "drawn": drawn,
+                 "rms_px": float(corners.rms()[index]), "chosen": chosen}
+    errors = np.concatenate([np.asarray(e, dtype=float) for e in per_image]) if len(per_image) else np.zeros(0)
     overall = float(np.sqrt(np.mean(errors**2))) if len(errors) else None
-    return {"rows": rows, "figure": errors_figure(images) if len(errors) else None, "picture": picture,
-            "rms_px": overall, "corners": int(len(errors)), "images": k}
+    return {"rows": rows, "figure": lengths_figure(names, roles, per_image) if len(errors) else None,
+            "picture": shown, "rms_px": overall, "corners": int(len(errors)), "images": len(names)}
 
 
 def render_camera_section(section: dict[str, Any]) -> str:
     """The camera's section of the page alone (HTML), as the report page includes it."""
-    from pincal.report.html import _environment
+    from pincal.report.templating import environment
 
-    template = _environment().from_string('{% import "' + CAMERA_TEMPLATE + '" as camera_parts %}'
+    template = environment().from_string('{% import "' + CAMERA_TEMPLATE + '" as camera_parts %}'
                                          "{{ camera_parts.sections(camera) }}")
     return template.render(camera=section)
 

@@ -18,19 +18,14 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, cast
 
-from jinja2 import (
-    Environment,
-    PackageLoader,
-    StrictUndefined,
-    UndefinedError,
-    select_autoescape,
-)
+from jinja2 import UndefinedError
 
 from pincal.errors import PincalError
 from pincal.fit.outliers import OUTLIER_THRESHOLD
 from pincal.outputs import write_text
 from pincal.palette import CALIBRATED, FLAG, LEGEND, NOMINAL, model_colour
 from pincal.report import figures
+from pincal.report.camera_html import camera_page, camera_title, is_camera
 from pincal.report.fixture_html import fixture_section
 from pincal.report.plan_html import is_plan, plan_context
 from pincal.report.prior_scale import prior_scale_line
@@ -44,6 +39,7 @@ from pincal.report.sections import (
     rotation_text,
     sessions_section,
 )
+from pincal.report.templating import environment as _environment
 from pincal.report.tree_html import tree_section
 
 __all__ = [
@@ -91,8 +87,8 @@ def _errors_row(label: str, model: str, errors: dict | None, points: int) -> dic
     }
 
 
-def _summary(doc: dict, evaluation: dict | None) -> dict[str, Any]:
-    """Headline cards, the errors table and the facts about the run."""
+def _summary(doc: dict, evaluation: dict | None, more: list[tuple[str, str]]) -> dict[str, Any]:
+    """Headline cards, the errors table and the facts about the run (then ``more``: a camera's)."""
     sets = list(doc.get("row_errors") or [])
     if evaluation and evaluation.get("row_errors"):
         sets += evaluation["row_errors"]
@@ -134,7 +130,7 @@ def _summary(doc: dict, evaluation: dict | None) -> dict[str, Any]:
     for row in kept:
         row["points"] += [""] * (points - len(row["points"]))
     return {"cards": cards, "errors": kept, "points": points, "has_rotation": any(r["rot"] for r in kept),
-            "figure": figures.overview_figure(stages), "facts": _facts(doc, evaluation)}
+            "figure": figures.overview_figure(stages), "facts": _facts(doc, evaluation) + more}
 
 
 def evaluated_sessions(evaluation: dict | None) -> list[dict[str, Any]]:
@@ -424,12 +420,17 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
     sessions = sessions_section(document) if document.get("registration") else None
     fixture = fixture_section(document, evaluation) if isinstance(document.get("fixture"), dict) else None
     tree = tree_section(document)  # several targets: each one's errors instead of one chain's
+    if camera is None and is_camera(document):  # a camera's REPORT.json: its section from the report alone
+        camera = camera_page(document)
     shown = KNOWN_KEYS | ({"sessions"} if sessions else set()) | ({"fixture", "measurement"} if fixture else set()) | (
-        {"targets"} if tree else set())
+        {"targets"} if tree else set()) | ({"camera", "measurement", "fit_seconds", "xacro_args"} if is_camera(
+        document) else set())
     extra = [(key, generic(value)) for key, value in document.items()
              if key not in shown and value not in (None, {}, [], "")]
     sources = document.get("sources") or {}
-    if document.get("method") is not None:
+    if is_camera(document):
+        kind = camera_title(document)
+    elif document.get("method") is not None:
         kind = f"Method {document['method']} calibration"
     elif "diagnosis" in document:
         kind = "Diagnosis" + (f" of {len(tree['rows'])} targets" if tree else "")
@@ -445,7 +446,7 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
         "kind": kind,
         "robot": robot,
         "chain": _chain(document.get("chain")),
-        "summary": _summary(document, evaluation),
+        "summary": _summary(document, evaluation, (camera or {}).get("facts") or []),
         "rows": _rows(document, evaluation),
         "params": params,
         "ident": _identifiability(document),
@@ -487,14 +488,6 @@ def _chain(chain: Any) -> dict[str, Any] | None:
         return None
     return {"root": chain.get("root_link", "?"), "tip": chain.get("tip_link") or _TIPS,
             "joints": len(chain.get("joints") or [])}
-
-
-def _environment() -> Environment:
-    env = Environment(loader=PackageLoader("pincal.report", "templates"),
-                      autoescape=select_autoescape(enabled_extensions=("html", "j2"), default=True),
-                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
-    env.filters["num"] = num
-    return env
 
 
 def write_html(path: str | Path, document: Mapping[str, Any], evaluation: dict[str, Any] | None = None,

@@ -19,7 +19,8 @@ from pincal.report.model_diagnosis import EffectJson
 from pincal.report.model_tree import TreeCandidateJson
 
 __all__ = ["CameraSources", "FrameJson", "IntrinsicsJson", "ReprojectionJson", "ReprojectionPair", "ImageErrorJson",
-           "CameraBlock", "CameraReport", "CameraEvaluationJson", "RmsPair", "CameraStepJson", "CameraDiagnosisJson"]
+           "PictureJson", "CameraBlock", "CameraReport", "CameraEvaluationJson", "RmsPair", "CameraStepJson",
+           "CameraDiagnosisJson"]
 
 
 class _CameraSourcesKeys(TypedDict):
@@ -33,10 +34,12 @@ class _CameraSourcesKeys(TypedDict):
 class CameraSources(_CameraSourcesKeys, total=False):
     """The files of the run: ``intrinsics`` is the file given or ``estimate``; ``camera_info`` the YAML written
     beside the corrected URDF; ``corrected_urdf_withheld`` true when neither was written (a gross misfit);
-    ``validation``: ``diagnose --validation``'s held-out images."""
+    ``validation``: ``diagnose --validation``'s held-out images; ``images``: the folder the HTML page looks for the
+    image files in (``--images``, else DATA.csv's folder)."""
 
     corrected_urdf_withheld: bool
     validation: str
+    images: str
 
 
 class FrameJson(TypedDict):
@@ -80,7 +83,8 @@ class ReprojectionPair(TypedDict):
 
 
 class ImageErrorJson(TypedDict):
-    """One image's corners reprojected: RMS per coordinate before and after [px]."""
+    """One image's corners reprojected: RMS per coordinate before and after [px]; ``errors_px``: each corner's
+    error length after, ‖reprojected − detected‖ [px] to 1e-4 px (the HTML page's box per image)."""
 
     image: str
     role: str
@@ -88,6 +92,19 @@ class ImageErrorJson(TypedDict):
     corners: int
     before_rms_px: float
     after_rms_px: float
+    errors_px: list[float]
+
+
+class PictureJson(TypedDict):
+    """The image the HTML page draws: the calibration image with the largest RMS after (where a bad corner or a bad
+    model shows first), its size and each corner as detected and as the calibrated model reprojects it, (u, v) [px]."""
+
+    image: str
+    role: str
+    width: int
+    height: int
+    detected_px: list[list[float]]
+    reprojected_px: list[list[float]]
 
 
 class CameraBlock(TypedDict):
@@ -98,7 +115,8 @@ class CameraBlock(TypedDict):
     ``nominal_*``: the same fitted with the nominal kinematics (OpenCV's hand-eye refined: the "before").
     ``worlds``: per session (``sessions``, in the same order), the board in the root frame (eye in hand) or the
     camera in it (eye to hand). ``cannot_see``: what one camera cannot determine,
-    in words. ``reprojection``: calibration and validation images, before and after; ``images``: each image."""
+    in words. ``reprojection``: calibration and validation images, before and after; ``images``: each image;
+    ``picture``: one image's corners for the HTML page (null: no image has corners)."""
 
     arrangement: Literal["eye_in_hand", "eye_to_hand"]
     camera_link: str
@@ -113,6 +131,7 @@ class CameraBlock(TypedDict):
     cannot_see: list[str]
     reprojection: dict[str, ReprojectionPair]
     images: list[ImageErrorJson]
+    picture: PictureJson | None
 
 
 class RmsPair(TypedDict):
@@ -180,7 +199,8 @@ class CameraReport(_CameraDiagnosisKeys):
 class CameraEvaluationJson(TypedDict):
     """``pincal evaluate --json`` of a camera's report: the evaluated images' reprojection errors before (the nominal
     URDF with the report's nominal mount, world frame and the start's intrinsics) and after (the corrected URDF and
-    its camera_info), overall and per image."""
+    its camera_info), overall and per image; ``picture``: the evaluated image with the largest RMS after, for
+    ``evaluate --html``."""
 
     urdf: str
     report: str
@@ -189,3 +209,4 @@ class CameraEvaluationJson(TypedDict):
     world: Literal["reported", "re-estimated"]
     reprojection: ReprojectionPair
     images: list[ImageErrorJson]
+    picture: PictureJson | None

@@ -48,8 +48,8 @@ KINDS: dict[str, tuple[type, str]] = {
 }
 #: The kinds of REPORT.json (the schema's top level, :data:`pincal.report.schema.REPORT_KINDS`).
 REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "camera")
-#: The kinds :func:`pincal.report.html.render_html` lays out as a page (not yet a camera's).
-PAGE_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "evaluation", "plan")
+#: The kinds :func:`pincal.report.html.render_html` lays out as a page.
+PAGE_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "evaluation", "plan", "camera")
 
 _T = TypeVar("_T")
 _MISSING: Any = object()

@@ -45,7 +45,7 @@ from pincal.fit.selection import SelectionCriterion
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.model.camera_chain import camera_chain, world_link_origin
 from pincal.model.camera_info import check_image_size, read_intrinsics, write_camera_info
-from pincal.model.camera_view import Arrangement
+from pincal.model.camera_view import Arrangement, camera_points
 from pincal.model.chain import KinematicChain
 from pincal.model.corrected_urdf import corrected_origins
 from pincal.model.description import read_description, xacro_arguments
@@ -57,13 +57,15 @@ from pincal.report.document import write_report
 from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import findings_json
 from pincal.report.model_camera import CameraReport, CameraSources
+from pincal.residuals.camera import CameraEstimate
 from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import default_selection, expect
 from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_urdf_checked_by
 
 __all__ = ["ESTIMATE", "CameraCalibrateSettings", "CameraSetup", "CameraCalibrationRun", "camera_info_path",
            "load_camera", "estimate_intrinsics", "calibrate_camera_files", "CameraPaths", "CameraFit", "CameraModel",
-           "fit_camera", "write_camera_run"]
+           "fit_camera", "write_camera_run", "misfit_m"]
 
 #: ``--intrinsics estimate``: the intrinsics started from OpenCV's calibrateCamera and fitted with the rest.
 ESTIMATE = "estimate"
@@ -82,6 +84,8 @@ class CameraCalibrateSettings:
             :class:`pincal.fit.prior.Prior`); None: the commands' default (:func:`default_selection`).
         xacro_args: ``NAME:=VALUE`` pairs for a ``.xacro`` description.
         force: write the corrected URDF and camera_info even of a model that misses its corners grossly.
+        images: the folder of the image files, where the HTML page looks for the one it draws (by the name
+            DATA.csv gives, which is a file name: detect keeps no folders); None: DATA.csv's folder.
 
     Raises:
         PincalError: an unknown level or selection, a prior at level registration.
@@ -94,6 +98,7 @@ class CameraCalibrateSettings:
     selection: SelectionCriterion | Prior | None = None
     xacro_args: tuple[tuple[str, str], ...] = ()
     force: bool = False
+    images: Path | None = None
 
     def __post_init__(self) -> None:
         from pincal.fit.camera_calibration import CAMERA_SELECTIONS
@@ -111,6 +116,8 @@ class CameraCalibrateSettings:
                               "parameter): use --level offsets or full, or drop it")
         if self.intrinsics != ESTIMATE:
             object.__setattr__(self, "intrinsics", Path(self.intrinsics))
+        if self.images is not None:
+            object.__setattr__(self, "images", Path(self.images))
         object.__setattr__(self, "xacro_args", tuple((str(k), str(v)) for k, v in self.xacro_args))
 
     @property
@@ -209,6 +216,7 @@ class CameraCalibrationRun:
         reload_error: the largest difference of the written URDF's camera (or board) poses, reloaded [m, -].
         withheld: the model misses its corners grossly: the corrected URDF and camera_info not written.
         notes: for the user.
+        html: the report's page written (``--html``), or None.
     """
 
     result: CameraCalibration
@@ -217,6 +225,7 @@ class CameraCalibrationRun:
     reload_error: float
     withheld: bool
     notes: tuple[str, ...]
+    html: Path | None = None
 
 
 def _start(setup: CameraSetup, calibration: CornerSet) -> tuple[CameraIntrinsics, tuple[str, ...]]:
@@ -226,20 +235,25 @@ def _start(setup: CameraSetup, calibration: CornerSet) -> tuple[CameraIntrinsics
     return estimate_intrinsics(calibration), INTRINSIC_NAMES
 
 
-def _misfit_m(result: CameraCalibration, chain: KinematicChain, calibration: CornerSet) -> float:
-    """The calibration corners' RMS reprojection error seen at the board: e [m] = e [px] · Z / f, over both
-    image axes (a point residual, as the sensor path's ``rms_m``)."""
-    from pincal.model.camera_view import camera_points
+def misfit_m(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+             rms_px: float) -> float:
+    """A reprojection RMS ``rms_px`` [px, per coordinate] of ``corners`` seen at the board: e [m] = e [px] · √2 · Z / f
+    over both image axes (a point residual, as the sensor path's ``rms_m``), Z the corners' mean depth through
+    ``chain`` as it is placed and ``estimate`` (``sessions``: each image's index into its world frames)."""
+    rotations, positions = chain.tool_poses(corners.q)
+    c = corners.image_of
+    _, p = camera_points(estimate.arrangement, (rotations[c], positions[c]), estimate.worlds[sessions[c]],
+                         estimate.mount, corners.board_points)
+    focal = 0.5 * (estimate.intrinsics.fx + estimate.intrinsics.fy)
+    return float(rms_px * np.sqrt(2.0) * np.mean(np.abs(p[:, 2])) / focal)
 
-    with chain.placed(list(result.chain_placements)):
-        rotations, positions = chain.tool_poses(calibration.q)
-    c = calibration.image_of
+
+def _misfit_m(result: CameraCalibration, chain: KinematicChain, calibration: CornerSet) -> float:
+    """The calibration corners' RMS reprojection error seen at the board (:func:`misfit_m`)."""
     session = {name: s for s, name in enumerate(result.session_names)}
-    worlds = result.estimate.worlds[[session.get(str(n), 0) for n in calibration.sessions]]
-    _, p = camera_points(result.estimate.arrangement, (rotations[c], positions[c]), worlds[c], result.estimate.mount,
-                         calibration.board_points)
-    focal = 0.5 * (result.estimate.intrinsics.fx + result.estimate.intrinsics.fy)
-    return float(result.rms_px * np.sqrt(2.0) * np.mean(np.abs(p[:, 2])) / focal)
+    sessions = np.array([session.get(str(n), 0) for n in calibration.sessions], dtype=np.intp)
+    with chain.placed(list(result.chain_placements)):
+        return misfit_m(chain, calibration, result.estimate, sessions, result.rms_px)
 
 
 def _write_urdf(urdf: Path, out_urdf: Path, setup: CameraSetup, result: CameraCalibration, comment: str,
@@ -278,7 +292,7 @@ def _write_urdf(urdf: Path, out_urdf: Path, setup: CameraSetup, result: CameraCa
 class CameraPaths:
     """The files of a camera's run: the URDF, DATA.csv, the corrected URDF and REPORT.json to write; ``validation``:
     held-out images of another file (None: DATA.csv's of role ``validation``); ``effects``: the run writes an
-    effects.yaml beside the URDF (``diagnose``)."""
+    effects.yaml beside the URDF (``diagnose``); ``html``: the report's page to write (``--html``), or None."""
 
     urdf: Path
     data: Path
@@ -286,6 +300,7 @@ class CameraPaths:
     report: Path
     validation: Path | None = None
     effects: bool = False
+    html: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -329,6 +344,8 @@ def fit_camera(paths: CameraPaths, settings: CameraCalibrateSettings) -> CameraF
     refuse_overwrite(info_path, *inputs, outputs=[paths.out_urdf, paths.report])
     if paths.effects:
         refuse_overwrite(effects_path(paths.out_urdf), *inputs, outputs=[paths.out_urdf, paths.report, info_path])
+    refuse_page(paths.html, inputs, [paths.out_urdf, paths.report, info_path]
+                + ([effects_path(paths.out_urdf)] if paths.effects else []))
     setup = load_camera(paths.urdf, paths.data, settings.camera_link, settings.board_link, settings.intrinsics,
                         settings.xacro_args)
     chain, corners = setup.chain, setup.corners
@@ -361,16 +378,19 @@ def fit_camera(paths: CameraPaths, settings: CameraCalibrateSettings) -> CameraF
 
 
 def calibrate_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | Path, report_path: str | Path,
-                           settings: CameraCalibrateSettings) -> CameraCalibrationRun:
+                           settings: CameraCalibrateSettings, html: str | Path | None = None) -> CameraCalibrationRun:
     """Calibrate ``urdf`` from a camera's ``data`` (DATA.csv, as detect writes it) as ``settings`` say; write the
-    corrected URDF, its camera_info YAML (:func:`camera_info_path`) and REPORT.json (module docstring).
+    corrected URDF, its camera_info YAML (:func:`camera_info_path`), REPORT.json (module docstring) and, given
+    ``html``, the report's page (:mod:`pincal.workflows.report_page`: the camera's section draws the image of
+    REPORT.json's ``camera.picture`` from ``settings.images``).
 
     Raises:
         PincalError: the inputs' one-line errors (:func:`load_camera`), an output path that is an input, fewer
             than 3 calibration images, a fit the images cannot determine.
     """
     expect(settings, CameraCalibrateSettings, "calibrate_camera_files")
-    paths = CameraPaths(Path(urdf), Path(data), Path(out_urdf), Path(report_path))
+    paths = CameraPaths(Path(urdf), Path(data), Path(out_urdf), Path(report_path),
+                        html=None if html is None else Path(html))
     fit = fit_camera(paths, settings)
     return write_camera_run(paths, settings, fit, CameraModel(fit.result))
 
@@ -394,22 +414,19 @@ def write_camera_run(paths: CameraPaths, settings: CameraCalibrateSettings, fit:
                + ": see the report.")
     reload_error, urdf_sha256 = _write_urdf(urdf, out_urdf, setup, result, comment, settings.xacro_args,
                                             keep=not withheld)
-    camera_info = None
     if withheld:
         removed = withhold(out_urdf)
         if info_path.is_file():
             info_path.unlink()
             removed.append(f"removed {info_path}, left by an earlier run")
         notes += removed
-    else:
-        write_camera_info(info_path, result.estimate.intrinsics, camera_name=settings.camera_link)
-        camera_info = info_path
     nominal = _nominal(fit.result)
     errors = {role: (corners, reprojection_errors(chain, result, corners, model.effects),
                      reprojection_errors(chain, nominal, corners))
               for role, corners in (("calibration", fit.calibration), ("validation", fit.validation))}
     sources: CameraSources = {"urdf": str(urdf), "data": str(data), "corrected_urdf": str(out_urdf),
-                              "intrinsics": str(settings.intrinsics), "camera_info": str(info_path)}
+                              "intrinsics": str(settings.intrinsics), "camera_info": str(info_path),
+                              "images": str(settings.images if settings.images is not None else data.parent)}
     if paths.validation is not None:
         sources["validation"] = str(paths.validation)
     if withheld:
@@ -420,10 +437,16 @@ def write_camera_run(paths: CameraPaths, settings: CameraCalibrateSettings, fit:
     report = camera_report(result, chain, record)
     if model.extend is not None:
         report = model.extend(report)
+    page = render_page(paths.html, report, report_path)  # made before the report and camera_info are written
+    camera_info = None
+    if not withheld:
+        write_camera_info(info_path, result.estimate.intrinsics, camera_name=settings.camera_link)
+        camera_info = info_path
     if paths.effects and not withheld:
         write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
-    return CameraCalibrationRun(result, report, camera_info, reload_error, withheld, tuple(notes))
+    return CameraCalibrationRun(result, report, camera_info, reload_error, withheld, tuple(notes),
+                                write_page(paths.html, page))
 
 
 def _nominal(result: CameraCalibration) -> CameraCalibration:

@@ -7,7 +7,9 @@ After: the corrected URDF (kinematics, mount and, eye to hand, the camera in the
 (OpenCV's hand-eye refined by reprojection: what hand-eye tools give). The world frame -- the board in the world eye
 in hand, the camera eye to hand -- is the report's for a session it has; with ``--new-session``, or for a session
 it lacks, it is re-estimated on the evaluated images (6 unknowns per session, by Gauss-Newton on eq C3 with the
-model fixed), for either model.
+model fixed), for either model. Images the corrected model misses grossly (the pixels seen at the board beyond
+5 % of the reach, as calibrate withholds a model) even with every world frame re-estimated are refused: no moved
+board or camera explains them, they are of the other arrangement or another robot.
 
 Only pixels: DATA.csv has no truth of the camera's pose, and the pose the camera itself measures per image (PnP)
 errs along its axis by far more than the reprojection it comes from, so a relative-pose error between images
@@ -18,7 +20,7 @@ would measure PnP, not the calibration. The relative-pose errors against a simul
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import cast
 
@@ -28,6 +30,7 @@ from scipy.optimize import least_squares
 
 from pincal.errors import PincalError
 from pincal.fit.camera_calibration import camera_effect_inputs
+from pincal.fit.plausibility import GROSS_REACH_FRACTION, gross_misfit, reach_m
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.model.camera_chain import camera_chain
 from pincal.model.camera_info import check_image_size, read_intrinsics
@@ -36,16 +39,23 @@ from pincal.model.chain import KinematicChain
 from pincal.model.description import read_description
 from pincal.model.effects import Effect, effect_from_dict
 from pincal.model.parameter_sets import NoParameters
-from pincal.outputs import file_sha256
-from pincal.report.camera import frame_matrix, image_errors_json, intrinsics_from_json, reprojection_json
+from pincal.outputs import file_sha256, write_text
+from pincal.report.camera import (
+    frame_matrix,
+    image_errors_json,
+    intrinsics_from_json,
+    picture_json,
+    reprojection_json,
+)
 from pincal.report.document import write_evaluation
 from pincal.report.model_camera import CameraEvaluationJson, CameraReport, FrameJson
 from pincal.report.reading import load_report
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.residuals.sensor_values import ModelledEffects
-from pincal.workflows.camera_calibration import camera_info_path
+from pincal.workflows.camera_calibration import camera_info_path, misfit_m
 from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page
 
 __all__ = ["CameraEvaluateSettings", "CameraEvaluation", "evaluate_camera_files"]
 
@@ -70,11 +80,13 @@ class CameraEvaluateSettings:
 
 @dataclass(frozen=True)
 class CameraEvaluation:
-    """Outcome of :func:`evaluate_camera_files`: ``document`` (``--json``'s), notes, and the file written (or None)."""
+    """Outcome of :func:`evaluate_camera_files`: ``document`` (``--json``'s), notes, and the files written: ``--json``'s
+    and ``--html``'s (or None)."""
 
     document: CameraEvaluationJson
     notes: tuple[str, ...]
     written: Path | None
+    html: Path | None = None
 
 
 def _pixels(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
@@ -123,14 +135,16 @@ def _session_indices(corners: CornerSet, names: list[str], new_session: bool
 
 def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str | Path,
                           settings: CameraEvaluateSettings = CameraEvaluateSettings(),
-                          json_path: str | Path | None = None) -> CameraEvaluation:
+                          json_path: str | Path | None = None, html_path: str | Path | None = None) -> CameraEvaluation:
     """Reproject the corners of ``data`` through the corrected ``urdf`` and the nominal one (module docstring);
-    write ``json_path`` (``--json``) if given.
+    write ``json_path`` (``--json``) and ``html_path`` (``--html``: the report's page with these images' errors, the
+    picture drawn from the image files beside ``data``) if given.
 
     Raises:
         PincalError: one line naming the file: the report is not a camera's, the URDF not the report's (without
             ``allow_other_urdf``), its camera or board link missing, the camera_info or nominal URDF missing,
-            images of another size than the intrinsics, DATA.csv not a camera's.
+            images of another size than the intrinsics, DATA.csv not a camera's, images the corrected model misses
+            grossly even with their world frames re-estimated (the other arrangement's, another robot's).
     """
     urdf, report_path, data = Path(urdf), Path(report_path), Path(data)
     report = cast(CameraReport, load_report(report_path, accept=("camera",),
@@ -138,6 +152,8 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     if json_path is not None:
         json_path = Path(json_path)
         refuse_overwrite(json_path, *description_inputs(urdf), report_path, data)
+    html_path = refuse_page(html_path, [*description_inputs(urdf), report_path, data],
+                            [] if json_path is None else [json_path])
     notes: list[str] = []
     if file_sha256(urdf) != report["urdf_sha256"]:
         if not settings.allow_other_urdf:
@@ -188,7 +204,9 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     before = CameraEstimate(arrangement, np.array(start_before), np.eye(4),
                             intrinsics_from_json(camera["nominal_intrinsics"], f"{report_path}: camera"))
     effects = [effect_from_dict(entry) for entry in report.get("effects") or []]  # diagnose's, applied after
-    after_px, _ = _pixels(after_chain, corners, after, sessions, refit, effects)
+    after_px, worlds = _pixels(after_chain, corners, after, sessions, refit, effects)
+    notes += _refuse_other_images(after_chain, corners, replace(after, worlds=worlds), sessions, (after_px, effects),
+                                  (str(data), str(report_path), camera["camera_link"], camera["board_link"]))
     placements = before_chain.placements()
     with before_chain.placed([*placements[:-1], before_mount]):  # the hand-eye mount on the nominal chain
         before_px, _ = _pixels(before_chain, corners, before, sessions, refit)
@@ -198,10 +216,50 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
         "reprojection": {"before": reprojection_json(corners, before_px),
                          "after": reprojection_json(corners, after_px)},
         "images": image_errors_json(corners, after_px, before_px),
+        "picture": picture_json(corners, after_px),
     }
+    page = None
+    if html_path is not None:  # made before anything is written
+        from pincal.report.camera_html import camera_page
+        from pincal.report.html import render_html
+
+        page = render_html(dict(report), camera=camera_page(report, document), source=report_path)
     if json_path is not None:
         write_evaluation(json_path, document)
-    return CameraEvaluation(document, tuple(notes), json_path)
+    if page is not None and html_path is not None:
+        write_text(html_path, page)
+    return CameraEvaluation(document, tuple(notes), json_path, html_path)
+
+
+def _refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+                         seen_with: tuple[np.ndarray, Sequence[tuple[Effect, np.ndarray]]],
+                         names: tuple[str, str, str, str | None]) -> list[str]:
+    """Refuse images the corrected model misses grossly (:func:`pincal.fit.plausibility.gross_misfit`, the pixels
+    seen at the board: :func:`pincal.workflows.camera_calibration.misfit_m`) even with every session's world frame
+    re-estimated on them: images of the other arrangement, or of another robot. A miss the re-estimated world frame
+    removes is a board (or camera) moved since the calibration: a note. ``names``: DATA.csv, REPORT.json, the
+    camera's and the board's links; ``seen_with``: the corners' errors (M, 2) [px] and the joint effects applied."""
+    data, report, camera_link, board_link = names
+    errors, effects = seen_with
+    reach = reach_m(chain, corners.q)
+    rms = float(np.sqrt(np.mean(errors**2)))
+    if gross_misfit(misfit_m(chain, corners, estimate, sessions, rms), reach) is None:
+        return []
+    every = np.unique(sessions)
+    errors, worlds = _pixels(chain, corners, estimate, sessions, every, effects)
+    refit = float(np.sqrt(np.mean(errors**2)))
+    seen = misfit_m(chain, corners, replace(estimate, worlds=worlds), sessions, refit)
+    if gross_misfit(seen, reach) is not None:
+        setup = (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else
+                 f"eye to hand: {camera_link} on the root, the board on {board_link}")
+        raise PincalError(f"{data}: the corrected model misses these images' corners by {refit:.4g} px RMS even with "
+                          f"the world frame re-estimated ({seen * 1e3:.3g} mm at the board, beyond "
+                          f"{GROSS_REACH_FRACTION * 100:g} % of the reach): not images of {report}'s arrangement "
+                          f"({setup}) or not of this robot; evaluate them against their own calibration's report")
+    moved = "board" if board_link is None else "camera"
+    return [f"{data}: through the reported world frame the corrected model misses these corners by {rms:.4g} px RMS, "
+            f"with it re-estimated by {refit:.4g} px: has the {moved} moved since the calibration? --new-session "
+            "re-estimates it"]
 
 
 def _reported_worlds(frames: list[FrameJson], arrangement: Arrangement, where: str) -> list[np.ndarray]:

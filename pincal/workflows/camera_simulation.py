@@ -34,8 +34,8 @@ from pincal.robots import example_robot_data_urdf
 from pincal.simulation.camera_scene import CameraScene, facing_scene, view_configurations, view_corners, with_fixed_link
 from pincal.workflows.paths import ensure_directory
 
-__all__ = ["INTRINSICS", "BOARD_SPEC", "TRUE_MOUNT", "Q0", "CameraSimulationSettings", "CameraSimulation",
-           "SimulatedCamera", "simulate_camera", "simulate_camera_files"]
+__all__ = ["INTRINSICS", "BOARD_SPEC", "TRUE_MOUNT", "SESSION_MOVE", "Q0", "CameraSimulationSettings",
+           "CameraSimulation", "SimulatedCamera", "simulate_camera", "simulate_camera_files"]
 
 #: 1280x960 px, a wide-angle lens's distortion (OpenCV's sample calibrations: |k1| ~ 0.1-0.3).
 INTRINSICS = CameraIntrinsics(1000.0, 1000.0, 640.0, 480.0, (-0.1, 0.05, 1e-3, -5e-4, 0.0), 1280, 960)
@@ -45,6 +45,9 @@ BOARD_SPEC = "charuco:7x5:0.04:0.03:DICT_5X5_100"
 Q0 = np.array([0.3, -1.2, 1.4, -1.6, -1.57, 0.2])
 #: The true mount on the added link: 10 cm and 30 degrees off the URDF's (the identity).
 TRUE_MOUNT = pose(pin.exp3(np.radians(30.0) * np.array([0.6, 0.0, 0.8])), np.array([0.06, 0.0, 0.08]))
+#: How the board (eye in hand, in its own frame) or the camera (eye to hand, in its own frame) moved between two
+#: sessions: 3.6 cm and 5.7 degrees, as a board put back on the table or a tripod nudged.
+SESSION_MOVE = pose(pin.exp3(np.array([0.0, 0.0, 0.1])), np.array([0.03, 0.02, 0.0]))
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,8 @@ class CameraSimulationSettings:
         effects: joint effects the readings lack, with their true values (:mod:`pincal.model.effects`): the
             images are taken at the readings plus each effect's shift, the calibration images' and the held-out
             ones' each over their own set (an approach flank follows its set's order); default none.
+        sessions: sessions the images are dealt to in turn (``s0``, ``s1`` ...): between two, the board
+            (eye in hand) or the camera (eye to hand) moved by :data:`SESSION_MOVE`.
     """
 
     arrangement: Arrangement = "eye_in_hand"
@@ -70,10 +75,14 @@ class CameraSimulationSettings:
     error_mrad: float = 0.5
     seed: int = 1
     effects: tuple[tuple[Effect, tuple[float, ...]], ...] = ()
+    sessions: int = 1
 
     def __post_init__(self) -> None:
         if self.arrangement not in ARRANGEMENTS:
             raise PincalError(f"arrangement must be one of {', '.join(ARRANGEMENTS)}, got '{self.arrangement}'")
+        if self.sessions < 1 or self.images < 3 * self.sessions:
+            raise PincalError(f"give 1 session or more and 3 calibration images per session, got {self.sessions} "
+                              f"session(s) and {self.images} images")
         if self.images < 3 or self.held_out < 0:
             raise PincalError(f"give 3 calibration images or more and no negative count, got {self.images}, "
                               f"{self.held_out}")
@@ -89,7 +98,8 @@ class CameraSimulation:
         held_out: ``held_out.csv``, the held-out images alone (None without any), for ``pincal evaluate``.
         camera_link / board_link: the links to name (board_link None eye in hand).
         placements: the chain's true joint and tip placements (as :meth:`KinematicChain.placements`).
-        mount: the true mount (4, 4) [m]; world: the true world frame W (4, 4) [m] (:mod:`pincal.model.camera_view`).
+        mount: the true mount (4, 4) [m]; world: the true world frame W (4, 4) [m] of the first session
+            (:mod:`pincal.model.camera_view`).
     """
 
     urdf: Path
@@ -141,7 +151,15 @@ def simulate_camera(settings: CameraSimulationSettings = CameraSimulationSetting
         scene = facing_scene(chain, settings.arrangement, Q0, TRUE_MOUNT, INTRINSICS, parse_board(BOARD_SPEC))
         q = view_configurations(chain, scene, Q0, settings.images + settings.held_out, rng)
         roles = ["calibration"] * settings.images + ["validation"] * settings.held_out
-        corners = view_corners(chain, scene, _actual(chain, q, settings), settings.noise_px, rng, roles=roles)
+        moves = [np.linalg.matrix_power(SESSION_MOVE, s) for s in range(settings.sessions)]
+        # W = base_T_board eye in hand (the board moved in its frame), camera_T_base eye to hand (the camera in its)
+        worlds = [scene.worlds[0] @ m if settings.arrangement == "eye_in_hand" else np.linalg.inv(m) @ scene.worlds[0]
+                  for m in moves]
+        scene = replace(scene, worlds=np.array(worlds))
+        sessions = [k % settings.sessions for k in range(settings.images)] + [
+            k % settings.sessions for k in range(settings.held_out)]
+        corners = view_corners(chain, scene, _actual(chain, q, settings), settings.noise_px, rng, sessions=sessions,
+                               roles=roles)
     return SimulatedCamera(text, chain, tuple(placements), scene, q, replace(corners, q=q))
 
 

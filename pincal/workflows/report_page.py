@@ -55,7 +55,8 @@ def report_file(document_path: str | Path, out: str | Path) -> Path:
             ``out`` the document itself. Nothing is written then.
     """
     document_path, out = Path(document_path), Path(out)
-    document = load_report(document_path, PAGE_KINDS)
+    document = load_report(document_path, PAGE_KINDS, hints={
+        "camera evaluation": "its page is the report's with these images: pincal evaluate ... --html REPORT.html"})
     refuse_overwrite(out, document_path)
     from pincal.report.html import write_html
 

@@ -1,0 +1,19 @@
+"""The Jinja2 environment of the HTML pages: the templates in ``pincal/report/templates``, autoescaped, strict
+about undefined values, with the ``num`` filter (:func:`pincal.report.sections.num`)."""
+
+from __future__ import annotations
+
+from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+
+from pincal.report.sections import num
+
+__all__ = ["environment"]
+
+
+def environment() -> Environment:
+    """The pages' template environment (:mod:`pincal.report.html`, :mod:`pincal.report.camera_figures`)."""
+    env = Environment(loader=PackageLoader("pincal.report", "templates"),
+                      autoescape=select_autoescape(enabled_extensions=("html", "j2"), default=True),
+                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    env.filters["num"] = num
+    return env
