@@ -150,12 +150,13 @@ class TreeDiagnosis:
     inputs: EffectInputs
 
 
-def tree_candidates(tree: KinematicTree, has_time: bool) -> list[Effect]:
-    """The single chain's catalogue on every target's chain (:func:`candidate_effects`), each effect once: a
-    joint shared by several chains is one candidate of each kind."""
+def tree_candidates(tree: KinematicTree, has_time: bool, lateral: bool = False) -> list[Effect]:
+    """The single chain's catalogue on every target's chain (:func:`candidate_effects`; with ``lateral``, each
+    revolute joint's lateral compliance too), each effect once: a joint shared by several chains is one candidate
+    of each kind."""
     out: list[Effect] = []
     for target in tree.targets:
-        out += [e for e in candidate_effects(target.chain, has_time) if e not in out]
+        out += [e for e in candidate_effects(target.chain, has_time, lateral) if e not in out]
     return out
 
 
@@ -224,7 +225,8 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     # the loads at the URDF's geometry: at the calibrated one a mass-moment column the URDF's symmetry makes
     # dependent (a combination the rows cannot determine) becomes independent by a hair, its value unbounded
     inputs = tree_inputs(tree, used, time, loads=unknown)
-    pool = list(options.candidates) if options.candidates is not None else tree_candidates(tree, time is not None)
+    pool = (list(options.candidates) if options.candidates is not None
+            else tree_candidates(tree, time is not None, options.lateral))
     pool, untestable = testable_pool(pool, inputs, TreeBody(tree), unknown)
     kept = calibration.kept  # under a prior also the parameters it holds near nominal: free in the fit
     problem = TreeProblem(tree, calibration.params, rows, calibration.target, row_weights(used, options.sigma_column),
