@@ -130,3 +130,8 @@ def test_lateral_is_claimed_only_where_the_torso_bends(robot, lateral, complianc
     assert [e.label.split(":moments")[0] for e, _, _ in found.effects] == named
     assert Effect("lateral", "torso_2") in tree_candidates(tree, False, lateral=True)
     assert np.all(np.sqrt(np.nanmean(found.heldout_after**2, axis=0)) < 1.25 * np.sqrt(3.0) * SIGMA_M)
+    # the final fit's estimation noise at the held-out rows: a fraction of the noise, so the held-out RMS is
+    # within 1.3x sqrt(3 σ² + e²) either way (scripts/scenarios.py's bound)
+    predicted = np.sqrt(3.0 * SIGMA_M**2 + found.heldout_predicted_m**2)
+    assert 0.0 < found.heldout_predicted_m < 2 * SIGMA_M  # 0.12 mm over 34 mass-moment values (unknown masses)
+    assert 1 / 1.3 < np.sqrt(np.nanmean(found.heldout_after**2)) / predicted < 1.3

@@ -130,6 +130,9 @@ class TreeDiagnosis:
         time_reference: the calibration rows' mean time [s] a drift is relative to (None without times).
         notes: what the user should know.
         inputs: the effect inputs of the calibration rows (columns: the tree's joints).
+        heldout_predicted_m: the held-out points' RMS error [m] the final fit's estimation noise makes (its
+            covariance propagated to the held-out rows; None without them): beside the noise σ,
+            sqrt(3 σ² + this²) is the RMS the held-out rows should show.
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -148,6 +151,7 @@ class TreeDiagnosis:
     time_reference: float | None
     notes: tuple[str, ...]
     inputs: EffectInputs
+    heldout_predicted_m: float | None = None
 
 
 def tree_candidates(tree: KinematicTree, has_time: bool, lateral: bool = False) -> list[Effect]:
@@ -352,17 +356,36 @@ def _verdict(search: _Search, inputs: EffectInputs, effect: Effect, evidence: tu
                             search.judged_noise(objective, solution), None)
 
 
-def _wald(objective: FitObjective, solution: Solution) -> float:
-    """Wald's statistic vᵀ C⁻¹ v of the last effect's values v, C their covariance: the posterior's under a prior
+def _covariance(objective: FitObjective, solution: Solution) -> np.ndarray:
+    """The covariance of every unknown of a fit [their units²]: the posterior's under a prior
     (:func:`pincal.fit.prior.posterior`), else the solver's s² (JᵀJ)⁻¹ (:func:`pincal.fit.solver.solve`)."""
-    jacobian, residual, sl = solution.jacobian, solution.residual, objective.effect_slices[-1]
+    jacobian, residual = solution.jacobian, solution.residual
     if isinstance(objective, PriorResidual):
-        covariance, _ = posterior(jacobian, residual, objective.n_prior, objective.noise)
-    else:
-        covariance = float(residual @ residual) / max(jacobian.shape[0] - jacobian.shape[1], 1) * np.linalg.inv(
-            gram(jacobian))
+        return posterior(jacobian, residual, objective.n_prior, objective.noise)[0]
+    return float(residual @ residual) / max(jacobian.shape[0] - jacobian.shape[1], 1) * np.linalg.inv(gram(jacobian))
+
+
+def _wald(objective: FitObjective, solution: Solution) -> float:
+    """Wald's statistic vᵀ C⁻¹ v of the last effect's values v, C their covariance (:func:`_covariance`)."""
+    sl = objective.effect_slices[-1]
     values = solution.x[sl]
-    return float(values @ np.linalg.lstsq(covariance[sl, sl], values, rcond=None)[0])
+    return float(values @ np.linalg.lstsq(_covariance(objective, solution)[sl, sl], values, rcond=None)[0])
+
+
+def _held_predicted(search: _Search, effects: Sequence[Effect], final: tuple[FitObjective, Solution]) -> float | None:
+    """The held-out points' RMS error [m] the final fit's estimation noise alone makes: its covariance C
+    (:func:`_covariance`: geometry, registrations, points and effect values) propagated through the held-out rows'
+    Jacobian J_h at the final model, sqrt(Σ diag(J_h C J_hᵀ) / seen points), as
+    :meth:`pincal.fit.tree_calibration.TreeCalibration.predicted_point_rms` for the geometry alone; None without
+    held-out rows."""
+    if search.held is None:
+        return None
+    objective, solution = final
+    held = cast(TreeResidual, search.objective(search.held, effects))
+    held = cast(TreeResidual, getattr(held, "objective", held))  # in metres: its rows' weights and scale are 1
+    jacobian = held.jacobian(solution.x)
+    variance = np.einsum("ij,jk,ik->i", jacobian, _covariance(objective, solution), jacobian)
+    return float(np.sqrt(variance.sum() / max(int(held.seen.sum()), 1)))
 
 
 def _concluded(search: _Search, final: tuple[FitObjective, Solution],
@@ -392,6 +415,7 @@ def _concluded(search: _Search, final: tuple[FitObjective, Solution],
         tree_placements=problem.tree.placements() if problem.params is None else problem.params.placements(vector),
         point_errors=errors, heldout_before=steps[0].heldout_before if steps else search.held_errors([], solution.x),
         heldout_after=search.held_errors(adopted, solution.x),
+        heldout_predicted_m=_held_predicted(search, adopted, final),
         sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown,
         time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes),
         inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))
