@@ -254,6 +254,9 @@ SLOW_TESTS = (
     "tests/test_tree_diagnose.py::test_diagnose_names_the_torso_compliance_and_brings_each_target_to_the_noise_floor",
     "tests/test_tree_diagnose.py::test_without_the_effect_nothing_is_claimed_and_with_unknown_masses_its_moments"
     "[unknown]",
+    # diagnose --lateral on a tree, end to end (1.8 s with its fixture) and with unknown masses (0.8 s)
+    "tests/test_tree_lateral.py::test_diagnose_lateral_names_the_torso_bending_and_evaluate_applies_it",
+    "tests/test_tree_lateral.py::test_lateral_is_claimed_only_where_the_torso_bends[unknown-masses]",
     "tests/test_mimic.py::test_diagnose_names_a_wrong_multiplier",
     "tests/test_read_against.py::test_effects_that_correct_alike_are_applied_and_the_alternatives_named",
     "tests/test_tip_link.py::test_calibrate_and_plan_warn_on_a_short_tip",
@@ -329,6 +332,9 @@ SLOW_TESTS = (
     "tests/test_prior_scales.py::test_folds_at_scale_choose_their_scales_without_their_held_out_rows",
     "tests/test_progress.py::test_commands_report_progress_on_stderr_and_quiet_silences_it",
     "tests/test_scenarios.py::test_scenario_reaches_its_noise_floor",
+    # TALOS elastic, 150 + 60 rows: calibrate at two levels and diagnose --masses unknown --lateral (~2 min on an
+    # idle core; 6 min with the machine loaded 4x)
+    "tests/test_scenarios.py::test_the_elastic_talos_row_is_checked_on_diagnose",
     "tests/test_study_reference.py::test_study_rows_equal_those_of_6975758",
     "tests/test_target_hold.py::test_raster_at_constant_orientation_holds_the_target_and_reaches_the_noise_floor",
     "tests/test_urdf_elements.py::test_calibrate_imports_neither_yourdfpy_nor_plots_nor_other_commands",

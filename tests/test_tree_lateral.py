@@ -29,7 +29,7 @@ from pincal.residuals.sensor_values import ModelledEffects, RowWeights
 from pincal.residuals.tree import TreeResidual
 
 #: torso_2's lateral compliances about its u and v axes [rad/(N·m)]: the torso bends under both arms by up to
-#: ~10 mrad, the hands by 3.5 mm RMS (up to ~15 mm) on these rows
+#: ~10 mrad, the hands by 3.6 mm RMS (12.8 mm at most) on these rows
 LATERAL = (6e-4, -5e-4)
 #: torso_2's joint compliance [rad/(N·m)] of the rows without bending (test_tree_diagnose's)
 COMPLIANCE = -4e-4
