@@ -332,8 +332,8 @@ SLOW_TESTS = (
     "tests/test_prior_scales.py::test_folds_at_scale_choose_their_scales_without_their_held_out_rows",
     "tests/test_progress.py::test_commands_report_progress_on_stderr_and_quiet_silences_it",
     "tests/test_scenarios.py::test_scenario_reaches_its_noise_floor",
-    # TALOS elastic, 150 + 60 rows: calibrate at two levels and diagnose --masses unknown --lateral (~2 min on an
-    # idle core; 6 min with the machine loaded 4x)
+    # TALOS elastic, 150 + 60 rows: calibrate at two levels and diagnose --masses unknown --lateral (76 s on the
+    # shared 2-core machine, 200 s at load 8)
     "tests/test_scenarios.py::test_the_elastic_talos_row_is_checked_on_diagnose",
     "tests/test_study_reference.py::test_study_rows_equal_those_of_6975758",
     "tests/test_target_hold.py::test_raster_at_constant_orientation_holds_the_target_and_reaches_the_noise_floor",
