@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import yaml
-from conftest import assert_close, numeric_jacobian
+from conftest import assert_close, numeric_jacobian, validate_document
 from test_tree_diagnose import FLOOR_MM, SIGMA_M, TARGETS, _write
 from tree_robot import compliant_rows, two_arm_urdf
 
@@ -99,6 +99,7 @@ def test_diagnose_lateral_names_the_torso_bending_and_evaluate_applies_it(diagno
     code, folder, out, report_path = diagnosed
     assert code == 0
     report = json.loads(report_path.read_text(encoding="utf-8"))
+    validate_document(report)  # a tree's report with a lateral compliance: of the schema's TreeReport kind only
     [effect] = report["effects"]
     assert (effect["type"], effect["joint"]) == ("lateral", "torso_2")
     assert effect["value"] == pytest.approx(list(LATERAL), rel=0.03)
