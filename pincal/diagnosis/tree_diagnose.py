@@ -3,9 +3,10 @@
 
 After the tree's geometric calibration (:func:`pincal.fit.tree_calibration.calibrate_tree`), every candidate
 of the single chain's catalogue on every target's chain (:func:`pincal.diagnosis.catalogue.candidate_effects`,
-a joint shared by several chains once) is tested on the tree's residual
-(:class:`pincal.residuals.tree.TreeResidual`): a joint effect shifts its joint's reading in every chain that
-has it, its load that of everything the joint carries (:mod:`pincal.model.tree_effects`). Each step screens
+a joint shared by several chains once; with ``lateral``, each revolute joint's lateral compliance too) is tested
+on the tree's residual (:class:`pincal.residuals.tree.TreeResidual`): a joint effect shifts its joint's reading,
+and a lateral compliance bends the chain at it, in every chain that has the joint, its load that of everything
+the joint carries (:mod:`pincal.model.tree_effects`). Each step screens
 every candidate by the linearised score test of :mod:`pincal.diagnosis.screening` at the current fit, fits
 those that may reach the evidence cut in full (geometry, registrations, points and the effects together),
 and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts`):

@@ -12,6 +12,7 @@ chain and not yet with a tree — ``--fixed-registration``, ``--temperature-colu
 
 A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
 joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
+lateral compliance bends every target's chain that has its joint (eq L1 of :mod:`pincal.model.lateral`), a
 sensor scale scales the sensed points; a drift is the calibration's sensor, not applied (a note says so).
 """
 
