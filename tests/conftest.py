@@ -256,6 +256,9 @@ SLOW_TESTS = (
     "[unknown]",
     # plan with several --tip-link: 32 tree calibrations against the plan's per-target prediction (11 s)
     "tests/test_tree_plan.py::test_planned_configurations_calibrate_as_predicted_for_each_target_and_beat_random",
+    # diagnose --lateral on a tree, end to end (1.8 s with its fixture) and with unknown masses (0.8 s)
+    "tests/test_tree_lateral.py::test_diagnose_lateral_names_the_torso_bending_and_evaluate_applies_it",
+    "tests/test_tree_lateral.py::test_lateral_is_claimed_only_where_the_torso_bends[unknown-masses]",
     "tests/test_mimic.py::test_diagnose_names_a_wrong_multiplier",
     # diagnose through a camera, end to end: 28 images simulated and calibrated (2.3 s), and by the CLI (3 s)
     "tests/test_camera_diagnose.py::test_diagnose_names_the_backlash_and_the_held_out_images_reach_the_noise",

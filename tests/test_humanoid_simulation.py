@@ -53,3 +53,26 @@ def test_the_compliance_moves_the_markers_by_millimetres_and_not_as_the_urdfs_ma
     light = simulate_humanoid(replace(SMALL, payload_kg=0.0, compliance=(("arm_left_2_joint", 1e-3),)))
     heavy = simulate_humanoid(replace(SMALL, compliance=(("arm_left_2_joint", 1e-3),)))
     assert heavy.deflection_mm[0] > 1.2 * light.deflection_mm[0]  # the 1 kg at each hand loads the shoulder
+
+
+def test_the_lateral_compliance_bends_the_torso_as_the_model_of_a_lateral_compliance_does(small):
+    """None by default (the example's rows as they were); TALOS_LATERAL moves the markers by millimetres, exactly
+    as pincal.model.lateral bends the tree's chains under the URDF's masses (no payload, no noise, no errors)."""
+    from pincal.model.effects import Effect
+    from pincal.model.lateral import bend_angles
+    from pincal.model.tree_effects import target_inputs, tree_inputs
+    from pincal.simulation.humanoid import MOCAP, TALOS_LATERAL, with_followers
+
+    assert SMALL.lateral == ()
+    exact = replace(SMALL, rows=5, held_out_rows=1, compliance=(), lateral=TALOS_LATERAL, payload_kg=0.0,
+                    sigma_pos_mm=0.0, deviation_mm=0.0, deviation_mrad=0.0)
+    bent = simulate_humanoid(exact)
+    assert 1.0 < bent.deflection_mm[0] < bent.deflection_mm[1] < 15.0
+    tree, rows = bent.tree, with_followers(bent.tree, bent.calibration)
+    inputs = tree_inputs(tree, rows)
+    joint, c_u, c_v = TALOS_LATERAL[0]
+    bends = [bend_angles([Effect("lateral", joint)], [np.array([c_u, c_v])], target_inputs(inputs, t),
+                         t.chain.joint_names) for t in tree.targets]
+    local = [np.array([exact.marker_m]) for _ in tree.targets]
+    world = tree.target_points(rows.q, local, bends)
+    assert np.allclose(world @ MOCAP.rotation.T + MOCAP.translation, rows.points, atol=1e-12, rtol=0.0)

@@ -46,3 +46,4 @@ def test_the_script_writes_its_table(scenarios, tmp_path):
     assert scenarios.main(["--only", "KUKA", "--markdown", str(table)]) == 0
     text = table.read_text(encoding="utf-8")
     assert text.count("KUKA LWR 4+") == 3 and "✔" in text
+

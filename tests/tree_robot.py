@@ -36,17 +36,21 @@ def two_arm_urdf() -> str:
     return f'<?xml version="1.0"?>\n<robot name="two_arms">\n{body}</robot>\n'
 
 
-def compliant_rows(tree, params, truth, compliance, n_rows, rng, sigma_m=1e-4, local=None, backlash=0.0):
+def compliant_rows(tree, params, truth, compliance, n_rows, rng, sigma_m=1e-4, local=None, backlash=0.0,  # noqa: PLR0913
+                   lateral=None):
     """Rows (q (K, N), sensed points (K, P, 3) [m]) of ``tree`` at the placement errors ``truth`` with a joint
     compliance on torso_2 of ``compliance`` [rad/(N·m)] under the gravity torque of everything it carries (the
     URDF's inertias) and a backlash of ``backlash`` [rad] on the flank torso_2 approached from (rows in order),
     sensed with a registration and Gaussian noise ``sigma_m`` per axis; ``local``: each target's points in its tip
-    link (default: one point each)."""
+    link (default: one point each); ``lateral``: (joint, c_u, c_v) [rad/(N·m)], that joint bent about its lateral
+    axes by the gravity moments about them (eq L1 of pincal.model.lateral), or None."""
     import numpy as np
     import pinocchio as pin
 
-    from pincal.model.effects import approach_flank, gravity_torques
-    from pincal.model.tree_effects import TreeBody
+    from pincal.measurements.data import MeasurementSet
+    from pincal.model.effects import Effect, approach_flank, gravity_torques
+    from pincal.model.lateral import bend_angles
+    from pincal.model.tree_effects import TreeBody, target_inputs, tree_inputs
 
     local = [np.array([[0.01, 0.0, 0.02]]), np.array([[0.0, 0.01, 0.0]])] if local is None else local
     q = rng.uniform(-1.2, 1.2, (n_rows, tree.n_joints))
@@ -54,6 +58,13 @@ def compliant_rows(tree, params, truth, compliance, n_rows, rng, sigma_m=1e-4, l
     with tree.placed(params.placements(truth)):  # the loads of the true geometry, as a robot's
         actual[:, 1] += compliance * gravity_torques(TreeBody(tree), q)[:, 1]  # torso_2 at its reading + c tau
         actual[:, 1] += backlash * approach_flank(q[:, 1], np.arange(n_rows))
-        world = tree.target_points(actual, local)
+        bends = None
+        if lateral is not None:  # at the readings' moments, as the tree's effect inputs have them
+            rows = MeasurementSet(tree.joint_names, q, np.zeros((n_rows, 1, 3)), None,
+                                  np.full(n_rows, "calibration", dtype=object), np.arange(n_rows))
+            inputs = tree_inputs(tree, rows)
+            bends = [bend_angles([Effect("lateral", lateral[0])], [np.array(lateral[1:])], target_inputs(inputs, t),
+                                 t.chain.joint_names) for t in tree.targets]
+        world = tree.target_points(actual, local, bends)
     sensed = world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
     return q, sensed + rng.normal(0.0, sigma_m, sensed.shape)

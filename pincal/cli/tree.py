@@ -101,7 +101,7 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
                                 payload_kg=args.payload_kg, time_column=args.time_column, sigma_pos_mm=args.sigma_pos,
                                 xacro_args=args.xacro_args, couplings=args.coupling or (),
                                 temperature_column=args.temperature_column, force=args.force, masses=args.masses,
-                                **({} if args.pause_s is None else {"pause_s": args.pause_s}))
+                                lateral=args.lateral, **({} if args.pause_s is None else {"pause_s": args.pause_s}))
     run = diagnose_tree_files(args.urdf, args.data, args.out, args.report, targets, settings,
                               validation_path=args.validation, outputs=DiagnoseOutputs(args.plots, args.html))
     for note in run.notes:

@@ -3,9 +3,10 @@
 
 After the tree's geometric calibration (:func:`pincal.fit.tree_calibration.calibrate_tree`), every candidate
 of the single chain's catalogue on every target's chain (:func:`pincal.diagnosis.catalogue.candidate_effects`,
-a joint shared by several chains once) is tested on the tree's residual
-(:class:`pincal.residuals.tree.TreeResidual`): a joint effect shifts its joint's reading in every chain that
-has it, its load that of everything the joint carries (:mod:`pincal.model.tree_effects`). Each step screens
+a joint shared by several chains once; with ``lateral``, each revolute joint's lateral compliance too) is tested
+on the tree's residual (:class:`pincal.residuals.tree.TreeResidual`): a joint effect shifts its joint's reading,
+and a lateral compliance bends the chain at it, in every chain that has the joint, its load that of everything
+the joint carries (:mod:`pincal.model.tree_effects`). Each step screens
 every candidate by the linearised score test of :mod:`pincal.diagnosis.screening` at the current fit, fits
 those that may reach the evidence cut in full (geometry, registrations, points and the effects together),
 and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts`):
@@ -48,9 +49,9 @@ from pincal.diagnosis.screening import FitObjective
 from pincal.diagnosis.verdicts import NOISE_FLOOR
 from pincal.fit.chain_calibration import row_weights
 from pincal.fit.metrics import PoseErrors
-from pincal.fit.prior import PriorResidual, standard_deviations
+from pincal.fit.prior import PriorResidual, posterior, standard_deviations
 from pincal.fit.sessions import session_rows
-from pincal.fit.solver import Solution, solve
+from pincal.fit.solver import Solution, gram, solve
 from pincal.fit.tree_calibration import TreeCalibration, tree_rows
 from pincal.fit.tree_problem import TreeProblem
 from pincal.measurements.data import MeasurementSet
@@ -90,6 +91,9 @@ class TreeDiagnosis:
         time_reference: the calibration rows' mean time [s] a drift is relative to (None without times).
         notes: what the user should know.
         inputs: the effect inputs of the calibration rows (columns: the tree's joints).
+        heldout_predicted_m: the held-out points' RMS error [m] the final fit's estimation noise makes (its
+            covariance propagated to the held-out rows; None without them): beside the noise σ,
+            sqrt(3 σ² + this²) is the RMS the held-out rows should show.
     """
 
     effects: tuple[tuple[Effect, np.ndarray, np.ndarray], ...]
@@ -108,14 +112,16 @@ class TreeDiagnosis:
     time_reference: float | None
     notes: tuple[str, ...]
     inputs: EffectInputs
+    heldout_predicted_m: float | None = None
 
 
-def tree_candidates(tree: KinematicTree, has_time: bool) -> list[Effect]:
-    """The single chain's catalogue on every target's chain (:func:`candidate_effects`), each effect once: a
-    joint shared by several chains is one candidate of each kind."""
+def tree_candidates(tree: KinematicTree, has_time: bool, lateral: bool = False) -> list[Effect]:
+    """The single chain's catalogue on every target's chain (:func:`candidate_effects`; with ``lateral``, each
+    revolute joint's lateral compliance too), each effect once: a joint shared by several chains is one candidate
+    of each kind."""
     out: list[Effect] = []
     for target in tree.targets:
-        out += [e for e in candidate_effects(target.chain, has_time) if e not in out]
+        out += [e for e in candidate_effects(target.chain, has_time, lateral) if e not in out]
     return out
 
 
@@ -198,7 +204,8 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     # the loads at the URDF's geometry: at the calibrated one a mass-moment column the URDF's symmetry makes
     # dependent (a combination the rows cannot determine) becomes independent by a hair, its value unbounded
     inputs = tree_inputs(tree, used, time, loads=unknown)
-    pool = list(options.candidates) if options.candidates is not None else tree_candidates(tree, time is not None)
+    pool = (list(options.candidates) if options.candidates is not None
+            else tree_candidates(tree, time is not None, options.lateral))
     pool, untestable = testable_pool(pool, inputs, TreeBody(tree), unknown)
     kept = calibration.kept  # under a prior also the parameters it holds near nominal: free in the fit
     problem = TreeProblem(tree, calibration.params, rows, calibration.target, row_weights(used, options.sigma_column),
@@ -218,6 +225,32 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
                      options.stated_sigma_pos_m)
     found = search_effects(search, inputs, pool, Counter(progress))
     return _concluded(found, untestable, unknown, time)
+
+
+def _covariance(objective: FitObjective, solution: Solution) -> np.ndarray:
+    """The covariance of every unknown of a fit [their units²]: the posterior's under a prior
+    (:func:`pincal.fit.prior.posterior`), else the solver's s² (JᵀJ)⁻¹ (:func:`pincal.fit.solver.solve`)."""
+    jacobian, residual = solution.jacobian, solution.residual
+    if isinstance(objective, PriorResidual):
+        return posterior(jacobian, residual, objective.n_prior, objective.noise)[0]
+    return float(residual @ residual) / max(jacobian.shape[0] - jacobian.shape[1], 1) * np.linalg.inv(gram(jacobian))
+
+
+def _held_predicted(search: _Search, effects: Sequence[Effect], final: tuple[FitObjective, Solution]) -> float | None:
+    """The held-out points' RMS error [m] the final fit's estimation noise alone makes: its covariance C
+    (:func:`_covariance`: geometry, registrations, points and effect values) propagated through the held-out rows'
+    Jacobian J_h at the final model, sqrt(Σ diag(J_h C J_hᵀ) / seen points), as
+    :meth:`pincal.fit.tree_calibration.TreeCalibration.predicted_point_rms` for the geometry alone; None without
+    held-out rows."""
+    if search.held is None:
+        return None
+    objective, solution = final
+    held = cast(TreeResidual, search.objective(search.held, effects))
+    held = cast(TreeResidual, getattr(held, "objective", held))  # in metres: its rows' weights and scale are 1
+    jacobian = held.jacobian(solution.x)
+    variance = np.einsum("ij,jk,ik->i", jacobian, _covariance(objective, solution), jacobian)
+    return float(np.sqrt(variance.sum() / max(int(held.seen.sum()), 1)))
+
 
 
 def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None) -> TreeDiagnosis:
@@ -245,6 +278,7 @@ def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: 
         tree_placements=problem.tree.placements() if problem.params is None else problem.params.placements(vector),
         point_errors=errors, heldout_before=steps[0].heldout_before if steps else search.held_errors([], solution.x),
         heldout_after=search.held_errors(adopted, solution.x),
+        heldout_predicted_m=_held_predicted(search, adopted, (objective, solution)),
         sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown,
         time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes),
         inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))

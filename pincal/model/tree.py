@@ -29,6 +29,7 @@ from pincal.errors import ModelError, PincalError
 from pincal.measurements.data import JointMimic, JointSpec
 from pincal.model.chain import ChainJoint, KinematicChain
 from pincal.model.description import RobotDescription, read_description
+from pincal.model.lateral import bent_tool_poses
 from pincal.model.urdf_elements import joint_mimics
 
 __all__ = ["TargetSpec", "TreeTarget", "KinematicTree", "parse_targets", "TreePlacements"]
@@ -219,13 +220,21 @@ class KinematicTree:
                 stack.enter_context(target.chain.placed(None if placements is None else list(placements[index])))
             yield self
 
-    def target_points(self, q: np.ndarray, points: Sequence[np.ndarray]) -> np.ndarray:
+    def target_points(self, q: np.ndarray, points: Sequence[np.ndarray],
+                      bends: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
         """Each measured point in the URDF root frame at tree joint readings ``q`` (K, N) [m], (K, P, 3) in the
-        order of the point numbers; ``points``: each target's points in its tip link (P_t, 3) [m]."""
+        order of the point numbers; ``points``: each target's points in its tip link (P_t, 3) [m]; ``bends``: each
+        target's chain joints' lateral deflections (K, 2 N_t) [rad] (:func:`pincal.model.lateral.bend_angles`,
+        eq L1), or None (none)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         out = np.full((len(q), max(p for t in self.targets for p in t.spec.points), 3), np.nan)
-        for target, local in zip(self.targets, points):
-            rotations, positions = target.chain.tool_poses(q[:, target.columns])
+        for t, (target, local) in enumerate(zip(self.targets, points)):
+            bent = None if bends is None else bends[t]
+            if bent is None:
+                rotations, positions = target.chain.tool_poses(q[:, target.columns])
+            else:  # the chain turned at its joints (eq L1), as the diagnose's residual had it
+                poses = bent_tool_poses(target.chain, q[:, target.columns], bent)
+                rotations, positions = poses.tool_rotations, poses.tool_positions
             world = positions[:, None, :] + np.einsum("kij,pj->kpi", rotations, np.atleast_2d(local))
             out[:, [p - 1 for p in target.spec.points]] = world
         return out

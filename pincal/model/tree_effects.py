@@ -19,7 +19,15 @@ import numpy as np
 
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain, reduced_model
-from pincal.model.effects import JOINT_EFFECTS, Effect, EffectInputs, RowContext, effect_inputs, with_loads
+from pincal.model.effects import (
+    BEND_EFFECTS,
+    JOINT_EFFECTS,
+    Effect,
+    EffectInputs,
+    RowContext,
+    effect_inputs,
+    with_loads,
+)
 from pincal.model.tree import KinematicTree, TreeTarget
 
 __all__ = ["TreeBody", "tree_inputs", "target_inputs", "acting_on"]
@@ -66,17 +74,19 @@ def tree_inputs(tree: KinematicTree, data: MeasurementSet, time: np.ndarray | No
 
 def target_inputs(inputs: EffectInputs, target: TreeTarget) -> EffectInputs:
     """The part of the tree's effect inputs ``inputs`` that ``target``'s chain reads: its joints' columns
-    (the mass moments stay the tree's: a moment of the other arm loads the torso)."""
+    (the mass moments stay the tree's: a moment of the other arm loads the torso, and bends it)."""
     columns = target.columns
     return replace(inputs, q=inputs.q[:, columns], gravity=inputs.gravity[:, columns],
+                   bending=None if inputs.bending is None else inputs.bending[:, columns],
                    context_q=None if inputs.context_q is None else inputs.context_q[:, columns],
                    loads=None if inputs.loads is None else inputs.loads[:, columns],
                    joint_names=tuple(target.chain.joint_names))
 
 
 def acting_on(effects: Sequence[Effect], target: TreeTarget) -> list[int]:
-    """The indices of ``effects`` that move ``target``: a joint effect of a joint on its chain (and its driver
-    too), every effect of the sensor's side."""
+    """The indices of ``effects`` that move ``target``: a joint effect or lateral compliance of a joint on its chain
+    (and its driver too), every effect of the sensor's side."""
     names = set(target.chain.joint_names)
     return [i for i, effect in enumerate(effects)
-            if effect.type not in JOINT_EFFECTS or (effect.joint in names and (effect.driver or effect.joint) in names)]
+            if effect.type not in (*JOINT_EFFECTS, *BEND_EFFECTS)
+            or (effect.joint in names and (effect.driver or effect.joint) in names)]

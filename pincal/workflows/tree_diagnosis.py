@@ -120,7 +120,7 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
     nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
     diagnosis = diagnose_tree(tree, calibration, data, heldout, DiagnoseOptions(
         sigma_column=settings.sigma_column, time=time_column(data, settings.time_column), heldout_time=held_time,
-        stated_sigma_pos_m=settings.sigma_pos_m, masses=settings.masses))
+        stated_sigma_pos_m=settings.sigma_pos_m, masses=settings.masses, lateral=settings.lateral))
     final = replace(calibration, vector=diagnosis.vector, std=diagnosis.std, target=diagnosis.target,
                     point_errors=diagnosis.point_errors, sigma_pos_m=diagnosis.sigma_pos_m,
                     tree_placements=diagnosis.tree_placements)

@@ -12,6 +12,7 @@ chain and not yet with a tree — ``--fixed-registration``, ``--temperature-colu
 
 A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
 joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
+lateral compliance bends every target's chain that has its joint (eq L1 of :mod:`pincal.model.lateral`), a
 sensor scale scales the sensed points; a drift is the calibration's sensor, not applied (a note says so).
 """
 
@@ -29,10 +30,11 @@ from pincal.fit.sessions import session_rows
 from pincal.fit.tree_calibration import tree_rows
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.measurements.data import MeasurementSet
-from pincal.model.effects import JOINT_EFFECTS, effect_from_dict, joint_shifts
+from pincal.model.effects import BEND_EFFECTS, JOINT_EFFECTS, effect_from_dict, joint_shifts
+from pincal.model.lateral import bend_angles
 from pincal.model.sensor import Registration
 from pincal.model.tree import KinematicTree, TargetSpec
-from pincal.model.tree_effects import TreeBody, tree_inputs
+from pincal.model.tree_effects import TreeBody, target_inputs, tree_inputs
 from pincal.outputs import file_sha256
 from pincal.report.document import write_evaluation
 from pincal.report.model_tree import TargetErrors, TreeEvaluationJson
@@ -108,9 +110,9 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     if not rows.seen.any():
         raise PincalError(f"{data_path}: no measured point in a row that is not role=cpa ({data.n_rows} such rows); "
                           "nothing to evaluate: give rows where a target's point is measured")
-    q, scale, effect_notes = _with_effects(tree, data, document.get("effects") or [])
+    q, scale, bends, effect_notes = _with_effects(tree, data, document.get("effects") or [])
     notes += effect_notes
-    world = tree.target_points(q, [points for _, points in targets])  # (K, P, 3) [m]
+    world = tree.target_points(q, [points for _, points in targets], bends)  # (K, P, 3) [m]
     if settings.new_session:
         for s, name in enumerate(data.session_names):  # a rigid registration needs three points (Arun et al. 1987)
             if (count := int(rows.seen[rows.sessions == s].sum())) < 3:
@@ -145,20 +147,27 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     return evaluation
 
 
-def _with_effects(tree: KinematicTree, data: MeasurementSet, entries: Any) -> tuple[np.ndarray, float, list[str]]:
+def _with_effects(tree: KinematicTree, data: MeasurementSet, entries: Any
+                  ) -> tuple[np.ndarray, float, list[np.ndarray | None] | None, list[str]]:
     """The rows' tree joint values with a report's joint effects applied (actual = reading + shift, followers
-    moved with their drivers, eq M1), its sensor scale s, and notes on what is not applied."""
+    moved with their drivers, eq M1), its sensor scale s, each target's lateral deflections (K, 2 N_t) [rad] of
+    its lateral compliances (eq L1-L3 of :mod:`pincal.model.lateral`; None without one), and notes on what is not
+    applied."""
     effects = [effect_from_dict(entry) for entry in entries]
     if not effects:
-        return data.q, 0.0, []
+        return data.q, 0.0, None, []
     body = TreeBody(tree)
     inputs = tree_inputs(tree, data, loads=any(e.moments for e, _ in effects))
     joint = [(e, v) for e, v in effects if e.type in JOINT_EFFECTS]
     shifts = joint_shifts([e for e, _ in joint], [v for _, v in joint], inputs, tree.joint_names)
     scale = sum(float(v[0]) for e, v in effects if e.type == "sensor_scale")
-    others = [e.label for e, _ in effects if e.type not in JOINT_EFFECTS and e.type != "sensor_scale"]
+    lateral = [(e, v) for e, v in effects if e.type in BEND_EFFECTS]
+    bends = [bend_angles([e for e, _ in lateral if e.joint in t.chain.joint_names],
+                         [v for e, v in lateral if e.joint in t.chain.joint_names], target_inputs(inputs, t),
+                         t.chain.joint_names) for t in tree.targets] if lateral else None
+    others = [e.label for e, _ in effects if e.type not in (*JOINT_EFFECTS, *BEND_EFFECTS, "sensor_scale")]
     notes = [f"the report's {', '.join(others)}: the calibration sensor's, not applied to these rows"] if others else []
-    return data.q + body.followed_shifts(shifts), scale, notes
+    return data.q + body.followed_shifts(shifts), scale, bends, notes
 
 
 def _targets(entries: Any) -> list[tuple[TargetSpec, np.ndarray]]:
