@@ -153,6 +153,26 @@ def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys):
     assert code == 2 and "several --tip-link: --tool is not yet supported" in capsys.readouterr().err
 
 
+
+@pytest.mark.parametrize("extra, named", [(["--pause-s", "60"], "--pause-s"),
+                                          (["--intrinsics", "camera_info.yaml"], "--intrinsics"),
+                                          (["--board-link", "board"], "--board-link")])
+@pytest.mark.parametrize("targets", [TARGETS, TARGETS[:2]], ids=["several", "one"])
+def test_diagnose_refuses_what_it_would_ignore(files, capsys, extra, named, targets):
+    """diagnose runs no differently for a flag it does not use: each is refused in one line, nothing written
+    (a pause length with several targets, whose search has no pause steps; a camera's flags without
+    --camera-link, with one target or several)."""
+    folder, urdf, data, *_ = files
+    if named == "--pause-s" and targets is not TARGETS:
+        pytest.skip("one chain takes --pause-s")
+    out = folder / f"refused_{named.strip('-')}_{len(targets)}"
+    code = main(["diagnose", str(urdf), str(data), *targets, *extra, "--out", str(out / "t.urdf"),
+                 "--report", str(out / "t.json"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and named in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
 MIMIC = '<mimic joint="arm_left_3" multiplier="0.5" offset="0.1"/>'
 
 

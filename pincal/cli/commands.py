@@ -120,7 +120,7 @@ def _no_camera(args: argparse.Namespace) -> None:
     from pincal.cli.camera import is_camera_data
 
     given = [flag for flag, value in (("--board-link", args.board_link), ("--intrinsics", args.intrinsics),
-                                      ("--images", args.images)) if value]
+                                      ("--images", getattr(args, "images", None))) if value]
     if given:
         raise PincalError(f"{' and '.join(given)} apply with --camera-link only (a camera's DATA.csv); give "
                           "--camera-link LINK, or drop them")
@@ -434,15 +434,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)  # no numpy, scipy or Pinocchio yet: --help and refusals are quick
     try:
         with _blas_limited_to_one_thread():
-            if args.command == "diagnose" and not isinstance(args.tip_link, str) and args.tip_link is not None \
-                    and len(args.tip_link) > 1:
-                tree_report, tree_withheld = run_diagnose_tree(args)  # several targets on several chains
-                return _warned(tree_report, args.strict, tree_withheld)
             if args.command == "diagnose" and args.camera_link is not None:  # a camera's DATA.csv
                 from pincal.cli.camera import run_diagnose as run_camera_diagnose
 
                 camera_report, camera_withheld = run_camera_diagnose(args)
                 return _warned(camera_report, args.strict, camera_withheld)
+            if args.command == "diagnose":  # the camera's flags and data refused, --tip-link asked for
+                _no_camera(args)
+            if args.command == "diagnose" and not isinstance(args.tip_link, str) and len(args.tip_link) > 1:
+                tree_report, tree_withheld = run_diagnose_tree(args)  # several targets on several chains
+                return _warned(tree_report, args.strict, tree_withheld)
             several = isinstance(getattr(args, "tip_link", None), list) and len(args.tip_link) > 1  # plan: a tree
             if args.command == "diagnose" or (args.command == "plan" and args.camera_link is None and not several):
                 args.tip_link = one_tip_link(args.command, args.tip_link)

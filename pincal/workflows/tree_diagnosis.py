@@ -28,6 +28,7 @@ from pincal.measurements.csv_v1 import read_measurements, read_sessions
 from pincal.model.description import xacro_arguments
 from pincal.model.drift import time_column
 from pincal.model.parameter_sets import ChainLevel
+from pincal.model.thermal import PAUSE_S
 from pincal.model.tree import KinematicTree, TargetSpec
 from pincal.report.document import write_report
 from pincal.report.effects_file import effects_path, write_effects_file
@@ -79,7 +80,8 @@ def _refused(settings: DiagnoseSettings, outputs: DiagnoseOutputs) -> None:
     for refused, flag in ((settings.level in ("auto", "dh"), f"--level {settings.level}"),
                           (settings.tool_pose is not None, "--tool"), (bool(settings.couplings), "--coupling"),
                           (settings.payload_kg > 0, "--payload-kg"), (outputs.plots_dir is not None, "--plots"),
-                          (settings.temperature_column is not None, "--temperature-column")):
+                          (settings.temperature_column is not None, "--temperature-column"),
+                          (settings.pause_s != PAUSE_S, "--pause-s")):
         if refused:
             raise PincalError(f"several --tip-link: diagnose {flag} is not yet supported; leave it out (--level "
                               "registration, offsets or full)")
