@@ -202,6 +202,7 @@ def test_a_joint_that_follows_another_has_no_column(tmp_path, mimics, columns, a
     (["--tip-link", "left_marker:1", "--tip-link", "no_such_link:2"], "no_such_link"),
     ([*TARGETS, "--existing", "MISSING_COLUMN"], "arm_right_4"),
     ([*TARGETS, "--tool", "0,0,0,0,0,0"], "--tool"),
+    ([*TARGETS, "--level", "dh"], "several --tip-link: plan --level dh"),  # not first sent to give --tool
 ])
 def test_bad_input_is_refused_in_one_line(planned, extra, message, capsys):
     folder, urdf, *_ = planned

@@ -166,6 +166,8 @@ def plan_files(
     expect_value(inputs, PlanInputs, "plan_files")
     tool_pose, candidates_path, workspace_path = inputs.tool_pose, inputs.candidates_path, inputs.workspace_path
     couplings, xacro_args = inputs.couplings, inputs.xacro_args
+    if not isinstance(tip_link, str):  # several targets: what their plan does not take, before what dh needs
+        _refused_for_tree(settings, inputs)
     if settings.level == "dh" and tool_pose is None:
         raise PincalError(
             "--level dh plans for the paper's DH parameters with the target known: give --tool X,Y,Z,ROLL,PITCH,YAW "
@@ -184,7 +186,6 @@ def plan_files(
         told: list[str | Path] = [*existing_paths] or ([candidates_path] if candidates_path is not None else [])
         couplings = follow_couplings(chain, couplings, told)
     else:
-        _refused_for_tree(settings, inputs)
         chain = KinematicTree.from_urdf(urdf, tip_link, xacro_args=xacro_args)
     names = chain.joint_names
     notes: list[str] = []
