@@ -91,6 +91,11 @@ def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
         ("left_marker", [1], 9), ("right_marker", [2, 3], 20)]
     assert document["rows"] == 10 and document["max_mm"] < 1e-6
     assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(held_out)]) == 2  # an input
+    capsys.readouterr()
+    assert main(["report", str(folder / "e.json"), "--out", str(folder / "e.html")]) == 2  # told apart, and why
+    err = capsys.readouterr().err
+    assert "'pincal evaluate --json' of a report of several --tip-link" in err and "pincal report REPORT.json" in err
+    assert not (folder / "e.html").exists()
 
 
 def test_evaluate_says_a_target_not_seen_and_refuses_rows_without_a_point(files, capsys):

@@ -23,7 +23,7 @@ from pincal.report.model_camera import CameraEvaluationJson, CameraReport
 from pincal.report.model_diagnosis import DiagnosisReport
 from pincal.report.model_evaluation import EvaluationJson
 from pincal.report.model_fixture import FixtureEvaluationJson, FixtureReport
-from pincal.report.model_tree import TreeReport
+from pincal.report.model_tree import TreeEvaluationJson, TreeReport
 
 __all__ = [
     "KINDS", "REPORT_KINDS", "PAGE_KINDS", "ReportDocument", "Document", "document_kind", "load_report", "value_at",
@@ -45,6 +45,7 @@ KINDS: dict[str, tuple[type, str]] = {
     "plan": (PlanJson, "a PLAN.json"),
     "camera": (CameraReport, "a camera's REPORT.json (calibrate --camera-link)"),
     "camera evaluation": (CameraEvaluationJson, "the file of 'pincal evaluate --json' of a camera's report"),
+    "tree evaluation": (TreeEvaluationJson, "the file of 'pincal evaluate --json' of a report of several --tip-link"),
 }
 #: The kinds of REPORT.json (the schema's top level, :data:`pincal.report.schema.REPORT_KINDS`).
 REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "camera")
@@ -81,6 +82,8 @@ def document_kind(document: Any) -> str | None:
         return "fixture evaluation"
     if "reprojection" in document and "world" in document:
         return "camera evaluation"
+    if "evaluated_targets" in document:
+        return "tree evaluation"
     return None
 
 
