@@ -94,7 +94,7 @@ def test_evaluate_gives_each_targets_errors_on_held_out_rows(files, capsys):
     capsys.readouterr()
     assert main(["report", str(folder / "e.json"), "--out", str(folder / "e.html")]) == 2  # told apart, and why
     err = capsys.readouterr().err
-    assert "'pincal evaluate --json' of a report of several --tip-link" in err and "pincal report REPORT.json" in err
+    assert "'pincal evaluate --json' of a tree's report" in err and "pincal report REPORT.json" in err
     assert not (folder / "e.html").exists()
 
 
