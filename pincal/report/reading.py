@@ -45,7 +45,7 @@ KINDS: dict[str, tuple[type, str]] = {
     "plan": (PlanJson, "a PLAN.json"),
     "camera": (CameraReport, "a camera's REPORT.json (calibrate --camera-link)"),
     "camera evaluation": (CameraEvaluationJson, "the file of 'pincal evaluate --json' of a camera's report"),
-    "tree evaluation": (TreeEvaluationJson, "the file of 'pincal evaluate --json' of a tree's report (several targets)"),
+    "tree evaluation": (TreeEvaluationJson, "the file of 'pincal evaluate --json' of a tree's report (targets)"),
 }
 #: The kinds of REPORT.json (the schema's top level, :data:`pincal.report.schema.REPORT_KINDS`).
 REPORT_KINDS = ("calibration", "diagnosis", "paper", "fixture", "tree", "camera")
