@@ -365,6 +365,8 @@ LONGEST_FIRST = (
     "tests/test_docs_examples.py",
     "tests/test_study_processes.py",
     "tests/test_plan.py",
+    "tests/test_tree_plan.py",
+    "tests/test_crawling_fits.py",
     "tests/test_study.py",
     "tests/test_html_report.py",
     "tests/test_study_dask_faults.py",
