@@ -7,6 +7,7 @@ The data: pincal.workflows.camera_simulation (a UR5 with a camera or a board on 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -253,6 +254,33 @@ def test_evaluate_refuses_the_other_arrangement_s_images(exact, small, capsys, t
     _refused(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(other.data), "--json",
               str(tmp_path / "e" / "evaluation.json")], capsys, tmp_path / "e", str(other.data),
              "not images of", "eye in hand" if sim.board_link is None else "eye to hand")
+
+
+def _mm_at_the_board(err: str) -> float:
+    return float(re.search(r"\(([0-9.e+]+) mm at the board", err).group(1))
+
+
+def test_calibrate_and_diagnose_refuse_held_out_images_of_the_other_arrangement(small, capsys, tmp_path):
+    """Eye-to-hand images held out of an eye-in-hand calibration (role validation in DATA.csv; diagnose's
+    --validation) miss by ~280 px even with the world frame re-estimated: refused before anything is judged on them,
+    as evaluate refuses them."""
+    hand, fixed = small[0]["eye_in_hand"], small[0]["eye_to_hand"]
+    lines = fixed.data.read_text().splitlines()
+    header = lines[0].split(",")
+    role, image = header.index("role"), header.index("image")
+    held = []
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[role], cells[image] = "validation", "other_" + cells[image]
+        held.append(",".join(cells))
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text(hand.data.read_text() + "\n".join(held) + "\n")
+    camera = ["--camera-link", "camera_link", "--intrinsics", str(hand.intrinsics), "--level", "registration",
+              "--out", str(tmp_path / "out" / "robot.urdf"), "--report", str(tmp_path / "out" / "REPORT.json")]
+    words = ("not images of this calibration's arrangement", "eye in hand")
+    _refused(["calibrate", str(hand.urdf), str(mixed), *camera], capsys, tmp_path / "out", str(mixed), *words)
+    _refused(["diagnose", str(hand.urdf), str(hand.data), "--validation", str(fixed.data), *camera], capsys,
+             tmp_path / "out", str(fixed.data), *words)
 
 
 def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path, capsys):
