@@ -256,10 +256,11 @@ def refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: Cam
     """Refuse held-out images the model misses grossly (:func:`pincal.fit.plausibility.gross_misfit` of the pixels
     seen at the board, :func:`misfit_m`) even with every session's world frame re-estimated on them: images of the
     other arrangement, or of another robot. A miss the re-estimated world frame removes is a board (or camera) moved
-    since the calibration: a note. ``chain`` as the model places it; ``estimate``: the model's world frames, mount
-    and intrinsics; ``seen_with``: the corners' errors (M, 2) [px] and the joint effects
-    applied; ``names``: DATA.csv, the REPORT.json evaluated (None: the calibration being run), the camera's and the
-    board's links.
+    since the calibration: a note. ``chain`` as the model places it; ``estimate``: the model's world frames (the
+    fitted or reported ones: the depth the pixels are seen at is taken through them, as one re-estimated on images of
+    the other arrangement can put the board metres away), mount and intrinsics; ``seen_with``: the corners' errors
+    (M, 2) [px] and the joint effects applied; ``names``: DATA.csv, the REPORT.json evaluated (None: the calibration
+    being run), the camera's and the board's links.
 
     Raises:
         PincalError: one line naming DATA.csv, the model's arrangement and what to do.
@@ -270,9 +271,9 @@ def refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: Cam
     rms = float(np.sqrt(np.mean(errors**2)))
     if gross_misfit(misfit_m(chain, corners, estimate, sessions, rms), reach) is None:
         return []
-    errors, worlds = refit_worlds(chain, corners, estimate, sessions, np.unique(sessions), effects)
+    errors, _ = refit_worlds(chain, corners, estimate, sessions, np.unique(sessions), effects)
     refit = float(np.sqrt(np.mean(errors**2)))
-    seen = misfit_m(chain, corners, replace(estimate, worlds=worlds), sessions, refit)
+    seen = misfit_m(chain, corners, estimate, sessions, refit)
     model, these = ("the calibrated model", "its held-out") if report is None else ("the corrected model", "these")
     if gross_misfit(seen, reach) is not None:
         setup = (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else

@@ -19,7 +19,7 @@ would measure PnP, not the calibration. The relative-pose errors against a simul
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
@@ -164,8 +164,8 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     before = CameraEstimate(arrangement, np.array(start_before), np.eye(4),
                             intrinsics_from_json(camera["nominal_intrinsics"], f"{report_path}: camera"))
     effects = [effect_from_dict(entry) for entry in report.get("effects") or []]  # diagnose's, applied after
-    after_px, worlds = refit_worlds(after_chain, corners, after, sessions, refit, effects)
-    notes += refuse_other_images(after_chain, corners, replace(after, worlds=worlds), sessions, (after_px, effects),
+    after_px, _ = refit_worlds(after_chain, corners, after, sessions, refit, effects)
+    notes += refuse_other_images(after_chain, corners, after, sessions, (after_px, effects),
                                  (str(data), str(report_path), camera["camera_link"], camera["board_link"]))
     placements = before_chain.placements()
     with before_chain.placed([*placements[:-1], before_mount]):  # the hand-eye mount on the nominal chain
