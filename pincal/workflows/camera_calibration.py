@@ -67,7 +67,8 @@ from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_urd
 
 __all__ = ["ESTIMATE", "CameraCalibrateSettings", "CameraSetup", "CameraCalibrationRun", "camera_info_path",
            "load_camera", "estimate_intrinsics", "calibrate_camera_files", "CameraPaths", "CameraFit", "CameraModel",
-           "fit_camera", "write_camera_run", "misfit_m", "refuse_other_images"]
+           "fit_camera", "write_camera_run", "misfit_m", "refuse_other_images",
+           "arrangement_words"]
 
 #: ``--intrinsics estimate``: the intrinsics started from OpenCV's calibrateCamera and fitted with the rest.
 ESTIMATE = "estimate"
@@ -250,6 +251,12 @@ def misfit_m(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate
     return float(rms_px * np.sqrt(2.0) * np.mean(np.abs(p[:, 2])) / focal)
 
 
+def arrangement_words(camera_link: str, board_link: str | None) -> str:
+    """The camera's arrangement in words, for a refusal of images of the other one."""
+    return (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else
+            f"eye to hand: {camera_link} on the root, the board on {board_link}")
+
+
 def refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
                         seen_with: tuple[np.ndarray, Sequence[tuple[Effect, np.ndarray]]],
                         names: tuple[str, str | None, str, str | None]) -> list[str]:
@@ -276,14 +283,12 @@ def refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: Cam
     seen = misfit_m(chain, corners, estimate, sessions, refit)
     model, these = ("the calibrated model", "its held-out") if report is None else ("the corrected model", "these")
     if gross_misfit(seen, reach) is not None:
-        setup = (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else
-                 f"eye to hand: {camera_link} on the root, the board on {board_link}")
         whose, advice = (("this calibration's", "hold out images of this arrangement, or calibrate these on their own")
                          if report is None else (f"{report}'s", "evaluate them against their own calibration's report"))
         raise PincalError(f"{data}: {model} misses {these} images' corners by {refit:.4g} px RMS even with the world "
                           f"frame re-estimated ({seen * 1e3:.3g} mm at the board, beyond "
                           f"{GROSS_REACH_FRACTION * 100:g} % of the reach): not images of {whose} arrangement "
-                          f"({setup}) or not of this robot; {advice}")
+                          f"({arrangement_words(camera_link, board_link)}) or not of this robot; {advice}")
     moved = "board" if board_link is None else "camera"
     return [f"{data}: through the {'fitted' if report is None else 'reported'} world frame {model} misses {these} "
             f"corners by {rms:.4g} px RMS, with it re-estimated by {refit:.4g} px: has the {moved} moved since the "
