@@ -30,8 +30,7 @@ CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or th
                    "sigma_pos": "--sigma-pos", "coupling": "--coupling"}
 #: Flags of diagnose that a camera's diagnosis has no use for (argparse dest → flag), besides calibrate's.
 DIAGNOSE_NOT_USED = {"payload_kg": "--payload-kg", "lateral": "--lateral", "time_column": "--time-column",
-                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots",
-                     "html": "--html", "images": "--images"}
+                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots"}
 #: The columns that make a CSV a camera's DATA.csv (pincal detect's).
 _CAMERA_COLUMNS = ("image", "corner", "u", "v")
 
@@ -103,7 +102,7 @@ def run_diagnose(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     settings = CameraDiagnoseSettings(_settings(args), masses=args.masses)
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         diagnosed = diagnose_camera_files(args.urdf, args.data[0], args.out, args.report, settings,
-                                          validation=args.validation, progress=progress)
+                                          validation=args.validation, progress=progress, html=args.html)
     run, diagnosis = diagnosed.run, diagnosed.diagnosis
     _print_run(args, run)
     held = diagnosis.heldout_before_px is not None
