@@ -221,6 +221,14 @@ def test_cli_camera_flags_without_a_camera_and_a_camera_link_not_in_the_urdf(
     assert "give --camera-link" in capsys.readouterr().err
     assert main(["plan", f"{root}/eye_to_hand.urdf", "--count", "6", "--out", f"{root}/p.csv"]) == 2
     assert "give --tip-link LINK" in capsys.readouterr().err
+    camera_data = Path(root) / "camera_DATA.csv"  # detect's columns: a point sensor's plan cannot continue it
+    joints = "shoulder_pan_joint,shoulder_lift_joint,elbow_joint,wrist_1_joint,wrist_2_joint,wrist_3_joint"
+    camera_data.write_text(f"image,corner,u,v,board_x,board_y,width,height,{joints}\na.png,0,1,2,0.04,0.04,1280,960,"
+                           + ",".join(str(v) for v in Q0) + "\n")
+    assert main(["plan", f"{root}/eye_to_hand.urdf", "--tip-link", "tool0", "--count", "6", "--out", f"{root}/p.csv",
+                 "--report", f"{root}/p.json", "--existing", str(camera_data)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{camera_data}: a camera's DATA.csv" in err and "give --camera-link" in err and len(err.splitlines()) == 1
     assert main(_plan(files, "eye_to_hand")[:2] + ["--camera-link", "camera", "--board-link", "board_link",
                                                    *_plan(files, "eye_to_hand")[6:], "--out", f"{root}/p.csv"]) == 2
     err = capsys.readouterr().err.strip()
