@@ -303,3 +303,11 @@ def test_cli_refuses_a_first_run_of_the_other_arrangement(tmp_path: Path, capsys
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1, err
     assert str(fixed.data) in err and "not images of this arrangement (eye in hand" in err and not out.exists()
+
+
+def test_the_view_angle_bound_is_one_constant() -> None:
+    """The plan's view-angle bound is the simulated images' (one constant, its source beside it), not a copy."""
+    import pincal.simulation.camera_scene as scene
+    from pincal.planning import camera_views
+
+    assert camera_views.MAX_VIEW_ANGLE_DEG is scene.MAX_VIEW_ANGLE_DEG
