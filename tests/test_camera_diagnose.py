@@ -115,12 +115,15 @@ def test_without_the_effect_nothing_is_claimed():
     assert all(candidate.delta_bic > -10.0 for candidate in diagnosis.last_candidates)
 
 
-def test_cli_writes_the_effects_and_evaluate_applies_them(tmp_path):
+def test_cli_writes_the_effects_and_evaluate_applies_them(tmp_path, capsys):
+    """... and --html writes the report's page, as calibrate --camera-link and pincal report do."""
     files = simulate_camera_files(tmp_path, _settings(3e-3))
-    out, report_path = tmp_path / "C.urdf", tmp_path / "REPORT.json"
+    out, report_path, page = tmp_path / "C.urdf", tmp_path / "REPORT.json", tmp_path / "REPORT.html"
     camera = ["--camera-link", "camera_link", "--intrinsics", str(files.intrinsics)]
     assert main(["diagnose", str(files.urdf), str(files.data), *camera, "--validation", str(files.held_out),
-                 "--out", str(out), "--report", str(report_path), "--quiet"]) == 0
+                 "--out", str(out), "--report", str(report_path), "--quiet", "--html", str(page),
+                 "--images", str(tmp_path)]) == 0
+    assert f"wrote {page}" in capsys.readouterr().out and "backlash" in page.read_text()
     report = json.loads(report_path.read_text())
     assert [(e["type"], e["joint"], e["source"]) for e in report["effects"]] == [("backlash", "elbow_joint",
                                                                                   "approach")]

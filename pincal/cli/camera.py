@@ -20,8 +20,8 @@ from pincal.errors import PincalError
 if TYPE_CHECKING:
     from pincal.workflows.camera_calibration import CameraCalibrateSettings, CameraCalibrationRun
 
-__all__ = ["CAMERA_NOT_USED", "DIAGNOSE_NOT_USED", "is_camera_data", "refuse_camera_flags", "run_calibrate",
-           "run_diagnose", "is_camera_report", "run_evaluate"]
+__all__ = ["CAMERA_NOT_USED", "DIAGNOSE_NOT_USED", "is_camera_data", "refuse_camera_data", "refuse_camera_flags",
+           "run_calibrate", "run_diagnose", "is_camera_report", "run_evaluate"]
 
 #: Flags of calibrate that a camera's calibration has no use for (argparse dest → flag).
 CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or the board's link)",
@@ -30,8 +30,7 @@ CAMERA_NOT_USED = {"tip_link": "--tip-link (the chain ends at the camera's or th
                    "sigma_pos": "--sigma-pos", "coupling": "--coupling"}
 #: Flags of diagnose that a camera's diagnosis has no use for (argparse dest → flag), besides calibrate's.
 DIAGNOSE_NOT_USED = {"payload_kg": "--payload-kg", "lateral": "--lateral", "time_column": "--time-column",
-                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots",
-                     "html": "--html", "images": "--images"}
+                     "temperature_column": "--temperature-column", "pause_s": "--pause-s", "plots": "--plots"}
 #: The columns that make a CSV a camera's DATA.csv (pincal detect's).
 _CAMERA_COLUMNS = ("image", "corner", "u", "v")
 
@@ -48,6 +47,15 @@ def is_camera_data(paths: Sequence[Path]) -> Path | None:
         if all(c in [h.strip() for h in header] for c in _CAMERA_COLUMNS):
             return path
     return None
+
+
+def refuse_camera_data(paths: Sequence[Path], give: str) -> None:
+    """Refuse, in one line naming the file, a camera's DATA.csv among ``paths`` given where a point sensor's is read
+    (``--tip-link``); ``give``: the flags that read it instead."""
+    camera = is_camera_data(paths)
+    if camera is not None:
+        raise PincalError(f"{camera}: a camera's DATA.csv (columns image, corner, u, v ...: detect's); give {give} "
+                          "instead of --tip-link")
 
 
 def refuse_camera_flags(args: argparse.Namespace) -> None:
@@ -103,7 +111,7 @@ def run_diagnose(args: argparse.Namespace) -> tuple[Mapping[str, Any], bool]:
     settings = CameraDiagnoseSettings(_settings(args), masses=args.masses)
     with progress_bar("diagnose", quiet=args.quiet, unit="fit") as progress:
         diagnosed = diagnose_camera_files(args.urdf, args.data[0], args.out, args.report, settings,
-                                          validation=args.validation, progress=progress)
+                                          validation=args.validation, progress=progress, html=args.html)
     run, diagnosis = diagnosed.run, diagnosed.diagnosis
     _print_run(args, run)
     held = diagnosis.heldout_before_px is not None

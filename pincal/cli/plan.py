@@ -22,6 +22,7 @@ _SENSOR_FLAGS = {"tip_link": "--tip-link", "report": "--report", "tool": "--tool
 
 def run_plan(args: argparse.Namespace) -> int:
     """``pincal plan``: choose, write PLAN.csv and PLAN.json, print the summary; the exit code."""
+    from pincal.cli.camera import refuse_camera_data
     from pincal.cli.progress import progress_bar
     from pincal.errors import PincalError
     from pincal.model.tree import parse_targets
@@ -34,6 +35,8 @@ def run_plan(args: argparse.Namespace) -> int:
     given = [flag for dest, flag in _CAMERA_FLAGS.items() if getattr(args, dest) is not None]
     if given:
         raise PincalError(f"{given[0]} is a camera's: give --camera-link LINK to plan a camera's images")
+    refuse_camera_data(args.existing or [], "--camera-link LINK (the camera's optical frame), --intrinsics FILE and "
+                       "--board SPEC")
     if args.report is None:
         raise PincalError("plan: give --report PLAN.json (the prediction to write)")
     args.sample = DEFAULT_SAMPLE if args.sample is None else args.sample

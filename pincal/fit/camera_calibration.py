@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, replace
 from typing import cast
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from pincal.errors import CalibrationError
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
@@ -50,7 +51,7 @@ from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.residuals.sensor_values import ModelledEffects
 
 __all__ = ["CAMERA_SELECTIONS", "CameraFitOptions", "CameraProblem", "CameraCalibration", "calibrate_camera",
-           "images_of", "reprojection_errors", "image_sessions",
+           "images_of", "reprojection_errors", "refit_worlds", "image_sessions",
            "images_as_rows", "camera_effect_inputs"]
 
 #: The selection criteria a camera's fit offers: leave-one-row-out (``press``) needs rows of one size,
@@ -323,15 +324,49 @@ def reprojection_errors(chain: KinematicChain, result: CameraCalibration, corner
     params = result.params if result.params is not None else NoParameters(chain)
     cache = KinematicsCache(params, np.array([], dtype=int), result.vector, corners.q)
     sessions = image_sessions(corners, result.session_names, len(result.estimate.worlds))
+    objective, x = _reprojection(chain, cache, corners, result.estimate, sessions, effects)
+    return objective.residual(x).reshape(-1, 2)
+
+
+def refit_worlds(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+                 refit: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """Each corner's reprojection error (M, 2) [px] through ``chain`` as it is placed, ``estimate``'s world frames
+    (``sessions``: each image's index), mount and intrinsics, the joint ``effects`` at their values (eq C4 over these
+    images); the world frames of sessions ``refit`` (indices) re-estimated first on these images (6 unknowns each,
+    Levenberg-Marquardt on eq C3 with the model fixed). Returns the errors and the world frames used (S, 4, 4)."""
+    cache = KinematicsCache(NoParameters(chain), np.array([], dtype=int), np.zeros(0), corners.q)
+    objective, x0 = _reprojection(chain, cache, corners, estimate, sessions, effects)
+    columns = (np.concatenate([objective.blocks["world"].start + 6 * s + np.arange(6) for s in refit]).astype(int)
+               if len(refit) else np.array([], dtype=int))
+    if columns.size:
+        def residual(v: np.ndarray) -> np.ndarray:
+            x = x0.copy()
+            x[columns] = v
+            return objective.residual(x)
+
+        def jacobian(v: np.ndarray) -> np.ndarray:
+            x = x0.copy()
+            x[columns] = v
+            return objective.jacobian(x)[:, columns]
+
+        x0[columns] = least_squares(residual, x0[columns], jac=jacobian, method="lm").x
+    return objective.residual(x0).reshape(-1, 2), objective.estimate(x0).worlds
+
+
+def _reprojection(chain: KinematicChain, cache: KinematicsCache, corners: CornerSet, estimate: CameraEstimate,
+                  sessions: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]]
+                  ) -> tuple[CameraResidual, np.ndarray]:
+    """The reprojection residual (eqs C3-C4) of ``corners`` with nothing free but the world frames, mount and
+    intrinsics (at ``estimate``) and the ``effects`` (at their values), and its vector at those values."""
     modelled = None
     if effects:
         inputs = camera_effect_inputs(chain, corners, loads=any(e.moments for e, _ in effects))
         modelled = ModelledEffects(tuple(e for e, _ in effects), inputs)
-    objective = CameraResidual(cache, corners, result.estimate, (), sessions, modelled)
+    objective = CameraResidual(cache, corners, estimate, (), sessions, modelled)
     x = objective.start_vector()
     if effects:
         x[objective.blocks["effects"]] = np.concatenate([np.asarray(v, dtype=float) for _, v in effects])
-    return objective.residual(x).reshape(-1, 2)
+    return objective, x
 
 
 def _calibration_images(corners: CornerSet) -> CornerSet:

@@ -6,8 +6,8 @@ A configuration's image is usable (:func:`board_views`, :meth:`ViewLimits.usable
 * the whole board is in front of the camera and inside the image: its four outer corners and every inner
   corner project within the image (a ChArUco corner is interpolated from the markers beside it, so a
   board cut by the image's edge loses the corners next to the cut);
-* its printed face is turned to the camera, its normal within :data:`MAX_VIEW_ANGLE_DEG` of the optical
-  axis;
+* its printed face is turned to the camera, its normal within
+  :data:`pincal.simulation.camera_scene.MAX_VIEW_ANGLE_DEG` of the optical axis;
 * neighbouring corners are at least :meth:`ViewLimits.min_spacing_px` apart, the size below which OpenCV's
   ArUco detector drops the markers.
 
@@ -31,19 +31,13 @@ from pincal.model.camera_view import camera_points, pose
 from pincal.model.chain import KinematicChain
 from pincal.planning.candidates import LIMIT_SLACK
 from pincal.residuals.camera import CameraEstimate
-from pincal.simulation.camera_scene import board_corners
+from pincal.simulation.camera_scene import MAX_VIEW_ANGLE_DEG, board_corners
 from pincal.simulation.cells import inverse_kinematics
 from pincal.simulation.sensor import sampling_limits
 
 __all__ = ["MAX_VIEW_ANGLE_DEG", "MIN_MARKER_PERIMETER_RATE", "ViewLimits", "BoardViews", "board_views",
            "aimed_configurations"]
 
-#: The steepest view of the board a plan uses: the angle between the board's normal and the camera's optical
-#: axis [deg]. Beyond about 60 degrees the markers foreshorten until the detector loses them and the corners'
-#: sub-pixel refinement degrades (OpenCV's calibration tutorials and calib.io's "Calibration Best Practices"
-#: tilt boards by up to about 45-60 degrees); the simulated images of the tests use the same bound
-#: (:data:`pincal.simulation.camera_scene.MAX_VIEW_ANGLE_DEG`).
-MAX_VIEW_ANGLE_DEG = 60.0
 #: OpenCV's ArUco detector keeps a marker whose perimeter is at least this fraction of the image's larger side
 #: (``cv::aruco::DetectorParameters::minMarkerPerimeterRate``, default 0.03): smaller markers are not found,
 #: and neither are the ChArUco corners beside them.

@@ -24,10 +24,13 @@ from pincal.model.camera_view import Arrangement, camera_points, pose
 from pincal.model.chain import KinematicChain
 from pincal.model.pinhole import CameraIntrinsics, project
 
-__all__ = ["CameraScene", "with_fixed_link", "board_corners", "facing_scene", "view_corners", "view_configurations"]
+__all__ = ["MAX_VIEW_ANGLE_DEG", "CameraScene", "with_fixed_link", "board_corners", "facing_scene", "view_corners",
+           "view_configurations"]
 
-#: The steepest view of the board an image is drawn with: the angle between the camera's axis and the
-#: board's normal [deg]. ChArUco detection degrades beyond about 60 degrees (the markers foreshorten).
+#: The steepest view of the board an image is drawn with and a plan uses (:mod:`pincal.planning.camera_views`): the
+#: angle between the board's normal and the camera's optical axis [deg]. Beyond about 60 degrees the markers
+#: foreshorten until the detector loses them and the corners' sub-pixel refinement degrades (OpenCV's calibration
+#: tutorials and calib.io's "Calibration Best Practices" tilt boards by up to about 45-60 degrees).
 MAX_VIEW_ANGLE_DEG = 60.0
 
 

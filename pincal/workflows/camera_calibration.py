@@ -21,7 +21,7 @@ board's mean depth, ``e [m] = e [px] · Z / f``, against the same 5 % of the rea
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal, cast
@@ -35,11 +35,13 @@ from pincal.fit.camera_calibration import (
     CameraCalibration,
     CameraFitOptions,
     calibrate_camera,
+    image_sessions,
     images_of,
+    refit_worlds,
     reprojection_errors,
 )
 from pincal.fit.camera_start import hand_eye_start
-from pincal.fit.plausibility import gross_misfit, reach_m
+from pincal.fit.plausibility import GROSS_REACH_FRACTION, gross_misfit, reach_m
 from pincal.fit.prior import Prior
 from pincal.fit.selection import SelectionCriterion
 from pincal.measurements.camera_csv import CornerSet, read_corners
@@ -65,7 +67,8 @@ from pincal.workflows.verdict import UrdfWrite, withhold, withholding, write_urd
 
 __all__ = ["ESTIMATE", "CameraCalibrateSettings", "CameraSetup", "CameraCalibrationRun", "camera_info_path",
            "load_camera", "estimate_intrinsics", "calibrate_camera_files", "CameraPaths", "CameraFit", "CameraModel",
-           "fit_camera", "write_camera_run", "misfit_m"]
+           "fit_camera", "write_camera_run", "misfit_m", "refuse_other_images",
+           "arrangement_words"]
 
 #: ``--intrinsics estimate``: the intrinsics started from OpenCV's calibrateCamera and fitted with the rest.
 ESTIMATE = "estimate"
@@ -248,6 +251,51 @@ def misfit_m(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate
     return float(rms_px * np.sqrt(2.0) * np.mean(np.abs(p[:, 2])) / focal)
 
 
+def arrangement_words(camera_link: str, board_link: str | None) -> str:
+    """The camera's arrangement in words, for a refusal of images of the other one."""
+    return (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else
+            f"eye to hand: {camera_link} on the root, the board on {board_link}")
+
+
+def refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
+                        seen_with: tuple[np.ndarray, Sequence[tuple[Effect, np.ndarray]]],
+                        names: tuple[str, str | None, str, str | None]) -> list[str]:
+    """Refuse held-out images the model misses grossly (:func:`pincal.fit.plausibility.gross_misfit` of the pixels
+    seen at the board, :func:`misfit_m`) even with every session's world frame re-estimated on them: images of the
+    other arrangement, or of another robot. A miss the re-estimated world frame removes is a board (or camera) moved
+    since the calibration: a note. ``chain`` as the model places it; ``estimate``: the model's world frames (the
+    fitted or reported ones: the depth the pixels are seen at is taken through them, as one re-estimated on images of
+    the other arrangement can put the board metres away), mount and intrinsics; ``seen_with``: the corners' errors
+    (M, 2) [px] and the joint effects applied; ``names``: DATA.csv, the REPORT.json evaluated (None: the calibration
+    being run), the camera's and the board's links.
+
+    Raises:
+        PincalError: one line naming DATA.csv, the model's arrangement and what to do.
+    """
+    data, report, camera_link, board_link = names
+    errors, effects = seen_with
+    reach = reach_m(chain, corners.q)
+    rms = float(np.sqrt(np.mean(errors**2)))
+    if gross_misfit(misfit_m(chain, corners, estimate, sessions, rms), reach) is None:
+        return []
+    errors, _ = refit_worlds(chain, corners, estimate, sessions, np.unique(sessions), effects)
+    refit = float(np.sqrt(np.mean(errors**2)))
+    seen = misfit_m(chain, corners, estimate, sessions, refit)
+    model, these = ("the calibrated model", "its held-out") if report is None else ("the corrected model", "these")
+    if gross_misfit(seen, reach) is not None:
+        whose, advice = (("this calibration's", "hold out images of this arrangement, or calibrate these on their own")
+                         if report is None else (f"{report}'s", "evaluate them against their own calibration's report"))
+        raise PincalError(f"{data}: {model} misses {these} images' corners by {refit:.4g} px RMS even with the world "
+                          f"frame re-estimated ({seen * 1e3:.3g} mm at the board, beyond "
+                          f"{GROSS_REACH_FRACTION * 100:g} % of the reach): not images of {whose} arrangement "
+                          f"({arrangement_words(camera_link, board_link)}) or not of this robot; {advice}")
+    moved = "board" if board_link is None else "camera"
+    return [f"{data}: through the {'fitted' if report is None else 'reported'} world frame {model} misses {these} "
+            f"corners by {rms:.4g} px RMS, with it re-estimated by {refit:.4g} px: has the {moved} moved since the "
+            "calibration? " + ("hold out images of the calibration's placement" if report is None else
+                               "--new-session re-estimates it")]
+
+
 def _misfit_m(result: CameraCalibration, chain: KinematicChain, calibration: CornerSet) -> float:
     """The calibration corners' RMS reprojection error seen at the board (:func:`misfit_m`)."""
     session = {name: s for s, name in enumerate(result.session_names)}
@@ -371,6 +419,12 @@ def fit_camera(paths: CameraPaths, settings: CameraCalibrateSettings) -> CameraF
         notes.append(f"{validation.source}: session(s) {', '.join(unseen)} have validation images only: no world "
                      "frame was fitted for them, so their images are left out of the report's errors")
         validation = images_of(validation, np.isin(validation.sessions.astype(str), sessions))
+    if len(validation.images):  # held-out images of another arrangement or robot would judge nothing
+        held = image_sessions(validation, result.session_names, len(result.estimate.worlds))
+        with chain.placed(list(result.chain_placements)):
+            errors, _ = refit_worlds(chain, validation, result.estimate, held, np.array([], dtype=np.intp))
+            notes += refuse_other_images(chain, validation, result.estimate, held, (errors, ()),
+                                         (validation.source, None, settings.camera_link, settings.board_link))
     if setup.arrangement == "eye_to_hand" and len(sessions) > 1:
         notes.append(f"{len(sessions)} sessions: the corrected URDF places {settings.camera_link} where session "
                      f"'{sessions[0]}' saw it; every session's camera pose is in REPORT.json camera.worlds")

@@ -57,9 +57,10 @@ class CameraDiagnoseRun:
 
 def diagnose_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | Path, report_path: str | Path,
                           settings: CameraDiagnoseSettings, validation: str | Path | None = None,
-                          progress: Progress | None = None) -> CameraDiagnoseRun:
+                          progress: Progress | None = None, html: str | Path | None = None) -> CameraDiagnoseRun:
     """Calibrate ``urdf`` from a camera's ``data`` as ``settings.camera`` say, search the images for joint effects,
-    and write the final model (module docstring); ``validation``: held-out images of another file.
+    and write the final model (module docstring); ``validation``: held-out images of another file; ``html``: the
+    report's page to write (:mod:`pincal.workflows.report_page`, the image drawn from ``settings.camera.images``).
 
     Raises:
         PincalError: calibrate's one-line errors (:func:`pincal.workflows.camera_calibration.fit_camera`).
@@ -70,7 +71,8 @@ def diagnose_camera_files(urdf: str | Path, data: str | Path, out_urdf: str | Pa
 
     expect(settings, CameraDiagnoseSettings, "diagnose_camera_files")
     paths = CameraPaths(Path(urdf), Path(data), Path(out_urdf), Path(report_path),
-                        None if validation is None else Path(validation), effects=True)
+                        None if validation is None else Path(validation), effects=True,
+                        html=None if html is None else Path(html))
     fit = fit_camera(paths, settings.camera)
     held = fit.validation if len(fit.validation.images) else None
     diagnosis = diagnose_camera(fit.setup.chain, fit.result, fit.calibration, held,

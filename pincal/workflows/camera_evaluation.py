@@ -19,26 +19,21 @@ would measure PnP, not the calibration. The relative-pose errors against a simul
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
 import numpy as np
 import pinocchio as pin
-from scipy.optimize import least_squares
 
 from pincal.errors import PincalError
-from pincal.fit.camera_calibration import camera_effect_inputs
-from pincal.fit.plausibility import GROSS_REACH_FRACTION, gross_misfit, reach_m
+from pincal.fit.camera_calibration import refit_worlds
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.model.camera_chain import camera_chain
 from pincal.model.camera_info import check_image_size, read_intrinsics
 from pincal.model.camera_view import Arrangement
-from pincal.model.chain import KinematicChain
 from pincal.model.description import read_description
-from pincal.model.effects import Effect, effect_from_dict
-from pincal.model.parameter_sets import NoParameters
+from pincal.model.effects import effect_from_dict
 from pincal.outputs import file_sha256, write_text
 from pincal.report.camera import (
     frame_matrix,
@@ -50,10 +45,8 @@ from pincal.report.camera import (
 from pincal.report.document import write_evaluation
 from pincal.report.model_camera import CameraEvaluationJson, CameraReport, FrameJson
 from pincal.report.reading import load_report
-from pincal.residuals.base import KinematicsCache
-from pincal.residuals.camera import CameraEstimate, CameraResidual
-from pincal.residuals.sensor_values import ModelledEffects
-from pincal.workflows.camera_calibration import camera_info_path, misfit_m
+from pincal.residuals.camera import CameraEstimate
+from pincal.workflows.camera_calibration import camera_info_path, refuse_other_images
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 from pincal.workflows.report_page import refuse_page
 
@@ -87,39 +80,6 @@ class CameraEvaluation:
     notes: tuple[str, ...]
     written: Path | None
     html: Path | None = None
-
-
-def _pixels(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
-            refit: np.ndarray, effects: Sequence[tuple[Effect, np.ndarray]] = ()) -> tuple[np.ndarray, np.ndarray]:
-    """Each corner's reprojection error (M, 2) [px] through ``chain`` as it is placed, ``estimate``'s world frames
-    (``sessions``: each image's index), mount and intrinsics, the joint ``effects`` at their values (eq C4 over these
-    images); the world frames of sessions ``refit`` (indices) re-estimated first. Returns the errors and the world
-    frames used."""
-    params = NoParameters(chain)
-    cache = KinematicsCache(params, np.array([], dtype=int), np.zeros(0), corners.q)
-    modelled = None
-    if effects:
-        modelled = ModelledEffects(tuple(e for e, _ in effects),
-                                   camera_effect_inputs(chain, corners, loads=any(e.moments for e, _ in effects)))
-    objective = CameraResidual(cache, corners, estimate, (), sessions, modelled)
-    x0 = objective.start_vector()
-    if effects:
-        x0[objective.blocks["effects"]] = np.concatenate([np.asarray(v, dtype=float) for _, v in effects])
-    columns = np.concatenate([objective.blocks["world"].start + 6 * s + np.arange(6) for s in refit]).astype(int) \
-        if len(refit) else np.array([], dtype=int)
-    if columns.size:
-        def residual(v: np.ndarray) -> np.ndarray:
-            x = x0.copy()
-            x[columns] = v
-            return objective.residual(x)
-
-        def jacobian(v: np.ndarray) -> np.ndarray:
-            x = x0.copy()
-            x[columns] = v
-            return objective.jacobian(x)[:, columns]
-
-        x0[columns] = least_squares(residual, x0[columns], jac=jacobian, method="lm").x
-    return objective.residual(x0).reshape(-1, 2), objective.estimate(x0).worlds
 
 
 def _session_indices(corners: CornerSet, names: list[str], new_session: bool
@@ -204,12 +164,12 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     before = CameraEstimate(arrangement, np.array(start_before), np.eye(4),
                             intrinsics_from_json(camera["nominal_intrinsics"], f"{report_path}: camera"))
     effects = [effect_from_dict(entry) for entry in report.get("effects") or []]  # diagnose's, applied after
-    after_px, worlds = _pixels(after_chain, corners, after, sessions, refit, effects)
-    notes += _refuse_other_images(after_chain, corners, replace(after, worlds=worlds), sessions, (after_px, effects),
-                                  (str(data), str(report_path), camera["camera_link"], camera["board_link"]))
+    after_px, _ = refit_worlds(after_chain, corners, after, sessions, refit, effects)
+    notes += refuse_other_images(after_chain, corners, after, sessions, (after_px, effects),
+                                 (str(data), str(report_path), camera["camera_link"], camera["board_link"]))
     placements = before_chain.placements()
     with before_chain.placed([*placements[:-1], before_mount]):  # the hand-eye mount on the nominal chain
-        before_px, _ = _pixels(before_chain, corners, before, sessions, refit)
+        before_px, _ = refit_worlds(before_chain, corners, before, sessions, refit)
     document: CameraEvaluationJson = {
         "urdf": str(urdf), "report": str(report_path), "data": str(data), "camera_info": str(info),
         "world": "re-estimated" if new else "reported",
@@ -229,37 +189,6 @@ def evaluate_camera_files(urdf: str | Path, report_path: str | Path, data: str |
     if page is not None and html_path is not None:
         write_text(html_path, page)
     return CameraEvaluation(document, tuple(notes), json_path, html_path)
-
-
-def _refuse_other_images(chain: KinematicChain, corners: CornerSet, estimate: CameraEstimate, sessions: np.ndarray,
-                         seen_with: tuple[np.ndarray, Sequence[tuple[Effect, np.ndarray]]],
-                         names: tuple[str, str, str, str | None]) -> list[str]:
-    """Refuse images the corrected model misses grossly (:func:`pincal.fit.plausibility.gross_misfit`, the pixels
-    seen at the board: :func:`pincal.workflows.camera_calibration.misfit_m`) even with every session's world frame
-    re-estimated on them: images of the other arrangement, or of another robot. A miss the re-estimated world frame
-    removes is a board (or camera) moved since the calibration: a note. ``names``: DATA.csv, REPORT.json, the
-    camera's and the board's links; ``seen_with``: the corners' errors (M, 2) [px] and the joint effects applied."""
-    data, report, camera_link, board_link = names
-    errors, effects = seen_with
-    reach = reach_m(chain, corners.q)
-    rms = float(np.sqrt(np.mean(errors**2)))
-    if gross_misfit(misfit_m(chain, corners, estimate, sessions, rms), reach) is None:
-        return []
-    every = np.unique(sessions)
-    errors, worlds = _pixels(chain, corners, estimate, sessions, every, effects)
-    refit = float(np.sqrt(np.mean(errors**2)))
-    seen = misfit_m(chain, corners, replace(estimate, worlds=worlds), sessions, refit)
-    if gross_misfit(seen, reach) is not None:
-        setup = (f"eye in hand: {camera_link} on the chain, the board fixed in the world" if board_link is None else
-                 f"eye to hand: {camera_link} on the root, the board on {board_link}")
-        raise PincalError(f"{data}: the corrected model misses these images' corners by {refit:.4g} px RMS even with "
-                          f"the world frame re-estimated ({seen * 1e3:.3g} mm at the board, beyond "
-                          f"{GROSS_REACH_FRACTION * 100:g} % of the reach): not images of {report}'s arrangement "
-                          f"({setup}) or not of this robot; evaluate them against their own calibration's report")
-    moved = "board" if board_link is None else "camera"
-    return [f"{data}: through the reported world frame the corrected model misses these corners by {rms:.4g} px RMS, "
-            f"with it re-estimated by {refit:.4g} px: has the {moved} moved since the calibration? --new-session "
-            "re-estimates it"]
 
 
 def _reported_worlds(frames: list[FrameJson], arrangement: Arrangement, where: str) -> list[np.ndarray]:

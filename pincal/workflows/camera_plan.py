@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from pincal.errors import ModelError, PincalError, expect_value
-from pincal.fit.camera_calibration import calibrate_camera
+from pincal.fit.camera_calibration import calibrate_camera, image_sessions
 from pincal.fit.camera_start import hand_eye_start
+from pincal.fit.plausibility import GROSS_REACH_FRACTION, gross_misfit, reach_m
 from pincal.measurements.camera_csv import CornerSet, read_corners
 from pincal.measurements.charuco import parse_board
 from pincal.model.camera_chain import camera_chain
@@ -45,6 +46,7 @@ from pincal.planning.defaults import DEFAULT_AIMED
 from pincal.planning.files import write_plan_csv
 from pincal.progress import Progress, Stages
 from pincal.residuals.camera import CameraEstimate
+from pincal.workflows.camera_calibration import arrangement_words, misfit_m
 from pincal.workflows.paths import description_inputs, refuse_overwrite
 
 __all__ = ["CameraPlanInputs", "CameraPlanRun", "camera_plan_files"]
@@ -151,6 +153,15 @@ def camera_plan_files(urdf: str | Path, inputs: CameraPlanInputs, settings: Came
                          str(inputs.intrinsics_path))
         start, session_names = hand_eye_start(chain, existing, arrangement, intrinsics)
         first = calibrate_camera(chain, existing, start, "registration", session_names=session_names)
+        seen = misfit_m(chain, existing, first.estimate, image_sessions(existing, session_names, len(start.worlds)),
+                        first.rms_px)
+        # a miss calibrate would withhold a model for is no pixel noise to plan with
+        if gross_misfit(seen, reach_m(chain, existing.q)) is not None:
+            raise PincalError(f"{inputs.existing_path}: the nominal kinematics with the mount and world frame fitted "
+                              f"miss these images' corners by {first.rms_px:.4g} px RMS ({seen * 1e3:.3g} mm at the "
+                              f"board, beyond {GROSS_REACH_FRACTION * 100:g} % of the reach): not images of this "
+                              f"arrangement ({arrangement_words(inputs.camera_link, inputs.board_link)}) or not of "
+                              "this robot; give the first run of this camera and board")
         camera = first.estimate
         settings = replace(settings, sigma_px=first.rms_px)
         notes.append(f"{inputs.existing_path}: {len(existing.images)} image(s) recorded, reprojection RMS "
