@@ -397,7 +397,17 @@ def test_noise_free_test_set_matches_the_noiseless_simulation(kuka_urdf):
     np.testing.assert_allclose(truth.rotations, clean.validation.rotations, atol=1e-12)
 
 
-def test_cli_study(tmp_path, capsys):
+def test_cli_study(tmp_path, capsys, monkeypatch):
+    """The command's wiring: its tables, findings and every figure's file. The figures are stubs here (drawing them
+    is two thirds of this run; tests/test_study_processes.py and the killed-study round of tests/test_outputs.py
+    draw them through the same FIGURES table)."""
+    from pincal.study import figures
+
+    def stub(result, path):
+        path.write_bytes(b"stub")
+        return path
+
+    monkeypatch.setattr(figures, "FIGURES", {name: stub for name in figures.FIGURES})
     out = tmp_path / "cli"
     code = main(["study", "--out", str(out), "--levels", "2", "--reps", "1", "--restarts", "2",
                  "--limit-pose-sets", "0", "--workers", "1"])
