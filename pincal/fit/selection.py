@@ -70,7 +70,7 @@ import scipy.linalg
 
 from pincal.errors import CalibrationError
 from pincal.fit.identifiability import LEVERAGE_FLOOR, Ordering, Selection, press
-from pincal.fit.prior import Prior
+from pincal.fit.prior import SCALE_FLOOR, Prior
 from pincal.fit.problem import KindProblem, ObjectiveT
 from pincal.fit.solver import solve
 from pincal.measurements.data import MeasurementSet
@@ -416,6 +416,12 @@ def select_subset(problem: KindProblem[ObjectiveT], ordering: Ordering, base: np
         if criterion == "press":
             blocks = _row_blocks(np.arange(residual.size), rows, block).reshape(rows.n_rows, block)
         fits = nested_fits(jac, residual, always, columns[len(always):], blocks)
+        weighted = _weighted_by_the_data(problem, objective, fits)
+        if weighted is not None:  # the rows reweighted: every score, and every refit, at the data's scales
+            problem = weighted
+            objective = problem.objective(everything, base)
+            jac, residual = objective.jacobian(x0), objective.residual(x0)
+            fits = nested_fits(jac, residual, always, columns[len(always):], blocks)
         linear = fits.scores(criterion)
         used = columns[: fits.scale.size]  # nested_fits drops prefixes that leave no residual degree of freedom
         undetermined = _first_undetermined(fits, objective, x0, jac[:, used], used, linear)
@@ -441,6 +447,31 @@ def select_subset(problem: KindProblem[ObjectiveT], ordering: Ordering, base: np
         solution=fitted[chosen][1],
     )
     return selection, np.sort(ordering.order[:chosen])
+
+
+def _weighted_by_the_data(problem: KindProblem[ObjectiveT], objective: ObjectiveT, fits: NestedFits
+                          ) -> KindProblem[ObjectiveT] | None:
+    """``problem`` with each kind of row (positions, orientations) weighted by its noise scale as the
+    widest prefix's linear fit leaves it (eq S1's e_j), or None with one kind of row.
+
+    The criteria compare the prefixes' RSS over all rows, m ln(RSS/m) + c n: with one kind of row the
+    scale only shifts every score alike, with two their relative weight decides which misfit counts.
+    The start's scales (:data:`pincal.fit.sensor_problem.START_SIGMA_POS_M`, ``..._ROT_RAD``: 1 mm to
+    1 mrad) weigh an orientation noise of 0.1° 300 times a position noise of 0.1 mm, so the criterion
+    would drop parameters whose loss shows in the positions only: on a UR5's 12 planned 6D rows, AIC
+    kept 12 of 18 identifiable parameters and the held-out error came out 0.69 mm instead of 0.12 mm.
+    The widest fit's residual estimates each kind's noise with the least bias the candidates allow (as
+    Mallows' Cp takes σ² from the fullest model); each estimate is kept above
+    :data:`pincal.fit.prior.SCALE_FLOOR`, which rows reproduced to rounding would otherwise fall to.
+    """
+    scales = problem.scales()
+    kinds = problem.scale_rows(objective)
+    if len(kinds) < 2:
+        return None
+    residual = fits.fit_residual(int(np.flatnonzero(fits.feasible)[-1]))
+    measured = iter([float(np.sqrt(np.mean(residual[rows] ** 2))) for rows in kinds])
+    return problem.with_scales(tuple(None if scale is None else max(scale * next(measured), SCALE_FLOOR)
+                                     for scale in scales))
 
 
 def _first_undetermined(fits: NestedFits, objective: ObjectiveT, x0: np.ndarray, jac: np.ndarray, columns: list[int],
