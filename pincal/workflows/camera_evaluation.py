@@ -17,8 +17,8 @@ Then the relative poses (:mod:`pincal.fit.camera_motion`): between consecutive i
 and degrees, with the floor of that comparison: what the corners' noise (the PnP residuals') leaves in the measured
 motion, a perfect model's RMS error. The PnP pose errs about the board's in-plane axes by far more than the
 reprojection it comes from, so the floor is often above both models' errors (millimetres at a camera 0.5 m from a
-24 cm board at 0.2 px): the verdict then says the images cannot tell the models apart by relative pose, and the
-pixels are the measure. No world frame enters the motions.
+28 x 20 cm board at 0.2 px): the verdict then says the images cannot tell the models apart by relative pose, and
+the pixels are the measure. No world frame enters the motions.
 """
 
 from __future__ import annotations
