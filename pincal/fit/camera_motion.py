@@ -34,6 +34,7 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
+from pincal.errors import CalibrationError
 from pincal.fit.camera_calibration import images_of
 from pincal.fit.camera_start import MIN_CORNERS, board_poses
 from pincal.measurements.camera_csv import CornerSet
@@ -46,7 +47,8 @@ __all__ = ["FLOOR_LEVEL", "MeasuredMotions", "image_pairs", "relative_motions", 
 
 #: The level at which a model's errors are "within the floor": a perfect model's RMS error exceeds the bound with
 #: this probability (the conventional 5 %), its mean square over P pairs taken as the floor's times a chi-square of
-#: 3P degrees of freedom over 3P (:func:`within_floor`).
+#: 3P degrees of freedom over 3P (:func:`within_floor`). An approximation: consecutive pairs share an image, and a
+#: pair's error is not isotropic (PnP's tilt dominates), both of which widen the true spread a little.
 FLOOR_LEVEL = 0.05
 
 
@@ -59,7 +61,8 @@ class MeasuredMotions:
         motions: D_jk of each pair (P, 4, 4) [m].
         floor: each pair's floor (P, 2) [mm, deg].
         noise_px: σ of eq R4, the corners' noise per coordinate the PnP residuals show [px] (None: no pair).
-        unplaced: the images PnP cannot place (fewer than 4 corners, or all on one line), left out of the pairs.
+        unplaced: the images PnP cannot place (fewer than 4 corners, all on one line, or solvePnP finds no pose),
+            left out of the pairs.
     """
 
     pairs: np.ndarray
@@ -125,8 +128,11 @@ def measured_motions(corners: CornerSet, intrinsics: CameraIntrinsics, arrangeme
     counts = np.bincount(corners.image_of, minlength=len(corners.images))
     enough = counts >= MIN_CORNERS
     views = np.full((len(corners.images), 4, 4), np.nan)
-    if enough.any():
-        views[enough] = board_poses(images_of(corners, enough), intrinsics)
+    for k in np.flatnonzero(enough):  # one image at a time: one PnP cannot place leaves its pairs, not the rest
+        try:
+            views[k] = board_poses(images_of(corners, np.array([k])), intrinsics)[0]
+        except CalibrationError:
+            continue
     placed = np.all(np.isfinite(views), axis=(1, 2))
     unplaced = tuple(corners.images[k] for k in np.flatnonzero(~placed))
     pairs = image_pairs(corners, placed)
