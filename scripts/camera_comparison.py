@@ -27,8 +27,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from pincal.fit.camera_calibration import CameraFitOptions, calibrate_camera, images_of, reprojection_errors
+from pincal.fit.camera_calibration import (
+    CameraFitOptions,
+    calibrate_camera,
+    images_of,
+    mounted_frames,
+    reprojection_errors,
+)
+from pincal.fit.camera_motion import image_pairs, motion_errors, relative_motions
 from pincal.fit.camera_start import HAND_EYE_METHODS, ROBOT_WORLD_METHODS, hand_eye_start
+from pincal.measurements.camera_csv import CornerSet
 from pincal.measurements.charuco import parse_board
 from pincal.model.camera_view import Arrangement, pose
 from pincal.model.chain import KinematicChain
@@ -54,19 +62,15 @@ class Row:
     seconds: float
 
 
-def _relative_errors(chain: KinematicChain, placements: list[np.ndarray], mount: np.ndarray, q: np.ndarray,
+def _relative_errors(chain: KinematicChain, placements: list[np.ndarray], mount: np.ndarray, corners: CornerSet,
                      true_placements: list[np.ndarray]) -> tuple[float, float]:
-    """RMS over consecutive pairs of the error of inv(T_j M) T_k M [mm, deg]."""
-    def frames(chosen: list[np.ndarray], m: np.ndarray) -> np.ndarray:
-        with chain.placed(chosen):
-            rotations, positions = chain.tool_poses(q)
-        return np.array([pose(r, t) @ m for r, t in zip(rotations, positions)])
-
-    model, truth = frames(placements, mount), frames(true_placements, TRUE_MOUNT)
-    errors = [np.linalg.inv(np.linalg.inv(truth[j]) @ truth[j + 1]) @ np.linalg.inv(model[j]) @ model[j + 1]
-              for j in range(len(q) - 1)]
-    mm = np.sqrt(np.mean([np.sum(e[:3, 3] ** 2) for e in errors])) * 1e3
-    deg = np.degrees(np.sqrt(np.mean([np.sum(pin.log3(e[:3, :3]) ** 2) for e in errors])))
+    """RMS over consecutive pairs of the error of inv(T_j M) T_k M [mm, deg] (pincal.fit.camera_motion, eqs R1, R3)."""
+    pairs = image_pairs(corners, np.ones(len(corners.images), dtype=bool))
+    with chain.placed(placements):
+        model = relative_motions(mounted_frames(chain, corners, mount), pairs)
+    with chain.placed(true_placements):
+        truth = relative_motions(mounted_frames(chain, corners, TRUE_MOUNT), pairs)
+    mm, deg = np.sqrt(np.mean(motion_errors(model, truth) ** 2, axis=0))
     return float(mm), float(deg)
 
 
@@ -99,7 +103,7 @@ def compare(arrangement: Arrangement, images: int = 30, held_out: int = 20, nois
         as_is = calibrate_camera(chain, calibration, start, "registration")
         pixels = reprojection_errors(chain, replace(as_is, estimate=start), validation)
         rows.append(Row(f"OpenCV {method}", float(np.sqrt(np.mean(pixels**2))),
-                        *_relative_errors(chain, nominal, start.mount, validation.q, true_placements), seconds))
+                        *_relative_errors(chain, nominal, start.mount, validation, true_placements), seconds))
     start, _ = hand_eye_start(chain, calibration, arrangement, INTRINSICS)
     for level in CHAIN_LEVELS:
         started = time.perf_counter()
@@ -107,7 +111,7 @@ def compare(arrangement: Arrangement, images: int = 30, held_out: int = 20, nois
         seconds = time.perf_counter() - started
         pixels = reprojection_errors(chain, result, validation)
         rows.append(Row(f"pincal {level}", float(np.sqrt(np.mean(pixels**2))),
-                        *_relative_errors(chain, list(result.chain_placements), result.estimate.mount, validation.q,
+                        *_relative_errors(chain, list(result.chain_placements), result.estimate.mount, validation,
                                           true_placements), seconds))
     return rows
 

@@ -16,11 +16,15 @@ import pinocchio as pin
 import pytest
 
 from pincal.cli.commands import main
-from pincal.fit.camera_calibration import CameraFitOptions, calibrate_camera
+from pincal.fit.camera_calibration import CameraFitOptions, calibrate_camera, mounted_frames
+from pincal.fit.camera_motion import motion_errors, relative_motions
 from pincal.fit.camera_start import board_poses, hand_eye_start
-from pincal.measurements.camera_csv import write_corner_set
+from pincal.measurements.camera_csv import read_corners, write_corner_set
+from pincal.model.camera_chain import camera_chain
 from pincal.model.camera_view import pose
 from pincal.model.chain import KinematicChain
+from pincal.model.description import read_description
+from pincal.report.camera import frame_matrix
 from pincal.workflows.camera_simulation import (
     INTRINSICS,
     CameraSimulationSettings,
@@ -49,6 +53,8 @@ def exact(request, tmp_path_factory):
     sim = simulate_camera_files(root, CameraSimulationSettings(request.param, images=8, held_out=4, noise_px=0.0,
                                                                seed=3))
     assert _calibrate(sim, root / "out", "--select", "all") == 0
+    assert main(["evaluate", str(root / "out" / "robot.urdf"), str(root / "out" / "REPORT.json"), str(sim.held_out),
+                 "--json", str(root / "out" / "evaluation.json")]) == 0
     return sim, root / "out"
 
 
@@ -130,6 +136,72 @@ def test_noisy_held_out_images_reach_the_noise_floor(noisy):
     report = json.loads((out / "REPORT.json").read_text())
     assert report["camera"]["reprojection"]["validation"]["after"]["images"] == 8
     assert any("first joint" in words for words in report["camera"]["cannot_see"])
+
+
+def _motion_errors_to_the_truth(sim, out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Against the truth's motions of the mounted frame between the consecutive held-out images, the errors (P, 2)
+    [mm, deg] of the model evaluate calls before (the nominal URDF with the report's nominal mount) and after (the
+    corrected URDF), and of the motions evaluate's JSON reports measured (their errors against after's, undone)."""
+    report = json.loads((out / "REPORT.json").read_text())
+    camera = report["camera"]
+    chains = [camera_chain(read_description(path), camera["camera_link"], camera["board_link"])[0]
+              for path in (sim.urdf, out / "robot.urdf")]
+    corners, _ = read_corners(sim.held_out, chains[0].joint_specs)
+    pairs = np.array([[k, k + 1] for k in range(len(corners.images) - 1)])
+    with chains[0].placed(list(sim.placements)):
+        truth = relative_motions(mounted_frames(chains[0], corners, sim.mount), pairs)
+    with chains[0].placed([*chains[0].placements()[:-1], frame_matrix(camera["nominal_mount"], "nominal_mount")]):
+        before = relative_motions(mounted_frames(chains[0], corners, np.eye(4)), pairs)
+    after = relative_motions(mounted_frames(chains[1], corners, np.eye(4)), pairs)
+    return motion_errors(before, truth), motion_errors(after, truth), pairs
+
+
+def test_noise_free_held_out_images_measure_the_relative_poses_exactly(exact):
+    """Noise-free corners: PnP measures the truth's motions, so the floor is nil, the corrected model's errors are
+    the fit's (~1e-9 m) and the nominal model's are its errors against the truth, to the digit."""
+    sim, out = exact
+    motion = json.loads((out / "evaluation.json").read_text())["relative_pose"]
+    before, after, pairs = _motion_errors_to_the_truth(sim, out)
+    assert [(p["first"], p["second"]) for p in motion["pairs"]] == [
+        (f"image_{j + 8:03d}.png", f"image_{k + 8:03d}.png") for j, k in pairs]
+    reported = np.array([[p[f"{m}_{u}"] for m in ("before", "after", "floor") for u in ("mm", "deg")]
+                         for p in motion["pairs"]])
+    assert np.abs(reported[:, 2:]).max() < 1e-6  # after and the floor [mm, deg]
+    assert np.abs(reported[:, :2] - before).max() < 1e-6 and motion["before"]["mm"] > 0.05
+    assert np.abs(after).max() < 1e-6
+    assert not motion["before_within_floor"] and motion["noise_px"] < 1e-6
+
+
+def test_noisy_held_out_relative_poses_within_their_floor(noisy, capsys):
+    """0.2 px of noise: against the truth the corrected model's motions beat the nominal one's (its 0.5 mm / 0.5
+    mrad joint errors); against PnP's motions both drown in the floor (PnP's pose errs by ~0.3 deg about the
+    board's in-plane axes, millimetres at the camera eye in hand), and evaluate says so."""
+    sim, out = noisy
+    before, after, _ = _motion_errors_to_the_truth(sim, out)
+    to_truth = np.sqrt(np.mean(before**2, axis=0)), np.sqrt(np.mean(after**2, axis=0))
+    assert to_truth[1][0] < to_truth[0][0] and to_truth[1][1] < to_truth[0][1], to_truth
+    motion = json.loads((out / "evaluation.json").read_text())["relative_pose"]
+    assert len(motion["pairs"]) == 7 and motion["no_pairs"] == [] and motion["unplaced"] == []
+    assert 0.15 < motion["noise_px"] < 0.25 and motion["floor"]["mm"] > 0.1 and motion["floor"]["deg"] > 0.05
+    assert motion["floor"]["mm"] > 2.0 * to_truth[0][0]  # the nominal model's error lies under the floor
+    assert motion["verdict"] == "the images cannot tell these models apart by relative pose"
+
+
+def test_evaluate_says_no_pairs_of_one_image_per_session(exact, tmp_path, capsys):
+    sim, out = exact
+    lines = sim.held_out.read_text().splitlines()
+    image = lines[0].split(",").index("image")
+    first = lines[1].split(",")[image]
+    (tmp_path / "one.csv").write_text("\n".join([lines[0]] + [line for line in lines[1:]
+                                                               if line.split(",")[image] == first]) + "\n")
+    capsys.readouterr()
+    assert main(["evaluate", str(out / "robot.urdf"), str(out / "REPORT.json"), str(tmp_path / "one.csv"), "--json",
+                 str(tmp_path / "one.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "session s0: no pairs (fewer than 2 images whose board pose PnP can measure)" in printed
+    motion = json.loads((tmp_path / "one.json").read_text())["relative_pose"]
+    assert motion["pairs"] == [] and motion["before"] is None and motion["floor"] is None
+    assert motion["verdict"].startswith("no pairs") and motion["verdict"] in printed
 
 
 @pytest.mark.parametrize("arrangement", ARRANGEMENTS)
@@ -309,6 +381,12 @@ def test_evaluate_re_estimates_the_world_frame_of_a_new_session(exact, tmp_path,
     assert reported["world"] == "reported" and reported["reprojection"]["after"]["rms_px"] > 10.0
     assert new["world"] == "re-estimated" and new["reprojection"]["after"]["rms_px"] < 1e-6
     assert new["reprojection"]["before"]["rms_px"] > 0.05  # the nominal kinematics cannot, whatever the board's pose
+    # the motions between images hold no board pose: the same errors as of the board where it was
+    unmoved = json.loads((out / "evaluation.json").read_text())["relative_pose"]
+    for moved_board in (reported["relative_pose"], new["relative_pose"]):
+        assert [p["second"] for p in moved_board["pairs"]] == [p["second"] for p in unmoved["pairs"]]
+        assert all(abs(p[k] - q[k]) < 1e-6 for p, q in zip(moved_board["pairs"], unmoved["pairs"])
+                   for k in ("before_mm", "before_deg", "after_mm", "after_deg"))
 
 
 @pytest.mark.parametrize("arrangement", ARRANGEMENTS)

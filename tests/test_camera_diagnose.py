@@ -137,6 +137,10 @@ def test_cli_writes_the_effects_and_evaluate_applies_them(tmp_path, capsys):
     assert main(["evaluate", str(out), str(report_path), str(files.held_out), "--json", str(evaluation)]) == 0
     after = json.loads(evaluation.read_text())["reprojection"]["after"]["rms_px"]
     assert after == pytest.approx(held["after_px"], rel=1e-6)  # the effects applied to the held-out images
+    # and to the camera's motions between them: the backlash's 3 mrad moves the camera by millimetres, above
+    # PnP's floor, which the diagnosed model's motions reach
+    motion = json.loads(evaluation.read_text())["relative_pose"]
+    assert motion["after_within_floor"] and not motion["before_within_floor"], motion
 
 
 def test_cli_refusals_name_the_flag(tmp_path, capsys):

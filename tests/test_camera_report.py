@@ -164,6 +164,7 @@ def test_evaluate_html_shows_the_evaluated_images(calibrated_page, tmp_path: Pat
     assert "One image: image_004.png" in page and "the validation image with the largest RMS error" in page
     assert "<td>image_004.png</td><td>validation</td>" in page and "<td>image_000.png</td>" not in page
     assert "image file was not found" in page and f"{sim.held_out} through" in page
+    assert "<dt>board motion between consecutive images</dt><dd>no pairs: no session has 2" in page  # one held out
     capsys.readouterr()
     assert main(["report", str(tmp_path / "evaluation.json"), "--out", str(tmp_path / "alone.html")]) == 2
     assert "pincal evaluate ... --html" in capsys.readouterr().err and not (tmp_path / "alone.html").exists()

@@ -185,6 +185,25 @@ def _print_reprojection(reprojection: Mapping[str, Any]) -> None:
     print("before: the nominal kinematics with their own mount and world frame fitted (OpenCV's hand-eye, refined)")
 
 
+def _print_relative_pose(motion: Mapping[str, Any]) -> None:
+    """evaluate's relative poses between consecutive images: per pair and their RMS, before, after and the floor
+    [mm, deg], then the verdict."""
+    frame = motion["frame"]
+    if motion["pairs"]:
+        print(f"{frame + ' motion, image to image':32s} {'before':>17s} {'after':>17s} {'floor':>17s}  [mm, deg]")
+        for pair in motion["pairs"]:
+            print(f"{pair['first'] + ' -> ' + pair['second']:32s} {pair['before_mm']:8.3f} {pair['before_deg']:8.4f} "
+                  f"{pair['after_mm']:8.3f} {pair['after_deg']:8.4f} {pair['floor_mm']:8.3f} {pair['floor_deg']:8.4f}")
+        rms = [motion[key] for key in ("before", "after", "floor")]
+        print(f"{'all ' + str(len(motion['pairs'])) + ' pairs':32s} "
+              + " ".join(f"{v['mm']:8.3f} {v['deg']:8.4f}" for v in rms))
+    for session in motion["no_pairs"]:
+        print(f"session {session}: no pairs (fewer than 2 images whose board pose PnP can measure)")
+    noise = "" if motion["noise_px"] is None else (f" (floor: what {motion['noise_px']:.3f} px of corner noise leaves "
+                                                   "in PnP's poses)")
+    print(f"{frame} motion: {motion['verdict']}{noise}")
+
+
 def is_camera_report(path: Path) -> bool:
     """Whether ``path`` is a camera's REPORT.json (``measurement`` camera); False for anything else, whose reader
     then says what is wrong with it."""
@@ -221,6 +240,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
           f"{after['rms_px']:9.4f}")
     print(f"world frame: {document['world']}; before: {document['report']}'s nominal kinematics with their own mount "
           "and world frame (OpenCV's hand-eye, refined); after: the corrected URDF and its camera_info")
+    _print_relative_pose(document["relative_pose"])
     for written in (run.written, run.html):
         if written is not None:
             print(f"wrote {written}")

@@ -42,7 +42,7 @@ from pincal.fit.solver import Solution, solve
 from pincal.measurements.camera_csv import CornerSet
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.model.effects import Effect, EffectInputs, effect_inputs, with_loads
+from pincal.model.effects import Effect, EffectInputs, effect_inputs, joint_shifts, with_loads
 from pincal.model.parameter_sets import CHAIN_LEVELS, LEVELS, ChainLevel, ChainParameters, NoParameters
 from pincal.model.pinhole import INTRINSIC_NAMES
 from pincal.model.sensitivity import ParameterSlot, SensitivityModel
@@ -51,7 +51,7 @@ from pincal.residuals.camera import CameraEstimate, CameraResidual
 from pincal.residuals.sensor_values import ModelledEffects
 
 __all__ = ["CAMERA_SELECTIONS", "CameraFitOptions", "CameraProblem", "CameraCalibration", "calibrate_camera",
-           "images_of", "reprojection_errors", "refit_worlds", "image_sessions",
+           "images_of", "reprojection_errors", "refit_worlds", "mounted_frames", "image_sessions",
            "images_as_rows", "camera_effect_inputs"]
 
 #: The selection criteria a camera's fit offers: leave-one-row-out (``press``) needs rows of one size,
@@ -351,6 +351,22 @@ def refit_worlds(chain: KinematicChain, corners: CornerSet, estimate: CameraEsti
 
         x0[columns] = least_squares(residual, x0[columns], jac=jacobian, method="lm").x
     return objective.residual(x0).reshape(-1, 2), objective.estimate(x0).worlds
+
+
+def mounted_frames(chain: KinematicChain, corners: CornerSet, mount: np.ndarray,
+                   effects: Sequence[tuple[Effect, np.ndarray]] = ()) -> np.ndarray:
+    """The mounted frame ``T_k = base_T_tip(q_k) M`` at each image of ``corners`` (K, 4, 4) [m]: the camera eye in
+    hand, the board eye to hand, through ``chain`` as it is placed and the ``mount`` M (4, 4) [m]; with joint
+    ``effects`` at their values, q_k the readings they move (eq C4 over these images)."""
+    q = corners.q
+    if effects:
+        inputs = camera_effect_inputs(chain, corners, loads=any(e.moments for e, _ in effects))
+        q = q + chain.followed_shifts(joint_shifts([e for e, _ in effects], [v for _, v in effects], inputs,
+                                                   chain.joint_names))
+    rotations, positions = chain.tool_poses(q)
+    out = np.tile(np.eye(4), (len(rotations), 1, 1))
+    out[:, :3, :3], out[:, :3, 3] = rotations, positions
+    return out @ mount
 
 
 def _reprojection(chain: KinematicChain, cache: KinematicsCache, corners: CornerSet, estimate: CameraEstimate,

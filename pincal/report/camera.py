@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.fit.camera_calibration import CameraCalibration
+from pincal.fit.camera_motion import MeasuredMotions, within_floor
 from pincal.measurements.camera_csv import CornerSet
 from pincal.model.camera_view import pose
 from pincal.model.chain import KinematicChain
@@ -25,13 +26,16 @@ from pincal.report.model_camera import (
     FrameJson,
     ImageErrorJson,
     IntrinsicsJson,
+    MotionRmsJson,
     PictureJson,
+    RelativePoseJson,
     ReprojectionJson,
     ReprojectionPair,
 )
 
 __all__ = ["ImageErrors", "CameraRecord", "frame_json", "frame_matrix", "intrinsics_json", "intrinsics_from_json",
-           "reprojection_json", "image_errors_json", "picture_json", "cannot_see", "camera_report"]
+           "reprojection_json", "image_errors_json", "picture_json", "relative_pose_json", "cannot_see",
+           "camera_report"]
 
 #: A set of images with each corner's error after and before (M, 2) [px] each.
 ImageErrors = tuple[CornerSet, np.ndarray, np.ndarray]
@@ -107,6 +111,45 @@ def picture_json(corners: CornerSet, after: np.ndarray) -> PictureJson | None:
     return {"image": corners.images[k], "role": str(corners.roles[k]), "width": width, "height": height,
             "detected_px": corners.pixels[mine].tolist(),
             "reprojected_px": (corners.pixels[mine] + after[mine]).tolist()}
+
+
+def _rms(errors: np.ndarray) -> MotionRmsJson | None:
+    if not len(errors):
+        return None
+    mm, deg = np.sqrt(np.mean(errors**2, axis=0))
+    return {"mm": float(mm), "deg": float(deg)}
+
+
+def relative_pose_json(corners: CornerSet, measured: MeasuredMotions, errors: tuple[np.ndarray, np.ndarray],
+                       frame: str) -> RelativePoseJson:
+    """The ``relative_pose`` of ``evaluate --json`` (:class:`pincal.report.model_camera.RelativePoseJson`): the
+    ``frame``'s (``camera`` or ``board``) relative-pose ``errors`` before and after (P, 2) each [mm, deg] of the
+    pairs ``measured`` (eqs R1-R6 of :mod:`pincal.fit.camera_motion`)."""
+    before, after = errors
+    placed = np.ones(len(corners.images), dtype=bool)
+    placed[[corners.images.index(name) for name in measured.unplaced]] = False
+    sessions = [str(s) for s in dict.fromkeys(corners.sessions.astype(str))]
+    no_pairs = [s for s in sessions if np.count_nonzero(placed & (corners.sessions.astype(str) == s)) < 2]
+    inside = within_floor(before, measured.floor), within_floor(after, measured.floor)
+    if not len(measured.pairs):
+        verdict = "no pairs: no session has 2 evaluated images whose board pose PnP can measure"
+    elif all(inside):
+        verdict = "the images cannot tell these models apart by relative pose"
+    elif any(inside):
+        verdict = (f"{'after' if inside[1] else 'before'} agrees with the images to their floor, "
+                   f"{'before' if inside[1] else 'after'} does not")
+    else:
+        verdict = "neither model agrees with the images to their floor"
+    return {
+        "frame": "camera" if frame == "camera" else "board", "noise_px": measured.noise_px,
+        "pairs": [{"first": corners.images[j], "second": corners.images[k], "session": str(corners.sessions[k]),
+                   "before_mm": float(b[0]), "before_deg": float(b[1]), "after_mm": float(a[0]),
+                   "after_deg": float(a[1]), "floor_mm": float(f[0]), "floor_deg": float(f[1])}
+                  for (j, k), b, a, f in zip(measured.pairs, before, after, measured.floor)],
+        "before": _rms(before), "after": _rms(after), "floor": _rms(measured.floor),
+        "before_within_floor": inside[0], "after_within_floor": inside[1], "verdict": verdict,
+        "no_pairs": no_pairs, "unplaced": list(measured.unplaced),
+    }
 
 
 def cannot_see(result: CameraCalibration, chain: KinematicChain) -> list[str]:

@@ -6,7 +6,8 @@
 it; the camera's facts (arrangement, mount, world frame of each session, intrinsics); each image's row (its RMS per
 coordinate before and after, and its corners' error lengths ‖e‖ [px] from ``errors_px``, drawn as a box per image);
 and the picture of ``camera.picture`` (its corners as detected and reprojected), drawn on the image file when
-``sources.images`` holds a file of that name and size, else on a blank image of its size.
+``sources.images`` holds a file of that name and size, else on a blank image of its size. ``evaluate --html`` adds
+the evaluated images' card and, among the facts, their relative poses (RMS before, after and the floor, the verdict).
 """
 
 from __future__ import annotations
@@ -85,6 +86,16 @@ def _cards(reprojection: Mapping[str, Any]) -> list[dict[str, Any]]:
     return cards
 
 
+def _motion_text(motion: Mapping[str, Any]) -> str:
+    """evaluate's relative poses in a line: their RMS before, after and the floor [mm, deg], and the verdict."""
+    if not motion["pairs"]:
+        return str(motion["verdict"])
+    rms = "; ".join(f"{key} {num(float(motion[key]['mm']), 3)} mm, {num(float(motion[key]['deg']), 3)}°"
+                    for key in ("before", "after", "floor"))
+    return (f"RMS over {len(motion['pairs'])} pairs: {rms} (the floor: what {num(float(motion['noise_px']), 3)} px "
+            f"of corner noise leaves in PnP's poses): {motion['verdict']}")
+
+
 def camera_page(document: Mapping[str, Any], evaluation: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The values of ``camera.html.j2`` for a camera's REPORT.json ``document`` (module docstring); with
     ``evaluation`` (``evaluate --json``'s document), its images instead of the report's, an ``evaluated`` card
@@ -113,6 +124,9 @@ def camera_page(document: Mapping[str, Any], evaluation: Mapping[str, Any] | Non
         cards += _cards({"evaluated": evaluation["reprojection"]})
         facts.append(("evaluated", f"{evaluation['data']} through {evaluation['urdf']} and {evaluation['camera_info']} "
                                    f"(world frame {evaluation['world']})"))
+        motion = evaluation.get("relative_pose")  # absent from files written before it was measured
+        if motion:
+            facts.append((f"{motion['frame']} motion between consecutive images", _motion_text(motion)))
     section.update(per_coordinate=True, cards=cards, facts=facts,
                    sessions=len({r["session"] for r in rows}) > 1)
     return section

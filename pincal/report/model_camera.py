@@ -20,7 +20,7 @@ from pincal.report.model_tree import TreeCandidateJson
 
 __all__ = ["CameraSources", "FrameJson", "IntrinsicsJson", "ReprojectionJson", "ReprojectionPair", "ImageErrorJson",
            "PictureJson", "CameraBlock", "CameraReport", "CameraEvaluationJson", "RmsPair", "CameraStepJson",
-           "CameraDiagnosisJson"]
+           "CameraDiagnosisJson", "MotionRmsJson", "MotionPairJson", "RelativePoseJson"]
 
 
 class _CameraSourcesKeys(TypedDict):
@@ -196,11 +196,62 @@ class CameraReport(_CameraDiagnosisKeys):
     xacro_args: dict[str, str]
 
 
-class CameraEvaluationJson(TypedDict):
+class MotionRmsJson(TypedDict):
+    """RMS over the pairs of a relative pose's error: its translation [mm] and its rotation [deg]."""
+
+    mm: float
+    deg: float
+
+
+class MotionPairJson(TypedDict):
+    """Two consecutive evaluated images of one session: the error of the mounted frame's relative pose between them
+    as each model predicts it against as the images measure it (PnP of each image's corners), [mm, deg], and its
+    floor, what the corners' noise alone leaves in the measured one (a perfect model's RMS error)."""
+
+    first: str
+    second: str
+    session: str
+    before_mm: float
+    before_deg: float
+    after_mm: float
+    after_deg: float
+    floor_mm: float
+    floor_deg: float
+
+
+class RelativePoseJson(TypedDict):
+    """The relative pose of the camera (eye in hand) or of the board (eye to hand) between consecutive evaluated
+    images of each session (:mod:`pincal.fit.camera_motion`, eqs R1-R6): per pair and its RMS over the pairs,
+    before, after and the floor (null without pairs); ``noise_px``: the corners' noise per coordinate the PnP
+    residuals show, the floor's source [px]; ``*_within_floor``: a model's errors no larger than a perfect
+    model's would be (95 %); ``verdict`` in words (``no pairs`` ... when no session has 2 images PnP places);
+    ``no_pairs``: the sessions with fewer than 2 such images; ``unplaced``: images PnP cannot place (fewer than 4
+    corners, or on one line)."""
+
+    frame: Literal["camera", "board"]
+    noise_px: float | None
+    pairs: list[MotionPairJson]
+    before: MotionRmsJson | None
+    after: MotionRmsJson | None
+    floor: MotionRmsJson | None
+    before_within_floor: bool
+    after_within_floor: bool
+    verdict: str
+    no_pairs: list[str]
+    unplaced: list[str]
+
+
+class _CameraEvaluationKeys(TypedDict, total=False):
+    relative_pose: RelativePoseJson
+
+
+class CameraEvaluationJson(_CameraEvaluationKeys):
     """``pincal evaluate --json`` of a camera's report: the evaluated images' reprojection errors before (the nominal
     URDF with the report's nominal mount, world frame and the start's intrinsics) and after (the corrected URDF and
     its camera_info), overall and per image; ``picture``: the evaluated image with the largest RMS after, for
-    ``evaluate --html``."""
+    ``evaluate --html``; ``relative_pose``: the camera's (or the board's) relative pose between consecutive images,
+    before and after, against what the images measure, with the floor of that comparison (absent from files
+    written before pincal measured it)."""
 
     urdf: str
     report: str
