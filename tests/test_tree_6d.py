@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
+import json
 
 import numpy as np
 import pinocchio as pin
@@ -11,6 +14,7 @@ from conftest import assert_close, numeric_jacobian
 from scipy.spatial.transform import Rotation
 from tree_robot import two_arm_urdf
 
+from pincal.cli.commands import main
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
 from pincal.fit.tree_calibration import calibrate_tree, initial_tree_target, tree_rows
@@ -22,6 +26,7 @@ from pincal.residuals.sensor_values import RowWeights
 from pincal.residuals.tree import TreeResidual
 
 TARGETS = ["left_marker:1", "right_marker:2,3"]
+TIP_LINKS = ["--tip-link", TARGETS[0], "--tip-link", TARGETS[1]]
 LOCAL = [np.array([[0.01, 0.0, 0.02]]), np.array([[0.0, 0.01, 0.0], [0.03, -0.01, 0.01]])]  # points in the tip links
 FRAMES = [pin.rpy.rpyToMatrix(0.2, 0.1, -0.3), pin.rpy.rpyToMatrix(-0.1, 0.4, 0.2)]  # each target's frame in its link
 NUMBERS = (1, 3)  # left_marker's orientation measured with point 1, right_marker's with point 3
@@ -112,15 +117,22 @@ def test_the_same_rows_without_orientations_fit_points_only(simulated):
     assert points_only.rms_m < 1e-11 and points_only.rank == result.rank  # the frames absorb the tips' rotations
 
 
+def _header(tree):
+    return [*tree.joint_names, *(f"{a}{i}" for i in (1, 2, 3) for a in "xyz"),
+            *(f"q{a}{n}" for n in NUMBERS for a in "xyzw")]
+
+
+def _cells(q, sensed, turns, index):
+    """The CSV cells of rows ``index``: joints, points, each target's quaternion (scalar last)."""
+    return [[*(repr(float(v)) for v in q[k]), *(repr(float(v)) for v in sensed[k].ravel()),
+             *(repr(float(v)) for turn in turns for v in Rotation.from_matrix(turn[k]).as_quat())] for k in index]
+
+
 @pytest.fixture(scope="module")
 def csv_rows(tmp_path_factory, simulated):
     """Three of the simulated rows as a CSV file with orientation columns qx1.. and qx3.. (header, lines 2-4)."""
     tree, _, _, data, (sensed, turns), _, _ = simulated
-    header = [*tree.joint_names, *(f"{a}{i}" for i in (1, 2, 3) for a in "xyz"),
-              *(f"q{a}{n}" for n in NUMBERS for a in "xyzw")]
-    rows = [[*(repr(float(v)) for v in data.q[k]), *(repr(float(v)) for v in sensed[k].ravel()),
-             *(repr(float(v)) for turn in turns for v in Rotation.from_matrix(turn[k]).as_quat())] for k in range(3)]
-    return tmp_path_factory.mktemp("tree6d"), tree, header, rows
+    return tmp_path_factory.mktemp("tree6d"), tree, _header(tree), _cells(data.q, sensed, turns, range(3))
 
 
 def _file(folder, header, rows, name="data.csv"):
@@ -173,3 +185,59 @@ def test_orientation_columns_name_a_target_by_one_of_its_points(csv_rows, rename
     else:
         with pytest.raises(PincalError, match=message):
             tree_rows(tree, data)
+
+
+@pytest.fixture(scope="module")
+def cli_run(tmp_path_factory, simulated):
+    """``pincal calibrate`` of 30 of the 6D rows (right_marker's orientation not seen on line 7), 10 held out."""
+    tree, _, _, data, (sensed, turns), _, _ = simulated
+    folder = tmp_path_factory.mktemp("tree6d_cli")
+    urdf = folder / "robot.urdf"
+    urdf.write_text(two_arm_urdf(), encoding="utf-8")
+    rows = _cells(data.q, sensed, turns, range(30))
+    column = _header(tree).index("qx3")
+    rows[5][column:column + 4] = ["", "", "", ""]
+    calibration, held = _file(folder, _header(tree), rows), _file(folder, _header(tree),
+                                                                 _cells(data.q, sensed, turns, range(30, 40)), "held.csv")
+    out, report = folder / "out.urdf", folder / "REPORT.json"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["calibrate", str(urdf), str(calibration), *TIP_LINKS, "--select", "all", "--out", str(out),
+                     "--report", str(report), "--quiet"])
+    return folder, urdf, calibration, held, out, report, code, printed.getvalue()
+
+
+def test_calibrate_reports_and_prints_each_targets_orientation_before_and_after(cli_run):
+    *_, report_path, code, printed = cli_run
+    assert code == 0
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    assert report["noise"]["sigma_rot_deg"] is not None
+    for target, seen in zip(report["targets"], (30, 29)):
+        before, after = target["nominal_errors"], target["calibration_errors"]
+        assert after["orientation_seen"] == seen and len(target["rotation_xyzw"]) == 4
+        assert before["orientation"]["rms_deg"] > 0.2 and after["orientation"]["max_deg"] < 1e-6
+    lines = printed.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("target orientation"))
+    assert [line.split()[:2] for line in lines[at + 1:at + 3]] == [["left_marker", "30"], ["right_marker", "29"]]
+
+
+def test_evaluate_prints_and_writes_each_targets_orientation_errors(cli_run, capsys):
+    folder, _, _, held, out, report, *_ = cli_run
+    assert main(["evaluate", str(out), str(report), str(held), "--max-rot-deg", "1e-6", "--json",
+                 str(folder / "e.json")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("target orientation"))
+    for line, link in zip(lines[at + 1:at + 3], ("left_marker", "right_marker")):
+        assert line.split()[:2] == [link, "10"] and float(line.split()[-1]) < 1e-6
+    document = json.loads((folder / "e.json").read_text(encoding="utf-8"))
+    assert document["max_deg"] < 1e-6
+    assert [t["errors"]["orientation_seen"] for t in document["evaluated_targets"]] == [10, 10]
+
+
+def test_diagnose_refuses_orientation_columns_in_one_line(cli_run, capsys):
+    folder, urdf, calibration, *_ = cli_run
+    assert main(["diagnose", str(urdf), str(calibration), *TIP_LINKS, "--out", str(folder / "d.urdf"),
+                 "--report", str(folder / "D.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "diagnose does not take the targets' orientation columns qxN,qyN,qzN,qwN" in err and "\n" not in err
+    assert not (folder / "D.json").exists()

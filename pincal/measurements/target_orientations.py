@@ -20,18 +20,33 @@ norm is one line naming the file, the line and the column.
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-if TYPE_CHECKING:
-    from pincal.measurements.csv_v1 import CsvTable
+from pincal.errors import PincalError
 
-__all__ = ["TARGET_QUAT_RE", "target_quat_columns", "read_target_rotations"]
+__all__ = ["TARGET_QUAT_RE", "CellTable", "target_quat_columns", "read_target_rotations"]
 
 #: A numbered orientation column: ``qxN``, ``qyN``, ``qzN`` or ``qwN`` (N = 1, 2, ...).
 TARGET_QUAT_RE = re.compile(r"q([xyzw])([1-9][0-9]*)")
+
+
+class CellTable(Protocol):
+    """What is read of a table here (:class:`pincal.measurements.csv_v1.CsvTable` is one)."""
+
+    @property
+    def names(self) -> tuple[str, ...]: ...
+
+    @property
+    def lines(self) -> list[int]: ...
+
+    def matrix(self, names: Sequence[str], blank: float | None = None) -> np.ndarray: ...
+
+    def error(self, message: str, line: int | None = None, column: str | None = None,
+              joint: str | None = None) -> PincalError: ...
 
 
 def target_quat_columns(number: int) -> tuple[str, str, str, str]:
@@ -39,7 +54,7 @@ def target_quat_columns(number: int) -> tuple[str, str, str, str]:
     return f"qx{number}", f"qy{number}", f"qz{number}", f"qw{number}"
 
 
-def read_target_rotations(table: CsvTable, norm_tolerance: float) -> dict[int, np.ndarray]:
+def read_target_rotations(table: CellTable, norm_tolerance: float) -> dict[int, np.ndarray]:
     """Every orientation group ``qxN,qyN,qzN,qwN`` of ``table``: N → (K, 3, 3) rotations in the sensor frame,
     normalised, NaN in the rows where all four cells are empty (not seen); {} without such columns.
 
