@@ -109,6 +109,20 @@ def test_an_occluded_orientation_removes_only_itself(simulated):
     assert np.isfinite(result.point_errors).all()  # the row's points stay
 
 
+def test_orientations_are_weighted_by_their_own_noise_scale(simulated):
+    """sigma_rot is estimated from the orientation residuals alone, sigma_pos from the points' (each row's
+    entries whitened by its own: maximum likelihood with unknown variances, as one chain's)."""
+    tree, _, _, data, _, _, _ = simulated
+    rng = np.random.default_rng(11)
+    sigma_pos, sigma_rot = 2e-4, np.radians(0.3)  # a mocap rigid body's: 0.2 mm, 0.3 deg
+    noisy = {n: turns @ Rotation.from_rotvec(rng.normal(0.0, sigma_rot, (len(turns), 3))).as_matrix()
+             for n, turns in data.target_rotations.items()}
+    rows = MeasurementSet(data.joint_names, data.q, data.points + rng.normal(0.0, sigma_pos, data.points.shape), None,
+                          data.roles, data.lines, target_rotations=noisy)
+    result = calibrate_tree(tree, rows, "full", ChainFitOptions(selection="all"))
+    assert 0.7 < result.sigma_pos_m / sigma_pos < 1.1 and 0.7 < result.sigma_rot_rad / sigma_rot < 1.1
+
+
 def test_the_same_rows_without_orientations_fit_points_only(simulated):
     tree, _, _, data, _, result, _ = simulated
     plain = MeasurementSet(data.joint_names, data.q, data.points, None, data.roles, data.lines)
