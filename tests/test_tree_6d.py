@@ -18,7 +18,7 @@ from pincal.cli.commands import main
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
 from pincal.fit.tree_calibration import calibrate_tree, initial_tree_target, tree_rows
-from pincal.measurements.csv_v1 import read_measurements
+from pincal.measurements.csv_v1 import read_measurements, read_sessions
 from pincal.measurements.data import MeasurementSet
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
@@ -167,6 +167,15 @@ def test_orientation_columns_are_read_per_target_and_an_empty_group_is_not_seen(
     assert table.rotation_seen.tolist() == [[True, True], [True, False], [True, True]]
 
 
+def test_sessions_of_one_calibration_give_the_same_orientation_columns(csv_rows):
+    folder, tree, header, rows = csv_rows
+    plain = [name for name in header if not name.startswith("q")]
+    other = _file(folder, plain, [row[:len(plain)] for row in rows], "points_only.csv")
+    with pytest.raises(PincalError, match="differs from .* in its orientation columns qxN,qyN,qzN,qwN"):
+        read_sessions([_file(folder, header, rows), other], tree.joint_specs, (), tree.other_branch_joints,
+                      occlusion=True)
+
+
 @pytest.mark.parametrize(("cells", "message"), [
     ({"qy3": "abc"}, "line 3, column 'qy3': 'abc' is not a finite number"),
     ({"qw1": ""}, "line 3, column 'qw1': some of qx1,qy1,qz1,qw1 empty"),
@@ -255,3 +264,10 @@ def test_diagnose_refuses_orientation_columns_in_one_line(cli_run, capsys):
     err = capsys.readouterr().err.strip()
     assert "diagnose does not take the targets' orientation columns qxN,qyN,qzN,qwN" in err and "\n" not in err
     assert not (folder / "D.json").exists()
+
+
+def test_plan_continues_6d_rows_and_says_it_plans_the_points(cli_run, capsys):
+    folder, urdf, calibration, *_ = cli_run
+    assert main(["plan", str(urdf), *TIP_LINKS, "--count", "2", "--sample", "40", "--existing", str(calibration),
+                 "--out", str(folder / "MORE.csv"), "--report", str(folder / "MORE.json"), "--quiet"]) == 0
+    assert "orientation columns qxN,qyN,qzN,qwN are not counted in the plan's information" in capsys.readouterr().err
