@@ -121,6 +121,7 @@ def test_orientations_are_weighted_by_their_own_noise_scale(simulated):
                           data.roles, data.lines, target_rotations=noisy)
     result = calibrate_tree(tree, rows, "full", ChainFitOptions(selection="all"))
     assert 0.7 < result.sigma_pos_m / sigma_pos < 1.1 and 0.7 < result.sigma_rot_rad / sigma_rot < 1.1
+    assert 0.0 < result.predicted_point_rms(tree, data.q[:5]) < sigma_pos  # the frames' columns in its covariance
 
 
 def test_the_same_rows_without_orientations_fit_points_only(simulated):
