@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -66,14 +67,24 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
         print(f"pincal: note: {note}", file=sys.stderr)
     result = run.result
     size, joints = 0 if result.params is None else result.params.size, len(run.report["chain"]["joints"])
+    noise = f"{result.sigma_pos_m * 1000:.3f} mm" + ("" if result.sigma_rot_rad is None else
+                                                     f", {math.degrees(result.sigma_rot_rad):.4f} deg")
     print(f"level {result.level}: {result.rank} of {size} parameters identifiable on {joints} joints "
-          f"({len(targets)} targets); noise {result.sigma_pos_m * 1000:.3f} mm; calibrated in {run.seconds:.2f} s")
+          f"({len(targets)} targets); noise {noise}; calibrated in {run.seconds:.2f} s")
     print(f"{'target (points)':32s} {'seen':>5s} {'RMS before':>11s} {'RMS after':>10s} {'max after':>10s}  [mm]")
     for target in run.report["targets"]:
         before, after = target["nominal_errors"], target["calibration_errors"]
         name = f"{target['tip_link']} ({','.join(map(str, target['points']))})"
         print(f"{name:32s} {after['seen']:5d} {before['position']['rms_mm']:11.3f} {after['position']['rms_mm']:10.3f} "
               f"{after['position']['max_mm']:10.3f}")
+    oriented = [t for t in run.report["targets"] if "orientation" in t["calibration_errors"]]
+    if oriented:  # each target's orientation (columns qxN,qyN,qzN,qwN) before and after
+        print(f"{'target orientation':32s} {'seen':>5s} {'RMS before':>11s} {'RMS after':>10s} {'max after':>10s}  "
+              "[deg]")
+    for target in oriented:
+        before, after = target["nominal_errors"], target["calibration_errors"]
+        print(f"{target['tip_link']:32s} {after['orientation_seen']:5d} {before['orientation']['rms_deg']:11.4f} "
+              f"{after['orientation']['rms_deg']:10.4f} {after['orientation']['max_deg']:10.4f}")
     if run.withheld:
         print(urdf_line(Path(args.out), True))
     else:
@@ -180,9 +191,23 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
             continue
         stats = errors["position"]
         print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
+    turned = [(link, errors) for link, errors in run.targets if errors is not None and "orientation_seen" in errors]
+    if turned:  # each target whose orientation the report calibrated and these rows measure
+        print(f"{'target orientation':32s} {'seen':>5s} {'mean':>8s} {'RMS':>8s} {'max':>8s}  [deg]")
+    for link, errors in turned:
+        if "orientation" not in errors:
+            print(f"{link:32s} {0:5d}  not seen")
+            continue
+        angle = errors["orientation"]
+        print(f"{link:32s} {errors['orientation_seen']:5d} {angle['mean_deg']:8.4f} {angle['rms_deg']:8.4f} "
+              f"{angle['max_deg']:8.4f}")
     if args.json is not None:
         print(f"wrote {args.json}")
+    failed = 0
     if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
         print(f"FAIL: largest position error {run.max_mm:.3f} mm > --max-pos-mm {args.max_pos_mm:g}")
-        return 1
-    return 0
+        failed = 1
+    if args.max_rot_deg is not None and run.max_deg is not None and run.max_deg > args.max_rot_deg:
+        print(f"FAIL: largest orientation error {run.max_deg:.4f} deg > --max-rot-deg {args.max_rot_deg:g}")
+        failed = 1
+    return failed

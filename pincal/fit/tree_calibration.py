@@ -8,11 +8,15 @@ link, and the tree's parameters (:class:`pincal.model.tree_parameters.TreeParame
 shared by several chains is one set of parameters, fitted once). After the registration, the
 steps are the one pipeline of :mod:`pincal.fit.pipeline` — identifiability ordered on the whole
 tree's Jacobian, the selection, the refits, the prior — on :class:`pincal.fit.tree_problem.TreeProblem`.
+A target whose orientation is measured (``qxN,qyN,qzN,qwN``, N one of its points:
+:mod:`pincal.measurements.target_orientations`) adds its frame's rotation in its tip link to the
+unknowns and its orientation residuals to the rows, weighted by the orientation noise scale as one
+chain's are.
 
-Not yet: orientation columns, a known tool, ``--select press`` (leave-one-row-out over rows of
-different sizes), outlier rejection, the target and registration holds of
-:mod:`pincal.fit.target_hold` and :mod:`pincal.fit.registration_hold` (refused or noted, never
-silently different).
+Not yet: orientation columns without a number (``qx,qy,qz,qw``: whose?), a known tool,
+``--select press`` (leave-one-row-out over rows of different sizes), outlier rejection,
+the target and registration holds of :mod:`pincal.fit.target_hold` and
+:mod:`pincal.fit.registration_hold` (refused or noted, never silently different).
 """
 
 from __future__ import annotations
@@ -29,10 +33,11 @@ from pincal.fit.identifiability import Ordering, Selection, condition_number, co
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import PriorResidual, data_rows
 from pincal.fit.problem import KindProblem
-from pincal.fit.registration import register_points
+from pincal.fit.registration import mean_rotation, register_points
 from pincal.fit.sessions import registration_problem, where
 from pincal.fit.tree_problem import TreeProblem, registration_fit
 from pincal.measurements.data import MeasurementSet
+from pincal.measurements.target_orientations import target_quat_columns
 from pincal.model.parameter_sets import CHAIN_LEVELS, ChainLevel, ParameterLevel
 from pincal.model.sensor import Registration
 from pincal.model.tree import KinematicTree, TreePlacements
@@ -55,7 +60,8 @@ class TreeCalibration:
         vector / std: every tree parameter's value [m, rad] (zero: nominal, and where not kept) and its
             standard deviation (NaN where not estimated), (n,).
         status: per tree parameter, :data:`pincal.fit.pipeline.KEPT` or why it is not.
-        target: the registrations (one per session) and every point (P, 3) in its own tip link [m].
+        target: the registrations (one per session), every point (P, 3) in its own tip link [m] and each target's
+            frame rotation in its tip link (T, 3, 3) (the identity for a target without orientation).
         sigma_pos_m: the position noise scale estimated from the residuals [m].
         rank, condition, selection, dropped, correlated: the identifiability of the whole tree.
         point_errors: each calibration row's distance of each point from the model [m], NaN where not seen (K, P).
@@ -71,8 +77,12 @@ class TreeCalibration:
         kept: the tree parameters the fit had free (indices, sorted): those ``calibrated`` and, under a prior,
             those it holds near nominal (``status`` says which); the geometry ``diagnose`` refits; the kinematic
             columns of ``covariance``.
-        covariance: of the fit's unknowns — the kept parameters, the registrations, the points — as the fit
-            gives it (with a prior: the posterior) [m², rad², m·rad]; None: not known (a result made elsewhere).
+        covariance: of the fit's unknowns — the kept parameters, the registrations, the points, the targets'
+            rotations — as the fit gives it (with a prior: the posterior) [m², rad², m·rad]; None: not known (a
+            result made elsewhere).
+        sigma_rot_rad: the orientation noise scale estimated from the residuals [rad]; None without orientations.
+        orientation_errors: each calibration row's orientation error of each target [rad], NaN where not seen
+            (K, T); None when no target's orientation is measured.
     """
 
     level: ChainLevel
@@ -97,6 +107,8 @@ class TreeCalibration:
     prior_sigma: np.ndarray | None = None
     kept: np.ndarray = field(default_factory=lambda: np.array([], dtype=np.intp))
     covariance: np.ndarray | None = None
+    sigma_rot_rad: float | None = None
+    orientation_errors: np.ndarray | None = None
 
     @property
     def rms_m(self) -> float:
@@ -112,10 +124,15 @@ class TreeCalibration:
         if self.covariance is None:
             return 0.0
         k, n_points = len(q), len(self.target.points)
+        turns = None  # the oriented targets' rows: their rotation unknowns are columns of the covariance
+        if self.orientation_errors is not None:
+            oriented = np.any(np.isfinite(self.orientation_errors), axis=0)
+            turns = np.broadcast_to(oriented, (k, oriented.size))
         rows = TreeRows(np.asarray(q, dtype=float), np.zeros((k, n_points, 3)), np.ones((k, n_points), dtype=bool),
-                        np.zeros(k, dtype=np.intp))
+                        np.zeros(k, dtype=np.intp), None if turns is None else np.tile(np.eye(3), (k, turns.shape[1],
+                                                                                                   1, 1)), turns)
         objective = TreeResidual(tree, self.params, self.kept, self.vector, rows, self.target, RowWeights(np.ones(k)))
-        jac = objective.jacobian(objective.start_vector())  # at the calibrated model: its own start
+        jac = objective.jacobian(objective.start_vector())[: objective.n_positions]  # at the calibrated model
         variance = np.einsum("ij,jk,ik->i", jac, self.covariance, jac)
         return float(np.sqrt(variance.sum() / (k * n_points)))
 
@@ -125,12 +142,14 @@ def tree_rows(tree: KinematicTree, data: MeasurementSet, sessions: np.ndarray | 
     its session's index in ``data``).
 
     Raises:
-        CalibrationError: orientation columns, a file's points that are not the targets' (naming both), or a
-            point with one or two of its three cells empty (naming the file and line).
+        CalibrationError: orientation columns without a number (whose?), a file's points that are not the targets'
+            (naming both), a point with one or two of its three cells empty (naming the file and line), an
+            orientation numbered with no target's point, or two for one target.
     """
     if data.rotations is not None:
-        raise CalibrationError(f"{data.source}: orientation columns qx,qy,qz,qw with several --tip-link are not yet "
-                               "supported; calibrate the points (drop the orientation columns) or one tip link")
+        raise CalibrationError(f"{data.source}: orientation columns qx,qy,qz,qw name no target with several "
+                               "--tip-link; give each target's as qxN,qyN,qzN,qwN, N one of its points (the point "
+                               "xN,yN,zN its tracker reports with it)")
     numbers = sorted(p for t in tree.targets for p in t.spec.points)
     if numbers != list(range(1, data.n_points + 1)):
         raise CalibrationError(f"{data.source}: {data.n_points} measured point(s) per row, the --tip-link values "
@@ -143,7 +162,33 @@ def tree_rows(tree: KinematicTree, data: MeasurementSet, sessions: np.ndarray | 
         raise CalibrationError(f"{data.files[k]}, line {int(data.lines[k])}: point {p + 1} has some of "
                                f"x{p + 1},y{p + 1},z{p + 1} empty; leave all three empty (not seen in this row) or "
                                "give all three")
-    return TreeRows(data.q, data.points, seen, data.session_index if sessions is None else sessions)
+    return TreeRows(data.q, data.points, seen, data.session_index if sessions is None else sessions,
+                    *_target_turns(tree, data))
+
+
+def _target_turns(tree: KinematicTree, data: MeasurementSet) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Each target's measured orientation (K, T, 3, 3) (the identity where not seen) and where it was seen (K, T)
+    from ``data``'s ``qxN,qyN,qzN,qwN`` (N one of the target's points); (None, None) without them."""
+    if not data.target_rotations:
+        return None, None
+    k, owner = data.n_rows, {p: t for t, target in enumerate(tree.targets) for p in target.spec.points}
+    turns, seen = np.tile(np.eye(3), (k, len(tree.targets), 1, 1)), np.zeros((k, len(tree.targets)), dtype=bool)
+    given: dict[int, int] = {}
+    for number, rotations in sorted(data.target_rotations.items()):
+        columns = ",".join(target_quat_columns(number))
+        if number not in owner:
+            raise CalibrationError(f"{data.source}: columns {columns}: there is no point {number} (the targets carry "
+                                   f"points 1..{data.n_points}); number a target's orientation with one of its points")
+        t = owner[number]
+        if t in given:
+            raise CalibrationError(f"{data.source}: columns {','.join(target_quat_columns(given[t]))} and {columns} "
+                                   f"are both the orientation of {tree.targets[t].link} (points "
+                                   f"{','.join(map(str, tree.targets[t].spec.points))}); a target has one, its link's: "
+                                   "give one group of columns per target")
+        given[t] = number
+        seen[:, t] = np.all(np.isfinite(rotations), axis=(1, 2))
+        turns[seen[:, t], t] = rotations[seen[:, t]]
+    return turns, seen
 
 
 def initial_tree_target(tree: KinematicTree, data: MeasurementSet, rows: TreeRows, iterations: int = 10
@@ -176,7 +221,14 @@ def initial_tree_target(tree: KinematicTree, data: MeasurementSet, rows: TreeRow
             rotations, positions = poses[carrier]
             mine = np.einsum("kji,kj->ki", rotations, local[:, p] - positions)
             points[p] = mine[rows.seen[:, p]].mean(axis=0)
-    return TargetEstimate(registrations[0], points, np.eye(3), tuple(registrations))
+    rotations = np.tile(np.eye(3), (len(tree.targets), 1, 1))
+    for t in rows.oriented():  # R_T,t the mean of R_ktᵀ Omega_sᵀ G_kt over its seen rows (Moakher 2002)
+        assert rows.rotations is not None and rows.rotation_seen is not None  # oriented: both given
+        seen = rows.rotation_seen[:, t]
+        omega = np.stack([r.rotation for r in registrations])[rows.sessions[seen]]
+        turned = poses[t][0][seen].transpose(0, 2, 1) @ omega.transpose(0, 2, 1) @ rows.rotations[seen, t]
+        rotations[t] = mean_rotation(turned)
+    return TargetEstimate(registrations[0], points, rotations, tuple(registrations))
 
 
 def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
@@ -226,8 +278,9 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         other = np.setdiff1d(np.arange(full.n_params), kinematic)
         analysis = Analysis(full.jacobian(full.start_vector()), kinematic, other)
     # the selection counts the residual's entries in blocks of 3 per (row, point) seen
-    pairs = used.select(observed)
-    pairs = MeasurementSet(pairs.joint_names, pairs.q, rows.points[rows.seen][:, None, :], None, pairs.roles,
+    pairs = used.select(np.concatenate([observed, np.nonzero(problem.orientation_seen())[0]]))  # an orientation: 3 too
+    sensed = np.concatenate([rows.points[rows.seen], np.zeros((pairs.n_rows - observed.size, 3))])
+    pairs = MeasurementSet(pairs.joint_names, pairs.q, sensed[:, None, :], None, pairs.roles,
                            pairs.lines, source=used.source, sessions=pairs.sessions, files=pairs.files)
     # TreeParameters has what the pipeline reads of a chain's parameter set (size, info, slots, chain)
     kind = cast("KindProblem[TreeResidual | PriorResidual]", problem)
@@ -239,6 +292,7 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     names += [f"registration{'' if len(used.session_names) == 1 else f'[{n}]'}.{a}"
               for n in used.session_names for a in ("rx", "ry", "rz", "x", "y", "z")]
     names += [f"target.point{p + 1}.{a}" for p in range(rows.seen.shape[1]) for a in "xyz"]
+    names += [f"target.{tree.targets[t].link}.r{a}" for t in rows.oriented() for a in "xyz"]
     columns = [names[i] for i in fit.kept] + names[size:]  # the fit's: the kept parameters, then the others
     dropped: tuple[Dropped, ...] = ()
     if analysis is not None and fit.ordering is not None:
@@ -255,4 +309,6 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         session_names=used.session_names, used_index=index,
         tree_placements=params.placements(fit.vector) if params is not None else tree.placements(),
         notes=tuple(notes), total_seconds=time.perf_counter() - started, prior_sigma=problem.prior,
-        kept=np.sort(np.asarray(fit.kept, dtype=np.intp)), covariance=fit.covariance)
+        kept=np.sort(np.asarray(fit.kept, dtype=np.intp)), covariance=fit.covariance, sigma_rot_rad=problem.sigma_rot,
+        orientation_errors=None if problem.sigma_rot is None else tree_objective.orientation_errors(
+            fit.solution.x, problem.row_weight / problem.sigma_rot))

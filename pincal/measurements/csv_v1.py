@@ -60,6 +60,7 @@ from pincal.measurements.data import (
     refuse_given_twice,
 )
 from pincal.measurements.mimics import follower_angles
+from pincal.measurements.target_orientations import read_target_rotations, target_quat_columns
 from pincal.outputs import replacing
 
 __all__ = [
@@ -398,7 +399,8 @@ def read_measurements(
     other_branches: Sequence[str] = (), occlusion: bool = False,
 ) -> tuple[MeasurementSet, list[str]]:
     """Read and validate a measurement file (format v1); with ``occlusion`` (several targets), an empty cell of a
-    point is NaN (the point not seen in that row: :func:`pincal.fit.tree_calibration.tree_rows`), else an error.
+    point is NaN (the point not seen in that row: :func:`pincal.fit.tree_calibration.tree_rows`), else an error,
+    and each target's ``qxN,qyN,qzN,qwN`` are read (:mod:`pincal.measurements.target_orientations`).
 
     Args:
         path: CSV file.
@@ -426,9 +428,11 @@ def read_measurements(
     for i, name in enumerate(c for triplet in point_names for c in triplet):
         table.check_magnitude(name, points[:, i], MAX_POSITION, "millimetres", "metres")
     rotations = _read_rotations(table)
+    targets = read_target_rotations(table, QUAT_NORM_TOL) if occlusion else {}  # each target's qxN,qyN,qzN,qwN
     roles = _read_roles(table)
-    drivers = [j.mimic.driver for j in joints if j.mimic]  # a driver off the chain is no extra either
-    extra, ignored = _read_extras(table, [n for n in table.names if not is_reserved(n, [*joint_names, *drivers])])
+    reserved = [*joint_names, *(j.mimic.driver for j in joints if j.mimic), *(c for n in targets
+                                                                             for c in target_quat_columns(n))]
+    extra, ignored = _read_extras(table, [n for n in table.names if not is_reserved(n, reserved)])
     notes = _limit_notes(table, q, joints, corrected=[c.joint for c in read_against])
     if ignored:
         notes.append(f"{table.source}: ignored non-numeric column(s): {', '.join(ignored)}")
@@ -436,7 +440,7 @@ def read_measurements(
         notes.append(f"{table.source}: kept numeric extra column(s): {', '.join(extra)}")
     data = MeasurementSet(tuple(joint_names), q, points.reshape(len(q), len(point_names), 3),
                           rotations, roles, np.array(table.lines), extra, table.source,
-                          sessions=_read_sessions(table))
+                          sessions=_read_sessions(table), target_rotations=targets)
     return data, notes
 
 

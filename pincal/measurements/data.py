@@ -151,6 +151,9 @@ class MeasurementSet:
             default: ``source``.
         dropped_extra: the extra columns a join of several files left out because some of
             the files lack them (:func:`join_sets`): each name with the files without it.
+        target_rotations: with several targets, each target's measured orientation in the sensor frame by
+            the number N of its columns ``qxN,qyN,qzN,qwN`` (:mod:`pincal.measurements.target_orientations`),
+            (K, 3, 3) each, NaN in a row where it was not seen; empty otherwise.
     """
 
     joint_names: tuple[str, ...]
@@ -165,6 +168,7 @@ class MeasurementSet:
     sessions: np.ndarray = None  # type: ignore[assignment]  # None: replaced in __post_init__
     files: np.ndarray = None  # type: ignore[assignment]  # None: replaced in __post_init__
     dropped_extra: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    target_rotations: Mapping[int, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -177,6 +181,7 @@ class MeasurementSet:
             "lines": _frozen(self.lines, np.int64),
             "extra": MappingProxyType({str(k): _frozen(v, float) for k, v in self.extra.items()}),
             "dropped_extra": MappingProxyType({str(k): tuple(map(str, v)) for k, v in self.dropped_extra.items()}),
+            "target_rotations": MappingProxyType({int(n): _frozen(r, float) for n, r in self.target_rotations.items()}),
         }
         for key, value in values.items():
             object.__setattr__(self, key, value)
@@ -199,6 +204,9 @@ class MeasurementSet:
             (len(set(names)) != len(names), "joint names are not unique"),
             (not set(self.roles.ravel().tolist()) <= set(ROLES), f"roles must be among {', '.join(ROLES)}"),
         ]
+        for number, turns in self.target_rotations.items():
+            problems.append((turns.shape != (k, 3, 3), f"target_rotations[{number}] has shape {turns.shape}, "
+                             f"expected ({k}, 3, 3)"))
         for name, column in self.extra.items():
             problems.append((column.shape != (k,), f"extra '{name}' has shape {column.shape}, expected ({k},)"))
             problems.append((is_reserved(name, names), f"extra column name '{name}' is reserved"))
@@ -278,16 +286,18 @@ class MeasurementSet:
             "sessions": self.sessions[index],
             "files": self.files[index],
             "dropped_extra": self.dropped_extra,
+            "target_rotations": {n: turns[index] for n, turns in self.target_rotations.items()},
         }
         if index.ndim != 1:  # not a choice of rows: the constructor says what is wrong
             return MeasurementSet(**rows)
         # rows of a valid set are a valid set, not checked again: NumPy's indexing made new
         # arrays, frozen here in place of the constructor's read-only copies
         for array in (rows["q"], rows["points"], rows["rotations"], rows["roles"], rows["lines"],
-                      rows["sessions"], rows["files"], *rows["extra"].values()):
+                      rows["sessions"], rows["files"], *rows["extra"].values(), *rows["target_rotations"].values()):
             if array is not None:
                 array.flags.writeable = False
         rows["extra"] = MappingProxyType(rows["extra"])
+        rows["target_rotations"] = MappingProxyType(rows["target_rotations"])
         subset = object.__new__(MeasurementSet)
         for key, value in rows.items():
             object.__setattr__(subset, key, value)
@@ -321,6 +331,7 @@ def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
             (other.n_points != first.n_points,
              f"target points per row ({other.n_points} against {first.n_points})"),
             (other.has_orientation != first.has_orientation, "orientation columns qx,qy,qz,qw"),
+            (sorted(other.target_rotations) != sorted(first.target_rotations), "orientation columns qxN,qyN,qzN,qwN"),
         ]
         for failed, what in differs:
             if failed:
@@ -342,6 +353,7 @@ def join_sets(sets: Sequence[MeasurementSet]) -> MeasurementSet:
         sessions=np.concatenate([s.sessions for s in sets]),
         files=np.concatenate([s.files for s in sets]),
         dropped_extra=dropped,
+        target_rotations={n: np.concatenate([s.target_rotations[n] for s in sets]) for n in first.target_rotations},
     )
 
 

@@ -229,15 +229,26 @@ class KinematicTree:
         q = np.atleast_2d(np.asarray(q, dtype=float))
         out = np.full((len(q), max(p for t in self.targets for p in t.spec.points), 3), np.nan)
         for t, (target, local) in enumerate(zip(self.targets, points)):
-            bent = None if bends is None else bends[t]
-            if bent is None:
-                rotations, positions = target.chain.tool_poses(q[:, target.columns])
-            else:  # the chain turned at its joints (eq L1), as the diagnose's residual had it
-                poses = bent_tool_poses(target.chain, q[:, target.columns], bent)
-                rotations, positions = poses.tool_rotations, poses.tool_positions
+            rotations, positions = self._tool_poses(t, q, bends)
             world = positions[:, None, :] + np.einsum("kij,pj->kpi", rotations, np.atleast_2d(local))
             out[:, [p - 1 for p in target.spec.points]] = world
         return out
+
+    def target_rotations(self, q: np.ndarray, frames: Sequence[np.ndarray],
+                         bends: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
+        """Each target's frame in the URDF root frame at tree joint readings ``q`` (K, N), R_k,t R_T,t: (K, T, 3, 3);
+        ``frames``: each target's frame in its tip link R_T,t (3, 3); ``bends``: as :meth:`target_points`'."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return np.stack([self._tool_poses(t, q, bends)[0] @ frame for t, frame in enumerate(frames)], axis=1)
+
+    def _tool_poses(self, t: int, q: np.ndarray, bends: Sequence[np.ndarray | None] | None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Target ``t``'s tip link rotations (K, 3, 3) and positions (K, 3) [m] at tree readings ``q`` (K, N)."""
+        target, bent = self.targets[t], None if bends is None else bends[t]
+        if bent is None:
+            return target.chain.tool_poses(q[:, target.columns])
+        poses = bent_tool_poses(target.chain, q[:, target.columns], bent)  # turned at its joints (eq L1)
+        return poses.tool_rotations, poses.tool_positions
 
 
 def _refuse_nested(model: pin.Model, links: Sequence[str], source: str) -> None:

@@ -12,8 +12,10 @@ from pincal.report.model import (
     Identifiability,
     JointKind,
     Noise,
+    OrientationStats,
     Parameter,
     PositionStats,
+    Quaternion,
     RegistrationPair,
     RunHead,
     Sha256,
@@ -38,13 +40,20 @@ class TreeChainJson(_TreeChainKeys, total=False):
     mimics: list[MimicJson]
 
 
-class TargetErrors(TypedDict):
-    """A target's points on a set of rows, each point where it was seen (eq 24's position error): ``seen``
-    (row, point) pairs, their errors over all of them and per point (in the order of ``points``)."""
-
+class _TargetErrorsKeys(TypedDict):
     seen: int
     position: PositionStats
     position_per_point: list[PositionStats]
+
+
+class TargetErrors(_TargetErrorsKeys, total=False):
+    """A target's points on a set of rows, each point where it was seen (eq 24's position error): ``seen``
+    (row, point) pairs, their errors over all of them and per point (in the order of ``points``). A target whose
+    orientation is measured (``qxN,qyN,qzN,qwN``) adds the rows where it was seen (``orientation_seen``) and eq 24's
+    orientation error on them [deg] (``orientation``; absent when seen in none)."""
+
+    orientation_seen: int
+    orientation: OrientationStats
 
 
 class _TargetKeys(TypedDict):
@@ -59,11 +68,14 @@ class _TargetKeys(TypedDict):
 class TargetJson(_TargetKeys, total=False):
     """One ``--tip-link LINK:POINTS``: the link, the numbers of the points it carries (1 is ``x1,y1,z1``),
     the joints of the chain root → link, each point in the link as calibrated [m], and the calibration rows'
-    errors of the nominal model (registered to them) and of the calibrated one. ``diagnose`` adds the
+    errors of the nominal model (registered to them) and of the calibrated one; a target whose orientation is
+    measured (``qxN,qyN,qzN,qwN``, N one of its points) adds its frame's rotation in the link as calibrated
+    (``rotation_xyzw``, as one chain's target rotation). ``diagnose`` adds the
     calibration rows' errors of the geometric calibration its effects were added to (``geometry_errors``;
     ``calibration_errors`` are then the final model's, with its effects), and with ``--validation`` the held-out
     rows' errors of both (``validation_geometry_errors``, ``validation_errors``)."""
 
+    rotation_xyzw: Quaternion
     geometry_errors: TargetErrors
     validation_geometry_errors: TargetErrors | None
     validation_errors: TargetErrors | None
@@ -151,13 +163,18 @@ class TreeEvaluationTarget(TypedDict):
     errors: TargetErrors | None
 
 
-class TreeEvaluationJson(TypedDict):
-    """``pincal evaluate --json`` of a REPORT.json of several ``--tip-link``: how many rows were evaluated, how
-    each session was registered, each target's errors (``evaluated_targets``), the largest error of any point
-    [mm] (what ``--max-pos-mm`` judges), and the notes."""
-
+class _TreeEvaluationKeys(TypedDict):
     rows: int
     registrations: list[str]
     evaluated_targets: list[TreeEvaluationTarget]
     max_mm: float
     notes: list[str]
+
+
+class TreeEvaluationJson(_TreeEvaluationKeys, total=False):
+    """``pincal evaluate --json`` of a REPORT.json of several ``--tip-link``: how many rows were evaluated, how
+    each session was registered, each target's errors (``evaluated_targets``), the largest error of any point
+    [mm] (what ``--max-pos-mm`` judges), and the notes; with a target's orientation evaluated, the largest
+    orientation error of any target [deg] (``max_deg``, what ``--max-rot-deg`` judges)."""
+
+    max_deg: float

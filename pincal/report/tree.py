@@ -5,6 +5,7 @@ chain's report words them, each target's points and errors, each session's regis
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pincal._version import __version__
 from pincal.fit.metrics import ErrorSummary
@@ -17,16 +18,29 @@ from pincal.report.model_tree import TargetErrors, TargetJson, TreeChainJson, Tr
 __all__ = ["target_errors", "tree_report"]
 
 
-def target_errors(point_errors: np.ndarray, numbers: tuple[int, ...]) -> TargetErrors:
+def target_errors(point_errors: np.ndarray, numbers: tuple[int, ...], turns: np.ndarray | None = None
+                  ) -> TargetErrors:
     """A target's errors: ``point_errors`` (K, P) [m] of every point, NaN where not seen; ``numbers``: its
-    points (1-based), each seen in some row (:func:`pincal.fit.tree_calibration.tree_rows`)."""
+    points (1-based), each seen in some row (:func:`pincal.fit.tree_calibration.tree_rows`); ``turns``: its
+    orientation errors (K,) [rad], NaN where not seen, or None (its orientation not measured)."""
     mine = np.asarray(point_errors, dtype=float)[:, [p - 1 for p in numbers]] * 1000.0
 
     def stats(values: np.ndarray) -> PositionStats:
         return ErrorSummary.of(values[np.isfinite(values)], "mm").as_dict()  # type: ignore[return-value]
 
-    return {"seen": int(np.isfinite(mine).sum()), "position": stats(mine),
-            "position_per_point": [stats(mine[:, i]) for i in range(len(numbers))]}
+    out: TargetErrors = {"seen": int(np.isfinite(mine).sum()), "position": stats(mine),
+                         "position_per_point": [stats(mine[:, i]) for i in range(len(numbers))]}
+    if turns is not None:
+        seen = np.degrees(np.asarray(turns, dtype=float)[np.isfinite(turns)])
+        out["orientation_seen"] = int(seen.size)
+        if seen.size:
+            out["orientation"] = ErrorSummary.of(seen, "deg").as_dict()  # type: ignore[typeddict-item]
+    return out
+
+
+def _turns(errors: np.ndarray | None, t: int) -> np.ndarray | None:
+    """Target ``t``'s orientation errors (K,) [rad] of a result's (K, T), None where it has none."""
+    return None if errors is None or not np.isfinite(errors[:, t]).any() else errors[:, t]
 
 
 def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: KinematicTree, sources: Sources,
@@ -36,9 +50,14 @@ def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: Kinemat
     targets: list[TargetJson] = [{
         "tip_link": target.link, "points": list(target.spec.points), "joints": list(target.chain.joint_names),
         "points_m": result.target.points[[p - 1 for p in target.spec.points]].tolist(),
-        "nominal_errors": target_errors(nominal.point_errors, target.spec.points),
-        "calibration_errors": target_errors(result.point_errors, target.spec.points),
-    } for target in tree.targets]
+        "nominal_errors": target_errors(nominal.point_errors, target.spec.points,
+                                        _turns(nominal.orientation_errors, t)),
+        "calibration_errors": target_errors(result.point_errors, target.spec.points,
+                                            _turns(result.orientation_errors, t)),
+    } for t, target in enumerate(tree.targets)]
+    for t, entry in enumerate(targets):
+        if _turns(result.orientation_errors, t) is not None:  # R_T,t as one chain's target rotation
+            entry["rotation_xyzw"] = Rotation.from_matrix(result.target.rotation[t]).as_quat().tolist()
     counts = [int(np.sum(result.row_sessions == s)) for s in range(len(result.session_names))]
     return {
         "pincal_version": __version__, "report_version": REPORT_VERSION, "method": None, "level": result.level,
@@ -50,7 +69,8 @@ def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: Kinemat
         "registration": registration_pair(result.target.registration, result.target.registration),
         "sessions": [{"name": name, "rows": count, "registration": registration_pair(r, r)}
                      for name, count, r in zip(result.session_names, counts, result.target.registrations)],
-        "noise": {"sigma_pos_mm": result.sigma_pos_m * 1000.0, "sigma_rot_deg": None},
+        "noise": {"sigma_pos_mm": result.sigma_pos_m * 1000.0,
+                  "sigma_rot_deg": None if result.sigma_rot_rad is None else float(np.degrees(result.sigma_rot_rad))},
         "notes": notes, "warnings": [], "urdf_sha256": digest[0], "xacro_args": digest[1],
     }
 

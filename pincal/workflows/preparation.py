@@ -206,6 +206,9 @@ def plan_files(
                                              occlusion=isinstance(chain, KinematicTree))
         notes += read_notes
         files += existing_paths
+        if existing.target_rotations:  # the tree's plan designs for the targets' points
+            notes.append(f"{existing.source}: the targets' orientation columns qxN,qyN,qzN,qwN are not counted in "
+                         "the plan's information (it plans the points; calibrate fits them)")
     if isinstance(chain, KinematicChain):
         notes += [finding.message for finding in tip_link_findings(chain, file_columns(files, names))]
     workspace = (corrected_angles(read_candidates(workspace_path, chain)[0], couplings, names)

@@ -116,6 +116,10 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                                                 occlusion=True)
         notes += held_notes
         held_time = time_column(heldout, settings.time_column)
+    turned = [d.source for d in (data, heldout) if d is not None and d.target_rotations]
+    if turned:  # the effect search counts and tests point entries only: refused, not run differently
+        raise PincalError(f"{turned[0]}: several --tip-link: diagnose does not take the targets' orientation columns "
+                          "qxN,qyN,qzN,qwN yet (calibrate and evaluate do); drop them to diagnose the points")
     level = cast(ChainLevel, settings.level)  # refused above: auto and dh
     options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
     calibration = calibrate_tree(tree, data, level, options)

@@ -1,13 +1,15 @@
 """``pincal evaluate`` of a calibration of several targets (a REPORT.json with ``targets``,
 :mod:`pincal.report.model_tree`): eq 24's position error of every point seen in every non-CPA row,
 each target's points in their tip link as reported, each row through its session's registration
-(:func:`evaluate_tree_files`).
+(:func:`evaluate_tree_files`). A target whose orientation the rows measure (``qxN,qyN,qzN,qwN``) and
+the report calibrated (its ``rotation_xyzw``) adds eq 24's orientation error, the angle of
+G_ktᵀ Omega R_k,t R_T,t, on the rows where it was seen (``--max-rot-deg`` judges the largest).
 
 The registration of a row is the report's session's of the same name, the report's only one for rows
 of a session it has not seen (held-out rows of the same setup), or — with ``--new-session`` — each
 session of the data registered anew with the model and the points fixed (Arun et al. 1987 on the seen
 points: the least-squares rigid registration of equally weighted points). What evaluate does with one
-chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``, ``--max-rot-deg``,
+chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``,
 ``--html`` — is refused in one line; ``--json`` writes :class:`pincal.report.model_tree.TreeEvaluationJson`.
 
 A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
@@ -23,6 +25,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pincal.errors import PincalError
 from pincal.fit.registration import register_points
@@ -40,6 +43,7 @@ from pincal.report.document import write_evaluation
 from pincal.report.model_tree import TargetErrors, TreeEvaluationJson
 from pincal.report.reading import load_report, value_at
 from pincal.report.tree import target_errors
+from pincal.residuals.tree import TreeRows
 from pincal.workflows.paths import refuse_overwrite
 from pincal.workflows.settings import EvaluateSettings
 
@@ -57,6 +61,9 @@ class TreeEvaluation:
         registrations: how each session of the data was registered (``session: source``).
         max_mm: the largest error of any point [mm] (``--max-pos-mm`` judges it).
         notes: the reader's notes and what the user should know.
+        points: each target's point numbers.
+        max_deg: the largest orientation error of any target [deg] (``--max-rot-deg`` judges it); None: no
+            orientation evaluated.
     """
 
     targets: tuple[tuple[str, TargetErrors | None], ...]
@@ -65,13 +72,18 @@ class TreeEvaluation:
     max_mm: float
     notes: tuple[str, ...]
     points: tuple[tuple[int, ...], ...] = ()
+    max_deg: float | None = None
 
     def as_dict(self) -> TreeEvaluationJson:
         """``evaluate --json``'s document (:class:`pincal.report.model_tree.TreeEvaluationJson`)."""
-        return {"rows": self.rows, "registrations": list(self.registrations),
-                "evaluated_targets": [{"tip_link": link, "points": list(points), "errors": errors}
-                                      for (link, errors), points in zip(self.targets, self.points)],
-                "max_mm": self.max_mm, "notes": list(self.notes)}
+        out: TreeEvaluationJson = {
+            "rows": self.rows, "registrations": list(self.registrations),
+            "evaluated_targets": [{"tip_link": link, "points": list(points), "errors": errors}
+                                  for (link, errors), points in zip(self.targets, self.points)],
+            "max_mm": self.max_mm, "notes": list(self.notes)}
+        if self.max_deg is not None:
+            out["max_deg"] = self.max_deg
+        return out
 
 
 def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: str | Path,
@@ -87,8 +99,7 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     """
     settings = EvaluateSettings() if settings is None else settings
     for refused, flag in ((settings.fixed_registration is not None, "--fixed-registration"),
-                          (settings.temperature_column is not None, "--temperature-column"),
-                          (settings.max_rot_deg is not None, "--max-rot-deg (the targets are points)")):
+                          (settings.temperature_column is not None, "--temperature-column")):
         if refused:
             raise PincalError(f"several --tip-link: {flag} is not yet supported by evaluate; leave it out")
     if json_path is not None:
@@ -102,6 +113,7 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                               "you changed it on purpose")
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
     targets = value_at(document, "targets", report_path, _targets)
+    frames = value_at(document, "targets", report_path, _frames)
     tree = KinematicTree.from_urdf(urdf, [spec for spec, _ in targets], xacro_args=settings.xacro_args)
     data, read_notes = read_measurements(data_path, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
     data = data.select(data.roles != "cpa")
@@ -131,17 +143,24 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     tau = np.stack([r.translation for r in registrations])[sessions]
     sensed = (1.0 + scale) * (np.einsum("kij,kpj->kpi", omega, world) + tau[:, None, :])
     errors = np.linalg.norm(np.where(rows.seen[..., None], sensed - rows.points, np.nan), axis=2)  # (K, P) [m]
+    turns, turn_notes = _orientation_errors(tree, rows, [frame for _, frame in frames], omega, (q, bends))
+    notes += turn_notes
+    if settings.max_rot_deg is not None and turns is None:
+        raise PincalError(f"{data_path}: --max-rot-deg: no orientation of a target the report calibrated with its "
+                          "orientation is measured in these rows (columns qxN,qyN,qzN,qwN); leave it out")
     seen = np.any(rows.seen, axis=0)  # (P,) each point seen in some row
     per_target: list[tuple[str, TargetErrors | None]] = []
-    for spec, _ in targets:
+    for t, (spec, _) in enumerate(targets):
         numbers = tuple(p for p in spec.points if seen[p - 1])
-        per_target.append((spec.link, target_errors(errors, numbers) if numbers else None))
+        mine = None if turns is None or frames[t][1] is None else turns[:, t]
+        per_target.append((spec.link, target_errors(errors, numbers, mine) if numbers else None))
         if numbers and numbers != spec.points:
             missing = ", ".join(str(p) for p in spec.points if p not in numbers)
             notes.append(f"{data_path}: point(s) {missing} of {spec.link} not seen in any row; its errors are those "
                          f"of point(s) {', '.join(map(str, numbers))}")
     evaluation = TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
-                                tuple(read_notes + notes), tuple(spec.points for spec, _ in targets))
+                                tuple(read_notes + notes), tuple(spec.points for spec, _ in targets),
+                                None if turns is None else float(np.degrees(np.nanmax(turns))))
     if json_path is not None:
         write_evaluation(json_path, evaluation.as_dict())
     return evaluation
@@ -180,6 +199,35 @@ def _targets(entries: Any) -> list[tuple[TargetSpec, np.ndarray]]:
             raise ValueError(f"{spec.link}: {len(spec.points)} points but {points.shape[0]} positions")
         out.append((spec, points))
     return out
+
+
+def _frames(entries: Any) -> list[tuple[str, np.ndarray | None]]:
+    """REPORT.json ``targets``' frame rotations in their links R_T,t (``rotation_xyzw``), None for a target
+    calibrated without its orientation."""
+    return [(str(e["tip_link"]), None if "rotation_xyzw" not in e else
+             Registration.from_dict({"rotation_xyzw": e["rotation_xyzw"], "translation_m": [0.0, 0.0, 0.0]}).rotation)
+            for e in entries]
+
+
+def _orientation_errors(tree: KinematicTree, rows: TreeRows, frames: list[np.ndarray | None], omega: np.ndarray,
+                        model: tuple[np.ndarray, list[np.ndarray | None] | None]
+                        ) -> tuple[np.ndarray | None, list[str]]:
+    """Each target's orientation error in each row [rad], the angle of G_ktᵀ Omega R_k,t R_T,t (eq 24), NaN where
+    not seen or not calibrated (K, T), or None when no such pair is seen; notes on orientations measured that the
+    report did not calibrate. ``model``: the rows' joint values with the effects and each target's bends."""
+    if rows.rotation_seen is None or rows.rotations is None:
+        return None, []
+    seen = rows.rotation_seen.copy()
+    uncalibrated = [t for t, frame in enumerate(frames) if frame is None and seen[:, t].any()]
+    seen[:, uncalibrated] = False
+    notes = [f"{tree.targets[t].link}: its orientation is measured, but the report calibrated it without; not "
+             "evaluated" for t in uncalibrated]
+    if not seen.any():
+        return None, notes
+    model_frames = tree.target_rotations(model[0], [np.eye(3) if f is None else f for f in frames], model[1])
+    relative = rows.rotations.transpose(0, 1, 3, 2) @ omega[:, None] @ model_frames  # G_ktᵀ Omega R_k,t R_T,t
+    angles = np.linalg.norm(Rotation.from_matrix(relative.reshape(-1, 3, 3)).as_rotvec(), axis=1)
+    return np.where(seen, angles.reshape(seen.shape), np.nan), notes
 
 
 def _sessions(entries: Any) -> tuple[list[str], list[Registration]]:
