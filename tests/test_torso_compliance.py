@@ -1,0 +1,160 @@
+"""Compliance without a mass model on a whole upper body: two arms on a four-joint torso whose 4th joint is coupled
+(tests/torso_robot.py), from a URDF without any ``<inertial>``.
+
+The simulated robot (its masses known to the simulation only) gives under its own weight: the right shoulder
+(arm_r_1, a joint compliance) and the torso's base (torso_1, bending about its lateral axis u, not v). ``pincal
+diagnose --tip-link hand_r:1 --tip-link hand_l:2 --lateral`` takes the masses as unknown (the URDF has none), names
+both effects in their mass-moment form, says each value's combination in words with its unit, writes them to
+effects.yaml and brings each hand's held-out error to the noise floor; ``evaluate`` applies them. The same robot
+without the compliances: nothing is claimed.
+"""
+
+from __future__ import annotations
+
+import io
+from contextlib import redirect_stdout
+
+import numpy as np
+import pytest
+import yaml
+from torso_robot import TARGETS, torso_urdf
+
+from pincal.cli.commands import main
+from pincal.diagnosis.diagnose import DiagnoseOptions
+from pincal.diagnosis.tree_diagnose import diagnose_tree
+from pincal.fit.chain_calibration import ChainFitOptions
+from pincal.fit.prior import Prior
+from pincal.fit.tree_calibration import calibrate_tree
+from pincal.measurements.csv_v1 import write_measurements
+from pincal.model.effects import gravity_torques, joint_shifts
+from pincal.model.lateral import bend_angles
+from pincal.model.tree import KinematicTree, parse_targets
+from pincal.model.tree_effects import TreeBody, target_inputs, tree_inputs
+from pincal.simulation.humanoid import HumanoidSettings, simulate_humanoid, with_followers
+from pincal.workflows import tree_diagnosis
+
+#: the right shoulder's joint compliance [rad/(N·m)], a joint that sags (c < 0)
+SHOULDER = ("arm_r_1", -3e-4)
+#: torso_1's lateral compliances about its u (x) and v (y) axes [rad/(N·m)]: it bends sideways only
+BENDING = ("torso_1", 3e-4, 0.0)
+SIGMA_MM = 0.1  # the motion capture's noise per axis [mm]
+ROWS, HELD = 120, 60
+
+
+def _simulate(folder, name, elastic):
+    """The rows of the simulated robot (``elastic``: with :data:`SHOULDER` and :data:`BENDING`), written as
+    ``NAME.csv`` and ``NAME_held.csv``; its data."""
+    data = simulate_humanoid(HumanoidSettings(
+        targets=TARGETS, rows=ROWS, held_out_rows=HELD, sigma_pos_mm=SIGMA_MM, deviation_mm=0.5, deviation_mrad=0.5,
+        compliance=(SHOULDER,) if elastic else (), lateral=(BENDING,) if elastic else (), payload_kg=0.0,
+        marker_m=(0.0, 0.0, 0.0), joint_range_rad=1.2, seed=3, urdf=str(folder / "truth.urdf")))
+    write_measurements(folder / f"{name}.csv", data.calibration)
+    write_measurements(folder / f"{name}_held.csv", data.validation)
+    return data
+
+
+@pytest.fixture(scope="module")
+def torso(tmp_path_factory):
+    """The user's URDF (no inertias), the simulated robot's (with them), and the elastic and the rigid rows."""
+    folder = tmp_path_factory.mktemp("torso4")
+    (folder / "robot.urdf").write_text(torso_urdf(inertias=False), encoding="utf-8")
+    (folder / "truth.urdf").write_text(torso_urdf(inertias=True), encoding="utf-8")
+    return folder, _simulate(folder, "elastic", True), _simulate(folder, "rigid", False)
+
+
+@pytest.fixture(scope="module")
+def diagnosed(torso):
+    """``pincal diagnose ... --lateral`` on the elastic rows: exit code, console, and the workflow's run."""
+    folder = torso[0]
+    runs, console = [], io.StringIO()
+    workflow = tree_diagnosis.diagnose_tree_files
+    with pytest.MonkeyPatch.context() as patch, redirect_stdout(console):  # the run the command printed
+        patch.setattr(tree_diagnosis, "diagnose_tree_files", lambda *a, **k: runs.append(workflow(*a, **k)) or runs[-1])
+        code = main(["diagnose", str(folder / "robot.urdf"), str(folder / "elastic.csv"), "--validation",
+                     str(folder / "elastic_held.csv"), "--tip-link", TARGETS[0], "--tip-link", TARGETS[1], "--lateral",
+                     "--out", str(folder / "out.urdf"), "--report", str(folder / "REPORT.json")])
+    return code, console.getvalue(), runs[0]
+
+
+def test_the_robot_couples_its_torso_and_the_truth_moves_the_hands_by_5_to_15_mm(torso):
+    folder, elastic, rigid = torso
+    tree = elastic.tree
+    assert "<inertial" not in (folder / "robot.urdf").read_text(encoding="utf-8")
+    assert tree.followers == ("torso_3", "torso_4")  # no column: each from torso_2
+    q = tree.followed(np.random.default_rng(0).uniform(-0.5, 0.5, (5, tree.n_joints)))
+    names = tree.joint_names
+    assert np.allclose(q[:, names.index("torso_4")], -(q[:, names.index("torso_2")] + q[:, names.index("torso_3")]))
+    assert "torso_3" not in elastic.calibration.joint_names and "torso_4" not in elastic.calibration.joint_names
+    rms_mm, max_mm = elastic.deflection_mm
+    assert 5.0 <= max_mm <= 15.0 and rms_mm > 10 * np.sqrt(3.0) * SIGMA_MM  # the issue's 5-15 mm, far above noise
+    assert rigid.deflection_mm == (0.0, 0.0)
+
+
+def test_diagnose_names_the_shoulder_and_the_sideways_bending_without_masses(diagnosed, torso):
+    code, console, run = diagnosed
+    assert code == 0
+    report = run.report
+    assert report["diagnosis"]["masses"] == "unknown"  # the URDF has none
+    assert [(e["type"], e["joint"]) for e in report["effects"]] == [("lateral", "torso_1"), ("compliance", "arm_r_1")]
+    folder, elastic, _ = torso
+    truth = KinematicTree.from_urdf(folder / "truth.urdf", parse_targets(list(TARGETS)))
+    rows = with_followers(truth, elastic.calibration)
+    inputs, tree = run.diagnosis.inputs, elastic.tree
+    effects = [(effect, values) for effect, values, _ in run.diagnosis.effects]
+    # torso_1 bends about u as the truth does and not about v (the mean: a placement the geometry took)
+    moments = tree_inputs(truth, rows).bending[:, 0]  # the true masses' moments about torso_1's u and v [N·m]
+    true_bend = np.array(BENDING[1:]) * moments
+    right = tree.targets[0]
+    bends = bend_angles(*zip(*effects[:1]), target_inputs(inputs, right), right.chain.joint_names)[:, :2]
+    off = bends - true_bend
+    scale = np.std(true_bend[:, 0])
+    assert scale > 1e-3  # ~mrad of bending
+    assert np.std(off[:, 0]) < 0.05 * scale and np.std(bends[:, 1]) < 0.05 * scale  # 1.5 % and 1.7 %
+    # arm_r_1 sags by its true compliance under the true masses' torque, likewise
+    j = tree.joint_names.index("arm_r_1")
+    true_shift = SHOULDER[1] * gravity_torques(TreeBody(truth), rows.q)[:, j]
+    shift = joint_shifts(*zip(*effects[1:]), inputs, tree.joint_names)[:, j]
+    assert np.std(shift - true_shift) < 0.1 * np.std(true_shift)  # 4 %: the fit's noise over 8 combinations
+    # each value a combination of mass moments, in words with its unit: on the console and in the report
+    for entry in report["effects"]:
+        assert len(entry["combinations"]) == len(entry["value"]) == len(entry["moments"])
+        assert all(w.startswith("g·(") and w.endswith(" [rad]") for w in entry["combinations"])
+        assert f"{entry['value'][0]:.4g} = {entry['combinations'][0]}" in console
+    assert "/k_u[torso_1] [rad]" in console and "/k[arm_r_1] [rad]" in console
+
+
+def test_each_hand_held_out_at_the_noise_floor_and_evaluate_applies_the_effects(diagnosed, torso, capsys):
+    """The floor: the simulated noise σ per axis, √3 σ per point, with the final fit's own estimation noise e
+    at the held-out rows (its covariance propagated: :attr:`TreeDiagnosis.heldout_predicted_m`): √(3σ² + e²)."""
+    _, _, run = diagnosed
+    folder = torso[0]
+    floor_mm = np.hypot(np.sqrt(3.0) * SIGMA_MM, run.diagnosis.heldout_predicted_m * 1000.0)
+    assert floor_mm < 1.2 * np.sqrt(3.0) * SIGMA_MM  # the fit's share is small: 120 rows for ~80 unknowns
+    for target in run.report["targets"]:
+        before, after = target["validation_geometry_errors"], target["validation_errors"]
+        assert before["position"]["rms_mm"] > 8 * floor_mm  # the geometry cannot bend
+        assert after["position"]["rms_mm"] < 1.2 * floor_mm
+    effects = yaml.safe_load((folder / "out.effects.yaml").read_text(encoding="utf-8"))
+    written = {(e["type"], e["joint"]): e for e in effects["effects"]}
+    assert set(written) == {("lateral", "torso_1"), ("compliance", "arm_r_1")}
+    for entry in run.report["effects"]:
+        assert written[entry["type"], entry["joint"]]["moments"] == entry["moments"]
+    corrected = (folder / "out.urdf").read_text(encoding="utf-8")
+    assert corrected.count("<mimic ") == 2 and "<inertial" not in corrected
+    capsys.readouterr()
+    assert main(["evaluate", str(folder / "out.urdf"), str(folder / "REPORT.json"),
+                 str(folder / "elastic_held.csv")]) == 0
+    lines = [line.split() for line in capsys.readouterr().out.splitlines()[2:4]]
+    for line, target in zip(lines, run.report["targets"]):
+        assert line[0] == target["tip_link"]
+        # its loads at the corrected URDF's geometry, diagnose's at the URDF's
+        assert float(line[3]) == pytest.approx(target["validation_errors"]["position"]["rms_mm"], rel=0.03)
+
+
+def test_without_the_compliances_nothing_is_claimed(torso):
+    folder, _, rigid = torso
+    tree = KinematicTree.from_urdf(folder / "robot.urdf", parse_targets(list(TARGETS)))
+    data, held = with_followers(tree, rigid.calibration), with_followers(tree, rigid.validation)
+    calibration = calibrate_tree(tree, data, "full", ChainFitOptions(selection=Prior()))  # diagnose's default
+    found = diagnose_tree(tree, calibration, data, held, DiagnoseOptions(lateral=True))
+    assert found.masses_unknown and found.effects == () and found.steps == ()
