@@ -30,7 +30,7 @@ from pincal.model.effects import gravity_torques, joint_shifts
 from pincal.model.lateral import bend_angles
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_effects import TreeBody, target_inputs, tree_inputs
-from pincal.simulation.humanoid import HumanoidSettings, simulate_humanoid, with_followers
+from pincal.simulation.humanoid import MOCAP, HumanoidSettings, simulate_humanoid, with_followers
 from pincal.workflows import tree_diagnosis
 
 #: the right shoulder's joint compliance [rad/(N·m)], a joint that sags (c < 0)
@@ -158,3 +158,22 @@ def test_without_the_compliances_nothing_is_claimed(torso):
     calibration = calibrate_tree(tree, data, "full", ChainFitOptions(selection=Prior()))  # diagnose's default
     found = diagnose_tree(tree, calibration, data, held, DiagnoseOptions(lateral=True))
     assert found.masses_unknown and found.effects == () and found.steps == ()
+
+
+def test_the_coupled_torso_gives_as_pincal_models_a_mimic_drivers_compliance(torso):
+    """torso_2's compliance on the simulated robot (no noise, no errors): it holds its followers' torques too, by
+    virtual work (τ₂ + τ₃ − 2 τ₄), and moves them with it, exactly as pincal's joint effects have a driver do."""
+    folder = torso[0]
+    exact = simulate_humanoid(HumanoidSettings(
+        targets=TARGETS, rows=5, held_out_rows=1, sigma_pos_mm=0.0, deviation_mm=0.0, deviation_mrad=0.0,
+        compliance=(("torso_2", -1e-4),), payload_kg=0.0, marker_m=(0.0, 0.0, 0.0), seed=3,
+        urdf=str(folder / "truth.urdf")))
+    tree, rows = exact.tree, with_followers(exact.tree, exact.calibration)
+    assert exact.deflection_mm[1] > 1.0
+    j = tree.joint_names.index("torso_2")
+    shifts = np.zeros_like(rows.q)
+    shifts[:, j] = -1e-4 * gravity_torques(TreeBody(tree), rows.q)[:, j]
+    actual = tree.followed(rows.q + shifts)  # the followers from the driver's actual angle (eq M1)
+    world = tree.target_points(actual, [np.zeros((1, 3))] * 2)
+    sensed = (exact.calibration.points - MOCAP.translation) @ MOCAP.rotation
+    assert np.allclose(world, sensed, atol=1e-12, rtol=0.0)
