@@ -137,8 +137,9 @@ def test_each_hand_held_out_at_the_noise_floor_and_evaluate_applies_the_effects(
     effects = yaml.safe_load((folder / "out.effects.yaml").read_text(encoding="utf-8"))
     written = {(e["type"], e["joint"]): e for e in effects["effects"]}
     assert set(written) == {("lateral", "torso_1"), ("compliance", "arm_r_1")}
-    for entry in run.report["effects"]:
-        assert written[entry["type"], entry["joint"]]["moments"] == entry["moments"]
+    for entry in run.report["effects"]:  # each value with its combination in words, and how to apply it
+        own = written[entry["type"], entry["joint"]]
+        assert (own["moments"], own["combinations"]) == (entry["moments"], entry["combinations"]) and own["equation"]
     corrected = (folder / "out.urdf").read_text(encoding="utf-8")
     assert corrected.count("<mimic ") == 2 and "<inertial" not in corrected
     capsys.readouterr()
@@ -149,6 +150,7 @@ def test_each_hand_held_out_at_the_noise_floor_and_evaluate_applies_the_effects(
         assert line[0] == target["tip_link"]
         # its loads at the corrected URDF's geometry, diagnose's at the URDF's
         assert float(line[3]) == pytest.approx(target["validation_errors"]["position"]["rms_mm"], rel=0.03)
+        assert float(line[3]) < 1.2 * floor_mm
 
 
 def test_without_the_compliances_nothing_is_claimed(torso):
