@@ -26,10 +26,12 @@ from pincal.fit.chain_calibration import ChainFitOptions
 from pincal.fit.prior import Prior
 from pincal.fit.tree_calibration import calibrate_tree
 from pincal.measurements.csv_v1 import write_measurements
+from pincal.measurements.data import MeasurementSet
 from pincal.model.effects import gravity_torques, joint_shifts
 from pincal.model.lateral import bend_angles
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_effects import TreeBody, target_inputs, tree_inputs
+from pincal.model.tree_parameters import TreeParameters
 from pincal.simulation.humanoid import MOCAP, HumanoidSettings, simulate_humanoid, with_followers
 from pincal.workflows import tree_diagnosis
 
@@ -179,3 +181,37 @@ def test_the_coupled_torso_gives_as_pincal_models_a_mimic_drivers_compliance(tor
     world = tree.target_points(actual, [np.zeros((1, 3))] * 2)
     sensed = (exact.calibration.points - MOCAP.translation) @ MOCAP.rotation
     assert np.allclose(world, sensed, atol=1e-12, rtol=0.0)
+
+
+def test_candidates_that_correct_alike_are_named_together(torso):
+    """torso_2's encoder off by 2 % (its followers moved with it): a coupling of torso_2 to torso_3's reading is
+    the same correction (torso_3 reads torso_2's angle), so the rows cannot tell them apart; the one adopted is
+    named with the other, as the single chain names candidates that correct alike."""
+    folder = torso[0]
+    tree = KinematicTree.from_urdf(folder / "robot.urdf", parse_targets(list(TARGETS)))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(8)
+    truth = rng.normal(0.0, 5e-4, params.size)
+    j = tree.joint_names.index("torso_2")
+    sets = []
+    for count, role in ((60, "calibration"), (30, "validation")):
+        q = rng.uniform(-1.2, 1.2, (count, tree.n_joints))
+        q[:, j] *= 0.5 / 1.2  # within torso_2's limits, ±0.5 rad
+        q = tree.followed(q)
+        actual = q.copy()
+        actual[:, j] *= 1.02
+        with tree.placed(params.placements(truth)):
+            world = tree.target_points(tree.followed(actual), [np.zeros((1, 3))] * 2)
+        sensed = world @ MOCAP.rotation.T + MOCAP.translation + rng.normal(0.0, SIGMA_MM * 1e-3, world.shape)
+        sets.append(MeasurementSet(tree.joint_names, q, sensed, None, np.full(count, role, dtype=object),
+                                   np.arange(count)))
+    calibration = calibrate_tree(tree, sets[0], "full", ChainFitOptions(selection=Prior()))
+    found = diagnose_tree(tree, calibration, sets[0], sets[1])
+    [(effect, values, _)] = found.effects
+    twins = {"encoder_scale:torso_2", "coupling:torso_2:torso_3"}
+    assert effect.label in twins
+    [other] = [c for c in found.steps[0].candidates if c.effect.label in twins - {effect.label}]
+    assert other.verdict.startswith(f"{effect.label} corrects the same poses the same way")
+    [note] = [n for n in found.notes if "these poses cannot tell" in n]
+    assert note.startswith("torso_2's error: an encoder scale or a coupling to torso_3's reading") or note.startswith(
+        "torso_2's error: a coupling to torso_3's reading or an encoder scale")
