@@ -14,17 +14,23 @@ each adoption), a value some :data:`DETERMINED_Z` standard deviations from zero,
 some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out
 rows better on them beyond their noise (the search's held-out test). The search stops when no candidate passes,
 or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+
+A candidate that passes every check too, within :data:`ALIKE_WINDOW` of the adopted one's ΔBIC, and changes the
+measured coordinates as it does (beyond what the fit's other unknowns can: the cosine of the two changes above
+:data:`pincal.diagnosis.verdicts.AMBIGUOUS`) is named beside it, as the single chain names candidates that correct
+alike (:func:`pincal.diagnosis.ambiguity.ambiguity_words`): the rows cannot tell them apart.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, TypeVar
 
 import numpy as np
 import scipy.stats
 
+from pincal.diagnosis.ambiguity import ambiguity_words
 from pincal.diagnosis.diagnose import MAX_EFFECTS
 from pincal.diagnosis.held_out import HELD_OUT_LEVEL, HELD_OUT_Z
 from pincal.diagnosis.screening import (
@@ -36,7 +42,7 @@ from pincal.diagnosis.screening import (
     residual_freedom,
     testable,
 )
-from pincal.diagnosis.verdicts import EVIDENCE, NEGLIGIBLE, effect_basis, offset_like, plausible
+from pincal.diagnosis.verdicts import AMBIGUOUS, EVIDENCE, NEGLIGIBLE, effect_basis, offset_like, plausible
 from pincal.errors import CalibrationError
 from pincal.fit.prior import PriorResidual, posterior, standard_deviations
 from pincal.fit.solver import Solution, gram
@@ -44,8 +50,8 @@ from pincal.model.chain import KinematicChain
 from pincal.model.effects import Effect, EffectInputs
 from pincal.progress import Counter
 
-__all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "EffectCandidate", "EffectStep", "EffectSearch", "Found",
-           "search_effects"]
+__all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "ALIKE_WINDOW", "EffectCandidate", "EffectStep",
+           "EffectSearch", "Found", "search_effects"]
 
 #: Candidates fitted in full per step, the best of the screen that may reach the evidence cut: the single
 #: chain's "first eight" (:mod:`pincal.diagnosis.diagnose`, screening).
@@ -60,6 +66,12 @@ DETERMINED_Z = HELD_OUT_Z
 #: be undetermined, their combination not): Wald's χ² of the values above its quantile at 1 − 2 Φ(−2) (one
 #: value: χ² = (v/σ)² ≥ 4, |v| ≥ 2σ).
 DETERMINED_LEVEL = 1.0 - 2.0 * HELD_OUT_LEVEL
+#: Largest ΔBIC above the adopted candidate's of another that corrects alike and is named beside it: the single
+#: chain's window (:meth:`pincal.diagnosis.verdicts.Judge.judged`, competitors within 6 of its ΔBIC), the "strong"
+#: evidence of Kass & Raftery (1995) below which the rows do not prefer one.
+ALIKE_WINDOW = 6.0
+#: The verdict of a candidate fitted after the one adopted, not judged.
+NOT_JUDGED = "not judged: another adopted"
 
 
 @dataclass(frozen=True)
@@ -148,9 +160,11 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
     ranking: tuple[EffectCandidate, ...] = ()
     notes: list[str] = []
     while len(adopted) < MAX_EFFECTS:
-        chosen, ranking = _step(search, inputs, (objective, solution), adopted, pool, counter)
+        chosen, ranking, alike = _step(search, inputs, (objective, solution), adopted, pool, counter)
         if chosen is None:
             break
+        if alike:
+            notes.append(alike)
         effect, new_objective, new_solution, delta = chosen
         # refitted at the noise scale of its residual (maximum likelihood; with a prior, eq P2), as the single
         # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
@@ -176,15 +190,16 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
 
 def _step(search: EffectSearch, inputs: EffectInputs, current: tuple[FitObjective, Solution], adopted: list[Effect],
           pool: Sequence[Effect], counter: Counter
-          ) -> tuple[tuple[Effect, FitObjective, Solution, float] | None, tuple[EffectCandidate, ...]]:
+          ) -> tuple[tuple[Effect, FitObjective, Solution, float] | None, tuple[EffectCandidate, ...], str]:
     """One step: screen every candidate not adopted, fit the shortlist in full, judge them best first; the one
-    adopted (its fit and ΔBIC) or None, and the ranking."""
+    adopted (its fit and ΔBIC) or None, the ranking, and the candidates that correct alike in words (empty
+    without, :func:`_alike`)."""
     objective, solution = current
     now = bic(solution.residual, solution.x.size, n_prior_rows(objective))
     freedom = residual_freedom(objective, solution)
     offered = [e for e in pool if e not in adopted and testable(freedom, e.n_values, EVIDENCE)]
     if not offered:
-        return None, ()
+        return None, (), ""
     scores = Linearisation(solution, n_prior_rows(objective)).test(objective.effect_columns(solution.x, offered), now)
     screened = sorted(zip(offered, scores), key=lambda item: item[1].delta_bic)
     shortlist = [e for e, score in screened[:SHORTLIST] if may_reach(score.delta_bic, EVIDENCE)]
@@ -205,16 +220,56 @@ def _step(search: EffectSearch, inputs: EffectInputs, current: tuple[FitObjectiv
     ranking = []
     for delta, effect, new_objective, new_solution in fitted:
         values = new_solution.x[new_objective.effect_slices[-1]]
-        verdict = "not judged: another adopted" if chosen is not None else _verdict(
+        verdict = NOT_JUDGED if chosen is not None else _verdict(
             search, inputs, effect, (delta, adopted), (new_objective, new_solution), solution.x)
         ranking.append(EffectCandidate(effect, float(delta), values, verdict))
         if verdict == "adopted":
             chosen = (effect, new_objective, new_solution, float(delta))
+    alike = ""
+    if chosen is not None:
+        fits = {effect: (obj, sol) for _, effect, obj, sol in fitted}
+        ranking, alike = _alike(search, inputs, (chosen, fits), ranking, (adopted, solution.x))
     ranking += failed
     ranking += [EffectCandidate(e, s.delta_bic, np.zeros(e.n_values), "screened out", screened=True)
                 for e, s in screened if e not in shortlist][: max(0, SHORTLIST - len(ranking))]
     counter.tick()
-    return chosen, tuple(ranking)
+    return chosen, tuple(ranking), alike
+
+
+def _changes(objective: FitObjective, solution: Solution) -> np.ndarray:
+    """What the last effect of a fit changes in the measured coordinates beyond what the fit's other unknowns can:
+    its whitened Jacobian columns times its values on the data rows (not the prior's), less their least-squares
+    part in the span of every other unknown's columns (the geometry takes that part in any fit)."""
+    rows = solution.residual.size - n_prior_rows(objective)
+    jacobian, sl = solution.jacobian[:rows], objective.effect_slices[-1]
+    own = jacobian[:, sl] @ solution.x[sl]
+    others = np.delete(jacobian, np.arange(sl.start, sl.stop), axis=1)
+    return own - others @ np.linalg.lstsq(others, own, rcond=None)[0]
+
+
+def _alike(search: EffectSearch, inputs: EffectInputs,
+           step: tuple[tuple[Effect, FitObjective, Solution, float], dict[Effect, tuple[FitObjective, Solution]]],
+           ranking: list[EffectCandidate], before: tuple[list[Effect], np.ndarray]
+           ) -> tuple[list[EffectCandidate], str]:
+    """The ranking with each candidate fitted after the adopted one that corrects alike (module docstring) given
+    that verdict, and the group in words (:func:`pincal.diagnosis.ambiguity.ambiguity_words`; empty without one);
+    ``before``: the effects adopted before the step and the current fit's unknowns."""
+    (taken, objective, solution, delta), fits = step
+    change = _changes(objective, solution)
+    out, others = [], []
+    for candidate in ranking:
+        if candidate.verdict == NOT_JUDGED and candidate.delta_bic - delta <= ALIKE_WINDOW:
+            fit = fits[candidate.effect]
+            other = _changes(*fit)
+            cosine = float(change @ other / max(np.linalg.norm(change) * np.linalg.norm(other), np.finfo(float).tiny))
+            if abs(cosine) > AMBIGUOUS and _verdict(search, inputs, candidate.effect, (candidate.delta_bic, before[0]),
+                                                    fit, before[1]) == "adopted":
+                others.append(candidate.effect)
+                candidate = replace(candidate, verdict=(
+                    f"{taken.label} corrects the same poses the same way (changes correlated {cosine:+.2f}): these "
+                    f"poses cannot tell them apart, and {taken.label} is preferred (the best ΔBIC)"))
+        out.append(candidate)
+    return out, ambiguity_words(taken, others, "the best ΔBIC") if others else ""
 
 
 def _verdict(search: EffectSearch, inputs: EffectInputs, effect: Effect, evidence: tuple[float, Sequence[Effect]],

@@ -19,9 +19,10 @@ some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is no
 rows better on them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`).
 The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
 
-Not yet as with one chain: a coupling nearer ±1 tried as a joint read against another (it stays an effect),
-two candidates that correct alike named together, thermal and pause steps, a payload, the generic check for
-remaining structure.
+A candidate that passes too and corrects the same poses alike, within 6 of the adopted one's ΔBIC, is named beside
+it (:mod:`pincal.diagnosis.effect_loop`); the adopted one is the best ΔBIC (the single chain's prefers the one that
+predicts the held-out rows best). Not yet as with one chain: a coupling nearer ±1 tried as a joint read against
+another (it stays an effect), thermal and pause steps, a payload, the generic check for remaining structure.
 """
 
 from __future__ import annotations

@@ -16,7 +16,8 @@ The true robot of :func:`simulate_humanoid` differs from the URDF the way a real
   :mod:`pincal.model.effects`: τ the torque that holds the links, so a joint that sags has c < 0),
   τ computed with the *true* masses, the URDF's plus ``payload_kg`` at each marker (a hand's tool and
   cables the URDF does not have) — so the URDF's masses cannot explain the deflection, and a diagnosis
-  must take the masses as unknown (``--masses unknown``);
+  must take the masses as unknown (``--masses unknown``); a joint that others follow by ``<mimic>`` holds
+  their torques too, by virtual work (τ_driver + multiplier · τ_follower), and moves them with it;
 * joints that bend under the same masses' gravity moments about the two axes orthogonal to their own
   (``lateral``: right after the joint's motion the chain turns about u by c_u · M_u(q), then about v by
   c_v · M_v(q), eq L1 of :mod:`pincal.model.lateral`; none by default);
@@ -25,7 +26,9 @@ The true robot of :func:`simulate_humanoid` differs from the URDF the way a real
 
 Calibration and held-out rows are drawn alike (uniform over each joint's range, clipped to
 ±``joint_range_rad``); the held-out rows are drawn after every value of the calibration rows, so a
-different number of them leaves the calibration rows as they were. Units: metres, radians, N·m.
+different number of them leaves the calibration rows as they were. ``HumanoidSettings.urdf`` simulates another
+robot the same way, its ``<inertial>`` the true masses (tests/torso_robot.py: two arms on a four-joint torso whose
+coupled joints follow one driver, for a user's URDF without inertias). Units: metres, radians, N·m.
 """
 
 from __future__ import annotations
@@ -82,6 +85,7 @@ class HumanoidSettings:
         marker_m: each marker in its link [m].
         joint_range_rad: the postures' joints within their limits and within ± this [rad].
         seed: of every random draw.
+        urdf: another robot's URDF file, the simulated robot's (its ``<inertial>`` the true masses); None: TALOS's.
     """
 
     targets: tuple[str, ...] = TALOS_TARGETS
@@ -96,6 +100,7 @@ class HumanoidSettings:
     marker_m: tuple[float, float, float] = (0.0, 0.0, -0.02)
     joint_range_rad: float = 1.5
     seed: int = 0
+    urdf: str | None = None
 
 
 @dataclass(frozen=True)
@@ -129,7 +134,7 @@ def talos_description() -> RobotDescription:
 def simulate_humanoid(settings: HumanoidSettings | None = None) -> HumanoidData:
     """TALOS's upper body measured by motion capture, a marker on each gripper (module docstring)."""
     settings = HumanoidSettings() if settings is None else settings
-    description = talos_description()
+    description = talos_description() if settings.urdf is None else read_description(settings.urdf)
     tree = KinematicTree.from_description(description, parse_targets(list(settings.targets)))
     params = TreeParameters(tree, "full")
     rng = np.random.default_rng(settings.seed)
@@ -201,19 +206,23 @@ def _with_payload(model: pin.Model, tree: KinematicTree, settings: HumanoidSetti
 def _deflection(model: pin.Model, tree: KinematicTree, angles: np.ndarray,
                 compliance: tuple[tuple[str, float], ...]) -> np.ndarray:
     """Each tree joint's shift c · τ(q) (K, N) [rad]: τ the gravity torque of ``model`` (Pinocchio's
-    ``computeGeneralizedGravity``) with the tree's joints at ``angles`` and every other joint at zero."""
+    ``computeGeneralizedGravity``) with the tree's joints at ``angles`` and every other joint at zero; a joint that
+    others follow (eq M1) holds theirs too, by virtual work: τ_driver + multiplier · τ_follower."""
     shifts = np.zeros_like(angles)
     if not compliance:
         return shifts
     data = model.createData()
     q_index = [model.joints[model.getJointId(n)].idx_q for n in tree.joint_names]
-    v_index = {n: model.joints[model.getJointId(n)].idx_v for n, _ in compliance}
+    v_index = {n: model.joints[model.getJointId(n)].idx_v for n in tree.joint_names}
+    followers = {name: [(v_index[j.name], j.mimic.multiplier) for j in tree.joints
+                        if j.mimic is not None and j.mimic.driver == name] for name, _ in compliance}
     configuration = pin.neutral(model)
     for k, row in enumerate(angles):
         configuration[q_index] = row
         torque = pin.computeGeneralizedGravity(model, data, configuration)
         for name, value in compliance:
-            shifts[k, tree.joint_names.index(name)] = value * torque[v_index[name]]
+            held = torque[v_index[name]] + sum(m * torque[v] for v, m in followers[name])
+            shifts[k, tree.joint_names.index(name)] = value * held
     for i, joint in enumerate(tree.joints):  # a follower moves with its driver's shift (eq M1)
         if joint.mimic is not None and joint.mimic.driver in tree.joint_names:
             shifts[:, i] += joint.mimic.multiplier * shifts[:, tree.joint_names.index(joint.mimic.driver)]
