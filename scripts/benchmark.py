@@ -23,7 +23,8 @@
     ``--select CRITERION`` for all three (default: the commands' own). Writes scripts/benchmark_diagnose.json.
 (i) ``--tree``: ``pincal calibrate`` of TALOS's upper body (example-robot-data, talos_full_v2.urdf: 2 torso
     joints shared by two 7-joint arms) with a marker on each gripper (``--tip-link LINK:1 --tip-link LINK:2``),
-    500 simulated rows, every placement off by 0.5 mm / 0.5 mrad, 0.1 mm noise: whole processes, median of
+    500 rows simulated by ``pincal.simulation.humanoid.simulate_humanoid`` (the TALOS example's simulation),
+    every placement off by 0.5 mm / 0.5 mrad, 0.1 mm noise: whole processes, median of
     ``--runs``-capped 3; goal <= 5 s (the issue's 500 rows x 2 markers); beside it (``diagnose_tree``) whole
     ``pincal diagnose`` processes of the same rows, and of rows whose torso pitch sags under the upper body (an
     effect to find), each in alternated order with calibrate of its rows, and the median of their ratios to
@@ -728,55 +729,36 @@ TREE_GOAL_S = 5.0
 TREE_COMPLIANCE = ("torso_2_joint", -1e-4)
 
 
-def _tree_rows(tree, params, rows: int, seed: int, compliance: float):
-    """(i)'s rows of ``tree``: joint readings within the limits (at most ±1.5 rad) and a marker 10 cm beyond
-    each gripper's base seen by a mocap 2 m away (0.1 mm per axis), every placement off by 0.5 mm / 0.5 mrad,
-    the torso pitch at its reading + ``compliance`` × its gravity torque under the URDF's masses."""
-    import numpy as np
-    import pinocchio as pin
+def _tree_rows(rows: int, seed: int, compliance: float):
+    """(i)'s rows: TALOS as :func:`pincal.simulation.humanoid.simulate_humanoid` simulates it, with a marker
+    10 cm beyond each gripper's base seen by its mocap (0.1 mm per axis), every placement off by 0.5 mm / 0.5
+    mrad, no payload, and the torso pitch at its reading + ``compliance`` x its gravity torque under the URDF's
+    masses (none: rigid)."""
+    from pincal.simulation.humanoid import HumanoidSettings, simulate_humanoid
 
-    from pincal.model.effects import gravity_torques
-    from pincal.model.tree_effects import TreeBody
-
-    rng = np.random.default_rng(seed)
-    lower, upper = (np.array([getattr(j, side) for j in tree.joints]) for side in ("lower", "upper"))
-    q = rng.uniform(np.maximum(lower, -1.5), np.minimum(upper, 1.5), (rows, tree.n_joints))
-    local = [np.array([[0.0, 0.0, -0.1]])] * len(TREE_TARGETS)  # 10 cm beyond each gripper's base [m]
-    actual = q.copy()
-    with tree.placed(params.placements(rng.normal(0.0, 5e-4, params.size))):  # the true geometry, its loads
-        if compliance:
-            joint = tree.joint_names.index(TREE_COMPLIANCE[0])
-            actual[:, joint] += compliance * gravity_torques(TreeBody(tree), q)[:, joint]
-        world = tree.target_points(actual, local)
-    return q, (world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
-               + rng.normal(0.0, 1e-4, world.shape))
+    settings = HumanoidSettings(targets=TREE_TARGETS, rows=rows, held_out_rows=0, sigma_pos_mm=0.1,
+                                deviation_mm=0.5, deviation_mrad=0.5,
+                                compliance=((TREE_COMPLIANCE[0], compliance),) if compliance else (),
+                                payload_kg=0.0, marker_m=(0.0, 0.0, -0.1), seed=seed)
+    return simulate_humanoid(settings)
 
 
 def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dict:
     """(i): whole ``pincal calibrate`` processes of TALOS's upper body with a marker on each gripper [s], and
     whole ``pincal diagnose`` processes beside them (``diagnose_tree``): on the same rigid rows, and on rows
     whose torso pitch sags (:data:`TREE_COMPLIANCE`), each against calibrate of its rows in alternated order."""
-    import csv
-
-    from pincal.model.description import read_description
-    from pincal.model.tree import KinematicTree, parse_targets
-    from pincal.model.tree_parameters import TreeParameters
+    from pincal.measurements.csv_v1 import write_measurements
     from pincal.robots import example_robot_data_urdf
+    from pincal.simulation.humanoid import TALOS_URDF
 
-    urdf = example_robot_data_urdf("talos_data/robots/talos_full_v2.urdf")
-    tree = KinematicTree.from_description(read_description(Path(urdf), ()), parse_targets(list(TREE_TARGETS)))
-    params = TreeParameters(tree, "full")
+    urdf = example_robot_data_urdf(TALOS_URDF)
     targets = [flag for target in TREE_TARGETS for flag in ("--tip-link", target)]
     out: dict = {}
     with tempfile.TemporaryDirectory() as folder:
         for name, compliance in (("rigid", 0.0), ("torso_compliance", TREE_COMPLIANCE[1])):
-            q, sensed = _tree_rows(tree, params, rows, seed, compliance)
+            simulated = _tree_rows(rows, seed, compliance)
             data = Path(folder) / f"talos_{name}.csv"
-            with open(data, "w", newline="") as handle:
-                writer = csv.writer(handle)
-                writer.writerow([*tree.joint_names, *(f"{a}{i + 1}" for i in range(len(TREE_TARGETS)) for a in "xyz")])
-                for k in range(rows):
-                    writer.writerow([*(repr(float(v)) for v in q[k]), *(repr(float(v)) for v in sensed[k].ravel())])
+            write_measurements(data, simulated.calibration)
             times: dict[str, list[float]] = {"calibrate": [], "diagnose": []}
             for i in range(runs):  # calibrate and diagnose side by side, their order alternated (the same load)
                 for command in ("calibrate", "diagnose")[:: 1 if i % 2 == 0 else -1]:
@@ -795,7 +777,8 @@ def tree_calibration(runs: int = 3, rows: int = TREE_ROWS, seed: int = 3) -> dic
                                               for t in diagnosis["targets"]],
                          "effects": [f"{e['type']}:{e.get('joint')}" for e in diagnosis.get("effects", [])]}
     rigid = out["rigid"]
-    return {"rows": rows, "joints": tree.n_joints, "targets": list(TREE_TARGETS), "times_s": rigid["calibrate_s"],
+    return {"rows": rows, "joints": simulated.tree.n_joints, "targets": list(TREE_TARGETS),
+            "times_s": rigid["calibrate_s"],
             "median_s": statistics.median(rigid["calibrate_s"]), "goal_s": TREE_GOAL_S,
             "rms_after_mm": rigid["rms_after_mm"],
             "diagnose_tree": {**out, "goal": DIAGNOSE_GOAL, "compliance": list(TREE_COMPLIANCE)},

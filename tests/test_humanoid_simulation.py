@@ -76,3 +76,12 @@ def test_the_lateral_compliance_bends_the_torso_as_the_model_of_a_lateral_compli
     local = [np.array([exact.marker_m]) for _ in tree.targets]
     world = tree.target_points(rows.q, local, bends)
     assert np.allclose(world @ MOCAP.rotation.T + MOCAP.translation, rows.points, atol=1e-12, rtol=0.0)
+
+
+def test_markers_off_the_fingers_and_no_held_out_rows_read_exactly_the_trees_joints():
+    """scripts/benchmark.py --tree's rows: a marker on each gripper's base, 16 joints with no follower, every
+    one a column in the tree's order, and no held-out rows."""
+    data = simulate_humanoid(HumanoidSettings(targets=("gripper_left_base_link:1", "gripper_right_base_link:2"),
+                                              rows=10, held_out_rows=0, compliance=(), payload_kg=0.0))
+    assert data.tree.n_joints == 16 and data.calibration.joint_names == data.tree.joint_names
+    assert data.calibration.points.shape == (10, 2, 3) and data.validation.n_rows == 0

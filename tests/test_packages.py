@@ -1,7 +1,8 @@
 """``package://`` collision meshes (``plan --min-distance``): found through ``--package-dir``,
-``ROS_PACKAGE_PATH`` or the ament index when the URDF is not inside its package, and a missing one
-named exactly, with where it was looked for and what to give. Each route gives the plan the URDF
-in its own package gives (the same candidates refused)."""
+``ROS_PACKAGE_PATH``, the ament index or this Python's install prefix (pip's example-robot-data) when the
+URDF is not inside its package, ``package:///NAME/...`` (TALOS's) read as ``package://NAME/...``, and a
+missing one named exactly, with where it was looked for and what to give. Each route gives the plan the
+URDF in its own package gives (the same candidates refused)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,11 @@ from pathlib import Path
 import pytest
 
 from pincal.cli.commands import main
+from pincal.model import packages
+from pincal.errors import ModelError
+from pincal.model.packages import resolve_mesh, with_resolved_meshes
 from pincal.robots import example_robot_data_urdf
+from pincal.simulation.humanoid import TALOS_URDF
 
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
 PACKAGE = "example-robot-data"
@@ -39,6 +44,7 @@ def reference(tmp_path_factory):
 def copied(tmp_path, monkeypatch):
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    monkeypatch.setattr(packages, "installed_prefixes", list)  # not pip's example-robot-data either
     urdf = tmp_path / "ur5.urdf"
     shutil.copy(UR5, urdf)
     return urdf
@@ -70,3 +76,42 @@ def test_a_package_dir_that_is_not_a_folder_is_a_usage_error(copied, tmp_path, c
     with pytest.raises(SystemExit) as caught:
         _refused(tmp_path, copied, "--package-dir", f"{PACKAGE}={tmp_path / 'nowhere'}")
     assert caught.value.code == 2 and "is not a folder" in capsys.readouterr().err
+
+
+def test_a_copied_urdf_finds_its_meshes_where_pip_installed_them(tmp_path, reference, monkeypatch):
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    urdf = tmp_path / "ur5.urdf"
+    shutil.copy(UR5, urdf)
+    assert resolve_mesh(MESH, urdf) == (PACKAGE_DIR / MESH.split(PACKAGE + "/", 1)[1]).resolve()
+    assert _refused(tmp_path, urdf)[2] == reference
+
+
+def test_an_empty_authority_names_the_package_as_pinocchio_reads_it(tmp_path, monkeypatch):
+    """TALOS's ``package:///example-robot-data/robots/talos_data/meshes/...``: Pinocchio joins what follows
+    ``package://`` to each package folder, so the first segment is the package; a missing one is named."""
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    urdf = tmp_path / "ur5.urdf"
+    shutil.copy(UR5, urdf)
+    assert resolve_mesh(MESH.replace("package://", "package:///"), urdf) == resolve_mesh(MESH, urdf)
+    monkeypatch.setattr(packages, "installed_prefixes", list)
+    tried = resolve_mesh(MESH.replace("package://", "package:///"), urdf, {PACKAGE: tmp_path / "nowhere"})
+    assert isinstance(tried, list) and tried[0] == tmp_path / "nowhere" / MESH.split(PACKAGE + "/", 1)[1]
+
+
+def test_talos_copied_out_checks_self_collision_by_default(tmp_path, monkeypatch):
+    """``pincal example talos`` copies TALOS's URDF out of example-robot-data: its 52 collision meshes
+    (``package:///example-robot-data/...``) are found where pip installed them, so ``plan`` checks it."""
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    urdf = tmp_path / "talos_full_v2.urdf"
+    shutil.copy(example_robot_data_urdf(TALOS_URDF), urdf)
+    text = urdf.read_text(encoding="utf-8")
+    resolved = with_resolved_meshes(text, urdf)
+    assert text.count("package:///") > 0 and "package:///" not in resolved.split("<visual")[0]
+    assert resolved.count("_collision.STL") == text.count("_collision.STL") > 0
+    monkeypatch.setattr(packages, "installed_prefixes", list)
+    with pytest.raises(ModelError, match=f"'package:///{PACKAGE}/robots/talos_data/meshes/.*' not found .*"
+                                         f"--package-dir {PACKAGE}=DIR"):
+        with_resolved_meshes(text, urdf)

@@ -18,6 +18,7 @@ import pytest
 
 from pincal.cli.commands import main
 from pincal.errors import PincalError
+from pincal.model import packages
 from pincal.model.chain import KinematicChain
 from pincal.planning.candidates import joint_ranges, sample_candidates
 from pincal.planning.collisions import _geometry, check_clearance
@@ -105,6 +106,7 @@ def test_a_urdf_without_collision_geometry_is_planned_with_a_note(tmp_path, caps
 def test_meshes_not_found_for_the_default_check_say_how_to_plan_without_it(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    monkeypatch.setattr(packages, "installed_prefixes", list)  # nor where pip installed example-robot-data
     urdf = tmp_path / "ur5.urdf"  # away from its package: its package:// meshes are found nowhere
     shutil.copy(UR5, urdf)
     code, _ = _plan(tmp_path, "lost", urdf, "tool0")

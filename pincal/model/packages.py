@@ -8,7 +8,16 @@ package is looked for, in this order:
    else NAME inside it, else NAME one level further down (as catkin workspaces hold ``src/NAME``);
 3. the ament index of each prefix of ``AMENT_PREFIX_PATH``: a marker
    ``PREFIX/share/ament_index/resource_index/packages/NAME`` means ``PREFIX/share/NAME``;
-4. the folders above the URDF: one named NAME, or NAME beside one (a URDF inside its package).
+4. the folders above the URDF: one named NAME, or NAME beside one (a URDF inside its package);
+5. the ament index of this Python's install prefixes, ``cmeel.prefix`` in each folder of ``sys.path``:
+   where pip installs the ROS-style packages of PyPI (example-robot-data, Pinocchio) with their
+   ament markers, so a URDF copied out of example-robot-data (``pincal example talos``) finds its
+   meshes where pip put them. Last, so that a package the user names or sources wins.
+
+``package:///NAME/PATH`` (an empty authority: TALOS's ``talos_full_v2.urdf`` in example-robot-data
+writes its meshes so) is read as ``package://NAME/PATH``, as Pinocchio reads it: its
+``retrieveResourcePath`` joins what follows ``package://`` to each package folder, the leading ``/``
+adding nothing. ROS's ``resource_retriever`` refuses it ("Package name must not be empty").
 
 Every mesh is resolved to an absolute path before Pinocchio reads the file, so a missing one is
 named exactly, with where it was looked for.
@@ -18,6 +27,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -25,9 +35,16 @@ from lxml import etree
 
 from pincal.errors import ModelError
 
-__all__ = ["PACKAGE_URI", "package_folders", "resolve_mesh", "with_resolved_meshes"]
+__all__ = ["PACKAGE_URI", "installed_prefixes", "package_folders", "resolve_mesh", "with_resolved_meshes"]
 
-PACKAGE_URI = re.compile(r"^package://([^/]+)/(.*)$")
+#: ``package://NAME/PATH``, or ``package:///NAME/PATH`` read alike (module docstring).
+PACKAGE_URI = re.compile(r"^package:///?([^/]+)/(.*)$")
+
+
+def installed_prefixes() -> list[Path]:
+    """This Python's install prefixes of ROS-style packages: ``cmeel.prefix`` in each folder of ``sys.path``."""
+    found = {Path(entry) / "cmeel.prefix" for entry in sys.path if entry and (Path(entry) / "cmeel.prefix").is_dir()}
+    return sorted(found)
 
 
 def package_folders(name: str, urdf: Path, given: Mapping[str, Path] | None = None) -> list[Path]:
@@ -38,12 +55,17 @@ def package_folders(name: str, urdf: Path, given: Mapping[str, Path] | None = No
         out += [root] if root.name == name else [root / name]
         if root.is_dir():
             out += sorted(child / name for child in root.iterdir() if child.is_dir())
-    for prefix in filter(None, os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
-        if (Path(prefix) / "share" / "ament_index" / "resource_index" / "packages" / name).exists():
-            out.append(Path(prefix) / "share" / name)
+    ament = os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
+    out += _ament_packages(name, [Path(prefix) for prefix in filter(None, ament)])
     for parent in Path(urdf).resolve().parents:
         out += [parent] if parent.name == name else [parent / name]
-    return out
+    return out + _ament_packages(name, installed_prefixes())
+
+
+def _ament_packages(name: str, prefixes: list[Path]) -> list[Path]:
+    """``PREFIX/share/NAME`` of each prefix whose ament index marks package ``name``."""
+    return [prefix / "share" / name for prefix in prefixes
+            if (prefix / "share" / "ament_index" / "resource_index" / "packages" / name).exists()]
 
 
 def resolve_mesh(filename: str, urdf: Path, given: Mapping[str, Path] | None = None) -> Path | list[Path]:
