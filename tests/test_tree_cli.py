@@ -143,6 +143,27 @@ def test_the_report_page_shows_each_targets_errors(files, capsys):
         assert f"<td>{after['rms_mm']:.3f}</td>" in page
 
 
+def test_evaluate_html_shows_each_targets_errors_on_the_evaluated_rows(files, capsys):
+    """evaluate --html of a tree's report: the report's page with each target's errors on the rows given (as
+    --json has them) beside its own; an --html that is an input, or the --json, leaves nothing written."""
+    folder, *_, out, report, _, _, held_out = files
+    page_path, json_path = folder / "evaluated.html", folder / "evaluated.json"
+    assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(json_path), "--html",
+                 str(page_path)]) == 0
+    assert f"wrote {page_path}" in capsys.readouterr().out
+    page = page_path.read_text(encoding="utf-8")
+    assert 'id="targets-table"' in page and "<th>evaluated RMS [mm]</th>" in page and str(held_out) in page
+    for target in json.loads(json_path.read_text(encoding="utf-8"))["evaluated_targets"]:
+        errors = target["errors"]["position"]  # the row of this target: its own numbers, then the evaluated ones
+        row = next(line for line in page.splitlines() if line.startswith(f"<tr><td>{target['tip_link']}</td>"))
+        assert row.endswith(f"<td>{target['errors']['seen']}</td><td>{errors['rms_mm']:.3f}</td>"
+                            f"<td>{errors['max_mm']:.3f}</td></tr>")
+    for bad in (held_out, json_path):
+        assert main(["evaluate", str(out), str(report), str(held_out), "--json", str(json_path), "--html",
+                     str(bad)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 2
+
+
 def test_one_tip_link_keeps_refusing_an_empty_point_cell(files, capsys):
     folder, urdf, data, *_ = files
     code = main(["calibrate", str(urdf), str(data), "--tip-link", "right_marker", "--out", str(folder / "one.urdf"),

@@ -162,14 +162,13 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
     from pincal.workflows.settings import EvaluateSettings
     from pincal.workflows.tree_evaluation import evaluate_tree_files
 
-    for attribute, flag in (("html", "--html"), ("nominal", "--nominal")):
-        if getattr(args, attribute, None) is not None:
-            raise PincalError(f"several --tip-link: evaluate {flag} is not yet supported; leave it out")
+    if getattr(args, "nominal", None) is not None:
+        raise PincalError("several --tip-link: evaluate --nominal is not yet supported; leave it out")
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
                                 fixed_registration=args.fixed_registration, new_session=args.new_session,
                                 temperature_column=args.temperature_column, max_pos_mm=args.max_pos_mm,
                                 max_rot_deg=args.max_rot_deg)
-    run = evaluate_tree_files(args.urdf, args.report, args.data, settings, json_path=args.json)
+    run = evaluate_tree_files(args.urdf, args.report, args.data, settings, json_path=args.json, html_path=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
@@ -182,6 +181,8 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
         print(f"{link:32s} {errors['seen']:5d} {stats['mean_mm']:8.3f} {stats['rms_mm']:8.3f} {stats['max_mm']:8.3f}")
     if args.json is not None:
         print(f"wrote {args.json}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
     if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
         print(f"FAIL: largest position error {run.max_mm:.3f} mm > --max-pos-mm {args.max_pos_mm:g}")
         return 1

@@ -7,8 +7,10 @@ The registration of a row is the report's session's of the same name, the report
 of a session it has not seen (held-out rows of the same setup), or — with ``--new-session`` — each
 session of the data registered anew with the model and the points fixed (Arun et al. 1987 on the seen
 points: the least-squares rigid registration of equally weighted points). What evaluate does with one
-chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``, ``--max-rot-deg``,
-``--html`` — is refused in one line; ``--json`` writes :class:`pincal.report.model_tree.TreeEvaluationJson`.
+chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``, ``--max-rot-deg`` — is
+refused in one line; ``--json`` writes :class:`pincal.report.model_tree.TreeEvaluationJson`, ``--html`` the report's
+page (:mod:`pincal.report.tree_html`) with each target's errors on the evaluated rows beside its own, both made
+before either is written.
 
 A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
 joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
@@ -18,7 +20,7 @@ sensor scale scales the sensed points; a drift is the calibration's sensor, not 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -40,7 +42,8 @@ from pincal.report.document import write_evaluation
 from pincal.report.model_tree import TargetErrors, TreeEvaluationJson
 from pincal.report.reading import load_report, value_at
 from pincal.report.tree import target_errors
-from pincal.workflows.paths import refuse_overwrite
+from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, write_page
 from pincal.workflows.settings import EvaluateSettings
 
 __all__ = ["TreeEvaluation", "evaluate_tree_files"]
@@ -57,6 +60,8 @@ class TreeEvaluation:
         registrations: how each session of the data was registered (``session: source``).
         max_mm: the largest error of any point [mm] (``--max-pos-mm`` judges it).
         notes: the reader's notes and what the user should know.
+        points: each target's point numbers.
+        html: the page written (``--html``), or None.
     """
 
     targets: tuple[tuple[str, TargetErrors | None], ...]
@@ -65,6 +70,7 @@ class TreeEvaluation:
     max_mm: float
     notes: tuple[str, ...]
     points: tuple[tuple[int, ...], ...] = ()
+    html: Path | None = None
 
     def as_dict(self) -> TreeEvaluationJson:
         """``evaluate --json``'s document (:class:`pincal.report.model_tree.TreeEvaluationJson`)."""
@@ -75,10 +81,11 @@ class TreeEvaluation:
 
 
 def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: str | Path,
-                        settings: EvaluateSettings | None = None, json_path: str | Path | None = None
-                        ) -> TreeEvaluation:
+                        settings: EvaluateSettings | None = None, json_path: str | Path | None = None,
+                        html_path: str | Path | None = None) -> TreeEvaluation:
     """Eq 24's position errors of the model of a tree's report on the non-CPA rows of ``data_path``; with
-    ``json_path``, written there too (``evaluate --json``: :meth:`TreeEvaluation.as_dict`).
+    ``json_path``, written there too (``evaluate --json``: :meth:`TreeEvaluation.as_dict`); with ``html_path``,
+    the report's page with each target's errors on these rows (``evaluate --html``).
 
     Raises:
         PincalError: a setting a tree does not take yet; ``urdf`` not the file written with the report (its
@@ -91,8 +98,10 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                           (settings.max_rot_deg is not None, "--max-rot-deg (the targets are points)")):
         if refused:
             raise PincalError(f"several --tip-link: {flag} is not yet supported by evaluate; leave it out")
+    inputs = [*description_inputs(urdf, settings.xacro_args), report_path, data_path]
     if json_path is not None:
-        refuse_overwrite(json_path, urdf, report_path, data_path)
+        refuse_overwrite(json_path, *inputs)
+    page_path = refuse_page(html_path, inputs, [] if json_path is None else [json_path])
     document = cast(dict[str, Any], load_report(report_path, ("tree",)))
     notes: list[str] = []
     if file_sha256(urdf) != value_at(document, "urdf_sha256", report_path):
@@ -142,9 +151,16 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                          f"of point(s) {', '.join(map(str, numbers))}")
     evaluation = TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
                                 tuple(read_notes + notes), tuple(spec.points for spec, _ in targets))
+    page = None
+    if page_path is not None:  # made before anything is written: a report it cannot show leaves no output
+        from pincal.report.html import render_html  # Jinja2 and the figures only when a page is asked for
+
+        shown = {"urdf": str(urdf), "data": str(data_path), **evaluation.as_dict()}
+        page = render_html(document, evaluation=cast(dict[str, Any], shown), base=Path(report_path).parent,
+                           source=report_path)
     if json_path is not None:
         write_evaluation(json_path, evaluation.as_dict())
-    return evaluation
+    return replace(evaluation, html=write_page(page_path, page))
 
 
 def _with_effects(tree: KinematicTree, data: MeasurementSet, entries: Any
