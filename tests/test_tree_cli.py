@@ -172,11 +172,31 @@ def test_one_tip_link_keeps_refusing_an_empty_point_cell(files, capsys):
     assert "line 5, column 'x2': empty cell; expected a finite number" in capsys.readouterr().err
 
 
-def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys):
+@pytest.mark.parametrize("extra, named", [
+    (["--tool", "0,0,0,0,0,0"], "several --tip-link: --tool is not yet supported"),
+    (["--level", "dh"], "several --tip-link: --level dh fits one serial chain's DH table"),
+    (["--method", "2"], "several --tip-link: --method is not yet supported"),
+    (["--reject-outliers"], "several --tip-link: --reject-outliers is not yet supported"),
+    (["--select", "press"], "several --tip-link: --select press is not yet supported"),
+    (["--sigma-pos", "0.1"], "several --tip-link: --sigma-pos")])
+def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys, extra, named):
+    """Each flag calibrate takes with one chain and not yet with several is refused in one line, nothing written."""
     folder, urdf, data, *_ = files
-    code = main(["calibrate", str(urdf), str(data), *TARGETS, "--tool", "0,0,0,0,0,0", "--out",
-                 str(folder / "t.urdf"), "--report", str(folder / "t.json")])
-    assert code == 2 and "several --tip-link: --tool is not yet supported" in capsys.readouterr().err
+    out = folder / f"refused_{extra[0].strip('-')}"
+    code = main(["calibrate", str(urdf), str(data), *TARGETS, *extra, "--out", str(out / "t.urdf"),
+                 "--report", str(out / "t.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and named in err and len(err.strip().splitlines()) == 1
+    assert not (out / "t.urdf").exists() and not (out / "t.json").exists()
+
+
+@pytest.mark.parametrize("extra", [["--nominal", "x.urdf"], ["--fixed-registration"], ["--max-rot-deg", "1"],
+                                   ["--temperature-column", "t"]])
+def test_evaluate_refuses_what_a_tree_does_not_take_yet(files, capsys, extra):
+    folder, *_, out, report, _, _, held_out = files
+    assert main(["evaluate", str(out), str(report), str(held_out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert extra[0] in err and "several --tip-link" in err and len(err.strip().splitlines()) == 1
 
 
 
@@ -249,6 +269,86 @@ def test_several_targets_refuse_a_column_that_does_not_follow_its_mimic(mimic_fi
                  "--report", str(folder / "w.json"), "--quiet"]) == 2
     assert "wrong.csv: line 4, column 'arm_left_4'" in capsys.readouterr().err
     assert not (folder / "w.urdf").exists()
+
+
+def _robot(folder, seed, n_rows):
+    """The two-arm robot's URDF written to ``folder``, its tree of TARGETS, its full parameters, a generator of
+    ``seed`` and ``n_rows`` joint readings drawn from it."""
+    urdf = folder / "robot.urdf"
+    urdf.write_text(two_arm_urdf(), encoding="utf-8")
+    tree = KinematicTree.from_urdf(urdf, parse_targets(TARGETS[1::2]))
+    rng = np.random.default_rng(seed)
+    return urdf, tree, TreeParameters(tree, "full"), rng, rng.uniform(-1.2, 1.2, (n_rows, tree.n_joints))
+
+
+COUPLINGS = ["--coupling", "arm_left_4=0.5*arm_left_3", "--coupling", "arm_right_3=-1*arm_right_2"]
+
+
+@pytest.fixture(scope="module")
+def coupled_files(tmp_path_factory):
+    """30 noise-free rows of a perturbed two-arm robot whose arm_left_4 turns at 0.5 x arm_left_3 (no column for
+    it) and whose arm_right_3 is read against arm_right_2 (its reading q3 - q2), calibrated with --coupling."""
+    folder = tmp_path_factory.mktemp("tree_coupling")
+    urdf, tree, params, rng, q = _robot(folder, 7, 30)
+    names = list(tree.joint_names)
+    q[:, names.index("arm_left_4")] = 0.5 * q[:, names.index("arm_left_3")]
+    with tree.placed(params.placements(rng.normal(0.0, 1e-3, params.size))):
+        sensed = tree.target_points(q, LOCAL) + np.array([0.3, -0.1, 0.2])
+    readings = q.copy()
+    readings[:, names.index("arm_right_3")] -= q[:, names.index("arm_right_2")]
+    keep = [i for i, name in enumerate(names) if name != "arm_left_4"]
+    data = folder / "coupled.csv"
+    _write_rows(data, [names[i] for i in keep], readings[:, keep], sensed)
+    out, report = folder / "out.urdf", folder / "REPORT.json"
+    code = main(["calibrate", str(urdf), str(data), *TARGETS, *COUPLINGS, "--out", str(out), "--report", str(report),
+                 "--quiet"])
+    return folder, urdf, data, out, report, code
+
+
+def test_several_targets_honour_coupling_without_a_column_and_read_against_a_driver(coupled_files, capsys):
+    """--coupling with several targets means what it means with one: a joint without a column follows its driver
+    (eq M1), a reading taken against another joint is corrected (eq C1); the report and effects.yaml record them,
+    evaluate applies them to its rows."""
+    folder, urdf, data, out, report_path, code = coupled_files
+    assert code == 0
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    for target in report["targets"]:
+        assert target["calibration_errors"]["position"]["max_mm"] < 1e-6  # noise-free rows reproduced
+    assert report["couplings"] == [{"joint": "arm_left_4", "factor": 0.5, "driver": "arm_left_3", "follows": True},
+                                   {"joint": "arm_right_3", "factor": -1.0, "driver": "arm_right_2"}]
+    assert {"joint": "arm_left_4", "driver": "arm_left_3", "multiplier": 0.5, "offset": 0.0} in report["chain"]["mimics"]
+    assert (folder / "out.effects.yaml").exists()
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(report_path), str(data), "--max-pos-mm", "1e-6"]) == 0
+    assert "readings corrected as" in capsys.readouterr().err
+    assert main(["calibrate", str(urdf), str(data), *TARGETS, "--out", str(folder / "no.urdf"),
+                 "--report", str(folder / "no.json"), "--quiet"]) == 2  # without it: arm_left_4 has no column
+    assert "arm_left_4" in capsys.readouterr().err and not (folder / "no.urdf").exists()
+
+
+def test_level_auto_with_several_targets_chooses_by_cross_validation(tmp_path, capsys):
+    """calibrate --level auto with several targets: the tree's levels cross-validated (two sessions, each held out
+    and registered anew), the level chosen printed and in REPORT.json (level_choice), the fit at it."""
+    urdf, tree, params, rng, q = _robot(tmp_path, 4, 24)
+    with tree.placed(params.placements(rng.normal(0.0, 2e-3, params.size))):  # every placement off by ~2 mm, mrad
+        sensed = tree.target_points(q, LOCAL) + np.array([0.3, -0.1, 0.2])
+    rows = tmp_path / "rows.csv"
+    _write_rows(rows, tree.joint_names, q, sensed + rng.normal(0.0, 1e-4, sensed.shape))
+    lines = rows.read_text(encoding="utf-8").splitlines()
+    data = tmp_path / "two_sessions.csv"
+    data.write_text("\n".join([lines[0] + ",session", *(f"{line},{'ab'[k // 12]}" for k, line in enumerate(lines[1:]))])
+                    + "\n", encoding="utf-8")
+    report_path = tmp_path / "REPORT.json"
+    assert main(["calibrate", str(urdf), str(data), *TARGETS, "--level", "auto", "--select", "aic", "--out",
+                 str(tmp_path / "out.urdf"), "--report", str(report_path), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "level auto: leave-one-session-out, 2 folds" in printed and "chosen: full" in printed
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    choice = report["level_choice"]
+    assert report["level"] == choice["chosen"] == "full" and [s["level"] for s in choice["levels"]] == [
+        "registration", "offsets", "full"]
+    assert choice["levels"][2]["cv_error_mm"] < 0.5 < choice["levels"][1]["cv_error_mm"]  # 0.1 mm noise per axis
+    assert "(level full, chosen by " in (tmp_path / "out.urdf").read_text(encoding="utf-8")  # its comment says how
 
 
 def test_a_gross_misfit_withholds_the_urdf_unless_forced(files, capsys):

@@ -21,8 +21,7 @@ __all__ = ["one_tip_link", "run_calibrate_tree", "run_diagnose_tree", "is_tree_r
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
 _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
-            ("reject_outliers", "--reject-outliers"),
-            ("coupling", "--coupling"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
+            ("reject_outliers", "--reject-outliers"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
 
 
 def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
@@ -47,7 +46,7 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     from pincal.cli.progress import progress_bar
     from pincal.model.tree import parse_targets
     from pincal.workflows.settings import CalibrateSettings
-    from pincal.workflows.tree_calibration import calibrate_tree_files
+    from pincal.workflows.tree_calibration import calibrate_tree_files, refuse_tree_level
     from pincal.workflows.verdict import urdf_line
 
     for attribute, flag in _NOT_YET:
@@ -55,16 +54,19 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
         if value is not None and value is not False and not (isinstance(value, list) and not value):
             raise PincalError(f"several --tip-link: {flag} is not yet supported; calibrate one --tip-link with it, "
                               "or leave it out")
+    refuse_tree_level(args.level, None)  # before the settings, whose level dh asks for a tool
     targets = parse_targets(args.tip_link)
     settings = CalibrateSettings(tip_link=targets[0].link, level=args.level or "full",
                                  sigma_column=args.sigma_column, selection=selection_criterion(args),
-                                 sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args, force=args.force)
+                                 sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args,
+                                 couplings=args.coupling or (), force=args.force)
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
         run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress,
                                    html=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     result = run.result
+    _print_level_choice(run.report)
     size, joints = 0 if result.params is None else result.params.size, len(run.report["chain"]["joints"])
     print(f"level {result.level}: {result.rank} of {size} parameters identifiable on {joints} joints "
           f"({len(targets)} targets); noise {result.sigma_pos_m * 1000:.3f} mm; calibrated in {run.seconds:.2f} s")
@@ -78,6 +80,8 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
         print(urdf_line(Path(args.out), True))
     else:
         print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
+    if run.effects_file is not None:
+        print(f"wrote {run.effects_file}")
     print(f"wrote {args.report}")
     if run.html is not None:
         print(f"wrote {run.html}")
@@ -107,6 +111,7 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     report, diagnosis = run.report, run.diagnosis
+    _print_level_choice(report)
     kinds = dict(zip(report["chain"]["joints"], report["chain"]["joint_kinds"]))
     print(f"geometric calibration ({run.calibration.level}, {len(targets)} targets), then {len(diagnosis.steps)} "
           f"effect(s) adopted; masses: {report['diagnosis']['masses']}")
@@ -144,6 +149,14 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     if run.html is not None:
         print(f"wrote {run.html}")
     return report, run.withheld
+
+
+def _print_level_choice(report: TreeReport) -> None:
+    """``--level auto``'s table: each level's cross-validated error and the one chosen (none for a level given)."""
+    if "level_choice" in report:
+        from pincal.cli.level_table import level_choice_lines
+
+        print("\n".join(level_choice_lines(report["level_choice"])))
 
 
 def is_tree_report(path: Path) -> bool:

@@ -12,6 +12,10 @@ refused in one line; ``--json`` writes :class:`pincal.report.model_tree.TreeEval
 page (:mod:`pincal.report.tree_html`) with each target's errors on the evaluated rows beside its own, both made
 before either is written.
 
+The report's ``couplings`` (``--coupling``) are applied to the rows as the calibration did: a reading taken against
+another joint corrected (eq C1 of :mod:`pincal.measurements.couplings`), a joint it made follow its driver computed
+from it (its column, if any, checked).
+
 A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
 joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
 lateral compliance bends every target's chain that has its joint (eq L1 of :mod:`pincal.model.lateral`), a
@@ -30,6 +34,7 @@ from pincal.errors import PincalError
 from pincal.fit.registration import register_points
 from pincal.fit.sessions import session_rows
 from pincal.fit.tree_calibration import tree_rows
+from pincal.measurements.couplings import couplings_from_report
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.measurements.data import MeasurementSet
 from pincal.model.effects import BEND_EFFECTS, JOINT_EFFECTS, effect_from_dict, joint_shifts
@@ -112,7 +117,13 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
         notes.append(f"{urdf}: not the URDF {report_path} was written with (--allow-other-urdf)")
     targets = value_at(document, "targets", report_path, _targets)
     tree = KinematicTree.from_urdf(urdf, [spec for spec, _ in targets], xacro_args=settings.xacro_args)
-    data, read_notes = read_measurements(data_path, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    couplings = couplings_from_report(document.get("couplings"), str(report_path))
+    tree.follow(couplings)  # a joint the calibration made follow its driver (couplings[].follows)
+    data, read_notes = read_measurements(data_path, tree.joint_specs, couplings, tree.other_branch_joints,
+                                         occlusion=True)
+    if couplings:
+        notes.append(f"{data_path}: readings corrected as {report_path} says (couplings: "
+                     f"{', '.join(c.label for c in couplings)})")
     data = data.select(data.roles != "cpa")
     names, reported = value_at(document, "sessions", report_path, _sessions)
     rows = tree_rows(tree, data)
