@@ -177,8 +177,7 @@ def test_one_tip_link_keeps_refusing_an_empty_point_cell(files, capsys):
     (["--level", "dh"], "several --tip-link: --level dh fits one serial chain's DH table"),
     (["--method", "2"], "several --tip-link: --method is not yet supported"),
     (["--reject-outliers"], "several --tip-link: --reject-outliers is not yet supported"),
-    (["--select", "press"], "several --tip-link: --select press is not yet supported"),
-    (["--sigma-pos", "0.1"], "several --tip-link: --sigma-pos")])
+    (["--select", "press"], "several --tip-link: --select press is not yet supported")])
 def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys, extra, named):
     """Each flag calibrate takes with one chain and not yet with several is refused in one line, nothing written."""
     folder, urdf, data, *_ = files
@@ -366,19 +365,29 @@ def test_a_gross_misfit_withholds_the_urdf_unless_forced(files, capsys):
     assert main(command) == 3
     assert "pincal: warning: the calibrated model misses the measured points by" in capsys.readouterr().err
     report = json.loads(report_path.read_text(encoding="utf-8"))
-    assert [w["code"] for w in report["warnings"]] == ["gross_misfit"]
+    assert [w["code"] for w in report["warnings"]] == ["residual", "gross_misfit"]  # one chain's two findings
     assert report["sources"]["corrected_urdf_withheld"] is True and not out.exists()
     assert main([*command, "--force"]) == 0 and out.exists()
-    assert "written all the same (--force)" in json.loads(report_path.read_text(encoding="utf-8"))["warnings"][0][
+    assert "written all the same (--force)" in json.loads(report_path.read_text(encoding="utf-8"))["warnings"][-1][
         "message"]
     assert main([*command, "--force", "--strict"]) == 3  # a warning with --strict
 
 
-def test_sigma_pos_is_refused_with_several_targets(files, capsys):
+def test_sigma_pos_judges_the_residual_of_several_targets(files, capsys):
+    """--sigma-pos with several targets: the residual per axis beyond 20x the stated noise is the noise warning
+    (--strict: exit 3), beyond 3x a note naming the diagnose command of these targets; within it, neither."""
     folder, urdf, data, *_ = files
-    code = main(["calibrate", str(urdf), str(data), *TARGETS, "--sigma-pos", "0.1", "--out", str(folder / "s.urdf"),
-                 "--report", str(folder / "s.json")])
-    assert code == 2 and "several --tip-link: --sigma-pos" in capsys.readouterr().err
+    command = ["calibrate", str(urdf), str(data), *TARGETS, "--level", "offsets", "--out", str(folder / "s.urdf"),
+               "--report", str(folder / "s.json"), "--quiet", "--strict", "--sigma-pos"]
+    assert main([*command, "0.001"]) == 3  # the offsets leave the placements' ~1 mm errors: far beyond 1 µm
+    report = json.loads((folder / "s.json").read_text(encoding="utf-8"))
+    assert [w["code"] for w in report["warnings"]] == ["noise"]
+    assert any("pincal diagnose" in n and "--tip-link left_marker:1 --tip-link right_marker:2,3" in n
+               for n in report["notes"])
+    assert main([*command, "10"]) == 0  # 10 mm per axis: within it
+    report = json.loads((folder / "s.json").read_text(encoding="utf-8"))
+    assert report["warnings"] == [] and not any("pincal diagnose" in n for n in report["notes"])
+    capsys.readouterr()
 
 
 def test_one_tip_link_with_points_says_it_takes_a_link_only(files, capsys):

@@ -21,7 +21,7 @@ __all__ = ["one_tip_link", "run_calibrate_tree", "run_diagnose_tree", "is_tree_r
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
 _NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
-            ("reject_outliers", "--reject-outliers"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
+            ("reject_outliers", "--reject-outliers"))
 
 
 def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:

@@ -3,13 +3,16 @@
 each target's errors (:mod:`pincal.report.model_tree`).
 
 A gross misfit (:func:`pincal.fit.plausibility.gross_misfit` of every seen point's RMS error) withholds the
-corrected URDF unless ``--force``, as with one chain (:mod:`pincal.workflows.verdict`). ``--level auto`` chooses
-the tree's level by cross-validation (:func:`pincal.fit.tree_level_choice.choose_tree_level`, REPORT.json
-``level_choice``); ``--coupling`` corrects every row read (eq C1 of :mod:`pincal.measurements.couplings`) or,
-on a joint without a column, makes it follow its driver, as with one chain (REPORT.json ``couplings``, and
-effects.yaml beside the URDF, which cannot carry them). What the single chain's run adds and a tree's does
-not yet: ``--level dh`` (a tree has no DH table), a known ``--tool``, orientation columns and the other
-plausibility checks; each is refused with one line, never run differently.
+corrected URDF unless ``--force``, as with one chain (:mod:`pincal.workflows.verdict`); the other checks of one
+chain warn as there (:func:`pincal.fit.plausibility.fit_findings`: the residual, against ``--sigma-pos`` too,
+each target's points, each registration, the corrections; not the leave-one-row-out comparison nor the
+tip-link check). ``--level auto`` chooses the tree's level by cross-validation
+(:func:`pincal.fit.tree_level_choice.choose_tree_level`, REPORT.json ``level_choice``); ``--coupling``
+corrects every row read (eq C1 of :mod:`pincal.measurements.couplings`) or, on a joint without a column,
+makes it follow its driver, as with one chain (REPORT.json ``couplings``, and effects.yaml beside the URDF,
+which cannot carry them). What the single chain's run adds and a tree's does not yet: ``--level dh`` (a tree
+has no DH table), a known ``--tool``, orientation columns; each is refused with one line, never run
+differently.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 from pincal._version import __version__
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
-from pincal.fit.plausibility import gross_misfit, reach_m
+from pincal.fit.plausibility import Finding, fit_findings, reach_m
 from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
 from pincal.measurements.csv_v1 import read_sessions
 from pincal.measurements.data import MeasurementSet
@@ -44,12 +47,13 @@ from pincal.report.tree import tree_report
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import CalibrateSettings, follow_couplings
-from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
+from pincal.workflows.verdict import RELOAD_TOLERANCE, diagnose_command, unmodelled_notes, withhold, withholding
 
 if TYPE_CHECKING:
     from pincal.fit.level_choice import LevelChoice
 
-__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "write_tree_urdf", "refuse_tree_level", "tree_level"]
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "write_tree_urdf", "refuse_tree_level", "tree_level",
+           "tree_findings"]
 
 
 @dataclass(frozen=True)
@@ -124,17 +128,16 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     chosen = ", chosen by --level auto" if choice is not None else ""
     comment = (f"Calibrated by pincal {__version__} (level {level}{chosen}, {len(tree.targets)} targets) from "
                f"{urdf.name} and {', '.join(p.name for p in data_paths)}. Registration and targets: see the report.")
-    # every seen point's distance from the model, as the single chain's RMS point residual; the reach of the
-    # farthest tip link: the gross-misfit rule of pincal.workflows.verdict, its URDF withheld unless --force
-    rms = float(np.sqrt(np.nanmean(result.point_errors ** 2)))
-    gross = gross_misfit(rms, max(reach_m(t.chain, data.q[:, t.columns]) for t in tree.targets))
-    warnings, withheld = withholding([] if gross is None else [gross], settings.force)
+    reach, findings = tree_findings(tree, result, data.q, settings.sigma_pos_m)
+    warnings, withheld = withholding(findings, settings.force)
     reload_error, digest = write_tree_urdf(urdf, out_urdf, tree, result.tree_placements,
                                            (comment, settings.xacro_args), data.q, keep=not withheld)
     sources: Sources = {"urdf": str(urdf),
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf)}
-    notes = notes + list(result.notes)
+    command = diagnose_command(urdf, data_paths, settings, out_urdf, report_path,
+                               [f"{t.link}:{','.join(map(str, t.spec.points))}" for t in tree.targets])
+    notes = notes + list(result.notes) + unmodelled_notes(result, reach, settings.sigma_pos_m, command)
     held = int(np.sum(data.roles == "validation"))
     if held:  # not in the fit, and not judged here: evaluate gives their errors per target
         notes.append(f"{held} row(s) with role 'validation' are not in the fit; pincal evaluate {out_urdf} "
@@ -163,6 +166,18 @@ def tree_level(tree: KinematicTree, data: MeasurementSet, level: str, options: C
 
     choice = choose_tree_level(tree, data, options, progress=stages.next())
     return choice, choice.chosen
+
+
+def tree_findings(tree: KinematicTree, result: TreeCalibration, q: np.ndarray, sigma_pos_m: float | None,
+                  diagnosed: bool = False) -> tuple[float, list[Finding]]:
+    """The reach of the farthest tip link at joint readings ``q`` [m] and the plausibility findings of one chain
+    on ``result`` (:func:`pincal.fit.plausibility.fit_findings`): its RMS distance of every seen point from the
+    model against the reach (a gross misfit) and the stated noise ``sigma_pos_m`` [m], each target's points
+    against the reach, each registration, the corrections (``diagnosed``: the model with diagnose's effects)."""
+    reach = max(reach_m(t.chain, q[:, t.columns]) for t in tree.targets)
+    points = [(t.link, float(np.max(np.linalg.norm(result.target.points[np.array(t.spec.points) - 1], axis=1))))
+              for t in tree.targets]
+    return reach, fit_findings(result, reach, points, len(result.used_index), sigma_pos_m, None, diagnosed)
 
 
 class _Withheld(Exception):

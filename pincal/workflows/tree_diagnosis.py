@@ -3,7 +3,8 @@ the tree's residuals for effects the geometry lacks (:func:`pincal.diagnosis.tre
 the final model's URDF (every calibrated chain), effects.yaml beside it and REPORT.json with each target's errors
 before and after (:func:`diagnose_tree_files`).
 
-A gross misfit of the final model withholds its URDF and effects.yaml unless ``--force``, as calibrate's.
+A gross misfit of the final model withholds its URDF and effects.yaml unless ``--force``, and the other checks of
+one chain warn, as calibrate's (:func:`pincal.workflows.tree_calibration.tree_findings`).
 ``--level auto`` and ``--coupling`` are calibrate's (:mod:`pincal.workflows.tree_calibration`): the geometry under
 the effects at the level cross-validation chooses, every row read (held-out rows too) corrected or followed as the
 couplings say. What the single chain's diagnose adds and a tree's does not yet: a known ``--tool``,
@@ -18,12 +19,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
-from pincal.fit.plausibility import gross_misfit, reach_m
 from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
 from pincal.measurements.csv_v1 import read_measurements, read_sessions
 from pincal.model.description import xacro_arguments
@@ -41,8 +39,8 @@ from pincal.workflows.diagnosis import DiagnoseOutputs
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.report_page import refuse_page, render_page, write_page
 from pincal.workflows.settings import DiagnoseSettings, follow_couplings
-from pincal.workflows.tree_calibration import tree_level, write_tree_urdf
-from pincal.workflows.verdict import withhold, withholding
+from pincal.workflows.tree_calibration import tree_findings, tree_level, write_tree_urdf
+from pincal.workflows.verdict import unmodelled_notes, withhold, withholding
 
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of the search
     from pincal.diagnosis.tree_diagnose import TreeDiagnosis
@@ -127,9 +125,8 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                     point_errors=diagnosis.point_errors, sigma_pos_m=diagnosis.sigma_pos_m,
                     tree_placements=diagnosis.tree_placements)
     used_q = data.q[calibration.used_index]
-    rms = float(np.sqrt(np.nanmean(final.point_errors ** 2)))
-    gross = gross_misfit(rms, max(reach_m(t.chain, used_q[:, t.columns]) for t in tree.targets))
-    warnings, withheld = withholding([] if gross is None else [gross], settings.force)
+    reach, findings = tree_findings(tree, final, used_q, settings.sigma_pos_m, diagnosed=True)
+    warnings, withheld = withholding(findings, settings.force)
     comment = (f"Calibrated by pincal {__version__} (diagnose, level {level}, {len(tree.targets)} targets) from "
                f"{urdf.name} and {', '.join(p.name for p in data_paths)}. Registration, targets and effects (which "
                "a URDF cannot carry): see the report.")
@@ -139,7 +136,8 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf),
                         "validation": None if validation_path is None else str(validation_path)}
-    notes = notes + list(calibration.notes) + list(diagnosis.notes)
+    notes = notes + list(calibration.notes) + list(diagnosis.notes) + unmodelled_notes(final, reach,
+                                                                                       settings.sigma_pos_m)
     if withheld:
         sources["corrected_urdf_withheld"] = True  # the path names no file of this run
         notes += withhold(out_urdf)
