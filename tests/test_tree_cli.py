@@ -325,6 +325,41 @@ def test_several_targets_honour_coupling_without_a_column_and_read_against_a_dri
     assert "arm_left_4" in capsys.readouterr().err and not (folder / "no.urdf").exists()
 
 
+def test_plan_with_several_targets_honours_coupling(coupled_files, capsys):
+    """plan --coupling with several targets: the recorded rows corrected and the joint without a column following
+    its driver, as a URDF <mimic> and corrected readings would give (the same plan), PLAN.csv in the controller's
+    readings (arm_right_3 read against arm_right_2) without a column for the follower."""
+    folder, urdf, data, *_ = coupled_files
+    text = two_arm_urdf()
+    end = text.index("</joint>", text.index('<joint name="arm_left_4"'))
+    mimic = folder / "mimic.urdf"
+    mimic.write_text(text[:end] + '<mimic joint="arm_left_3" multiplier="0.5"/>' + text[end:], encoding="utf-8")
+    rows = list(csv.DictReader(data.read_text(encoding="utf-8").splitlines()))
+    corrected = folder / "corrected.csv"  # the actual angles: arm_right_3's reading plus arm_right_2's
+    with open(corrected, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({**row, "arm_right_3": repr(float(row["arm_right_3"]) + float(row["arm_right_2"]))}
+                         for row in rows)
+    common = [*TARGETS, "--count", "3", "--sample", "60", "--quiet"]
+    assert main(["plan", str(urdf), "--existing", str(data), *COUPLINGS, *common,
+                 "--out", str(folder / "c.csv"), "--report", str(folder / "c.json")]) == 0
+    assert main(["plan", str(mimic), "--existing", str(corrected), *common,
+                 "--out", str(folder / "p.csv"), "--report", str(folder / "p.json")]) == 0
+    coupled, plain = (json.loads((folder / f"{n}.json").read_text(encoding="utf-8")) for n in ("c", "p"))
+    assert coupled["sources"]["couplings"][0] == {"joint": "arm_left_4", "factor": 0.5, "driver": "arm_left_3",
+                                                  "follows": True}
+    for key in ("mean_position_mm", "max_position_mm", "condition"):  # the recorded rows read alike
+        assert coupled["predicted"]["recorded_only"][key] == pytest.approx(plain["predicted"]["recorded_only"][key],
+                                                                           rel=1e-9)
+    c_rows, p_rows = (list(csv.DictReader((folder / f"{n}.csv").read_text(encoding="utf-8").splitlines()))
+                      for n in ("c", "p"))
+    assert "arm_left_4" not in c_rows[0] and [r["candidate"] for r in c_rows] == [r["candidate"] for r in p_rows]
+    for c_row, p_row in zip(c_rows, p_rows):
+        assert float(c_row["arm_right_3"]) == pytest.approx(float(p_row["arm_right_3"]) - float(p_row["arm_right_2"]))
+    capsys.readouterr()
+
+
 def test_level_auto_with_several_targets_chooses_by_cross_validation(tmp_path, capsys):
     """calibrate --level auto with several targets: the tree's levels cross-validated (two sessions, each held out
     and registered anew), the level chosen printed and in REPORT.json (level_choice), the fit at it."""
