@@ -20,8 +20,7 @@ if TYPE_CHECKING:
 __all__ = ["one_tip_link", "run_calibrate_tree", "run_diagnose_tree", "is_tree_report", "run_evaluate_tree"]
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
-_NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
-            ("reject_outliers", "--reject-outliers"))
+_NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"))
 
 
 def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
@@ -59,7 +58,8 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     settings = CalibrateSettings(tip_link=targets[0].link, level=args.level or "full",
                                  sigma_column=args.sigma_column, selection=selection_criterion(args),
                                  sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args,
-                                 couplings=args.coupling or (), force=args.force)
+                                 couplings=args.coupling or (), reject_outliers=args.reject_outliers,
+                                 force=args.force)
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
         run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress,
                                    html=args.html)

@@ -118,13 +118,16 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
     tree = KinematicTree.from_urdf(urdf, targets, xacro_args=settings.xacro_args)
     couplings = follow_couplings(tree, settings.couplings, data_paths)  # a joint without a column follows (M1)
     data, notes = read_sessions(data_paths, tree.joint_specs, couplings, tree.other_branch_joints, occlusion=True)
-    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
+    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion,
+                              reject_outliers=settings.reject_outliers)
     start = time.perf_counter()
     stages = Stages(progress)
     choice, level = tree_level(tree, data, settings.level, options, stages)
     result = calibrate_tree(tree, data, level, options, stages.next())
     seconds = time.perf_counter() - start
-    nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
+    # the errors before: the nominal model registered to the rows of the fit (outliers removed, if they were)
+    nominal = calibrate_tree(tree, data.select(result.used_index), "registration",
+                             ChainFitOptions(sigma_column=settings.sigma_column))
     chosen = ", chosen by --level auto" if choice is not None else ""
     comment = (f"Calibrated by pincal {__version__} (level {level}{chosen}, {len(tree.targets)} targets) from "
                f"{urdf.name} and {', '.join(p.name for p in data_paths)}. Registration and targets: see the report.")

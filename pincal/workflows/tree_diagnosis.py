@@ -114,7 +114,7 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                                                 tree.other_branch_joints, occlusion=True)
         notes += held_notes
         held_time = time_column(heldout, settings.time_column)
-    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
+    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion, refit_offered=False)
     choice, level = tree_level(tree, data, settings.level, options, Stages(None))
     calibration = calibrate_tree(tree, data, level, options)
     nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
