@@ -372,7 +372,7 @@ def test_level_auto_with_several_targets_chooses_by_cross_validation(tmp_path, c
     data.write_text("\n".join([lines[0] + ",session", *(f"{line},{'ab'[k // 12]}" for k, line in enumerate(lines[1:]))])
                     + "\n", encoding="utf-8")
     report_path = tmp_path / "REPORT.json"
-    assert main(["calibrate", str(urdf), str(data), *TARGETS, "--level", "auto", "--select", "aic", "--out",
+    assert main(["calibrate", str(urdf), str(data), *TARGETS, "--level", "auto", "--select", "all", "--out",
                  str(tmp_path / "out.urdf"), "--report", str(report_path), "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "level auto: leave-one-session-out, 2 folds" in printed and "chosen: full" in printed
