@@ -156,3 +156,24 @@ def test_the_predicted_point_error_propagates_the_fits_covariance(simulated):
         assert 0.8 < result.predicted_point_rms(tree, data.q) / expected < 1.25, level
         if level == "full":
             assert 0.8 < result.sigma_pos_m / sigma < 1.25
+
+
+def test_level_auto_on_a_tree_chooses_the_level_the_rows_support(model):
+    """--level auto on several targets: rows of a robot whose only errors are joint offsets choose offsets, not the
+    full level the rows fit no better on held-out sessions (one-standard-error rule, simplest first)."""
+    from pincal.fit.tree_level_choice import choose_tree_level
+
+    tree = KinematicTree(model, parse_targets(["left_marker:1", "right_marker:2"]))
+    offsets = TreeParameters(tree, "offsets")
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1.2, 1.2, (24, tree.n_joints))
+    with tree.placed(offsets.placements(rng.normal(0.0, 5e-3, offsets.size))):
+        world = tree.target_points(q, [LOCAL[0], LOCAL[1][:1]])
+    sensed = world @ pin.rpy.rpyToMatrix(0.1, -0.2, 0.3).T + np.array([1.0, 0.5, -0.2])
+    data = MeasurementSet(tree.joint_names, q, sensed + rng.normal(0.0, 1e-4, sensed.shape), None,
+                          np.full(len(q), "calibration", dtype=object), np.arange(2, len(q) + 2),
+                          sessions=np.array(["a"] * 12 + ["b"] * 12, dtype=object))
+    choice = choose_tree_level(tree, data, ChainFitOptions(selection="aic"))
+    assert choice.scheme == "leave-one-session-out" and choice.chosen == "offsets"
+    registration, offset, full = (s.cv_error_mm for s in choice.scores)
+    assert offset < 0.3 < 1.0 < registration and full > offset  # 0.1 mm noise per axis; 5 mrad offsets

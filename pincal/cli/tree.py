@@ -21,9 +21,7 @@ if TYPE_CHECKING:
 __all__ = ["one_tip_link", "run_calibrate_tree", "run_diagnose_tree", "is_tree_report", "run_evaluate_tree"]
 
 #: What the calibration of several targets does not take yet (each flag set refuses it).
-_NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"),
-            ("reject_outliers", "--reject-outliers"),
-            ("coupling", "--coupling"), ("sigma_pos", "--sigma-pos (the noise checks of one chain)"))
+_NOT_YET = (("fixture", "--fixture"), ("method", "--method"), ("weight", "--weight"), ("tool", "--tool"))
 
 
 def one_tip_link(command: str, tip_links: Sequence[str] | str | None) -> str:
@@ -48,7 +46,7 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     from pincal.cli.progress import progress_bar
     from pincal.model.tree import parse_targets
     from pincal.workflows.settings import CalibrateSettings
-    from pincal.workflows.tree_calibration import calibrate_tree_files
+    from pincal.workflows.tree_calibration import calibrate_tree_files, refuse_tree_level
     from pincal.workflows.verdict import urdf_line
 
     for attribute, flag in _NOT_YET:
@@ -56,16 +54,20 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
         if value is not None and value is not False and not (isinstance(value, list) and not value):
             raise PincalError(f"several --tip-link: {flag} is not yet supported; calibrate one --tip-link with it, "
                               "or leave it out")
+    refuse_tree_level(args.level, None)  # before the settings, whose level dh asks for a tool
     targets = parse_targets(args.tip_link)
     settings = CalibrateSettings(tip_link=targets[0].link, level=args.level or "full",
                                  sigma_column=args.sigma_column, selection=selection_criterion(args),
-                                 sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args, force=args.force)
+                                 sigma_pos_mm=args.sigma_pos, xacro_args=args.xacro_args,
+                                 couplings=args.coupling or (), reject_outliers=args.reject_outliers,
+                                 force=args.force)
     with progress_bar("calibrate", quiet=args.quiet, unit="fit") as progress:
         run = calibrate_tree_files(args.urdf, args.data, args.out, args.report, targets, settings, progress,
                                    html=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     result = run.result
+    _print_level_choice(run.report)
     size, joints = 0 if result.params is None else result.params.size, len(run.report["chain"]["joints"])
     noise = f"{result.sigma_pos_m * 1000:.3f} mm" + ("" if result.sigma_rot_rad is None else
                                                      f", {math.degrees(result.sigma_rot_rad):.4f} deg")
@@ -89,6 +91,8 @@ def run_calibrate_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
         print(urdf_line(Path(args.out), True))
     else:
         print(f"wrote {args.out} (reload check: every target reproduced to {run.reload_error:.1e} m)")
+    if run.effects_file is not None:
+        print(f"wrote {run.effects_file}")
     print(f"wrote {args.report}")
     if run.html is not None:
         print(f"wrote {run.html}")
@@ -118,6 +122,7 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     report, diagnosis = run.report, run.diagnosis
+    _print_level_choice(report)
     kinds = dict(zip(report["chain"]["joints"], report["chain"]["joint_kinds"]))
     print(f"geometric calibration ({run.calibration.level}, {len(targets)} targets), then {len(diagnosis.steps)} "
           f"effect(s) adopted; masses: {report['diagnosis']['masses']}")
@@ -157,6 +162,14 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
     return report, run.withheld
 
 
+def _print_level_choice(report: TreeReport) -> None:
+    """``--level auto``'s table: each level's cross-validated error and the one chosen (none for a level given)."""
+    if "level_choice" in report:
+        from pincal.cli.level_table import level_choice_lines
+
+        print("\n".join(level_choice_lines(report["level_choice"])))
+
+
 def is_tree_report(path: Path) -> bool:
     """Whether ``path`` is a REPORT.json of several targets (``targets``); False for anything else, whose
     reader then says what is wrong with it."""
@@ -173,14 +186,13 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
     from pincal.workflows.settings import EvaluateSettings
     from pincal.workflows.tree_evaluation import evaluate_tree_files
 
-    for attribute, flag in (("html", "--html"), ("nominal", "--nominal")):
-        if getattr(args, attribute, None) is not None:
-            raise PincalError(f"several --tip-link: evaluate {flag} is not yet supported; leave it out")
+    if getattr(args, "nominal", None) is not None:
+        raise PincalError("several --tip-link: evaluate --nominal is not yet supported; leave it out")
     settings = EvaluateSettings(allow_other_urdf=args.allow_other_urdf, xacro_args=args.xacro_args,
                                 fixed_registration=args.fixed_registration, new_session=args.new_session,
                                 temperature_column=args.temperature_column, max_pos_mm=args.max_pos_mm,
                                 max_rot_deg=args.max_rot_deg)
-    run = evaluate_tree_files(args.urdf, args.report, args.data, settings, json_path=args.json)
+    run = evaluate_tree_files(args.urdf, args.report, args.data, settings, json_path=args.json, html_path=args.html)
     for note in run.notes:
         print(f"pincal: note: {note}", file=sys.stderr)
     print(f"{run.rows} rows; registration: {'; '.join(run.registrations)}")
@@ -203,6 +215,8 @@ def run_evaluate_tree(args: argparse.Namespace) -> int:
               f"{angle['max_deg']:8.4f}")
     if args.json is not None:
         print(f"wrote {args.json}")
+    if run.html is not None:
+        print(f"wrote {run.html}")
     failed = 0
     if args.max_pos_mm is not None and run.max_mm > args.max_pos_mm:
         print(f"FAIL: largest position error {run.max_mm:.3f} mm > --max-pos-mm {args.max_pos_mm:g}")

@@ -78,7 +78,8 @@ __all__ = [
     "DEFAULT_FOLDS", "SEED", "SAME_CONFIGURATION_RAD", "MIN_TRAINING_ROWS", "MIN_CONFIGURATIONS",
     "MIN_HELD_OUT_COORDINATES", "RULE", "RULE_PRIOR", "Fold", "LevelScore", "LevelChoice", "one_standard_error",
     "row_folds", "configuration_keys", "sensor_folds", "choose_level", "fixture_heldout_error", "fixture_rows",
-    "fixture_folds", "choose_fixture_level", "placement_error",
+    "fixture_folds", "choose_fixture_level", "placement_error", "cross_validate", "rule_choice",
+    "sensor_setup",
 ]
 
 #: Fewest rows a fold may calibrate on (a calibration needs 3: pincal.fit.chain_calibration).
@@ -222,8 +223,9 @@ def _score(level: ChainLevel, errors: list[float], kept: list[int], failures: li
     return LevelScore(level, tuple(values.tolist()), tuple(kept), mean, se, tuple(failures))
 
 
-def _choice(scheme: str, error: str, folds: Sequence[Fold], scores: Sequence[LevelScore],
-            selection: SelectionCriterion | Prior, started: float) -> LevelChoice:
+def rule_choice(scheme: str, error: str, folds: Sequence[Fold], scores: Sequence[LevelScore],
+                selection: SelectionCriterion | Prior, started: float) -> LevelChoice:
+    """The :class:`LevelChoice` of ``scores`` by :func:`one_standard_error` (the richest within it with ``prior``)."""
     richest = selection == "prior"
     lowest, chosen, threshold = one_standard_error([s.cv_error_mm for s in scores],
                                                    [s.standard_error_mm for s in scores], richest)
@@ -231,9 +233,9 @@ def _choice(scheme: str, error: str, folds: Sequence[Fold], scores: Sequence[Lev
                        threshold, selection, time.perf_counter() - started, RULE_PRIOR if richest else RULE)
 
 
-def _cross_validate(folds: Sequence[Fold], levels: Sequence[ChainLevel],
-                    fit_and_score: Callable[[ChainLevel, Fold], tuple[float, int]], counter: Counter
-                    ) -> list[LevelScore]:
+def cross_validate(folds: Sequence[Fold], levels: Sequence[ChainLevel],
+                   fit_and_score: Callable[[ChainLevel, Fold], tuple[float, int]], counter: Counter
+                   ) -> list[LevelScore]:
     """e_f of every level on every fold; ``fit_and_score(level, fold)`` → (e_f [m], kept)."""
     counter.expect(len(folds) * len(levels))
     scores = []
@@ -304,6 +306,16 @@ def sensor_folds(data: MeasurementSet, folds: int = DEFAULT_FOLDS, seed: int = S
     return f"{folds}-fold over configurations (seed {seed})", out
 
 
+def sensor_setup(data: MeasurementSet, options: ChainFitOptions | None, folds: int, seed: int, caller: str
+                 ) -> tuple[ChainFitOptions, MeasurementSet, str, list[Fold]]:
+    """What a sensor calibration's level choice starts from: its options (the default's when None, checked), the
+    rows of ``data`` without role ``validation`` and their folds (:func:`sensor_folds`)."""
+    options = ChainFitOptions() if options is None else options
+    expect_value(options, ChainFitOptions, caller)
+    rows = data.select(np.flatnonzero(data.roles != "validation"))
+    return (options, rows, *sensor_folds(rows, folds, seed))
+
+
 def choose_level(
     chain: KinematicChain,
     data: MeasurementSet,
@@ -324,10 +336,7 @@ def choose_level(
         CalibrationError: folds that cannot be formed or fitted (one line saying what to do).
     """
     started = time.perf_counter()
-    options = ChainFitOptions() if options is None else options
-    expect_value(options, ChainFitOptions, "choose_level")
-    rows = data.select(np.flatnonzero(data.roles != "validation"))
-    scheme, fold_list = sensor_folds(rows, folds, seed)
+    options, rows, scheme, fold_list = sensor_setup(data, options, folds, seed, "choose_level")
     several = len(rows.session_names) > 1
 
     def fit_and_score(level: ChainLevel, fold: Fold) -> tuple[float, int]:
@@ -345,14 +354,14 @@ def choose_level(
         return float(np.sqrt(np.mean(errors.position_m**2))), len(result.kept)
 
     if several or options.reject_outliers or rows.n_rows < LINEARISED_FROM_ROWS:
-        scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress))
+        scores = cross_validate(fold_list, levels, fit_and_score, Counter(progress))
     else:  # many rows: one fit per level, each fold by one Gauss–Newton step (pincal.fit.fold_update, eq L1)
         scores = _linearised(chain, rows, fold_list, levels, Counter(progress), options)
         scheme += f", scored from the fit of all {rows.n_rows} rows by one Gauss–Newton step per fold (eq L1)"
     error = ("RMS distance of the held-out rows' target points from the model's [mm], "
              + ("each held-out session through its own registration re-estimated from its rows (6 parameters)"
                 if several else "through the training fit's registration (one session)"))
-    return _choice(scheme, error, fold_list, scores, options.selection, started)
+    return rule_choice(scheme, error, fold_list, scores, options.selection, started)
 
 
 def _linearised(chain: KinematicChain, rows: MeasurementSet, folds: Sequence[Fold], levels: Sequence[ChainLevel],
@@ -487,8 +496,8 @@ def choose_fixture_level(
         c = np.array([centres[data.fixture.names[i]] for i in test.socket])
         return float(np.sqrt(np.mean(np.sum((p - c) ** 2, axis=1)))), len(result.kept)
 
-    scores = _cross_validate(fold_list, levels, fit_and_score, Counter(progress))
+    scores = cross_validate(fold_list, levels, fit_and_score, Counter(progress))
     error = ("RMS of eq F1 on the held-out placement [mm], its own fixture pose fitted to its rows with the "
              "model and the ball centre fixed (consistency and distortion in one number)" if several else
              "RMS distance of the held-out rows' ball centre from its socket's fitted centre [mm]")
-    return _choice(scheme, error, fold_list, scores, selection, started)
+    return rule_choice(scheme, error, fold_list, scores, selection, started)

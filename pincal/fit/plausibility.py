@@ -73,7 +73,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, Protocol, cast
 
 import numpy as np
 
@@ -86,14 +86,14 @@ from pincal.fit.sensor_problem import FitProblem
 from pincal.fit.solver import Solution, solve
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
-from pincal.residuals.sensor import SensorResidual
+from pincal.residuals.sensor import SensorResidual, TargetEstimate
 
 __all__ = [
     "MAX_RMS_M", "MAX_NOISE_RATIO", "MAX_SENSOR_DISTANCE_M", "MAX_TRANSLATION_M", "MAX_ROTATION_RAD", "DATA_CAUSES",
     "MIN_REFERENCE_RMS_M", "CALIBRATED_ACCURACY_M", "Finding", "MOVED_MIN", "tip_link_findings", "tip_link_verdict",
     "reach_m", "check_calibration", "check_evaluation", "refit_nominal", "press_against_nominal",
     "calibration_findings", "GROSS_REACH_FRACTION", "NOTE_NOISE_RATIO", "gross_bound_m", "gross_misfit", "noise_ratio",
-    "UNMODELLED_CAUSES", "unmodelled_reason",
+    "UNMODELLED_CAUSES", "unmodelled_reason", "Fitted", "fit_findings",
 ]
 
 #: A joint column whose values span less than this has not moved [rad or m]: encoder jitter is ~1e-5 rad;
@@ -191,7 +191,7 @@ def gross_misfit(rms_m: float, reach: float, what: str = "the calibrated model")
                    f"correction of this robot: the data are not of it as described")
 
 
-def noise_ratio(result: ChainCalibration, stated_sigma_pos_m: float | None) -> float | None:
+def noise_ratio(result: Fitted, stated_sigma_pos_m: float | None) -> float | None:
     """The residual per axis — the RMS point residual ``result.rms_m`` / sqrt(3), the noise the model
     leaves — over the sensor's stated noise ``stated_sigma_pos_m`` [m] per axis; None without a stated
     noise, or at level ``registration``, whose residual holds the robot's own geometric errors (module
@@ -202,7 +202,7 @@ def noise_ratio(result: ChainCalibration, stated_sigma_pos_m: float | None) -> f
     return float(result.rms_m / np.sqrt(3.0) / stated_sigma_pos_m)
 
 
-def unmodelled_reason(result: ChainCalibration, reach: float, stated_sigma_pos_m: float | None) -> str | None:
+def unmodelled_reason(result: Fitted, reach: float, stated_sigma_pos_m: float | None) -> str | None:
     """Why ``result`` (a chain calibration on rows of a robot of ``reach`` [m]) likely lacks an effect, in
     words; None when nothing says so, at level ``registration`` (its residual holds the geometry's own
     errors) and for a gross misfit (a data problem: :func:`gross_misfit`).
@@ -232,10 +232,37 @@ def _likely(gross: bool, diagnosed: bool) -> str:
             f"none, check: {causes}")
 
 
+class Fitted(Protocol):
+    """What the checks read of a calibration, one chain's (:class:`pincal.fit.chain_calibration.ChainCalibration`)
+    or a tree's (:class:`pincal.fit.tree_calibration.TreeCalibration`)."""
+
+    @property
+    def level(self) -> str: ...
+
+    @property
+    def vector(self) -> np.ndarray: ...
+
+    @property
+    def status(self) -> tuple[str, ...]: ...
+
+    @property
+    def session_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def rms_m(self) -> float: ...
+
+    @property
+    def params(self) -> Any: ...
+
+    @property
+    def target(self) -> TargetEstimate: ...
+
+
 def check_calibration(chain: KinematicChain, result: ChainCalibration, rows: MeasurementSet,
                       stated_sigma_pos_m: float | None = None, press: tuple[float, float] | None = None,
                       diagnosed: bool = False) -> list[Finding]:
-    """The findings on a :class:`pincal.fit.chain_calibration.ChainCalibration` of ``rows``.
+    """The findings on a :class:`pincal.fit.chain_calibration.ChainCalibration` of ``rows``
+    (:func:`fit_findings` with the chain's reach in the rows and its estimated target).
 
     At level ``registration`` nothing of the geometry is fitted, so the robot's own errors stay in the
     residual: the noise ratio is not judged there, and a large residual points to a richer level first.
@@ -253,11 +280,21 @@ def check_calibration(chain: KinematicChain, result: ChainCalibration, rows: Mea
         diagnosed: ``result`` is pincal diagnose's final model, with the effects it adopted: a large
             residual then points past the effects diagnose tries.
     """
+    targets = ((chain.tip_link, float(np.max(np.linalg.norm(result.target.points, axis=1)))),) \
+        if result.fit_target else ()
+    return fit_findings(result, reach_m(chain, rows.q), targets, rows.n_rows, stated_sigma_pos_m, press, diagnosed)
+
+
+def fit_findings(result: Fitted, reach: float, targets: Sequence[tuple[str, float]], n_rows: int,  # noqa: PLR0913
+                 stated_sigma_pos_m: float | None = None, press: tuple[float, float] | None = None,
+                 diagnosed: bool = False) -> list[Finding]:
+    """The findings of :func:`check_calibration` on a calibration of ``n_rows`` rows of a robot of ``reach`` [m]
+    (:func:`reach_m`), one chain's or several targets' on a tree; ``targets``: each estimated target's tip link
+    and the largest distance of its points from it [m] (none: a known tool)."""
     findings: list[Finding] = []
     causes = "; ".join(DATA_CAUSES)
     rms = result.rms_m
     geometry = result.level != "registration"
-    reach = reach_m(chain, rows.q)
     what = "the model with its effects" if diagnosed else "the calibrated model"
     gross = gross_misfit(rms, reach, what)
     likely = _likely(gross is not None, diagnosed)
@@ -283,10 +320,9 @@ def check_calibration(chain: KinematicChain, result: ChainCalibration, rows: Mea
         findings.append(Finding("noise", f"the residual ({rms / np.sqrt(3.0) * 1e3:.3g} mm per axis) is "
                                 f"{ratio:.0f}× the sensor's stated noise ({stated_sigma_pos_m * 1e3:g} mm; more "
                                 f"than {MAX_NOISE_RATIO:g}×): something the model lacks, or bad data. {likely}"))
-    if result.fit_target:
-        distance = float(np.max(np.linalg.norm(result.target.points, axis=1)))
+    for tip_link, distance in targets:
         if distance > reach:
-            findings.append(Finding("target", f"the estimated target is {distance:.3g} m from {chain.tip_link}, "
+            findings.append(Finding("target", f"the estimated target is {distance:.3g} m from {tip_link}, "
                                     f"beyond the robot's reach in these rows ({reach:.3g} m): no tool is that long. "
                                     "The data cannot place it; give --tool X,Y,Z,R,P,Y, vary the tool's "
                                     f"orientation, or check: {causes}"))
@@ -317,11 +353,11 @@ def check_calibration(chain: KinematicChain, result: ChainCalibration, rows: Mea
                                 "moved), so the calibrated model cannot be cross-validated and that parameter fits "
                                 "its noise. Add rows that move every joint, use a lower --level, or pincal plan"))
     elif press is not None and np.isfinite(press[0]) and np.isfinite(press[1]) and press[1] > 0 and (
-            np.sqrt(press[0] / press[1]) > 1.0 + 2.0 / np.sqrt(2.0 * rows.n_rows)):
+            np.sqrt(press[0] / press[1]) > 1.0 + 2.0 / np.sqrt(2.0 * n_rows)):
         gain = np.sqrt(press[0] / press[1])
         findings.append(Finding("cross_validation", f"the calibrated model predicts left-out rows worse than the "
                                 f"nominal one (leave-one-row-out RMS error ×{gain:.3g}, beyond the "
-                                f"×{1.0 + 2.0 / np.sqrt(2.0 * rows.n_rows):.3g} its noise allows over {rows.n_rows} "
+                                f"×{1.0 + 2.0 / np.sqrt(2.0 * n_rows):.3g} its noise allows over {n_rows} "
                                 f"rows): the kept parameters fit noise or an effect the model lacks. "
                                 "Try a lower --level, --select prior or bic, "
                                 "more varied postures (pincal plan), or pincal diagnose"))
@@ -354,7 +390,7 @@ def check_evaluation(evaluated_rms_m: float, calibration_rms_m: float | None,
                     f"{moved}. See each row's error by file line: --html REPORT.html")]
 
 
-def _large_corrections(result: ChainCalibration) -> list[str]:
+def _large_corrections(result: Fitted) -> list[str]:
     """Names and values of kept parameters beyond :data:`MAX_TRANSLATION_M` / :data:`MAX_ROTATION_RAD`."""
     params = result.params
     out: list[str] = []

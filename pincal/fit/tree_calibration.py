@@ -13,16 +13,17 @@ A target whose orientation is measured (``qxN,qyN,qzN,qwN``, N one of its points
 unknowns and its orientation residuals to the rows, weighted by the orientation noise scale as one
 chain's are.
 
-Not yet: orientation columns without a number (``qx,qy,qz,qw``: whose?), a known tool,
-``--select press`` (leave-one-row-out over rows of different sizes), outlier rejection,
-the target and registration holds of :mod:`pincal.fit.target_hold` and
+Outliers as one chain's (:mod:`pincal.fit.outliers`, each row's error the RMS distance of its seen points): noted,
+or with ``reject_outliers`` removed and the rows refitted once. Not yet: orientation columns without a
+number (``qx,qy,qz,qw``: whose?), a known tool, ``--select press`` (leave-one-row-out over rows of different
+sizes), the target and registration holds of :mod:`pincal.fit.target_hold` and
 :mod:`pincal.fit.registration_hold` (refused or noted, never silently different).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import cast
 
 import numpy as np
@@ -30,11 +31,12 @@ import numpy as np
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainFitOptions, row_weights
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
+from pincal.fit.outliers import find_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import PriorResidual, data_rows
 from pincal.fit.problem import KindProblem
 from pincal.fit.registration import mean_rotation, register_points
-from pincal.fit.sessions import registration_problem, where
+from pincal.fit.sessions import registration_problem, rows_at, where
 from pincal.fit.tree_problem import TreeProblem, registration_fit
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.target_orientations import target_quat_columns
@@ -246,12 +248,36 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     options = ChainFitOptions() if options is None else options
     for refused, flag, instead in (
             (options.tool_known, "a known --tool", "leave it out: each target's points are estimated"),
-            (options.selection == "press", "--select press", "use aic, bic, all or prior"),
-            (options.reject_outliers, "--reject-outliers", "leave it out")):
+            (options.selection == "press", "--select press", "use aic, bic, all or prior")):
         if refused:
             raise CalibrationError(f"several --tip-link: {flag} is not yet supported; {instead}")
     started = time.perf_counter()
     index = np.flatnonzero(data.roles != "validation")
+    notes: list[str] = []
+    flagged: list[int] = []  # outlier rows, as indices into ``data``
+    removed: list[int] = []
+    counter = Counter(progress)
+    for attempt in range(2):  # as one chain's (pincal.fit.chain_calibration): each row's error the RMS of its points
+        result = _calibrate_tree_rows(tree, data, index, level, options, counter)
+        seen = np.any(np.isfinite(result.point_errors), axis=1)  # a row none of whose points was seen: no error
+        per_row = np.sqrt(np.nanmean(result.point_errors[seen] ** 2, axis=1))
+        flagged = [k for k, _ in find_outliers(per_row[:, None], index[seen])]
+        if not (options.reject_outliers and flagged and attempt == 0):
+            break
+        removed = flagged
+        index = index[~np.isin(index, removed)]
+        notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)} and refitted")
+    if flagged and not removed:
+        notes.append(f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
+                     + ("rerun with --reject-outliers to refit without them" if options.refit_offered else
+                        "they stay in the fit: check them and remove the bad ones from the file"))
+    return replace(result, notes=result.notes + tuple(notes), total_seconds=time.perf_counter() - started)
+
+
+def _calibrate_tree_rows(tree: KinematicTree, data: MeasurementSet, index: np.ndarray, level: ChainLevel,
+                         options: ChainFitOptions, counter: Counter) -> TreeCalibration:
+    """One calibration of the rows ``index`` of ``data`` (:func:`calibrate_tree`'s, without the outlier step)."""
+    started = time.perf_counter()
     used = data.select(index)
     if used.n_rows < 3:
         raise CalibrationError(f"{data.source}: {used.n_rows} calibration row(s) (rows with role 'validation' are "
@@ -265,7 +291,6 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     start = initial_tree_target(tree, used, rows)
     params = TreeParameters(tree, cast(ParameterLevel, level)) if level != "registration" else None
     size = 0 if params is None else int(params.size)
-    counter = Counter(progress)
     counter.expect(1)
     problem = TreeProblem(tree, params, rows, start, row_weights(used, options.sigma_column), used.session_names)
     problem, _ = registration_fit(problem, size, options.sigma_iterations)

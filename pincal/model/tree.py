@@ -26,6 +26,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from pincal.errors import ModelError, PincalError
+from pincal.measurements.couplings import ReadingCoupling
 from pincal.measurements.data import JointMimic, JointSpec
 from pincal.model.chain import ChainJoint, KinematicChain
 from pincal.model.description import RobotDescription, read_description
@@ -167,6 +168,21 @@ class KinematicTree:
         """The tree's joints that follow another joint (URDF ``<mimic>``, eq M1): their readings come from their
         driver's (a tree joint's, or a column of its own off the tree), a file needs no column for them."""
         return tuple(j.name for j in self.joints if j.mimic is not None)
+
+    def follow(self, couplings: Sequence[ReadingCoupling]) -> None:
+        """Make each ``--coupling`` the run decided ``follows`` a tree joint that follows its driver (eq M1, offset
+        0), on every target's chain that has the joint (:meth:`KinematicChain.follow`) and in the tree's joints, as
+        a URDF ``<mimic>`` would, for the whole run: its readers (:attr:`joint_specs`) and REPORT.json's
+        ``chain.mimics``.
+
+        Raises:
+            MeasurementError: a ``--coupling`` on a joint the URDF already makes follow another.
+        """
+        for target in self.targets:
+            target.chain.follow(couplings)
+        by_name = {j.name: j for target in self.targets for j in target.chain.joints}
+        self.joints = tuple(by_name[n] for n in self.joint_names)
+        self.joint_specs = [j.spec for j in self.joints]
 
     def followed(self, q: npt.ArrayLike) -> np.ndarray:
         """Tree joint values (K, N) [rad or m] with each follower set from its driver (eq M1), as

@@ -419,7 +419,7 @@ def _render(document: dict[str, Any], evaluation: dict[str, Any] | None, base: s
     params = parameter_section(document, figures.parameter_figure)
     sessions = sessions_section(document) if document.get("registration") else None
     fixture = fixture_section(document, evaluation) if isinstance(document.get("fixture"), dict) else None
-    tree = tree_section(document)  # several targets: each one's errors instead of one chain's
+    tree = tree_section(document, evaluation)  # several targets: each one's errors instead of one chain's
     if camera is None and is_camera(document):  # a camera's REPORT.json: its section from the report alone
         camera = camera_page(document)
     shown = KNOWN_KEYS | ({"sessions"} if sessions else set()) | ({"fixture", "measurement"} if fixture else set()) | (

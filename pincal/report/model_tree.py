@@ -8,9 +8,11 @@ from typing import TypedDict
 
 from pincal.measurements.data import MimicJson
 from pincal.report.model import (
+    CouplingsPart,
     Finding,
     Identifiability,
     JointKind,
+    LevelChoicePart,
     Noise,
     OrientationStats,
     Parameter,
@@ -134,12 +136,13 @@ class _TreeDiagnosisKeys(TypedDict, total=False):
     diagnosis: TreeDiagnosisJson
 
 
-class TreeReport(RunHead, _TreeDiagnosisKeys):
+class TreeReport(RunHead, _TreeDiagnosisKeys, LevelChoicePart, CouplingsPart):
     """REPORT.json of ``calibrate`` with several ``--tip-link LINK:POINTS``: one calibration of every target,
     the joints shared by several chains fitted once (``parameters``: one entry each), one registration per
     session (``registration``: the first session's; every one under ``sessions``). ``diagnose``'s adds the
     effects of the final model (``effects``, as in effects.yaml; ``parameters`` and ``targets`` are the final
-    model's) and its search (``diagnosis``)."""
+    model's) and its search (``diagnosis``). ``level_choice``: ``--level auto``'s; ``couplings``: ``--coupling``
+    given, as the run decided them (as one chain's)."""
 
     chain: TreeChainJson
     targets: list[TargetJson]

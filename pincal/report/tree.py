@@ -4,6 +4,9 @@ chain's report words them, each target's points and errors, each session's regis
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -12,8 +15,12 @@ from pincal.fit.metrics import ErrorSummary
 from pincal.fit.tree_calibration import TreeCalibration
 from pincal.model.tree import KinematicTree
 from pincal.report.document import REPORT_VERSION, identifiability_report, mimics_json, parameters_report
-from pincal.report.model import PositionStats, Sha256, Sources, registration_pair
+from pincal.report.model import PositionStats, Sha256, Sources, couplings_part, level_choice_part, registration_pair
 from pincal.report.model_tree import TargetErrors, TargetJson, TreeChainJson, TreeReport
+
+if TYPE_CHECKING:
+    from pincal.fit.level_choice import LevelChoice
+    from pincal.measurements.couplings import ReadingCoupling
 
 __all__ = ["target_errors", "tree_report"]
 
@@ -43,10 +50,12 @@ def _turns(errors: np.ndarray | None, t: int) -> np.ndarray | None:
     return None if errors is None or not np.isfinite(errors[:, t]).any() else errors[:, t]
 
 
-def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: KinematicTree, sources: Sources,
-                notes: list[str], digest: tuple[Sha256, dict[str, str]]) -> TreeReport:
+def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: KinematicTree, sources: Sources,  # noqa: PLR0913
+                notes: list[str], digest: tuple[Sha256, dict[str, str]], couplings: Sequence[ReadingCoupling] = (),
+                choice: LevelChoice | None = None) -> TreeReport:
     """The REPORT.json of ``result`` (``nominal``: the nominal model registered to the same rows, for the
-    errors before); ``digest``: the corrected URDF's SHA-256 and the xacro arguments."""
+    errors before); ``digest``: the corrected URDF's SHA-256 and the xacro arguments; ``couplings``: the run's
+    ``--coupling`` as it decided them (``couplings``); ``choice``: how ``--level auto`` chose (``level_choice``)."""
     targets: list[TargetJson] = [{
         "tip_link": target.link, "points": list(target.spec.points), "joints": list(target.chain.joint_names),
         "points_m": result.target.points[[p - 1 for p in target.spec.points]].tolist(),
@@ -72,6 +81,7 @@ def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: Kinemat
         "noise": {"sigma_pos_mm": result.sigma_pos_m * 1000.0,
                   "sigma_rot_deg": None if result.sigma_rot_rad is None else float(np.degrees(result.sigma_rot_rad))},
         "notes": notes, "warnings": [], "urdf_sha256": digest[0], "xacro_args": digest[1],
+        **level_choice_part(choice), **couplings_part(couplings),
     }
 
 

@@ -5,7 +5,8 @@ A tree's REPORT.json has each target's errors under ``targets`` rather than one 
 prepared here for the template partial ``templates/tree.html.j2``: per target its link, points and seen (row,
 point) pairs, the RMS and largest distance [mm] of its points from the nominal model (registered to the
 calibration rows), from the geometric calibration and, after ``diagnose``, from the final model with its effects;
-on the held-out rows, the geometric calibration's and the final model's.
+on the held-out rows, the geometric calibration's and the final model's; on the rows ``evaluate --html`` evaluated
+(its ``evaluated_targets``, :class:`pincal.report.model_tree.TreeEvaluationJson`), the reported model's.
 """
 
 from __future__ import annotations
@@ -24,11 +25,15 @@ def _mm(errors: Any, key: str = "rms_mm") -> str:
     return f"{round(float(value), 3) + 0.0:.3f}"
 
 
-def tree_section(doc: dict[str, Any]) -> dict[str, Any] | None:
-    """Everything the tree partial shows, from a REPORT.json ``doc`` with ``targets``; None for any other."""
+def tree_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """Everything the tree partial shows, from a REPORT.json ``doc`` with ``targets``; None for any other.
+    ``evaluation``: what ``evaluate --html`` measured (``evaluated_targets``, ``registrations``, ``rows``,
+    ``data``), each target's errors on those rows shown beside its own; None: none."""
     targets = doc.get("targets")
     if not isinstance(targets, list):
         return None
+    evaluated = {(e.get("tip_link"), tuple(e.get("points") or ())): e.get("errors")
+                 for e in (evaluation or {}).get("evaluated_targets") or [] if isinstance(e, dict)}
     diagnosed = any("geometry_errors" in t for t in targets if isinstance(t, dict))
     held = any(t.get("validation_errors") for t in targets if isinstance(t, dict))
     rows = []
@@ -46,7 +51,20 @@ def tree_section(doc: dict[str, Any]) -> dict[str, Any] | None:
             "held": (_mm(target.get("validation_geometry_errors")), _mm(target.get("validation_errors")))
             if held else None,
             "held_seen": (target.get("validation_errors") or {}).get("seen") if held else None,
+            "evaluated": _evaluated(evaluated.get((target.get("tip_link"), tuple(target.get("points") or ()))))
+            if evaluated else None,
         })
-    return {"rows": rows, "diagnosed": diagnosed, "held": held,
+    shown = None
+    if evaluated:  # the evaluated file, its row count and how each of its sessions was registered
+        shown = {"data": (evaluation or {}).get("data"), "rows": (evaluation or {}).get("rows"),
+                 "registrations": [str(r) for r in (evaluation or {}).get("registrations") or []]}
+    return {"rows": rows, "diagnosed": diagnosed, "held": held, "evaluated": shown,
             "shared": [j for j in (doc.get("chain") or {}).get("joints") or []
                        if sum(j in (t.get("joints") or []) for t in targets if isinstance(t, dict)) > 1]}
+
+
+def _evaluated(errors: Any) -> tuple[int | str, str, str]:
+    """A target's (seen pairs, RMS, max [mm]) on the evaluated rows; "not seen" where none of its points was."""
+    if not isinstance(errors, dict):
+        return 0, "not seen", "—"
+    return int(errors.get("seen") or 0), _mm(errors), _mm(errors, "max_mm")

@@ -141,7 +141,8 @@ def plan_files(
     ``tip_link`` may be several targets (:func:`pincal.model.tree.parse_targets` of ``--tip-link LINK:POINTS``
     values): the plan is then the tree's (:func:`pincal.planning.tree_plan.plan_tree_measurements`), its candidates
     every joint of the targets' chains, PLAN.csv a column for each but the joints that follow another
-    (``<mimic>``), PLAN.json each target's prediction; ``--tool``, ``--coupling`` and ``--level dh`` are refused.
+    (``<mimic>``), PLAN.json each target's prediction; ``--coupling`` as for one chain (below); ``--tool`` and
+    ``--level dh`` are refused.
 
     ``settings.tool_known`` must say whether ``inputs.tool_pose`` is given. Level ``dh``
     plans for the paper's DH parameters with the target known, so it needs
@@ -179,14 +180,12 @@ def plan_files(
                   *(Path(p) for p in (candidates_path, *existing_paths, workspace_path) if p is not None)]
     refuse_overwrite(out_csv, *sources_in)
     refuse_overwrite(out_json, *sources_in, outputs=[out_csv])
-    chain: KinematicChain | KinematicTree
-    if isinstance(tip_link, str):
-        chain = KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args)
-        # a joint without a column in the recorded rows (else the candidate file) follows its driver (eq M1)
-        told: list[str | Path] = [*existing_paths] or ([candidates_path] if candidates_path is not None else [])
-        couplings = follow_couplings(chain, couplings, told)
-    else:
-        chain = KinematicTree.from_urdf(urdf, tip_link, xacro_args=xacro_args)
+    chain: KinematicChain | KinematicTree = (
+        KinematicChain.from_urdf(urdf, tip_link, tool=tool_pose, xacro_args=xacro_args) if isinstance(tip_link, str)
+        else KinematicTree.from_urdf(urdf, tip_link, xacro_args=xacro_args))
+    # a joint without a column in the recorded rows (else the candidate file) follows its driver (eq M1)
+    told: list[str | Path] = [*existing_paths] or ([candidates_path] if candidates_path is not None else [])
+    couplings = follow_couplings(chain, couplings, told)
     names = chain.joint_names
     notes: list[str] = []
     if candidates_path is not None:  # a file holds the controller's readings (eq C1 with --coupling)
@@ -234,8 +233,8 @@ def plan_files(
                             "xacro_args": dict(xacro_arguments(xacro_args))}
     if couplings:  # PLAN.csv in the controller's joint space: what it reads and is commanded in
         sources["couplings"] = [c.as_dict() for c in couplings]
-    unread = [c.joint for c in couplings if c.follows] + list(chain.followers if isinstance(chain, KinematicTree)
-                                                              else ())
+    unread = list(dict.fromkeys([c.joint for c in couplings if c.follows]  # a tree's followers include them
+                                + list(chain.followers if isinstance(chain, KinematicTree) else ())))
     digest = write_plan_csv(out_csv, replace(plan, q=readings_of(plan.q, couplings, names)), chain, labels,
                             unread=unread)
     pool = CandidatePool(labels, ranges, check, clearance, inputs.sample if candidates_path is None else None)
@@ -246,8 +245,7 @@ def plan_files(
 
 def _refused_for_tree(settings: PlanSettings, inputs: PlanInputs) -> None:
     """What a tree's plan does not take: one line each."""
-    for refused, flag in ((inputs.tool_pose is not None, "--tool"), (bool(inputs.couplings), "--coupling"),
-                          (settings.level == "dh", "--level dh")):
+    for refused, flag in ((inputs.tool_pose is not None, "--tool"), (settings.level == "dh", "--level dh")):
         if refused:
             raise PincalError(f"several --tip-link: plan {flag} is not supported; leave it out (each target's points "
                               "are estimated, as calibrate with several --tip-link does)")

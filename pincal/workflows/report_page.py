@@ -57,8 +57,8 @@ def report_file(document_path: str | Path, out: str | Path) -> Path:
     document_path, out = Path(document_path), Path(out)
     document = load_report(document_path, PAGE_KINDS, hints={
         "camera evaluation": "its page is the report's with these images: pincal evaluate ... --html REPORT.html",
-        "tree evaluation": "each target's errors are its evaluated_targets; the page is the calibration's: pincal "
-                           "report REPORT.json"})
+        "tree evaluation": "each target's errors are its evaluated_targets; the page with them: pincal evaluate ... "
+                           "--html PAGE.html; the calibration's: pincal report REPORT.json"})
     refuse_overwrite(out, document_path)
     from pincal.report.html import write_html
 

@@ -28,6 +28,7 @@ from pincal.model.thermal import PAUSE_S
 if TYPE_CHECKING:  # the fit's selection module is imported only when a selection is checked
     from pincal.fit.selection import SelectionCriterion
     from pincal.model.chain import KinematicChain
+    from pincal.model.tree import KinematicTree
 
 __all__ = [
     "CALIBRATE_LEVELS", "DIAGNOSE_LEVELS", "CalibrateLevel", "DiagnoseLevel", "METHODS", "expect", "no_prior",
@@ -288,12 +289,13 @@ class EvaluateSettings:
         object.__setattr__(self, "xacro_args", _xacro(self.xacro_args))
 
 
-def follow_couplings(chain: KinematicChain, couplings: Sequence[ReadingCoupling],
+def follow_couplings(chain: KinematicChain | KinematicTree, couplings: Sequence[ReadingCoupling],
                      paths: Sequence[str | os.PathLike[str]]) -> tuple[ReadingCoupling, ...]:
     """The run's ``--coupling`` decided once, from the columns of its calibration files ``paths``: a coupling
     on a chain joint one of them has no column for ``follows`` its driver
-    (:func:`pincal.measurements.couplings.decide_followers`), and ``chain`` is made to follow it for the whole
-    run (:meth:`pincal.model.chain.KinematicChain.follow`); REPORT.json records what was decided.
+    (:func:`pincal.measurements.couplings.decide_followers`), and ``chain`` (or a tree of several targets) is made
+    to follow it for the whole run (:meth:`pincal.model.chain.KinematicChain.follow`,
+    :meth:`pincal.model.tree.KinematicTree.follow`); REPORT.json records what was decided.
 
     Raises:
         MeasurementError: an unreadable file, a coupling on a joint the URDF's ``<mimic>`` already ties.

@@ -3,10 +3,16 @@
 each target's errors (:mod:`pincal.report.model_tree`).
 
 A gross misfit (:func:`pincal.fit.plausibility.gross_misfit` of every seen point's RMS error) withholds the
-corrected URDF unless ``--force``, as with one chain (:mod:`pincal.workflows.verdict`). What the single
-chain's run adds and a tree's does not yet: ``--level auto`` and ``dh``, a known ``--tool``,
-``--coupling``, orientation columns, the other plausibility checks and effects.yaml; each is refused with
-one line, never run differently.
+corrected URDF unless ``--force``, as with one chain (:mod:`pincal.workflows.verdict`); the other checks of one
+chain warn as there (:func:`pincal.fit.plausibility.fit_findings`: the residual, against ``--sigma-pos`` too,
+each target's points, each registration, the corrections; not the leave-one-row-out comparison nor the
+tip-link check). ``--level auto`` chooses the tree's level by cross-validation
+(:func:`pincal.fit.tree_level_choice.choose_tree_level`, REPORT.json ``level_choice``); ``--coupling``
+corrects every row read (eq C1 of :mod:`pincal.measurements.couplings`) or, on a joint without a column,
+makes it follow its driver, as with one chain (REPORT.json ``couplings``, and effects.yaml beside the URDF,
+which cannot carry them). What the single chain's run adds and a tree's does not yet: ``--level dh`` (a tree
+has no DH table), a known ``--tool``, orientation columns; each is refused with one line, never run
+differently.
 """
 
 from __future__ import annotations
@@ -15,33 +21,39 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from pincal._version import __version__
 from pincal.errors import CalibrationError, PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
-from pincal.fit.plausibility import gross_misfit, reach_m
+from pincal.fit.plausibility import Finding, fit_findings, reach_m
 from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
 from pincal.measurements.csv_v1 import read_sessions
+from pincal.measurements.data import MeasurementSet
 from pincal.model.corrected_urdf import corrected_origins
 from pincal.model.description import xacro_arguments
 from pincal.model.parameter_sets import ChainLevel
 from pincal.model.tree import KinematicTree, TargetSpec, TreePlacements
 from pincal.model.urdf import write_urdf_with_origins
 from pincal.outputs import file_sha256
-from pincal.progress import Progress
+from pincal.progress import Progress, Stages
 from pincal.report.document import write_report
+from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import Sources, findings_json
 from pincal.report.model_tree import TreeReport
 from pincal.report.tree import tree_report
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.report_page import refuse_page, render_page, write_page
-from pincal.workflows.settings import CalibrateSettings
-from pincal.workflows.verdict import RELOAD_TOLERANCE, withhold, withholding
+from pincal.workflows.settings import CalibrateSettings, follow_couplings
+from pincal.workflows.verdict import RELOAD_TOLERANCE, diagnose_command, unmodelled_notes, withhold, withholding
 
-__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "write_tree_urdf"]
+if TYPE_CHECKING:
+    from pincal.fit.level_choice import LevelChoice
+
+__all__ = ["TreeCalibrationRun", "calibrate_tree_files", "write_tree_urdf", "refuse_tree_level", "tree_level",
+           "tree_findings"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +69,8 @@ class TreeCalibrationRun:
         withheld: the corrected URDF is not written (a gross misfit without ``--force``:
             :mod:`pincal.workflows.verdict`); REPORT.json says so in ``warnings``.
         html: the report's page written (``--html``), or None.
+        choice: how ``--level auto`` chose the level, or None (a level given).
+        effects_file: the effects.yaml written beside the URDF (``--coupling``), or None.
     """
 
     result: TreeCalibration
@@ -67,14 +81,20 @@ class TreeCalibrationRun:
     reload_error: float
     withheld: bool = False
     html: Path | None = None
+    choice: LevelChoice | None = None
+    effects_file: Path | None = None
 
 
-def _refused(settings: CalibrateSettings) -> None:
-    for refused, flag in ((settings.level in ("auto", "dh"), f"--level {settings.level}"),
-                          (settings.tool_pose is not None, "--tool"), (bool(settings.couplings), "--coupling")):
-        if refused:
-            raise PincalError(f"several --tip-link: {flag} is not yet supported; use --level registration, "
-                              "offsets or full without it")
+def refuse_tree_level(level: str, tool_pose: object) -> None:
+    """Refuse what a tree's calibration and diagnosis do not take, in one line each: ``--level dh`` (the paper's
+    methods fit one serial chain's DH table with a known tool; a tree has several chains and no such table) and a
+    known ``--tool`` (each target's points are estimated in its tip link)."""
+    if level == "dh":
+        raise PincalError("several --tip-link: --level dh fits one serial chain's DH table (Franaszek & Marvel 2022) "
+                          "and a tree of several chains has none; use --level auto, registration, offsets or full")
+    if tool_pose is not None:
+        raise PincalError("several --tip-link: --tool is not yet supported; leave it out: each target's points are "
+                          "estimated in its tip link")
 
 
 def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str | Path], out_urdf: str | Path,
@@ -87,34 +107,40 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
 
     An empty cell of a point is that point not seen in the row (occlusion): only it is left out.
     """
-    _refused(settings)
+    refuse_tree_level(settings.level, settings.tool_pose)
     urdf, data_paths = Path(urdf), input_paths(data_path)
     out_urdf, report_path = Path(out_urdf), Path(report_path)
     inputs = [*description_inputs(urdf, settings.xacro_args), *data_paths]
     refuse_overwrite(out_urdf, *inputs)
     refuse_overwrite(report_path, *inputs, outputs=[out_urdf])
-    page_path = refuse_page(html, inputs, [out_urdf, report_path])
+    refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
+    page_path = refuse_page(html, inputs, [out_urdf, report_path, effects_path(out_urdf)])
     tree = KinematicTree.from_urdf(urdf, targets, xacro_args=settings.xacro_args)
-    data, notes = read_sessions(data_paths, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
-    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
-    level = cast(ChainLevel, settings.level)  # refused above: auto and dh
+    couplings = follow_couplings(tree, settings.couplings, data_paths)  # a joint without a column follows (M1)
+    data, notes = read_sessions(data_paths, tree.joint_specs, couplings, tree.other_branch_joints, occlusion=True)
+    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion,
+                              reject_outliers=settings.reject_outliers)
     start = time.perf_counter()
-    result = calibrate_tree(tree, data, level, options, progress)
+    stages = Stages(progress)
+    choice, level = tree_level(tree, data, settings.level, options, stages)
+    result = calibrate_tree(tree, data, level, options, stages.next())
     seconds = time.perf_counter() - start
-    nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
-    comment = (f"Calibrated by pincal {__version__} (level {level}, {len(tree.targets)} targets) from {urdf.name} "
-               f"and {', '.join(p.name for p in data_paths)}. Registration and targets: see the report.")
-    # every seen point's distance from the model, as the single chain's RMS point residual; the reach of the
-    # farthest tip link: the gross-misfit rule of pincal.workflows.verdict, its URDF withheld unless --force
-    rms = float(np.sqrt(np.nanmean(result.point_errors ** 2)))
-    gross = gross_misfit(rms, max(reach_m(t.chain, data.q[:, t.columns]) for t in tree.targets))
-    warnings, withheld = withholding([] if gross is None else [gross], settings.force)
+    # the errors before: the nominal model registered to the rows of the fit (outliers removed, if they were)
+    nominal = calibrate_tree(tree, data.select(result.used_index), "registration",
+                             ChainFitOptions(sigma_column=settings.sigma_column))
+    chosen = ", chosen by --level auto" if choice is not None else ""
+    comment = (f"Calibrated by pincal {__version__} (level {level}{chosen}, {len(tree.targets)} targets) from "
+               f"{urdf.name} and {', '.join(p.name for p in data_paths)}. Registration and targets: see the report.")
+    reach, findings = tree_findings(tree, result, data.q, settings.sigma_pos_m)
+    warnings, withheld = withholding(findings, settings.force)
     reload_error, digest = write_tree_urdf(urdf, out_urdf, tree, result.tree_placements,
                                            (comment, settings.xacro_args), data.q, keep=not withheld)
     sources: Sources = {"urdf": str(urdf),
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf)}
-    notes = notes + list(result.notes)
+    command = diagnose_command(urdf, data_paths, settings, out_urdf, report_path,
+                               [f"{t.link}:{','.join(map(str, t.spec.points))}" for t in tree.targets])
+    notes = notes + list(result.notes) + unmodelled_notes(result, reach, settings.sigma_pos_m, command)
     held = int(np.sum(data.roles == "validation"))
     if held:  # not in the fit, and not judged here: evaluate gives their errors per target
         notes.append(f"{held} row(s) with role 'validation' are not in the fit; pincal evaluate {out_urdf} "
@@ -123,12 +149,38 @@ def calibrate_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str 
         sources["corrected_urdf_withheld"] = True  # the path names no file of this run
         notes += withhold(out_urdf)
     report = tree_report(result, nominal, tree, sources, notes,
-                         (digest, dict(xacro_arguments(settings.xacro_args))))
+                         (digest, dict(xacro_arguments(settings.xacro_args))), couplings, choice)
     report["warnings"] = findings_json(warnings)
     page = render_page(page_path, report, report_path)
+    # the couplings, which a URDF cannot carry, beside the URDF (none beside a withheld one)
+    effects_file = None if withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
     return TreeCalibrationRun(result, nominal, report, notes, seconds, reload_error, withheld,
-                              write_page(page_path, page))
+                              write_page(page_path, page), choice, effects_file)
+
+
+def tree_level(tree: KinematicTree, data: MeasurementSet, level: str, options: ChainFitOptions, stages: Stages
+               ) -> tuple[LevelChoice | None, ChainLevel]:
+    """The level a tree is calibrated at: ``level`` as given, or with ``auto`` the one cross-validation chooses
+    (:func:`pincal.fit.tree_level_choice.choose_tree_level`, its fits counted on the first of ``stages``) and how."""
+    if level != "auto":
+        return None, cast(ChainLevel, level)  # registration, offsets or full: the settings checked it, dh refused
+    from pincal.fit.tree_level_choice import choose_tree_level
+
+    choice = choose_tree_level(tree, data, options, progress=stages.next())
+    return choice, choice.chosen
+
+
+def tree_findings(tree: KinematicTree, result: TreeCalibration, q: np.ndarray, sigma_pos_m: float | None,
+                  diagnosed: bool = False) -> tuple[float, list[Finding]]:
+    """The reach of the farthest tip link at joint readings ``q`` [m] and the plausibility findings of one chain
+    on ``result`` (:func:`pincal.fit.plausibility.fit_findings`): its RMS distance of every seen point from the
+    model against the reach (a gross misfit) and the stated noise ``sigma_pos_m`` [m], each target's points
+    against the reach, each registration, the corrections (``diagnosed``: the model with diagnose's effects)."""
+    reach = max(reach_m(t.chain, q[:, t.columns]) for t in tree.targets)
+    points = [(t.link, float(np.max(np.linalg.norm(result.target.points[np.array(t.spec.points) - 1], axis=1))))
+              for t in tree.targets]
+    return reach, fit_findings(result, reach, points, len(result.used_index), sigma_pos_m, None, diagnosed)
 
 
 class _Withheld(Exception):

@@ -3,10 +3,12 @@ the tree's residuals for effects the geometry lacks (:func:`pincal.diagnosis.tre
 the final model's URDF (every calibrated chain), effects.yaml beside it and REPORT.json with each target's errors
 before and after (:func:`diagnose_tree_files`).
 
-A gross misfit of the final model withholds its URDF and effects.yaml unless ``--force``, as calibrate's. What the
-single chain's diagnose adds and a tree's does not yet: ``--level auto`` and ``dh``, a known ``--tool``,
-``--coupling``, ``--payload-kg``, ``--plots``, thermal and pause steps; each is refused with one line, never run
-differently.
+A gross misfit of the final model withholds its URDF and effects.yaml unless ``--force``, and the other checks of
+one chain warn, as calibrate's (:func:`pincal.workflows.tree_calibration.tree_findings`).
+``--level auto`` and ``--coupling`` are calibrate's (:mod:`pincal.workflows.tree_calibration`): the geometry under
+the effects at the level cross-validation chooses, every row read (held-out rows too) corrected or followed as the
+couplings say. What the single chain's diagnose adds and a tree's does not yet: a known ``--tool``,
+``--payload-kg``, ``--plots``, thermal and pause steps; each is refused with one line, never run differently.
 """
 
 from __future__ import annotations
@@ -15,21 +17,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from pincal._version import __version__
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
-from pincal.fit.plausibility import gross_misfit, reach_m
 from pincal.fit.tree_calibration import TreeCalibration, calibrate_tree
 from pincal.measurements.csv_v1 import read_measurements, read_sessions
 from pincal.model.description import xacro_arguments
 from pincal.model.drift import time_column
-from pincal.model.parameter_sets import ChainLevel
 from pincal.model.thermal import PAUSE_S
 from pincal.model.tree import KinematicTree, TargetSpec
+from pincal.progress import Stages
 from pincal.report.document import write_report
 from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.model import Sources, findings_json
@@ -39,9 +38,9 @@ from pincal.report.tree_diagnosis import with_diagnosis
 from pincal.workflows.diagnosis import DiagnoseOutputs
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.report_page import refuse_page, render_page, write_page
-from pincal.workflows.settings import DiagnoseSettings
-from pincal.workflows.tree_calibration import write_tree_urdf
-from pincal.workflows.verdict import withhold, withholding
+from pincal.workflows.settings import DiagnoseSettings, follow_couplings
+from pincal.workflows.tree_calibration import tree_findings, tree_level, write_tree_urdf
+from pincal.workflows.verdict import unmodelled_notes, withhold, withholding
 
 if TYPE_CHECKING:  # imported where used, so `pincal calibrate` loads none of the search
     from pincal.diagnosis.tree_diagnose import TreeDiagnosis
@@ -77,14 +76,12 @@ class TreeDiagnoseRun:
 
 
 def _refused(settings: DiagnoseSettings, outputs: DiagnoseOutputs) -> None:
-    for refused, flag in ((settings.level in ("auto", "dh"), f"--level {settings.level}"),
-                          (settings.tool_pose is not None, "--tool"), (bool(settings.couplings), "--coupling"),
+    for refused, flag in ((settings.tool_pose is not None, "--tool"),
                           (settings.payload_kg > 0, "--payload-kg"), (outputs.plots_dir is not None, "--plots"),
                           (settings.temperature_column is not None, "--temperature-column"),
                           (settings.pause_s != PAUSE_S, "--pause-s")):
         if refused:
-            raise PincalError(f"several --tip-link: diagnose {flag} is not yet supported; leave it out (--level "
-                              "registration, offsets or full)")
+            raise PincalError(f"several --tip-link: diagnose {flag} is not yet supported; leave it out")
 
 
 def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str | Path], out_urdf: str | Path,
@@ -109,19 +106,20 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
     refuse_overwrite(effects_path(out_urdf), *inputs, outputs=[out_urdf, report_path])
     html = refuse_page(outputs.html, inputs, [out_urdf, report_path, effects_path(out_urdf)])
     tree = KinematicTree.from_urdf(urdf, targets, xacro_args=settings.xacro_args)
-    data, notes = read_sessions(data_paths, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    couplings = follow_couplings(tree, settings.couplings, data_paths)  # a joint without a column follows (M1)
+    data, notes = read_sessions(data_paths, tree.joint_specs, couplings, tree.other_branch_joints, occlusion=True)
     heldout = held_time = None
     if validation_path:
-        heldout, held_notes = read_measurements(validation_path, tree.joint_specs, (), tree.other_branch_joints,
-                                                occlusion=True)
+        heldout, held_notes = read_measurements(validation_path, tree.joint_specs, couplings,
+                                                tree.other_branch_joints, occlusion=True)
         notes += held_notes
         held_time = time_column(heldout, settings.time_column)
     turned = [d.source for d in (data, heldout) if d is not None and d.target_rotations]
     if turned:  # the effect search counts and tests point entries only: refused, not run differently
         raise PincalError(f"{turned[0]}: several --tip-link: diagnose does not take the targets' orientation columns "
                           "qxN,qyN,qzN,qwN yet (calibrate and evaluate do); drop them to diagnose the points")
-    level = cast(ChainLevel, settings.level)  # refused above: auto and dh
-    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion)
+    options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion, refit_offered=False)
+    choice, level = tree_level(tree, data, settings.level, options, Stages(None))
     calibration = calibrate_tree(tree, data, level, options)
     nominal = calibrate_tree(tree, data, "registration", ChainFitOptions(sigma_column=settings.sigma_column))
     diagnosis = diagnose_tree(tree, calibration, data, heldout, DiagnoseOptions(
@@ -131,9 +129,8 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                     point_errors=diagnosis.point_errors, sigma_pos_m=diagnosis.sigma_pos_m,
                     tree_placements=diagnosis.tree_placements)
     used_q = data.q[calibration.used_index]
-    rms = float(np.sqrt(np.nanmean(final.point_errors ** 2)))
-    gross = gross_misfit(rms, max(reach_m(t.chain, used_q[:, t.columns]) for t in tree.targets))
-    warnings, withheld = withholding([] if gross is None else [gross], settings.force)
+    reach, findings = tree_findings(tree, final, used_q, settings.sigma_pos_m, diagnosed=True)
+    warnings, withheld = withholding(findings, settings.force)
     comment = (f"Calibrated by pincal {__version__} (diagnose, level {level}, {len(tree.targets)} targets) from "
                f"{urdf.name} and {', '.join(p.name for p in data_paths)}. Registration, targets and effects (which "
                "a URDF cannot carry): see the report.")
@@ -143,11 +140,13 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                         "data": str(data_paths[0]) if len(data_paths) == 1 else [str(p) for p in data_paths],
                         "corrected_urdf": str(out_urdf),
                         "validation": None if validation_path is None else str(validation_path)}
-    notes = notes + list(calibration.notes) + list(diagnosis.notes)
+    notes = notes + list(calibration.notes) + list(diagnosis.notes) + unmodelled_notes(final, reach,
+                                                                                       settings.sigma_pos_m)
     if withheld:
         sources["corrected_urdf_withheld"] = True  # the path names no file of this run
         notes += withhold(out_urdf)
-    report = tree_report(final, nominal, tree, sources, notes, (digest, dict(xacro_arguments(settings.xacro_args))))
+    report = tree_report(final, nominal, tree, sources, notes, (digest, dict(xacro_arguments(settings.xacro_args))),
+                         couplings, choice)
     report["warnings"] = findings_json(warnings)
     report = with_diagnosis(report, diagnosis, calibration.point_errors, tree)
     page = render_page(html, report, report_path)

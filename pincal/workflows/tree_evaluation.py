@@ -9,8 +9,14 @@ The registration of a row is the report's session's of the same name, the report
 of a session it has not seen (held-out rows of the same setup), or — with ``--new-session`` — each
 session of the data registered anew with the model and the points fixed (Arun et al. 1987 on the seen
 points: the least-squares rigid registration of equally weighted points). What evaluate does with one
-chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column``,
-``--html`` — is refused in one line; ``--json`` writes :class:`pincal.report.model_tree.TreeEvaluationJson`.
+chain and not yet with a tree — ``--fixed-registration``, ``--temperature-column`` — is refused in one line;
+``--json`` writes :class:`pincal.report.model_tree.TreeEvaluationJson`, ``--html`` the report's page
+(:mod:`pincal.report.tree_html`) with each target's errors on the evaluated rows beside its own, both made
+before either is written.
+
+The report's ``couplings`` (``--coupling``) are applied to the rows as the calibration did: a reading taken against
+another joint corrected (eq C1 of :mod:`pincal.measurements.couplings`), a joint it made follow its driver computed
+from it (its column, if any, checked).
 
 A report of ``diagnose`` carries its effects (``effects``, as its effects.yaml): each joint effect shifts its
 joint's reading, at the loads of the evaluated rows' readings (:func:`pincal.model.tree_effects.tree_inputs`), a
@@ -20,7 +26,7 @@ sensor scale scales the sensed points; a drift is the calibration's sensor, not 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -31,6 +37,7 @@ from pincal.errors import PincalError
 from pincal.fit.registration import register_points
 from pincal.fit.sessions import session_rows
 from pincal.fit.tree_calibration import tree_rows
+from pincal.measurements.couplings import couplings_from_report
 from pincal.measurements.csv_v1 import read_measurements
 from pincal.measurements.data import MeasurementSet
 from pincal.model.effects import BEND_EFFECTS, JOINT_EFFECTS, effect_from_dict, joint_shifts
@@ -44,7 +51,8 @@ from pincal.report.model_tree import TargetErrors, TreeEvaluationJson
 from pincal.report.reading import load_report, value_at
 from pincal.report.tree import target_errors
 from pincal.residuals.tree import TreeRows
-from pincal.workflows.paths import refuse_overwrite
+from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.report_page import refuse_page, write_page
 from pincal.workflows.settings import EvaluateSettings
 
 __all__ = ["TreeEvaluation", "evaluate_tree_files"]
@@ -64,6 +72,7 @@ class TreeEvaluation:
         points: each target's point numbers.
         max_deg: the largest orientation error of any target [deg] (``--max-rot-deg`` judges it); None: no
             orientation evaluated.
+        html: the page written (``--html``), or None.
     """
 
     targets: tuple[tuple[str, TargetErrors | None], ...]
@@ -73,6 +82,7 @@ class TreeEvaluation:
     notes: tuple[str, ...]
     points: tuple[tuple[int, ...], ...] = ()
     max_deg: float | None = None
+    html: Path | None = None
 
     def as_dict(self) -> TreeEvaluationJson:
         """``evaluate --json``'s document (:class:`pincal.report.model_tree.TreeEvaluationJson`)."""
@@ -87,10 +97,11 @@ class TreeEvaluation:
 
 
 def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: str | Path,
-                        settings: EvaluateSettings | None = None, json_path: str | Path | None = None
-                        ) -> TreeEvaluation:
+                        settings: EvaluateSettings | None = None, json_path: str | Path | None = None,
+                        html_path: str | Path | None = None) -> TreeEvaluation:
     """Eq 24's position errors of the model of a tree's report on the non-CPA rows of ``data_path``; with
-    ``json_path``, written there too (``evaluate --json``: :meth:`TreeEvaluation.as_dict`).
+    ``json_path``, written there too (``evaluate --json``: :meth:`TreeEvaluation.as_dict`); with ``html_path``,
+    the report's page with each target's errors on these rows (``evaluate --html``).
 
     Raises:
         PincalError: a setting a tree does not take yet; ``urdf`` not the file written with the report (its
@@ -102,8 +113,10 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
                           (settings.temperature_column is not None, "--temperature-column")):
         if refused:
             raise PincalError(f"several --tip-link: {flag} is not yet supported by evaluate; leave it out")
+    inputs = [*description_inputs(urdf, settings.xacro_args), report_path, data_path]
     if json_path is not None:
-        refuse_overwrite(json_path, urdf, report_path, data_path)
+        refuse_overwrite(json_path, *inputs)
+    page_path = refuse_page(html_path, inputs, [] if json_path is None else [json_path])
     document = cast(dict[str, Any], load_report(report_path, ("tree",)))
     notes: list[str] = []
     if file_sha256(urdf) != value_at(document, "urdf_sha256", report_path):
@@ -115,7 +128,13 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     targets = value_at(document, "targets", report_path, _targets)
     frames = value_at(document, "targets", report_path, _frames)
     tree = KinematicTree.from_urdf(urdf, [spec for spec, _ in targets], xacro_args=settings.xacro_args)
-    data, read_notes = read_measurements(data_path, tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    couplings = couplings_from_report(document.get("couplings"), str(report_path))
+    tree.follow(couplings)  # a joint the calibration made follow its driver (couplings[].follows)
+    data, read_notes = read_measurements(data_path, tree.joint_specs, couplings, tree.other_branch_joints,
+                                         occlusion=True)
+    if couplings:
+        notes.append(f"{data_path}: readings corrected as {report_path} says (couplings: "
+                     f"{', '.join(c.label for c in couplings)})")
     data = data.select(data.roles != "cpa")
     names, reported = value_at(document, "sessions", report_path, _sessions)
     rows = tree_rows(tree, data)
@@ -161,9 +180,16 @@ def evaluate_tree_files(urdf: str | Path, report_path: str | Path, data_path: st
     evaluation = TreeEvaluation(tuple(per_target), data.n_rows, tuple(how), float(np.nanmax(errors)) * 1000.0,
                                 tuple(read_notes + notes), tuple(spec.points for spec, _ in targets),
                                 None if turns is None else float(np.degrees(np.nanmax(turns))))
+    page = None
+    if page_path is not None:  # made before anything is written: a report it cannot show leaves no output
+        from pincal.report.html import render_html  # Jinja2 and the figures only when a page is asked for
+
+        shown = {"urdf": str(urdf), "data": str(data_path), **evaluation.as_dict()}
+        page = render_html(document, evaluation=cast(dict[str, Any], shown), base=Path(report_path).parent,
+                           source=report_path)
     if json_path is not None:
         write_evaluation(json_path, evaluation.as_dict())
-    return evaluation
+    return replace(evaluation, html=write_page(page_path, page))
 
 
 def _with_effects(tree: KinematicTree, data: MeasurementSet, entries: Any

@@ -27,8 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from pincal.errors import CalibrationError
-from pincal.fit.chain_calibration import ChainCalibration
-from pincal.fit.plausibility import UNMODELLED_CAUSES, Finding, tip_link_findings, tip_link_verdict, unmodelled_reason
+from pincal.fit.plausibility import (
+    UNMODELLED_CAUSES,
+    Finding,
+    Fitted,
+    tip_link_findings,
+    tip_link_verdict,
+    unmodelled_reason,
+)
 from pincal.fit.prior import Prior
 from pincal.measurements.csv_v1 import file_columns
 from pincal.model.chain import KinematicChain, xyz_rpy_from_pose
@@ -194,7 +200,7 @@ def _reload_error(urdf: Path, chain: KinematicChain, q: np.ndarray) -> float:
     )
 
 
-def unmodelled_notes(result: ChainCalibration, reach_m: float, stated_sigma_pos_m: float | None,
+def unmodelled_notes(result: Fitted, reach_m: float, stated_sigma_pos_m: float | None,
                      command: str | None = None) -> list[str]:
     """The note on a model ``result`` (of a robot of ``reach_m`` [m]) that likely lacks an effect
     (:func:`pincal.fit.plausibility.unmodelled_reason`), or none: with the ``pincal diagnose`` ``command``
@@ -209,13 +215,16 @@ def unmodelled_notes(result: ChainCalibration, reach_m: float, stated_sigma_pos_
 
 
 def diagnose_command(urdf: Path, data_paths: Sequence[Path], settings: CalibrateSettings, out_urdf: Path,
-                     report_path: Path) -> str:
+                     report_path: Path, tip_links: Sequence[str] = ()) -> str:
     """The ``pincal diagnose`` command line (POSIX shell quoting) of the calibration ``settings`` of
     ``urdf`` on ``data_paths``: the same level, tool, noise column, selection, stated noise, couplings and
     xacro arguments (diagnose rejects no outliers: ``--reject-outliers`` has no counterpart), writing
-    ``STEM_diagnosed.urdf`` beside ``out_urdf`` and ``STEM_diagnose.json`` beside ``report_path``."""
-    words = ["pincal", "diagnose", str(urdf), *map(str, data_paths), "--tip-link", settings.tip_link,
-             "--level", settings.level]
+    ``STEM_diagnosed.urdf`` beside ``out_urdf`` and ``STEM_diagnose.json`` beside ``report_path``;
+    ``tip_links``: several targets' ``LINK:POINTS`` (default: the settings' one tip link)."""
+    words = ["pincal", "diagnose", str(urdf), *map(str, data_paths)]
+    for tip_link in tip_links or (settings.tip_link,):
+        words += ["--tip-link", tip_link]
+    words += ["--level", settings.level]
     if settings.tool_pose is not None:
         words += ["--tool", ",".join(repr(float(v)) for v in np.concatenate(xyz_rpy_from_pose(settings.tool_pose)))]
     if settings.sigma_column is not None:
