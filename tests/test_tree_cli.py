@@ -188,7 +188,7 @@ def test_flags_a_tree_does_not_take_yet_are_refused(files, capsys, extra, named)
     assert not (out / "t.urdf").exists() and not (out / "t.json").exists()
 
 
-@pytest.mark.parametrize("extra", [["--nominal", "x.urdf"], ["--fixed-registration"], ["--max-rot-deg", "1"],
+@pytest.mark.parametrize("extra", [["--nominal", "x.urdf"], ["--fixed-registration"],
                                    ["--temperature-column", "t"]])
 def test_evaluate_refuses_what_a_tree_does_not_take_yet(files, capsys, extra):
     folder, *_, out, report, _, _, held_out = files
