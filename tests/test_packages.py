@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import json
 import shutil
-from pathlib import Path
 
 import pytest
 
 from pincal.cli.commands import main
-from pincal.model import packages
 from pincal.errors import ModelError
+from pincal.model import packages
 from pincal.model.packages import resolve_mesh, with_resolved_meshes
 from pincal.robots import example_robot_data_urdf
 from pincal.simulation.humanoid import TALOS_URDF

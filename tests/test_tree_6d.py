@@ -272,3 +272,17 @@ def test_plan_continues_6d_rows_and_says_it_plans_the_points(cli_run, capsys):
     assert main(["plan", str(urdf), *TIP_LINKS, "--count", "2", "--sample", "40", "--existing", str(calibration),
                  "--out", str(folder / "MORE.csv"), "--report", str(folder / "MORE.json"), "--quiet"]) == 0
     assert "orientation columns qxN,qyN,qzN,qwN are not counted in the plan's information" in capsys.readouterr().err
+
+
+def test_a_target_beyond_reach_is_not_told_to_give_a_tool_a_tree_refuses(simulated):
+    """The beyond-reach finding of one chain advises --tool; with several targets --tool is refused, so the
+    finding gives the rest of its advice only."""
+    from dataclasses import replace
+
+    from pincal.workflows.tree_calibration import tree_findings
+
+    tree, _, _, data, _, result, _ = simulated
+    far = replace(result, target=replace(result.target, points=result.target.points * 100.0))
+    _, found = tree_findings(tree, far, data.q, None)
+    target = [f.message for f in found if f.code == "target"]
+    assert target and "vary the tool's orientation" in target[0] and "--tool" not in target[0]

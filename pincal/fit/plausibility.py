@@ -320,12 +320,13 @@ def fit_findings(result: Fitted, reach: float, targets: Sequence[tuple[str, floa
         findings.append(Finding("noise", f"the residual ({rms / np.sqrt(3.0) * 1e3:.3g} mm per axis) is "
                                 f"{ratio:.0f}× the sensor's stated noise ({stated_sigma_pos_m * 1e3:g} mm; more "
                                 f"than {MAX_NOISE_RATIO:g}×): something the model lacks, or bad data. {likely}"))
+    tool = "give --tool X,Y,Z,R,P,Y, " if isinstance(result, ChainCalibration) else ""  # a tree's tool: not yet
     for tip_link, distance in targets:
         if distance > reach:
             findings.append(Finding("target", f"the estimated target is {distance:.3g} m from {tip_link}, "
                                     f"beyond the robot's reach in these rows ({reach:.3g} m): no tool is that long. "
-                                    "The data cannot place it; give --tool X,Y,Z,R,P,Y, vary the tool's "
-                                    f"orientation, or check: {causes}"))
+                                    f"The data cannot place it; {tool}vary the tool's orientation, or check: "
+                                    f"{causes}"))
     for name, registration in zip(result.session_names or ("",), result.target.registrations):
         # the robot base's position in the sensor frame is the registration's translation
         distance = float(np.linalg.norm(registration.translation))

@@ -26,12 +26,24 @@ from pincal.residuals.base import KinematicsCache
 from pincal.residuals.sensor import SensorResidual, TargetEstimate
 from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWeights
 
-__all__ = ["START_SIGMA_POS_M", "START_SIGMA_ROT_RAD", "FitProblem"]
+__all__ = ["START_SIGMA_POS_M", "START_SIGMA_ROT_RAD", "FitProblem", "kind_scales"]
 
 #: Starting noise scales for weighting positions against orientations; both
 #: are re-estimated from the residuals (maximum likelihood with unknown variances).
 START_SIGMA_POS_M = 1e-3
 START_SIGMA_ROT_RAD = 1e-3
+
+
+def kind_scales(residual: np.ndarray, n_pos: int, n_data: int, sigma_pos: float, sigma_rot: float | None
+                ) -> tuple[float, float | None]:
+    """Maximum likelihood with unknown variances, per kind of entry: σ² the mean squared error of the
+    position entries ``residual[:n_pos]`` [m] and of the orientation ones ``residual[n_pos:n_data]`` [rad],
+    each whitened by its scale now (``sigma_pos``, ``sigma_rot``; None: no orientations). A kind fitted
+    exactly keeps its scale."""
+    sigma = float(np.sqrt(np.mean((residual[:n_pos] * sigma_pos) ** 2))) or sigma_pos
+    if sigma_rot is None:
+        return sigma, None
+    return sigma, float(np.sqrt(np.mean((residual[n_pos:n_data] * sigma_rot) ** 2))) or sigma_rot
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,10 +159,5 @@ class FitProblem:
         if isinstance(objective, PriorResidual):
             return self.with_scales(reestimated_scales(solution, objective.n_prior, n_pos, self.sigma_pos,
                                                        self.sigma_rot))
-        pos = solution.residual[:n_pos] * self.sigma_pos
-        sigma_pos = float(np.sqrt(np.mean(pos**2))) or self.sigma_pos
-        sigma_rot = self.sigma_rot
-        if sigma_rot is not None:
-            rot = solution.residual[n_pos:] * sigma_rot
-            sigma_rot = float(np.sqrt(np.mean(rot**2))) or sigma_rot
-        return self.with_scales((sigma_pos, sigma_rot))
+        return self.with_scales(kind_scales(solution.residual, n_pos, solution.residual.size, self.sigma_pos,
+                                            self.sigma_rot))

@@ -17,7 +17,7 @@ from typing import cast
 import numpy as np
 
 from pincal.fit.prior import PriorResidual, log_evidence, reestimated_scales
-from pincal.fit.sensor_problem import START_SIGMA_POS_M, START_SIGMA_ROT_RAD
+from pincal.fit.sensor_problem import START_SIGMA_POS_M, START_SIGMA_ROT_RAD, kind_scales
 from pincal.fit.solver import Solution, solve
 from pincal.model.sensitivity import ParameterSlot, SensitivityModel
 from pincal.model.tree import KinematicTree
@@ -121,16 +121,12 @@ class TreeProblem:
         if isinstance(objective, PriorResidual):
             scales = reestimated_scales(solution, objective.n_prior, n_pos, self.sigma_pos, self.sigma_rot)
             return self.with_scales(scales if self.sigma_rot is not None else scales[:1])
-        position = solution.residual[:n_pos] * self.sigma_pos
-        sigma_pos = float(np.sqrt(np.mean(position**2))) or self.sigma_pos
-        if self.sigma_rot is None:
-            return self.with_scales((sigma_pos,))
-        turns = solution.residual[n_pos: self.n_data] * self.sigma_rot
-        return self.with_scales((sigma_pos, float(np.sqrt(np.mean(turns**2))) or self.sigma_rot))
+        scales = kind_scales(solution.residual, n_pos, self.n_data, self.sigma_pos, self.sigma_rot)
+        return self.with_scales(scales if self.sigma_rot is not None else scales[:1])
 
 
 def registration_fit(problem: TreeProblem, size: int, iterations: int) -> tuple[TreeProblem, Solution]:
-    """The registrations and points with the nominal kinematics, at the noise scale of their residual
+    """The registrations and points with the nominal kinematics, at the noise scales of their residual
     (re-estimated ``iterations`` times): the pipeline's start."""
     empty, base = np.array([], dtype=int), np.zeros(size)
     objective, solution = problem.fit(empty, base, what="registration")

@@ -17,7 +17,7 @@ The true robot of :func:`simulate_humanoid` differs from the URDF the way a real
   τ computed with the *true* masses, the URDF's plus ``payload_kg`` at each marker (a hand's tool and
   cables the URDF does not have) — so the URDF's masses cannot explain the deflection, and a diagnosis
   must take the masses as unknown (``--masses unknown``) — on the URDF's geometry (the placement errors
-  move TALOS's torso pitch torque by 0.6 % at most at 0.5 mm / 0.5 mrad: 0.27 of 42 N·m RMS); a joint that
+  move TALOS's torso pitch torque by at most 0.27 N·m at 0.5 mm / 0.5 mrad, against its 42 N·m RMS); a joint that
   others follow by ``<mimic>`` holds their torques too, by virtual work (τ_driver + multiplier · τ_follower),
   and moves them with it;
 * joints that bend under the same masses' gravity moments about the two axes orthogonal to their own

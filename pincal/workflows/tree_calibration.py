@@ -11,8 +11,8 @@ tip-link check). ``--level auto`` chooses the tree's level by cross-validation
 corrects every row read (eq C1 of :mod:`pincal.measurements.couplings`) or, on a joint without a column,
 makes it follow its driver, as with one chain (REPORT.json ``couplings``, and effects.yaml beside the URDF,
 which cannot carry them). What the single chain's run adds and a tree's does not yet: ``--level dh`` (a tree
-has no DH table), a known ``--tool``, orientation columns; each is refused with one line, never run
-differently.
+has no DH table), a known ``--tool``, unnumbered orientation columns (``qx,qy,qz,qw``: whose?); each is
+refused with one line, never run differently.
 """
 
 from __future__ import annotations
