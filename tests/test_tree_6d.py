@@ -272,3 +272,17 @@ def test_plan_continues_6d_rows_and_says_it_plans_the_points(cli_run, capsys):
     assert main(["plan", str(urdf), *TIP_LINKS, "--count", "2", "--sample", "40", "--existing", str(calibration),
                  "--out", str(folder / "MORE.csv"), "--report", str(folder / "MORE.json"), "--quiet"]) == 0
     assert "orientation columns qxN,qyN,qzN,qwN are not counted in the plan's information" in capsys.readouterr().err
+
+
+def test_the_report_page_shows_each_targets_orientation_before_and_after(cli_run):
+    folder, *_, report_path, _, _ = cli_run
+    assert main(["report", str(report_path), "--out", str(folder / "tree.html")]) == 0
+    page = (folder / "tree.html").read_text(encoding="utf-8")
+    table = page[page.index('id="target-orientations-table"'):]
+    table = table[:table.index("</table>")]
+    for target in json.loads(report_path.read_text(encoding="utf-8"))["targets"]:
+        before, after = target["nominal_errors"], target["calibration_errors"]
+        row = table[table.index(f"<td>{target['tip_link']}</td>"):]
+        row = row[:row.index("</tr>")]
+        assert (f"<td>{after['orientation_seen']}</td><td>{before['orientation']['rms_deg']:.3f}</td>"
+                f"<td>{after['orientation']['rms_deg']:.3f}</td>") in row

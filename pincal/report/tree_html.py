@@ -5,7 +5,8 @@ A tree's REPORT.json has each target's errors under ``targets`` rather than one 
 prepared here for the template partial ``templates/tree.html.j2``: per target its link, points and seen (row,
 point) pairs, the RMS and largest distance [mm] of its points from the nominal model (registered to the
 calibration rows), from the geometric calibration and, after ``diagnose``, from the final model with its effects;
-on the held-out rows, the geometric calibration's and the final model's.
+on the held-out rows, the geometric calibration's and the final model's. A target whose orientation is measured
+(``qxN,qyN,qzN,qwN``) shows its orientation errors [deg] the same way.
 """
 
 from __future__ import annotations
@@ -16,12 +17,28 @@ from typing import Any
 __all__ = ["tree_section"]
 
 
-def _mm(errors: Any, key: str = "rms_mm") -> str:
-    """A TargetErrors' mean/RMS/max over its points [mm], three decimals; an em dash for what is missing."""
-    value = ((errors or {}).get("position") or {}).get(key) if isinstance(errors, dict) else None
+def _mm(errors: Any, key: str = "rms_mm", part: str = "position") -> str:
+    """A TargetErrors' mean/RMS/max over its points [mm] (``part`` "orientation", ``key`` "rms_deg": of its
+    orientation [deg]), three decimals; an em dash for what is missing."""
+    value = ((errors or {}).get(part) or {}).get(key) if isinstance(errors, dict) else None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         return "—"
     return f"{round(float(value), 3) + 0.0:.3f}"
+
+
+def _turns(target: dict[str, Any], diagnosed: bool, held: bool) -> dict[str, Any] | None:
+    """A target's orientation errors [deg] as its points' (RMS per step, max, held out), None where its
+    orientation is not measured (no ``orientation_seen`` in its errors)."""
+    final = target.get("calibration_errors") or {}
+    if "orientation_seen" not in final:
+        return None
+    steps = [_mm(target.get(key), "rms_deg", "orientation") for key in
+             ("nominal_errors", "geometry_errors" if diagnosed else "calibration_errors")]
+    if diagnosed:
+        steps.append(_mm(final, "rms_deg", "orientation"))
+    return {"seen": final["orientation_seen"], "steps": steps, "max": _mm(final, "max_deg", "orientation"),
+            "held": tuple(_mm(target.get(key), "rms_deg", "orientation")
+                          for key in ("validation_geometry_errors", "validation_errors")) if held else None}
 
 
 def tree_section(doc: dict[str, Any]) -> dict[str, Any] | None:
@@ -46,7 +63,8 @@ def tree_section(doc: dict[str, Any]) -> dict[str, Any] | None:
             "held": (_mm(target.get("validation_geometry_errors")), _mm(target.get("validation_errors")))
             if held else None,
             "held_seen": (target.get("validation_errors") or {}).get("seen") if held else None,
+            "turns": _turns(target, diagnosed, held),
         })
-    return {"rows": rows, "diagnosed": diagnosed, "held": held,
+    return {"rows": rows, "diagnosed": diagnosed, "held": held, "oriented": any(r["turns"] for r in rows),
             "shared": [j for j in (doc.get("chain") or {}).get("joints") or []
                        if sum(j in (t.get("joints") or []) for t in targets if isinstance(t, dict)) > 1]}
