@@ -18,7 +18,7 @@ from pincal.cli.commands import main
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
 from pincal.fit.tree_calibration import calibrate_tree, initial_tree_target, tree_rows
-from pincal.measurements.csv_v1 import read_measurements, read_sessions
+from pincal.measurements.csv_v1 import read_measurements, read_sessions, write_measurements
 from pincal.measurements.data import MeasurementSet
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
@@ -286,3 +286,23 @@ def test_the_report_page_shows_each_targets_orientation_before_and_after(cli_run
         row = row[:row.index("</tr>")]
         assert (f"<td>{after['orientation_seen']}</td><td>{before['orientation']['rms_deg']:.3f}</td>"
                 f"<td>{after['orientation']['rms_deg']:.3f}</td>") in row
+
+
+def test_written_6d_tree_rows_read_back_exactly(simulated, tmp_path):
+    """write_measurements writes each target's qxN group (an occluded orientation or point: empty cells)."""
+    tree, _, _, data, *_ = simulated
+    points = data.points.copy()
+    points[2, 1] = np.nan  # point 2 not seen on the third row
+    data = MeasurementSet(data.joint_names, data.q[:8], points[:8], None, data.roles[:8], data.lines[:8],
+                          target_rotations={n: r[:8] for n, r in data.target_rotations.items()})
+    write_measurements(tmp_path / "rows.csv", data)
+    back, _ = read_measurements(tmp_path / "rows.csv", tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    assert np.array_equal(back.q, data.q) and np.array_equal(back.points, data.points, equal_nan=True)
+    assert sorted(back.target_rotations) == sorted(NUMBERS)
+    for number in NUMBERS:
+        seen = np.isfinite(data.target_rotations[number]).all(axis=(1, 2))
+        assert np.array_equal(np.isfinite(back.target_rotations[number]).all(axis=(1, 2)), seen)
+        assert_close(back.target_rotations[number][seen], data.target_rotations[number][seen], 1e-15, f"qx{number}")
+    with open(tmp_path / "rows.csv", newline="") as handle:
+        header, *rows = list(csv.reader(handle))
+    assert header == [*_header(tree), "role"] and sum(cell == "" for row in rows for cell in row) == 3 + 4
