@@ -22,6 +22,7 @@ from pincal.measurements.csv_v1 import read_measurements, read_sessions, write_m
 from pincal.measurements.data import MeasurementSet
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
+from pincal.report.tree_html import tree_section
 from pincal.residuals.sensor_values import RowWeights
 from pincal.residuals.tree import TreeResidual
 
@@ -221,8 +222,8 @@ def cli_run(tmp_path_factory, simulated):
     rows = _cells(data.q, sensed, turns, range(30))
     column = _header(tree).index("qx3")
     rows[5][column:column + 4] = ["", "", "", ""]
-    calibration, held = _file(folder, _header(tree), rows), _file(folder, _header(tree),
-                                                                 _cells(data.q, sensed, turns, range(30, 40)), "held.csv")
+    calibration = _file(folder, _header(tree), rows)
+    held = _file(folder, _header(tree), _cells(data.q, sensed, turns, range(30, 40)), "held.csv")
     out, report = folder / "out.urdf", folder / "REPORT.json"
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
@@ -256,15 +257,6 @@ def test_evaluate_prints_and_writes_each_targets_orientation_errors(cli_run, cap
     document = json.loads((folder / "e.json").read_text(encoding="utf-8"))
     assert document["max_deg"] < 1e-6
     assert [t["errors"]["orientation_seen"] for t in document["evaluated_targets"]] == [10, 10]
-
-
-def test_diagnose_refuses_orientation_columns_in_one_line(cli_run, capsys):
-    folder, urdf, calibration, *_ = cli_run
-    assert main(["diagnose", str(urdf), str(calibration), *TIP_LINKS, "--out", str(folder / "d.urdf"),
-                 "--report", str(folder / "D.json")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "diagnose does not take the targets' orientation columns qxN,qyN,qzN,qwN" in err and "\n" not in err
-    assert not (folder / "D.json").exists()
 
 
 def test_plan_continues_6d_rows_and_says_it_plans_the_points(cli_run, capsys):
@@ -306,3 +298,68 @@ def test_written_6d_tree_rows_read_back_exactly(simulated, tmp_path):
     with open(tmp_path / "rows.csv", newline="") as handle:
         header, *rows = list(csv.reader(handle))
     assert header == [*_header(tree), "role"] and sum(cell == "" for row in rows for cell in row) == 3 + 4
+
+
+SAG = -4e-4  # torso_2's compliance [rad/(N·m)]: it sags under both arms by up to ~7 mrad (test_tree_diagnose's)
+SIGMA_M, SIGMA_RAD = 1e-4, np.radians(0.1)  # a mocap rigid body's noise per axis: 0.1 mm, 0.1 deg
+FLOOR_DEG = np.sqrt(3.0) * 0.1  # the RMS angle of an orientation at the noise alone (three axes) [deg]
+
+
+def _sagging_6d_rows(tree, params, truth, n_rows, rng):
+    """6D rows of the two-arm robot (one point per hand, its orientation as qx1.., qx2..) with torso_2 sagging by
+    SAG times its gravity torque, each point and orientation with its noise."""
+    from pincal.model.effects import gravity_torques
+    from pincal.model.tree_effects import TreeBody
+
+    q = rng.uniform(-1.2, 1.2, (n_rows, tree.n_joints))
+    actual = q.copy()
+    with tree.placed(params.placements(truth)):
+        actual[:, 1] += SAG * gravity_torques(TreeBody(tree), q)[:, 1]
+        world = tree.target_points(actual, LOCAL[:1] * 2)
+        turns = [OMEGA @ t.chain.tool_poses(actual[:, t.columns])[0] @ frame for t, frame in zip(tree.targets, FRAMES)]
+    sensed = world @ OMEGA.T + TAU + rng.normal(0.0, SIGMA_M, world.shape)
+    measured = {n + 1: turn @ Rotation.from_rotvec(rng.normal(0.0, SIGMA_RAD, (n_rows, 3))).as_matrix()
+                for n, turn in enumerate(turns)}
+    return MeasurementSet(tree.joint_names, q, sensed, None, np.full(n_rows, "calibration", dtype=object),
+                          np.arange(2, n_rows + 2), target_rotations=measured)
+
+
+@pytest.fixture(scope="module")
+def diagnosed_6d(tmp_path_factory):
+    """``pincal diagnose`` of 40 such rows, 20 held out."""
+    folder = tmp_path_factory.mktemp("tree6d_diagnose")
+    targets = ["left_marker:1", "right_marker:2"]
+    tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(targets))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(5)
+    truth = rng.normal(0.0, 5e-4, params.size)
+    for name, rows in (("data", 40), ("held", 20)):
+        write_measurements(folder / f"{name}.csv", _sagging_6d_rows(tree, params, truth, rows, rng))
+    (folder / "robot.urdf").write_text(two_arm_urdf(), encoding="utf-8")
+    report = folder / "REPORT.json"
+    code = main(["diagnose", str(folder / "robot.urdf"), str(folder / "data.csv"), "--tip-link", targets[0],
+                 "--tip-link", targets[1], "--validation", str(folder / "held.csv"), "--out", str(folder / "out.urdf"),
+                 "--report", str(report), "--quiet"])
+    return code, report
+
+
+def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_noise(diagnosed_6d):
+    code, report_path = diagnosed_6d
+    assert code == 0
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    [effect] = report["effects"]
+    assert (effect["type"], effect["joint"]) == ("compliance", "torso_2")
+    assert effect["value"] == pytest.approx(SAG, rel=0.03)
+    assert report["noise"]["sigma_rot_deg"] == pytest.approx(0.1, rel=0.15)  # the orientations' own scale
+    for target in report["targets"]:
+        geometry, final = target["geometry_errors"], target["calibration_errors"]
+        assert geometry["orientation_seen"] == final["orientation_seen"] == 40
+        assert geometry["orientation"]["rms_deg"] > 1.25 * FLOOR_DEG  # the sag turns the hands too
+        assert final["orientation"]["rms_deg"] < 1.15 * FLOOR_DEG
+        held_before, held_after = target["validation_geometry_errors"], target["validation_errors"]
+        assert held_before["orientation_seen"] == held_after["orientation_seen"] == 20
+        assert held_before["orientation"]["rms_deg"] > 1.5 * FLOOR_DEG  # the geometry alone cannot turn the hands back
+        assert held_after["orientation"]["rms_deg"] < 1.1 * FLOOR_DEG
+    # the page's values: each target's orientation nominal -> geometry -> with effects, and held out
+    rows = [row["turns"] for row in tree_section(report)["rows"]]
+    assert [len(r["steps"]) for r in rows] == [3, 3] and all("—" not in r["held"] for r in rows)

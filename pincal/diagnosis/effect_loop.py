@@ -141,7 +141,8 @@ class EffectSearch(Protocol):
 @dataclass(frozen=True)
 class Found:
     """Where :func:`search_effects` ended: the search at the final noise scale, the final fit, the effects adopted,
-    their steps, the ranking of the step that adopted nothing, and notes."""
+    their steps, the ranking of the step that adopted nothing, notes, and the unknowns of the fit without effects
+    (``start_x``: what the steps' errors before the first are of)."""
 
     search: EffectSearch
     objective: FitObjective
@@ -150,11 +151,13 @@ class Found:
     steps: tuple[EffectStep, ...]
     ranking: tuple[EffectCandidate, ...]
     notes: tuple[str, ...]
+    start_x: np.ndarray | None = None
 
 
 def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Effect], counter: Counter) -> Found:
     """Run the loop of the module docstring from the fit without effects."""
     objective, solution = search.fit([])
+    start_x = solution.x
     adopted: list[Effect] = []
     steps: list[EffectStep] = []
     ranking: tuple[EffectCandidate, ...] = ()
@@ -185,7 +188,7 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
                                 ranking))
         adopted.append(effect)
         objective, solution = new_objective, new_solution
-    return Found(search, objective, solution, tuple(adopted), tuple(steps), ranking, tuple(notes))
+    return Found(search, objective, solution, tuple(adopted), tuple(steps), ranking, tuple(notes), start_x)
 
 
 def _step(search: EffectSearch, inputs: EffectInputs, current: tuple[FitObjective, Solution], adopted: list[Effect],

@@ -13,11 +13,13 @@ and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts
 
     ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m) < EVIDENCE = −10      (Schwarz 1978; Kass & Raftery 1995)
 
-on the calibration rows (m: their seen coordinates; the noise scale the current model's, re-estimated after
-each adoption), a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of
-some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out
-rows better on them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`).
-The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+on the calibration rows (m: their seen coordinates, and with a target's orientation measured its seen
+orientations' 3 entries each; every entry whitened by its own noise scale, the positions' or the orientations',
+the current model's, each re-estimated from its own entries after each adoption, as the tree's fit weighs them),
+a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of some measured
+coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out rows better on
+them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`, on the
+held-out points). The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
 
 A candidate that passes too and corrects the same poses alike, within 6 of the adopted one's ΔBIC, is named beside
 it (:mod:`pincal.diagnosis.effect_loop`); the adopted one is the best ΔBIC (the single chain's prefers the one that
@@ -87,7 +89,12 @@ class TreeDiagnosis:
         point_errors: the calibration rows' point errors of the final model (K, P) [m], NaN where not seen.
         heldout_before / heldout_after: the held-out rows' point errors (K_h, P) [m] of the geometric
             calibration and of the final model (None without held-out rows).
+        heldout_turns: the held-out rows' orientation errors (K_h, T) [rad] of the geometric calibration and of
+            the final model, NaN where not seen (None without held-out rows or without orientations).
         sigma_pos_m: the noise scale of the final model's residuals [m].
+        orientation_errors: the calibration rows' orientation errors of the final model (K, T) [rad], NaN where not
+            seen; None when no target's orientation is measured.
+        sigma_rot_rad: the orientation noise scale of the final model's residuals [rad]; None without orientations.
         masses_unknown: compliances follow mass moments (``--masses unknown`` or no inertias).
         time_reference: the calibration rows' mean time [s] a drift is relative to (None without times).
         notes: what the user should know.
@@ -114,6 +121,9 @@ class TreeDiagnosis:
     notes: tuple[str, ...]
     inputs: EffectInputs
     heldout_predicted_m: float | None = None
+    orientation_errors: np.ndarray | None = None
+    sigma_rot_rad: float | None = None
+    heldout_turns: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def tree_candidates(tree: KinematicTree, has_time: bool, lateral: bool = False) -> list[Effect]:
@@ -176,11 +186,23 @@ class _Search:
 
     def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         """The held-out rows' point errors (K_h, P) [m] of the model at ``x`` (None without them)."""
+        held = self._held_objective(effects)
+        return None if held is None else held.point_errors(x, np.ones(held.seen.shape[0]))
+
+    def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
+        """The held-out rows' orientation errors (K_h, T) [rad] of the model at ``x``, NaN where not seen (None
+        without held-out rows or without orientations)."""
+        held = self._held_objective(effects)
+        if held is None or self.problem.sigma_rot is None:
+            return None
+        return held.orientation_errors(x, np.ones(held.seen.shape[0]))
+
+    def _held_objective(self, effects: Sequence[Effect]) -> TreeResidual | None:
+        """The held-out rows' residual with ``effects`` in metres and radians (their weights and scales 1)."""
         if self.held is None:
             return None
-        held = cast(TreeResidual, self.objective(self.held, effects))
-        held = cast(TreeResidual, getattr(held, "objective", held))
-        return held.point_errors(x, np.ones(held.seen.shape[0]))
+        held = self.objective(self.held, effects)
+        return cast(TreeResidual, getattr(held, "objective", held))
 
 
 def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: MeasurementSet,
@@ -211,7 +233,7 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     kept = calibration.kept  # under a prior also the parameters it holds near nominal: free in the fit
     problem = TreeProblem(tree, calibration.params, rows, calibration.target, row_weights(used, options.sigma_column),
                           calibration.session_names, sigma_pos=calibration.sigma_pos_m, prior=calibration.prior_sigma,
-                          effects=ModelledEffects((), inputs))
+                          effects=ModelledEffects((), inputs), sigma_rot=calibration.sigma_rot_rad)
     held = None
     if heldout is not None:
         held_rows = tree_rows(tree, heldout, session_rows(heldout, calibration.session_names))
@@ -220,7 +242,7 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
         held_inputs = tree_inputs(tree, heldout, held_time, loads=unknown)
         if held_time is not None and reference is not None:  # a drift's time as the calibration rows'
             held_inputs = replace(held_inputs, time=held_time - reference)
-        held = replace(problem, rows=held_rows, row_weight=np.ones(heldout.n_rows), sigma_pos=1.0,
+        held = replace(problem, rows=held_rows, row_weight=np.ones(heldout.n_rows), sigma_pos=1.0, sigma_rot=1.0,
                        effects=ModelledEffects((), held_inputs))
     search = _Search(problem, kept, calibration.vector, held,
                      options.stated_sigma_pos_m)
@@ -243,15 +265,22 @@ def _held_predicted(search: _Search, effects: Sequence[Effect], final: tuple[Fit
     Jacobian J_h at the final model, sqrt(Σ diag(J_h C J_hᵀ) / seen points), as
     :meth:`pincal.fit.tree_calibration.TreeCalibration.predicted_point_rms` for the geometry alone; None without
     held-out rows."""
-    if search.held is None:
+    held = search._held_objective(effects)  # in metres: its rows' weights and scale are 1
+    if held is None:
         return None
     objective, solution = final
-    held = cast(TreeResidual, search.objective(search.held, effects))
-    held = cast(TreeResidual, getattr(held, "objective", held))  # in metres: its rows' weights and scale are 1
-    jacobian = held.jacobian(solution.x)
+    jacobian = held.jacobian(solution.x)[:held.n_positions]  # the points' entries (orientations' follow)
     variance = np.einsum("ij,jk,ik->i", jacobian, _covariance(objective, solution), jacobian)
     return float(np.sqrt(variance.sum() / max(int(held.seen.sum()), 1)))
 
+
+
+def _held_turns(search: _Search, adopted: Sequence[Effect], xs: tuple[np.ndarray | None, np.ndarray]
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The held-out rows' orientation errors (K_h, T) [rad] of the fit without effects (``xs[0]``) and of the final
+    one, None without held-out rows or orientations."""
+    before, after = search.held_turns([], xs[1] if xs[0] is None else xs[0]), search.held_turns(adopted, xs[1])
+    return None if before is None or after is None else (before, after)
 
 
 def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None) -> TreeDiagnosis:
@@ -266,6 +295,9 @@ def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: 
     vector[search.kept], std[search.kept] = solution.x[kinematic], std_all[kinematic]
     errors = search.errors(objective, solution.x)
     seen = errors[np.isfinite(errors)]
+    tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
+    turns = None if problem.sigma_rot is None else tree_objective.orientation_errors(
+        solution.x, problem.row_weight / problem.sigma_rot)
     effects = tuple((effect, solution.x[sl], std_all[sl]) for effect, sl in zip(adopted, objective.effect_slices))
     if untestable:
         notes.append(f"{len(untestable)} candidate(s) cannot be tested on these rows ("
@@ -280,6 +312,8 @@ def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: 
         point_errors=errors, heldout_before=steps[0].heldout_before if steps else search.held_errors([], solution.x),
         heldout_after=search.held_errors(adopted, solution.x),
         heldout_predicted_m=_held_predicted(search, adopted, (objective, solution)),
-        sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown,
+        heldout_turns=_held_turns(search, adopted, (found.start_x, solution.x)),
+        sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown, orientation_errors=turns,
+        sigma_rot_rad=None if turns is None else float(np.sqrt(np.nanmean(turns**2) / 3.0)),
         time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes),
         inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))
