@@ -336,15 +336,16 @@ def diagnosed_6d(tmp_path_factory):
     for name, rows in (("data", 40), ("held", 20)):
         write_measurements(folder / f"{name}.csv", _sagging_6d_rows(tree, params, truth, rows, rng))
     (folder / "robot.urdf").write_text(two_arm_urdf(), encoding="utf-8")
-    report = folder / "REPORT.json"
-    code = main(["diagnose", str(folder / "robot.urdf"), str(folder / "data.csv"), "--tip-link", targets[0],
-                 "--tip-link", targets[1], "--validation", str(folder / "held.csv"), "--out", str(folder / "out.urdf"),
-                 "--report", str(report), "--quiet"])
-    return code, report
+    report, printed = folder / "REPORT.json", io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["diagnose", str(folder / "robot.urdf"), str(folder / "data.csv"), "--tip-link", targets[0],
+                     "--tip-link", targets[1], "--validation", str(folder / "held.csv"), "--out",
+                     str(folder / "out.urdf"), "--report", str(report), "--quiet"])
+    return code, report, printed.getvalue()
 
 
 def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_noise(diagnosed_6d):
-    code, report_path = diagnosed_6d
+    code, report_path, printed = diagnosed_6d
     assert code == 0
     report = json.loads(report_path.read_text(encoding="utf-8"))
     [effect] = report["effects"]
@@ -363,3 +364,7 @@ def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_no
     # the page's values: each target's orientation nominal -> geometry -> with effects, and held out
     rows = [row["turns"] for row in tree_section(report)["rows"]]
     assert [len(r["steps"]) for r in rows] == [3, 3] and all("—" not in r["held"] for r in rows)
+    for target in report["targets"]:  # printed: RMS geometry, final, held-out geometry, held-out final [deg]
+        [line] = [line.split() for line in printed.splitlines() if line.startswith(f"{target['tip_link']} orient")]
+        assert line[2:] == [f"{target[k]['orientation']['rms_deg']:.4f}" for k in (
+            "geometry_errors", "calibration_errors", "validation_geometry_errors", "validation_errors")] + ["[deg]"]
