@@ -305,16 +305,16 @@ SIGMA_M, SIGMA_RAD = 1e-4, np.radians(0.1)  # a mocap rigid body's noise per axi
 FLOOR_DEG = np.sqrt(3.0) * 0.1  # the RMS angle of an orientation at the noise alone (three axes) [deg]
 
 
-def _sagging_6d_rows(tree, params, truth, n_rows, rng):
+def _sagging_6d_rows(tree, params, truth, n_rows, rng, sag=SAG):
     """6D rows of the two-arm robot (one point per hand, its orientation as qx1.., qx2..) with torso_2 sagging by
-    SAG times its gravity torque, each point and orientation with its noise."""
+    ``sag`` times its gravity torque, each point and orientation with its noise."""
     from pincal.model.effects import gravity_torques
     from pincal.model.tree_effects import TreeBody
 
     q = rng.uniform(-1.2, 1.2, (n_rows, tree.n_joints))
     actual = q.copy()
     with tree.placed(params.placements(truth)):
-        actual[:, 1] += SAG * gravity_torques(TreeBody(tree), q)[:, 1]
+        actual[:, 1] += sag * gravity_torques(TreeBody(tree), q)[:, 1]
         world = tree.target_points(actual, LOCAL[:1] * 2)
         turns = [OMEGA @ t.chain.tool_poses(actual[:, t.columns])[0] @ frame for t, frame in zip(tree.targets, FRAMES)]
     sensed = world @ OMEGA.T + TAU + rng.normal(0.0, SIGMA_M, world.shape)
@@ -368,3 +368,21 @@ def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_no
         [line] = [line.split() for line in printed.splitlines() if line.startswith(f"{target['tip_link']} orient")]
         assert line[2:] == [f"{target[k]['orientation']['rms_deg']:.4f}" for k in (
             "geometry_errors", "calibration_errors", "validation_geometry_errors", "validation_errors")] + ["[deg]"]
+
+
+def test_the_held_out_test_judges_the_orientations_too():
+    """Held-out rows of a stiff robot refute the sag the calibration rows show, in their points and orientations."""
+    from pincal.diagnosis.diagnose import DiagnoseOptions
+    from pincal.diagnosis.tree_diagnose import diagnose_tree
+    from pincal.model.effects import Effect
+
+    tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(["left_marker:1", "right_marker:2"]))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(3)
+    truth = rng.normal(0.0, 5e-4, params.size)
+    data, stiff = (_sagging_6d_rows(tree, params, truth, rows, rng, sag) for rows, sag in ((40, SAG), (20, 0.0)))
+    calibration = calibrate_tree(tree, data, "full", ChainFitOptions(selection="all"))
+    found = diagnose_tree(tree, calibration, data, stiff, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
+    [candidate] = found.last_candidates
+    assert found.effects == () and candidate.verdict.startswith("it makes the held-out rows worse")
+    assert "orientation" in candidate.verdict  # the angles' change beside the points'

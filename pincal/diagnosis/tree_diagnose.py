@@ -19,7 +19,8 @@ the current model's, each re-estimated from its own entries after each adoption,
 a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of some measured
 coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out rows better on
 them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`, on the
-held-out points). The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+held-out points and orientations). The search stops when no candidate passes, or after
+:data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
 
 A candidate that passes too and corrects the same poses alike, within 6 of the adopted one's ΔBIC, is named beside
 it (:mod:`pincal.diagnosis.effect_loop`); the adopted one is the best ΔBIC (the single chain's prefers the one that
@@ -44,6 +45,7 @@ from pincal.diagnosis.effect_loop import (
     EffectCandidate,
     EffectStep,
     Found,
+    Model,
     search_effects,
 )
 from pincal.diagnosis.held_out import held_out_verdict
@@ -157,17 +159,25 @@ class _Search:
     def row_noise(self) -> float:
         return 1.0  # the residual is whitened: its rows are in noise units
 
-    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution]) -> str:
-        # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
-        return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
-                                self.judged_noise(*fit), None)
+    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
+                     models: tuple[Model, Model]) -> str:
+        """The held-out test on the points and, with orientations, on each row's targets' angles too (row_changes:
+        both in noise units); an unseen point or orientation changes nothing: a zero for both."""
+        sigma_pos, sigma_rot = self.judged_noise(*fit)
+        turns = [self.held_turns(*model) for model in models]
+        rows = [None if t is None or sigma_rot is None else np.nansum(t, axis=1) for t in turns]
+        return held_out_verdict(PoseErrors(np.nan_to_num(before), rows[0]), PoseErrors(np.nan_to_num(after), rows[1]),
+                                sigma_pos, sigma_rot)
 
-    def judged_noise(self, objective: FitObjective, solution: Solution) -> float:
-        """The noise [m] a held-out test judges in: the stated one, else the smaller of the current model's and
-        the candidate's fit's (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`: a model far off the data puts
-        its own estimate too high), at least :data:`pincal.diagnosis.verdicts.NOISE_FLOOR`."""
-        fitted = self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution).sigma_pos
-        return self.stated or max(min(self.problem.sigma_pos, fitted), NOISE_FLOOR)
+    def judged_noise(self, objective: FitObjective, solution: Solution) -> tuple[float, float | None]:
+        """The noise scales (σ_pos [m], σ_rot [rad] or None) a held-out test judges in: σ_pos the stated one, else
+        per kind the smaller of the current model's and the candidate's fit's
+        (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`: a model far off the data puts its own estimate too
+        high), at least :data:`pincal.diagnosis.verdicts.NOISE_FLOOR`."""
+        fitted = self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution)
+        rot = None if self.problem.sigma_rot is None or fitted.sigma_rot is None else max(
+            min(self.problem.sigma_rot, fitted.sigma_rot), NOISE_FLOOR)
+        return self.stated or max(min(self.problem.sigma_pos, fitted.sigma_pos), NOISE_FLOOR), rot
 
     def fit(self, effects: Sequence[Effect], x0: np.ndarray | None = None) -> tuple[FitObjective, Solution]:
         objective = self.objective(self.problem, effects)
