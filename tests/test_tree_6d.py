@@ -370,19 +370,44 @@ def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_no
             "geometry_errors", "calibration_errors", "validation_geometry_errors", "validation_errors")] + ["[deg]"]
 
 
-def test_the_held_out_test_judges_the_orientations_too():
+@pytest.fixture(scope="module")
+def sagging():
+    """40 6D rows of the two-arm robot whose torso pitch sags, 20 held-out rows of it stiff, 20 of it sagging, and
+    the rows' calibration (every parameter)."""
+    tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(["left_marker:1", "right_marker:2"]))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(3)
+    truth = rng.normal(0.0, 5e-4, params.size)
+    data, stiff, held = (_sagging_6d_rows(tree, params, truth, rows, rng, sag)
+                         for rows, sag in ((40, SAG), (20, 0.0), (20, SAG)))
+    return tree, data, held, stiff, calibrate_tree(tree, data, "full", ChainFitOptions(selection="all"))
+
+
+def test_the_held_out_test_judges_the_orientations_too(sagging):
     """Held-out rows of a stiff robot refute the sag the calibration rows show, in their points and orientations."""
     from pincal.diagnosis.diagnose import DiagnoseOptions
     from pincal.diagnosis.tree_diagnose import diagnose_tree
     from pincal.model.effects import Effect
 
-    tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(["left_marker:1", "right_marker:2"]))
-    params = TreeParameters(tree, "full")
-    rng = np.random.default_rng(3)
-    truth = rng.normal(0.0, 5e-4, params.size)
-    data, stiff = (_sagging_6d_rows(tree, params, truth, rows, rng, sag) for rows, sag in ((40, SAG), (20, 0.0)))
-    calibration = calibrate_tree(tree, data, "full", ChainFitOptions(selection="all"))
+    tree, data, _, stiff, calibration = sagging
     found = diagnose_tree(tree, calibration, data, stiff, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
     [candidate] = found.last_candidates
     assert found.effects == () and candidate.verdict.startswith("it makes the held-out rows worse")
     assert "orientation" in candidate.verdict  # the angles' change beside the points'
+
+
+def test_held_out_rows_may_measure_fewer_orientations_than_the_calibration_rows(sagging):
+    """Held-out rows with one hand's orientation only: the fits' unknowns stay where the calibration's are."""
+    from pincal.diagnosis.diagnose import DiagnoseOptions
+    from pincal.diagnosis.tree_diagnose import diagnose_tree
+    from pincal.model.effects import Effect
+
+    tree, data, held, _, calibration = sagging
+    one = MeasurementSet(held.joint_names, held.q, held.points, None, held.roles, held.lines,
+                         target_rotations={1: held.target_rotations[1]})
+    found = diagnose_tree(tree, calibration, data, one, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
+    [(effect, values, _)] = found.effects
+    assert values[0] == pytest.approx(SAG, rel=0.03) and found.heldout_turns is not None
+    after = found.heldout_turns[1]
+    assert np.isfinite(after[:, 0]).all() and np.isnan(after[:, 1]).all()
+    assert np.sqrt(np.mean(after[:, 0] ** 2)) < 1.25 * np.sqrt(3.0) * SIGMA_RAD  # the noise's

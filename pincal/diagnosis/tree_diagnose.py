@@ -66,7 +66,7 @@ from pincal.model.tree import KinematicTree, TreePlacements
 from pincal.model.tree_effects import TreeBody, tree_inputs
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor_values import ModelledEffects, TargetEstimate
-from pincal.residuals.tree import TreeResidual
+from pincal.residuals.tree import TreeResidual, TreeRows
 
 __all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "TreeStep", "TreeCandidate", "TreeDiagnosis",
            "tree_candidates", "diagnose_tree"]
@@ -252,12 +252,23 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
         held_inputs = tree_inputs(tree, heldout, held_time, loads=unknown)
         if held_time is not None and reference is not None:  # a drift's time as the calibration rows'
             held_inputs = replace(held_inputs, time=held_time - reference)
-        held = replace(problem, rows=held_rows, row_weight=np.ones(heldout.n_rows), sigma_pos=1.0, sigma_rot=1.0,
+        held = replace(problem, rows=_with_frames(held_rows, rows.oriented(), len(tree.targets)),
+                       row_weight=np.ones(heldout.n_rows), sigma_pos=1.0, sigma_rot=1.0,
                        effects=ModelledEffects((), held_inputs))
     search = _Search(problem, kept, calibration.vector, held,
                      options.stated_sigma_pos_m)
     found = search_effects(search, inputs, pool, Counter(progress))
     return _concluded(found, untestable, unknown, time)
+
+
+def _with_frames(rows: TreeRows, frames: np.ndarray, n_targets: int) -> TreeRows:
+    """``rows`` with the frame rotations of ``frames`` as unknowns (the calibration rows' targets measured in
+    orientation), whichever orientations they measure themselves: the fits' unknowns at the same places. An
+    orientation of a target not among ``frames`` is unused; one of ``frames`` never measured here is not seen."""
+    k = rows.seen.shape[0]
+    seen = np.zeros((k, n_targets), dtype=bool) if rows.rotation_seen is None else np.asarray(rows.rotation_seen, bool)
+    turns = np.broadcast_to(np.eye(3), (k, n_targets, 3, 3)) if rows.rotations is None else rows.rotations
+    return replace(rows, rotations=turns, rotation_seen=seen & np.isin(np.arange(n_targets), frames), frames=frames)
 
 
 def _covariance(objective: FitObjective, solution: Solution) -> np.ndarray:
