@@ -396,18 +396,20 @@ def test_the_held_out_test_judges_the_orientations_too(sagging):
     assert "orientation" in candidate.verdict  # the angles' change beside the points'
 
 
-def test_held_out_rows_may_measure_fewer_orientations_than_the_calibration_rows(sagging):
-    """Held-out rows with one hand's orientation only: the fits' unknowns stay where the calibration's are."""
+@pytest.mark.parametrize("measured", [(1,), ()])
+def test_held_out_rows_may_measure_fewer_orientations_than_the_calibration_rows(sagging, measured):
+    """Held-out rows with one hand's orientation only, or none: the fits' unknowns stay where the calibration's
+    are."""
     from pincal.diagnosis.diagnose import DiagnoseOptions
     from pincal.diagnosis.tree_diagnose import diagnose_tree
     from pincal.model.effects import Effect
 
     tree, data, held, _, calibration = sagging
-    one = MeasurementSet(held.joint_names, held.q, held.points, None, held.roles, held.lines,
-                         target_rotations={1: held.target_rotations[1]})
-    found = diagnose_tree(tree, calibration, data, one, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
+    fewer = MeasurementSet(held.joint_names, held.q, held.points, None, held.roles, held.lines,
+                           target_rotations={n: held.target_rotations[n] for n in measured})
+    found = diagnose_tree(tree, calibration, data, fewer, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
     [(effect, values, _)] = found.effects
     assert values[0] == pytest.approx(SAG, rel=0.03) and found.heldout_turns is not None
     after = found.heldout_turns[1]
-    assert np.isfinite(after[:, 0]).all() and np.isnan(after[:, 1]).all()
-    assert np.sqrt(np.mean(after[:, 0] ** 2)) < 1.25 * np.sqrt(3.0) * SIGMA_RAD  # the noise's
+    assert np.isfinite(after[:, :len(measured)]).all() and np.isnan(after[:, len(measured):]).all()
+    assert not measured or np.sqrt(np.mean(after[:, :1] ** 2)) < 1.25 * np.sqrt(3.0) * SIGMA_RAD  # the noise's
