@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from pincal.model.tree_parameters import TreeParameters
 from pincal.simulation.humanoid import HumanoidSettings, simulate_humanoid
@@ -85,3 +86,29 @@ def test_markers_off_the_fingers_and_no_held_out_rows_read_exactly_the_trees_joi
                                               rows=10, held_out_rows=0, compliance=(), payload_kg=0.0))
     assert data.tree.n_joints == 16 and data.calibration.joint_names == data.tree.joint_names
     assert data.calibration.points.shape == (10, 2, 3) and data.validation.n_rows == 0
+
+
+def test_each_hands_orientation_is_its_bent_links_and_its_noise_the_stated_one(small):
+    """With sigma_rot_deg each target's orientation (numbered by its point) is its link's frame in the sensor frame,
+    bent as its points are; its noise per axis the stated one; the points as they were without it."""
+    from pincal.model.effects import Effect
+    from pincal.model.lateral import bend_angles
+    from pincal.model.tree_effects import target_inputs, tree_inputs
+    from pincal.simulation.humanoid import MOCAP, TALOS_LATERAL, with_followers
+
+    assert SMALL.sigma_rot_deg is None and not small.calibration.target_rotations
+    exact = replace(SMALL, rows=30, held_out_rows=1, compliance=(), lateral=TALOS_LATERAL, payload_kg=0.0,
+                    sigma_pos_mm=0.0, deviation_mm=0.0, deviation_mrad=0.0, sigma_rot_deg=0.0)
+    bent, noisy = simulate_humanoid(exact), simulate_humanoid(replace(exact, sigma_rot_deg=0.3))
+    tree, rows = bent.tree, with_followers(bent.tree, bent.calibration)
+    joint, c_u, c_v = TALOS_LATERAL[0]
+    bends = [bend_angles([Effect("lateral", joint)], [np.array([c_u, c_v])], target_inputs(tree_inputs(tree, rows), t),
+                         t.chain.joint_names) for t in tree.targets]
+    hands = MOCAP.rotation @ tree.target_rotations(rows.q, [np.eye(3)] * 2, bends)
+    assert sorted(rows.target_rotations) == [1, 2]  # gripper_left's point 1, gripper_right's point 2
+    for t, number in enumerate((1, 2)):
+        assert np.allclose(rows.target_rotations[number], hands[:, t], atol=1e-12, rtol=0.0)
+        turns = np.swapaxes(hands[:, t], 1, 2) @ noisy.calibration.target_rotations[number]
+        angles = np.degrees(np.linalg.norm(Rotation.from_matrix(turns).as_rotvec(), axis=1))
+        assert 0.75 < np.sqrt(np.mean(angles**2)) / (np.sqrt(3.0) * 0.3) < 1.25  # 30 rows' RMS of 3 axes' noise
+    assert np.array_equal(noisy.calibration.points, bent.calibration.points)

@@ -18,10 +18,11 @@ from pincal.cli.commands import main
 from pincal.errors import PincalError
 from pincal.fit.chain_calibration import ChainFitOptions
 from pincal.fit.tree_calibration import calibrate_tree, initial_tree_target, tree_rows
-from pincal.measurements.csv_v1 import read_measurements, read_sessions
+from pincal.measurements.csv_v1 import read_measurements, read_sessions, write_measurements
 from pincal.measurements.data import MeasurementSet
 from pincal.model.tree import KinematicTree, parse_targets
 from pincal.model.tree_parameters import TreeParameters
+from pincal.report.tree_html import tree_section
 from pincal.residuals.sensor_values import RowWeights
 from pincal.residuals.tree import TreeResidual
 
@@ -221,8 +222,8 @@ def cli_run(tmp_path_factory, simulated):
     rows = _cells(data.q, sensed, turns, range(30))
     column = _header(tree).index("qx3")
     rows[5][column:column + 4] = ["", "", "", ""]
-    calibration, held = _file(folder, _header(tree), rows), _file(folder, _header(tree),
-                                                                 _cells(data.q, sensed, turns, range(30, 40)), "held.csv")
+    calibration = _file(folder, _header(tree), rows)
+    held = _file(folder, _header(tree), _cells(data.q, sensed, turns, range(30, 40)), "held.csv")
     out, report = folder / "out.urdf", folder / "REPORT.json"
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
@@ -258,15 +259,6 @@ def test_evaluate_prints_and_writes_each_targets_orientation_errors(cli_run, cap
     assert [t["errors"]["orientation_seen"] for t in document["evaluated_targets"]] == [10, 10]
 
 
-def test_diagnose_refuses_orientation_columns_in_one_line(cli_run, capsys):
-    folder, urdf, calibration, *_ = cli_run
-    assert main(["diagnose", str(urdf), str(calibration), *TIP_LINKS, "--out", str(folder / "d.urdf"),
-                 "--report", str(folder / "D.json")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "diagnose does not take the targets' orientation columns qxN,qyN,qzN,qwN" in err and "\n" not in err
-    assert not (folder / "D.json").exists()
-
-
 def test_plan_continues_6d_rows_and_says_it_plans_the_points(cli_run, capsys):
     folder, urdf, calibration, *_ = cli_run
     assert main(["plan", str(urdf), *TIP_LINKS, "--count", "2", "--sample", "40", "--existing", str(calibration),
@@ -286,3 +278,152 @@ def test_a_target_beyond_reach_is_not_told_to_give_a_tool_a_tree_refuses(simulat
     _, found = tree_findings(tree, far, data.q, None)
     target = [f.message for f in found if f.code == "target"]
     assert target and "vary the tool's orientation" in target[0] and "--tool" not in target[0]
+
+
+def test_the_report_page_shows_each_targets_orientation_before_and_after(cli_run):
+    folder, *_, report_path, _, _ = cli_run
+    assert main(["report", str(report_path), "--out", str(folder / "tree.html")]) == 0
+    page = (folder / "tree.html").read_text(encoding="utf-8")
+    table = page[page.index('id="target-orientations-table"'):]
+    table = table[:table.index("</table>")]
+    for target in json.loads(report_path.read_text(encoding="utf-8"))["targets"]:
+        before, after = target["nominal_errors"], target["calibration_errors"]
+        row = table[table.index(f"<td>{target['tip_link']}</td>"):]
+        row = row[:row.index("</tr>")]
+        assert (f"<td>{after['orientation_seen']}</td><td>{before['orientation']['rms_deg']:.3f}</td>"
+                f"<td>{after['orientation']['rms_deg']:.3f}</td>") in row
+
+
+def test_written_6d_tree_rows_read_back_exactly(simulated, tmp_path):
+    """write_measurements writes each target's qxN group (an occluded orientation or point: empty cells)."""
+    tree, _, _, data, *_ = simulated
+    points = data.points.copy()
+    points[2, 1] = np.nan  # point 2 not seen on the third row
+    data = MeasurementSet(data.joint_names, data.q[:8], points[:8], None, data.roles[:8], data.lines[:8],
+                          target_rotations={n: r[:8] for n, r in data.target_rotations.items()})
+    write_measurements(tmp_path / "rows.csv", data)
+    back, _ = read_measurements(tmp_path / "rows.csv", tree.joint_specs, (), tree.other_branch_joints, occlusion=True)
+    assert np.array_equal(back.q, data.q) and np.array_equal(back.points, data.points, equal_nan=True)
+    assert sorted(back.target_rotations) == sorted(NUMBERS)
+    for number in NUMBERS:
+        seen = np.isfinite(data.target_rotations[number]).all(axis=(1, 2))
+        assert np.array_equal(np.isfinite(back.target_rotations[number]).all(axis=(1, 2)), seen)
+        assert_close(back.target_rotations[number][seen], data.target_rotations[number][seen], 1e-15, f"qx{number}")
+    with open(tmp_path / "rows.csv", newline="") as handle:
+        header, *rows = list(csv.reader(handle))
+    assert header == [*_header(tree), "role"] and sum(cell == "" for row in rows for cell in row) == 3 + 4
+
+
+SAG = -4e-4  # torso_2's compliance [rad/(N·m)]: it sags under both arms by up to ~7 mrad (test_tree_diagnose's)
+SIGMA_M, SIGMA_RAD = 1e-4, np.radians(0.1)  # a mocap rigid body's noise per axis: 0.1 mm, 0.1 deg
+FLOOR_DEG = np.sqrt(3.0) * 0.1  # the RMS angle of an orientation at the noise alone (three axes) [deg]
+
+
+def _sagging_6d_rows(tree, params, truth, n_rows, rng, sag=SAG):
+    """6D rows of the two-arm robot (one point per hand, its orientation as qx1.., qx2..) with torso_2 sagging by
+    ``sag`` times its gravity torque, each point and orientation with its noise."""
+    from pincal.model.effects import gravity_torques
+    from pincal.model.tree_effects import TreeBody
+
+    q = rng.uniform(-1.2, 1.2, (n_rows, tree.n_joints))
+    actual = q.copy()
+    with tree.placed(params.placements(truth)):
+        actual[:, 1] += sag * gravity_torques(TreeBody(tree), q)[:, 1]
+        world = tree.target_points(actual, LOCAL[:1] * 2)
+        turns = [OMEGA @ t.chain.tool_poses(actual[:, t.columns])[0] @ frame for t, frame in zip(tree.targets, FRAMES)]
+    sensed = world @ OMEGA.T + TAU + rng.normal(0.0, SIGMA_M, world.shape)
+    measured = {n + 1: turn @ Rotation.from_rotvec(rng.normal(0.0, SIGMA_RAD, (n_rows, 3))).as_matrix()
+                for n, turn in enumerate(turns)}
+    return MeasurementSet(tree.joint_names, q, sensed, None, np.full(n_rows, "calibration", dtype=object),
+                          np.arange(2, n_rows + 2), target_rotations=measured)
+
+
+@pytest.fixture(scope="module")
+def diagnosed_6d(tmp_path_factory):
+    """``pincal diagnose`` of 40 such rows, 20 held out."""
+    folder = tmp_path_factory.mktemp("tree6d_diagnose")
+    targets = ["left_marker:1", "right_marker:2"]
+    tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(targets))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(5)
+    truth = rng.normal(0.0, 5e-4, params.size)
+    for name, rows in (("data", 40), ("held", 20)):
+        write_measurements(folder / f"{name}.csv", _sagging_6d_rows(tree, params, truth, rows, rng))
+    (folder / "robot.urdf").write_text(two_arm_urdf(), encoding="utf-8")
+    report, printed = folder / "REPORT.json", io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["diagnose", str(folder / "robot.urdf"), str(folder / "data.csv"), "--tip-link", targets[0],
+                     "--tip-link", targets[1], "--validation", str(folder / "held.csv"), "--out",
+                     str(folder / "out.urdf"), "--report", str(report), "--quiet"])
+    return code, report, printed.getvalue()
+
+
+def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_noise(diagnosed_6d):
+    code, report_path, printed = diagnosed_6d
+    assert code == 0
+    report = json.loads(report_path.read_text(encoding="utf-8"))
+    [effect] = report["effects"]
+    assert (effect["type"], effect["joint"]) == ("compliance", "torso_2")
+    assert effect["value"] == pytest.approx(SAG, rel=0.03)
+    assert report["noise"]["sigma_rot_deg"] == pytest.approx(0.1, rel=0.15)  # the orientations' own scale
+    for target in report["targets"]:
+        geometry, final = target["geometry_errors"], target["calibration_errors"]
+        assert geometry["orientation_seen"] == final["orientation_seen"] == 40
+        assert geometry["orientation"]["rms_deg"] > 1.25 * FLOOR_DEG  # the sag turns the hands too
+        assert final["orientation"]["rms_deg"] < 1.15 * FLOOR_DEG
+        held_before, held_after = target["validation_geometry_errors"], target["validation_errors"]
+        assert held_before["orientation_seen"] == held_after["orientation_seen"] == 20
+        assert held_before["orientation"]["rms_deg"] > 1.5 * FLOOR_DEG  # the geometry alone cannot turn the hands back
+        assert held_after["orientation"]["rms_deg"] < 1.1 * FLOOR_DEG
+    # the page's values: each target's orientation nominal -> geometry -> with effects, and held out
+    rows = [row["turns"] for row in tree_section(report)["rows"]]
+    assert [len(r["steps"]) for r in rows] == [3, 3] and all("—" not in r["held"] for r in rows)
+    for target in report["targets"]:  # printed: RMS geometry, final, held-out geometry, held-out final [deg]
+        [line] = [line.split() for line in printed.splitlines() if line.startswith(f"{target['tip_link']} orient")]
+        assert line[2:] == [f"{target[k]['orientation']['rms_deg']:.4f}" for k in (
+            "geometry_errors", "calibration_errors", "validation_geometry_errors", "validation_errors")] + ["[deg]"]
+
+
+@pytest.fixture(scope="module")
+def sagging():
+    """40 6D rows of the two-arm robot whose torso pitch sags, 20 held-out rows of it stiff, 20 of it sagging, and
+    the rows' calibration (every parameter)."""
+    tree = KinematicTree(pin.buildModelFromXML(two_arm_urdf()), parse_targets(["left_marker:1", "right_marker:2"]))
+    params = TreeParameters(tree, "full")
+    rng = np.random.default_rng(3)
+    truth = rng.normal(0.0, 5e-4, params.size)
+    data, stiff, held = (_sagging_6d_rows(tree, params, truth, rows, rng, sag)
+                         for rows, sag in ((40, SAG), (20, 0.0), (20, SAG)))
+    return tree, data, held, stiff, calibrate_tree(tree, data, "full", ChainFitOptions(selection="all"))
+
+
+def test_the_held_out_test_judges_the_orientations_too(sagging):
+    """Held-out rows of a stiff robot refute the sag the calibration rows show, in their points and orientations."""
+    from pincal.diagnosis.diagnose import DiagnoseOptions
+    from pincal.diagnosis.tree_diagnose import diagnose_tree
+    from pincal.model.effects import Effect
+
+    tree, data, _, stiff, calibration = sagging
+    found = diagnose_tree(tree, calibration, data, stiff, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
+    [candidate] = found.last_candidates
+    assert found.effects == () and candidate.verdict.startswith("it makes the held-out rows worse")
+    assert "orientation" in candidate.verdict  # the angles' change beside the points'
+
+
+@pytest.mark.parametrize("measured", [(1,), ()])
+def test_held_out_rows_may_measure_fewer_orientations_than_the_calibration_rows(sagging, measured):
+    """Held-out rows with one hand's orientation only, or none: the fits' unknowns stay where the calibration's
+    are."""
+    from pincal.diagnosis.diagnose import DiagnoseOptions
+    from pincal.diagnosis.tree_diagnose import diagnose_tree
+    from pincal.model.effects import Effect
+
+    tree, data, held, _, calibration = sagging
+    fewer = MeasurementSet(held.joint_names, held.q, held.points, None, held.roles, held.lines,
+                           target_rotations={n: held.target_rotations[n] for n in measured})
+    found = diagnose_tree(tree, calibration, data, fewer, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
+    [(effect, values, _)] = found.effects
+    assert values[0] == pytest.approx(SAG, rel=0.03) and found.heldout_turns is not None
+    after = found.heldout_turns[1]
+    assert np.isfinite(after[:, :len(measured)]).all() and np.isnan(after[:, len(measured):]).all()
+    assert not measured or np.sqrt(np.mean(after[:, :1] ** 2)) < 1.25 * np.sqrt(3.0) * SIGMA_RAD  # the noise's

@@ -136,6 +136,7 @@ def test_the_report_page_shows_each_targets_errors(files, capsys):
     assert main(["report", str(report), "--out", str(folder / "tree.html")]) == 0
     page = (folder / "tree.html").read_text(encoding="utf-8")
     assert 'id="targets-table"' in page and "Calibration (full) of 2 targets" in page
+    assert "target-orientations-table" not in page  # no orientation measured: no orientation table
     document = json.loads(report.read_text(encoding="utf-8"))
     for target in document["targets"]:  # each target's line: its link, its RMS before and after as the report's
         before, after = target["nominal_errors"]["position"]["rms_mm"], target["calibration_errors"]["position"]

@@ -150,6 +150,12 @@ def run_diagnose_tree(args: argparse.Namespace) -> tuple[TreeReport, bool]:
             line += (f" {before['position']['rms_mm']:18.3f} {after['position']['rms_mm']:15.3f}" if before and after
                      else f" {'not seen':>18s} {'':>15s}")
         print(line)
+    for target in (t for t in report["targets"] if "orientation" in t["calibration_errors"]):  # qxN,qyN,qzN,qwN
+        turns = (target["geometry_errors"], target["calibration_errors"], target.get("validation_geometry_errors"),
+                 target.get("validation_errors"))
+        print(f"{target['tip_link'] + ' orientation':32s} " + " ".join(
+            f"{e['orientation']['rms_deg']:{w}.4f}" if e and "orientation" in e else f"{'':{w}s}"
+            for e, w in zip(turns, (13, 10, 18, 15) if held else (13, 10))) + "  [deg]")
     if run.withheld:
         print(f"{args.out}: not written (withheld; --force writes it)")
     else:

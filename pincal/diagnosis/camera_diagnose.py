@@ -25,7 +25,7 @@ import numpy as np
 
 from pincal.diagnosis.catalogue import candidate_effects
 from pincal.diagnosis.diagnose import DiagnoseOptions
-from pincal.diagnosis.effect_loop import EffectCandidate, EffectStep, Found, search_effects
+from pincal.diagnosis.effect_loop import EffectCandidate, EffectStep, Found, Model, search_effects
 from pincal.diagnosis.held_out import held_out_verdict
 from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
 from pincal.diagnosis.screening import FitObjective
@@ -137,7 +137,8 @@ class _Search:
             return None
         return _per_image(_camera(self.objective(self.held, effects)), self.held.corners, x)
 
-    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution]) -> str:
+    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
+                     models: tuple[Model, Model]) -> str:
         """The held-out test of :func:`held_out_verdict` on the images' corner distances [px]: in its units of a
         thousandth (its text's "mm" then reads pixels, said so)."""
         objective, solution = fit

@@ -51,7 +51,7 @@ from pincal.model.effects import Effect, EffectInputs
 from pincal.progress import Counter
 
 __all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "ALIKE_WINDOW", "EffectCandidate", "EffectStep",
-           "EffectSearch", "Found", "search_effects"]
+           "EffectSearch", "Found", "Model", "search_effects"]
 
 #: Candidates fitted in full per step, the best of the screen that may reach the evidence cut: the single
 #: chain's "first eight" (:mod:`pincal.diagnosis.diagnose`, screening).
@@ -104,6 +104,8 @@ class EffectStep:
 
 
 S = TypeVar("S", bound="EffectSearch")
+#: A model of a search: its effects and the fit's unknowns.
+Model = tuple[Sequence[Effect], np.ndarray]
 
 
 class EffectSearch(Protocol):
@@ -133,15 +135,18 @@ class EffectSearch(Protocol):
         """The held-out rows' errors (K_h, P) of the model at ``x`` (None without them)."""
         ...
 
-    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution]) -> str:
-        """``adopted``, or why not, from the held-out rows' errors without and with the candidate (its fit)."""
+    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
+                     models: tuple[Model, Model]) -> str:
+        """``adopted``, or why not, from the held-out rows' errors without and with the candidate (its fit);
+        ``models``: the effects and unknowns of the two models, for what else a residual measures there."""
         ...
 
 
 @dataclass(frozen=True)
 class Found:
     """Where :func:`search_effects` ended: the search at the final noise scale, the final fit, the effects adopted,
-    their steps, the ranking of the step that adopted nothing, and notes."""
+    their steps, the ranking of the step that adopted nothing, notes, and the unknowns of the fit without effects
+    (``start_x``: what the steps' errors before the first are of)."""
 
     search: EffectSearch
     objective: FitObjective
@@ -150,11 +155,13 @@ class Found:
     steps: tuple[EffectStep, ...]
     ranking: tuple[EffectCandidate, ...]
     notes: tuple[str, ...]
+    start_x: np.ndarray | None = None
 
 
 def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Effect], counter: Counter) -> Found:
     """Run the loop of the module docstring from the fit without effects."""
     objective, solution = search.fit([])
+    start_x = solution.x
     adopted: list[Effect] = []
     steps: list[EffectStep] = []
     ranking: tuple[EffectCandidate, ...] = ()
@@ -185,7 +192,7 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
                                 ranking))
         adopted.append(effect)
         objective, solution = new_objective, new_solution
-    return Found(search, objective, solution, tuple(adopted), tuple(steps), ranking, tuple(notes))
+    return Found(search, objective, solution, tuple(adopted), tuple(steps), ranking, tuple(notes), start_x)
 
 
 def _step(search: EffectSearch, inputs: EffectInputs, current: tuple[FitObjective, Solution], adopted: list[Effect],
@@ -298,7 +305,7 @@ def _verdict(search: EffectSearch, inputs: EffectInputs, effect: Effect, evidenc
     before, after = search.held_errors(adopted, x_before), search.held_errors([*adopted, effect], solution.x)
     if before is None or after is None:
         return "adopted"
-    return search.held_verdict(before, after, fit)
+    return search.held_verdict(before, after, fit, ((adopted, x_before), ([*adopted, effect], solution.x)))
 
 
 def _wald(objective: FitObjective, solution: Solution) -> float:

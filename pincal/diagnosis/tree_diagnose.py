@@ -13,11 +13,14 @@ and adopts the best by the single chain's rules (:mod:`pincal.diagnosis.verdicts
 
     ΔBIC = m ln(RSS₁/RSS₀) + Δn ln(m) < EVIDENCE = −10      (Schwarz 1978; Kass & Raftery 1995)
 
-on the calibration rows (m: their seen coordinates; the noise scale the current model's, re-estimated after
-each adoption), a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of
-some measured coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out
-rows better on them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`).
-The search stops when no candidate passes, or after :data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
+on the calibration rows (m: their seen coordinates, and with a target's orientation measured its seen
+orientations' 3 entries each; every entry whitened by its own noise scale, the positions' or the orientations',
+the current model's, each re-estimated from its own entries after each adoption, as the tree's fit weighs them),
+a value some :data:`DETERMINED_Z` standard deviations from zero, in physical range, a change of some measured
+coordinate of at least NEGLIGIBLE × its noise, a basis that is not an offset, and with held-out rows better on
+them beyond their noise (the signed-rank test of :func:`pincal.diagnosis.held_out.held_out_verdict`, on the
+held-out points and orientations). The search stops when no candidate passes, or after
+:data:`pincal.diagnosis.diagnose.MAX_EFFECTS`.
 
 A candidate that passes too and corrects the same poses alike, within 6 of the adopted one's ΔBIC, is named beside
 it (:mod:`pincal.diagnosis.effect_loop`); the adopted one is the best ΔBIC (the single chain's prefers the one that
@@ -42,6 +45,7 @@ from pincal.diagnosis.effect_loop import (
     EffectCandidate,
     EffectStep,
     Found,
+    Model,
     search_effects,
 )
 from pincal.diagnosis.held_out import held_out_verdict
@@ -62,7 +66,7 @@ from pincal.model.tree import KinematicTree, TreePlacements
 from pincal.model.tree_effects import TreeBody, tree_inputs
 from pincal.progress import Counter, Progress
 from pincal.residuals.sensor_values import ModelledEffects, TargetEstimate
-from pincal.residuals.tree import TreeResidual
+from pincal.residuals.tree import TreeResidual, TreeRows
 
 __all__ = ["SHORTLIST", "DETERMINED_Z", "DETERMINED_LEVEL", "TreeStep", "TreeCandidate", "TreeDiagnosis",
            "tree_candidates", "diagnose_tree"]
@@ -87,7 +91,12 @@ class TreeDiagnosis:
         point_errors: the calibration rows' point errors of the final model (K, P) [m], NaN where not seen.
         heldout_before / heldout_after: the held-out rows' point errors (K_h, P) [m] of the geometric
             calibration and of the final model (None without held-out rows).
+        heldout_turns: the held-out rows' orientation errors (K_h, T) [rad] of the geometric calibration and of
+            the final model, NaN where not seen (None without held-out rows or without orientations).
         sigma_pos_m: the noise scale of the final model's residuals [m].
+        orientation_errors: the calibration rows' orientation errors of the final model (K, T) [rad], NaN where not
+            seen; None when no target's orientation is measured.
+        sigma_rot_rad: the orientation noise scale of the final model's residuals [rad]; None without orientations.
         masses_unknown: compliances follow mass moments (``--masses unknown`` or no inertias).
         time_reference: the calibration rows' mean time [s] a drift is relative to (None without times).
         notes: what the user should know.
@@ -114,6 +123,9 @@ class TreeDiagnosis:
     notes: tuple[str, ...]
     inputs: EffectInputs
     heldout_predicted_m: float | None = None
+    orientation_errors: np.ndarray | None = None
+    sigma_rot_rad: float | None = None
+    heldout_turns: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def tree_candidates(tree: KinematicTree, has_time: bool, lateral: bool = False) -> list[Effect]:
@@ -147,17 +159,26 @@ class _Search:
     def row_noise(self) -> float:
         return 1.0  # the residual is whitened: its rows are in noise units
 
-    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution]) -> str:
-        # an unseen point changes nothing: a zero for both (row_changes sums each row's points)
-        return held_out_verdict(PoseErrors(np.nan_to_num(before), None), PoseErrors(np.nan_to_num(after), None),
-                                self.judged_noise(*fit), None)
+    def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
+                     models: tuple[Model, Model]) -> str:
+        """The held-out test on the points and, with orientations, on each row's targets' angles too (row_changes:
+        both in noise units); an unseen point or orientation changes nothing: a zero for both."""
+        sigma_pos, sigma_rot = self.judged_noise(*fit)
+        turns = [self.held_turns(*model) for model in models]
+        rows = [None if t is None or sigma_rot is None or not np.isfinite(t).any() else np.nansum(t, axis=1)
+                for t in turns]  # held-out rows that measure no orientation: their points alone
+        return held_out_verdict(PoseErrors(np.nan_to_num(before), rows[0]), PoseErrors(np.nan_to_num(after), rows[1]),
+                                sigma_pos, sigma_rot)
 
-    def judged_noise(self, objective: FitObjective, solution: Solution) -> float:
-        """The noise [m] a held-out test judges in: the stated one, else the smaller of the current model's and
-        the candidate's fit's (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`: a model far off the data puts
-        its own estimate too high), at least :data:`pincal.diagnosis.verdicts.NOISE_FLOOR`."""
-        fitted = self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution).sigma_pos
-        return self.stated or max(min(self.problem.sigma_pos, fitted), NOISE_FLOOR)
+    def judged_noise(self, objective: FitObjective, solution: Solution) -> tuple[float, float | None]:
+        """The noise scales (σ_pos [m], σ_rot [rad] or None) a held-out test judges in: σ_pos the stated one, else
+        per kind the smaller of the current model's and the candidate's fit's
+        (:meth:`pincal.diagnosis.verdicts.Judge.judged_noise`: a model far off the data puts its own estimate too
+        high), at least :data:`pincal.diagnosis.verdicts.NOISE_FLOOR`."""
+        fitted = self.problem.rescaled(cast(TreeResidual | PriorResidual, objective), solution)
+        rot = None if self.problem.sigma_rot is None or fitted.sigma_rot is None else max(
+            min(self.problem.sigma_rot, fitted.sigma_rot), NOISE_FLOOR)
+        return self.stated or max(min(self.problem.sigma_pos, fitted.sigma_pos), NOISE_FLOOR), rot
 
     def fit(self, effects: Sequence[Effect], x0: np.ndarray | None = None) -> tuple[FitObjective, Solution]:
         objective = self.objective(self.problem, effects)
@@ -176,11 +197,23 @@ class _Search:
 
     def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         """The held-out rows' point errors (K_h, P) [m] of the model at ``x`` (None without them)."""
+        held = self._held_objective(effects)
+        return None if held is None else held.point_errors(x, np.ones(held.seen.shape[0]))
+
+    def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
+        """The held-out rows' orientation errors (K_h, T) [rad] of the model at ``x``, NaN where not seen (None
+        without held-out rows or without orientations)."""
+        held = self._held_objective(effects)
+        if held is None or self.problem.sigma_rot is None:
+            return None
+        return held.orientation_errors(x, np.ones(held.seen.shape[0]))
+
+    def _held_objective(self, effects: Sequence[Effect]) -> TreeResidual | None:
+        """The held-out rows' residual with ``effects`` in metres and radians (their weights and scales 1)."""
         if self.held is None:
             return None
-        held = cast(TreeResidual, self.objective(self.held, effects))
-        held = cast(TreeResidual, getattr(held, "objective", held))
-        return held.point_errors(x, np.ones(held.seen.shape[0]))
+        held = self.objective(self.held, effects)
+        return cast(TreeResidual, getattr(held, "objective", held))
 
 
 def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: MeasurementSet,
@@ -211,7 +244,7 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
     kept = calibration.kept  # under a prior also the parameters it holds near nominal: free in the fit
     problem = TreeProblem(tree, calibration.params, rows, calibration.target, row_weights(used, options.sigma_column),
                           calibration.session_names, sigma_pos=calibration.sigma_pos_m, prior=calibration.prior_sigma,
-                          effects=ModelledEffects((), inputs))
+                          effects=ModelledEffects((), inputs), sigma_rot=calibration.sigma_rot_rad)
     held = None
     if heldout is not None:
         held_rows = tree_rows(tree, heldout, session_rows(heldout, calibration.session_names))
@@ -220,12 +253,23 @@ def diagnose_tree(tree: KinematicTree, calibration: TreeCalibration, data: Measu
         held_inputs = tree_inputs(tree, heldout, held_time, loads=unknown)
         if held_time is not None and reference is not None:  # a drift's time as the calibration rows'
             held_inputs = replace(held_inputs, time=held_time - reference)
-        held = replace(problem, rows=held_rows, row_weight=np.ones(heldout.n_rows), sigma_pos=1.0,
+        held = replace(problem, rows=_with_frames(held_rows, rows.oriented(), len(tree.targets)),
+                       row_weight=np.ones(heldout.n_rows), sigma_pos=1.0, sigma_rot=1.0,
                        effects=ModelledEffects((), held_inputs))
     search = _Search(problem, kept, calibration.vector, held,
                      options.stated_sigma_pos_m)
     found = search_effects(search, inputs, pool, Counter(progress))
     return _concluded(found, untestable, unknown, time)
+
+
+def _with_frames(rows: TreeRows, frames: np.ndarray, n_targets: int) -> TreeRows:
+    """``rows`` with the frame rotations of ``frames`` as unknowns (the calibration rows' targets measured in
+    orientation), whichever orientations they measure themselves: the fits' unknowns at the same places. An
+    orientation of a target not among ``frames`` is unused; one of ``frames`` never measured here is not seen."""
+    k = rows.seen.shape[0]
+    seen = np.zeros((k, n_targets), dtype=bool) if rows.rotation_seen is None else np.asarray(rows.rotation_seen, bool)
+    turns = np.broadcast_to(np.eye(3), (k, n_targets, 3, 3)) if rows.rotations is None else rows.rotations
+    return replace(rows, rotations=turns, rotation_seen=seen & np.isin(np.arange(n_targets), frames), frames=frames)
 
 
 def _covariance(objective: FitObjective, solution: Solution) -> np.ndarray:
@@ -243,15 +287,22 @@ def _held_predicted(search: _Search, effects: Sequence[Effect], final: tuple[Fit
     Jacobian J_h at the final model, sqrt(Σ diag(J_h C J_hᵀ) / seen points), as
     :meth:`pincal.fit.tree_calibration.TreeCalibration.predicted_point_rms` for the geometry alone; None without
     held-out rows."""
-    if search.held is None:
+    held = search._held_objective(effects)  # in metres: its rows' weights and scale are 1
+    if held is None:
         return None
     objective, solution = final
-    held = cast(TreeResidual, search.objective(search.held, effects))
-    held = cast(TreeResidual, getattr(held, "objective", held))  # in metres: its rows' weights and scale are 1
-    jacobian = held.jacobian(solution.x)
+    jacobian = held.jacobian(solution.x)[:held.n_positions]  # the points' entries (orientations' follow)
     variance = np.einsum("ij,jk,ik->i", jacobian, _covariance(objective, solution), jacobian)
     return float(np.sqrt(variance.sum() / max(int(held.seen.sum()), 1)))
 
+
+
+def _held_turns(search: _Search, adopted: Sequence[Effect], xs: tuple[np.ndarray | None, np.ndarray]
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The held-out rows' orientation errors (K_h, T) [rad] of the fit without effects (``xs[0]``) and of the final
+    one, None without held-out rows or orientations."""
+    before, after = search.held_turns([], xs[1] if xs[0] is None else xs[0]), search.held_turns(adopted, xs[1])
+    return None if before is None or after is None else (before, after)
 
 
 def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: np.ndarray | None) -> TreeDiagnosis:
@@ -266,6 +317,9 @@ def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: 
     vector[search.kept], std[search.kept] = solution.x[kinematic], std_all[kinematic]
     errors = search.errors(objective, solution.x)
     seen = errors[np.isfinite(errors)]
+    tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
+    turns = None if problem.sigma_rot is None else tree_objective.orientation_errors(
+        solution.x, problem.row_weight / problem.sigma_rot)
     effects = tuple((effect, solution.x[sl], std_all[sl]) for effect, sl in zip(adopted, objective.effect_slices))
     if untestable:
         notes.append(f"{len(untestable)} candidate(s) cannot be tested on these rows ("
@@ -280,6 +334,8 @@ def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: 
         point_errors=errors, heldout_before=steps[0].heldout_before if steps else search.held_errors([], solution.x),
         heldout_after=search.held_errors(adopted, solution.x),
         heldout_predicted_m=_held_predicted(search, adopted, (objective, solution)),
-        sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown,
+        heldout_turns=_held_turns(search, adopted, (found.start_x, solution.x)),
+        sigma_pos_m=float(np.sqrt(np.mean(seen**2) / 3.0)), masses_unknown=unknown, orientation_errors=turns,
+        sigma_rot_rad=None if turns is None else float(np.sqrt(np.nanmean(turns**2) / 3.0)),
         time_reference=None if time is None else float(np.mean(time)), notes=tuple(notes),
         inputs=cast(EffectInputs, cast(ModelledEffects, problem.effects).inputs))

@@ -60,7 +60,7 @@ from pincal.measurements.data import (
     refuse_given_twice,
 )
 from pincal.measurements.mimics import follower_angles
-from pincal.measurements.target_orientations import read_target_rotations, target_quat_columns
+from pincal.measurements.target_orientations import read_target_rotations, target_quat_cells, target_quat_columns
 from pincal.outputs import replacing
 
 __all__ = [
@@ -480,11 +480,11 @@ def read_sessions(
 def write_measurements(path: str | os.PathLike[str], data: MeasurementSet) -> None:
     """Write ``data`` in format v1, exactly readable back by :func:`read_measurements`.
 
-    Columns: joints, ``x,y,z`` (one point) or ``x1,y1,z1,...``, ``qx,qy,qz,qw`` if
-    orientations were measured, ``role``, ``session`` when the rows belong to
-    several sessions, then the extras. Floats are written with
-    ``repr`` (shortest exact form), so q, points and extras round-trip bit for bit
-    and rotations to ~1e-15.
+    Columns: joints, ``x,y,z`` (one point) or ``x1,y1,z1,...``, ``qx,qy,qz,qw`` if orientations
+    were measured, each target's ``qxN,qyN,qzN,qwN`` if measured, ``role``, ``session`` when the rows
+    belong to several sessions, then the extras. Floats are written with ``repr`` (shortest exact
+    form), so q, points and extras round-trip bit for bit and rotations to ~1e-15; a point or a
+    target's orientation not seen (NaN) is empty cells, as read with ``occlusion``.
 
     Raises:
         MeasurementError: if the file cannot be written.
@@ -496,11 +496,10 @@ def write_measurements(path: str | os.PathLike[str], data: MeasurementSet) -> No
     if data.rotations is not None and data.n_rows:
         numeric.append(Rotation.from_matrix(data.rotations).as_quat())
         header += QUAT_COLUMNS
-    header.append(ROLE_COLUMN)
+    names, quats = target_quat_cells(data.target_rotations, data.n_rows)
+    numeric, header = [*numeric, quats], [*header, *names, ROLE_COLUMN]
     labelled = len(data.session_names) > 1
-    if labelled:
-        header.append(SESSION_COLUMN)
-    header += list(data.extra)
+    header += [*([SESSION_COLUMN] if labelled else []), *data.extra]
     numbers = np.hstack(numeric)
     extras = np.column_stack([data.extra[n] for n in data.extra]) if data.extra else np.empty((data.n_rows, 0))
     try:
@@ -509,7 +508,8 @@ def write_measurements(path: str | os.PathLike[str], data: MeasurementSet) -> No
             writer.writerow(header)
             for k in range(data.n_rows):
                 labels = [data.sessions[k]] if labelled else []
-                writer.writerow([*map(_format, numbers[k]), data.roles[k], *labels, *map(_format, extras[k])])
+                writer.writerow([*(_format(v) if np.isfinite(v) else "" for v in numbers[k]), data.roles[k], *labels,
+                                 *map(_format, extras[k])])
     except OSError as exc:
         raise MeasurementError(f"{path}: cannot write file ({exc.strerror or exc})") from None
 

@@ -20,7 +20,7 @@ norm is one line naming the file, the line and the column.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from pincal.errors import PincalError
 
-__all__ = ["TARGET_QUAT_RE", "CellTable", "target_quat_columns", "read_target_rotations"]
+__all__ = ["TARGET_QUAT_RE", "CellTable", "target_quat_columns", "read_target_rotations", "target_quat_cells"]
 
 #: A numbered orientation column: ``qxN``, ``qyN``, ``qzN`` or ``qwN`` (N = 1, 2, ...).
 TARGET_QUAT_RE = re.compile(r"q([xyzw])([1-9][0-9]*)")
@@ -94,3 +94,20 @@ def read_target_rotations(table: CellTable, norm_tolerance: float) -> dict[int, 
             rotations[seen] = Rotation.from_quat(quats[seen] / norms[seen, None]).as_matrix()
         out[number] = rotations
     return out
+
+
+def target_quat_cells(rotations: Mapping[int, np.ndarray], n_rows: int) -> tuple[list[str], np.ndarray]:
+    """The columns ``qxN,qyN,qzN,qwN`` of each target's orientation (N → (K, 3, 3), NaN where not seen), in
+    increasing N, and their values (K, 4·groups): unit quaternions, scalar last, NaN where not seen (an empty
+    group, what :func:`read_target_rotations` reads back)."""
+    names: list[str] = []
+    quats = [np.empty((n_rows, 0))]
+    for number in sorted(rotations):
+        turns = np.asarray(rotations[number], dtype=float).reshape(n_rows, 3, 3)
+        seen = np.isfinite(turns).all(axis=(1, 2))
+        group = np.full((n_rows, 4), np.nan)
+        if seen.any():
+            group[seen] = Rotation.from_matrix(turns[seen]).as_quat()
+        names += target_quat_columns(number)
+        quats.append(group)
+    return names, np.hstack(quats)

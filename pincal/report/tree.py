@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from pincal.fit.level_choice import LevelChoice
     from pincal.measurements.couplings import ReadingCoupling
 
-__all__ = ["target_errors", "tree_report"]
+__all__ = ["target_errors", "orientation_of", "tree_report"]
 
 
 def target_errors(point_errors: np.ndarray, numbers: tuple[int, ...], turns: np.ndarray | None = None
@@ -45,7 +45,7 @@ def target_errors(point_errors: np.ndarray, numbers: tuple[int, ...], turns: np.
     return out
 
 
-def _turns(errors: np.ndarray | None, t: int) -> np.ndarray | None:
+def orientation_of(errors: np.ndarray | None, t: int) -> np.ndarray | None:
     """Target ``t``'s orientation errors (K,) [rad] of a result's (K, T), None where it has none."""
     return None if errors is None or not np.isfinite(errors[:, t]).any() else errors[:, t]
 
@@ -60,12 +60,12 @@ def tree_report(result: TreeCalibration, nominal: TreeCalibration, tree: Kinemat
         "tip_link": target.link, "points": list(target.spec.points), "joints": list(target.chain.joint_names),
         "points_m": result.target.points[[p - 1 for p in target.spec.points]].tolist(),
         "nominal_errors": target_errors(nominal.point_errors, target.spec.points,
-                                        _turns(nominal.orientation_errors, t)),
+                                        orientation_of(nominal.orientation_errors, t)),
         "calibration_errors": target_errors(result.point_errors, target.spec.points,
-                                            _turns(result.orientation_errors, t)),
+                                            orientation_of(result.orientation_errors, t)),
     } for t, target in enumerate(tree.targets)]
     for t, entry in enumerate(targets):
-        if _turns(result.orientation_errors, t) is not None:  # R_T,t as one chain's target rotation
+        if orientation_of(result.orientation_errors, t) is not None:  # R_T,t as one chain's target rotation
             entry["rotation_xyzw"] = Rotation.from_matrix(result.target.rotation[t]).as_quat().tolist()
     counts = [int(np.sum(result.row_sessions == s)) for s in range(len(result.session_names))]
     return {

@@ -22,15 +22,16 @@ from pincal.report.model_tree import (
     TreeDiagnosisJson,
     TreeReport,
 )
-from pincal.report.tree import target_errors
+from pincal.report.tree import orientation_of, target_errors
 
 __all__ = ["with_diagnosis", "candidate_entries"]
 
 
-def _held(errors: np.ndarray | None, points: tuple[int, ...]) -> TargetErrors | None:
-    """A target's errors on the held-out rows (K_h, P) [m], of its points seen there (None: none, or no rows)."""
+def _held(errors: np.ndarray | None, points: tuple[int, ...], turns: np.ndarray | None = None) -> TargetErrors | None:
+    """A target's errors on the held-out rows (K_h, P) [m], of its points seen there (None: none, or no rows);
+    ``turns``: its orientation errors there (K_h,) [rad], or None."""
     numbers = () if errors is None else tuple(p for p in points if np.isfinite(errors[:, p - 1]).any())
-    return target_errors(errors, numbers) if errors is not None and numbers else None
+    return target_errors(errors, numbers, turns) if errors is not None and numbers else None
 
 
 def _all_points(errors: np.ndarray) -> TargetErrors:
@@ -59,17 +60,21 @@ def candidate_entries(candidates: Sequence[TreeCandidate], inputs: EffectInputs,
     return out
 
 
-def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis, geometry_errors: np.ndarray,
-                   tree: KinematicTree) -> TreeReport:
+def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis,
+                   geometry_errors: tuple[np.ndarray, np.ndarray | None], tree: KinematicTree) -> TreeReport:
     """``report`` (:func:`pincal.report.tree.tree_report` of the final model) with each target's errors of the
-    geometric calibration (``geometry_errors``, its calibration rows' point errors (K, P) [m]) and on the
-    held-out rows, the effects and the search of ``diagnosis``."""
+    geometric calibration (``geometry_errors``: its calibration rows' point errors (K, P) [m] and orientation
+    errors (K, T) [rad], None without orientations) and on the held-out rows, the effects and the search of
+    ``diagnosis``."""
     kinds = dict(zip(report["chain"]["joints"], report["chain"]["joint_kinds"]))
     out: TreeReport = {**report, "targets": [TargetJson(**t) for t in report["targets"]]}
-    for target, entry in zip(tree.targets, out["targets"]):
-        entry["geometry_errors"] = target_errors(geometry_errors, target.spec.points)
-        entry["validation_geometry_errors"] = _held(diagnosis.heldout_before, target.spec.points)
-        entry["validation_errors"] = _held(diagnosis.heldout_after, target.spec.points)
+    points, turns = geometry_errors
+    for t, (target, entry) in enumerate(zip(tree.targets, out["targets"])):
+        entry["geometry_errors"] = target_errors(points, target.spec.points, orientation_of(turns, t))
+        held = (None, None) if diagnosis.heldout_turns is None else diagnosis.heldout_turns
+        entry["validation_geometry_errors"] = _held(diagnosis.heldout_before, target.spec.points,
+                                                    orientation_of(held[0], t))
+        entry["validation_errors"] = _held(diagnosis.heldout_after, target.spec.points, orientation_of(held[1], t))
     section: TreeDiagnosisJson = {
         "criterion": CRITERION,
         "masses": "unknown" if diagnosis.masses_unknown else "urdf",

@@ -6,7 +6,8 @@ prepared here for the template partial ``templates/tree.html.j2``: per target it
 point) pairs, the RMS and largest distance [mm] of its points from the nominal model (registered to the
 calibration rows), from the geometric calibration and, after ``diagnose``, from the final model with its effects;
 on the held-out rows, the geometric calibration's and the final model's; on the rows ``evaluate --html`` evaluated
-(its ``evaluated_targets``, :class:`pincal.report.model_tree.TreeEvaluationJson`), the reported model's.
+(its ``evaluated_targets``, :class:`pincal.report.model_tree.TreeEvaluationJson`), the reported model's. A target
+whose orientation is measured (``qxN,qyN,qzN,qwN``) shows its orientation errors [deg] the same way.
 """
 
 from __future__ import annotations
@@ -17,12 +18,28 @@ from typing import Any
 __all__ = ["tree_section"]
 
 
-def _mm(errors: Any, key: str = "rms_mm") -> str:
-    """A TargetErrors' mean/RMS/max over its points [mm], three decimals; an em dash for what is missing."""
-    value = ((errors or {}).get("position") or {}).get(key) if isinstance(errors, dict) else None
+def _mm(errors: Any, key: str = "rms_mm", part: str = "position") -> str:
+    """A TargetErrors' mean/RMS/max over its points [mm] (``part`` "orientation", ``key`` "rms_deg": of its
+    orientation [deg]), three decimals; an em dash for what is missing."""
+    value = ((errors or {}).get(part) or {}).get(key) if isinstance(errors, dict) else None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         return "—"
     return f"{round(float(value), 3) + 0.0:.3f}"
+
+
+def _turns(target: dict[str, Any], diagnosed: bool, held: bool) -> dict[str, Any] | None:
+    """A target's orientation errors [deg] as its points' (RMS per step, max, held out), None where its
+    orientation is not measured (no ``orientation_seen`` in its errors)."""
+    final = target.get("calibration_errors") or {}
+    if "orientation_seen" not in final:
+        return None
+    steps = [_mm(target.get(key), "rms_deg", "orientation") for key in
+             ("nominal_errors", "geometry_errors" if diagnosed else "calibration_errors")]
+    if diagnosed:
+        steps.append(_mm(final, "rms_deg", "orientation"))
+    return {"seen": final["orientation_seen"], "steps": steps, "max": _mm(final, "max_deg", "orientation"),
+            "held": tuple(_mm(target.get(key), "rms_deg", "orientation")
+                          for key in ("validation_geometry_errors", "validation_errors")) if held else None}
 
 
 def tree_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = None) -> dict[str, Any] | None:
@@ -51,6 +68,7 @@ def tree_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = None) 
             "held": (_mm(target.get("validation_geometry_errors")), _mm(target.get("validation_errors")))
             if held else None,
             "held_seen": (target.get("validation_errors") or {}).get("seen") if held else None,
+            "turns": _turns(target, diagnosed, held),
             "evaluated": _evaluated(evaluated.get((target.get("tip_link"), tuple(target.get("points") or ()))))
             if evaluated else None,
         })
@@ -59,6 +77,7 @@ def tree_section(doc: dict[str, Any], evaluation: dict[str, Any] | None = None) 
         shown = {"data": (evaluation or {}).get("data"), "rows": (evaluation or {}).get("rows"),
                  "registrations": [str(r) for r in (evaluation or {}).get("registrations") or []]}
     return {"rows": rows, "diagnosed": diagnosed, "held": held, "evaluated": shown,
+            "oriented": any(r["turns"] for r in rows),
             "shared": [j for j in (doc.get("chain") or {}).get("joints") or []
                        if sum(j in (t.get("joints") or []) for t in targets if isinstance(t, dict)) > 1]}
 

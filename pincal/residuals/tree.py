@@ -64,6 +64,8 @@ class TreeRows:
             (where not seen anything: not read), or None (no orientation).
         rotation_seen: (K, T) whether each target's orientation was measured in each row, or None (none);
             a target never seen has no rotation unknown.
+        frames: the targets whose frame rotation is an unknown (indices, sorted), when not those some row
+            measures: another set of rows' (held-out rows evaluated with the calibration's unknowns), or None.
     """
 
     q: np.ndarray
@@ -72,9 +74,12 @@ class TreeRows:
     sessions: np.ndarray
     rotations: np.ndarray | None = None
     rotation_seen: np.ndarray | None = None
+    frames: np.ndarray | None = None
 
     def oriented(self) -> np.ndarray:
-        """The targets whose orientation some row measures (indices, sorted)."""
+        """The targets whose frame rotation is an unknown: ``frames``, else those some row measures (sorted)."""
+        if self.frames is not None:
+            return np.asarray(self.frames, dtype=np.intp)
         return np.array([], dtype=np.intp) if self.rotation_seen is None else np.flatnonzero(
             np.any(self.rotation_seen, axis=0))
 

@@ -24,7 +24,9 @@ The true robot of :func:`simulate_humanoid` differs from the URDF the way a real
   (``lateral``: right after the joint's motion the chain turns about u by c_u · M_u(q), then about v by
   c_v · M_v(q), eq L1 of :mod:`pincal.model.lateral`; none by default);
 * a motion-capture system 1.14 m away (an arbitrary registration) measuring each marker with
-  N(0, ``sigma_pos_mm``) per axis.
+  N(0, ``sigma_pos_mm``) per axis, and with ``sigma_rot_deg`` each marker's link as a rigid body: its orientation
+  in the sensor frame (columns ``qxN,qyN,qzN,qwN``, N the target's first point) turned by N(0, ``sigma_rot_deg``)
+  per axis — the link's frame as the true robot has it, bent by ``lateral`` too.
 
 Calibration and held-out rows are drawn alike (uniform over each joint's range, clipped to
 ±``joint_range_rad``); the held-out rows are drawn after every value of the calibration rows, so a
@@ -39,6 +41,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial.transform import Rotation
 
 from pincal.measurements.data import MeasurementSet
 from pincal.model.description import RobotDescription, read_description
@@ -78,6 +81,8 @@ class HumanoidSettings:
         targets: ``LINK:POINTS`` per marker's link (as ``--tip-link``); one marker per target.
         rows / held_out_rows: calibration rows and held-out rows (role ``validation``).
         sigma_pos_mm: the motion capture's noise per axis [mm] (0.1-0.2 mm for a ceiling system).
+        sigma_rot_deg: each target's orientation measured too, with this noise per axis [deg] (a motion-capture
+            rigid body's: ~0.1 deg); None: its points only.
         deviation_mm / deviation_mrad: std of the true placement errors [mm, mrad].
         compliance: (joint, c [rad/(N·m)]) of the true robot; empty: a rigid robot.
         lateral: (joint, c_u, c_v [rad/(N·m)]) of the true robot's lateral compliances (eq L1 of
@@ -103,6 +108,7 @@ class HumanoidSettings:
     joint_range_rad: float = 1.5
     seed: int = 0
     urdf: str | None = None
+    sigma_rot_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -159,13 +165,25 @@ def simulate_humanoid(settings: HumanoidSettings | None = None) -> HumanoidData:
         with tree.placed(params.placements(truth)):
             world = tree.target_points(actual, local, bends)
             moved.append(np.linalg.norm(world - tree.target_points(full, local), axis=2).ravel())
+            hands = MOCAP.rotation @ tree.target_rotations(actual, [np.eye(3)] * len(tree.targets), bends)
         sensed = (world @ MOCAP.rotation.T + MOCAP.translation
                   + rng.normal(0.0, settings.sigma_pos_mm * 1e-3, world.shape))
         sets.append(MeasurementSet(tuple(columns), q, sensed, None, np.full(count, role, dtype=object),
-                                   np.arange(2, count + 2)))
+                                   np.arange(2, count + 2), target_rotations=_turned(tree, hands, settings, rng)))
     shift = np.concatenate(moved) * 1e3
     return HumanoidData(tree, sets[0], sets[1], truth, tuple(i.name for i in params.info), MOCAP,
                         (float(np.sqrt(np.mean(shift**2))), float(shift.max())))
+
+
+def _turned(tree: KinematicTree, hands: np.ndarray, settings: HumanoidSettings, rng: np.random.Generator
+            ) -> dict[int, np.ndarray]:
+    """Each target's measured orientation (its first point's number → (K, 3, 3)): its true frame in the sensor
+    frame ``hands`` (K, T, 3, 3) turned by N(0, ``sigma_rot_deg``) per axis; {} without ``sigma_rot_deg``."""
+    if settings.sigma_rot_deg is None:
+        return {}
+    tilt = rng.normal(0.0, np.radians(settings.sigma_rot_deg), (*hands.shape[:2], 3))
+    return {t.spec.points[0]: Rotation.from_rotvec(tilt[:, i]).as_matrix() @ hands[:, i]
+            for i, t in enumerate(tree.targets)}
 
 
 def with_followers(tree: KinematicTree, data: MeasurementSet) -> MeasurementSet:

@@ -114,10 +114,6 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
                                                 tree.other_branch_joints, occlusion=True)
         notes += held_notes
         held_time = time_column(heldout, settings.time_column)
-    turned = [d.source for d in (data, heldout) if d is not None and d.target_rotations]
-    if turned:  # the effect search counts and tests point entries only: refused, not run differently
-        raise PincalError(f"{turned[0]}: several --tip-link: diagnose does not take the targets' orientation columns "
-                          "qxN,qyN,qzN,qwN yet (calibrate and evaluate do); drop them to diagnose the points")
     options = ChainFitOptions(sigma_column=settings.sigma_column, selection=settings.criterion, refit_offered=False)
     choice, level = tree_level(tree, data, settings.level, options, Stages(None))
     calibration = calibrate_tree(tree, data, level, options)
@@ -127,7 +123,8 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
         stated_sigma_pos_m=settings.sigma_pos_m, masses=settings.masses, lateral=settings.lateral))
     final = replace(calibration, vector=diagnosis.vector, std=diagnosis.std, target=diagnosis.target,
                     point_errors=diagnosis.point_errors, sigma_pos_m=diagnosis.sigma_pos_m,
-                    tree_placements=diagnosis.tree_placements)
+                    tree_placements=diagnosis.tree_placements, orientation_errors=diagnosis.orientation_errors,
+                    sigma_rot_rad=diagnosis.sigma_rot_rad)
     used_q = data.q[calibration.used_index]
     reach, findings = tree_findings(tree, final, used_q, settings.sigma_pos_m, diagnosed=True)
     warnings, withheld = withholding(findings, settings.force)
@@ -148,7 +145,7 @@ def diagnose_tree_files(urdf: str | Path, data_path: str | Path | Sequence[str |
     report = tree_report(final, nominal, tree, sources, notes, (digest, dict(xacro_arguments(settings.xacro_args))),
                          couplings, choice)
     report["warnings"] = findings_json(warnings)
-    report = with_diagnosis(report, diagnosis, calibration.point_errors, tree)
+    report = with_diagnosis(report, diagnosis, (calibration.point_errors, calibration.orientation_errors), tree)
     page = render_page(html, report, report_path)
     effects_file = None if withheld else write_effects_file(out_urdf, report_path, report)
     write_report(report_path, report)
