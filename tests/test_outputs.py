@@ -324,11 +324,14 @@ def raw_writes(source: str, filename: str) -> list[str]:
     called on a receiver annotated with its class writes through :mod:`pincal.outputs`.
     """
     tree = ast.parse(source, filename=filename)
-    guarded, scratch = _inside(tree, "replacing"), _inside(tree, "TemporaryDirectory")
-    guarded |= _in_memory(tree) | _atomic_calls(tree)
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)]
+    if not calls:
+        return []
+    scratch = _inside(tree, "TemporaryDirectory")
+    guarded = None  # what writes atomically: worked out only for a module that calls a saver (most call none)
     bad = []
-    for node in ast.walk(tree):
-        if not isinstance(node, ast.Call) or id(node) in scratch:
+    for node in calls:
+        if id(node) in scratch:
             continue
         name, where = _called(node.func), f"{filename}:{node.lineno}"
         method = isinstance(node.func, ast.Attribute) and not (
@@ -338,10 +341,12 @@ def raw_writes(source: str, filename: str) -> list[str]:
             bad.append(f"{where}: Path.{name}")
         elif name == "open" and isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+"):
             bad.append(f"{where}: open(..., {mode.value!r})")
-        elif id(node) not in guarded and (  # lxml's tree.write(path, xml_declaration=...) too
-                (method and name in _SAVERS)
-                or (name == "write" and any(k.arg in ("xml_declaration", "pretty_print") for k in node.keywords))):
-            bad.append(f"{where}: {name} outside `with replacing(...)`")
+        elif ((method and name in _SAVERS)  # lxml's tree.write(path, xml_declaration=...) too
+              or (name == "write" and any(k.arg in ("xml_declaration", "pretty_print") for k in node.keywords))):
+            if guarded is None:
+                guarded = _inside(tree, "replacing") | _in_memory(tree) | _atomic_calls(tree)
+            if id(node) not in guarded:
+                bad.append(f"{where}: {name} outside `with replacing(...)`")
     return bad
 
 
