@@ -20,11 +20,11 @@ from threadpoolctl import threadpool_info, threadpool_limits
 
 import pincal.outputs as outputs
 from pincal.cli.progress import progress_bar
-from pincal.study import figures
 from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
 from pincal.study.executors import execute, fork_is_safe
-from pincal.study.protocol import StudyConfig
-from pincal.study.run import run_study
+
+# The study itself and its figures (matplotlib: ~2 s of a core to import) are imported where a test draws them:
+# every worker a test spawns imports this module afresh, and so does each test's own Python process.
 
 #: Set by a test before its workers start: a forked worker sees the new value, a spawned one
 #: (which imports this module afresh) the old one.
@@ -143,6 +143,10 @@ def _recording(name, draw):
 def _figures_twice(folder: str) -> dict:
     """A small study's figures drawn here (``here/``) and by forked processes (``forked/``, each figure's
     drawing process recorded), in a process of its own: no threads other tests left, so the fork is safe."""
+    from pincal.study import figures
+    from pincal.study.protocol import StudyConfig
+    from pincal.study.run import run_study
+
     result = run_study(StudyConfig(deviations=("large",), levels=2, repeats=1, restarts=0, limit_pose_sets=0),
                        workers=1)  # small enough for seconds, its summary draws every figure (no noise limit)
     here = figures.write_figures(result, Path(folder) / "here", workers=1)
@@ -156,6 +160,8 @@ def _figures_twice(folder: str) -> dict:
 def test_figures_drawn_by_forked_processes_are_the_same_bytes(tmp_path):
     """One drawing by this process's code path, one by forked processes (the study's tables are written
     meanwhile): the same PNG bytes, and none drawn by the process that forked them."""
+    from pincal.study import figures
+
     script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
               f"import test_study_processes as t; print(json.dumps(t._figures_twice({str(tmp_path)!r})))")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True)
