@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import ast
 import difflib
+import functools
 import re
 from pathlib import Path
 
@@ -44,7 +45,8 @@ PRINTED_BY = {
 _SUGGESTION = re.compile(r"(?<![\w-])(--[a-z][\w-]*)(?:[ =](\w+))?")
 
 
-def _messages(source: str) -> list[tuple[int, str]]:
+@functools.cache  # a module's text is read twice by the scan (its count, its problems): parsed once
+def _messages(source: str) -> tuple[tuple[int, str], ...]:
     """(line, text) of every string literal of a module but its docstrings, in order (an f-string whole,
     ``{}`` for each field)."""
     tree = ast.parse(source)
@@ -59,7 +61,7 @@ def _messages(source: str) -> list[tuple[int, str]]:
                                                   for part in node.values)))
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped:
             messages.append((node.lineno, node.value))
-    return sorted(messages)
+    return tuple(sorted(messages))
 
 
 def suggested_flags(source: str) -> list[tuple[int, str, str | None, str]]:

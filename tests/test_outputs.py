@@ -324,11 +324,14 @@ def raw_writes(source: str, filename: str) -> list[str]:
     called on a receiver annotated with its class writes through :mod:`pincal.outputs`.
     """
     tree = ast.parse(source, filename=filename)
-    guarded, scratch = _inside(tree, "replacing"), _inside(tree, "TemporaryDirectory")
-    guarded |= _in_memory(tree) | _atomic_calls(tree)
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)]
+    if not calls:
+        return []
+    scratch = _inside(tree, "TemporaryDirectory")
+    guarded = None  # what writes atomically: worked out only for a module that calls a saver (most call none)
     bad = []
-    for node in ast.walk(tree):
-        if not isinstance(node, ast.Call) or id(node) in scratch:
+    for node in calls:
+        if id(node) in scratch:
             continue
         name, where = _called(node.func), f"{filename}:{node.lineno}"
         method = isinstance(node.func, ast.Attribute) and not (
@@ -338,10 +341,12 @@ def raw_writes(source: str, filename: str) -> list[str]:
             bad.append(f"{where}: Path.{name}")
         elif name == "open" and isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+"):
             bad.append(f"{where}: open(..., {mode.value!r})")
-        elif id(node) not in guarded and (  # lxml's tree.write(path, xml_declaration=...) too
-                (method and name in _SAVERS)
-                or (name == "write" and any(k.arg in ("xml_declaration", "pretty_print") for k in node.keywords))):
-            bad.append(f"{where}: {name} outside `with replacing(...)`")
+        elif ((method and name in _SAVERS)  # lxml's tree.write(path, xml_declaration=...) too
+              or (name == "write" and any(k.arg in ("xml_declaration", "pretty_print") for k in node.keywords))):
+            if guarded is None:
+                guarded = _inside(tree, "replacing") | _in_memory(tree) | _atomic_calls(tree)
+            if id(node) not in guarded:
+                bad.append(f"{where}: {name} outside `with replacing(...)`")
     return bad
 
 
@@ -440,11 +445,38 @@ def _snapshot(folder: Path) -> dict[str, tuple[int, int, int]]:
     return found
 
 
-def _start(argv: list[str], cwd: Path) -> subprocess.Popen:
-    """``pincal ARGV`` in ``cwd``; its stderr goes to ``cwd/stderr.log`` (a pipe nobody reads could block it)."""
+#: How a kill round starts pincal: ``python -m pincal ARGV``.
+PINCAL = ("-m", "pincal")
+#: ``pincal study`` whose figures are small ones written through the study's own writer
+#: (:func:`pincal.study.figures._save`), each held open 0.2 s as a real figure's rendering holds it: the same
+#: files written the same way, at less than half a run's CPU (the seven real figures take ~3.7 s of a core, and
+#: tests/test_study_processes.py and tests/test_study.py draw them).
+QUICK_FIGURES = ("-c", """
+import sys, time
+import matplotlib.pyplot as plt
+from pincal.cli.commands import main
+from pincal.study import figures
+
+def quick(result, path):
+    fig = plt.figure(figsize=(1, 1))
+    render = fig.savefig
+    def slowly(*args, **kwargs):
+        time.sleep(0.2)
+        return render(*args, **kwargs)
+    fig.savefig = slowly
+    return figures._save(fig, path)
+
+figures.FIGURES = {name: quick for name in figures.FIGURES}
+sys.exit(main(sys.argv[1:]))
+""")
+
+
+def _start(argv: list[str], cwd: Path, launcher: tuple[str, ...] = PINCAL) -> subprocess.Popen:
+    """``pincal ARGV`` in ``cwd`` (started by ``python LAUNCHER``); its stderr goes to ``cwd/stderr.log`` (a pipe
+    nobody reads could block it)."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
     with open(cwd / "stderr.log", "wb") as log:
-        return subprocess.Popen([sys.executable, "-m", "pincal", *argv], cwd=cwd, env=env,
+        return subprocess.Popen([sys.executable, *launcher, *argv], cwd=cwd, env=env,
                                 stdout=subprocess.DEVNULL, stderr=log)
 
 
@@ -460,11 +492,11 @@ def _wait_for_first_write(proc: subprocess.Popen, folder: Path, before: dict) ->
         time.sleep(0.002)
 
 
-def _reference_run(argv: list[str], cwd: Path, folder: Path) -> tuple[float, float]:
+def _reference_run(argv: list[str], cwd: Path, folder: Path, launcher: tuple[str, ...]) -> tuple[float, float]:
     """Run to completion; return (seconds to the first write, seconds to the exit) to aim the kills."""
     before = _snapshot(folder)
     start = time.monotonic()
-    proc = _start(argv, cwd)
+    proc = _start(argv, cwd, launcher)
     _wait_for_first_write(proc, folder, before)
     first = time.monotonic() - start
     proc.wait(timeout=HANG_S)
@@ -472,11 +504,12 @@ def _reference_run(argv: list[str], cwd: Path, folder: Path) -> tuple[float, flo
     return first, time.monotonic() - start
 
 
-def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: bool, delay_s: float) -> tuple[int, bool]:
+def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: bool, delay_s: float,
+                launcher: tuple[str, ...]) -> tuple[int, bool]:
     """Kill ``pincal ARGV`` after ``delay_s`` (from its first write, or from its start); returns its exit
     code (-SIGKILL, or 0 if it finished first) and whether it had changed ``folder`` by then."""
     before = _snapshot(folder)
-    proc = _start(argv, cwd)
+    proc = _start(argv, cwd, launcher)
     try:
         if after_first_write:
             _wait_for_first_write(proc, folder, before)
@@ -534,8 +567,9 @@ def _check_outputs(folder: Path, reference: dict[str, tuple], what: str) -> list
     return leftovers
 
 
-def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: int, anywhere: int) -> None:
-    first_write_s, total_s = _reference_run(argv, cwd, folder)
+def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: int, anywhere: int,
+                launcher: tuple[str, ...] = PINCAL) -> None:
+    first_write_s, total_s = _reference_run(argv, cwd, folder, launcher)
     reference = {name: whole_file(folder / name) for name in os.listdir(folder)}
     assert reference and not any(is_temporary(n) for n in reference)
     rng = np.random.default_rng(seed)
@@ -545,7 +579,7 @@ def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: 
     for number, after_first_write in enumerate(kinds):
         delay = rng.uniform(0.0, 1.2 * write_span_s) if after_first_write else rng.uniform(0.0, total_s)
         what = f"kill {number} ({'after the first write + ' if after_first_write else 'after '}{delay:.3f} s)"
-        code, wrote = _killed_run(argv, cwd, folder, bool(after_first_write), delay)
+        code, wrote = _killed_run(argv, cwd, folder, bool(after_first_write), delay, launcher)
         landed += code == -signal.SIGKILL and wrote
         _check_outputs(folder, reference, what)
     # at least one kill cut a run that had begun writing (else the round tested only whole runs); kills aimed
@@ -576,7 +610,8 @@ def test_killed_study_leaves_old_or_whole_outputs(tmp_path):
     out = tmp_path / "study"
     out.mkdir()
     # no noise limit and no restart cases (--limit-pose-sets 0, --restarts 0): the same 12 files written, a
-    # tenth less work for each run; three kills aimed inside the writes (each run costs a study: ~8 s of a core)
+    # tenth less work for each run; three kills aimed inside the writes (each run costs a study: ~3 s of a core
+    # with QUICK_FIGURES, whose seven 0.2 s renderings keep the write span over a second)
     argv = ["study", "--reps", "1", "--levels", "2", "--restarts", "0", "--workers", "1", "--limit-pose-sets", "0",
             "--out", str(out)]
-    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=3, anywhere=1)
+    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=3, anywhere=1, launcher=QUICK_FIGURES)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import time
+from contextlib import contextmanager
 from itertools import pairwise
 
 import numpy as np
@@ -268,8 +269,30 @@ def test_commands_report_progress_on_stderr_and_quiet_silences_it(simulated, tmp
     assert lines and not any(line.startswith(label + ":") for line in captured.out.splitlines()), captured.err
     counts = [_counts(line) for line in lines]
     assert counts[-1][0] == counts[-1][1] > 0 and [c for c, _ in counts] == sorted(c for c, _ in counts)
-    assert main(argv + ["--quiet"]) == 0
+    _stopping_at_the_first_report(monkeypatch)
+    # --quiet: the same command, stopped at its first report (every line above drew one by then)
+    with pytest.raises(_FirstReport):
+        main(argv + ["--quiet"])
     assert label + ":" not in capsys.readouterr().err
+
+
+class _FirstReport(BaseException):
+    """Raised by :func:`_stopping_at_the_first_report`'s callback (no ``except Exception`` of a command holds it)."""
+
+
+def _stopping_at_the_first_report(monkeypatch):
+    """Make every command's progress bar raise :class:`_FirstReport` once it has drawn its first report."""
+    real = progress_module.progress_bar
+
+    @contextmanager
+    def stopping(*args, **kwargs):
+        with real(*args, **kwargs) as report:
+            def first(done, total):
+                report(done, total)
+                raise _FirstReport
+            yield first
+
+    monkeypatch.setattr(progress_module, "progress_bar", stopping)
 
 
 def test_a_quick_command_in_a_log_prints_no_progress(simulated, tmp_path, capsys, clock):

@@ -399,8 +399,8 @@ def test_noise_free_test_set_matches_the_noiseless_simulation(kuka_urdf):
 
 def test_cli_study(tmp_path, capsys, monkeypatch):
     """The command's wiring: its tables, findings and every figure's file. The figures are stubs here (drawing them
-    is two thirds of this run; tests/test_study_processes.py and the killed-study round of tests/test_outputs.py
-    draw them through the same FIGURES table)."""
+    is two thirds of this run; the tiny study's fixture above and tests/test_study_processes.py draw them through
+    the same FIGURES table)."""
     from pincal.study import figures
 
     def stub(result, path):

@@ -51,9 +51,10 @@ def _outputs(folder: Path) -> tuple[bytes, bytes]:
 
 @pytest.fixture(scope="module")
 def undisturbed(tmp_path_factory) -> tuple[bytes, bytes]:
-    """study.csv and restarts.csv of an undisturbed run (``pincal study`` ARGUMENTS, without figures)."""
+    """study.csv and restarts.csv of an undisturbed run (``pincal study`` ARGUMENTS, without figures), run in
+    this process: every executor gives the same rows (tests/test_study.py), and a cluster costs seconds to start."""
     out = tmp_path_factory.mktemp("undisturbed")
-    write_study(run_study(CONFIG, workers=2, scheduler="local"), out, figures=False)
+    write_study(run_study(CONFIG, workers=1), out, figures=False)
     return _outputs(out)
 
 

@@ -20,11 +20,11 @@ from threadpoolctl import threadpool_info, threadpool_limits
 
 import pincal.outputs as outputs
 from pincal.cli.progress import progress_bar
-from pincal.study import figures
 from pincal.study.checkpoints import CHECKPOINT_FOLDER, TaskStore
 from pincal.study.executors import execute, fork_is_safe
-from pincal.study.protocol import StudyConfig
-from pincal.study.run import run_study
+
+# The study itself and its figures (matplotlib: ~2 s of a core to import) are imported where a test draws them:
+# every worker a test spawns imports this module afresh, and so does each test's own Python process.
 
 #: Set by a test before its workers start: a forked worker sees the new value, a spawned one
 #: (which imports this module afresh) the old one.
@@ -132,52 +132,43 @@ def test_checkpoints_skip_fsync_and_a_truncated_one_reruns_its_task(tmp_path, mo
     assert synced  # the file (and its folder, where the platform allows)
 
 
-@pytest.fixture(scope="module")
-def small_result():
-    """A study small enough for seconds whose summary draws every figure (no noise limit)."""
-    return run_study(StudyConfig(deviations=("large",), levels=2, repeats=1, restarts=0, limit_pose_sets=0),
-                     workers=1)
+def _recording(name, draw):
+    """``draw`` that also writes which process drew figure ``name``: ``NAME.pid`` beside it."""
+    def wrapper(result, path):
+        (path.parent / f"{name}.pid").write_text(str(os.getpid()))
+        return draw(result, path)
+    return wrapper
 
 
-def test_figures_drawn_by_other_processes_are_the_same_bytes(small_result, tmp_path, monkeypatch):
-    def recording(name, draw):
-        def wrapper(result, path):
-            (path.parent / f"{name}.pid").write_text(str(os.getpid()))
-            return draw(result, path)
-        return wrapper
+def _figures_twice(folder: str) -> dict:
+    """A small study's figures drawn here (``here/``) and by forked processes (``forked/``, each figure's
+    drawing process recorded), in a process of its own: no threads other tests left, so the fork is safe."""
+    from pincal.study import figures
+    from pincal.study.protocol import StudyConfig
+    from pincal.study.run import run_study
 
-    here = figures.write_figures(small_result, tmp_path / "here", workers=1)
-    monkeypatch.setattr(figures, "FIGURES", {name: recording(name, draw) for name, draw in figures.FIGURES.items()})
-    forked = figures.write_figures(small_result, tmp_path / "forked", workers=2)
-    assert [p.name for p in here] == [p.name for p in forked] == list(figures.FIGURES)
-    for a, b in zip(here, forked):
-        assert a.read_bytes() == b.read_bytes(), a.name
-    drawn_by = {int((tmp_path / "forked" / f"{p.name}.pid").read_text()) for p in forked}
-    if _ON_LINUX and fork_is_safe():  # else (threads left by other tests) drawn here: see the next test
-        assert os.getpid() not in drawn_by  # forked processes drew them, this one wrote the tables meanwhile
-    assert sorted(figures._LONGEST_FIRST) == sorted(figures.FIGURES)
-
-
-def _figure_pids(folder: str) -> dict:
-    """Who drew the figures of a small study, in a process of its own (no threads other tests left)."""
     result = run_study(StudyConfig(deviations=("large",), levels=2, repeats=1, restarts=0, limit_pose_sets=0),
-                       workers=1)
-    def recording(name, draw):
-        def wrapper(result, path):
-            (path.parent / f"{name}.pid").write_text(str(os.getpid()))
-            return draw(result, path)
-        return wrapper
-
-    figures.FIGURES = {name: recording(name, draw) for name, draw in figures.FIGURES.items()}  # forked: inherited
-    figures.write_figures(result, Path(folder), workers=2)
-    return {"pid": os.getpid(), "fork_is_safe": fork_is_safe()}
+                       workers=1)  # small enough for seconds, its summary draws every figure (no noise limit)
+    here = figures.write_figures(result, Path(folder) / "here", workers=1)
+    figures.FIGURES = {name: _recording(name, draw) for name, draw in figures.FIGURES.items()}  # forked: inherited
+    forked = figures.write_figures(result, Path(folder) / "forked", workers=2)
+    return {"pid": os.getpid(), "fork_is_safe": fork_is_safe(), "here": [p.name for p in here],
+            "forked": [p.name for p in forked]}
 
 
 @pytest.mark.skipif(not _ON_LINUX, reason="figures are drawn by forked processes on Linux only")
-def test_figures_are_drawn_by_forked_processes(tmp_path):
+def test_figures_drawn_by_forked_processes_are_the_same_bytes(tmp_path):
+    """One drawing by this process's code path, one by forked processes (the study's tables are written
+    meanwhile): the same PNG bytes, and none drawn by the process that forked them."""
+    from pincal.study import figures
+
     script = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
-              f"import test_study_processes as t; print(json.dumps(t._figure_pids({str(tmp_path)!r})))")
+              f"import test_study_processes as t; print(json.dumps(t._figures_twice({str(tmp_path)!r})))")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True)
     out = json.loads(done.stdout.strip().splitlines()[-1])
-    drawn_by = {int(p.read_text()) for p in tmp_path.glob("*.pid")}
+    assert out["here"] == out["forked"] == list(figures.FIGURES)
+    for name in out["here"]:
+        assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "forked" / name).read_bytes(), name
+    drawn_by = {int((tmp_path / "forked" / f"{name}.pid").read_text()) for name in out["forked"]}
     assert out["fork_is_safe"] and len(drawn_by) >= 1 and out["pid"] not in drawn_by
+    assert sorted(figures._LONGEST_FIRST) == sorted(figures.FIGURES)
