@@ -176,16 +176,19 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
         # refitted at the noise scale of its residual (maximum likelihood; with a prior, eq P2), as the single
         # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
         # strongly against the rows, and what it held would be left for the next candidates to imitate
-        search = search.rescaled(new_objective, new_solution)
+        # the current model's errors at the scales its residual is whitened with, before they change
+        before = search.errors(objective, solution.x)
+        rescaled = search.rescaled(new_objective, new_solution)
         try:
-            new_objective, new_solution = search.fit([*adopted, effect], new_solution.x)
+            new_objective, new_solution = rescaled.fit([*adopted, effect], new_solution.x)
         except CalibrationError as error:  # sparse data: with the scale re-estimated it is not determined
             notes.append(f"{effect.label} not adopted: its refit with the noise re-estimated fails ({error}); the "
                          "search stops here")
             break
+        search = rescaled  # kept only with the refit it weighs: the final errors are un-whitened at its scales
         values = new_solution.x[new_objective.effect_slices[-1]]
         std = standard_deviations(new_objective, new_solution)[new_objective.effect_slices[-1]]
-        steps.append(EffectStep(effect, values, std, delta, search.errors(objective, solution.x),
+        steps.append(EffectStep(effect, values, std, delta, before,
                                 search.errors(new_objective, new_solution.x),
                                 search.held_errors(adopted, solution.x), search.held_errors([*adopted, effect],
                                                                                             new_solution.x),
