@@ -6,6 +6,7 @@ import contextlib
 import csv
 import io
 import json
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -408,6 +409,11 @@ def test_the_held_out_test_judges_the_orientations_too(sagging):
     [candidate] = found.last_candidates
     assert found.effects == () and candidate.verdict.startswith("it makes the held-out rows worse")
     assert "orientation" in candidate.verdict  # the angles' change beside the points'
+    # the orientations alone refute it: held-out rows whose every point is unseen
+    blind = replace(stiff, points=np.full_like(stiff.points, np.nan))
+    found = diagnose_tree(tree, calibration, data, blind, DiagnoseOptions(candidates=[Effect("compliance", "torso_2")]))
+    [candidate] = found.last_candidates
+    assert found.effects == () and candidate.verdict.startswith("it makes the held-out rows worse")
 
 
 @pytest.mark.parametrize("measured", [(1,), ()])

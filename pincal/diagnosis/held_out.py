@@ -48,12 +48,23 @@ def row_changes(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, sigma
     change of the model; the change of distance is the model's own change along the row's error."""
     change = (np.sum(after.position_m, axis=1) - np.sum(before.position_m, axis=1)) / sigma_pos_m
     if before.rotation_rad is not None and after.rotation_rad is not None and sigma_rot_rad:
-        change = change + (after.rotation_rad - before.rotation_rad) / sigma_rot_rad
+        change = change + (_per_row(after.rotation_rad) - _per_row(before.rotation_rad)) / sigma_rot_rad
     return change
 
 
+def _per_row(angles: np.ndarray) -> np.ndarray:
+    """η_k of each row (K,): the row's angle, or with several targets (K, T) the sum of its seen ones' (a target
+    not seen, NaN, changes nothing), as the points' distances are summed."""
+    return angles if angles.ndim == 1 else np.nansum(angles, axis=1)
+
+
+def _rms_mrad(angles: np.ndarray) -> float:
+    """The RMS of the seen angles [mrad]: per row, or per (row, target) with several targets."""
+    return 1e3 * float(np.sqrt(np.nanmean(angles**2)))
+
+
 def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, sigma_rot_rad: float | None) -> str:
-    """``adopted`` when the held-out rows fit better beyond their noise, else why not (issue: judged on
+    """``adopted`` when the held-out rows fit better beyond their noise, else why not (judged on
     held-out poses in position and orientation).
 
     The per-row changes d_k of :func:`row_changes` (position and orientation together in noise units, so a trade
@@ -77,8 +88,7 @@ def held_out_verdict(before: PoseErrors, after: PoseErrors, sigma_pos_m: float, 
     change = row_changes(before, after, sigma_pos_m, sigma_rot_rad)
     shown = [f"position {before.position.rms:.3f} → {after.position.rms:.3f} mm RMS"]
     if before.rotation_rad is not None and after.rotation_rad is not None and sigma_rot_rad:
-        shown.append(f"orientation {1e3 * np.sqrt(np.mean(before.rotation_rad**2)):.3g} → "
-                     f"{1e3 * np.sqrt(np.mean(after.rotation_rad**2)):.3g} mrad RMS")
+        shown.append(f"orientation {_rms_mrad(before.rotation_rad):.3g} → {_rms_mrad(after.rotation_rad):.3g} mrad RMS")
     nonzero, telling = change[change != 0.0], change[np.abs(change) >= TELLING_CHANGE]
     if nonzero.size >= MIN_PAIRED_ROWS and _p(nonzero, "greater") < HELD_OUT_LEVEL:
         return (f"it makes the held-out rows worse ({', '.join(shown)}; signed-rank over {nonzero.size} rows, "

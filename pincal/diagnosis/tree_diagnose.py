@@ -165,8 +165,8 @@ class _Search:
         both in noise units); an unseen point or orientation changes nothing: a zero for both."""
         sigma_pos, sigma_rot = self.judged_noise(*fit)
         turns = [self.held_turns(*model) for model in models]
-        rows = [None if t is None or sigma_rot is None or not np.isfinite(t).any() else np.nansum(t, axis=1)
-                for t in turns]  # held-out rows that measure no orientation: their points alone
+        # each (K, T), NaN where not seen; held-out rows that measure no orientation: their points alone
+        rows = [None if t is None or sigma_rot is None or not np.isfinite(t).any() else t for t in turns]
         return held_out_verdict(PoseErrors(np.nan_to_num(before), rows[0]), PoseErrors(np.nan_to_num(after), rows[1]),
                                 sigma_pos, sigma_rot)
 

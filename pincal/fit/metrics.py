@@ -56,7 +56,8 @@ class PoseErrors:
 
     Attributes:
         position_m: q_jp [m], (J, P): one column per target point.
-        rotation_rad: eta_j [rad], (J,), or None without orientation data.
+        rotation_rad: eta_j [rad], (J,), or None without orientation data (the held-out test of several
+            targets: (J, T), one per target, NaN where not seen).
     """
 
     position_m: np.ndarray
