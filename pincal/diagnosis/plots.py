@@ -67,8 +67,8 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
             continue
         # set together with the driver (pincal.diagnosis.structure.partial_residual)
         assert step.joint_residual is not None and step.fitted_shift is not None
-        fig = Figure(figsize=(6.4, 4.2), layout="tight")
-        ax = fig.subplots()
+        fig = Figure(figsize=(6.4, 4.2))
+        ax = fig.subplots(gridspec_kw=_margins(6.4, 4.2))
         grid, curve = effect_curve(step.effect, step.driver, step.fitted_shift)
         ax.plot(step.driver, step.joint_residual * 1000.0, "o", ms=4, alpha=0.6, color=DATA_COLOUR,
                 label="fitted shift + remaining residual, per row")
@@ -93,13 +93,17 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
         held_before = first.heldout_before if first else diagnosis.heldout_errors
         assert held_before is not None  # every step has held-out errors when the diagnosis has
         panels.append(("held-out rows", held_before, diagnosis.heldout_errors))
-    fig = Figure(figsize=(6.0 * len(panels), 4.0), layout="tight")
-    axes = fig.subplots(1, len(panels), squeeze=False)
+    width = 6.0 * len(panels)
+    fig = Figure(figsize=(width, 4.0))
+    axes = fig.subplots(1, len(panels), squeeze=False, gridspec_kw={**_margins(width, 4.0), "wspace": 0.2})
     for ax, (title, before, after) in zip(axes[0], panels):
         b, a = before.position_m.ravel() * 1000.0, after.position_m.ravel() * 1000.0
         bins = np.linspace(0.0, max(b.max(), a.max()) * 1.05, 30)
-        ax.hist(b, bins=bins, alpha=0.5, color=CALIBRATED, label=f"geometry only (RMS {before.position.rms:.3f} mm)")
-        ax.hist(a, bins=bins, alpha=0.5, color=WITH_EFFECTS, label=f"with effects (RMS {after.position.rms:.3f} mm)")
+        # one filled outline per histogram: the look of touching bars, at one patch instead of one per bin
+        ax.hist(b, bins=bins, histtype="stepfilled", alpha=0.5,
+                color=CALIBRATED, label=f"geometry only (RMS {before.position.rms:.3f} mm)")
+        ax.hist(a, bins=bins, histtype="stepfilled", alpha=0.5,
+                color=WITH_EFFECTS, label=f"with effects (RMS {after.position.rms:.3f} mm)")
         ax.set_xlabel("point position error [mm]")
         ax.set_ylabel("count")
         ax.set_title(title)
@@ -110,8 +114,16 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
     return path
 
 
+def _margins(width_in: float, height_in: float) -> dict[str, float]:
+    """Fixed margins [in] as figure fractions: room for a title, the axis labels and tick labels of up to
+    seven characters at 10 pt. A layout engine fits them to the text instead, but at the cost of a second
+    draw: three fifths of a figure's drawing time (0.34 of 0.58 s for the error histograms)."""
+    return {"left": 0.85 / width_in, "right": 1.0 - 0.15 / width_in,
+            "bottom": 0.6 / height_in, "top": 1.0 - 0.4 / height_in}
+
+
 def _save(fig: Figure, path: Path) -> None:
-    """Draw ``fig`` once (the tight layout is applied during that draw) into ``path``."""
+    """Draw ``fig`` once into ``path``."""
     FigureCanvasAgg(fig)
     with replacing(path, "wb") as handle:
         fig.savefig(handle, format="png", dpi=120)
