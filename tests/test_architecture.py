@@ -405,7 +405,8 @@ def test_only_the_model_changes_a_chain():
     found = [line for name, path in outside.items() for line in chain_mutations(path.read_text(encoding="utf-8"), name)]
     assert not found, ("evaluate a model with `with chain.placed(placements, tool=...):` instead of changing "
                        "the chain:\n" + "\n".join(found))
-    assert {room(name) for name in outside} >= {"cli", "workflows", "report", "diagnosis", "fit", "paper", "simulation", "study"}
+    assert {room(name) for name in outside} >= {"cli", "workflows", "report", "diagnosis", "fit", "paper", "simulation",
+                                                "study"}
 
 
 def test_the_chain_check_catches_each_mutation():
