@@ -4,6 +4,7 @@ document pincal writes in a test is validated against ``docs/report.schema.json`
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import json
 import re
@@ -82,20 +83,45 @@ DOCUMENT_KINDS = {"report_version": None, "plan_version": "PlanJson", "not_held_
                   "skipped_cpa_rows": "EvaluationJson", "camera_info": "CameraEvaluationJson",
                   "evaluated_targets": "TreeEvaluationJson"}
 _validators: dict[str, jsonschema.protocols.Validator] = {}
+#: Draft 2020-12, whose ``descend`` into a subschema that is only ``{"type": ...}`` checks the type in place
+#: (:func:`_descend`). Most of a report's values are such leaves (the numbers of its arrays, its names and
+#: units): the full descent builds a validator for each, about half of a validation's time (73 documents of
+#: six test files: 1.26 s -> 0.65 s CPU).
+_Draft202012 = jsonschema.validators.extend(jsonschema.Draft202012Validator)
+_full_descend = _Draft202012.descend
+
+
+def _descend(self, instance, schema, *args, **kwargs):
+    """``descend``, without building a validator for a value whose subschema is only ``{"type": ...}`` and
+    which has that type: the full descent would run the ``type`` keyword alone, with the same type checker,
+    and yield nothing. Anything else, a value of another type among them, takes the full descent (the same
+    errors)."""
+    if type(schema) is dict and len(schema) == 1 and "type" in schema:
+        types = schema["type"]
+        if any(self.is_type(instance, name) for name in ([types] if isinstance(types, str) else types)):
+            return iter(())
+    return _full_descend(self, instance, schema, *args, **kwargs)
+
+
+_Draft202012.descend = _descend  # evolve() keeps the class: every subschema's validator descends so
 
 
 def _validator(kind: str) -> jsonschema.protocols.Validator:
-    """The validator of the schema's ``$defs`` entry ``kind``, built once."""
+    """The validator of the schema's ``$defs`` entry ``kind``, built once per process."""
     if kind not in _validators:
-        schema = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
-        _validators[kind] = jsonschema.Draft202012Validator({"$ref": f"#/$defs/{kind}", "$defs": schema["$defs"]})
+        _validators[kind] = _Draft202012({"$ref": f"#/$defs/{kind}", "$defs": _schema()["$defs"]})
     return _validators[kind]
+
+
+@functools.cache
+def _schema() -> dict:
+    """docs/report.schema.json, read once per process (callers only read it)."""
+    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
 
 
 def report_kinds() -> list[str]:
     """The kinds a REPORT.json may be: the schema's top level is ``oneOf`` their ``$ref``s."""
-    schema = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
-    return [entry["$ref"].rpartition("/")[2] for entry in schema["oneOf"]]
+    return [entry["$ref"].rpartition("/")[2] for entry in _schema()["oneOf"]]
 
 
 def validate_document(document, kind: str | None = None) -> None:

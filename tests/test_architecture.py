@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 from conftest import package_files
+from sources import nodes, parsed
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
@@ -39,15 +40,13 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 ENTRY_POINTS = ("pincal", "pincal.__main__")
 
 
-@functools.lru_cache(maxsize=None)
-def parsed(text: str) -> ast.Module:
-    """The syntax tree of a module's source, parsed once per text: the checks below each walk every module
-    (eight parses of ~200 files were half of this file's time); callers only read the trees."""
-    return ast.parse(text)
+def source(path: Path) -> str:
+    return path.read_text(encoding="utf-8")
 
 
 def parsed_file(path: Path) -> ast.Module:
-    return parsed(path.read_text(encoding="utf-8"))
+    """The tree of a module, parsed once per text (tests/sources.py: the checks below each read every module)."""
+    return parsed(source(path))
 
 
 def module_name(path: Path) -> str:
@@ -57,10 +56,9 @@ def module_name(path: Path) -> str:
 
 def pincal_imports(path: Path, name: str) -> set[str]:
     """The pincal modules ``path`` (module ``name``) imports, anywhere in its body."""
-    tree = parsed_file(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found: set[str] = set()
-    for node in ast.walk(tree):
+    for node in nodes(source(path), ast.Import, ast.ImportFrom):
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names if alias.name.split(".")[0] == "pincal")
         elif isinstance(node, ast.ImportFrom):
@@ -209,10 +207,9 @@ def step_callers(modules: dict[str, Path]) -> dict[str, set[str]]:
     imported alias)."""
     callers: dict[str, set[str]] = {step: set() for step in PIPELINE_STEPS}
     for name, path in modules.items():
-        tree = parsed_file(path)
-        aliases = {a.asname: a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
-                   for a in node.names if a.asname}
-        for node in ast.walk(tree):
+        text = source(path)
+        aliases = {a.asname: a.name for node in nodes(text, ast.ImportFrom) for a in node.names if a.asname}
+        for node in nodes(text, ast.Call):
             if isinstance(node, ast.Call):
                 called = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
                 called = aliases.get(called, called)
@@ -273,9 +270,7 @@ def names_imported_across_rooms(modules: dict[str, Path]) -> list[tuple[str, str
     found = []
     for importer, path in modules.items():
         package = importer if path.name == "__init__.py" else importer.rpartition(".")[0]
-        for node in ast.walk(parsed_file(path)):
-            if not isinstance(node, ast.ImportFrom):
-                continue
+        for node in nodes(source(path), ast.ImportFrom):
             base = package.split(".")[: len(package.split(".")) - (node.level - 1)] if node.level else []
             module = ".".join(base + [node.module]) if node.level else node.module or ""
             if module in MODULES and (room(module) != room(importer) or importer in ENTRY_POINTS):
@@ -338,7 +333,7 @@ def private_attributes_by_room(modules: dict[str, Path]) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
     for name, path in modules.items():
         found = out.setdefault(room(name), set())
-        for node in ast.walk(parsed_file(path)):
+        for node in nodes(source(path), ast.ClassDef, ast.Attribute):
             if isinstance(node, ast.ClassDef):
                 for item in node.body:
                     if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -359,7 +354,7 @@ def private_attribute_reads(modules: dict[str, Path], defined: dict[str, set[str
     for name, path in modules.items():
         own = defined.get(room(name), set())
         elsewhere = set().union(*(names for r, names in defined.items() if r != room(name)))
-        for node in ast.walk(parsed_file(path)):
+        for node in nodes(source(path), ast.Attribute):
             if isinstance(node, ast.Attribute) and node.attr in elsewhere - own and not (
                     isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
                 bad.append(f"{name}:{node.lineno} reads {node.attr}, private to another room")
@@ -391,7 +386,7 @@ def chain_mutations(text: str, label: str) -> list[str]:
     :data:`CHAIN_MUTATORS`, ``.apply(…)`` on a parameter set (a receiver whose source names
     ``param``), and an assignment into :data:`CHAIN_STATE`; in the order of the source."""
     found: list[tuple[int, str]] = []
-    for node in ast.walk(parsed(text)):
+    for node in nodes(text, ast.Call, ast.Assign, ast.AugAssign, ast.AnnAssign):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
             name = node.func.attr
             if name in CHAIN_MUTATORS or (name == "apply" and "param" in ast.unparse(node.func.value).lower()):
@@ -410,7 +405,8 @@ def test_only_the_model_changes_a_chain():
     found = [line for name, path in outside.items() for line in chain_mutations(path.read_text(encoding="utf-8"), name)]
     assert not found, ("evaluate a model with `with chain.placed(placements, tool=...):` instead of changing "
                        "the chain:\n" + "\n".join(found))
-    assert {room(name) for name in outside} >= {"cli", "workflows", "report", "diagnosis", "fit", "paper", "simulation", "study"}
+    assert {room(name) for name in outside} >= {"cli", "workflows", "report", "diagnosis", "fit", "paper", "simulation",
+                                                "study"}
 
 
 def test_the_chain_check_catches_each_mutation():
@@ -445,15 +441,14 @@ def problem_assignments(text: str, label: str, fields: set[str]) -> list[str]:
     holder); and on ``self`` too in a method of a :data:`PROBLEM_CLASSES` class other than its constructor
     (:data:`CONSTRUCTORS`); in the order of the source."""
     classes = {name for _, name in PROBLEM_CLASSES}
-    tree = parsed(text)
     method_of: dict[int, str] = {}  # node → the problem class's method it is in
-    for node in ast.walk(tree):
+    for node in nodes(text, ast.ClassDef):
         if isinstance(node, ast.ClassDef) and node.name in classes:
             for item in node.body:
                 if isinstance(item, ast.FunctionDef):
                     method_of.update({id(inner): item.name for inner in ast.walk(item)})
     found: list[tuple[int, str]] = []
-    for node in ast.walk(tree):
+    for node in nodes(text, ast.Assign, ast.AugAssign, ast.AnnAssign, ast.Call):
         setting: list[tuple[str, str]] = []  # (owner, attribute)
         if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
             pending = list(node.targets) if isinstance(node, ast.Assign) else [node.target]

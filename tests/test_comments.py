@@ -29,11 +29,10 @@ PROVENANCE = {
 
 def _comments_and_docstrings(path: Path) -> list[tuple[int, str]]:
     """(line number, text) of every comment and string literal of ``path`` (docstrings among them)."""
-    import io
     import tokenize
 
     out = []
-    with io.open(path, encoding="utf-8") as handle:
+    with open(path, encoding="utf-8") as handle:
         for token in tokenize.generate_tokens(handle.readline):
             if token.type in (tokenize.COMMENT, tokenize.STRING):
                 out.append((token.start[0], token.string))
@@ -45,6 +44,11 @@ def test_no_issue_numbers_or_commit_hashes_as_rationale():
     for path in SOURCES:
         rel = path.relative_to(ROOT).as_posix()
         allowed = PROVENANCE.get(rel, set())
+        whole = path.read_text(encoding="utf-8")
+        if not ISSUE.search(whole) and all(match.group(0) in allowed for match in HASH.finditer(whole)):
+            # a comment or string is a piece of the file, cut at a quote, "#" or a line's end (never inside a
+            # word): a finding in one is a match in the whole text, so a file with none needs no tokenizing
+            continue
         for line, text in _comments_and_docstrings(path):
             for match in ISSUE.finditer(text):
                 found.append(f"{rel}:{line}: {match.group(0)!r}")

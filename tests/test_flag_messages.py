@@ -15,6 +15,7 @@ import re
 from pathlib import Path
 
 from conftest import package_files, subcommand_actions
+from sources import nodes
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
@@ -49,12 +50,12 @@ _SUGGESTION = re.compile(r"(?<![\w-])(--[a-z][\w-]*)(?:[ =](\w+))?")
 def _messages(source: str) -> tuple[tuple[int, str], ...]:
     """(line, text) of every string literal of a module but its docstrings, in order (an f-string whole,
     ``{}`` for each field)."""
-    tree = ast.parse(source)
-    skipped = {id(node.body[0].value) for node in ast.walk(tree)
+    skipped = {id(node.body[0].value) for node in nodes(source, ast.Module, ast.ClassDef, ast.FunctionDef,
+                                                          ast.AsyncFunctionDef)
                if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
                and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
     messages = []
-    for node in ast.walk(tree):
+    for node in nodes(source, ast.JoinedStr, ast.Constant):  # an f-string before its parts, as ast.walk goes
         if isinstance(node, ast.JoinedStr):
             skipped.update(id(part) for part in node.values)
             messages.append((node.lineno, "".join(part.value if isinstance(part, ast.Constant) else "{}"

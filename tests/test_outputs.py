@@ -27,6 +27,7 @@ import pinocchio as pin
 import pytest
 from conftest import package_files
 from lxml import etree
+from sources import nodes, parsed
 
 from pincal import outputs
 from pincal.cli.commands import main
@@ -206,11 +207,11 @@ def _called(func: ast.expr) -> str:
     return func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
 
 
-def _inside(tree: ast.AST, context: str) -> set[int]:
-    """ids of the nodes in the body of every ``with context(...)`` of ``tree``."""
+def _inside(source: str, context: str) -> set[int]:
+    """ids of the nodes in the body of every ``with context(...)`` of ``source``."""
     return {
         id(sub)
-        for node in ast.walk(tree)
+        for node in nodes(source, ast.With)
         if isinstance(node, ast.With)
         and any(isinstance(i.context_expr, ast.Call) and _called(i.context_expr.func) == context for i in node.items)
         for child in node.body
@@ -223,9 +224,9 @@ _FUNCTIONS = (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)
 _WRAPPERS = {"Optional", "Union"}
 
 
-def _scopes(tree: ast.AST):
+def _scopes(source: str):
     """The module and every function, each as (scope, the nodes of its own body, not of nested functions)."""
-    for scope in [tree, *(n for n in ast.walk(tree) if isinstance(n, _FUNCTIONS))]:
+    for scope in [parsed(source), *nodes(source, *_FUNCTIONS)]:
         own, stack = [], list(ast.iter_child_nodes(scope))
         while stack:
             node = stack.pop()
@@ -235,10 +236,10 @@ def _scopes(tree: ast.AST):
         yield scope, own
 
 
-def _in_memory(tree: ast.AST) -> set[int]:
+def _in_memory(source: str) -> set[int]:
     """ids of saver calls whose target is a name bound, in the same scope, only to ``io.BytesIO()`` / ``StringIO()``."""
     found = set()
-    for _, own in _scopes(tree):
+    for _, own in _scopes(source):
         bound: dict[str, bool] = {}  # name -> every binding in the scope is an in-memory file
         for node in own:
             if isinstance(node, ast.Assign):
@@ -289,12 +290,12 @@ def _scope_types(scope: ast.AST, own: list) -> dict[str, set[str]]:
     return types
 
 
-def _atomic_calls(tree: ast.AST) -> set[int]:
+def _atomic_calls(source: str) -> set[int]:
     """ids of calls of an :data:`ATOMIC_SAVERS` method on a receiver every binding of which,
     in its scope (``self.X``: in its class), is annotated with that method's class."""
     attributes: dict[int, dict[str, set[str]]] = {}  # method -> the ``self.X`` of its class
-    scopes = list(_scopes(tree))
-    for cls in (n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)):
+    scopes = list(_scopes(source))
+    for cls in nodes(source, ast.ClassDef):
         methods = [n for n in cls.body if isinstance(n, _FUNCTIONS)]
         merged: dict[str, set[str]] = {}
         for scope, own in scopes:
@@ -323,11 +324,10 @@ def raw_writes(source: str, filename: str) -> list[str]:
     ``io.BytesIO()`` in its scope writes no file; a method of :data:`ATOMIC_SAVERS`
     called on a receiver annotated with its class writes through :mod:`pincal.outputs`.
     """
-    tree = ast.parse(source, filename=filename)
-    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)]
+    calls = nodes(source, ast.Call)  # the module parsed and walked once per process (tests/sources.py)
     if not calls:
         return []
-    scratch = _inside(tree, "TemporaryDirectory")
+    scratch = _inside(source, "TemporaryDirectory")
     guarded = None  # what writes atomically: worked out only for a module that calls a saver (most call none)
     bad = []
     for node in calls:
@@ -344,7 +344,7 @@ def raw_writes(source: str, filename: str) -> list[str]:
         elif ((method and name in _SAVERS)  # lxml's tree.write(path, xml_declaration=...) too
               or (name == "write" and any(k.arg in ("xml_declaration", "pretty_print") for k in node.keywords))):
             if guarded is None:
-                guarded = _inside(tree, "replacing") | _in_memory(tree) | _atomic_calls(tree)
+                guarded = _inside(source, "replacing") | _in_memory(source) | _atomic_calls(source)
             if id(node) not in guarded:
                 bad.append(f"{where}: {name} outside `with replacing(...)`")
     return bad

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from sources import parsed
 
 import pincal
 
@@ -40,7 +41,7 @@ def test_star_import_in_a_fresh_interpreter():
 
 def _statically_bound() -> tuple[dict[str, str], dict[str, str]]:
     """The names ``pincal/__init__.py`` imports, by module: at module level, and under ``if TYPE_CHECKING:``."""
-    tree = ast.parse(Path(pincal.__file__).read_text())
+    tree = parsed(Path(pincal.__file__).read_text())
     eager: dict[str, str] = {}
     checking: dict[str, str] = {}
     for node in tree.body:
