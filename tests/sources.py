@@ -33,11 +33,6 @@ def _walked(text: str) -> tuple[tuple[ast.AST, ...], dict[type, tuple[int, ...]]
     return order, {cls: tuple(found) for cls, found in positions.items()}
 
 
-def walk(text: str) -> tuple[ast.AST, ...]:
-    """``tuple(ast.walk(parsed(text)))``, walked once."""
-    return _walked(text)[0]
-
-
 @functools.cache
 def nodes(text: str, *classes: type) -> tuple[ast.AST, ...]:
     """The nodes of ``text``'s tree that are instances of ``classes`` (an abstract class such as ``ast.expr``

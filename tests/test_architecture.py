@@ -24,7 +24,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pincal"
 
 #: Bottom to top; the rooms of one layer are peers and never import each other.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("_version", "errors", "outputs", "progress", "palette"),
+    ("_version", "errors", "outputs", "progress", "palette", "figure_margins"),
     ("measurements", "robots", "datasets"),
     ("model",),
     ("simulation",),

@@ -18,10 +18,9 @@ import numpy as np
 from matplotlib import rc_context
 from matplotlib.backends.backend_svg import FigureCanvasSVG
 from matplotlib.figure import Figure
-from matplotlib.font_manager import FontProperties
 from matplotlib.patches import Patch
-from matplotlib.textpath import text_to_path
 
+from pincal.figure_margins import fixed_margins, label_width_in
 from pincal.fit.outliers import OUTLIER_THRESHOLD
 from pincal.palette import CALIBRATED, FLAG, NOMINAL, model_colour
 
@@ -67,27 +66,6 @@ def _svg_uri(fig: Figure) -> str:
     return "data:image/svg+xml;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
-def _label_width_in(labels: Sequence[str], size_pt: float) -> float:
-    """Width [in] of the widest of ``labels`` at ``size_pt`` in the style's font, from the font's metrics (no
-    draw). The page shows text as text in the reader's sans-serif, which is about as wide or narrower."""
-    font = FontProperties(family=_STYLE["font.family"], size=size_pt)
-    widths = [text_to_path.get_text_width_height_descent(label, font, ismath=False)[0] for label in labels]
-    return max(widths, default=0.0) / 72.0
-
-
-def _margins(width_in: float, height_in: float, left_in: float, gap_in: float = 0.0,
-             axes: int = 1, across: bool = False) -> dict[str, float]:
-    """Fixed margins [in] as a grid's fractions: ``left_in`` for the tick labels, room below for an axis label
-    under its tick labels, ``gap_in`` between ``axes`` panels side by side (``across``) or stacked. A layout
-    engine would fit them to the drawn text instead, at the cost of a second draw (two fifths of a page's
-    figure time)."""
-    left, right, bottom, top = left_in, 0.2, 0.5, 0.12
-    inner = (width_in - left - right) if across else (height_in - bottom - top)
-    panel = (inner - (axes - 1) * gap_in) / axes  # the mean panel's extent, which the gap is a fraction of
-    return {"left": left / width_in, "right": 1.0 - right / width_in, "bottom": bottom / height_in,
-            "top": 1.0 - top / height_in, ("wspace" if across else "hspace"): gap_in / panel}
-
-
 def png_uri(path: Path) -> str | None:
     """A PNG file as a ``data:`` URI, or None if ``path`` is not a readable PNG."""
     try:
@@ -113,8 +91,9 @@ def overview_figure(stages: Sequence[dict[str, Any]]) -> str | None:
         names = [f"{stage['set']}: {model[0]}" for stage in stages for model in stage["models"]]
         fig = Figure(figsize=size)
         # tick labels at the style's font size (matplotlib's "medium")
-        grid = _margins(*size, left_in=_label_width_in(names, _STYLE["font.size"]) + 0.15, gap_in=0.3,
-                        axes=2 if has_rotation else 1, across=True)
+        left = label_width_in(names, _STYLE["font.size"], _STYLE["font.family"]) + 0.25  # + the ticks, pads, hinting
+        # the gap: half of each panel's last x tick label, and a value printed past a bar's end
+        grid = fixed_margins(*size, left, gap_in=0.6, panels=2 if has_rotation else 1, across=True)
         axes = fig.subplots(1, 2 if has_rotation else 1, squeeze=False, gridspec_kw=grid)[0]
         for ax, column, unit in zip(axes, (1, 2), ("mm", "deg")):
             labels, values, colours, y = [], [], [], 0.0
@@ -233,8 +212,9 @@ def parameter_figure(rows: Sequence[dict[str, Any]]) -> str | None:
     with rc_context(_STYLE):
         size = (7.2, 0.9 + 0.2 * sum(heights) + 0.5 * len(units))
         fig = Figure(figsize=size)
-        grid = _margins(*size, left_in=_label_width_in([r["name"] for r in rows], 7.5) + 0.15, gap_in=0.45,
-                        axes=len(units))
+        names = [r["name"] for r in rows]
+        left = label_width_in(names, 7.5, _STYLE["font.family"]) + 0.25  # + the ticks, pads, hinting
+        grid = fixed_margins(*size, left, gap_in=0.45, panels=len(units))
         axes = fig.subplots(len(units), 1, squeeze=False, height_ratios=[h + 1.5 for h in heights],
                             gridspec_kw=grid)[:, 0]
         for ax, unit in zip(axes, units):

@@ -15,8 +15,8 @@ __all__ = ["environment"]
 @cache
 def environment() -> Environment:
     """The pages' template environment (:mod:`pincal.report.html`, :mod:`pincal.report.camera_figures`): one per
-    process, so each template is compiled once (compiling the report page's templates takes ~0.25 s of a core,
-    a fifth of a TIAGo diagnosis page's rendering); its loader still recompiles a template whose file changed."""
+    process, so each template is compiled once (compiling the report page's templates was a fifth of a TIAGo
+    diagnosis page's rendering); its loader still recompiles a template whose file changed."""
     env = Environment(loader=PackageLoader("pincal.report", "templates"),
                       autoescape=select_autoescape(enabled_extensions=("html", "j2"), default=True),
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True)
