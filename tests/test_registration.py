@@ -242,3 +242,30 @@ def test_registration_rejects_bad_values():
     reg = Registration(np.eye(3), np.zeros(3))
     with pytest.raises(ValueError):
         reg.rotation[0, 0] = 2.0  # stored arrays are read-only
+
+
+@SETTINGS
+@given(seed=seeds, scale=st.floats(1e-9, 3.0))
+def test_a_turned_registration_is_the_checked_one_bit_for_bit(seed, scale):
+    """The fit's registration at its parameters (eq 20) is what the checking constructor builds, bit for bit and
+    read-only; the input translation is copied, not kept."""
+    rng = np.random.default_rng(seed)
+    start = Registration(*random_transform(rng))
+    step, translation = scale * rng.normal(size=3), rng.uniform(-2.0, 2.0, 3)
+    turned = start.turned(step, translation)
+    checked = Registration(start.rotation @ pin.exp3(step), translation.copy())
+    assert turned.rotation.tobytes() == checked.rotation.tobytes()
+    assert turned.translation.tobytes() == checked.translation.tobytes()
+    translation[0] += 1.0
+    assert turned.translation.tobytes() == checked.translation.tobytes()
+    with pytest.raises(ValueError):
+        turned.rotation[0, 0] = 2.0
+    with pytest.raises(ValueError):
+        turned.translation[0] = 2.0
+
+
+@pytest.mark.parametrize("step, translation", [([np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]),
+                                               ([0.0, 0.0, 0.0], [0.0, np.inf, 0.0])])
+def test_a_turned_registration_refuses_what_the_constructor_refuses(step, translation):
+    with pytest.raises(CalibrationError, match="NaN or infinite"):
+        Registration(np.eye(3), np.zeros(3)).turned(np.array(step), np.array(translation))

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from pincal.errors import CalibrationError
@@ -47,6 +48,20 @@ class Registration:
         rot.flags.writeable = tr.flags.writeable = False
         object.__setattr__(self, "rotation", rot)
         object.__setattr__(self, "translation", tr)
+
+    def turned(self, step: np.ndarray, translation: np.ndarray) -> Registration:
+        """This registration's rotation turned by ``step`` φ [rad] (3,), Ω exp(φ), with ``translation`` τ [m] (3,):
+        a fit's registration at its parameter vector (eq 20). Ω is a proper rotation and exp(φ) of a finite φ is
+        one, so only finiteness is checked here, not :meth:`__post_init__`'s orthogonality and determinant: a fit
+        builds one per residual evaluation. A non-finite step or translation takes the checking path (its error)."""
+        if not (np.isfinite(step).all() and np.isfinite(translation).all()):
+            return Registration(self.rotation @ pin.exp3(step), translation)
+        rotation, translation = self.rotation @ pin.exp3(step), np.array(translation, dtype=float)
+        rotation.flags.writeable = translation.flags.writeable = False
+        registration = object.__new__(Registration)
+        object.__setattr__(registration, "rotation", rotation)
+        object.__setattr__(registration, "translation", translation)
+        return registration
 
     def apply_points(self, points: npt.ArrayLike) -> np.ndarray:
         """Map robot-base points (..., 3) [m] to sensor coordinates: Ω t + τ."""

@@ -179,11 +179,8 @@ class SensorResidual(BlockObjective):
         reg = self._registration_values(x)
         registrations = self.start.registrations
         if reg.size:
-            registrations = tuple(
-                Registration(rotation=start.rotation @ pin.exp3(reg[6 * s : 6 * s + 3]),
-                             translation=reg[6 * s + 3 : 6 * s + 6].copy())
-                for s, start in enumerate(registrations)
-            )
+            registrations = tuple(start.turned(reg[6 * s : 6 * s + 3], reg[6 * s + 3 : 6 * s + 6])
+                                  for s, start in enumerate(registrations))
         pts = x[self.blocks["points"]]
         if self.point_basis is not None:  # the start's points moved within the basis's span
             points = self.start.points + (self.point_basis @ pts).reshape(-1, 3)
