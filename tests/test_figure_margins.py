@@ -4,6 +4,7 @@ as pincal writes them and tick labels of seven characters."""
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -71,3 +72,40 @@ def test_the_diagnose_plots_keep_their_labels_inside(drawn, tmp_path, shift):
     assert len(drawn) == 2
     for fig in drawn:
         _assert_inside_and_apart(fig)
+
+
+
+@pytest.fixture(scope="module")
+def study():
+    """A study small enough for half a second whose summary draws every figure (no noise limit: its tasks take
+    ~1 s each)."""
+    from pincal.study.protocol import StudyConfig
+    from pincal.study.run import run_study
+
+    return run_study(StudyConfig(deviations=("large",), levels=2, repeats=1, restarts=0, limit_pose_sets=0),
+                     workers=1)
+
+
+def _scaled(result, factor):
+    """``result`` with every error of its summary (the y values of the figures) times ``factor``."""
+    summary = [{key: value * factor if key.startswith(("pos_", "rot_")) else value for key, value in row.items()}
+               for row in result.summary]
+    return dataclasses.replace(result, summary=summary)
+
+
+# Every study figure is laid out by one function (pincal.study.figures._fix_margins); these cover what it sizes,
+# at ~0.4 s a figure: two-line titles (figure 2), the gap between rows (figure 5's 2 × 2 grid), titles wider than
+# their panels and, scaled to micrometres, tick labels of seven characters (figure 6: 0.00025 mm).
+@pytest.mark.parametrize("name, factor", [("figure2", 1.0), ("figure5", 1.0), ("figure6", 4e-3)],
+                         ids=["two-line titles", "two rows", "wide titles, seven-character ticks"])
+def test_the_study_figures_keep_their_labels_inside_and_their_panels_apart(study, monkeypatch, tmp_path, name,
+                                                                           factor):
+    from pincal.study import figures as study_figures
+
+    kept = []
+    monkeypatch.setattr(study_figures, "_save", lambda fig, path: study_figures._fix_margins(fig) or kept.append(fig))
+    getattr(study_figures, name)(_scaled(study, factor), tmp_path / name)
+    labels = [label.get_text() for ax in kept[0].axes for label in ax.get_yticklabels()]
+    if factor < 1.0:
+        assert max(len(label) for label in labels) >= 7, labels
+    _assert_inside_and_apart(kept[0])
