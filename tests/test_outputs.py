@@ -1,8 +1,9 @@
 """Outputs survive faults: every file pincal writes is replaced atomically.
 
 Unit tests of :mod:`pincal.outputs`, a scan that no module of pincal writes a
-file around it, and kill tests: ``pincal calibrate`` and ``pincal study`` run as
-subprocesses and are SIGKILLed at seeded random moments; after every kill each
+file around it, and kill tests: ``pincal calibrate`` and ``pincal study`` run in
+processes of their own (forked by a launcher that loaded pincal once, :data:`LAUNCHER`)
+and are SIGKILLed at seeded random moments; after every kill each
 output present must be whole (it parses and has the structure of a complete
 run's file) and every other file must be a temporary one that no output name
 or pattern can match. When the kill lands is machine dependent; what is
@@ -15,6 +16,7 @@ import ast
 import csv
 import json
 import os
+import select
 import signal
 import stat
 import subprocess
@@ -41,6 +43,8 @@ PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # empty IEND chunk with its CRC
 OUTPUT_SUFFIXES = (".urdf", ".json", ".csv", ".md", ".png")
 #: A safety net against a hung subprocess, never an assertion about speed.
 HANG_S = 300.0
+#: The environment of pincal's processes: one BLAS thread (as ``main`` sets it), figures without a display.
+ENV = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
 
 
 # --- the writer ----------------------------------------------------------------
@@ -445,16 +449,77 @@ def _snapshot(folder: Path) -> dict[str, tuple[int, int, int]]:
     return found
 
 
-#: How a kill round starts pincal: ``python -m pincal ARGV``.
-PINCAL = ("-m", "pincal")
+#: A kill round's launcher: a clean ``python -c`` process (started by the test, so it has none of pytest's
+#: threads) that runs the round's SETUP (argv[1]) once, then, per line ``[ARGV, CWD]`` read on stdin, forks a
+#: child that runs ``main(ARGV)`` in CWD with stdout to /dev/null and stderr to ``CWD/stderr.log``, as ``pincal
+#: ARGV`` run there would, and ends with ``os._exit``; it replies the child's pid, then its exit code as
+#: :attr:`subprocess.Popen.returncode` gives it (-9: SIGKILLed). A run then costs its own work: a fresh ``python
+#: -m pincal calibrate`` of the round spends ~1.5 s of a core, ~0.2 s of it on the fit and the writes that the
+#: kills aim at, the rest importing numpy, scipy, Pinocchio and pincal. The launcher forks only while it
+#: has one thread (a lock or a thread's state copied half-way would make the child another program), and it
+#: keeps each child a zombie until the next line, so a SIGKILL sent after the child ended reaches no other process.
+LAUNCHER = ("-c", r"""
+import json, os, sys, threading, traceback
+
+replies = os.fdopen(os.dup(1), "w", buffering=1)  # the protocol's channel; what the setup prints goes to the log
+os.dup2(2, 1)
+exec(sys.argv[1])
+from pincal.cli.commands import main
+
+
+def threads():
+    return len(os.listdir("/proc/self/task")) if os.path.isdir("/proc/self/task") else threading.active_count()
+
+
+def run(argv, cwd):
+    code = 1
+    try:
+        replies.close()
+        os.chdir(cwd)
+        null, log = os.open(os.devnull, os.O_RDWR), os.open("stderr.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        os.dup2(null, 0)
+        os.dup2(null, 1)
+        os.dup2(log, 2)
+        code = main(argv)
+    except SystemExit as stop:
+        code = stop.code if isinstance(stop.code, int) else 1
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+
+replies.write("ready\n")
+pid = None
+for line in sys.stdin:
+    if pid is not None:
+        os.waitpid(pid, 0)
+    argv, cwd = json.loads(line)
+    assert threads() == 1, f"{threads()} threads in the launcher: no fork"
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:
+        run(argv, cwd)
+    replies.write(f"{pid}\n")
+    ended = os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT)  # reaped at the next line
+    replies.write(f"{-ended.si_status if ended.si_code in (os.CLD_KILLED, os.CLD_DUMPED) else ended.si_status}\n")
+if pid is not None:
+    os.waitpid(pid, 0)
+""")
+#: What ``pincal calibrate`` loads once its arguments are valid: loaded by the launcher, not by each run.
+CALIBRATE_SETUP = "import pincal.cli.progress, pincal.paper.methods, pincal.workflows.calibration"
 #: ``pincal study`` whose figures are small ones written through the study's own writer
 #: (:func:`pincal.study.figures._save`), each held open 0.2 s as a real figure's rendering holds it: the same
 #: files written the same way, at less than half a run's CPU (the seven real figures take ~3.7 s of a core, and
-#: tests/test_study_processes.py and tests/test_study.py draw them).
-QUICK_FIGURES = ("-c", """
-import sys, time
+#: tests/test_study_processes.py and tests/test_study.py draw them); with what the study loads.
+QUICK_FIGURES = """
+import time
+import matplotlib.backends.backend_agg
 import matplotlib.pyplot as plt
-from pincal.cli.commands import main
+import pincal.cli.progress, pincal.study.run
 from pincal.study import figures
 
 def quick(result, path):
@@ -467,24 +532,77 @@ def quick(result, path):
     return figures._save(fig, path)
 
 figures.FIGURES = {name: quick for name in figures.FIGURES}
-sys.exit(main(sys.argv[1:]))
-""")
+"""
 
 
-def _start(argv: list[str], cwd: Path, launcher: tuple[str, ...] = PINCAL) -> subprocess.Popen:
-    """``pincal ARGV`` in ``cwd`` (started by ``python LAUNCHER``); its stderr goes to ``cwd/stderr.log`` (a pipe
-    nobody reads could block it)."""
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-    with open(cwd / "stderr.log", "wb") as log:
-        return subprocess.Popen([sys.executable, *launcher, *argv], cwd=cwd, env=env,
-                                stdout=subprocess.DEVNULL, stderr=log)
+class Launcher:
+    """A started :data:`LAUNCHER` (its stderr to ``log``); :meth:`close` ends it and the run it forked last."""
+
+    def __init__(self, setup: str, log: Path) -> None:
+        self.log = log
+        with open(log, "wb") as handle:  # a pipe nobody reads could block it
+            self.proc = subprocess.Popen([sys.executable, *LAUNCHER, setup], env=ENV, stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, stderr=handle, bufsize=0)
+        self.last: Run | None = None
+        assert self.reply(HANG_S) == "ready", "the launcher did not start"
+
+    def reply(self, timeout_s: float) -> str | None:
+        """The launcher's next line, or None if none came within ``timeout_s``."""
+        if not select.select([self.proc.stdout], [], [], timeout_s)[0]:
+            return None
+        line = self.proc.stdout.readline()
+        assert line, f"the launcher ended: {self.log.read_text(encoding='utf-8', errors='replace')}"
+        return line.decode().strip()
+
+    def close(self) -> None:
+        try:
+            if self.last is not None and self.last.poll() is None:
+                self.last.kill()
+            self.proc.stdin.close()
+            self.proc.wait(timeout=HANG_S)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait()
+
+
+class Run:
+    """``pincal ARGV`` in ``cwd``, forked by ``launcher``: what a round uses of :class:`subprocess.Popen`."""
+
+    def __init__(self, launcher: Launcher, argv: list[str], cwd: Path) -> None:
+        self.launcher, self.returncode = launcher, None
+        launcher.proc.stdin.write(f"{json.dumps([argv, str(cwd)])}\n".encode())
+        pid = launcher.reply(HANG_S)
+        assert pid is not None, "the launcher did not fork"
+        self.pid = int(pid)
+        launcher.last = self
+
+    def wait(self, timeout: float = HANG_S) -> int:
+        if self.returncode is None:
+            code = self.launcher.reply(timeout)
+            if code is None:
+                raise subprocess.TimeoutExpired(f"pincal (pid {self.pid})", timeout)
+            self.returncode = int(code)
+        return self.returncode
+
+    def poll(self) -> int | None:
+        try:
+            return self.wait(0.0)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def send_signal(self, signum: int) -> None:
+        os.kill(self.pid, signum)  # the pid is this run's, a zombie once it ended, until the launcher's next run
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
 
 
 def _stderr(cwd: Path) -> str:
     return (cwd / "stderr.log").read_text(encoding="utf-8", errors="replace")
 
 
-def _wait_for_first_write(proc: subprocess.Popen, folder: Path, before: dict) -> None:
+def _wait_for_first_write(proc: Run, folder: Path, before: dict) -> None:
     """Return once ``folder`` changes (a file created, renamed or grown) or ``proc`` has exited."""
     deadline = time.monotonic() + HANG_S
     while proc.poll() is None and _snapshot(folder) == before:
@@ -492,11 +610,11 @@ def _wait_for_first_write(proc: subprocess.Popen, folder: Path, before: dict) ->
         time.sleep(0.002)
 
 
-def _reference_run(argv: list[str], cwd: Path, folder: Path, launcher: tuple[str, ...]) -> tuple[float, float]:
+def _reference_run(argv: list[str], cwd: Path, folder: Path, launcher: Launcher) -> tuple[float, float]:
     """Run to completion; return (seconds to the first write, seconds to the exit) to aim the kills."""
     before = _snapshot(folder)
     start = time.monotonic()
-    proc = _start(argv, cwd, launcher)
+    proc = Run(launcher, argv, cwd)
     _wait_for_first_write(proc, folder, before)
     first = time.monotonic() - start
     proc.wait(timeout=HANG_S)
@@ -505,11 +623,11 @@ def _reference_run(argv: list[str], cwd: Path, folder: Path, launcher: tuple[str
 
 
 def _killed_run(argv: list[str], cwd: Path, folder: Path, after_first_write: bool, delay_s: float,
-                launcher: tuple[str, ...]) -> tuple[int, bool]:
+                launcher: Launcher) -> tuple[int, bool]:
     """Kill ``pincal ARGV`` after ``delay_s`` (from its first write, or from its start); returns its exit
     code (-SIGKILL, or 0 if it finished first) and whether it had changed ``folder`` by then."""
     before = _snapshot(folder)
-    proc = _start(argv, cwd, launcher)
+    proc = Run(launcher, argv, cwd)
     try:
         if after_first_write:
             _wait_for_first_write(proc, folder, before)
@@ -568,7 +686,18 @@ def _check_outputs(folder: Path, reference: dict[str, tuple], what: str) -> list
 
 
 def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: int, anywhere: int,
-                launcher: tuple[str, ...] = PINCAL) -> None:
+                setup: str) -> dict[str, tuple]:
+    """Kill ``pincal ARGV`` ``in_writes`` times after its first write and ``anywhere`` times after its start
+    (forked by a launcher that ran ``setup``); the structure of its complete outputs."""
+    launcher = Launcher(setup, cwd / "launcher.log")
+    try:
+        return _aimed_kills(argv, cwd, folder, seed, in_writes, anywhere, launcher)
+    finally:
+        launcher.close()
+
+
+def _aimed_kills(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: int, anywhere: int,
+                 launcher: Launcher) -> dict[str, tuple]:
     first_write_s, total_s = _reference_run(argv, cwd, folder, launcher)
     reference = {name: whole_file(folder / name) for name in os.listdir(folder)}
     assert reference and not any(is_temporary(n) for n in reference)
@@ -587,6 +716,7 @@ def _kill_round(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes: 
     # 3), and the seeds below draw at least two of them within 0.6 of the span: those miss only if a run
     # writes over 1.6 times as fast as its reference run
     assert landed >= 1, f"no kill landed after a write began ({len(kinds)} tried)"
+    return reference
 
 
 @pytest.fixture(scope="module")
@@ -603,15 +733,22 @@ def test_killed_calibrate_leaves_old_or_whole_outputs(simulated_kuka, kuka_urdf)
     argv = ["calibrate", str(kuka_urdf), "sim/calibration.csv", "--method", "2",
             "--tool", "0.045,-0.043,0.118,0.12,-0.25,0.4", "--tool-parent", "lwr_flange",
             "--out", "calibrated/kuka_calibrated.urdf", "--report", "calibrated/REPORT.json"]
-    _kill_round(argv, simulated_kuka, out, seed=11_3, in_writes=4, anywhere=2)
+    reference = _kill_round(argv, simulated_kuka, out, seed=11_3, in_writes=4, anywhere=2, setup=CALIBRATE_SETUP)
+    # the console script's own way in (python -m pincal: a fresh interpreter, console(), its exit) ends 0 and
+    # replaces the outputs the forked runs left by the same whole files
+    done = subprocess.run([sys.executable, "-m", "pincal", *argv], cwd=simulated_kuka, env=ENV, capture_output=True,
+                          timeout=HANG_S)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    assert set(reference) <= set(os.listdir(out))
+    _check_outputs(out, reference, "python -m pincal")
 
 
 def test_killed_study_leaves_old_or_whole_outputs(tmp_path):
     out = tmp_path / "study"
     out.mkdir()
     # no noise limit and no restart cases (--limit-pose-sets 0, --restarts 0): the same 12 files written, a
-    # tenth less work for each run; three kills aimed inside the writes (each run costs a study: ~3 s of a core
-    # with QUICK_FIGURES, whose seven 0.2 s renderings keep the write span over a second)
+    # tenth less work for each run; three kills aimed inside the writes (each run costs the study's own work, ~1 s
+    # of a core with QUICK_FIGURES, whose seven 0.2 s renderings keep the write span over a second)
     argv = ["study", "--reps", "1", "--levels", "2", "--restarts", "0", "--workers", "1", "--limit-pose-sets", "0",
             "--out", str(out)]
-    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=3, anywhere=1, launcher=QUICK_FIGURES)
+    _kill_round(argv, tmp_path, out, seed=11_3_2, in_writes=3, anywhere=1, setup=QUICK_FIGURES)
