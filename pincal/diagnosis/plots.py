@@ -15,14 +15,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from matplotlib import rcParams
-from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.font_manager import FontProperties
 
 from pincal.diagnosis.diagnose import Diagnosis
-from pincal.figure_margins import BOTTOM_10PT_IN, TITLE_IN, fixed_margins, label_width_in
+from pincal.figure_margins import BOTTOM_10PT_IN, TITLE_IN, fixed_margins, y_label_room_in
 from pincal.model.effects import Effect
 from pincal.outputs import replacing
 from pincal.palette import CALIBRATED, WITH_EFFECTS
@@ -82,7 +79,7 @@ def plot_diagnosis(diagnosis: Diagnosis, out_dir: str | Path) -> list[Path]:
         ax.set_title(f"step {number}: {step.effect.label} (ΔBIC {step.delta_bic:.0f})")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-        fig.subplots_adjust(**fixed_margins(6.4, 4.2, _y_label_room(ax), top_in=TITLE_IN, bottom_in=BOTTOM_10PT_IN))
+        fig.subplots_adjust(**fixed_margins(6.4, 4.2, y_label_room_in(ax), top_in=TITLE_IN, bottom_in=BOTTOM_10PT_IN))
         path = out / f"diagnose_step{number}_{step.effect.label.replace(':', '_')}.png"
         _save(fig, path)
         paths.append(path)
@@ -114,19 +111,12 @@ def _error_distributions(diagnosis: Diagnosis, out: Path) -> Path:
         ax.set_title(title)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    room = max(_y_label_room(ax) for ax in axes[0])  # each panel's y labels: the left margin, and between panels
+    room = max(y_label_room_in(ax) for ax in axes[0])  # each panel's y labels: the left margin, and between panels
     fig.subplots_adjust(**fixed_margins(width, 4.0, room, gap_in=room + 0.1, panels=len(panels), across=True,
                                         top_in=TITLE_IN, bottom_in=BOTTOM_10PT_IN))
     path = out / "diagnose_errors_before_after.png"
     _save(fig, path)
     return path
-
-
-def _y_label_room(ax: Axes) -> float:
-    """Room [in] left of ``ax`` for its y tick labels as they will be drawn (formatted now, without a draw), the
-    ticks and pads (7 pt), one line of axis label and the padding a tight layout leaves (0.45 in in all)."""
-    labels = ax.yaxis.get_major_formatter().format_ticks(ax.get_yticks().tolist())
-    return label_width_in(labels, FontProperties(size=rcParams["ytick.labelsize"]).get_size_in_points()) + 0.45
 
 
 def _save(fig: Figure, path: Path) -> None:
