@@ -513,7 +513,7 @@ if pid is not None:
 CALIBRATE_SETUP = "import pincal.cli.progress, pincal.paper.methods, pincal.workflows.calibration"
 #: ``pincal study`` whose figures are small ones written through the study's own writer
 #: (:func:`pincal.study.figures._save`), each held open 0.2 s as a real figure's rendering holds it: the same
-#: files written the same way, at less than half a run's CPU (the seven real figures take ~3.7 s of a core, and
+#: files written the same way, at less than half a run's CPU (the seven real figures take ~2.5 s of a core, and
 #: tests/test_study_processes.py and tests/test_study.py draw them); with what the study loads.
 QUICK_FIGURES = """
 import time
