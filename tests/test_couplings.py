@@ -9,7 +9,9 @@ coordinates adding ~10 %.
 
 from __future__ import annotations
 
+import io
 import json
+from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
 from pathlib import Path
 
@@ -86,7 +88,27 @@ def _held_out_mm(tmp_path, urdf, report, validation) -> float:
     return json.loads(out.read_text(encoding="utf-8"))["position"]["rms_mm"]
 
 
-def test_diagnose_corrects_it_itself_and_the_flag_brings_the_model_to_the_noise(horizontal_j3, tmp_path, capsys):
+@pytest.fixture(scope="module")
+def coupled(horizontal_j3, tmp_path_factory):
+    """calibrate --coupling A3=-1*A2 on the cell's calibration rows, and evaluate of its URDF and report on
+    the held-out rows (once for the module: the tests that judge the flag's model read the same run): the
+    REPORT.json, evaluate's --json document and what evaluate printed."""
+    urdf, calibration, validation = horizontal_j3
+    folder = tmp_path_factory.mktemp("coupled")
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):  # a module fixture has no capsys
+        assert main(["calibrate", str(urdf), str(calibration), "--tip-link", "flange", "--quiet", "--coupling",
+                     "A3=-1*A2", "--out", str(folder / "coupled.urdf"), "--report", str(folder / "coupled.json")]) in (
+            0, 3), err.getvalue()
+        out.seek(0), out.truncate()
+        assert main(["evaluate", str(folder / "coupled.urdf"), str(folder / "coupled.json"), str(validation),
+                     "--json", str(folder / "e.json")]) == 0, err.getvalue()
+    return (json.loads((folder / "coupled.json").read_text(encoding="utf-8")),
+            json.loads((folder / "e.json").read_text(encoding="utf-8")), out.getvalue())
+
+
+def test_diagnose_corrects_it_itself_and_the_flag_brings_the_model_to_the_noise(horizontal_j3, coupled, tmp_path,
+                                                                                capsys):
     """diagnose finds A3 read against A2, corrects the readings by the convention exactly, calibrates the
     geometry again on them and goes on: REPORT.json records it under couplings (as --coupling would), and
     evaluate on the written report is at the noise; calibrate with the flag is too, without it far off."""
@@ -108,14 +130,13 @@ def test_diagnose_corrects_it_itself_and_the_flag_brings_the_model_to_the_noise(
     assert main(["report", str(tmp_path / "d" / "REPORT.json"), "--out", str(tmp_path / "d.html")]) == 0
     assert "A3 is read against A2" in (tmp_path / "d.html").read_text(encoding="utf-8")  # the page says it
     # plain: the readings as they are miss by ~1 m, a model no URDF is written of unless --force
-    for flags, name in ((["--force"], "plain"), (["--coupling", "A3=-1*A2"], "coupled")):
-        assert main(["calibrate", str(urdf), str(calibration), *common, *flags, "--out", str(tmp_path / f"{name}.urdf"),
-                     "--report", str(tmp_path / f"{name}.json")]) in (0, 3)
-    report = json.loads((tmp_path / "coupled.json").read_text(encoding="utf-8"))
+    assert main(["calibrate", str(urdf), str(calibration), *common, "--force", "--out", str(tmp_path / "plain.urdf"),
+                 "--report", str(tmp_path / "plain.json")]) in (0, 3)
+    report, evaluated, _ = coupled  # with the flag (the module's one run of it)
     assert report["couplings"] == [{"joint": "A3", "factor": -1.0, "driver": "A2"}]
     assert "couplings" not in json.loads((tmp_path / "plain.json").read_text(encoding="utf-8"))
     capsys.readouterr()
-    assert _held_out_mm(tmp_path, tmp_path / "coupled.urdf", tmp_path / "coupled.json", validation) < BOUND_MM
+    assert evaluated["position"]["rms_mm"] < BOUND_MM
     assert _held_out_mm(tmp_path, tmp_path / "plain.urdf", tmp_path / "plain.json", validation) > 10.0  # mm
 
 
@@ -195,7 +216,7 @@ def test_plan_reads_and_writes_the_controllers_joint_space(horizontal_j3, tmp_pa
     assert np.allclose(rows[0][:, 2], rows[1][:, 2] - rows[1][:, 1]) and np.allclose(rows[0][:, :2], rows[1][:, :2])
 
 
-def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, tmp_path, capsys):
+def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, coupled):
     """Evaluate's before -> after. Before: the URDF the calibration started from
     (REPORT.json sources.urdf), its registration and target fitted to the evaluated rows — recomputed
     here with the library; after: the evaluated error. The readings corrected first (the report's coupling)."""
@@ -204,19 +225,17 @@ def test_evaluate_says_before_and_after_on_the_rows_it_evaluates(horizontal_j3, 
     from pincal.fit.chain_calibration import calibrate_chain
     from pincal.measurements.csv_v1 import read_measurements
 
-    urdf, calibration, validation = horizontal_j3
-    assert main(["calibrate", str(urdf), str(calibration), "--tip-link", "flange", "--coupling", "A3=-1*A2",
-                 "--quiet", "--out", str(tmp_path / "c.urdf"), "--report", str(tmp_path / "c.json")]) in (0, 3)
-    capsys.readouterr()
-    after = _held_out_mm(tmp_path, tmp_path / "c.urdf", tmp_path / "c.json", validation)
-    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("before -> after, these rows"))
+    urdf, _, validation = horizontal_j3
+    _, evaluated, printed = coupled  # calibrate --coupling A3=-1*A2, evaluate on the held-out rows
+    after = evaluated["position"]["rms_mm"]
+    line = next(x for x in printed.splitlines() if x.startswith("before -> after, these rows"))
     before_mm, after_mm = map(float, re.findall(r"([0-9.]+) -> ([0-9.]+) mm", line)[0])
     chain = KinematicChain.from_urdf(urdf, "flange")
     rows = apply_couplings(read_measurements(validation, chain.joint_specs)[0], [parse_coupling("A3=-1*A2")])
     rows = replace(rows, roles=np.full(rows.n_rows, "calibration", dtype=object))
     assert before_mm == pytest.approx(1000 * calibrate_chain(chain, rows, "registration").rms_m, abs=6e-4)
     assert after_mm == pytest.approx(after, abs=6e-4) and before_mm > 10 * after_mm  # printed to 3 decimals
-    before = json.loads((tmp_path / "e.json").read_text(encoding="utf-8"))["before"]  # --json: the same before
+    before = evaluated["before"]  # --json: the same before
     assert before["position_rms_mm"] == pytest.approx(before_mm, abs=6e-4) and before["urdf"] == str(urdf)
     assert before["registration"] == "fitted to the evaluated rows"
 

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import csv
 import html
+import io
 import json
+from contextlib import redirect_stderr
 
 import numpy as np
 import pytest
@@ -39,14 +41,23 @@ def _not_extrapolated_notes(err: str) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def diagnosed(tmp_path_factory, kuka_urdf):
-    """diagnose without --validation on a simulated session with a drift: the report adopts it."""
+def simulated(tmp_path_factory):
+    """The simulated session with a drift (``sim/``) and its true tool as --tool takes it. Apart from
+    ``diagnosed``, so that a worker given only the tests that diagnose the session their own way (when a
+    parallel run splits this module) does not also run the diagnose they do not read."""
     root = tmp_path_factory.mktemp("drift")
     sim = root / "sim"
     assert main(["simulate", "--out", str(sim), "--deviations", "small", "--sigma-pos", str(SIGMA_MM),
                  "--sigma-rot", "0.02", "--seed", "2", "--effect", "drift:" + ":".join(map(str, DRIFT))]) == 0
     truth = json.loads((sim / "truth.json").read_text())
-    tool = ",".join(repr(v) for v in truth["tool"]["xyz_m"] + truth["tool"]["rpy_rad"])
+    return root, ",".join(repr(v) for v in truth["tool"]["xyz_m"] + truth["tool"]["rpy_rad"])
+
+
+@pytest.fixture(scope="module")
+def diagnosed(simulated, kuka_urdf):
+    """diagnose without --validation on a simulated session with a drift: the report adopts it."""
+    root, tool = simulated
+    sim = root / "sim"
     urdf, report = root / "k.urdf", root / "REPORT.json"
     assert main(["diagnose", str(kuka_urdf), str(sim / "calibration.csv"), "--tip-link", KUKA_FLANGE_LINK,
                  f"--tool={tool}", "--out", str(urdf), "--report", str(report), "--plots", str(root / "plots"),
@@ -86,13 +97,28 @@ def _evaluate(root, urdf, report, data, capsys, name):
     return json.loads(out.read_text()), err
 
 
-def test_another_days_rows_are_not_extrapolated_to(diagnosed, capsys):
+@pytest.fixture(scope="module")
+def nextday(diagnosed):
+    """evaluate on another day's rows, once for the module (several tests read the same run): of the diagnosed
+    report (--json, its stderr and --html), and of the same model without its drift term (--json)."""
+    root, urdf, report, _ = diagnosed
+    err = io.StringIO()
+    with redirect_stderr(err):  # a module fixture has no capsys
+        assert main(["evaluate", str(urdf), str(report), str(root / "nextday.csv"), "--json",
+                     str(root / "nextday.json"), "--html", str(root / "nextday.html")]) == 0, err.getvalue()
+        held = err.getvalue()
+        assert main(["evaluate", str(urdf), str(root / "no_drift.json"), str(root / "nextday.csv"), "--json",
+                     str(root / "nextday_plain.json")]) == 0, err.getvalue()
+    return (json.loads((root / "nextday.json").read_text()), held, root / "nextday.html",
+            json.loads((root / "nextday_plain.json").read_text()))
+
+
+def test_another_days_rows_are_not_extrapolated_to(diagnosed, nextday):
     """Rows a day after the fitted session: no drift term (a one-session fit: the drift held at
     the session's mean time), one note on stderr, ``drift`` in --json — not the 32 mm of a
     drift extrapolated over a day."""
-    root, urdf, report, _ = diagnosed
-    shifted, err = _evaluate(root, urdf, report, root / "nextday.csv", capsys, "nextday")
-    plain, _ = _evaluate(root, urdf, root / "no_drift.json", root / "nextday.csv", capsys, "nextday_plain")
+    root = diagnosed[0]
+    shifted, err, _, plain = nextday
     # the rule itself: exactly the model without its drift term (rounding only)
     assert shifted["position"]["rms_mm"] == pytest.approx(plain["position"]["rms_mm"], rel=1e-9)
     # physical bound: these rows truly drifted within the session (first <= t <= last), so the model
@@ -117,12 +143,8 @@ def test_rows_just_after_the_span_are_held_too(diagnosed, capsys):
     assert at_last["drift"]["rows_applied"] == 50
 
 
-def test_the_html_page_says_so(diagnosed, capsys):
-    root, urdf, report, _ = diagnosed
-    page = root / "nextday.html"
-    assert main(["evaluate", str(urdf), str(report), str(root / "nextday.csv"), "--html", str(page)]) == 0
-    capsys.readouterr()
-    text = html.unescape(page.read_text())
+def test_the_html_page_says_so(nextday):
+    text = html.unescape(nextday[2].read_text())
     assert "drift not extrapolated: 50 row(s) outside the time span" in text
     assert AT_MEAN_TIME in text and AT_SPAN_END not in text  # one session, its registration from the report
 
@@ -148,14 +170,14 @@ def test_diagnose_records_the_fitted_span(diagnosed):
     assert span["mean"] == pytest.approx(doc["time_reference_s"], rel=1e-12)  # one session: t̄ is its mean
 
 
-def test_a_report_without_spans_never_extrapolates(diagnosed, capsys):
+def test_a_report_without_spans_never_extrapolates(diagnosed, nextday, capsys):
     """A report written before time_spans_s: no row is known to be inside; none gets the drift, and
     the note says to rerun diagnose."""
     root, urdf, _, doc = diagnosed
     old = root / "old_report.json"
     old.write_text(json.dumps({k: v for k, v in doc.items() if k != "time_spans_s"}))
     got, err = _evaluate(root, urdf, old, root / "nextday.csv", capsys, "old")
-    plain, _ = _evaluate(root, urdf, root / "no_drift.json", root / "nextday.csv", capsys, "old_plain")
+    plain = nextday[3]  # the model without its drift term on the same rows
     assert got["position"]["rms_mm"] == pytest.approx(plain["position"]["rms_mm"], rel=1e-9)
     assert got["drift"]["rows_held"] == 50 and got["drift"]["time_spans_s"] is None
     assert "rerun diagnose" in err
@@ -215,15 +237,13 @@ def test_a_session_between_two_spans_is_held_in_one_of_them():
 
 
 @pytest.fixture(scope="module")
-def two_sessions(diagnosed, kuka_urdf):
+def two_sessions(simulated, kuka_urdf):
     """diagnose on two sessions a day apart (the simulated session and a copy one day later):
     spans 'calibration' [0, 4290] s and 'calB' [86400, 90690] s; ``between.csv`` the validation
     rows re-timed to 40000 / 50000 s alternately: one session between the two spans."""
-    root = diagnosed[0]
+    root, tool = simulated
     sim = root / "sim"
     _retimed(sim / "calibration.csv", root / "calB.csv", lambda t: t + DAY_S)
-    truth = json.loads((sim / "truth.json").read_text())
-    tool = ",".join(repr(v) for v in truth["tool"]["xyz_m"] + truth["tool"]["rpy_rad"])
     urdf, report = root / "k2.urdf", root / "R2.json"
     assert main(["diagnose", str(kuka_urdf), str(sim / "calibration.csv"), str(root / "calB.csv"),
                  "--tip-link", KUKA_FLANGE_LINK, f"--tool={tool}", "--out", str(urdf), "--report", str(report),
@@ -257,14 +277,14 @@ def test_a_reestimated_session_between_two_spans_is_not_split(two_sessions, caps
     assert abs(got["held"]["position"]["rms_mm"] - got["plain"]["position"]["rms_mm"]) <= 0.1 * SIGMA_MM, got
 
 
-def test_a_report_without_sessions_holds_at_the_mean(diagnosed, capsys):
+def test_a_report_without_sessions_holds_at_the_mean(diagnosed, nextday, capsys):
     """A report without ``sessions``: its one registration is not a re-estimated one; another day's
     rows are held at the session's mean time (no drift term), not at the span's end."""
     root, urdf, _, doc = diagnosed
     lone = root / "no_sessions.json"
     lone.write_text(json.dumps({k: v for k, v in doc.items() if k != "sessions"}))
     got, _ = _evaluate(root, urdf, lone, root / "nextday.csv", capsys, "lone")
-    plain, _ = _evaluate(root, urdf, root / "no_drift.json", root / "nextday.csv", capsys, "lone_plain")
+    plain = nextday[3]  # the model without its drift term on the same rows
     assert got["sessions"][0]["registration_source"] == "the report's registration"
     assert got["position"]["rms_mm"] == pytest.approx(plain["position"]["rms_mm"], rel=1e-9)
 
@@ -295,17 +315,15 @@ def test_the_html_page_says_where_a_reestimated_session_holds_it(diagnosed, caps
     assert f"are evaluated with it {AT_SPAN_END}" in text and AT_MEAN_TIME not in text
 
 
-def test_diagnose_holds_the_heldout_drift_as_evaluate_does(diagnosed, kuka_urdf, capsys):
+def test_diagnose_holds_the_heldout_drift_as_evaluate_does(simulated, kuka_urdf, capsys):
     """diagnose --validation on the session's validation rows, every other one re-timed a day
     later: its held-out rows take the drift by evaluate's rule (inside the span as fitted,
     outside held at the session's mean time), so the drift is adopted (extrapolated, the later
     rows would be ~32 mm off and veto it) and diagnose's held-out errors are evaluate's."""
-    root = diagnosed[0]
+    root, tool = simulated
     sim = root / "sim"
     later = iter([0.0, DAY_S] * 25)
     _retimed(sim / "validation.csv", root / "mixed.csv", lambda t: t + next(later))
-    truth = json.loads((sim / "truth.json").read_text())
-    tool = ",".join(repr(v) for v in truth["tool"]["xyz_m"] + truth["tool"]["rpy_rad"])
     urdf, report = root / "km.urdf", root / "RM.json"
     assert main(["diagnose", str(kuka_urdf), str(sim / "calibration.csv"), "--validation", str(root / "mixed.csv"),
                  "--tip-link", KUKA_FLANGE_LINK, f"--tool={tool}", "--out", str(urdf), "--report", str(report),

@@ -67,6 +67,14 @@ def _line(urdf, with_rotation: bool, tool_known: bool, kind: str = "line", seed:
     return chain, rows, test
 
 
+@functools.cache
+def _calibrated(urdf, with_rotation: bool, tool_known: bool, kind: str = "line"):
+    """``_line``'s rows calibrated at level full under the prior, once per cell: the tests that hold, predict
+    and move the same rows share this one fit (a frozen ChainCalibration, read only)."""
+    chain, rows, _ = _line(urdf, with_rotation, tool_known, kind)
+    return calibrate_chain(chain, rows, "full", ChainFitOptions(tool_known=tool_known, selection="prior"))
+
+
 def _held_out(chain, result, test):
     """RMS point distance of the held-out rows [m] and its noise-limited prediction sqrt(3σ² + e²) [m]."""
     target = result.target
@@ -86,7 +94,7 @@ def test_one_line_holds_what_the_rows_leave_free_and_predicts_the_path(industria
     orientations fixes it, positions alone never do —; the rows along the line within 1.3× the prediction; the
     plausibility warning 'path' exactly when something was held."""
     chain, rows, test = _line(industrial_arm_urdf, with_rotation, tool_known)
-    result = calibrate_chain(chain, rows, "full", ChainFitOptions(tool_known=tool_known, selection="prior"))
+    result = _calibrated(industrial_arm_urdf, with_rotation, tool_known)
     assert len(result.held_rotations) == rotations_held and len(result.held) == (0 if tool_known else 3)
     for held in result.held_rotations:
         assert abs(held.axis[0]) == pytest.approx(1.0) and held.seen <= LINE_RATIO  # the path runs along base x
@@ -105,7 +113,7 @@ def test_one_arc_at_constant_orientation_predicts_the_path(industrial_arm_urdf, 
     nothing is held about an axis; what the rows leave free of the target is held as for a line; the rows
     along the arc within 1.3× the noise-limited prediction."""
     chain, rows, test = _line(industrial_arm_urdf, with_rotation, tool_known, kind="arc")
-    result = calibrate_chain(chain, rows, "full", ChainFitOptions(tool_known=tool_known, selection="prior"))
+    result = _calibrated(industrial_arm_urdf, with_rotation, tool_known, kind="arc")
     assert result.held_rotations == () and len(result.held) == (0 if tool_known else 3)
     measured, predicted = _held_out(chain, result, test)
     assert 1.0 / BOUND <= measured / predicted <= BOUND
@@ -153,8 +161,10 @@ def test_one_line_end_to_end_calibrate_diagnose_and_evaluate(industrial_arm_urdf
     assert doc["warnings"] == [] and "not_determined_rotations" not in doc["identifiability"]
 
 
-def _outcome(chain, data):
-    result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
+def _outcome(chain, data, result=None):
+    """Placements and per-row position errors [m] of ``data`` calibrated (or of ``result``, its calibration)."""
+    if result is None:
+        result = calibrate_chain(chain, data, "full", ChainFitOptions(selection="prior"))
     with chain.placed(result.chain_placements):
         errors = pose_errors(chain, data, result.target.registration, result.target.registration,
                              points=result.target.points, target_rotation=result.target.rotation)
@@ -177,7 +187,8 @@ def test_moving_the_sensor_changes_nothing(industrial_arm_urdf, with_rotation):
     may differ, by what the data cannot see: the held-out rows along the line are predicted to within 1 %
     (measured 0.05 %; the placements moved by 1e-4)."""
     chain, rows, test = _line(industrial_arm_urdf, with_rotation, False)
-    placements, errors = _outcome(chain, rows)
+    result = _calibrated(industrial_arm_urdf, with_rotation, False)
+    placements, errors = _outcome(chain, rows, result)
     about_z = Rotation.from_euler("z", 137.0, degrees=True).as_matrix()
     tilted = Rotation.from_rotvec([0.4, -0.9, 0.3]).as_matrix()
     for turn in (about_z,) if not with_rotation else (tilted,):
@@ -187,7 +198,6 @@ def test_moving_the_sensor_changes_nothing(industrial_arm_urdf, with_rotation):
         assert np.abs(moved - placements).max() <= (1e-9 if with_rotation else 1e-7) * scale
     if not with_rotation:
         shift = np.array([-7.0, 9.0, 2.5])
-        result = calibrate_chain(chain, rows, "full", ChainFitOptions(selection="prior"))
         moved = calibrate_chain(chain, _moved(rows, tilted, shift), "full", ChainFitOptions(selection="prior"))
         measured, _ = _held_out(chain, result, test)
         moved_measured, _ = _held_out(chain, moved, _moved(test, tilted, shift))

@@ -11,6 +11,7 @@ methods on the same configurations.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 import numpy as np
@@ -26,10 +27,20 @@ from pincal.model.dh.table import KUKA_LWR4_DH, TABLE2_LARGE, TABLE2_SMALL
 from pincal.paper.methods import calibrate_paper
 from pincal.paper.ml_estimator import calibrate_ml
 from pincal.paper.noise_limit import predicted_errors
-from pincal.robots import KUKA_FLANGE_LINK
+from pincal.robots import KUKA_FLANGE_LINK, kuka_lwr4plus_urdf
 from pincal.simulation.paper import SimulationSettings, simulate_experiment
 
 SMALL = SimulationSettings(seed=4, n_cpa=10, n_calibration=60, n_validation=10)
+
+
+@functools.cache
+def _small(method):
+    """The noise-free SMALL experiment (Table 2's large deviations) and the prediction of ``method`` for it at
+    σ_p = 0.05 mm, σ_a = 0.1 deg: the same numbers for every test that checks that prediction, made once
+    (ML's takes ~0.4 s). Read only."""
+    chain = KinematicChain.from_urdf(kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK)
+    experiment = simulate_experiment(chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
+    return experiment, predicted_errors(chain, experiment, method, 0.05, 0.1)
 
 
 def _calibrate(chain, data, method, sigma=(0.05, 0.1), nominal=None):
@@ -49,15 +60,14 @@ def test_mean_norm_matches_closed_forms_and_sampling():
 
 
 @pytest.mark.parametrize("method", [1, 2, 3, "ml"])
-def test_linearisation_matches_finite_differences_of_the_whole_estimator(kuka_urdf, kuka_chain, method):
+def test_linearisation_matches_finite_differences_of_the_whole_estimator(kuka_urdf, method):
     """Perturb single noise components of the data and re-run every stage of the method.
 
     The change of the DH vector and of both registrations (left rotation φ and
     τ) must equal the predicted column of d(parameters)/d(noise): CPA points,
     calibration positions and calibration orientations, through all stages.
     """
-    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
-    prediction = predicted_errors(kuka_chain, experiment, method, 0.05, 0.1)
+    experiment, prediction = _small(method)
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     data = experiment.calibration
     truth = experiment.registration
@@ -97,7 +107,7 @@ def _draw_estimate(chain, experiment, method, z, sigma):
 
 
 @pytest.mark.parametrize("method", [1, 2, 3, "ml"])
-def test_estimator_answers_a_noise_draw_linearly_with_the_predicted_slope(kuka_urdf, kuka_chain, method):
+def test_estimator_answers_a_noise_draw_linearly_with_the_predicted_slope(kuka_urdf, method):
     """Run the whole estimator on one draw of noise on every row (CPA and calibration,
     positions and orientations) scaled by s, and compare its change with sensitivity @ (s z).
 
@@ -109,8 +119,7 @@ def test_estimator_answers_a_noise_draw_linearly_with_the_predicted_slope(kuka_u
     Methods 1-3 and 4e-5 for ML at σ_p = 0.05 mm, σ_a = 0.1 deg.)
     """
     sigma = (0.05, 0.1)
-    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)  # noise-free rows
-    prediction = predicted_errors(kuka_chain, experiment, method, *sigma)
+    experiment, prediction = _small(method)  # noise-free rows
     chain = KinematicChain.from_urdf(kuka_urdf, KUKA_FLANGE_LINK, tool=experiment.tool)
     n_rows = experiment.calibration.n_rows
     z = np.random.default_rng(7).normal(size=(n_rows, 6)) * np.repeat([sigma[0] / 1000, np.radians(sigma[1])], 3)
@@ -177,7 +186,7 @@ def _noise_scale(sigma_pos_mm, sigma_rot_deg, n_rows):
 
 
 @pytest.mark.parametrize("method", [1, 2, 3, "ml"])
-def test_predicted_test_pose_errors_follow_from_an_independent_forward_model(kuka_chain, method):
+def test_predicted_test_pose_errors_follow_from_an_independent_forward_model(method):
     """Propagate the sensitivity to the J test poses with a forward model of our own.
 
     C_j = G_j S Σ_z Sᵀ G_jᵀ, with G_j the numpy DH model's finite-difference derivative of
@@ -189,8 +198,7 @@ def test_predicted_test_pose_errors_follow_from_an_independent_forward_model(kuk
     to ~1e-9.
     """
     sigma_pos_mm, sigma_rot_deg = 0.05, 0.1
-    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
-    prediction = predicted_errors(kuka_chain, experiment, method, sigma_pos_mm, sigma_rot_deg)
+    experiment, prediction = _small(method)
     n_dh = experiment.truth.to_vector().size
     jac = _reading_jacobian(experiment, experiment.validation.q, np.arange(n_dh + 6))
     scaled = prediction.sensitivity * _noise_scale(sigma_pos_mm, sigma_rot_deg, experiment.calibration.n_rows)
@@ -205,7 +213,7 @@ def test_predicted_test_pose_errors_follow_from_an_independent_forward_model(kuk
     assert prediction.rotation_deg == pytest.approx(np.degrees(expected["orientation"].mean()), rel=1e-6)
 
 
-def test_ml_prediction_is_the_cramer_rao_bound_of_an_independent_model(kuka_chain):
+def test_ml_prediction_is_the_cramer_rao_bound_of_an_independent_model():
     """The ML covariance against (JᵀΣ⁻¹J)⁻¹ built without pincal's residuals or Jacobians.
 
     J: finite differences of the numpy DH model's readings of every CPA and calibration
@@ -217,8 +225,7 @@ def test_ml_prediction_is_the_cramer_rao_bound_of_an_independent_model(kuka_chai
     Tolerance 1e-6: finite differences with h = 1e-6 are accurate to ~1e-9.
     """
     sigma_pos_mm, sigma_rot_deg = 0.05, 0.1
-    experiment = simulate_experiment(kuka_chain, KUKA_LWR4_DH, TABLE2_LARGE, SMALL)
-    prediction = predicted_errors(kuka_chain, experiment, "ml", sigma_pos_mm, sigma_rot_deg)
+    experiment, prediction = _small("ml")
     n_joints = experiment.truth.n_joints
     n_dh = 4 * n_joints
     gauge = [n_joints, 3 * n_joints]  # ε_1 and d_1 in the flat [α, ε, r, d] vector
