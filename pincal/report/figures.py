@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from matplotlib import rc_context
 from matplotlib.backends.backend_svg import FigureCanvasSVG
+from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
@@ -127,6 +128,20 @@ def overview_figure(stages: Sequence[dict[str, Any]]) -> str | None:
         return _svg_uri(fig)
 
 
+def _bars(centres: np.ndarray, heights: np.ndarray, width: float, colours: Sequence[str]) -> PolyCollection:
+    """Bars from 0 to ``heights`` of ``width`` at ``centres`` (data units), as one artist: ``Axes.bar`` makes a
+    patch per bar, each laid out and written apart (~0.6 ms a bar, most of a page's time for a thousand rows).
+    Bars of non-finite height are left out, as ``Axes.bar`` draws nothing for them."""
+    shown = np.isfinite(heights)
+    x0, x1 = centres[shown] - 0.5 * width, centres[shown] + 0.5 * width
+    top, ground = heights[shown], np.zeros(int(shown.sum()))
+    corners = np.stack([np.column_stack(pair) for pair in ((x0, ground), (x0, top), (x1, top), (x1, ground))], axis=1)
+    faces = [colour for colour, keep in zip(colours, shown) if keep]
+    bars = PolyCollection(list(corners), facecolors=faces, edgecolors="none", zorder=2)
+    bars.sticky_edges.y.append(0.0)  # as Axes.bar: autoscaling leaves no margin below the bars' ground
+    return bars
+
+
 def row_errors_figure(entry: dict[str, Any], flagged: Sequence[int]) -> str:
     """Per-row errors of one ``row_errors`` set against file line: bars for the reported
     model, markers for the earlier ones, the 5-robust-σ line, flagged rows in red.
@@ -155,7 +170,7 @@ def row_errors_figure(entry: dict[str, Any], flagged: Sequence[int]) -> str:
         for ax, key, unit in zip(axes, ("position_mm", "orientation_deg"), ("mm", "deg")):
             final = np.asarray(models[-1][key], dtype=float)
             bar_colours = [FLAG_COLOUR if k in flagged_set else colours[-1] for k in range(len(lines))]
-            ax.bar(lines, final, width=width, color=bar_colours, zorder=2)
+            ax.add_collection(_bars(lines, final, width, bar_colours))
             median = float(np.median(final))
             scale = 1.4826 * float(np.median(np.abs(final - median)))
             threshold = median + OUTLIER_THRESHOLD * scale
