@@ -11,11 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 from matplotlib import rcParams
-from matplotlib.axes import Axes
-from matplotlib.font_manager import FontProperties
+from matplotlib.font_manager import FontProperties, findfont
 from matplotlib.textpath import text_to_path
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["BOTTOM_IN", "BOTTOM_10PT_IN", "RIGHT_IN", "TITLE_IN", "TOP_IN", "fixed_margins", "grid_margins",
            "label_width_in", "y_label_room_in"]
@@ -34,11 +37,13 @@ def label_width_in(labels: Sequence[str], size_pt: float, family: str = "sans-se
     """Width [in] of the widest of ``labels`` at ``size_pt`` points in ``family``, from matplotlib's font metrics
     (the widths its text layout uses). A page showing the text as text in another font differs as that
     font's widths differ."""
-    return max((_width_pt(label, size_pt, family) for label in labels), default=0.0) / 72.0
+    font_file = findfont(FontProperties(family=family, size=size_pt))  # the font drawn now, as rcParams choose it
+    return max((_width_pt(label, size_pt, family, font_file) for label in labels), default=0.0) / 72.0
 
 
 @lru_cache(maxsize=4096)  # tick labels recur across panels and figures ("0.00", "0.05" ...); ~0.5 ms a layout
-def _width_pt(label: str, size_pt: float, family: str) -> float:
+def _width_pt(label: str, size_pt: float, family: str, font_file: str) -> float:
+    """The width [pt] of ``label``; ``font_file``, the font ``family`` resolves to, keys the cache only."""
     font = FontProperties(family=family, size=size_pt)
     return float(text_to_path.get_text_width_height_descent(label, font, ismath=False)[0])
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 from types import SimpleNamespace
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -74,7 +75,6 @@ def test_the_diagnose_plots_keep_their_labels_inside(drawn, tmp_path, shift):
         _assert_inside_and_apart(fig)
 
 
-
 @pytest.fixture(scope="module")
 def study():
     """A study small enough for half a second whose summary draws every figure (no noise limit: its tasks take
@@ -109,3 +109,4 @@ def test_the_study_figures_keep_their_labels_inside_and_their_panels_apart(study
     if factor < 1.0:
         assert max(len(label) for label in labels) >= 7, labels
     _assert_inside_and_apart(kept[0])
+    plt.close(kept[0])  # drawn through pyplot: its figure manager keeps it open otherwise

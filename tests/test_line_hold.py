@@ -20,6 +20,7 @@ import lxml.html
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 from scipy.spatial.transform import Rotation
 
 from pincal.cli.commands import main
@@ -37,7 +38,6 @@ from pincal.residuals.sensor import SensorResidual
 from pincal.residuals.sensor_values import FittedBlocks, RowWeights
 from pincal.simulation.cells import ToolPath, constant_orientation_path, measure_truth, sensor_at
 from pincal.simulation.sensor import SimulatedSensor
-from conftest import INDUSTRIAL_ARM_START, assert_close, numeric_jacobian
 
 SIGMA_POS_M = 20e-6  # a laser tracker at a few metres
 SIGMA_ROT_RAD = np.radians(0.003)  # its 6D probe
@@ -47,10 +47,15 @@ TOOL = pose_from_xyz_rpy(TOOL_XYZ, TOOL_RPY)
 DOWN = np.diag([-1.0, 1.0, -1.0])  # tool pointing down
 
 
-@functools.cache
 def _line(urdf, with_rotation: bool, tool_known: bool, kind: str = "line", seed: int = 3):
     """One path at constant orientation (2 passes of 50 rows) and its other points (37 a pass) held out;
-    the target known (the chain's tool, measured as itself) or not (measured at TOOL, estimated)."""
+    the target known (the chain's tool, measured as itself) or not (measured at TOOL, estimated). Simulated once
+    per cell however the call spells its arguments (a cache keys on the arguments as given)."""
+    return _simulated_line(urdf, with_rotation, tool_known, kind, seed)
+
+
+@functools.cache
+def _simulated_line(urdf, with_rotation: bool, tool_known: bool, kind: str, seed: int):
     plain = KinematicChain.from_urdf(urdf, "flange")
     path = ToolPath(kind, 100, np.array([1.2, 0.0, 0.5]), heights=1)
     q, q_test = (constant_orientation_path(plain, p, DOWN, INDUSTRIAL_ARM_START)

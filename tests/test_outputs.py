@@ -481,14 +481,16 @@ def run(argv, cwd):
         os.dup2(null, 1)
         os.dup2(log, 2)
         code = main(argv)
-    except SystemExit as stop:
-        code = stop.code if isinstance(stop.code, int) else 1
+    except SystemExit as stop:  # as the interpreter exits: None is 0, another non-integer 1
+        code = 0 if stop.code is None else stop.code if isinstance(stop.code, int) else 1
     except BaseException:
         traceback.print_exc()
     finally:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code if isinstance(code, int) else 1)  # never back into the launcher's loop
 
 
 replies.write("ready\n")
@@ -544,7 +546,11 @@ class Launcher:
             self.proc = subprocess.Popen([sys.executable, *LAUNCHER, setup], env=ENV, stdin=subprocess.PIPE,
                                          stdout=subprocess.PIPE, stderr=handle, bufsize=0)
         self.last: Run | None = None
-        assert self.reply(HANG_S) == "ready", "the launcher did not start"
+        try:
+            assert self.reply(HANG_S) == "ready", "the launcher did not start"
+        except BaseException:
+            self.close()
+            raise
 
     def reply(self, timeout_s: float) -> str | None:
         """The launcher's next line, or None if none came within ``timeout_s``."""
@@ -564,6 +570,7 @@ class Launcher:
             if self.proc.poll() is None:
                 self.proc.kill()
                 self.proc.wait()
+            self.proc.stdout.close()
 
 
 class Run:
@@ -719,6 +726,11 @@ def _aimed_kills(argv: list[str], cwd: Path, folder: Path, seed: int, in_writes:
     return reference
 
 
+#: The launcher forks after numpy, SciPy, Pinocchio and matplotlib are loaded: sound on Linux, not on macOS
+#: (pincal.study.executors.fork_is_safe), where these rounds do not run.
+ON_LINUX = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill rounds fork their runs: Linux only")
+
+
 @pytest.fixture(scope="module")
 def simulated_kuka(tmp_path_factory):
     folder = tmp_path_factory.mktemp("kill")
@@ -727,6 +739,7 @@ def simulated_kuka(tmp_path_factory):
     return folder
 
 
+@ON_LINUX
 def test_killed_calibrate_leaves_old_or_whole_outputs(simulated_kuka, kuka_urdf):
     out = simulated_kuka / "calibrated"
     out.mkdir()
@@ -743,6 +756,7 @@ def test_killed_calibrate_leaves_old_or_whole_outputs(simulated_kuka, kuka_urdf)
     _check_outputs(out, reference, "python -m pincal")
 
 
+@ON_LINUX
 def test_killed_study_leaves_old_or_whole_outputs(tmp_path):
     out = tmp_path / "study"
     out.mkdir()

@@ -264,8 +264,21 @@ def test_a_turned_registration_is_the_checked_one_bit_for_bit(seed, scale):
         turned.translation[0] = 2.0
 
 
-@pytest.mark.parametrize("step, translation", [([np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]),
-                                               ([0.0, 0.0, 0.0], [0.0, np.inf, 0.0])])
-def test_a_turned_registration_refuses_what_the_constructor_refuses(step, translation):
-    with pytest.raises(CalibrationError, match="NaN or infinite"):
-        Registration(np.eye(3), np.zeros(3)).turned(np.array(step), np.array(translation))
+@pytest.mark.parametrize("step, translation, error, match", [
+    ([np.nan, 0.0, 0.0], [0.0, 0.0, 0.0], CalibrationError, "NaN or infinite"),
+    ([0.0, 0.0, 0.0], [0.0, np.inf, 0.0], CalibrationError, "NaN or infinite"),
+    ([1e308, 1e308, 0.0], [0.0, 0.0, 0.0], CalibrationError, "NaN or infinite"),  # finite; its angle overflows
+    ([0.0, 0.0, 0.0], [0.0, 0.0], ValueError, "reshape"),  # the constructor's numpy error, as for any caller
+])
+def test_a_turned_registration_refuses_what_the_constructor_refuses(step, translation, error, match):
+    start = Registration(np.eye(3), np.zeros(3))
+    with pytest.raises(error, match=match):
+        Registration(start.rotation @ pin.exp3(np.array(step)), np.array(translation))
+    with pytest.raises(error, match=match):
+        start.turned(np.array(step), np.array(translation))
+
+
+def test_a_turned_registration_keeps_the_constructor_s_shapes():
+    """A translation given as a column (3, 1) is stored as the constructor stores it, (3,)."""
+    turned = Registration(np.eye(3), np.zeros(3)).turned(np.zeros(3), np.ones((3, 1)))
+    assert turned.translation.shape == (3,) and turned.rotation.shape == (3, 3)

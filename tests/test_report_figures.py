@@ -27,7 +27,7 @@ def test_the_bars_are_axes_bar_pixel_for_pixel_with_its_limits():
     colours = ["#1f5fbf", "#1f5fbf", "#1f5fbf", "#c0392b", "#1f5fbf", "#1f5fbf", "#c0392b"]
     width = 0.8
     by_bar = _raster(lambda ax: ax.bar(lines, heights, width=width, color=colours, zorder=2))
-    by_collection = _raster(lambda ax: ax.add_collection(_bars(lines, heights, width, colours)))
+    by_collection = _raster(lambda ax: ax.add_collection(_bars(lines, heights, width, colours)) and ax.autoscale_view())
     # the limits to rounding: Axes.bar converts the width through the first bar's position (0.8 → 0.7999999999999998)
     assert by_collection[1] == pytest.approx(by_bar[1], rel=1e-12, abs=1e-12)
     assert np.array_equal(by_collection[0], by_bar[0])

@@ -51,12 +51,13 @@ class Registration:
 
     def turned(self, step: np.ndarray, translation: np.ndarray) -> Registration:
         """This registration's rotation turned by ``step`` φ [rad] (3,), Ω exp(φ), with ``translation`` τ [m] (3,):
-        a fit's registration at its parameter vector (eq 20). Ω is a proper rotation and exp(φ) of a finite φ is
-        one, so only finiteness is checked here, not :meth:`__post_init__`'s orthogonality and determinant: a fit
-        builds one per residual evaluation. A non-finite step or translation takes the checking path (its error)."""
-        if not (np.isfinite(step).all() and np.isfinite(translation).all()):
-            return Registration(self.rotation @ pin.exp3(step), translation)
+        a fit's registration at its parameter vector (eq 20). Ω is a proper rotation and so is exp(φ), so only the
+        shapes and finiteness are checked here, not :meth:`__post_init__`'s orthogonality and determinant: a fit
+        builds one per residual evaluation. Anything else (a non-finite value, another shape) takes the checking
+        constructor, and its error."""
         rotation, translation = self.rotation @ pin.exp3(step), np.array(translation, dtype=float)
+        if translation.shape != (3,) or not (np.isfinite(rotation).all() and np.isfinite(translation).all()):
+            return Registration(rotation, translation)
         rotation.flags.writeable = translation.flags.writeable = False
         registration = object.__new__(Registration)
         object.__setattr__(registration, "rotation", rotation)

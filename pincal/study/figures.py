@@ -7,7 +7,7 @@ along the noise axis, as in the paper. Two more figures compare the
 estimators with their linearised noise limit and the maximum-likelihood
 estimator with Method 2. Drawn with matplotlib's Agg backend into PNG files,
 by forked worker processes where that is safe (:func:`start_figures`; as many
-as the study's workers, at most seven): the seven figures take ~2 s of one core,
+as the study's workers, at most seven): the seven figures take ~2.5 s of one core,
 about half of that on two. Their margins are sized from their labels
 (:mod:`pincal.figure_margins`), not by a tight layout, which measures each
 figure by drawing it once more (30-40 % of the drawing).
