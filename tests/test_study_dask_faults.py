@@ -19,7 +19,9 @@ import time
 from pathlib import Path
 from typing import ClassVar
 
+import dask
 import distributed
+import distributed.utils
 import pytest
 
 from pincal.cli.commands import main
@@ -35,6 +37,21 @@ ARGUMENTS = ["--reps", "2", "--levels", "2", "--restarts", "2", "--limit-pose-se
 CONFIG = StudyConfig(repeats=2, levels=2, restarts=2, limit_pose_sets=0)  # what the CLI makes of them
 #: A safety net against a hung subprocess, never an assertion about speed.
 HANG_S = 300.0
+
+
+@pytest.fixture(autouse=True)
+def _workers_from_a_forkserver(monkeypatch):
+    """Dask's worker processes forked from one server process that has imported Dask and pincal's study
+    tasks, instead of each started afresh (Dask's default, ``spawn``: seconds of imports per worker, three or
+    four workers a test). How a worker process starts changes nothing these tests check: what a lost worker's
+    tasks become, what a killed scheduler leaves behind (Dask's own test suite starts its workers so). The
+    processes a test starts (``pincal study``, ``dask worker``) read the setting from the environment."""
+    method = "forkserver"
+    monkeypatch.setenv("DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD", method)
+    with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+        context = distributed.utils.get_mp_context()  # Dask sets its own preload on its first call
+        context.set_forkserver_preload(["distributed", "pincal.study.tasks"])  # read when the server starts
+        yield
 
 
 def _without_fit_times(path: Path) -> bytes:
