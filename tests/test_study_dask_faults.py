@@ -41,11 +41,11 @@ HANG_S = 300.0
 
 @pytest.fixture(autouse=True)
 def _workers_from_a_forkserver(monkeypatch):
-    """Dask's worker processes forked from one server process that has imported Dask and pincal's study
-    tasks, instead of each started afresh (Dask's default, ``spawn``: seconds of imports per worker, three or
-    four workers a test). How a worker process starts changes nothing these tests check: what a lost worker's
-    tasks become, what a killed scheduler leaves behind (Dask's own test suite starts its workers so). The
-    processes a test starts (``pincal study``, ``dask worker``) read the setting from the environment."""
+    """Dask's worker processes forked from a server process instead of each started afresh (Dask's default,
+    ``spawn``: seconds of imports per worker, up to four workers a test). The server of this process has
+    imported Dask and pincal's study tasks; the processes a test starts (``pincal study``, ``dask worker``)
+    read the method from the environment and preload Dask's own list. How a worker process starts changes
+    nothing these tests check: what a lost worker's tasks become, what a killed scheduler leaves behind."""
     method = "forkserver"
     monkeypatch.setenv("DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD", method)
     with dask.config.set({"distributed.worker.multiprocessing-method": method}):
@@ -114,7 +114,7 @@ def test_a_study_killed_with_its_scheduler_resumes_to_the_same_files(undisturbed
         while proc.poll() is None and len(list(checkpoints.glob("*.json"))) < 2:
             assert time.monotonic() < deadline, "the study neither finished a task nor exited"
             time.sleep(0.002)
-        os.killpg(proc.pid, signal.SIGKILL)  # the study, its scheduler, nannies and workers
+        os.killpg(proc.pid, signal.SIGKILL)  # the study, its scheduler, nannies, forkserver and workers
         proc.wait(timeout=HANG_S)
     finally:
         if proc.poll() is None:

@@ -72,14 +72,14 @@ def test_origins_and_written_file_equal_yourdfpy_bit_for_bit(source, tmp_path):
         return
     description = read_description(source)
     reference = _yourdfpy(source)
-    ours = joint_origins(description.root())
+    root = description.root()  # one parse: joint_origins and parent_joint only read it
+    ours = joint_origins(root)
     assert list(ours) == [joint.name for joint in reference.robot.joints]
     for joint in reference.robot.joints:
         expected = np.eye(4) if joint.origin is None else joint.origin
         # the same doubles, signed zeros included: the corrected origins are computed from them
         assert np.array_equal(ours[joint.name], expected) and np.array_equal(
             np.signbit(ours[joint.name]), np.signbit(expected)), joint.name
-    root = description.root()  # one parse: parent_joint only reads it
     for joint in reference.robot.joints:
         assert parent_joint(root, joint.child) == (joint.name, joint.type == "fixed")
 
