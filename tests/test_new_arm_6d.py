@@ -98,3 +98,34 @@ def test_new_arm_from_modified_dh_table_calibrated_in_6d(arm_urdf, level, tmp_pa
     assert errors["rows"] == 300
     assert errors["position"]["max_mm"] < MAX_POS_MM
     assert errors["orientation"]["max_deg"] < MAX_ROT_DEG
+
+
+def test_a_row_whose_orientation_alone_is_off_is_printed_reported_and_removed_by_its_orientation(arm_urdf, tmp_path,
+                                                                                               capsys):
+    """A laser tracker with a 6-DoF probe (0.05 mm, 0.01°) and one row whose orientation reads 0.5° off, its
+    position right: ``calibrate`` prints it as an orientation outlier, REPORT.json says ``by: orientation`` and the
+    report page flags it so; ``--reject-outliers`` removes it."""
+    chain = KinematicChain.from_urdf(arm_urdf, "flange")
+    params = JointOffsets(chain)
+    truth = np.random.default_rng(12).normal(0.0, 2e-3, params.size)
+    settings = SimulationSettings(sigma_pos_mm=0.05, sigma_rot_deg=0.01, n_calibration=40, n_validation=1, seed=5)
+    rows = simulate_chain(params, truth, TARGET_POINT, settings, with_rotation=True,
+                          target_rotation=TARGET_ROTATION).calibration
+    turned = np.array(rows.rotations)
+    turned[9] = turned[9] @ Rotation.from_euler("z", 0.5, degrees=True).as_matrix()
+    write_measurements(tmp_path / "rows.csv", type(rows)(rows.joint_names, rows.q, rows.points, turned, rows.roles,
+                                                         rows.lines, extra={}, source="rows.csv"))
+    line = 9 + 2  # the file line of row 9: the header is line 1
+    args = ["calibrate", str(arm_urdf), str(tmp_path / "rows.csv"), "--tip-link", "flange", "--level", "offsets",
+            "--out", str(tmp_path / "arm.urdf")]
+    assert main([*args, "--report", str(tmp_path / "REPORT.json")]) == 0
+    printed = capsys.readouterr().out
+    assert f"outlier: line {line} (robust score " in printed and "of its orientation error)" in printed, printed
+    doc = json.loads((tmp_path / "REPORT.json").read_text())
+    assert [(o["line"], o["by"]) for o in doc["outliers"]] == [(line, "orientation")]
+    assert doc["removed_lines"] == []
+    from pincal.report.html import render_html
+    assert f"outlier (orientation, score {doc['outliers'][0]['robust_score']:.3g}" in render_html(doc)
+    assert main([*args, "--report", str(tmp_path / "CLEAN.json"), "--reject-outliers"]) == 0
+    clean = json.loads((tmp_path / "CLEAN.json").read_text())
+    assert clean["removed_lines"] == [line] and clean["outliers"] == []

@@ -126,6 +126,29 @@ def test_orientations_are_weighted_by_their_own_noise_scale(simulated):
     assert 0.0 < result.predicted_point_rms(tree, data.q[:5]) < sigma_pos  # the frames' columns in its covariance
 
 
+def test_a_row_whose_orientation_alone_is_off_is_named_and_removed_when_asked(simulated):
+    """Rows with a mocap rigid body's noise (0.2 mm, 0.3°) and one row whose right target's orientation is turned by
+    5° (its markers matched the wrong way round), its points right: noted by its line, removed by
+    ``reject_outliers``; the rows as they were flag nothing."""
+    tree, _, _, data, _, _, _ = simulated
+    rng = np.random.default_rng(12)
+    noisy = {n: turns @ Rotation.from_rotvec(rng.normal(0.0, np.radians(0.3), (len(turns), 3))).as_matrix()
+             for n, turns in data.target_rotations.items()}
+    points = data.points + rng.normal(0.0, 2e-4, data.points.shape)
+    clean = MeasurementSet(data.joint_names, data.q, points, None, data.roles, data.lines, target_rotations=noisy)
+    bad_turns = {n: turns.copy() for n, turns in noisy.items()}
+    bad_turns[NUMBERS[1]][17] = bad_turns[NUMBERS[1]][17] @ pin.exp3(np.array([0.0, np.radians(5.0), 0.0]))
+    bad = replace(clean, target_rotations=bad_turns)
+    line = int(data.lines[17])
+    assert not any("outlier" in note for note in calibrate_tree(tree, clean, "full", ChainFitOptions()).notes)
+    noted = calibrate_tree(tree, bad, "full", ChainFitOptions())
+    assert any("1 row(s) look like outliers" in note and f"lines [{line}]" in note for note in noted.notes), noted.notes
+    assert line in data.lines[noted.used_index]  # noted, kept in the fit
+    removed = calibrate_tree(tree, bad, "full", ChainFitOptions(reject_outliers=True))
+    assert line not in data.lines[removed.used_index] and removed.used_index.size == data.n_rows - 1
+    assert any(f"removed 1 outlier row(s) at lines [{line}]" in note for note in removed.notes), removed.notes
+
+
 def test_the_same_rows_without_orientations_fit_points_only(simulated):
     tree, _, _, data, _, result, _ = simulated
     plain = MeasurementSet(data.joint_names, data.q, data.points, None, data.roles, data.lines)

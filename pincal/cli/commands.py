@@ -204,8 +204,9 @@ def _print_chain_summary(run) -> None:
     for pair in ident["correlated_pairs"][:10]:
         print(f"correlated: {pair['a']} ~ {pair['b']} ({pair['correlation']:+.3f})")
     files = result.outlier_files if len(result.session_names) > 1 else [""] * len(result.outliers)
-    for (line, score), file in zip(result.outliers, files):
-        print(f"outlier: {file + ' ' if file else ''}line {line} (robust score {score:.1f})")
+    for (line, score), file, by in zip(result.outliers, files, result.outlier_errors()):
+        print(f"outlier: {file + ' ' if file else ''}line {line} (robust score {score:.1f}"
+              + (" of its orientation error)" if by == "orientation" else ")"))
     print(f"estimated noise: {result.sigma_pos_m * 1000:.3f} mm"
           + ("" if result.sigma_rot_rad is None else f", {np.degrees(result.sigma_rot_rad):.4f} deg"))
     print(f"fit {result.fit_seconds * 1000:.1f} ms (with selection {result.total_seconds * 1000:.0f} ms)")

@@ -31,7 +31,7 @@ import numpy as np
 
 from pincal.errors import CalibrationError, did_you_mean, expect_value
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
-from pincal.fit.outliers import find_outliers
+from pincal.fit.outliers import OutlierError, find_row_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import Prior, PriorResidual, data_rows
 from pincal.fit.registration_hold import HeldRotation, hold_registration, rotation_reason
@@ -68,7 +68,7 @@ class ChainCalibration:
         target_std: standard deviations of the registrations (6 per session) and target parameters.
         sigma_pos_m / sigma_rot_rad: noise scales estimated from the residuals.
         rank, condition, selection, dropped, correlated: identifiability report.
-        outliers: (file line, robust score) of rows flagged as outliers.
+        outliers: (file line, robust score) of rows flagged as outliers (:mod:`pincal.fit.outliers`).
         removed_lines: lines removed before the final fit (``reject_outliers``).
         rows_used: file lines of the rows in the final fit.
         fit_seconds: time of the final least-squares fit [s].
@@ -78,6 +78,7 @@ class ChainCalibration:
         session_names: the sessions, in the order of ``target.registrations``.
         used_index: rows of the data given to :func:`calibrate_chain` in the final fit (indices).
         outlier_files / removed_files: the file of each outlier / removed row.
+        outlier_by: the error that flags each outlier, ``position`` or ``orientation``.
         prior_sigma: with ``--select prior``, σ_i of every kinematic parameter of ``params`` in its
             own unit (m or rad) (:func:`pincal.fit.prior.prior_sigmas`), (n,); None without a prior.
         chain_placements: the calibrated chain's joint and tip placements (4×4 each, as
@@ -118,12 +119,19 @@ class ChainCalibration:
     used_index: np.ndarray = field(default_factory=lambda: np.array([], dtype=int))
     outlier_files: tuple[str, ...] = ()
     removed_files: tuple[str, ...] = ()
+    outlier_by: tuple[OutlierError, ...] = ()
     prior_sigma: np.ndarray | None = None
     held: tuple[HeldDirection, ...] = ()
     point_basis: np.ndarray | None = None
     chain_placements: tuple[np.ndarray, ...] = ()
     held_rotations: tuple[HeldRotation, ...] = ()
     registration_basis: np.ndarray | None = None
+
+    def outlier_errors(self) -> tuple[OutlierError, ...]:
+        """The error that flags each of :attr:`outliers`: :attr:`outlier_by`, or ``position`` for every one
+        where it was not given."""
+        position: OutlierError = "position"
+        return self.outlier_by or tuple(position for _ in self.outliers)
 
     def predicted_point_rms(self, chain: KinematicChain, q: np.ndarray) -> float:
         """Linearised prediction of the RMS error of the target points at
@@ -240,9 +248,9 @@ def calibrate_chain(chain: KinematicChain, data: MeasurementSet, level: ChainLev
     removed: list[int] = []
     counter = Counter(progress)
     for attempt in range(2):
-        result, point_errors = _calibrate_rows(chain, params, rows, level, options, counter)
-        outliers = find_outliers(point_errors, index)  # (row of ``data``, robust score)
-        flagged = [k for k, _ in outliers]
+        result, point_errors, rotation_errors = _calibrate_rows(chain, params, rows, level, options, counter)
+        outliers = find_row_outliers(point_errors, index, rotation_errors)  # rows of ``data``
+        flagged = [o.row for o in outliers]
         if not (options.reject_outliers and outliers and attempt == 0):
             break
         removed = flagged
@@ -266,16 +274,18 @@ def calibrate_chain(chain: KinematicChain, data: MeasurementSet, level: ChainLev
     return replace(
         result, rows_used=tuple(int(line) for line in rows.lines), used_index=index,
         total_seconds=time.perf_counter() - started, notes=tuple(notes),
-        outliers=tuple((int(data.lines[k]), score) for k, score in outliers), outlier_files=tuple(data.files[flagged]),
+        outliers=tuple((int(data.lines[o.row]), o.score) for o in outliers), outlier_files=tuple(data.files[flagged]),
+        outlier_by=tuple(o.by for o in outliers),
         removed_lines=tuple(int(data.lines[k]) for k in removed), removed_files=tuple(data.files[removed]),
     )
 
 
 def _calibrate_rows(chain: KinematicChain, params: ChainParameters | None, rows: MeasurementSet, level: ChainLevel,
                     options: ChainFitOptions, counter: Counter, hold: tuple[HeldDirection, ...] = ()
-                    ) -> tuple[ChainCalibration, np.ndarray]:
+                    ) -> tuple[ChainCalibration, np.ndarray, np.ndarray | None]:
     """One calibration of ``rows``; returns the result (without the outlier
-    bookkeeping) and each target point's distance from the model (K, P) [m].
+    bookkeeping), each target point's distance from the model (K, P) [m] and, with
+    orientations, each row's orientation error (K,) [rad] (else None).
     ``counter`` counts the registration fits, each subset scored and the final fits as one each.
     ``hold``: target directions to hold besides those the rows leave free (:mod:`pincal.fit.target_hold`);
     a calibration whose target comes out weakly determined is done again with those held."""
@@ -333,6 +343,8 @@ def _calibrate_rows(chain: KinematicChain, params: ChainParameters | None, rows:
     point_residual = (solution.residual[: 3 * k * p].reshape(k, p, 3) * problem.sigma_pos
                       / problem.row_weight[:, None, None])
     point_errors = np.linalg.norm(point_residual, axis=2)
+    rotation_errors = None if problem.sigma_rot is None else np.linalg.norm(  # the angle of log(E_k)
+        solution.residual[3 * k * p: 3 * k * (p + 1)].reshape(k, 3), axis=1) * problem.sigma_rot / problem.row_weight
     result = ChainCalibration(
         level=level,
         params=params,
@@ -370,7 +382,7 @@ def _calibrate_rows(chain: KinematicChain, params: ChainParameters | None, rows:
     weak = () if tool_known or hold else weak_target(problem, kept, covariance)
     if weak:  # the kinematics took what the target was left to explain: again, with it held
         return _calibrate_rows(chain, params, rows, level, options, counter, hold=weak)
-    return result, point_errors
+    return result, point_errors, rotation_errors
 
 
 def _column_names(objective: SensorResidual | PriorResidual, params: ChainParameters | None, kept: np.ndarray,

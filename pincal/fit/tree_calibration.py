@@ -13,8 +13,9 @@ A target whose orientation is measured (``qxN,qyN,qzN,qwN``, N one of its points
 unknowns and its orientation residuals to the rows, weighted by the orientation noise scale as one
 chain's are.
 
-Outliers as one chain's (:mod:`pincal.fit.outliers`, each row's error the RMS distance of its seen points): noted,
-or with ``reject_outliers`` removed and the rows refitted once. Not yet: orientation columns without a
+Outliers as one chain's (:mod:`pincal.fit.outliers`: each row's position error the RMS distance of its seen points,
+its orientation error the RMS angle of its targets' measured orientations): noted, or with ``reject_outliers``
+removed and the rows refitted once. Not yet: orientation columns without a
 number (``qx,qy,qz,qw``: whose?), a known tool, ``--select press`` (leave-one-row-out over rows of different
 sizes), the target and registration holds of :mod:`pincal.fit.target_hold` and
 :mod:`pincal.fit.registration_hold` (refused or noted, never silently different).
@@ -31,7 +32,7 @@ import numpy as np
 from pincal.errors import CalibrationError
 from pincal.fit.chain_calibration import ChainFitOptions, row_weights
 from pincal.fit.identifiability import Ordering, Selection, condition_number, correlated_pairs
-from pincal.fit.outliers import find_outliers
+from pincal.fit.outliers import find_row_outliers
 from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinematics
 from pincal.fit.prior import PriorResidual, data_rows
 from pincal.fit.problem import KindProblem
@@ -257,11 +258,12 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     flagged: list[int] = []  # outlier rows, as indices into ``data``
     removed: list[int] = []
     counter = Counter(progress)
-    for attempt in range(2):  # as one chain's (pincal.fit.chain_calibration): each row's error the RMS of its points
-        result = _calibrate_tree_rows(tree, data, index, level, options, counter)
+    for attempt in range(2):  # as one chain's (pincal.fit.chain_calibration): a row's errors the RMS of its points
+        result = _calibrate_tree_rows(tree, data, index, level, options, counter)  # and of its targets' angles
         seen = np.any(np.isfinite(result.point_errors), axis=1)  # a row none of whose points was seen: no error
         per_row = np.sqrt(np.nanmean(result.point_errors[seen] ** 2, axis=1))
-        flagged = [k for k, _ in find_outliers(per_row[:, None], index[seen])]
+        flagged = [o.row for o in find_row_outliers(per_row[:, None], index[seen],
+                                                    _row_angles(result.orientation_errors, seen))]
         if not (options.reject_outliers and flagged and attempt == 0):
             break
         removed = flagged
@@ -272,6 +274,18 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
                      + ("rerun with --reject-outliers to refit without them" if options.refit_offered else
                         "they stay in the fit: check them and remove the bad ones from the file"))
     return replace(result, notes=result.notes + tuple(notes), total_seconds=time.perf_counter() - started)
+
+
+def _row_angles(orientation_errors: np.ndarray | None, seen: np.ndarray) -> np.ndarray | None:
+    """The RMS orientation error of each row ``seen`` over its targets whose orientation it measures [rad],
+    NaN for a row that measures none, (K_seen,); None without orientations."""
+    if orientation_errors is None:
+        return None
+    angles = orientation_errors[seen]
+    measured = np.isfinite(angles)
+    count = measured.sum(axis=1)
+    total = np.where(measured, angles, 0.0) ** 2
+    return np.where(count > 0, np.sqrt(total.sum(axis=1) / np.maximum(count, 1)), np.nan)
 
 
 def _calibrate_tree_rows(tree: KinematicTree, data: MeasurementSet, index: np.ndarray, level: ChainLevel,

@@ -457,9 +457,10 @@ def chain_head(
             "sigma_pos_mm": result.sigma_pos_m * 1000.0,
             "sigma_rot_deg": None if result.sigma_rot_rad is None else float(np.degrees(result.sigma_rot_rad)),
         },
-        "outliers": [{"line": line, "robust_score": score, "file": file}
-                     for (line, score), file in zip(result.outliers,
-                                                    result.outlier_files or [None] * len(result.outliers))],
+        "outliers": [{"line": line, "robust_score": score, "file": file, "by": by}
+                     for (line, score), file, by in zip(result.outliers,
+                                                        result.outlier_files or [None] * len(result.outliers),
+                                                        result.outlier_errors())],
         "removed_lines": list(result.removed_lines),
         "removed_files": list(result.removed_files),
         "fit": {

@@ -84,7 +84,8 @@ def fixture_report(
         "identifiability": identifiability_report(result),
         "tool": {"parent_link": chain.tip_link, "points_m": [ball], "xyz_m": ball},
         "noise": {"sigma_pos_mm": result.rms_m * 1000.0, "sigma_rot_deg": None},
-        "outliers": [{"file": file, "line": line, "robust_score": score} for file, line, score in result.outliers],
+        "outliers": [{"file": file, "line": line, "robust_score": score, "by": "position"}
+                     for file, line, score in result.outliers],
         "removed_lines": [],
         "fit": {
             "rows": {"calibration": result.n_rows},

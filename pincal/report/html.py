@@ -253,7 +253,7 @@ def _facts(doc: dict, evaluation: dict | None) -> list[tuple[str, str]]:
 
 def _rows(doc: dict, evaluation: dict | None) -> list[dict[str, Any]]:
     """Per row set: the sortable table's columns and rows, and its plot."""
-    reported = {(o.get("file"), int(o["line"])): o.get("robust_score") for o in doc.get("outliers") or []
+    reported = {(o.get("file"), int(o["line"])): (o.get("robust_score"), o.get("by")) for o in doc.get("outliers") or []
                 if "line" in o}
     sets = list(doc.get("row_errors") or []) + list((evaluation or {}).get("row_errors") or [])
     reestimated = {s["name"] for s in evaluated_sessions(evaluation) if s["reestimated"]}
@@ -277,7 +277,7 @@ def _rows(doc: dict, evaluation: dict | None) -> list[dict[str, Any]]:
             flag = ""
             outlier = reported.get((files[i], int(line)), None if several_files else reported.get((None, int(line))))
             if entry["set"] == "calibration" and outlier is not None:
-                flag = f"outlier (score {num(outlier, 3)})"
+                flag = f"outlier ({'orientation, ' if outlier[1] == 'orientation' else ''}score {num(outlier[0], 3)})"
             elif score is not None and score > OUTLIER_THRESHOLD:
                 flag = f"> {OUTLIER_THRESHOLD:g} robust σ"
             if flag:

@@ -21,11 +21,11 @@ from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
 
 from pincal.measurements.couplings import CouplingJson
 from pincal.measurements.data import MimicJson
+from pincal.report.model_level_choice import LevelChoiceJson
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from pincal.fit.level_choice import LevelChoice
     from pincal.fit.metrics import PoseErrors
     from pincal.fit.plausibility import Finding as PlausibilityFinding
     from pincal.measurements.couplings import ReadingCoupling
@@ -37,9 +37,9 @@ __all__ = [
     "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped",
     "CorrelatedPair", "NotDetermined", "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise",
     "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
-    "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
+    "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet",
     "TimeSpanJson", "RunHead", "ChainHead", "CalibrationReport", "PaperReport",
-    "LevelChoicePart", "errors_json", "registration_json", "registration_pair", "level_choice_part", "findings_json",
+    "errors_json", "registration_json", "registration_pair", "findings_json",
     "CouplingJson", "CouplingsPart", "couplings_part",
 ]
 
@@ -278,12 +278,18 @@ class Noise(TypedDict):
     sigma_rot_deg: float | None
 
 
-class Outlier(TypedDict):
-    """A row flagged as an outlier, by file and line."""
-
+class _OutlierKeys(TypedDict):
     line: int
     robust_score: float
     file: str | None
+
+
+class Outlier(_OutlierKeys, total=False):
+    """A row flagged as an outlier, by file and line; ``by``: the error that flags it, the RMS distance of its
+    points (``position``) or its orientation's angle (``orientation``, 6D rows) — absent from files written
+    before pincal flagged orientations."""
+
+    by: Literal["position", "orientation"]
 
 
 class _FitRowsKeys(TypedDict):
@@ -371,38 +377,6 @@ class RowErrorSet(TypedDict):
     robust_score: list[float]
 
 
-class Fold(TypedDict):
-    name: str
-    held_out_rows: int
-    training_rows: int
-
-
-class LevelScore(TypedDict):
-    """One level's cross-validation error (null where its fits failed)."""
-
-    level: str
-    cv_error_mm: float | None
-    standard_error_mm: float | None
-    fold_errors_mm: list[float | None]
-    kept_parameters: list[int | None]
-    failures: list[str]
-
-
-class LevelChoiceJson(TypedDict):
-    """How ``--level auto`` chose the level (:meth:`pincal.fit.level_choice.LevelChoice.as_dict`)."""
-
-    rule: str
-    scheme: str
-    error: str
-    selection: str
-    folds: list[Fold]
-    levels: list[LevelScore]
-    lowest: str
-    threshold_mm: float
-    chosen: str
-    seconds: float
-
-
 class TimeSpanJson(TypedDict):
     """The times [s] of one session's rows a drift was fitted on."""
 
@@ -474,12 +448,6 @@ class PaperReport(TypedDict):
     xacro_args: dict[str, str]
 
 
-class LevelChoicePart(TypedDict, total=False):
-    """``level_choice`` where a report has it (``--level auto``), to unpack into a report."""
-
-    level_choice: LevelChoiceJson
-
-
 class CouplingsPart(TypedDict, total=False):
     """``couplings`` where a report has them (``--coupling`` given), to unpack into a report."""
 
@@ -503,11 +471,6 @@ def registration_json(registration: Registration) -> RegistrationJson:
 def registration_pair(position: Registration, orientation: Registration) -> RegistrationPair:
     """Registrations 1 and 2 (one estimate serves both outside the paper's methods)."""
     return {"position": registration_json(position), "orientation": registration_json(orientation)}
-
-
-def level_choice_part(choice: LevelChoice | None) -> LevelChoicePart:
-    """``{"level_choice": ...}`` of ``--level auto``, ``{}`` for a level given."""
-    return {} if choice is None else {"level_choice": cast(LevelChoiceJson, choice.as_dict())}
 
 
 def couplings_part(couplings: Sequence[ReadingCoupling]) -> CouplingsPart:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Literal, TypedDict
 
-from pincal.report.model import CouplingJson, LevelChoiceJson, PoseErrorsJson, TimeSpanJson, Vector3, _CalibrationKeys
+from pincal.report.model import CouplingJson, PoseErrorsJson, TimeSpanJson, Vector3, _CalibrationKeys
+from pincal.report.model_level_choice import LevelChoiceJson
 
 __all__ = [
     "EffectJson", "CandidateJson", "BeforeAfter", "DiagnosisStep", "DiagnosisJson", "ApproachContext",

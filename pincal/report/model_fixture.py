@@ -11,7 +11,6 @@ from pincal.report.model import (
     Finding,
     FixtureFit,
     Identifiability,
-    LevelChoiceJson,
     Noise,
     Outlier,
     Parameter,
@@ -20,6 +19,7 @@ from pincal.report.model import (
     Sources,
     Vector3,
 )
+from pincal.report.model_level_choice import LevelChoiceJson
 
 if TYPE_CHECKING:
     from pincal.fit.socket_metrics import FixtureMetrics

@@ -12,7 +12,6 @@ from pincal.report.model import (
     Finding,
     Identifiability,
     JointKind,
-    LevelChoicePart,
     Noise,
     OrientationStats,
     Parameter,
@@ -24,6 +23,7 @@ from pincal.report.model import (
     Vector3,
 )
 from pincal.report.model_diagnosis import CandidateJson, EffectJson
+from pincal.report.model_level_choice import LevelChoicePart
 
 __all__ = ["TreeChainJson", "TargetErrors", "TargetJson", "TreeSessionJson", "TreeCandidateJson", "TreeBeforeAfter",
            "TreeStepJson", "TreeDiagnosisJson", "TreeReport", "TreeEvaluationTarget", "TreeEvaluationJson"]

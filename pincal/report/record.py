@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pincal.report.model import CouplingsPart, Finding, LevelChoicePart, RowErrorSet
+from pincal.report.model import CouplingsPart, Finding, RowErrorSet
+from pincal.report.model_level_choice import LevelChoicePart
 
 __all__ = ["ReportRecord"]
 
@@ -22,8 +23,8 @@ class ReportRecord:
         xacro_args: ``{NAME: VALUE}`` the ``.xacro`` URDF was expanded with (``xacro_args``; ``{}`` for a URDF).
         row_errors: each row's error by file line (``row_errors``; a socket fixture's report has none).
         warnings: the plausibility findings (``warnings``; a paper method's report has none).
-        level_choice: :func:`pincal.report.model.level_choice_part` (``level_choice`` with ``--level auto``;
-            a paper method's report has none).
+        level_choice: :func:`pincal.report.model_level_choice.level_choice_part` (``level_choice`` with
+            ``--level auto``; a paper method's report has none).
         couplings: :func:`pincal.report.model.couplings_part` of ``--coupling`` (None without; a paper
             method's report has none).
     """

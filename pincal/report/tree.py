@@ -15,7 +15,8 @@ from pincal.fit.metrics import ErrorSummary
 from pincal.fit.tree_calibration import TreeCalibration
 from pincal.model.tree import KinematicTree
 from pincal.report.document import REPORT_VERSION, identifiability_report, mimics_json, parameters_report
-from pincal.report.model import PositionStats, Sha256, Sources, couplings_part, level_choice_part, registration_pair
+from pincal.report.model import PositionStats, Sha256, Sources, couplings_part, registration_pair
+from pincal.report.model_level_choice import level_choice_part
 from pincal.report.model_tree import TargetErrors, TargetJson, TreeChainJson, TreeReport
 
 if TYPE_CHECKING:

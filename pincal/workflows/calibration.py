@@ -29,7 +29,8 @@ from pincal.model.parameter_sets import ChainLevel
 from pincal.progress import Progress, Stages
 from pincal.report.document import chain_head, chain_report, fit_rows, paper_report, write_report
 from pincal.report.effects_file import effects_path, write_effects_file
-from pincal.report.model import CalibrationReport, PaperReport, Sources, couplings_part, level_choice_part
+from pincal.report.model import CalibrationReport, PaperReport, Sources, couplings_part
+from pincal.report.model_level_choice import level_choice_part
 from pincal.report.record import ReportRecord
 from pincal.report.row_errors import chain_row_errors, paper_row_errors
 from pincal.report.sessions import session_entries, session_errors

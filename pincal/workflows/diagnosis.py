@@ -28,8 +28,9 @@ from pincal.progress import Progress, Stages
 from pincal.report.diagnosis import diagnosis_report
 from pincal.report.document import chain_head, fit_rows, write_report
 from pincal.report.effects_file import effects_path, write_effects_file
-from pincal.report.model import Sources, couplings_part, level_choice_part
+from pincal.report.model import Sources, couplings_part
 from pincal.report.model_diagnosis import DiagnosisReport
+from pincal.report.model_level_choice import level_choice_part
 from pincal.report.record import ReportRecord
 from pincal.report.row_errors import diagnosis_row_errors
 from pincal.report.sessions import drift_spans, session_entries

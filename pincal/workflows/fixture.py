@@ -50,13 +50,14 @@ from pincal.outputs import file_sha256
 from pincal.report.document import write_report
 from pincal.report.effects_file import effects_path, write_effects_file
 from pincal.report.fixture import fixture_report, read_fixture_block
-from pincal.report.model import Sources, couplings_part, findings_json, level_choice_part
+from pincal.report.model import Sources, couplings_part, findings_json
 from pincal.report.model_fixture import (
     FixtureEvaluationJson,
     FixtureReport,
     PlacementPredictionJson,
     fixture_metrics_json,
 )
+from pincal.report.model_level_choice import level_choice_part
 from pincal.report.reading import load_report
 from pincal.report.record import ReportRecord
 from pincal.workflows.evaluation_outputs import EvaluateOutputs, write_outputs
