@@ -3,7 +3,8 @@
 UR5 (collision meshes): the candidates in self-collision are refused by default — the same ones as
 ``--min-distance 0``, each with two links intersecting (checked pair by pair with coal through
 Pinocchio), the kept ones with none —, ``--no-collision-check`` keeps them all, and it is refused
-beside ``--min-distance``. KUKA (no ``<collision>``): a note says the candidates are not checked.
+beside ``--min-distance``. KUKA (no ``<collision>``): a note says the candidates are not checked. TALOS: its SRDF's
+pairs replace those in contact at zero, where its grippers sit inside its thighs.
 PLAN.json and the console say each joint's range and where it comes from.
 """
 
@@ -21,11 +22,16 @@ from pincal.errors import PincalError
 from pincal.model import packages
 from pincal.model.chain import KinematicChain
 from pincal.planning.candidates import joint_ranges, sample_candidates
+from pincal.errors import ModelError
+from pincal.model.tree import KinematicTree, parse_targets
 from pincal.planning.collisions import _geometry, check_clearance
-from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_urdf, kuka_lwr4plus_urdf
+from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_dir, example_robot_data_urdf, kuka_lwr4plus_urdf
 from pincal.workflows.preparation import PlanInputs
 
 UR5 = example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf")
+UR5_SRDF = example_robot_data_dir() / "ur_description" / "srdf" / "ur5.srdf"
+TALOS = example_robot_data_urdf("talos_data/robots/talos_full_v2.urdf")
+TALOS_SRDF = example_robot_data_dir() / "talos_data" / "srdf" / "talos.srdf"
 SAMPLE = 120
 
 
@@ -211,3 +217,67 @@ def test_geometry_on_one_link_only_is_said_to_check_nothing(tmp_path, capsys):
     # with geometry on the moving links (the UR5 itself) no such note
     code, _ = _plan(tmp_path, "ur5", UR5, "tool0")
     assert code == 0 and "in effect not checked" not in capsys.readouterr().err
+
+
+def _talos_arms():
+    return KinematicTree.from_urdf(TALOS, parse_targets(["gripper_left_fingertip_1_link:1",
+                                                         "gripper_right_fingertip_1_link:2"]))
+
+
+def test_talos_srdf_checks_the_grippers_against_the_thighs_that_touch_at_zero():
+    """At TALOS's zero configuration (arms down) its grippers' meshes intersect its thighs: the zero rule ignores
+    those pairs — and so would let a gripper into a thigh in any posture — and names them as not adjacent. With
+    the robot's SRDF (example-robot-data's talos.srdf), its disabled pairs are the ones skipped, and the zero
+    configuration is refused; the arms abducted by 0.6 rad (34°) away from the legs are free either way."""
+    tree = _talos_arms()
+    zero = np.clip(np.zeros(tree.n_joints), [j.lower for j in tree.joints], [j.upper for j in tree.joints])
+    abducted = zero.copy()
+    abducted[[tree.joint_names.index("arm_left_2_joint"), tree.joint_names.index("arm_right_2_joint")]] = 0.6, -0.6
+    q = np.stack([zero, abducted])
+    default = check_clearance(TALOS, tree, q, 0.0)
+    assert default.allowed.tolist() == [True, True] and default.srdf is None
+    assert {"leg_left_3_link_0~gripper_left_base_link_0", "leg_right_3_link_0~gripper_right_base_link_0"} <= \
+        set(default.unrelated_ignored) <= set(default.pairs_ignored)
+    srdf = check_clearance(TALOS, tree, q, 0.0, srdf=TALOS_SRDF)
+    assert srdf.allowed.tolist() == [False, True] and srdf.in_collision == 1
+    assert srdf.pairs_ignored == () and srdf.unrelated_ignored == () and srdf.pairs_disabled > 0
+    # every pair of moving links is either checked or disabled by the SRDF
+    assert srdf.pairs_checked + srdf.pairs_disabled == default.pairs_checked + len(default.pairs_ignored)
+    assert srdf.as_dict()["srdf"] == {"file": str(TALOS_SRDF), "pairs_disabled": srdf.pairs_disabled}
+    assert "srdf" not in default.as_dict()
+
+
+@pytest.mark.parametrize("text, message", [
+    (None, "cannot read the SRDF"),
+    ("<robot name='ur5'><group name='arm'/>", "cannot read the SRDF"),
+    ("<robot name='ur5'><group name='arm'/></robot>", "no <disable_collisions> pair"),
+    ("TALOS", "disables no pair of this URDF's moving links .* not in the URDF"),
+])
+def test_an_srdf_that_cannot_serve_is_one_line_naming_it(tmp_path, text, message):
+    """A missing or malformed file, one without pairs, another robot's (TALOS's for a UR5): a ModelError
+    naming the file, never a check that silently skips nothing."""
+    chain = KinematicChain.from_urdf(UR5, "tool0")
+    path = TALOS_SRDF if text == "TALOS" else tmp_path / "robot.srdf"
+    if text not in (None, "TALOS"):
+        path.write_text(text, encoding="utf-8")
+    with pytest.raises(ModelError, match=message) as caught:
+        check_clearance(UR5, chain, sample_candidates(chain, 2, seed=1), 0.0, srdf=path)
+    assert str(path) in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_plan_srdf_is_printed_recorded_and_refused_beside_no_collision_check(tmp_path, capsys):
+    """UR5 with its SRDF (example-robot-data's ur5.srdf): the console says how many pairs it disabled and
+    PLAN.json records the file; with --no-collision-check it is one line and exit 2; without the SRDF the UR5's
+    pairs in contact at zero are all adjacent, so no note."""
+    code, doc = _plan(tmp_path, "srdf", UR5, "tool0", "--srdf", str(UR5_SRDF))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    clearance = doc["candidates"]["clearance"]
+    assert clearance["srdf"]["file"] == str(UR5_SRDF) and clearance["srdf"]["pairs_disabled"] > 0
+    assert clearance["pairs_ignored_at_zero"] == []
+    assert f"{clearance['srdf']['pairs_disabled']} disabled by ur5.srdf)" in captured.out
+    code, _ = _plan(tmp_path, "both", UR5, "tool0", "--srdf", str(UR5_SRDF), "--no-collision-check")
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--srdf" in err and "--no-collision-check" in err
+    code, _ = _plan(tmp_path, "plain", UR5, "tool0")
+    assert code == 0 and "--srdf" not in capsys.readouterr().err

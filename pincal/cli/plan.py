@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from pincal.cli.arguments import selection_criterion
 
@@ -48,7 +49,7 @@ def run_plan(args: argparse.Namespace) -> int:
     inputs = PlanInputs(tool_pose=args.tool, candidates_path=args.candidates, sample=args.sample,
                         existing_path=args.existing, workspace_path=args.workspace, min_distance_m=args.min_distance,
                         collision_check=not args.no_collision_check, xacro_args=args.xacro_args,
-                        package_dirs=dict(args.package_dir), couplings=args.coupling or ())
+                        package_dirs=dict(args.package_dir), couplings=args.coupling or (), srdf=args.srdf)
     # several --tip-link LINK:POINTS: the tree of their chains (one string: one chain, as ever)
     tip_link = args.tip_link if isinstance(args.tip_link, str) else parse_targets(args.tip_link)
     with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
@@ -123,9 +124,10 @@ def print_candidates(run) -> None:
         c = run.clearance
         closer = "" if c.min_distance_m == 0.0 else f", {c.too_close} closer than {c.min_distance_m:g} m"
         ignored = "in contact" if c.min_distance_m == 0.0 else "closer"
+        skipped = (f"{c.pairs_disabled} disabled by {Path(c.srdf).name}" if c.srdf is not None else
+                   f"{len(c.pairs_ignored)} ignored as {ignored} at the zero configuration")
         print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
-              f"self-collision{closer} ({c.pairs_checked} link pairs checked, {len(c.pairs_ignored)} ignored as "
-              f"{ignored} at the zero configuration)")
+              f"self-collision{closer} ({c.pairs_checked} link pairs checked, {skipped})")
     elif run.collision_check == "off":
         print("not checked for self-collision (--no-collision-check)")
 
@@ -157,7 +159,7 @@ def run_camera_plan(args: argparse.Namespace) -> int:
                               existing_path=existing[0] if existing else None, candidates_path=args.candidates,
                               sample=DEFAULT_AIMED if args.sample is None else args.sample,
                               collision_check=not args.no_collision_check, xacro_args=args.xacro_args,
-                              package_dirs=dict(args.package_dir))
+                              package_dirs=dict(args.package_dir), srdf=args.srdf)
     with progress_bar("plan", quiet=args.quiet, unit="step") as progress:
         run = camera_plan_files(args.urdf, inputs, settings, args.out, progress=progress)
     for note in run.notes:

@@ -11,6 +11,13 @@ collision test without margin) — adjacent links touch or overlap there —, ar
 ignored. A candidate is refused when any remaining pair is closer than the
 clearance (coal's collision test with a security margin: distance < margin);
 with a clearance of 0, when two links are in contact.
+
+With the robot's SRDF (``plan --srdf``), its ``disable_collisions`` pairs are the ones not checked
+(Pinocchio's ``removeCollisionPairs``), instead of those in contact at the zero configuration: a
+whole robot's zero is no resting pose (TALOS's grippers sit inside its thighs there), and the zero
+rule would leave such pairs unchecked in every posture. Links in contact at zero that are not adjacent
+— neither on one joint nor on a joint and its parent — are named by :attr:`Clearance.unrelated_ignored`,
+so that a plan without the SRDF can say so.
 """
 
 from __future__ import annotations
@@ -50,6 +57,9 @@ class Clearance:
         too_close: candidates refused because two links are closer than the clearance (not intersecting).
         pairs_checked: geometry pairs checked.
         pairs_ignored: names of the pairs ignored (closer than the clearance at the zero configuration).
+        unrelated_ignored: those of :attr:`pairs_ignored` whose links are not adjacent (module docstring).
+        srdf: the SRDF whose disabled pairs were not checked (then nothing is ignored at zero), or None.
+        pairs_disabled: pairs the SRDF disabled among those of moving links.
     """
 
     min_distance_m: float
@@ -58,9 +68,12 @@ class Clearance:
     too_close: int
     pairs_checked: int
     pairs_ignored: tuple[str, ...]
+    unrelated_ignored: tuple[str, ...] = ()
+    srdf: str | None = None
+    pairs_disabled: int = 0
 
     def as_dict(self) -> dict[str, object]:
-        return {
+        out: dict[str, object] = {
             "min_distance_m": self.min_distance_m,
             "refused": int(self.in_collision + self.too_close),
             "refused_in_collision": self.in_collision,
@@ -68,6 +81,9 @@ class Clearance:
             "pairs_checked": self.pairs_checked,
             "pairs_ignored_at_zero": list(self.pairs_ignored),
         }
+        if self.srdf is not None:
+            out["srdf"] = {"file": self.srdf, "pairs_disabled": self.pairs_disabled}
+        return out
 
 
 def has_collision_geometry(urdf: str | Path, xacro_args: Sequence[tuple[str, str]] = ()) -> bool:
@@ -103,15 +119,26 @@ def check_clearance(
     xacro_args: Sequence[tuple[str, str]] = (),
     progress: Progress | None = None,
     package_dirs: Mapping[str, Path] | None = None,
+    srdf: str | Path | None = None,
 ) -> Clearance:
     """Which configurations ``q`` (K, N) keep every moving pair of links at least ``min_distance`` [m] apart
     (0: which are free of self-collision).
 
     ``progress(done, total)`` counts the configurations checked (those too close twice: then for contact;
     once with ``min_distance`` 0).
-    ``package_dirs``: NAME → the folder of package NAME, searched first for ``package://NAME/...`` meshes."""
+    ``package_dirs``: NAME → the folder of package NAME, searched first for ``package://NAME/...`` meshes.
+    ``srdf``: the robot's SRDF, whose ``disable_collisions`` pairs are not checked, instead of those in
+    contact (closer than ``min_distance``) at the zero configuration.
+
+    Raises:
+        ModelError: collision geometry that cannot be loaded, or an SRDF that cannot be read or that disables
+            no pair of this URDF's links (another robot's?).
+    """
     model, geometry = _geometry(Path(urdf), chain, xacro_args, package_dirs)
     geometry.addAllCollisionPairs()  # pairs on different joints only
+    every = len(geometry.collisionPairs)
+    if srdf is not None:
+        _disable_srdf_pairs(model, geometry, Path(srdf))
     data, geometry_data = model.createData(), geometry.createData()
     zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])
     pin.computeDistances(model, data, geometry, geometry_data, chain.configurations(zero)[0])
@@ -120,11 +147,13 @@ def check_clearance(
     # link 1: 6e-9 m, yet in collision at every configuration)
     pin.computeCollisions(model, data, geometry, geometry_data, chain.configurations(zero)[0], False)
     names = [o.name for o in geometry.geometryObjects]
-    keep, ignored = [], []
+    keep, ignored, unrelated = [], [], []
     for pair, result, contact in zip(geometry.collisionPairs, geometry_data.distanceResults,
                                      geometry_data.collisionResults):
-        if result.min_distance < min_distance or contact.isCollision():  # closer, or in contact
+        if srdf is None and (result.min_distance < min_distance or contact.isCollision()):  # closer, or in contact
             ignored.append(f"{names[pair.first]}~{names[pair.second]}")
+            if not _adjacent(model, geometry, pair):
+                unrelated.append(ignored[-1])
         else:
             keep.append(pair)
     geometry.removeAllCollisionPairs()
@@ -146,7 +175,39 @@ def check_clearance(
         too_close=int(close.sum() - touching.sum()),
         pairs_checked=len(keep),
         pairs_ignored=tuple(ignored),
+        unrelated_ignored=tuple(unrelated),
+        srdf=None if srdf is None else str(srdf),
+        pairs_disabled=every - len(keep) if srdf is not None else 0,
     )
+
+
+def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Path) -> None:
+    """Remove the SRDF's ``disable_collisions`` pairs from ``geometry``'s (Pinocchio reads the file)."""
+    try:
+        root = etree.parse(str(srdf)).getroot()
+    except (OSError, etree.XMLSyntaxError) as exc:
+        raise ModelError(f"{srdf}: cannot read the SRDF ({exc}); give the robot's .srdf file") from None
+    listed = {link for element in root.iter("disable_collisions")
+              for link in (element.get("link1"), element.get("link2")) if link is not None}
+    if not listed:
+        raise ModelError(f"{srdf}: no <disable_collisions> pair in this SRDF; give the robot's .srdf file "
+                         "(or leave --srdf out)")
+    before = len(geometry.collisionPairs)
+    try:
+        pin.removeCollisionPairs(model, geometry, str(srdf), False)
+    except (RuntimeError, ValueError) as exc:
+        raise ModelError(f"{srdf}: cannot read the SRDF ({exc})") from None
+    if len(geometry.collisionPairs) == before:  # a robot's SRDF disables its adjacent links at least
+        unknown = sorted(link for link in listed if not model.existFrame(link))
+        raise ModelError(f"{srdf}: disables no pair of this URDF's moving links"
+                         + (f" ({len(unknown)} of its {len(listed)} links are not in the URDF, e.g. {unknown[0]!r})"
+                            if unknown else "") + ": another robot's SRDF? give this robot's")
+
+
+def _adjacent(model: pin.Model, geometry: pin.GeometryModel, pair: pin.CollisionPair) -> bool:
+    """Whether the pair's two links are on one joint or on a joint and its parent (of the reduced model)."""
+    a, b = (geometry.geometryObjects[i].parentJoint for i in (pair.first, pair.second))
+    return a == b or model.parents[a] == b or model.parents[b] == a
 
 
 #: Configurations checked per parallel call: the progress advances between calls.

@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # annotations only: the REPORT.json loader reads PLAN.json wi
 
 __all__ = [
     "PLAN_VERSION", "PlanSources", "PlanChain", "PlanTarget", "TargetErrorsJson", "TargetPredictionJson",
-    "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion",
+    "PlanPriorScale", "PlanTool", "PlanSettingsJson", "PlanCriterion", "SrdfJson",
     "PredictionJson", "RandomPrediction", "PlanPredicted", "PlanIdentifiability", "ClearanceJson", "PlanCandidates",
     "BalanceJson", "PlanOrder", "Addition", "PlanJson", "CandidatePool", "PlannedRows", "write_plan_csv",
     "write_plan_json", "plan_document",
@@ -179,15 +179,27 @@ class PlanIdentifiability(TypedDict):
     condition_number: float | None
 
 
-class ClearanceJson(TypedDict):
-    """The collision check of the candidates (:class:`pincal.planning.collisions.Clearance`)."""
-
+class _ClearanceKeys(TypedDict):
     min_distance_m: float
     refused: int
     refused_in_collision: int
     refused_too_close: int
     pairs_checked: int
     pairs_ignored_at_zero: list[str]
+
+
+class SrdfJson(TypedDict):
+    """The SRDF given (``--srdf``) and how many pairs of moving links its ``disable_collisions`` left unchecked."""
+
+    file: str
+    pairs_disabled: int
+
+
+class ClearanceJson(_ClearanceKeys, total=False):
+    """The collision check of the candidates (:class:`pincal.planning.collisions.Clearance`); ``srdf`` with
+    ``--srdf`` (then ``pairs_ignored_at_zero`` is empty)."""
+
+    srdf: SrdfJson
 
 
 class _PlanCandidatesKeys(TypedDict):

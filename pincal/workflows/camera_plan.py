@@ -71,6 +71,7 @@ class CameraPlanInputs:
         collision_check: False: no self-collision check (``--no-collision-check``).
         xacro_args: ``NAME:=VALUE`` pairs a ``.xacro`` URDF is expanded with (``--xacro-arg``).
         package_dirs: NAME → the folder of ROS package NAME, for ``package://`` collision meshes.
+        srdf: the robot's SRDF (``--srdf``): its ``disable_collisions`` pairs are the ones not checked.
     """
 
     camera_link: str
@@ -84,6 +85,12 @@ class CameraPlanInputs:
     collision_check: bool = True
     xacro_args: Sequence[tuple[str, str]] = ()
     package_dirs: Mapping[str, Path] | None = None
+    srdf: str | Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.srdf is not None and not self.collision_check:
+            raise PincalError("--srdf says which link pairs the collision check skips, and --no-collision-check "
+                              "skips the check: give one of them")
 
 
 @dataclass(frozen=True)
@@ -188,7 +195,8 @@ def camera_plan_files(urdf: str | Path, inputs: CameraPlanInputs, settings: Came
     if inputs.collision_check and has_collision_geometry(urdf, inputs.xacro_args):
         try:
             allowed = check_clearance(urdf, chain, candidates, 0.0, xacro_args=inputs.xacro_args,
-                                      progress=stages.next(), package_dirs=inputs.package_dirs).allowed
+                                      progress=stages.next(), package_dirs=inputs.package_dirs,
+                                      srdf=inputs.srdf).allowed
         except ModelError as exc:  # checked by default, not asked for: say how to plan without it
             raise ModelError(f"{exc}; or plan --no-collision-check without the self-collision check") from None
         if not allowed.all():

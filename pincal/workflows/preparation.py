@@ -81,9 +81,12 @@ class PlanInputs:
         xacro_args: ``NAME:=VALUE`` pairs a ``.xacro`` URDF is expanded with (``--xacro-arg``).
         package_dirs: NAME → the folder of ROS package NAME, for ``package://`` collision meshes
             (``--package-dir``, :mod:`pincal.model.packages`).
+        srdf: the robot's SRDF (``--srdf``): its ``disable_collisions`` pairs are the ones not checked, instead
+            of those in contact at the zero configuration (:mod:`pincal.planning.collisions`).
 
     Raises:
-        PincalError: ``min_distance_m`` with ``collision_check`` False, or a negative ``min_distance_m``.
+        PincalError: ``min_distance_m`` or ``srdf`` with ``collision_check`` False, or a negative
+            ``min_distance_m``.
     """
 
     tool_pose: np.ndarray | None = None
@@ -96,11 +99,15 @@ class PlanInputs:
     collision_check: bool = True
     xacro_args: Sequence[tuple[str, str]] = ()
     package_dirs: Mapping[str, Path] | None = None
+    srdf: str | Path | None = None
 
     def __post_init__(self) -> None:
         if self.min_distance_m is not None and not self.collision_check:
             raise PincalError("--min-distance asks for the collision check that --no-collision-check skips: "
                               "give one of them")
+        if self.srdf is not None and not self.collision_check:
+            raise PincalError("--srdf says which link pairs the collision check skips, and --no-collision-check "
+                              "skips the check: give one of them")
         if self.min_distance_m is not None and not self.min_distance_m >= 0.0:
             raise PincalError(f"--min-distance {self.min_distance_m}: give a clearance of 0 m or more")
 
@@ -224,6 +231,10 @@ def plan_files(
         notes.append(f"{urdf.name}: no two links that move relative to each other both have <collision> geometry "
                      f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration): the candidates "
                      "are in effect not checked for collision (check the plan's postures before the robot moves)")
+    if clearance is not None and clearance.unrelated_ignored:  # not adjacent, yet in contact at zero
+        notes.append(f"{urdf.name}: {len(clearance.unrelated_ignored)} pair(s) of links that are not adjacent are in "
+                     f"contact at the zero configuration and so never checked (e.g. {clearance.unrelated_ignored[0]}): "
+                     "give the robot's SRDF with --srdf to check them")
     allowed = None if clearance is None else clearance.allowed
     plan = (plan_measurements(chain, candidates, settings, existing, workspace, allowed, stages.next())
             if isinstance(chain, KinematicChain)
@@ -256,7 +267,7 @@ def _clearance(urdf: Path, chain: KinematicChain | KinematicTree, candidates: np
     """The collision check of the candidates: for self-collision (a clearance of 0), or ``--min-distance``."""
     try:
         return check_clearance(urdf, chain, candidates, inputs.min_distance_m or 0.0, xacro_args=inputs.xacro_args,
-                               progress=progress, package_dirs=inputs.package_dirs)
+                               progress=progress, package_dirs=inputs.package_dirs, srdf=inputs.srdf)
     except ModelError as exc:
         if check != "self-collision":
             raise
