@@ -126,6 +126,8 @@ def test_a_row_whose_orientation_alone_is_off_is_printed_reported_and_removed_by
     assert doc["removed_lines"] == []
     from pincal.report.html import render_html
     assert f"outlier (orientation, score {doc['outliers'][0]['robust_score']:.3g}" in render_html(doc)
+    older = {**doc, "outliers": [{k: v for k, v in o.items() if k != "by"} for o in doc["outliers"]]}
+    assert "outlier (score " in render_html(older)  # a report written before orientations were scored
     assert main([*args, "--report", str(tmp_path / "CLEAN.json"), "--reject-outliers"]) == 0
     clean = json.loads((tmp_path / "CLEAN.json").read_text())
     assert clean["removed_lines"] == [line] and clean["outliers"] == []

@@ -308,7 +308,7 @@ def test_outliers_are_reported_by_file_and_line(truth, tmp_path):
     assert main(["calibrate", str(URDF), str(tmp_path / "A.csv"), str(tmp_path / "B.csv"), "--tip-link", TIP,
                  "--level", "offsets", "--select", "aic", "--out", str(tmp_path / "c.urdf"), "--report", str(tmp_path / "R.json")]) == 0
     report = json.loads((tmp_path / "R.json").read_text())
-    assert [(o["file"], o["line"]) for o in report["outliers"]] == [(str(tmp_path / "B.csv"), 7)]
+    assert [(o["file"], o["line"], o["by"]) for o in report["outliers"]] == [(str(tmp_path / "B.csv"), 7, "position")]
 
 
 # --- the reader ---------------------------------------------------------------------------

@@ -127,7 +127,7 @@ def test_orientations_are_weighted_by_their_own_noise_scale(simulated):
 
 
 def test_a_row_whose_orientation_alone_is_off_is_named_and_removed_when_asked(simulated):
-    """Rows with a mocap rigid body's noise (0.2 mm, 0.3°) and one row whose right target's orientation is turned by
+    """Rows with a mocap rigid body's noise (0.2 mm, 0.3°, as the test above) and one row whose right target's orientation is turned by
     5° (its markers matched the wrong way round), its points right: noted by its line, removed by
     ``reject_outliers``; the rows as they were flag nothing."""
     tree, _, _, data, _, _, _ = simulated
@@ -142,7 +142,8 @@ def test_a_row_whose_orientation_alone_is_off_is_named_and_removed_when_asked(si
     line = int(data.lines[17])
     assert not any("outlier" in note for note in calibrate_tree(tree, clean, "full", ChainFitOptions()).notes)
     noted = calibrate_tree(tree, bad, "full", ChainFitOptions())
-    assert any("1 row(s) look like outliers" in note and f"lines [{line}]" in note for note in noted.notes), noted.notes
+    assert any(f"1 row(s) look like outliers (lines [{line}]; by their orientation: lines [{line}])" in note
+               for note in noted.notes), noted.notes
     assert line in data.lines[noted.used_index]  # noted, kept in the fit
     removed = calibrate_tree(tree, bad, "full", ChainFitOptions(reject_outliers=True))
     assert line not in data.lines[removed.used_index] and removed.used_index.size == data.n_rows - 1

@@ -37,7 +37,7 @@ from pincal.fit.prior import Prior, PriorResidual, data_rows
 from pincal.fit.registration_hold import HeldRotation, hold_registration, rotation_reason
 from pincal.fit.selection import SELECTION_CRITERIA, SelectionCriterion
 from pincal.fit.sensor_problem import START_SIGMA_POS_M, START_SIGMA_ROT_RAD, FitProblem
-from pincal.fit.sessions import check_registrable, initial_target, rows_at
+from pincal.fit.sessions import by_orientation, check_registrable, initial_target, rows_at
 from pincal.fit.target_hold import HeldDirection, analysis_jacobian, held_reason, hold_target, weak_target
 from pincal.measurements.data import MeasurementSet
 from pincal.model.chain import KinematicChain
@@ -260,7 +260,7 @@ def calibrate_chain(chain: KinematicChain, data: MeasurementSet, level: ChainLev
         notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)} and refitted")
     if flagged and not removed:
         notes.append(
-            f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
+            f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}{by_orientation(data, outliers)}); "
             + ("rerun with --reject-outliers to refit without them" if options.refit_offered else
                "they stay in the fit: check them and remove the bad ones from the file (an effect found "
                "later may explain the others)")

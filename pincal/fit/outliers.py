@@ -32,7 +32,7 @@ MAD_TO_SIGMA = 1.4826
 #: laser tracker's resolution (~10 µm) and far above double-precision rounding.
 OUTLIER_FLOOR_M = 1e-6
 #: Excess over the median below which no row is an orientation outlier [rad]: 10 µrad (0.0006°), a
-#: seventeenth of a 6-DoF laser-tracker probe's orientation accuracy (±0.01°) and far above rounding.
+#: seventeenth of a 6-DoF laser-tracker probe's orientation accuracy (±0.01°, Leica's T-Mac) and far above rounding.
 OUTLIER_FLOOR_RAD = 1e-5
 
 #: Which of a row's errors flags it: the RMS distance of its points or the angle of its orientation.

@@ -32,6 +32,7 @@ import numpy.typing as npt
 
 from pincal.errors import CalibrationError
 from pincal.fit.metrics import PoseErrors, RowCorrections, pose_errors
+from pincal.fit.outliers import RowOutlier
 from pincal.fit.registration import (
     mean_rotation,
     register_line,
@@ -54,9 +55,9 @@ from pincal.residuals.sensor_values import FittedBlocks, ModelledEffects, RowWei
 from pincal.residuals.so3 import log3
 
 __all__ = [
-    "MIN_SPREAD_M", "MIN_SPREAD_RATIO", "LINE_RATIO", "MIN_TURN_RAD", "where", "rows_at", "registration_problem",
+    "MIN_SPREAD_M", "MIN_SPREAD_RATIO", "LINE_RATIO", "MIN_TURN_RAD", "where", "rows_at", "by_orientation",
     "check_registrable", "session_rows", "by_points", "start_registration", "initial_target", "register_session",
-    "session_pose_errors", "RegistrationStart",
+    "session_pose_errors", "RegistrationStart", "registration_problem",
 ]
 
 #: How a session's registration is started: from its points (Arun), from its orientations
@@ -95,6 +96,13 @@ def rows_at(data: MeasurementSet, index: Sequence[int]) -> str:
     if len(set(data.files.tolist())) == 1:
         return f"lines {[int(data.lines[k]) for k in index]}"
     return ", ".join(f"{data.files[k]} line {int(data.lines[k])}" for k in index)
+
+
+def by_orientation(data: MeasurementSet, outliers: Sequence[RowOutlier]) -> str:
+    """``; by their orientation: lines [9]`` naming the outliers (rows of ``data``) that their orientation
+    error flags, to follow :func:`rows_at` in a note; empty when none is."""
+    turned = [o.row for o in outliers if o.by == "orientation"]
+    return f"; by their orientation: {rows_at(data, turned)}" if turned else ""
 
 
 def registration_problem(points: np.ndarray, n_rows: int, has_orientation: bool) -> str | None:

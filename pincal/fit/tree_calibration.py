@@ -37,7 +37,7 @@ from pincal.fit.pipeline import Analysis, Dropped, dropped_parameters, fit_kinem
 from pincal.fit.prior import PriorResidual, data_rows
 from pincal.fit.problem import KindProblem
 from pincal.fit.registration import mean_rotation, register_points
-from pincal.fit.sessions import registration_problem, rows_at, where
+from pincal.fit.sessions import by_orientation, registration_problem, rows_at, where
 from pincal.fit.tree_problem import TreeProblem, registration_fit
 from pincal.measurements.data import MeasurementSet
 from pincal.measurements.target_orientations import target_quat_columns
@@ -262,15 +262,16 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
         result = _calibrate_tree_rows(tree, data, index, level, options, counter)  # and of its targets' angles
         seen = np.any(np.isfinite(result.point_errors), axis=1)  # a row none of whose points was seen: no error
         per_row = np.sqrt(np.nanmean(result.point_errors[seen] ** 2, axis=1))
-        flagged = [o.row for o in find_row_outliers(per_row[:, None], index[seen],
-                                                    _row_angles(result.orientation_errors, seen))]
+        outliers = find_row_outliers(per_row[:, None], index[seen], _row_angles(result.orientation_errors, seen))
+        flagged = [o.row for o in outliers]
         if not (options.reject_outliers and flagged and attempt == 0):
             break
         removed = flagged
         index = index[~np.isin(index, removed)]
         notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)} and refitted")
     if flagged and not removed:
-        notes.append(f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}); "
+        notes.append(f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}"
+                     + by_orientation(data, outliers) + "); "
                      + ("rerun with --reject-outliers to refit without them" if options.refit_offered else
                         "they stay in the fit: check them and remove the bad ones from the file"))
     return replace(result, notes=result.notes + tuple(notes), total_seconds=time.perf_counter() - started)

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Literal, TypedDict, cast
 
 from pincal.measurements.couplings import CouplingJson
 from pincal.measurements.data import MimicJson
-from pincal.report.model_level_choice import LevelChoiceJson
+from pincal.report.model_level_choice import Fold, LevelChoiceJson, LevelChoicePart, LevelScore, level_choice_part
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -37,7 +37,8 @@ __all__ = [
     "PriorScaleEstimate", "PriorScale", "SelectionCandidate", "SelectionJson", "Absorption", "Dropped",
     "CorrelatedPair", "NotDetermined", "NotDeterminedRotation", "Identifiability", "PaperTool", "Tool", "Noise",
     "Outlier", "FitRows", "Stage", "PaperFit", "FixtureFit",
-    "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet",
+    "ChainFit", "Finding", "SessionEntry", "RowErrorModel", "RowErrorSet", "Fold", "LevelScore", "LevelChoiceJson",
+    "LevelChoicePart", "level_choice_part",  # pincal.report.model_level_choice's, where they have always been
     "TimeSpanJson", "RunHead", "ChainHead", "CalibrationReport", "PaperReport",
     "errors_json", "registration_json", "registration_pair", "findings_json",
     "CouplingJson", "CouplingsPart", "couplings_part",
