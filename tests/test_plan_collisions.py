@@ -18,13 +18,12 @@ import pinocchio as pin
 import pytest
 
 from pincal.cli.commands import main
-from pincal.errors import PincalError
+from pincal.errors import ModelError, PincalError
 from pincal.model import packages
 from pincal.model.chain import KinematicChain
-from pincal.planning.candidates import joint_ranges, sample_candidates
-from pincal.errors import ModelError
 from pincal.model.tree import KinematicTree, parse_targets
-from pincal.planning.collisions import _geometry, check_clearance
+from pincal.planning.candidates import joint_ranges, sample_candidates
+from pincal.planning.collisions import _disable_srdf_pairs, _geometry, check_clearance
 from pincal.robots import KUKA_FLANGE_LINK, example_robot_data_dir, example_robot_data_urdf, kuka_lwr4plus_urdf
 from pincal.workflows.preparation import PlanInputs
 
@@ -241,14 +240,24 @@ def test_talos_srdf_checks_the_grippers_against_the_thighs_that_touch_at_zero():
     srdf = check_clearance(TALOS, tree, q, 0.0, srdf=TALOS_SRDF)
     assert srdf.allowed.tolist() == [False, True] and srdf.in_collision == 1
     assert srdf.pairs_ignored == () and srdf.unrelated_ignored == () and srdf.pairs_disabled > 0
-    # every pair of moving links is either checked or disabled by the SRDF
-    assert srdf.pairs_checked + srdf.pairs_disabled == default.pairs_checked + len(default.pairs_ignored)
-    assert srdf.as_dict()["srdf"] == {"file": str(TALOS_SRDF), "pairs_disabled": srdf.pairs_disabled}
+    # which pairs: an adjacent pair of the SRDF is not checked, a thigh and a gripper are, and so is a pair the
+    # SRDF disables as "Never" in collision (its forearm and wrist sensor, which intersect in some postures)
+    model, geometry = _geometry(TALOS, tree)
+    geometry.addAllCollisionPairs()
+    assert _disable_srdf_pairs(model, geometry, TALOS_SRDF) == srdf.srdf_never_checked > 0
+    names = [o.name for o in geometry.geometryObjects]
+    checked = {frozenset((names[p.first], names[p.second])) for p in geometry.collisionPairs}
+    assert frozenset(("arm_left_1_link_0", "arm_left_2_link_0")) not in checked
+    assert frozenset(("leg_left_3_link_0", "gripper_left_base_link_0")) in checked
+    assert frozenset(("arm_left_5_link_0", "wrist_left_ft_link_0")) in checked
+    assert srdf.as_dict()["srdf"] == {"file": str(TALOS_SRDF), "pairs_disabled": srdf.pairs_disabled,
+                                      "never_pairs_checked": srdf.srdf_never_checked}
     assert "srdf" not in default.as_dict()
 
 
 @pytest.mark.parametrize("text, message", [
     (None, "cannot read the SRDF"),
+    ("DIR", "cannot read the SRDF"),
     ("<robot name='ur5'><group name='arm'/>", "cannot read the SRDF"),
     ("<robot name='ur5'><group name='arm'/></robot>", "no <disable_collisions> pair"),
     ("TALOS", "disables no pair of this URDF's moving links .* not in the URDF"),
@@ -257,8 +266,8 @@ def test_an_srdf_that_cannot_serve_is_one_line_naming_it(tmp_path, text, message
     """A missing or malformed file, one without pairs, another robot's (TALOS's for a UR5): a ModelError
     naming the file, never a check that silently skips nothing."""
     chain = KinematicChain.from_urdf(UR5, "tool0")
-    path = TALOS_SRDF if text == "TALOS" else tmp_path / "robot.srdf"
-    if text not in (None, "TALOS"):
+    path = TALOS_SRDF if text == "TALOS" else tmp_path if text == "DIR" else tmp_path / "robot.srdf"
+    if text not in (None, "TALOS", "DIR"):
         path.write_text(text, encoding="utf-8")
     with pytest.raises(ModelError, match=message) as caught:
         check_clearance(UR5, chain, sample_candidates(chain, 2, seed=1), 0.0, srdf=path)
@@ -275,9 +284,23 @@ def test_plan_srdf_is_printed_recorded_and_refused_beside_no_collision_check(tmp
     clearance = doc["candidates"]["clearance"]
     assert clearance["srdf"]["file"] == str(UR5_SRDF) and clearance["srdf"]["pairs_disabled"] > 0
     assert clearance["pairs_ignored_at_zero"] == []
-    assert f"{clearance['srdf']['pairs_disabled']} disabled by ur5.srdf)" in captured.out
+    assert f"{clearance['srdf']['pairs_disabled']} disabled by ur5.srdf, whose " in captured.out
     code, _ = _plan(tmp_path, "both", UR5, "tool0", "--srdf", str(UR5_SRDF), "--no-collision-check")
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "--srdf" in err and "--no-collision-check" in err
+    code, _ = _plan(tmp_path, "clearance", UR5, "tool0", "--srdf", str(UR5_SRDF), "--min-distance", "0.02")
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--srdf" in err and "--min-distance" in err
     code, _ = _plan(tmp_path, "plain", UR5, "tool0")
     assert code == 0 and "--srdf" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("relative, tip", [("panda_description/urdf/panda.urdf", "panda_link8"),
+                                           ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector")])
+def test_one_arms_wrist_links_touching_at_zero_are_not_named(relative, tip):
+    """A Panda's links 5 and 7 (two joints apart) and a Kinova's links 3 and 6 (three) touch at zero by design:
+    one wrist, not separate limbs, so no pair is named for the SRDF note (TALOS's thigh and gripper are, above)."""
+    urdf = example_robot_data_urdf(relative)
+    chain = KinematicChain.from_urdf(urdf, tip)
+    clearance = check_clearance(urdf, chain, sample_candidates(chain, 2, seed=1), 0.0)
+    assert clearance.pairs_ignored and clearance.unrelated_ignored == ()

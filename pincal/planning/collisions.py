@@ -12,12 +12,12 @@ ignored. A candidate is refused when any remaining pair is closer than the
 clearance (coal's collision test with a security margin: distance < margin);
 with a clearance of 0, when two links are in contact.
 
-With the robot's SRDF (``plan --srdf``), its ``disable_collisions`` pairs are the ones not checked
-(Pinocchio's ``removeCollisionPairs``), instead of those in contact at the zero configuration: a
-whole robot's zero is no resting pose (TALOS's grippers sit inside its thighs there), and the zero
-rule would leave such pairs unchecked in every posture. Links in contact at zero that are not adjacent
-— neither on one joint nor on a joint and its parent — are named by :attr:`Clearance.unrelated_ignored`,
-so that a plan without the SRDF can say so.
+With the robot's SRDF (``plan --srdf``, self-collision only), its ``disable_collisions`` pairs are the ones
+not checked (Pinocchio's ``removeCollisionPairsFromXML``; those disabled as "Never" in collision are checked
+still, :data:`SRDF_REASONS`), instead of those in contact at the zero configuration: a whole robot's zero is
+no resting pose (TALOS's grippers sit inside its thighs there), and the zero rule would leave such pairs
+unchecked in every posture. Links ignored at zero more than :data:`NEAR_JOINTS` joints apart are named by
+:attr:`Clearance.unrelated_ignored`, so that a plan without the SRDF can say so.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from pincal.model.packages import with_resolved_meshes
 from pincal.model.tree import KinematicTree
 from pincal.progress import Counter, Progress
 
-__all__ = ["CollisionCheck", "Clearance", "check_clearance", "has_collision_geometry"]
+__all__ = ["CollisionCheck", "Clearance", "SRDF_REASONS", "NEAR_JOINTS", "check_clearance", "has_collision_geometry"]
 
 #: How a plan's candidates were checked: for self-collision (the default where the URDF has collision
 #: geometry), for a clearance (``--min-distance``), not at all (``--no-collision-check``), or not for want of
@@ -60,6 +60,7 @@ class Clearance:
         unrelated_ignored: those of :attr:`pairs_ignored` whose links are not adjacent (module docstring).
         srdf: the SRDF whose disabled pairs were not checked (then nothing is ignored at zero), or None.
         pairs_disabled: pairs the SRDF disabled among those of moving links.
+        srdf_never_checked: the SRDF's pairs disabled as "Never" in collision, checked still (:data:`SRDF_REASONS`).
     """
 
     min_distance_m: float
@@ -71,6 +72,7 @@ class Clearance:
     unrelated_ignored: tuple[str, ...] = ()
     srdf: str | None = None
     pairs_disabled: int = 0
+    srdf_never_checked: int = 0
 
     def as_dict(self) -> dict[str, object]:
         out: dict[str, object] = {
@@ -82,7 +84,8 @@ class Clearance:
             "pairs_ignored_at_zero": list(self.pairs_ignored),
         }
         if self.srdf is not None:
-            out["srdf"] = {"file": self.srdf, "pairs_disabled": self.pairs_disabled}
+            out["srdf"] = {"file": self.srdf, "pairs_disabled": self.pairs_disabled,
+                           "never_pairs_checked": self.srdf_never_checked}
         return out
 
 
@@ -137,8 +140,10 @@ def check_clearance(
     model, geometry = _geometry(Path(urdf), chain, xacro_args, package_dirs)
     geometry.addAllCollisionPairs()  # pairs on different joints only
     every = len(geometry.collisionPairs)
-    if srdf is not None:
-        _disable_srdf_pairs(model, geometry, Path(srdf))
+    if srdf is not None and min_distance > 0.0:
+        raise ModelError(f"{srdf}: an SRDF's disabled pairs are those that may touch, not those that may come closer "
+                         f"than a clearance: give --srdf for the self-collision check, or --min-distance without it")
+    never = 0 if srdf is None else _disable_srdf_pairs(model, geometry, Path(srdf))
     data, geometry_data = model.createData(), geometry.createData()
     zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])
     pin.computeDistances(model, data, geometry, geometry_data, chain.configurations(zero)[0])
@@ -152,7 +157,7 @@ def check_clearance(
                                      geometry_data.collisionResults):
         if srdf is None and (result.min_distance < min_distance or contact.isCollision()):  # closer, or in contact
             ignored.append(f"{names[pair.first]}~{names[pair.second]}")
-            if not _adjacent(model, geometry, pair):
+            if _joints_apart(model, geometry, pair) > NEAR_JOINTS:
                 unrelated.append(ignored[-1])
         else:
             keep.append(pair)
@@ -178,36 +183,62 @@ def check_clearance(
         unrelated_ignored=tuple(unrelated),
         srdf=None if srdf is None else str(srdf),
         pairs_disabled=every - len(keep) if srdf is not None else 0,
+        srdf_never_checked=never,
     )
 
 
-def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Path) -> None:
-    """Remove the SRDF's ``disable_collisions`` pairs from ``geometry``'s (Pinocchio reads the file)."""
+#: The SRDF's reasons for a disabled pair that pincal honours (MoveIt's setup assistant writes them): links
+#: adjacent, in collision in its default pose, or in every posture it sampled. A pair disabled as "Never" — in
+#: collision in none of its samples — is checked still: the samples were of the author's meshes and limits
+#: (TALOS's forearm and wrist, "Never" in talos.srdf, intersect in 9 of 60 postures drawn within this URDF's).
+SRDF_REASONS = ("Adjacent", "Default", "Always")
+
+
+def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Path) -> int:
+    """Remove the SRDF's ``disable_collisions`` pairs of :data:`SRDF_REASONS` (or without a reason) from
+    ``geometry``'s (Pinocchio's ``removeCollisionPairsFromXML``); returns how many "Never" pairs stay checked."""
     try:
         root = etree.parse(str(srdf)).getroot()
     except (OSError, etree.XMLSyntaxError) as exc:
         raise ModelError(f"{srdf}: cannot read the SRDF ({exc}); give the robot's .srdf file") from None
-    listed = {link for element in root.iter("disable_collisions")
-              for link in (element.get("link1"), element.get("link2")) if link is not None}
+    pairs = root.findall("disable_collisions")  # where Pinocchio reads them: children of <robot>
+    listed = {link for element in pairs for link in (element.get("link1"), element.get("link2")) if link is not None}
     if not listed:
         raise ModelError(f"{srdf}: no <disable_collisions> pair in this SRDF; give the robot's .srdf file "
                          "(or leave --srdf out)")
+    kept = [element for element in pairs if element.get("reason", "Default") not in SRDF_REASONS]
+    for element in kept:
+        root.remove(element)
     before = len(geometry.collisionPairs)
     try:
-        pin.removeCollisionPairs(model, geometry, str(srdf), False)
+        pin.removeCollisionPairsFromXML(model, geometry, etree.tostring(root, encoding="unicode"), False)
     except (RuntimeError, ValueError) as exc:
         raise ModelError(f"{srdf}: cannot read the SRDF ({exc})") from None
-    if len(geometry.collisionPairs) == before:  # a robot's SRDF disables its adjacent links at least
+    if len(geometry.collisionPairs) == before and len(kept) < len(pairs):  # a robot's SRDF disables its adjacent links
         unknown = sorted(link for link in listed if not model.existFrame(link))
         raise ModelError(f"{srdf}: disables no pair of this URDF's moving links"
                          + (f" ({len(unknown)} of its {len(listed)} links are not in the URDF, e.g. {unknown[0]!r})"
                             if unknown else "") + ": another robot's SRDF? give this robot's")
+    return len(kept)
 
 
-def _adjacent(model: pin.Model, geometry: pin.GeometryModel, pair: pin.CollisionPair) -> bool:
-    """Whether the pair's two links are on one joint or on a joint and its parent (of the reduced model)."""
-    a, b = (geometry.geometryObjects[i].parentJoint for i in (pair.first, pair.second))
-    return a == b or model.parents[a] == b or model.parents[b] == a
+#: Links at most this many joints apart (along the tree, in the reduced model) that are in contact at zero form
+#: one elbow or wrist, whose meshes often touch by design (a Panda's links 5 and 7, two joints apart; a Kinova's
+#: links 3 and 6, three); farther apart they are separate limbs (TALOS's thigh and gripper: nine), which the zero
+#: rule would leave unchecked in every posture.
+NEAR_JOINTS = 3
+
+
+def _joints_apart(model: pin.Model, geometry: pin.GeometryModel, pair: pin.CollisionPair) -> int:
+    """How many joints lie between the pair's two links along the kinematic tree (0: on one joint)."""
+    def ancestry(joint: int) -> list[int]:
+        path = [joint]
+        while path[-1] != 0:
+            path.append(model.parents[path[-1]])
+        return path
+    a, b = (ancestry(geometry.geometryObjects[i].parentJoint) for i in (pair.first, pair.second))
+    common = next(j for j in a if j in b)
+    return a.index(common) + b.index(common)
 
 
 #: Configurations checked per parallel call: the progress advances between calls.

@@ -189,10 +189,12 @@ class _ClearanceKeys(TypedDict):
 
 
 class SrdfJson(TypedDict):
-    """The SRDF given (``--srdf``) and how many pairs of moving links its ``disable_collisions`` left unchecked."""
+    """The SRDF given (``--srdf``), how many pairs of moving links its ``disable_collisions`` left unchecked, and
+    how many it disables as "Never" in collision that were checked still."""
 
     file: str
     pairs_disabled: int
+    never_pairs_checked: int
 
 
 class ClearanceJson(_ClearanceKeys, total=False):

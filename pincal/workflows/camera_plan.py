@@ -198,6 +198,8 @@ def camera_plan_files(urdf: str | Path, inputs: CameraPlanInputs, settings: Came
                                       progress=stages.next(), package_dirs=inputs.package_dirs,
                                       srdf=inputs.srdf).allowed
         except ModelError as exc:  # checked by default, not asked for: say how to plan without it
+            if inputs.srdf is not None:
+                raise
             raise ModelError(f"{exc}; or plan --no-collision-check without the self-collision check") from None
         if not allowed.all():
             notes.append(f"{int((~allowed).sum())} of {len(candidates)} candidates refused: in self-collision")

@@ -22,7 +22,13 @@ from pincal.model.description import xacro_arguments
 from pincal.model.dh.conversion import DHUrdf, urdf_from_dh_table
 from pincal.model.tree import KinematicTree, TargetSpec
 from pincal.planning.candidates import DEFAULT_SAMPLE, JointRange, joint_ranges, read_candidates, sample_candidates
-from pincal.planning.collisions import Clearance, CollisionCheck, check_clearance, has_collision_geometry
+from pincal.planning.collisions import (
+    NEAR_JOINTS,
+    Clearance,
+    CollisionCheck,
+    check_clearance,
+    has_collision_geometry,
+)
 from pincal.planning.files import (
     CandidatePool,
     PlanJson,
@@ -85,8 +91,8 @@ class PlanInputs:
             of those in contact at the zero configuration (:mod:`pincal.planning.collisions`).
 
     Raises:
-        PincalError: ``min_distance_m`` or ``srdf`` with ``collision_check`` False, or a negative
-            ``min_distance_m``.
+        PincalError: ``min_distance_m`` or ``srdf`` with ``collision_check`` False, ``srdf`` with
+            ``min_distance_m``, or a negative ``min_distance_m``.
     """
 
     tool_pose: np.ndarray | None = None
@@ -108,6 +114,9 @@ class PlanInputs:
         if self.srdf is not None and not self.collision_check:
             raise PincalError("--srdf says which link pairs the collision check skips, and --no-collision-check "
                               "skips the check: give one of them")
+        if self.srdf is not None and self.min_distance_m is not None:
+            raise PincalError("--srdf lists the link pairs that may touch, not those that may come closer than "
+                              "--min-distance: give --srdf for the self-collision check, or --min-distance without it")
         if self.min_distance_m is not None and not self.min_distance_m >= 0.0:
             raise PincalError(f"--min-distance {self.min_distance_m}: give a clearance of 0 m or more")
 
@@ -231,10 +240,14 @@ def plan_files(
         notes.append(f"{urdf.name}: no two links that move relative to each other both have <collision> geometry "
                      f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration): the candidates "
                      "are in effect not checked for collision (check the plan's postures before the robot moves)")
-    if clearance is not None and clearance.unrelated_ignored:  # not adjacent, yet in contact at zero
-        notes.append(f"{urdf.name}: {len(clearance.unrelated_ignored)} pair(s) of links that are not adjacent are in "
-                     f"contact at the zero configuration and so never checked (e.g. {clearance.unrelated_ignored[0]}): "
-                     "give the robot's SRDF with --srdf to check them")
+    if clearance is not None and clearance.unrelated_ignored:  # separate limbs, yet touching at zero
+        near = "in contact" if clearance.min_distance_m == 0.0 else f"closer than {clearance.min_distance_m:g} m"
+        notes.append(f"{urdf.name}: {len(clearance.unrelated_ignored)} pair(s) of links more than {NEAR_JOINTS} "
+                     f"joints apart are {near} at the zero configuration and so never checked (e.g. "
+                     f"{clearance.unrelated_ignored[0]})" + (": give the robot's SRDF with --srdf to check them"
+                                                             if clearance.min_distance_m == 0.0 else ""))
+    if inputs.srdf is not None and check == "no collision geometry":
+        notes.append(f"--srdf {inputs.srdf} is not used: nothing is checked for collision")
     allowed = None if clearance is None else clearance.allowed
     plan = (plan_measurements(chain, candidates, settings, existing, workspace, allowed, stages.next())
             if isinstance(chain, KinematicChain)
@@ -269,7 +282,7 @@ def _clearance(urdf: Path, chain: KinematicChain | KinematicTree, candidates: np
         return check_clearance(urdf, chain, candidates, inputs.min_distance_m or 0.0, xacro_args=inputs.xacro_args,
                                progress=progress, package_dirs=inputs.package_dirs, srdf=inputs.srdf)
     except ModelError as exc:
-        if check != "self-collision":
+        if check != "self-collision" or inputs.srdf is not None:  # asked for: the error as it is
             raise
         # checked by default, not asked for: say how to plan without it
         raise ModelError(f"{exc}; or plan --no-collision-check without the self-collision check") from None
