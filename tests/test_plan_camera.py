@@ -27,7 +27,7 @@ from pincal.planning.camera_plan import CameraPlanSettings, plan_camera_views
 from pincal.planning.camera_views import MAX_VIEW_ANGLE_DEG, ViewLimits, aimed_configurations
 from pincal.residuals.base import KinematicsCache
 from pincal.residuals.camera import CameraEstimate, CameraResidual
-from pincal.robots import example_robot_data_urdf
+from pincal.robots import example_robot_data_dir, example_robot_data_urdf
 from pincal.simulation.camera_scene import (
     CameraScene,
     board_corners,
@@ -205,6 +205,7 @@ def test_cli_writes_a_plan_csv_that_detect_reads_as_joints(files: dict[str, str]
     ("eye_to_hand", ["--board-pose", "0,0,1,0,0,0"], "leave out --board-pose"),
     ("eye_to_hand", ["--tool", "0,0,0.1,0,0,0"], "--tool is a point sensor's"),
     ("eye_to_hand", ["--count", "500"], "candidates that see the whole board at most 60 degrees"),
+    ("eye_to_hand", ["--srdf", "ur5.srdf"], "--srdf says which link pairs the collision check skips"),
 ])
 def test_cli_bad_input_is_one_line(files: dict[str, str], arrangement: str, extra: list[str], message: str,
                                    capsys: pytest.CaptureFixture[str]) -> None:
@@ -311,3 +312,13 @@ def test_the_view_angle_bound_is_one_constant() -> None:
     from pincal.planning import camera_views
 
     assert camera_views.MAX_VIEW_ANGLE_DEG is scene.MAX_VIEW_ANGLE_DEG
+
+
+def test_cli_camera_plan_takes_the_robots_srdf(files: dict[str, str], capsys: pytest.CaptureFixture[str]) -> None:
+    """The UR5's SRDF (example-robot-data's ur5.srdf) serves the camera's plan as the points' plan: a note says
+    how many pairs it disabled."""
+    srdf = example_robot_data_dir() / "ur_description" / "srdf" / "ur5.srdf"
+    args = [a for a in _plan(files, "eye_to_hand") if a != "--no-collision-check"]
+    assert main([*args, "--srdf", str(srdf), "--out", f"{files['root']}/srdf_PLAN.csv"]) == 0
+    err = capsys.readouterr().err
+    assert "disabled by ur5.srdf, whose " in err, err

@@ -194,18 +194,22 @@ def camera_plan_files(urdf: str | Path, inputs: CameraPlanInputs, settings: Came
     allowed = np.ones(len(candidates), dtype=bool)
     if inputs.collision_check and has_collision_geometry(urdf, inputs.xacro_args):
         try:
-            allowed = check_clearance(urdf, chain, candidates, 0.0, xacro_args=inputs.xacro_args,
-                                      progress=stages.next(), package_dirs=inputs.package_dirs,
-                                      srdf=inputs.srdf).allowed
+            clearance = check_clearance(urdf, chain, candidates, 0.0, xacro_args=inputs.xacro_args,
+                                        progress=stages.next(), package_dirs=inputs.package_dirs, srdf=inputs.srdf)
         except ModelError as exc:  # checked by default, not asked for: say how to plan without it
             if inputs.srdf is not None:
                 raise
             raise ModelError(f"{exc}; or plan --no-collision-check without the self-collision check") from None
+        allowed = clearance.allowed
         if not allowed.all():
             notes.append(f"{int((~allowed).sum())} of {len(candidates)} candidates refused: in self-collision")
+        if clearance.srdf is not None:
+            notes.append(f"{clearance.pairs_checked} link pairs checked, {clearance.pairs_disabled} disabled by "
+                         f"{Path(clearance.srdf).name}, whose {clearance.srdf_never_checked} 'Never' pairs are checked")
     elif inputs.collision_check:
         notes.append(f"{urdf.name} has no <collision> geometry: the candidates are not checked for self-collision "
-                     "(check the plan's postures before the robot moves)")
+                     "(check the plan's postures before the robot moves)"
+                     + (f"; --srdf {inputs.srdf} is not used" if inputs.srdf is not None else ""))
     kept = np.flatnonzero(allowed)
     plan = plan_camera_views(chain, camera, board, candidates[kept], settings, existing, session_names,
                              progress=stages.next())
