@@ -400,6 +400,15 @@ def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_no
         assert held_before["orientation_seen"] == held_after["orientation_seen"] == 20
         assert held_before["orientation"]["rms_deg"] > 1.5 * FLOOR_DEG  # the geometry alone cannot turn the hands back
         assert held_after["orientation"]["rms_deg"] < 1.1 * FLOOR_DEG
+    # the step that adopted the sag: every measured orientation before and after it, on the calibration rows (as
+    # the targets' geometry and final errors, both targets together) and on the held-out rows
+    [step] = report["diagnosis"]["steps"]
+    for rows, (before, after), seen in (("calibration", ("geometry_errors", "calibration_errors"), 80),
+                                         ("heldout", ("validation_geometry_errors", "validation_errors"), 40)):
+        assert step[rows]["before"]["orientation_seen"] == step[rows]["after"]["orientation_seen"] == seen
+        for key, errors in ((before, step[rows]["before"]), (after, step[rows]["after"])):
+            rms = np.sqrt(np.mean([t[key]["orientation"]["rms_deg"] ** 2 for t in report["targets"]]))
+            assert errors["orientation"]["rms_deg"] == pytest.approx(rms, rel=1e-9), (rows, key)
     # the page's values: each target's orientation nominal -> geometry -> with effects, and held out
     rows = [row["turns"] for row in tree_section(report)["rows"]]
     assert [len(r["steps"]) for r in rows] == [3, 3] and all("—" not in r["held"] for r in rows)

@@ -137,6 +137,12 @@ class _Search:
             return None
         return _per_image(_camera(self.objective(self.held, effects)), self.held.corners, x)
 
+    def turns(self, objective: FitObjective, x: np.ndarray) -> np.ndarray | None:
+        return None  # an image measures corners, no orientation
+
+    def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
+        return None
+
     def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
                      models: tuple[Model, Model]) -> str:
         """The held-out test of :func:`held_out_verdict` on the images' corner distances [px]: in its units of a

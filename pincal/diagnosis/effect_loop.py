@@ -90,7 +90,9 @@ class EffectCandidate:
 class EffectStep:
     """One adopted effect: its values and standard deviations [unit of :func:`pincal.model.effect_units.effect_unit`],
     its ΔBIC, the calibration rows' errors before and after it (the search's :meth:`EffectSearch.errors`), the
-    held-out rows' (None without them), and the step's candidates (best first)."""
+    held-out rows' (None without them), the step's candidates (best first), and the orientation errors before and
+    after it on the calibration and on the held-out rows (:meth:`EffectSearch.turns`; None where the rows measure
+    none, or none are held out)."""
 
     effect: Effect
     values: np.ndarray
@@ -101,6 +103,8 @@ class EffectStep:
     heldout_before: np.ndarray | None
     heldout_after: np.ndarray | None
     candidates: tuple[EffectCandidate, ...]
+    calibration_turns: tuple[np.ndarray, np.ndarray] | None = None
+    heldout_turns: tuple[np.ndarray, np.ndarray] | None = None
 
 
 S = TypeVar("S", bound="EffectSearch")
@@ -135,6 +139,14 @@ class EffectSearch(Protocol):
         """The held-out rows' errors (K_h, P) of the model at ``x`` (None without them)."""
         ...
 
+    def turns(self, objective: FitObjective, x: np.ndarray) -> np.ndarray | None:
+        """The calibration rows' orientation errors (K, T) [rad] of a fit, NaN where not seen (None: none measured)."""
+        ...
+
+    def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
+        """The held-out rows' orientation errors (K_h, T) [rad] of the model at ``x`` (None: none, or no rows)."""
+        ...
+
     def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
                      models: tuple[Model, Model]) -> str:
         """``adopted``, or why not, from the held-out rows' errors without and with the candidate (its fit);
@@ -158,6 +170,10 @@ class Found:
     start_x: np.ndarray | None = None
 
 
+def _pair(before: np.ndarray | None, after: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    return None if before is None or after is None else (before, after)
+
+
 def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Effect], counter: Counter) -> Found:
     """Run the loop of the module docstring from the fit without effects."""
     objective, solution = search.fit([])
@@ -177,7 +193,7 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
         # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
         # strongly against the rows, and what it held would be left for the next candidates to imitate
         # the current model's errors at the scales its residual is whitened with, before they change
-        before = search.errors(objective, solution.x)
+        before, turns_before = search.errors(objective, solution.x), search.turns(objective, solution.x)
         rescaled = search.rescaled(new_objective, new_solution)
         try:
             new_objective, new_solution = rescaled.fit([*adopted, effect], new_solution.x)
@@ -192,7 +208,9 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
                                 search.errors(new_objective, new_solution.x),
                                 search.held_errors(adopted, solution.x), search.held_errors([*adopted, effect],
                                                                                             new_solution.x),
-                                ranking))
+                                ranking, _pair(turns_before, search.turns(new_objective, new_solution.x)),
+                                _pair(search.held_turns(adopted, solution.x),
+                                      search.held_turns([*adopted, effect], new_solution.x))))
         adopted.append(effect)
         objective, solution = new_objective, new_solution
     return Found(search, objective, solution, tuple(adopted), tuple(steps), ranking, tuple(notes), start_x)

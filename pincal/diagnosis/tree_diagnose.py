@@ -195,6 +195,14 @@ class _Search:
         tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
         return tree_objective.point_errors(x, self.problem.row_weight / self.problem.sigma_pos)
 
+    def turns(self, objective: FitObjective, x: np.ndarray) -> np.ndarray | None:
+        """The calibration rows' orientation errors (K, T) [rad] of a fit, NaN where not seen (None without
+        orientations)."""
+        if self.problem.sigma_rot is None:
+            return None
+        tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
+        return tree_objective.orientation_errors(x, self.problem.row_weight / self.problem.sigma_rot)
+
     def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         """The held-out rows' point errors (K_h, P) [m] of the model at ``x`` (None without them)."""
         held = self._held_objective(effects)
@@ -317,9 +325,7 @@ def _concluded(found: Found, untestable: Sequence[Effect], unknown: bool, time: 
     vector[search.kept], std[search.kept] = solution.x[kinematic], std_all[kinematic]
     errors = search.errors(objective, solution.x)
     seen = errors[np.isfinite(errors)]
-    tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
-    turns = None if problem.sigma_rot is None else tree_objective.orientation_errors(
-        solution.x, problem.row_weight / problem.sigma_rot)
+    turns = search.turns(objective, solution.x)
     effects = tuple((effect, solution.x[sl], std_all[sl]) for effect, sl in zip(adopted, objective.effect_slices))
     if untestable:
         notes.append(f"{len(untestable)} candidate(s) cannot be tested on these rows ("

@@ -101,7 +101,8 @@ class TreeCandidateJson(CandidateJson, total=False):
 
 class TreeBeforeAfter(TypedDict):
     """Every target's points on a set of rows before and after a step (``seen`` pairs, ``position``: mean, RMS
-    and max [mm] over every seen point, ``position_per_point``)."""
+    and max [mm] over every seen point, ``position_per_point``) and, where the rows measure orientations, every
+    measured orientation's (``orientation_seen``, ``orientation`` [deg])."""
 
     before: TargetErrors
     after: TargetErrors

@@ -34,13 +34,20 @@ def _held(errors: np.ndarray | None, points: tuple[int, ...], turns: np.ndarray 
     return target_errors(errors, numbers, turns) if errors is not None and numbers else None
 
 
-def _all_points(errors: np.ndarray) -> TargetErrors:
-    """Every seen point's errors (K, P) [m] as one target's (its points: those seen in some row)."""
-    return target_errors(errors, tuple(int(p) + 1 for p in np.flatnonzero(np.isfinite(errors).any(axis=0))))
+def _all_points(errors: np.ndarray, turns: np.ndarray | None = None) -> TargetErrors:
+    """Every seen point's errors (K, P) [m] as one target's (its points: those seen in some row); ``turns``: every
+    measured orientation's errors (K, T) [rad], NaN where not seen, or None."""
+    return target_errors(errors, tuple(int(p) + 1 for p in np.flatnonzero(np.isfinite(errors).any(axis=0))), turns)
 
 
-def _before_after(before: np.ndarray | None, after: np.ndarray | None) -> TreeBeforeAfter | None:
-    return None if before is None or after is None else {"before": _all_points(before), "after": _all_points(after)}
+def _before_after(before: np.ndarray | None, after: np.ndarray | None,
+                  turns: tuple[np.ndarray, np.ndarray] | None = None) -> TreeBeforeAfter | None:
+    """A step's errors before and after it: every seen point's and, with ``turns`` (before, after), every
+    measured orientation's."""
+    if before is None or after is None:
+        return None
+    turned = (None, None) if turns is None else turns
+    return {"before": _all_points(before, turned[0]), "after": _all_points(after, turned[1])}
 
 
 def candidate_entries(candidates: Sequence[TreeCandidate], inputs: EffectInputs, kinds: Mapping[str, str]
@@ -81,8 +88,9 @@ def with_diagnosis(report: TreeReport, diagnosis: TreeDiagnosis,
         "steps": [{
             "effect": effect_entries([(step.effect, step.values, step.std)], diagnosis.inputs, kinds, {})[0],
             "delta_bic": step.delta_bic,
-            "calibration": cast(TreeBeforeAfter, _before_after(step.calibration_before, step.calibration_after)),
-            "heldout": _before_after(step.heldout_before, step.heldout_after),
+            "calibration": cast(TreeBeforeAfter, _before_after(step.calibration_before, step.calibration_after,
+                                                               step.calibration_turns)),
+            "heldout": _before_after(step.heldout_before, step.heldout_after, step.heldout_turns),
             "candidates": candidate_entries(step.candidates, diagnosis.inputs, kinds),
         } for step in diagnosis.steps],
         "last_candidates": candidate_entries(diagnosis.last_candidates, diagnosis.inputs, kinds),
