@@ -103,6 +103,9 @@ def test_a_urdf_without_collision_geometry_is_planned_with_a_note(tmp_path, caps
     assert doc["candidates"]["collision_check"] == "no collision geometry" and doc["candidates"]["clearance"] is None
     notes = [line for line in captured.err.splitlines() if "no <collision> geometry" in line]
     assert len(notes) == 1 and "not checked for self-collision" in notes[0]
+    # an SRDF has nothing to serve: said, not silently dropped
+    code, _ = _plan(tmp_path, "kuka-srdf", kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK, "--srdf", str(UR5_SRDF))
+    assert code == 0 and f"--srdf {UR5_SRDF} is not used" in capsys.readouterr().err
     # asked for explicitly, the clearance cannot be checked: an error, as before
     code, _ = _plan(tmp_path, "kuka-clearance", kuka_lwr4plus_urdf(), KUKA_FLANGE_LINK, "--min-distance", "0.01")
     assert code == 2 and "no <collision> geometry" in capsys.readouterr().err
@@ -240,6 +243,9 @@ def test_talos_srdf_checks_the_grippers_against_the_thighs_that_touch_at_zero():
     srdf = check_clearance(TALOS, tree, q, 0.0, srdf=TALOS_SRDF)
     assert srdf.allowed.tolist() == [False, True] and srdf.in_collision == 1
     assert srdf.pairs_ignored == () and srdf.unrelated_ignored == () and srdf.pairs_disabled > 0
+    assert default.unrelated_note().startswith(f"{len(default.unrelated_ignored)} pair(s) of links more than 3 joints")
+    assert default.unrelated_note().endswith("give the robot's SRDF with --srdf to check them")
+    assert srdf.unrelated_note() == ""
     # which pairs: an adjacent pair of the SRDF is not checked, a thigh and a gripper are, and so is a pair the
     # SRDF disables as "Never" in collision (its forearm and wrist sensor, which intersect in some postures)
     model, geometry = _geometry(TALOS, tree)
@@ -284,7 +290,7 @@ def test_plan_srdf_is_printed_recorded_and_refused_beside_no_collision_check(tmp
     clearance = doc["candidates"]["clearance"]
     assert clearance["srdf"]["file"] == str(UR5_SRDF) and clearance["srdf"]["pairs_disabled"] > 0
     assert clearance["pairs_ignored_at_zero"] == []
-    assert f"{clearance['srdf']['pairs_disabled']} disabled by ur5.srdf, whose " in captured.out
+    assert f"{clearance['srdf']['pairs_disabled']} disabled by ur5.srdf)" in captured.out  # no 'Never' pair in it
     code, _ = _plan(tmp_path, "both", UR5, "tool0", "--srdf", str(UR5_SRDF), "--no-collision-check")
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "--srdf" in err and "--no-collision-check" in err

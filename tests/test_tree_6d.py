@@ -406,8 +406,10 @@ def test_diagnose_of_6d_rows_names_the_sag_and_brings_each_orientation_to_its_no
     for rows, (before, after), seen in (("calibration", ("geometry_errors", "calibration_errors"), 80),
                                          ("heldout", ("validation_geometry_errors", "validation_errors"), 40)):
         assert step[rows]["before"]["orientation_seen"] == step[rows]["after"]["orientation_seen"] == seen
-        for key, errors in ((before, step[rows]["before"]), (after, step[rows]["after"])):
-            rms = np.sqrt(np.mean([t[key]["orientation"]["rms_deg"] ** 2 for t in report["targets"]]))
+        for key, errors in ((before, step[rows]["before"]), (after, step[rows]["after"])):  # RMS pooled by count
+            counts = [t[key]["orientation_seen"] for t in report["targets"]]
+            rms = np.sqrt(np.dot(counts, [t[key]["orientation"]["rms_deg"] ** 2 for t in report["targets"]])
+                          / np.sum(counts))
             assert errors["orientation"]["rms_deg"] == pytest.approx(rms, rel=1e-9), (rows, key)
     # the page's values: each target's orientation nominal -> geometry -> with effects, and held out
     rows = [row["turns"] for row in tree_section(report)["rows"]]

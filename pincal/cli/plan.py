@@ -124,8 +124,8 @@ def print_candidates(run) -> None:
         c = run.clearance
         closer = "" if c.min_distance_m == 0.0 else f", {c.too_close} closer than {c.min_distance_m:g} m"
         ignored = "in contact" if c.min_distance_m == 0.0 else "closer"
-        skipped = (f"{c.pairs_disabled} disabled by {Path(c.srdf).name}, whose {c.srdf_never_checked} 'Never' "
-                   "pairs are checked" if c.srdf is not None else
+        never = f", whose {c.srdf_never_checked} 'Never' pairs are checked" if c.srdf_never_checked else ""
+        skipped = (f"{c.pairs_disabled} disabled by {Path(c.srdf).name}{never}" if c.srdf is not None else
                    f"{len(c.pairs_ignored)} ignored as {ignored} at the zero configuration")
         print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
               f"self-collision{closer} ({c.pairs_checked} link pairs checked, {skipped})")

@@ -74,6 +74,15 @@ class Clearance:
     pairs_disabled: int = 0
     srdf_never_checked: int = 0
 
+    def unrelated_note(self) -> str:
+        """What :attr:`unrelated_ignored` means for the plan, in one sentence (empty when there are none)."""
+        if not self.unrelated_ignored:
+            return ""
+        near = "in contact" if self.min_distance_m == 0.0 else f"closer than {self.min_distance_m:g} m"
+        return (f"{len(self.unrelated_ignored)} pair(s) of links more than {NEAR_JOINTS} joints apart are {near} at "
+                f"the zero configuration and so never checked (e.g. {self.unrelated_ignored[0]})"
+                + (": give the robot's SRDF with --srdf to check them" if self.min_distance_m == 0.0 else ""))
+
     def as_dict(self) -> dict[str, object]:
         out: dict[str, object] = {
             "min_distance_m": self.min_distance_m,

@@ -110,8 +110,8 @@ class TreeBeforeAfter(TypedDict):
 
 class TreeStepJson(TypedDict):
     """An effect ``diagnose`` adopted on a tree: the effect (its values and standard deviations), its ΔBIC,
-    every seen point's errors on the calibration rows before and after it, and on the held-out rows (None
-    without ``--validation``), the step's candidates, best first."""
+    every seen point's errors (and measured orientation's) on the calibration rows before and after it, and on
+    the held-out rows (None without ``--validation``), the step's candidates, best first."""
 
     effect: EffectJson
     delta_bic: float

@@ -37,7 +37,9 @@ def _held(errors: np.ndarray | None, points: tuple[int, ...], turns: np.ndarray 
 def _all_points(errors: np.ndarray, turns: np.ndarray | None = None) -> TargetErrors:
     """Every seen point's errors (K, P) [m] as one target's (its points: those seen in some row); ``turns``: every
     measured orientation's errors (K, T) [rad], NaN where not seen, or None."""
-    return target_errors(errors, tuple(int(p) + 1 for p in np.flatnonzero(np.isfinite(errors).any(axis=0))), turns)
+    measured = turns if turns is not None and np.isfinite(turns).any() else None  # rows that measure none: no key
+    return target_errors(errors, tuple(int(p) + 1 for p in np.flatnonzero(np.isfinite(errors).any(axis=0))),
+                         measured)
 
 
 def _before_after(before: np.ndarray | None, after: np.ndarray | None,

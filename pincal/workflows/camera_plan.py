@@ -203,9 +203,13 @@ def camera_plan_files(urdf: str | Path, inputs: CameraPlanInputs, settings: Came
         allowed = clearance.allowed
         if not allowed.all():
             notes.append(f"{int((~allowed).sum())} of {len(candidates)} candidates refused: in self-collision")
+        if clearance.unrelated_ignored:  # separate limbs, yet touching at zero
+            notes.append(f"{urdf.name}: {clearance.unrelated_note()}")
         if clearance.srdf is not None:
+            never = clearance.srdf_never_checked
             notes.append(f"{clearance.pairs_checked} link pairs checked, {clearance.pairs_disabled} disabled by "
-                         f"{Path(clearance.srdf).name}, whose {clearance.srdf_never_checked} 'Never' pairs are checked")
+                         f"{Path(clearance.srdf).name}"
+                         + (f", whose {never} 'Never' pairs are checked" if never else ""))
     elif inputs.collision_check:
         notes.append(f"{urdf.name} has no <collision> geometry: the candidates are not checked for self-collision "
                      "(check the plan's postures before the robot moves)"

@@ -22,13 +22,7 @@ from pincal.model.description import xacro_arguments
 from pincal.model.dh.conversion import DHUrdf, urdf_from_dh_table
 from pincal.model.tree import KinematicTree, TargetSpec
 from pincal.planning.candidates import DEFAULT_SAMPLE, JointRange, joint_ranges, read_candidates, sample_candidates
-from pincal.planning.collisions import (
-    NEAR_JOINTS,
-    Clearance,
-    CollisionCheck,
-    check_clearance,
-    has_collision_geometry,
-)
+from pincal.planning.collisions import Clearance, CollisionCheck, check_clearance, has_collision_geometry
 from pincal.planning.files import (
     CandidatePool,
     PlanJson,
@@ -241,11 +235,7 @@ def plan_files(
                      f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration): the candidates "
                      "are in effect not checked for collision (check the plan's postures before the robot moves)")
     if clearance is not None and clearance.unrelated_ignored:  # separate limbs, yet touching at zero
-        near = "in contact" if clearance.min_distance_m == 0.0 else f"closer than {clearance.min_distance_m:g} m"
-        notes.append(f"{urdf.name}: {len(clearance.unrelated_ignored)} pair(s) of links more than {NEAR_JOINTS} "
-                     f"joints apart are {near} at the zero configuration and so never checked (e.g. "
-                     f"{clearance.unrelated_ignored[0]})" + (": give the robot's SRDF with --srdf to check them"
-                                                             if clearance.min_distance_m == 0.0 else ""))
+        notes.append(f"{urdf.name}: {clearance.unrelated_note()}")
     if inputs.srdf is not None and check == "no collision geometry":
         notes.append(f"--srdf {inputs.srdf} is not used: nothing is checked for collision")
     allowed = None if clearance is None else clearance.allowed
