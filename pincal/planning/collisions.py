@@ -205,7 +205,8 @@ SRDF_REASONS = ("Adjacent", "Default", "Always")
 
 def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Path) -> int:
     """Remove the SRDF's ``disable_collisions`` pairs of :data:`SRDF_REASONS` (or without a reason) from
-    ``geometry``'s (Pinocchio's ``removeCollisionPairsFromXML``); returns how many "Never" pairs stay checked."""
+    ``geometry``'s (Pinocchio's ``removeCollisionPairsFromXML``); returns how many of its "Never" pairs are pairs
+    of ``geometry`` (of moving links), checked still."""
     try:
         root = etree.parse(str(srdf)).getroot()
     except (OSError, etree.XMLSyntaxError) as exc:
@@ -219,8 +220,14 @@ def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Pat
     for element in kept:
         root.remove(element)
     before = len(geometry.collisionPairs)
+    never = geometry.copy()  # what the "Never" pairs alone would remove: how many of them are pairs here
     try:
         pin.removeCollisionPairsFromXML(model, geometry, etree.tostring(root, encoding="unicode"), False)
+        for element in pairs:  # then the "Never" pairs alone
+            if element not in kept:
+                root.remove(element)
+        root.extend(kept)
+        pin.removeCollisionPairsFromXML(model, never, etree.tostring(root, encoding="unicode"), False)
     except (RuntimeError, ValueError) as exc:
         raise ModelError(f"{srdf}: cannot read the SRDF ({exc})") from None
     if len(geometry.collisionPairs) == before and len(kept) < len(pairs):  # a robot's SRDF disables its adjacent links
@@ -228,7 +235,7 @@ def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Pat
         raise ModelError(f"{srdf}: disables no pair of this URDF's moving links"
                          + (f" ({len(unknown)} of its {len(listed)} links are not in the URDF, e.g. {unknown[0]!r})"
                             if unknown else "") + ": another robot's SRDF? give this robot's")
-    return len(kept)
+    return before - len(never.collisionPairs)
 
 
 #: Links at most this many joints apart (along the tree, in the reduced model) that are in contact at zero form
