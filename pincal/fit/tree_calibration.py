@@ -260,8 +260,12 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     counter = Counter(progress)
     for attempt in range(2):  # as one chain's (pincal.fit.chain_calibration): a row's errors the RMS of its points
         result = _calibrate_tree_rows(tree, data, index, level, options, counter)  # and of its targets' angles
-        seen = np.any(np.isfinite(result.point_errors), axis=1)  # a row none of whose points was seen: no error
-        per_row = np.sqrt(np.nanmean(result.point_errors[seen] ** 2, axis=1))
+        points = np.any(np.isfinite(result.point_errors), axis=1)  # a row none of whose points was seen: no error
+        turns = (np.zeros_like(points) if result.orientation_errors is None
+                 else np.any(np.isfinite(result.orientation_errors), axis=1))
+        seen = points | turns  # a row seeing an orientation only is scored by it
+        per_row = np.full(int(seen.sum()), np.nan)
+        per_row[points[seen]] = np.sqrt(np.nanmean(result.point_errors[points] ** 2, axis=1))
         outliers = find_row_outliers(per_row[:, None], index[seen], _row_angles(result.orientation_errors, seen))
         flagged = [o.row for o in outliers]
         if not (options.reject_outliers and flagged and attempt == 0):
