@@ -267,6 +267,8 @@ def test_talos_srdf_checks_the_grippers_against_the_thighs_that_touch_at_zero():
     ("<robot name='ur5'><group name='arm'/>", "cannot read the SRDF"),
     ("<robot name='ur5'><group name='arm'/></robot>", "no <disable_collisions> pair"),
     ("TALOS", "disables no pair of this URDF's moving links .* not in the URDF"),
+    ("<robot name='ur5'><disable_collisions link1='base_link' link2='shoulder_link' reason='Never'/></robot>",
+     "disables no pair of this URDF's moving links .its 1 pairs are all 'Never'"),
 ])
 def test_an_srdf_that_cannot_serve_is_one_line_naming_it(tmp_path, text, message):
     """A missing or malformed file, one without pairs, another robot's (TALOS's for a UR5): a ModelError

@@ -147,7 +147,8 @@ def test_a_row_whose_orientation_alone_is_off_is_named_and_removed_when_asked(si
     assert line in data.lines[noted.used_index]  # noted, kept in the fit
     removed = calibrate_tree(tree, bad, "full", ChainFitOptions(reject_outliers=True))
     assert line not in data.lines[removed.used_index] and removed.used_index.size == data.n_rows - 1
-    assert any(f"removed 1 outlier row(s) at lines [{line}]" in note for note in removed.notes), removed.notes
+    assert any(f"removed 1 outlier row(s) at lines [{line}]; by their orientation: lines [{line}] and refitted" in note
+               for note in removed.notes), removed.notes
     # the same row seeing none of its points (every cell of x,y,z empty), its orientations only: scored by them
     blind = replace(bad, points=np.where(np.arange(data.n_rows)[:, None, None] == 17, np.nan, bad.points))
     noted = calibrate_tree(tree, blind, "full", ChainFitOptions())

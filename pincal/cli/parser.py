@@ -392,8 +392,9 @@ def build_parser() -> argparse.ArgumentParser:
                                 "self-collision, where the URDF has collision geometry)")
     collision.add_argument("--no-collision-check", action="store_true",
                            help="do not check the candidates for self-collision")
-    plan.add_argument("--srdf", metavar="FILE", help="the robot's SRDF: its disable_collisions link pairs are the "
-                      "ones not checked (default: the pairs in contact at the zero configuration)")
+    plan.add_argument("--srdf", metavar="FILE", help="the robot's SRDF: its disable_collisions link pairs (except "
+                      "those disabled as 'Never' in collision) are the ones not checked (default: the pairs in contact "
+                      "at the zero configuration); not with --min-distance or --no-collision-check")
     plan.add_argument("--package-dir", type=package_dir, action="append", default=[], metavar="NAME=DIR",
                       help="folder of ROS package NAME for package://NAME/... collision meshes (repeat for "
                            "several; else ROS_PACKAGE_PATH, the ament index, the folders above the URDF)")

@@ -257,7 +257,8 @@ def calibrate_chain(chain: KinematicChain, data: MeasurementSet, level: ChainLev
         keep = ~np.isin(index, removed)
         index, rows = index[keep], rows.select(keep)
         check_registrable(rows)
-        notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)} and refitted")
+        notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)}"
+                     f"{by_orientation(data, outliers)} and refitted")
     if flagged and not removed:
         notes.append(
             f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}{by_orientation(data, outliers)}); "

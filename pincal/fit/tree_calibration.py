@@ -272,7 +272,8 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
             break
         removed = flagged
         index = index[~np.isin(index, removed)]
-        notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)} and refitted")
+        notes.append(f"removed {len(removed)} outlier row(s) at {rows_at(data, removed)}"
+                     f"{by_orientation(data, outliers)} and refitted")
     if flagged and not removed:
         notes.append(f"{len(flagged)} row(s) look like outliers ({rows_at(data, flagged)}"
                      + by_orientation(data, outliers) + "); "

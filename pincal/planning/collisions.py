@@ -230,11 +230,13 @@ def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Pat
         pin.removeCollisionPairsFromXML(model, never, etree.tostring(root, encoding="unicode"), False)
     except (RuntimeError, ValueError) as exc:
         raise ModelError(f"{srdf}: cannot read the SRDF ({exc})") from None
-    if len(geometry.collisionPairs) == before and len(kept) < len(pairs):  # a robot's SRDF disables its adjacent links
+    if len(geometry.collisionPairs) == before:  # a robot's SRDF disables its adjacent links at least
         unknown = sorted(link for link in listed if not model.existFrame(link))
-        raise ModelError(f"{srdf}: disables no pair of this URDF's moving links"
-                         + (f" ({len(unknown)} of its {len(listed)} links are not in the URDF, e.g. {unknown[0]!r})"
-                            if unknown else "") + ": another robot's SRDF? give this robot's")
+        why = (f"its {len(pairs)} pairs are all 'Never' in collision, which are checked still"
+               if len(kept) == len(pairs) else
+               f"{len(unknown)} of its {len(listed)} links are not in the URDF, e.g. {unknown[0]!r}" if unknown else "")
+        raise ModelError(f"{srdf}: disables no pair of this URDF's moving links" + (f" ({why})" if why else "")
+                         + ": another robot's SRDF? give this robot's, or leave --srdf out")
     return before - len(never.collisionPairs)
 
 

@@ -71,7 +71,8 @@ class CameraPlanInputs:
         collision_check: False: no self-collision check (``--no-collision-check``).
         xacro_args: ``NAME:=VALUE`` pairs a ``.xacro`` URDF is expanded with (``--xacro-arg``).
         package_dirs: NAME → the folder of ROS package NAME, for ``package://`` collision meshes.
-        srdf: the robot's SRDF (``--srdf``): its ``disable_collisions`` pairs are the ones not checked.
+        srdf: the robot's SRDF (``--srdf``): its ``disable_collisions`` pairs (except those disabled as "Never" in
+            collision) are the ones not checked.
     """
 
     camera_link: str

@@ -81,8 +81,9 @@ class PlanInputs:
         xacro_args: ``NAME:=VALUE`` pairs a ``.xacro`` URDF is expanded with (``--xacro-arg``).
         package_dirs: NAME → the folder of ROS package NAME, for ``package://`` collision meshes
             (``--package-dir``, :mod:`pincal.model.packages`).
-        srdf: the robot's SRDF (``--srdf``): its ``disable_collisions`` pairs are the ones not checked, instead
-            of those in contact at the zero configuration (:mod:`pincal.planning.collisions`).
+        srdf: the robot's SRDF (``--srdf``): its ``disable_collisions`` pairs (except those disabled as "Never" in
+            collision) are the ones not checked, instead of those in contact at the zero configuration
+            (:mod:`pincal.planning.collisions`).
 
     Raises:
         PincalError: ``min_distance_m`` or ``srdf`` with ``collision_check`` False, ``srdf`` with
@@ -231,9 +232,12 @@ def plan_files(
     clearance = _clearance(urdf, chain, candidates, check, inputs, stages.next()) if check in (
         "self-collision", "min-distance") else None
     if clearance is not None and clearance.pairs_checked == 0:  # geometry on one link, or on links fixed together
-        notes.append(f"{urdf.name}: no two links that move relative to each other both have <collision> geometry "
-                     f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration): the candidates "
-                     "are in effect not checked for collision (check the plan's postures before the robot moves)")
+        why = (f"{Path(clearance.srdf).name} disables all {clearance.pairs_disabled} pair(s) of links that move "
+               "relative to each other" if clearance.srdf is not None else
+               "no two links that move relative to each other both have <collision> geometry "
+               f"({len(clearance.pairs_ignored)} pair(s) ignored at the zero configuration)")
+        notes.append(f"{urdf.name}: {why}: the candidates are in effect not checked for collision (check the plan's "
+                     "postures before the robot moves)")
     if clearance is not None and clearance.unrelated_ignored:  # separate limbs, yet touching at zero
         notes.append(f"{urdf.name}: {clearance.unrelated_note()}")
     if inputs.srdf is not None and check == "no collision geometry":
