@@ -143,6 +143,9 @@ class _Search:
     def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         return None
 
+    def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
+        return None  # the held-out and BIC tests judge in the corners' noise, floored at CORNER_NOISE_FLOOR_PX
+
     def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
                      models: tuple[Model, Model]) -> str:
         """The held-out test of :func:`held_out_verdict` on the images' corner distances [px]: in its units of a

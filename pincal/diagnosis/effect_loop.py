@@ -143,6 +143,11 @@ class EffectSearch(Protocol):
         """The calibration rows' orientation errors (K, T) [rad] of a fit, NaN where not seen (None: none measured)."""
         ...
 
+    def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
+        """Why no effect can be told from these rows — a fit that reproduces them below what any sensor resolves,
+        where the BIC's noise estimate is rounding and any change "significant" — as a note, or None."""
+        ...
+
     def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         """The held-out rows' orientation errors (K_h, T) [rad] of the model at ``x`` (None: none, or no rows)."""
         ...
@@ -183,6 +188,10 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
     ranking: tuple[EffectCandidate, ...] = ()
     notes: list[str] = []
     while len(adopted) < MAX_EFFECTS:
+        floor = search.reproduced(objective, solution.x)
+        if floor:
+            notes.append(floor)
+            break
         chosen, ranking, alike = _step(search, inputs, (objective, solution), adopted, pool, counter)
         if chosen is None:
             break
