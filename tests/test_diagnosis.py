@@ -311,10 +311,13 @@ def test_diagnose_stops_cleanly_when_no_candidate_is_left(noisy_large_experiment
     assert [step.effect for step in result.steps] == []
 
 
-def test_rounding_level_effects_are_not_adopted(tmp_path, capsys):
+def test_rounding_level_effects_are_not_adopted(tmp_path, capsys, monkeypatch):
     """Noise-free rows of a Kinova (continuous joints) without any effect: a backlash of 1e-17 rad
-    'fits' the rounding at ΔBIC −20, and must not be adopted (unseen-setups issue: an effect changing
-    no measured coordinate by a tenth of the noise is not physically meaningful, whatever its ΔBIC)."""
+    'fits' the rounding at ΔBIC −20, and must not be adopted. The geometry reproduces the rows below the
+    0.01 µm an effect could be told by, so the search stops with a note; without that stop, the rule that an effect
+    changing no measured coordinate by a tenth of the noise is not physically meaningful, whatever its ΔBIC, still
+    refuses it."""
+    from pincal.diagnosis import reproduction
     from pincal.diagnosis.verdicts import NEGLIGIBLE
     from pincal.measurements.csv_v1 import write_measurements
     from pincal.model.parameter_sets import PlacementErrors
@@ -330,9 +333,16 @@ def test_rounding_level_effects_are_not_adopted(tmp_path, capsys):
                                 SimulationSettings(n_calibration=60, n_validation=50, seed=2), with_rotation=True)
     write_measurements(tmp_path / "cal.csv", experiment.calibration)
     write_measurements(tmp_path / "val.csv", experiment.validation)
-    code = main(["diagnose", str(urdf), str(tmp_path / "cal.csv"), "--validation", str(tmp_path / "val.csv"),
-                 "--tip-link", "j2s6s200_end_effector", "--select", "aic", "--quiet", "--out",
-                 str(tmp_path / "k.urdf"), "--report", str(tmp_path / "R.json"), "--plots", str(tmp_path / "p")])
+    args = ["diagnose", str(urdf), str(tmp_path / "cal.csv"), "--validation", str(tmp_path / "val.csv"),
+            "--tip-link", "j2s6s200_end_effector", "--select", "aic", "--quiet", "--out",
+            str(tmp_path / "k.urdf"), "--report", str(tmp_path / "R.json"), "--plots", str(tmp_path / "p")]
+    assert main(args) == 0
+    report = json.loads((tmp_path / "R.json").read_text())
+    assert report["effects"] == [] and any("an effect could be told by: no further effect is sought" in note
+                                           for note in report["diagnosis"]["notes"]), report["diagnosis"]["notes"]
+    capsys.readouterr()
+    monkeypatch.setattr(reproduction, "REPRODUCED", 0.0)  # no stop: the candidates are judged
+    code = main(args)
     out = capsys.readouterr().out
     assert code == 0
     assert json.loads((tmp_path / "R.json").read_text())["effects"] == []
@@ -416,3 +426,19 @@ def test_effects_that_need_gravity_are_named_untestable_without_inertias(industr
     assert "compliance:A1," in note and "compliance:A2," not in note and "backlash:A6:gravity" in note
     assert "compliance:A2:A3" in note and "compliance:A3:A2" in note
     assert not any("compliance" in n for n in result.notes if n.startswith("not separable"))
+
+
+def test_the_reproduction_stop_reads_every_seen_coordinate_and_orientation():
+    """The stop (pincal.diagnosis.reproduction) only below 1e-8 m (rad) RMS per axis of both kinds: an effect of
+    8e-8 m per axis left in noise-free rows (a torso compliance of -4e-8 rad/(N·m) on a two-arm tree) is still
+    sought; unseen points (NaN) and rows without orientations count for nothing; no data, no stop."""
+    from pincal.diagnosis.reproduction import REPRODUCED, reproduced_note
+
+    rows = np.full((40, 2), np.sqrt(3.0) * 1e-11)  # distances of 1e-11 m per axis
+    rows[3, 1] = np.nan
+    assert REPRODUCED == pytest.approx(1e-8)
+    assert reproduced_note(rows, None, 0).startswith("the geometry reproduces the rows to 1e-05 µm per axis")
+    assert reproduced_note(rows, np.full(40, 1e-12), 2).startswith("the geometry and 2 effect(s) reproduce the rows")
+    assert reproduced_note(rows * 8e3, None, 0) is None  # 8e-8 m per axis: an effect is still sought
+    assert reproduced_note(rows, np.full(40, 1e-3), 0) is None  # the orientations not reproduced
+    assert reproduced_note(np.full((4, 2), np.nan), None, 0) is None

@@ -144,7 +144,7 @@ class _Search:
         return None
 
     def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
-        return None  # the held-out and BIC tests judge in the corners' noise, floored at CORNER_NOISE_FLOOR_PX
+        return None  # pixels, not metres: no floor of reproduction is set for a camera (noise-free images untested)
 
     def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],
                      models: tuple[Model, Model]) -> str:

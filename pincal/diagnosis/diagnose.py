@@ -331,6 +331,7 @@ def _conclude(search: Search, state: State, counter: Counter) -> Diagnosis:
     current_objective, calibration, chain, heldout = state.objective, search.calibration, search.chain, search.heldout
     notes = [read_against_words(s.convention) for s in state.steps if s.convention is not None]
     notes += [text for label, text in state.rejected if label not in labels]
+    notes += state.remarks
     untestable = search.untestable
     if untestable and search.masses_unknown:
         notes.append(f"cannot be tested, {len(untestable)} candidate(s): the masses are unknown (--masses unknown, or "

@@ -27,6 +27,7 @@ import numpy as np
 from pincal.diagnosis.conditions import ConditionSearch
 from pincal.diagnosis.conventions import ConventionTrial, adopted_trial, convention_for, followers_of
 from pincal.diagnosis.effect_fits import CandidateFit, EffectModel, heldout_errors, pose_errors_of
+from pincal.diagnosis.reproduction import reproduced_note
 from pincal.diagnosis.screening import (
     SCREEN_CONDITION,
     SCREEN_INSEPARABLE,
@@ -148,8 +149,8 @@ class State:
     """The search between steps: the model (its noise scales and effect inputs; ``held_inputs`` those of the
     held-out rows), its fit (``objective`` at ``solution``, ``bic``), the effects adopted and their steps, the
     last step's ranking, the notes of candidates reported rather than adopted (by label, first-reported order),
-    the labels the geometry absorbs, those not tested (with the residual degrees of freedom left), and
-    ``done`` once the search stops."""
+    the labels the geometry absorbs, those not tested (with the residual degrees of freedom left), ``done`` once
+    the search stops, and ``remarks``: why it stopped, where that is worth a note."""
 
     model: EffectModel
     held_inputs: EffectInputs | None
@@ -164,6 +165,7 @@ class State:
     untested: tuple[tuple[str, float], ...] = ()
     done: bool = False
     dropped: frozenset[str] = frozenset()  # adopted, then dropped as superseded (:func:`drop_superseded`)
+    remarks: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -417,6 +419,10 @@ def search_step(search: Search, state: State, counter: Counter) -> State | Resta
     """One step of the search: screen, fit and judge the candidates, adopt the chosen one and refit (module
     docstring); ``done`` when none is offered or chosen. ``counter`` expects one unit per candidate offered
     (fitted or screened out) and one for adopting."""
+    errors = pose_errors_of(state.objective, state.solution.x)  # noise-free rows: no effect can be told by them
+    floor = reproduced_note(errors.position_m, errors.rotation_rad, len(state.adopted))
+    if floor:
+        return replace(state, done=True, remarks=(*state.remarks, floor))
     screened = screen_candidates(search, state)
     if not screened:  # every candidate adopted (or none offered)
         return replace(state, done=True)

@@ -50,6 +50,7 @@ from pincal.diagnosis.effect_loop import (
 )
 from pincal.diagnosis.held_out import held_out_verdict
 from pincal.diagnosis.moment_candidates import masses_unknown, testable_pool
+from pincal.diagnosis.reproduction import reproduced_note
 from pincal.diagnosis.screening import FitObjective
 from pincal.diagnosis.verdicts import NOISE_FLOOR
 from pincal.fit.chain_calibration import row_weights
@@ -204,19 +205,9 @@ class _Search:
         return tree_objective.orientation_errors(x, self.problem.row_weight / self.problem.sigma_rot)
 
     def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
-        """A note when the fit reproduces every seen point's coordinates, and every measured orientation's, to
-        below :data:`pincal.diagnosis.verdicts.NOISE_FLOOR` RMS per axis (noise-free rows): its noise estimate is
-        rounding, on which a fit's improvement of picometres reads as a large ΔBIC (an effect
-        nearly the geometry's, a sensor scale, would be adopted for it); else None."""
-        points = self.errors(objective, x)
-        position = float(np.sqrt(np.mean(points[np.isfinite(points)] ** 2) / 3.0))
-        turns = self.turns(objective, x)
-        angle = 0.0 if turns is None else float(np.sqrt(np.mean(turns[np.isfinite(turns)] ** 2) / 3.0))
-        if position >= NOISE_FLOOR or angle >= NOISE_FLOOR:
-            return None
-        return (f"the geometry reproduces the rows to {position * 1000:.2g} mm per axis"
-                + ("" if turns is None else f" and {np.degrees(angle):.2g} deg") + f", below the "
-                f"{NOISE_FLOOR * 1e6:g} µm (and µrad) no sensor resolves: no effect can be told from these rows")
+        """:func:`pincal.diagnosis.verdicts.reproduced_note` of the fit's calibration rows (noise-free rows)."""
+        effects = len(cast(FitObjective, objective).effect_slices)
+        return reproduced_note(self.errors(objective, x), self.turns(objective, x), effects)
 
     def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         """The held-out rows' point errors (K_h, P) [m] of the model at ``x`` (None without them)."""
