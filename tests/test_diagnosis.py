@@ -338,7 +338,7 @@ def test_rounding_level_effects_are_not_adopted(tmp_path, capsys, monkeypatch):
             str(tmp_path / "k.urdf"), "--report", str(tmp_path / "R.json"), "--plots", str(tmp_path / "p")]
     assert main(args) == 0
     report = json.loads((tmp_path / "R.json").read_text())
-    assert report["effects"] == [] and any("an effect could be told by: no further effect is sought" in note
+    assert report["effects"] == [] and any("an effect would have to change to be told: no further effect" in note
                                            for note in report["diagnosis"]["notes"]), report["diagnosis"]["notes"]
     capsys.readouterr()
     monkeypatch.setattr(reproduction, "REPRODUCED", 0.0)  # no stop: the candidates are judged
@@ -429,16 +429,20 @@ def test_effects_that_need_gravity_are_named_untestable_without_inertias(industr
 
 
 def test_the_reproduction_stop_reads_every_seen_coordinate_and_orientation():
-    """The stop (pincal.diagnosis.reproduction) only below 1e-8 m (rad) RMS per axis of both kinds: an effect of
-    8e-8 m per axis left in noise-free rows (a torso compliance of -4e-8 rad/(N·m) on a two-arm tree) is still
-    sought; unseen points (NaN) and rows without orientations count for nothing; no data, no stop."""
+    """The stop (pincal.diagnosis.reproduction) only when every seen point and every measured orientation is within
+    1e-8 m (rad) of the model: one row left 2e-8 m off (an effect on a few rows) is still sought, and so are
+    orientations not reproduced; unseen points (NaN) and rows without orientations count for nothing; no data, no
+    stop."""
     from pincal.diagnosis.reproduction import REPRODUCED, reproduced_note
 
-    rows = np.full((40, 2), np.sqrt(3.0) * 1e-11)  # distances of 1e-11 m per axis
+    rows = np.full((40, 2), 1e-11)  # every point 1e-11 m from the model
     rows[3, 1] = np.nan
     assert REPRODUCED == pytest.approx(1e-8)
-    assert reproduced_note(rows, None, 0).startswith("the geometry reproduces the rows to 1e-05 µm per axis")
-    assert reproduced_note(rows, np.full(40, 1e-12), 2).startswith("the geometry and 2 effect(s) reproduce the rows")
-    assert reproduced_note(rows * 8e3, None, 0) is None  # 8e-8 m per axis: an effect is still sought
+    assert reproduced_note(rows, None, 0).startswith("the geometry reproduces every row to within 1e-11 m, below")
+    assert reproduced_note(rows, np.full(40, 1e-12), 2).startswith(
+        "the geometry and 2 effect(s) reproduce every row to within 1e-11 m and 1e-12 rad")
+    off = rows.copy()
+    off[7, 0] = 2e-8
+    assert reproduced_note(off, None, 0) is None  # one row beyond: an effect is still sought
     assert reproduced_note(rows, np.full(40, 1e-3), 0) is None  # the orientations not reproduced
     assert reproduced_note(np.full((4, 2), np.nan), None, 0) is None

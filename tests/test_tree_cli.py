@@ -326,7 +326,7 @@ def test_several_targets_honour_coupling_without_a_column_and_read_against_a_dri
 
 
 def test_diagnose_claims_nothing_on_rows_the_geometry_reproduces_below_any_sensor(coupled_files, capsys):
-    """The same noise-free rows: the calibrated geometry reproduces them to about 1e-11 m per axis, far below the
+    """The same noise-free rows: the calibrated geometry reproduces every one to within about 1e-10 m, far below the
     1e-8 m an effect could be told by (pincal.diagnosis.reproduction.REPRODUCED: a tenth of the 0.1 µm no sensor
     resolves). Judged in a noise estimate that is rounding, a sensor scale — nearly the geometry's lengths — once
     improved that by a third and was adopted at -0.2 % (ΔBIC -63); now no effect is claimed and a note says why."""
@@ -336,8 +336,9 @@ def test_diagnose_claims_nothing_on_rows_the_geometry_reproduces_below_any_senso
                  "--report", str(report), "--quiet"]) == 0
     doc = json.loads(report.read_text(encoding="utf-8"))
     assert doc["effects"] == [] and doc["diagnosis"]["steps"] == []
-    assert any(note.startswith("the geometry reproduces the rows to ") and note.endswith(
-        "below the 0.01 µm (µrad) an effect could be told by: no further effect is sought") for note in doc["notes"])
+    assert any(note.startswith("the geometry reproduces every row to within ") and note.endswith(
+        "below the 1e-08 m (rad) an effect would have to change to be told: no further effect is sought")
+        for note in doc["notes"])
     capsys.readouterr()
 
 

@@ -144,8 +144,9 @@ class EffectSearch(Protocol):
         ...
 
     def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
-        """Why no effect can be told from these rows — a fit that reproduces them below what any sensor resolves,
-        where the BIC's noise estimate is rounding and any change "significant" — as a note, or None."""
+        """Why no effect can be told from these rows — a fit that reproduces them within
+        :data:`pincal.diagnosis.reproduction.REPRODUCED`, where the BIC's noise estimate is rounding and any change
+        "significant" — as a note, or None."""
         ...
 
     def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:

@@ -205,7 +205,7 @@ class _Search:
         return tree_objective.orientation_errors(x, self.problem.row_weight / self.problem.sigma_rot)
 
     def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
-        """:func:`pincal.diagnosis.verdicts.reproduced_note` of the fit's calibration rows (noise-free rows)."""
+        """:func:`pincal.diagnosis.reproduction.reproduced_note` of the fit's calibration rows (noise-free rows)."""
         effects = len(cast(FitObjective, objective).effect_slices)
         return reproduced_note(self.errors(objective, x), self.turns(objective, x), effects)
 
