@@ -312,3 +312,22 @@ def test_one_arms_wrist_links_touching_at_zero_are_not_named(relative, tip):
     chain = KinematicChain.from_urdf(urdf, tip)
     clearance = check_clearance(urdf, chain, sample_candidates(chain, 2, seed=1), 0.0)
     assert clearance.pairs_ignored and clearance.unrelated_ignored == ()
+
+
+def test_a_pair_listed_never_and_adjacent_is_disabled_and_not_counted_as_checked(tmp_path):
+    """An SRDF listing one pair twice, "Adjacent" and "Never": disabled (a reason pincal honours), and not among the
+    "Never" pairs counted as checked; a "Never" pair of its own is checked and counted."""
+    chain = KinematicChain.from_urdf(UR5, "tool0")
+    srdf = tmp_path / "ur5.srdf"
+    srdf.write_text("<robot name='ur5'>"
+                    "<disable_collisions link1='base_link' link2='shoulder_link' reason='Adjacent'/>"
+                    "<disable_collisions link1='shoulder_link' link2='base_link' reason='Never'/>"
+                    "<disable_collisions link1='upper_arm_link' link2='wrist_3_link' reason='Never'/></robot>",
+                    encoding="utf-8")
+    model, geometry = _geometry(UR5, chain)
+    geometry.addAllCollisionPairs()
+    assert _disable_srdf_pairs(model, geometry, srdf) == 1
+    names = [o.name for o in geometry.geometryObjects]
+    checked = {frozenset((names[p.first], names[p.second])) for p in geometry.collisionPairs}
+    assert frozenset(("base_link_0", "shoulder_link_0")) not in checked
+    assert frozenset(("upper_arm_link_0", "wrist_3_link_0")) in checked

@@ -216,7 +216,11 @@ def _disable_srdf_pairs(model: pin.Model, geometry: pin.GeometryModel, srdf: Pat
     if not listed:
         raise ModelError(f"{srdf}: no <disable_collisions> pair in this SRDF; give the robot's .srdf file "
                          "(or leave --srdf out)")
-    kept = [element for element in pairs if element.get("reason", "Default") not in SRDF_REASONS]
+    def links(element: etree._Element) -> frozenset[str | None]:
+        return frozenset((element.get("link1"), element.get("link2")))
+    honoured = {links(element) for element in pairs if element.get("reason", "Default") in SRDF_REASONS}
+    kept = [element for element in pairs if element.get("reason", "Default") not in SRDF_REASONS
+            and links(element) not in honoured]  # a pair listed "Never" and "Adjacent" too: disabled
     for element in kept:
         root.remove(element)
     before = len(geometry.collisionPairs)
