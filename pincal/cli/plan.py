@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from pincal.cli.arguments import selection_criterion
 
@@ -124,9 +123,7 @@ def print_candidates(run) -> None:
         c = run.clearance
         closer = "" if c.min_distance_m == 0.0 else f", {c.too_close} closer than {c.min_distance_m:g} m"
         ignored = "in contact" if c.min_distance_m == 0.0 else "closer"
-        never = f", whose {c.srdf_never_checked} 'Never' pairs are checked" if c.srdf_never_checked else ""
-        skipped = (f"{c.pairs_disabled} disabled by {Path(c.srdf).name}{never}" if c.srdf is not None else
-                   f"{len(c.pairs_ignored)} ignored as {ignored} at the zero configuration")
+        skipped = c.srdf_words() or f"{len(c.pairs_ignored)} ignored as {ignored} at the zero configuration"
         print(f"refused {c.in_collision + c.too_close} of {run.n_candidates} candidates: {c.in_collision} in "
               f"self-collision{closer} ({c.pairs_checked} link pairs checked, {skipped})")
     elif run.collision_check == "off":

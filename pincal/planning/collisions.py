@@ -83,6 +83,14 @@ class Clearance:
                 f"the zero configuration and so never checked (e.g. {self.unrelated_ignored[0]})"
                 + (": give the robot's SRDF with --srdf to check them" if self.min_distance_m == 0.0 else ""))
 
+    def srdf_words(self) -> str:
+        """What the SRDF left unchecked, for the console (empty without an SRDF): "29 disabled by talos.srdf, whose
+        316 'Never' pairs are checked"."""
+        if self.srdf is None:
+            return ""
+        never = f", whose {self.srdf_never_checked} 'Never' pairs are checked" if self.srdf_never_checked else ""
+        return f"{self.pairs_disabled} disabled by {Path(self.srdf).name}{never}"
+
     def as_dict(self) -> dict[str, object]:
         out: dict[str, object] = {
             "min_distance_m": self.min_distance_m,
@@ -146,33 +154,20 @@ def check_clearance(
         ModelError: collision geometry that cannot be loaded, or an SRDF that cannot be read or that disables
             no pair of this URDF's links (another robot's?).
     """
+    if srdf is not None and min_distance > 0.0:  # before the meshes are read
+        raise ModelError(f"{srdf}: an SRDF's disabled pairs are those that may touch, not those that may come closer "
+                         f"than a clearance: give --srdf for the self-collision check, or --min-distance without it")
     model, geometry = _geometry(Path(urdf), chain, xacro_args, package_dirs)
     geometry.addAllCollisionPairs()  # pairs on different joints only
     every = len(geometry.collisionPairs)
-    if srdf is not None and min_distance > 0.0:
-        raise ModelError(f"{srdf}: an SRDF's disabled pairs are those that may touch, not those that may come closer "
-                         f"than a clearance: give --srdf for the self-collision check, or --min-distance without it")
-    never = 0 if srdf is None else _disable_srdf_pairs(model, geometry, Path(srdf))
-    data, geometry_data = model.createData(), geometry.createData()
-    zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])
-    pin.computeDistances(model, data, geometry, geometry_data, chain.configurations(zero)[0])
-    # in contact: as the collision test that refuses candidates says, not by the distance, which coal
-    # gives as 0 for intersecting meshes and as a few nanometres for some that touch (Kinova's base and
-    # link 1: 6e-9 m, yet in collision at every configuration)
-    pin.computeCollisions(model, data, geometry, geometry_data, chain.configurations(zero)[0], False)
-    names = [o.name for o in geometry.geometryObjects]
-    keep, ignored, unrelated = [], [], []
-    for pair, result, contact in zip(geometry.collisionPairs, geometry_data.distanceResults,
-                                     geometry_data.collisionResults):
-        if srdf is None and (result.min_distance < min_distance or contact.isCollision()):  # closer, or in contact
-            ignored.append(f"{names[pair.first]}~{names[pair.second]}")
-            if _joints_apart(model, geometry, pair) > NEAR_JOINTS:
-                unrelated.append(ignored[-1])
-        else:
-            keep.append(pair)
-    geometry.removeAllCollisionPairs()
-    for pair in keep:
-        geometry.addCollisionPair(pair)
+    if srdf is not None:  # its pairs replace the zero rule
+        never = _disable_srdf_pairs(model, geometry, Path(srdf))
+        ignored: list[str] = []
+        unrelated: list[str] = []
+    else:
+        never = 0
+        ignored, unrelated = _ignored_at_zero(model, geometry, chain, min_distance)
+    checked = len(geometry.collisionPairs)
     configurations = chain.configurations(q)
     counter = Counter(progress)
     counter.expect(len(configurations))
@@ -187,13 +182,41 @@ def check_clearance(
         allowed=~close,
         in_collision=int(touching.sum()),
         too_close=int(close.sum() - touching.sum()),
-        pairs_checked=len(keep),
+        pairs_checked=checked,
         pairs_ignored=tuple(ignored),
         unrelated_ignored=tuple(unrelated),
         srdf=None if srdf is None else str(srdf),
-        pairs_disabled=every - len(keep) if srdf is not None else 0,
+        pairs_disabled=every - checked if srdf is not None else 0,
         srdf_never_checked=never,
     )
+
+
+def _ignored_at_zero(model: pin.Model, geometry: pin.GeometryModel, chain: KinematicChain | KinematicTree,
+                     min_distance: float) -> tuple[list[str], list[str]]:
+    """Remove from ``geometry``'s pairs those closer than ``min_distance`` [m], or in contact, at the zero
+    configuration (clipped into the joint limits); returns their names and those of them more than
+    :data:`NEAR_JOINTS` joints apart."""
+    data, geometry_data = model.createData(), geometry.createData()
+    zero = np.clip(np.zeros((1, chain.n_joints)), [j.lower for j in chain.joints], [j.upper for j in chain.joints])
+    pin.computeDistances(model, data, geometry, geometry_data, chain.configurations(zero)[0])
+    # in contact: as the collision test that refuses candidates says, not by the distance, which coal
+    # gives as 0 for intersecting meshes and as a few nanometres for some that touch (Kinova's base and
+    # link 1: 6e-9 m, yet in collision at every configuration)
+    pin.computeCollisions(model, data, geometry, geometry_data, chain.configurations(zero)[0], False)
+    names = [o.name for o in geometry.geometryObjects]
+    keep, ignored, unrelated = [], [], []
+    for pair, result, contact in zip(geometry.collisionPairs, geometry_data.distanceResults,
+                                     geometry_data.collisionResults):
+        if result.min_distance < min_distance or contact.isCollision():  # closer, or in contact
+            ignored.append(f"{names[pair.first]}~{names[pair.second]}")
+            if _joints_apart(model, geometry, pair) > NEAR_JOINTS:
+                unrelated.append(ignored[-1])
+        else:
+            keep.append(pair)
+    geometry.removeAllCollisionPairs()
+    for pair in keep:
+        geometry.addCollisionPair(pair)
+    return ignored, unrelated
 
 
 #: The SRDF's reasons for a disabled pair that pincal honours (MoveIt's setup assistant writes them): links

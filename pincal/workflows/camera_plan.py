@@ -48,6 +48,7 @@ from pincal.progress import Progress, Stages
 from pincal.residuals.camera import CameraEstimate
 from pincal.workflows.camera_calibration import arrangement_words, misfit_m
 from pincal.workflows.paths import description_inputs, refuse_overwrite
+from pincal.workflows.preparation import refuse_srdf_unchecked
 
 __all__ = ["CameraPlanInputs", "CameraPlanRun", "camera_plan_files"]
 
@@ -89,9 +90,7 @@ class CameraPlanInputs:
     srdf: str | Path | None = None
 
     def __post_init__(self) -> None:
-        if self.srdf is not None and not self.collision_check:
-            raise PincalError("--srdf says which link pairs the collision check skips, and --no-collision-check "
-                              "skips the check: give one of them")
+        refuse_srdf_unchecked(self.srdf, self.collision_check)
 
 
 @dataclass(frozen=True)
@@ -207,10 +206,7 @@ def camera_plan_files(urdf: str | Path, inputs: CameraPlanInputs, settings: Came
         if clearance.unrelated_ignored:  # separate limbs, yet touching at zero
             notes.append(f"{urdf.name}: {clearance.unrelated_note()}")
         if clearance.srdf is not None:
-            never = clearance.srdf_never_checked
-            notes.append(f"{clearance.pairs_checked} link pairs checked, {clearance.pairs_disabled} disabled by "
-                         f"{Path(clearance.srdf).name}"
-                         + (f", whose {never} 'Never' pairs are checked" if never else ""))
+            notes.append(f"{clearance.pairs_checked} link pairs checked, {clearance.srdf_words()}")
     elif inputs.collision_check:
         notes.append(f"{urdf.name} has no <collision> geometry: the candidates are not checked for self-collision "
                      "(check the plan's postures before the robot moves)"

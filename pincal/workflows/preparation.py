@@ -37,7 +37,7 @@ from pincal.progress import Progress, Stages
 from pincal.workflows.paths import description_inputs, input_paths, refuse_overwrite
 from pincal.workflows.settings import follow_couplings
 
-__all__ = ["urdf_from_dh_file", "PlanInputs", "PlanRun", "plan_files"]
+__all__ = ["urdf_from_dh_file", "PlanInputs", "PlanRun", "plan_files", "refuse_srdf_unchecked"]
 
 # --- urdf-from-dh ------------------------------------------------------------------------
 
@@ -61,6 +61,13 @@ def urdf_from_dh_file(
 
 
 # --- plan --------------------------------------------------------------------------------
+
+
+def refuse_srdf_unchecked(srdf: str | Path | None, collision_check: bool) -> None:
+    """PincalError for ``--srdf`` beside ``--no-collision-check`` (a plan's, a camera's plan's)."""
+    if srdf is not None and not collision_check:
+        raise PincalError("--srdf says which link pairs the collision check skips, and --no-collision-check "
+                          "skips the check: give one of them")
 
 
 @dataclass(frozen=True)
@@ -106,9 +113,7 @@ class PlanInputs:
         if self.min_distance_m is not None and not self.collision_check:
             raise PincalError("--min-distance asks for the collision check that --no-collision-check skips: "
                               "give one of them")
-        if self.srdf is not None and not self.collision_check:
-            raise PincalError("--srdf says which link pairs the collision check skips, and --no-collision-check "
-                              "skips the check: give one of them")
+        refuse_srdf_unchecked(self.srdf, self.collision_check)
         if self.srdf is not None and self.min_distance_m is not None:
             raise PincalError("--srdf lists the link pairs that may touch, not those that may come closer than "
                               "--min-distance: give --srdf for the self-collision check, or --min-distance without it")
