@@ -260,13 +260,10 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     counter = Counter(progress)
     for attempt in range(2):  # as one chain's (pincal.fit.chain_calibration): a row's errors the RMS of its points
         result = _calibrate_tree_rows(tree, data, index, level, options, counter)  # and of its targets' angles
-        points = np.any(np.isfinite(result.point_errors), axis=1)  # a row none of whose points was seen: no error
-        turns = (np.zeros_like(points) if result.orientation_errors is None
-                 else np.any(np.isfinite(result.orientation_errors), axis=1))
-        seen = points | turns  # a row seeing an orientation only is scored by it
-        per_row = np.full(int(seen.sum()), np.nan)
-        per_row[points[seen]] = np.sqrt(np.nanmean(result.point_errors[points] ** 2, axis=1))
-        outliers = find_row_outliers(per_row[:, None], index[seen], _row_angles(result.orientation_errors, seen))
+        points = _row_rms(result.point_errors)  # NaN: a row none of whose points was seen
+        turns = None if result.orientation_errors is None else _row_rms(result.orientation_errors)
+        seen = np.isfinite(points) if turns is None else np.isfinite(points) | np.isfinite(turns)  # or one angle
+        outliers = find_row_outliers(points[seen, None], index[seen], None if turns is None else turns[seen])
         flagged = [o.row for o in outliers]
         if not (options.reject_outliers and flagged and attempt == 0):
             break
@@ -282,16 +279,13 @@ def calibrate_tree(tree: KinematicTree, data: MeasurementSet, level: ChainLevel,
     return replace(result, notes=result.notes + tuple(notes), total_seconds=time.perf_counter() - started)
 
 
-def _row_angles(orientation_errors: np.ndarray | None, seen: np.ndarray) -> np.ndarray | None:
-    """The RMS orientation error of each row ``seen`` over its targets whose orientation it measures [rad],
-    NaN for a row that measures none, (K_seen,); None without orientations."""
-    if orientation_errors is None:
-        return None
-    angles = orientation_errors[seen]
-    measured = np.isfinite(angles)
-    count = measured.sum(axis=1)
-    total = np.where(measured, angles, 0.0) ** 2
-    return np.where(count > 0, np.sqrt(total.sum(axis=1) / np.maximum(count, 1)), np.nan)
+def _row_rms(errors: np.ndarray) -> np.ndarray:
+    """Each row's RMS over its seen entries (K, N) — points' distances [m], targets' angles [rad] —, NaN for a
+    row that sees none, (K,)."""
+    out = np.full(len(errors), np.nan)
+    seen = np.isfinite(errors).any(axis=1)
+    out[seen] = np.sqrt(np.nanmean(errors[seen] ** 2, axis=1))
+    return out
 
 
 def _calibrate_tree_rows(tree: KinematicTree, data: MeasurementSet, index: np.ndarray, level: ChainLevel,
