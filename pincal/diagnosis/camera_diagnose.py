@@ -143,7 +143,7 @@ class _Search:
     def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         return None
 
-    def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
+    def reproduced(self, errors: np.ndarray, turns: np.ndarray | None, effects: int) -> str | None:
         return None  # pixels, not metres: no floor of reproduction is set for a camera (noise-free images untested)
 
     def held_verdict(self, before: np.ndarray, after: np.ndarray, fit: tuple[FitObjective, Solution],

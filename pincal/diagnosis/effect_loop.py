@@ -143,10 +143,10 @@ class EffectSearch(Protocol):
         """The calibration rows' orientation errors (K, T) [rad] of a fit, NaN where not seen (None: none measured)."""
         ...
 
-    def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
-        """Why no effect can be told from these rows — a fit that reproduces them within
-        :data:`pincal.diagnosis.reproduction.REPRODUCED`, where the BIC's noise estimate is rounding and any change
-        "significant" — as a note, or None."""
+    def reproduced(self, errors: np.ndarray, turns: np.ndarray | None, effects: int) -> str | None:
+        """Why no effect can be told from these rows — a fit (the geometry and ``effects`` effects) whose errors
+        (:meth:`errors`, :meth:`turns`) are within :data:`pincal.diagnosis.reproduction.REPRODUCED`, where the
+        BIC's noise estimate is rounding and any change "significant" — as a note, or None."""
         ...
 
     def held_turns(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
@@ -189,7 +189,9 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
     ranking: tuple[EffectCandidate, ...] = ()
     notes: list[str] = []
     while len(adopted) < MAX_EFFECTS:
-        floor = search.reproduced(objective, solution.x)
+        # the current model's errors at the scales its residual is whitened with: the step's "before"
+        before, turns_before = search.errors(objective, solution.x), search.turns(objective, solution.x)
+        floor = search.reproduced(before, turns_before, len(adopted))
         if floor:
             notes.append(floor)
             break
@@ -202,8 +204,6 @@ def search_effects(search: EffectSearch, inputs: EffectInputs, pool: Sequence[Ef
         # refitted at the noise scale of its residual (maximum likelihood; with a prior, eq P2), as the single
         # chain's adoption does: a scale the unmodelled effect inflated weighs the prior on the geometry too
         # strongly against the rows, and what it held would be left for the next candidates to imitate
-        # the current model's errors at the scales its residual is whitened with, before they change
-        before, turns_before = search.errors(objective, solution.x), search.turns(objective, solution.x)
         rescaled = search.rescaled(new_objective, new_solution)
         try:
             new_objective, new_solution = rescaled.fit([*adopted, effect], new_solution.x)

@@ -335,15 +335,16 @@ def regravitated(search: Search, model: EffectModel, held_inputs: EffectInputs |
     return replace(model, inputs=inputs), held_inputs
 
 
-def adopt(search: Search, state: State, judgement: Judgement, counter: Counter) -> State | Restart:
+def adopt(search: Search, state: State, judgement: Judgement, counter: Counter, before_cal: PoseErrors
+          ) -> State | Restart:
     """Adopt: the chosen candidate's step — the errors before and after, its partial residual for the plot — and
     the state refitted with it (:func:`refit`); a coupling that is a joint read against another, adopted as a
     convention (:func:`pincal.diagnosis.conventions.adopted_trial`), restarts the search on the corrected rows.
-    A refit that fails leaves the model as it was, the candidate reported, and stops the search."""
+    A refit that fails leaves the model as it was, the candidate reported, and stops the search. ``before_cal``:
+    the calibration rows' errors of the state's fit (:func:`pincal.diagnosis.effect_fits.pose_errors_of`)."""
     assert judgement.chosen is not None  # adopt only what was chosen
     delta, effect, obj, sol = judgement.chosen
     chain, model, heldout, held_inputs = search.chain, state.model, search.heldout, state.held_inputs
-    before_cal = pose_errors_of(state.objective, state.solution.x)
     before_held = heldout_errors(model, state.objective, state.solution.x, heldout, held_inputs)
     driver, driver_label, joint_residual, fitted = partial_residual(effect, obj, sol, model.inputs, chain)
     unit = shift_unit(chain.joint_kinds.get(effect.joint or "") == "prismatic")
@@ -419,8 +420,8 @@ def search_step(search: Search, state: State, counter: Counter) -> State | Resta
     """One step of the search: screen, fit and judge the candidates, adopt the chosen one and refit (module
     docstring); ``done`` when none is offered or chosen. ``counter`` expects one unit per candidate offered
     (fitted or screened out) and one for adopting."""
-    errors = pose_errors_of(state.objective, state.solution.x)  # noise-free rows: no effect can be told by them
-    floor = reproduced_note(errors.position_m, errors.rotation_rad, len(state.adopted))
+    errors = pose_errors_of(state.objective, state.solution.x)  # the step's "before"
+    floor = reproduced_note(errors.position_m, errors.rotation_rad, len(state.adopted))  # noise-free rows
     if floor:
         return replace(state, done=True, remarks=(*state.remarks, floor))
     screened = screen_candidates(search, state)
@@ -433,4 +434,4 @@ def search_step(search: Search, state: State, counter: Counter) -> State | Resta
     state = judged(state, judgement)
     if judgement.chosen is None:
         return replace(state, done=True)
-    return adopt(search, state, judgement, counter)
+    return adopt(search, state, judgement, counter, errors)  # judged() keeps the fit: its errors are these

@@ -204,10 +204,9 @@ class _Search:
         tree_objective = cast(TreeResidual, getattr(objective, "objective", objective))
         return tree_objective.orientation_errors(x, self.problem.row_weight / self.problem.sigma_rot)
 
-    def reproduced(self, objective: FitObjective, x: np.ndarray) -> str | None:
-        """:func:`pincal.diagnosis.reproduction.reproduced_note` of the fit's calibration rows (noise-free rows)."""
-        effects = len(cast(FitObjective, objective).effect_slices)
-        return reproduced_note(self.errors(objective, x), self.turns(objective, x), effects)
+    def reproduced(self, errors: np.ndarray, turns: np.ndarray | None, effects: int) -> str | None:
+        """:func:`pincal.diagnosis.reproduction.reproduced_note`: metres and radians (noise-free rows)."""
+        return reproduced_note(errors, turns, effects)
 
     def held_errors(self, effects: Sequence[Effect], x: np.ndarray) -> np.ndarray | None:
         """The held-out rows' point errors (K_h, P) [m] of the model at ``x`` (None without them)."""
